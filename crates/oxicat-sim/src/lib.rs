@@ -1,0 +1,1 @@
+//! `oxicat-sim`: the virtual EtherCAT segment.
