@@ -1,1 +1,9 @@
 //! `oxicat-sim`: the virtual EtherCAT segment.
+//!
+//! Chains of software ESCs in a topology, a virtual clock in nanoseconds, lockstep frame
+//! exchange, pcapng capture and fault hooks, and transports that let a master (ethercrab
+//! in the same process, or a real master on an interface) drive it.
+#![forbid(unsafe_code)]
+#![warn(missing_docs)]
+
+pub mod pcapng;

@@ -1,0 +1,1 @@
+//! pcapng capture files: writer (both directions, ns timestamps) and reader.
