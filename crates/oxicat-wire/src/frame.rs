@@ -1,9 +1,12 @@
 //! The EtherCAT frame: a 2-byte header followed by datagrams, and a builder for whole
 //! Ethernet frames.
 
-use crate::datagram::{DatagramHeader, DatagramMut, DatagramRef, DATAGRAM_HEADER_LEN, WKC_LEN};
+use crate::datagram::{
+    DatagramHeader, DatagramMut, DatagramRef, DATAGRAM_HEADER_LEN, MAX_DATA_LEN, WKC_LEN,
+};
 use crate::error::{need, WireError};
 use crate::ethernet::{EthernetHeader, ETHERNET_MIN_LEN};
+use crate::udp::UdpEndpoints;
 
 /// Length of the EtherCAT frame header.
 pub const ECAT_HEADER_LEN: usize = 2;
@@ -185,6 +188,7 @@ pub struct FrameBuilder<'a> {
     ecat_offset: usize,
     len: usize,
     last_header: Option<usize>,
+    udp: Option<UdpEndpoints>,
 }
 
 impl<'a> FrameBuilder<'a> {
@@ -199,6 +203,15 @@ impl<'a> FrameBuilder<'a> {
         Self::start(buf, 0)
     }
 
+    /// Starts an EtherCAT-over-UDP frame: Ethernet, IPv4 and UDP headers are written by
+    /// [`FrameBuilder::finish`] once the payload length is known.
+    pub fn new_udp(buf: &'a mut [u8], endpoints: &UdpEndpoints) -> Result<Self, WireError> {
+        let off = endpoints.payload_offset();
+        let mut b = Self::start(buf, off)?;
+        b.udp = Some(*endpoints);
+        Ok(b)
+    }
+
     fn start(buf: &'a mut [u8], ecat_offset: usize) -> Result<Self, WireError> {
         if buf.len() < ecat_offset + ECAT_HEADER_LEN {
             return Err(WireError::BufferFull);
@@ -208,13 +221,18 @@ impl<'a> FrameBuilder<'a> {
             ecat_offset,
             len: ecat_offset + ECAT_HEADER_LEN,
             last_header: None,
+            udp: None,
         })
     }
 
     /// Appends a datagram with `header.len` data bytes taken from `data` (zero-filled if
     /// `data` is shorter) and working counter 0; sets the more-follows bit of the previous
-    /// datagram. Returns the new datagram's data bytes for filling in.
+    /// datagram. Returns the new datagram's data bytes for filling in. A length above 0x7FF
+    /// is an error.
     pub fn push(&mut self, header: DatagramHeader, data: &[u8]) -> Result<&mut [u8], WireError> {
+        if header.len as usize > MAX_DATA_LEN || header.reserved > 7 {
+            return Err(WireError::InvalidField("datagram length"));
+        }
         let total = header.wire_len();
         let start = self.len;
         if self.buf.len() < start + total || (start - self.ecat_offset + total) > 0x7FF + 2 {
@@ -247,6 +265,11 @@ impl<'a> FrameBuilder<'a> {
         };
         let o = self.ecat_offset;
         self.buf[o..o + 2].copy_from_slice(&h.to_word().to_le_bytes());
+        if let Some(ep) = &self.udp {
+            // The buffer was checked to hold the headers in `new_udp`, and the payload is at
+            // most 0x801 bytes, so this cannot fail.
+            let _ = ep.write_headers(self.buf, self.len - o);
+        }
         let mut len = self.len;
         if self.ecat_offset > 0 && len < ETHERNET_MIN_LEN {
             let pad_to = ETHERNET_MIN_LEN.min(self.buf.len());

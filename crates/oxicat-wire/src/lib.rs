@@ -12,12 +12,21 @@
 #[cfg(test)]
 extern crate std;
 
+pub mod coe;
 pub mod datagram;
+pub mod eoe;
 pub mod error;
 pub mod ethernet;
+pub mod foe;
 pub mod frame;
+pub mod mailbox;
+pub mod sii;
+pub mod soe;
+pub mod udp;
 
 pub use datagram::{Command, DatagramHeader, DatagramMut, DatagramRef};
 pub use error::WireError;
 pub use ethernet::{EthernetHeader, ETHERCAT_ETHERTYPE, VLAN_ETHERTYPE};
 pub use frame::{EcatFrame, EcatHeader, FrameBuilder, FrameType};
+pub use mailbox::{MailboxHeader, MailboxRef, MailboxType};
+pub use udp::{EcatUdpFrame, UdpEndpoints, ETHERCAT_UDP_PORT};
