@@ -1,0 +1,1152 @@
+//! The ESC core: register file + process RAM, datagram execution with working-counter
+//! rules, SyncManager and FMMU redirection, AL/DL state, events, watchdogs, SII and the
+//! PDI side.
+//!
+//! Silicon behaviour modelled (Beckhoff ESC datasheet section I/II, ET1100 class):
+//! - reads of unimplemented registers / memory return 0, writes to them and to read-only
+//!   registers are ignored; the working counter is still incremented (the slave was
+//!   addressed and the access executed). The only accesses that do not count are those a
+//!   SyncManager refuses (read of an empty mailbox, write to a full mailbox, access to a
+//!   buffer that does not begin at its start address, access in the wrong direction).
+//! - ECAT writes to registers (< 0x1000) take effect only if the frame ends with a good
+//!   FCS (`frame_ok`); SyncManager buffer writes are committed (mailbox full / buffer
+//!   exchange) only at the end of a good frame; reads take effect immediately.
+//! - BRD/BRW OR the memory into the datagram data.
+
+use alloc::vec;
+use alloc::vec::Vec;
+use core::mem::take;
+
+use oxicat_wire::frame::for_each_datagram_mut;
+use oxicat_wire::{Command, DatagramMut, WireError};
+
+use crate::config::EscConfig;
+use crate::dc::Dc;
+use crate::fmmu::{get_bit, set_bit, Fmmu};
+use crate::regs::{self, PERMISSIONS, P_CLEAR, P_ECAT, P_PDI};
+use crate::sii;
+use crate::sm::{Side, Sm, CTRL_WD_TRIGGER};
+
+/// Where a frame leaves the ESC.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Forward {
+    /// Out of this port.
+    Port(u8),
+    /// Destroyed (circulating frame).
+    Dropped,
+}
+
+/// Things that happened on the PDI side while time advanced.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct EscEvents {
+    /// Global time of a SYNC0 rising edge.
+    pub sync0: Option<u64>,
+    /// Global time of a SYNC1 rising edge.
+    pub sync1: Option<u64>,
+    /// The process-data watchdog expired (digital outputs were cleared).
+    pub pd_watchdog_expired: bool,
+    /// The PDI watchdog expired.
+    pub pdi_watchdog_expired: bool,
+}
+
+/// Why a PDI access failed.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum PdiError {
+    /// The address range lies (partly) outside the implemented memory.
+    OutOfRange,
+}
+
+impl core::fmt::Display for PdiError {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        match self {
+            PdiError::OutOfRange => write!(f, "PDI access outside implemented memory"),
+        }
+    }
+}
+
+impl core::error::Error for PdiError {}
+
+/// AL event request bit 0: AL control written.
+const AL_EV_CONTROL: u32 = 1 << 0;
+/// AL event request bit 4: SM activation register changed.
+const AL_EV_SM_CHANGE: u32 = 1 << 4;
+/// AL event request bit 6: process-data watchdog expired.
+const AL_EV_WD: u32 = 1 << 6;
+/// ECAT event request bit 2: DL status changed.
+const ECAT_EV_DL: u16 = 1 << 2;
+/// ECAT event request bit 3: AL status changed.
+const ECAT_EV_AL: u16 = 1 << 3;
+
+const REG_END: usize = 0x1000;
+
+/// A software EtherCAT Slave Controller.
+#[derive(Debug, Clone)]
+pub struct Esc {
+    cfg: EscConfig,
+    mem: Vec<u8>,
+    eeprom: Vec<u8>,
+    dc: Dc,
+    link: [bool; 4],
+    sms: Vec<Sm>,
+    active_sms: Vec<u8>,
+    fmmus: Vec<Fmmu>,
+    fmmu_rw_overlap: bool,
+    fmmu_any_read: bool,
+    fmmu_any_write: bool,
+    scratch: Vec<u8>,
+    scratch_bits: Vec<u8>,
+    scratch_mask: Vec<u8>,
+    now: u64,
+    frame_ok: bool,
+    pending: bool,
+    events_dirty: bool,
+    ecat_irq: u16,
+    ecat_ev: u16,
+    al_ev: u32,
+    dout: u32,
+    pd_wd_last: Option<u64>,
+    pdi_wd_last: Option<u64>,
+    latch_inputs: [bool; 2],
+}
+
+impl Esc {
+    /// Power-on: register file reset values, EEPROM loaded (config area words 0..7 into PDI
+    /// control, PDI config, SYNC pulse length, alias), CRC error flagged in 0x0502 if the
+    /// CRC of words 0..6 (word 7) is wrong.
+    pub fn new(config: EscConfig, eeprom: Vec<u8>) -> Self {
+        let mut cfg = config;
+        cfg.fmmu_count = cfg.fmmu_count.min(16);
+        cfg.sm_count = cfg.sm_count.min(16);
+        let mut mem = vec![0u8; cfg.memory_end()];
+        mem[regs::TYPE as usize] = cfg.esc_type;
+        mem[regs::REVISION as usize] = cfg.revision;
+        mem[2..4].copy_from_slice(&cfg.build.to_le_bytes());
+        mem[regs::FMMU_COUNT as usize] = cfg.fmmu_count;
+        mem[regs::SM_COUNT as usize] = cfg.sm_count;
+        mem[regs::RAM_SIZE as usize] = cfg.ram_kib;
+        mem[regs::PORT_DESC as usize] = cfg.port_descriptor;
+        mem[8..10].copy_from_slice(&cfg.features.to_le_bytes());
+        mem[0x0100] = 0x01;
+        mem[0x0102] = 0x07;
+        mem[0x0120] = 0x01;
+        mem[0x0130] = 0x01;
+        mem[0x0204..0x0208].copy_from_slice(&0x00FF_FF0Fu32.to_le_bytes());
+        mem[0x0400..0x0402].copy_from_slice(&2498u16.to_le_bytes());
+        mem[0x0410..0x0412].copy_from_slice(&1000u16.to_le_bytes());
+        mem[0x0420..0x0422].copy_from_slice(&1000u16.to_le_bytes());
+        let mut ctl = 0u16;
+        if cfg.sii_read_8_bytes {
+            ctl |= sii::CTL_READ_8;
+        }
+        if eeprom.len() > 2048 {
+            ctl |= sii::CTL_ADDR_2BYTES;
+        }
+        sii::write_ctl(&mut mem, ctl);
+        sii::load_config(&mut mem, &eeprom);
+        let mut sms = vec![Sm::default(); cfg.sm_count as usize];
+        for sm in sms.iter_mut() {
+            sm.reset_state();
+        }
+        let dc = Dc::new(cfg.clock);
+        let mut esc = Self {
+            cfg,
+            mem,
+            eeprom,
+            dc,
+            link: [true, false, false, false],
+            sms,
+            active_sms: Vec::with_capacity(16),
+            fmmus: Vec::with_capacity(16),
+            fmmu_rw_overlap: false,
+            fmmu_any_read: false,
+            fmmu_any_write: false,
+            scratch: Vec::with_capacity(2048),
+            scratch_bits: Vec::with_capacity(2050),
+            scratch_mask: Vec::with_capacity(2050),
+            now: 0,
+            frame_ok: true,
+            pending: false,
+            events_dirty: true,
+            ecat_irq: 0,
+            ecat_ev: 0,
+            al_ev: 0,
+            dout: 0,
+            pd_wd_last: None,
+            pdi_wd_last: None,
+            latch_inputs: [false; 2],
+        };
+        esc.update_dl_status(false);
+        esc.ecat_ev = 0;
+        esc.refresh_events();
+        esc
+    }
+
+    /// The configuration this ESC was built with.
+    pub fn config(&self) -> &EscConfig {
+        &self.cfg
+    }
+
+    /// The DC unit (for inspection by the simulator and tests).
+    pub fn dc(&self) -> &Dc {
+        &self.dc
+    }
+
+    /// Configured station address (0x0010).
+    pub fn station_address(&self) -> u16 {
+        self.reg16(regs::STATION_ADDR)
+    }
+
+    /// AL status register (0x0130).
+    pub fn al_status(&self) -> u16 {
+        self.reg16(regs::AL_STATUS)
+    }
+
+    /// AL control register (0x0120), without the read side effect.
+    pub fn al_control(&self) -> u16 {
+        self.reg16(regs::AL_CONTROL)
+    }
+
+    /// True when the port's loop is open (frames leave through it).
+    pub fn port_open(&self, port: u8) -> bool {
+        if port > 3 || !self.cfg.port_present(port) {
+            return false;
+        }
+        match (self.mem[regs::DL_LOOP_CONTROL as usize] >> (2 * port)) & 3 {
+            2 => true,
+            3 => false,
+            _ => self.link[port as usize],
+        }
+    }
+
+    /// Current levels of the latch inputs as set by [`Esc::set_latch_input`].
+    pub fn latch_inputs(&self) -> [bool; 2] {
+        self.latch_inputs
+    }
+
+    #[inline]
+    fn reg16(&self, a: u16) -> u16 {
+        let a = a as usize;
+        u16::from_le_bytes([self.mem[a], self.mem[a + 1]])
+    }
+
+    // ------------------------------------------------------------------ ECAT side
+
+    /// Physical link state of a port (set by the simulator's topology / fault hooks).
+    /// Power-on default: port 0 up, the others down.
+    pub fn set_link(&mut self, port: u8, up: bool) {
+        if port > 3 {
+            return;
+        }
+        let p = port as usize;
+        let up = up && self.cfg.port_present(port);
+        if self.link[p] && !up {
+            let a = regs::LOST_LINK_COUNTER as usize + p;
+            self.mem[a] = self.mem[a].saturating_add(1);
+        }
+        self.link[p] = up;
+        self.update_dl_status(true);
+    }
+
+    /// A frame's first bit reaches `port` at time `t`; see the API contract. Returns the
+    /// port the frame leaves through or `Dropped` (circulating frame rule).
+    pub fn forward(&mut self, port: u8, frame: &mut [u8], t: u64, frame_ok: bool) -> Forward {
+        let port = port & 3;
+        self.now = t;
+        self.dc.frame_arrival(&mut self.mem[..REG_END], port, t);
+        if !frame_ok {
+            let a = regs::RX_ERROR_COUNTER as usize + 2 * port as usize;
+            self.mem[a] = self.mem[a].saturating_add(1);
+        }
+        if port == 0 {
+            self.process_frame(frame, frame_ok);
+        }
+        let mut cur = port;
+        for _ in 0..8 {
+            let nxt = match cur {
+                0 => 3,
+                3 => 1,
+                1 => 2,
+                _ => 0,
+            };
+            if self.port_open(nxt) {
+                return Forward::Port(nxt);
+            }
+            if nxt == 0 {
+                // Port 0 closed: the frame loops back into the processing unit.
+                match circulating(frame) {
+                    Some(true) => return Forward::Dropped,
+                    Some(false) => set_circulating(frame),
+                    None => {}
+                }
+                self.process_frame(frame, frame_ok);
+            }
+            cur = nxt;
+        }
+        Forward::Dropped
+    }
+
+    fn process_frame(&mut self, frame: &mut [u8], frame_ok: bool) {
+        self.frame_ok = frame_ok;
+        let _ = for_each_datagram_mut::<WireError>(frame, |dg| {
+            self.process_datagram(dg);
+            Ok(())
+        });
+        if self.pending {
+            self.pending = false;
+            for i in 0..self.sms.len() {
+                if self.sms[i].pending_commit {
+                    if frame_ok {
+                        self.commit_sm(i, Side::Ecat);
+                    } else {
+                        self.sms[i].discard();
+                    }
+                }
+            }
+        }
+        self.frame_ok = true;
+    }
+
+    fn configured_match(&self, adp: u16) -> bool {
+        adp == self.reg16(regs::STATION_ADDR)
+            || (self.mem[regs::DL_ALIAS_ENABLE as usize] & 1 != 0
+                && adp == self.reg16(regs::STATION_ALIAS))
+    }
+
+    fn process_datagram(&mut self, dg: &mut DatagramMut<'_>) {
+        if self.events_dirty {
+            self.refresh_events();
+        }
+        let Some(cmd) = dg.header.command() else {
+            return;
+        };
+        let mut header_changed = false;
+        let mut inc: u16 = 0;
+        let adp = dg.header.adp();
+        let ado = dg.header.ado() as u32;
+        match cmd {
+            Command::Nop => {}
+            Command::Aprd | Command::Apwr | Command::Aprw | Command::Armw => {
+                if adp == 0 {
+                    inc = self.physical(cmd, ado, dg.data, false);
+                } else if cmd == Command::Armw {
+                    inc = self.physical(Command::Apwr, ado, dg.data, false);
+                }
+                dg.header.address = (dg.header.address & 0xFFFF_0000) | adp.wrapping_add(1) as u32;
+                header_changed = true;
+            }
+            Command::Fprd | Command::Fpwr | Command::Fprw | Command::Frmw => {
+                if self.configured_match(adp) {
+                    inc = self.physical(cmd, ado, dg.data, false);
+                } else if cmd == Command::Frmw {
+                    inc = self.physical(Command::Fpwr, ado, dg.data, false);
+                }
+            }
+            Command::Brd | Command::Bwr | Command::Brw => {
+                inc = self.physical(cmd, ado, dg.data, true);
+                dg.header.address = (dg.header.address & 0xFFFF_0000) | adp.wrapping_add(1) as u32;
+                header_changed = true;
+            }
+            Command::Lrd | Command::Lwr | Command::Lrw => {
+                inc = self.logical(cmd, dg.header.address, dg.data);
+            }
+        }
+        let irq = self.ecat_irq;
+        if irq & !dg.header.irq != 0 {
+            dg.header.irq |= irq;
+            header_changed = true;
+        }
+        if header_changed {
+            dg.commit_header();
+        }
+        if inc != 0 {
+            let w = dg.wkc().wrapping_add(inc);
+            dg.set_wkc(w);
+        }
+    }
+
+    /// Physical access by a datagram addressed to this slave; returns the WKC increment.
+    fn physical(&mut self, cmd: Command, ado: u32, data: &mut [u8], or: bool) -> u16 {
+        // ARMW/FRMW at the addressed slave read only.
+        let r = cmd.reads();
+        let w = cmd.writes() && !matches!(cmd, Command::Armw | Command::Frmw);
+        match (r, w) {
+            (true, false) => u16::from(self.phys_read(Side::Ecat, ado, data, or)),
+            (false, true) => u16::from(self.phys_write(Side::Ecat, ado, data, None)),
+            (true, true) => {
+                let mut orig = take(&mut self.scratch);
+                orig.clear();
+                orig.extend_from_slice(data);
+                let mut inc = 0;
+                if self.phys_read(Side::Ecat, ado, data, or) {
+                    inc += 1;
+                }
+                if self.phys_write(Side::Ecat, ado, &orig, None) {
+                    inc += 2;
+                }
+                self.scratch = orig;
+                inc
+            }
+            (false, false) => 0,
+        }
+    }
+
+    /// Logical access through the FMMUs; returns the WKC increment.
+    fn logical(&mut self, cmd: Command, addr: u32, data: &mut [u8]) -> u16 {
+        let do_read = cmd != Command::Lwr && self.fmmu_any_read;
+        let do_write = cmd != Command::Lrd && self.fmmu_any_write;
+        if !do_read && !do_write {
+            return 0;
+        }
+        let need_copy = do_read && do_write && self.fmmu_rw_overlap;
+        let mut orig = take(&mut self.scratch);
+        if need_copy {
+            orig.clear();
+            orig.extend_from_slice(data);
+        }
+        let mut rd = false;
+        let mut wr = false;
+        let n = self.fmmus.len();
+        if do_read {
+            for k in 0..n {
+                let f = self.fmmus[k];
+                if f.read && self.fmmu_read(&f, addr, data) {
+                    rd = true;
+                }
+            }
+        }
+        if do_write {
+            for k in 0..n {
+                let f = self.fmmus[k];
+                if f.write {
+                    let src: &[u8] = if need_copy { &orig } else { data };
+                    if self.fmmu_write(&f, addr, src) {
+                        wr = true;
+                    }
+                }
+            }
+        }
+        self.scratch = orig;
+        u16::from(rd) + 2 * u16::from(wr)
+    }
+
+    fn fmmu_read(&mut self, f: &Fmmu, addr: u32, data: &mut [u8]) -> bool {
+        let ds = addr as u64;
+        let de = ds + data.len() as u64;
+        if f.aligned {
+            let x0 = ds.max(f.log_start as u64);
+            let x1 = de.min(f.log_end);
+            if x0 >= x1 {
+                return false;
+            }
+            let phys = f.phys_start as u32 + (x0 - f.log_start as u64) as u32;
+            let out = &mut data[(x0 - ds) as usize..(x1 - ds) as usize];
+            return self.phys_read(Side::Ecat, phys, out, false);
+        }
+        let b0 = f.log_bit_start.max(ds * 8);
+        let b1 = f.log_bit_end.min(de * 8);
+        if b0 >= b1 {
+            return false;
+        }
+        let n = (b1 - b0) as usize;
+        let p0 = f.phys_bit_start as usize + (b0 - f.log_bit_start) as usize;
+        let pb0 = p0 / 8;
+        let pb1 = (p0 + n - 1) / 8;
+        let mut tmp = take(&mut self.scratch_bits);
+        tmp.clear();
+        tmp.resize(pb1 - pb0 + 1, 0);
+        let ok = self.phys_read(Side::Ecat, pb0 as u32, &mut tmp, false);
+        if ok {
+            let dbit = (b0 - ds * 8) as usize;
+            let pbit = p0 % 8;
+            for i in 0..n {
+                set_bit(data, dbit + i, get_bit(&tmp, pbit + i));
+            }
+        }
+        self.scratch_bits = tmp;
+        ok
+    }
+
+    fn fmmu_write(&mut self, f: &Fmmu, addr: u32, src: &[u8]) -> bool {
+        let ds = addr as u64;
+        let de = ds + src.len() as u64;
+        if f.aligned {
+            let x0 = ds.max(f.log_start as u64);
+            let x1 = de.min(f.log_end);
+            if x0 >= x1 {
+                return false;
+            }
+            let phys = f.phys_start as u32 + (x0 - f.log_start as u64) as u32;
+            let inp = &src[(x0 - ds) as usize..(x1 - ds) as usize];
+            return self.phys_write(Side::Ecat, phys, inp, None);
+        }
+        let b0 = f.log_bit_start.max(ds * 8);
+        let b1 = f.log_bit_end.min(de * 8);
+        if b0 >= b1 {
+            return false;
+        }
+        let n = (b1 - b0) as usize;
+        let p0 = f.phys_bit_start as usize + (b0 - f.log_bit_start) as usize;
+        let pb0 = p0 / 8;
+        let pb1 = (p0 + n - 1) / 8;
+        let mut tmp = take(&mut self.scratch_bits);
+        let mut mask = take(&mut self.scratch_mask);
+        tmp.clear();
+        tmp.resize(pb1 - pb0 + 1, 0);
+        mask.clear();
+        mask.resize(pb1 - pb0 + 1, 0);
+        let dbit = (b0 - ds * 8) as usize;
+        let pbit = p0 % 8;
+        for i in 0..n {
+            set_bit(&mut tmp, pbit + i, get_bit(src, dbit + i));
+            set_bit(&mut mask, pbit + i, true);
+        }
+        let ok = self.phys_write(Side::Ecat, pb0 as u32, &tmp, Some(&mask));
+        self.scratch_bits = tmp;
+        self.scratch_mask = mask;
+        ok
+    }
+
+    // ------------------------------------------------------------------ memory layer
+
+    /// The next piece of `[cur, end)`: its end and the SM that covers it, if any.
+    #[inline]
+    fn piece(&self, cur: u32, end: u32) -> (u32, Option<usize>) {
+        let mut pend = end;
+        for &i in &self.active_sms {
+            let sm = &self.sms[i as usize];
+            let s = sm.start as u32;
+            let e = sm.end();
+            if cur >= s && cur < e {
+                return (e.min(end), Some(i as usize));
+            }
+            if s > cur && s < pend {
+                pend = s;
+            }
+        }
+        (pend, None)
+    }
+
+    /// Reads physical memory as `side` sees it (SyncManager rules applied). Returns false
+    /// when a SyncManager refused (part of) the access.
+    fn phys_read(&mut self, side: Side, addr: u32, out: &mut [u8], or: bool) -> bool {
+        let end = addr + out.len() as u32;
+        let mut cur = addr;
+        let mut ok = true;
+        while cur < end {
+            let (pe, sm) = self.piece(cur, end);
+            let o = &mut out[(cur - addr) as usize..(pe - addr) as usize];
+            match sm {
+                Some(i) => ok &= self.sm_read(i, side, cur, o, or),
+                None => self.plain_read(side, cur, o, or),
+            }
+            cur = pe;
+        }
+        ok
+    }
+
+    /// Writes physical memory as `side` (SyncManager rules and register permissions
+    /// applied); `mask` selects the bits to write. Returns false when a SyncManager refused.
+    fn phys_write(&mut self, side: Side, addr: u32, data: &[u8], mask: Option<&[u8]>) -> bool {
+        let end = addr + data.len() as u32;
+        let mut cur = addr;
+        let mut ok = true;
+        while cur < end {
+            let (pe, sm) = self.piece(cur, end);
+            let a = (cur - addr) as usize;
+            let b = (pe - addr) as usize;
+            let d = &data[a..b];
+            let m = mask.map(|m| &m[a..b]);
+            match sm {
+                Some(i) => ok &= self.sm_write(i, side, cur, d, m),
+                None => self.plain_write(side, cur, d, m),
+            }
+            cur = pe;
+        }
+        ok
+    }
+
+    fn copy_out(&self, from: u32, o: &mut [u8], or: bool) {
+        let from = from as usize;
+        let len = self.mem.len();
+        let avail = len.saturating_sub(from).min(o.len());
+        let (a, rest) = o.split_at_mut(avail);
+        if avail > 0 {
+            let src = &self.mem[from..from + avail];
+            if or {
+                for (x, y) in a.iter_mut().zip(src) {
+                    *x |= *y;
+                }
+            } else {
+                a.copy_from_slice(src);
+            }
+        }
+        if !or {
+            rest.fill(0);
+        }
+    }
+
+    fn store(&mut self, to: u32, d: &[u8], m: Option<&[u8]>) {
+        let to = to as usize;
+        let avail = self.mem.len().saturating_sub(to).min(d.len());
+        if avail == 0 {
+            return;
+        }
+        let dst = &mut self.mem[to..to + avail];
+        match m {
+            None => dst.copy_from_slice(&d[..avail]),
+            Some(m) => {
+                for ((x, y), k) in dst.iter_mut().zip(d).zip(m) {
+                    *x = (*x & !*k) | (*y & *k);
+                }
+            }
+        }
+    }
+
+    fn plain_read(&mut self, side: Side, cur: u32, o: &mut [u8], or: bool) {
+        let c = cur as usize;
+        if c < REG_END {
+            let e = (c + o.len()).min(REG_END);
+            if c < 0x0A00 && e > 0x0900 {
+                let a = c.max(0x0900);
+                let b = e.min(0x0A00);
+                self.dc
+                    .before_read(&mut self.mem[..REG_END], a as u16, (b - a) as u16, self.now);
+            }
+            if c < 0x0224 && e > 0x0210 {
+                self.refresh_events();
+            }
+            self.copy_out(cur, o, or);
+            self.read_side_effects(side, c, e);
+        } else {
+            self.copy_out(cur, o, or);
+        }
+    }
+
+    fn read_side_effects(&mut self, side: Side, c: usize, e: usize) {
+        let hit = |a: usize| c <= a && a < e;
+        match side {
+            Side::Ecat => {
+                if hit(regs::AL_STATUS as usize) && self.ecat_ev & ECAT_EV_AL != 0 {
+                    self.ecat_ev &= !ECAT_EV_AL;
+                    self.events_dirty = true;
+                }
+            }
+            Side::Pdi => {
+                if hit(regs::AL_CONTROL as usize) && self.al_ev & AL_EV_CONTROL != 0 {
+                    self.al_ev &= !AL_EV_CONTROL;
+                    self.events_dirty = true;
+                }
+                if hit(regs::WD_STATUS_PD as usize) && self.al_ev & AL_EV_WD != 0 {
+                    self.al_ev &= !AL_EV_WD;
+                    self.events_dirty = true;
+                }
+                if self.al_ev & AL_EV_SM_CHANGE != 0
+                    && (0..self.sms.len()).any(|i| hit(0x0806 + 8 * i))
+                {
+                    self.al_ev &= !AL_EV_SM_CHANGE;
+                    self.events_dirty = true;
+                }
+            }
+        }
+    }
+
+    fn plain_write(&mut self, side: Side, cur: u32, d: &[u8], m: Option<&[u8]>) {
+        let c = cur as usize;
+        if c >= REG_END {
+            self.store(cur, d, m);
+            return;
+        }
+        if side == Side::Ecat && !self.frame_ok {
+            // Register writes take effect only with a good FCS.
+            return;
+        }
+        let e = (c + d.len()).min(REG_END);
+        let bit = if side == Side::Ecat { P_ECAT } else { P_PDI };
+        let sii_owner_ok = match side {
+            Side::Ecat => !sii::pdi_owns(&self.mem),
+            Side::Pdi => sii::pdi_owns(&self.mem),
+        };
+        let old_al_ctl = self.reg16(regs::AL_CONTROL);
+        let old_activate: [u8; 16] =
+            core::array::from_fn(|i| self.mem.get(0x0806 + 8 * i).copied().unwrap_or_default());
+        for (k, a) in (c..e).enumerate() {
+            let p = PERMISSIONS[a];
+            if p & bit == 0 {
+                continue;
+            }
+            if (0x0502..0x0510).contains(&a) && !sii_owner_ok {
+                continue;
+            }
+            if a == regs::SII_PDI_ACCESS as usize && self.mem[regs::SII_CONFIG as usize] & 1 == 0 {
+                continue;
+            }
+            if p & P_CLEAR != 0 {
+                self.mem[a] = 0;
+                continue;
+            }
+            let v = d[k];
+            match m {
+                None => self.mem[a] = v,
+                Some(m) => self.mem[a] = (self.mem[a] & !m[k]) | (v & m[k]),
+            }
+        }
+        self.write_side_effects(side, c, e, old_al_ctl, &old_activate);
+    }
+
+    fn write_side_effects(
+        &mut self,
+        side: Side,
+        c: usize,
+        e: usize,
+        old_al_ctl: u16,
+        old_activate: &[u8; 16],
+    ) {
+        let over = |a: usize, b: usize| c < b && e > a;
+        if over(0x0100, 0x0104) && side == Side::Ecat {
+            self.update_dl_status(true);
+        }
+        if over(0x0120, 0x0122) && side == Side::Ecat {
+            let _ = old_al_ctl;
+            self.al_ev |= AL_EV_CONTROL;
+            if self.mem[regs::ESC_CONFIG as usize] & 1 != 0 {
+                // Device emulation: AL status follows AL control, error indication cleared.
+                let ctl = self.mem[regs::AL_CONTROL as usize];
+                let st = ctl & 0x0F;
+                if self.mem[regs::AL_STATUS as usize] != st || self.mem[0x0131] != 0 {
+                    self.ecat_ev |= ECAT_EV_AL;
+                }
+                self.mem[regs::AL_STATUS as usize] = st;
+                self.mem[0x0131] = 0;
+            }
+            self.events_dirty = true;
+        }
+        if over(0x0130, 0x0132) && side == Side::Pdi {
+            self.ecat_ev |= ECAT_EV_AL;
+            self.events_dirty = true;
+        }
+        if over(0x0200, 0x0208) {
+            self.events_dirty = true;
+        }
+        if over(0x0500, 0x0501) && side == Side::Ecat && self.mem[0x0500] & 2 != 0 {
+            // Force ECAT access: the PDI loses the EEPROM.
+            self.mem[0x0501] &= !1;
+        }
+        if over(0x0502, 0x0504) {
+            let written = self.reg16(regs::SII_CONTROL);
+            let ok_owner = match side {
+                Side::Ecat => !sii::pdi_owns(&self.mem),
+                Side::Pdi => sii::pdi_owns(&self.mem),
+            };
+            if ok_owner {
+                let read8 = self.cfg.sii_read_8_bytes;
+                let out = sii::execute(&mut self.mem, &mut self.eeprom, written, read8);
+                if let sii::SiiOutcome::Reloaded(_) = out {
+                    self.update_dl_status(true);
+                }
+            }
+        }
+        if over(0x0600, 0x0700) {
+            self.rebuild_fmmus();
+        }
+        if over(0x0800, 0x0880) {
+            let first = (c.max(0x0800) - 0x0800) / 8;
+            let last = (e.min(0x0880) - 1 - 0x0800) / 8;
+            let n = self.sms.len();
+            for (i, &old) in old_activate.iter().enumerate().take(last + 1).skip(first) {
+                if i >= n {
+                    break;
+                }
+                if side == Side::Ecat && old != self.mem[0x0806 + 8 * i] {
+                    self.al_ev |= AL_EV_SM_CHANGE;
+                }
+                self.reload_sm(i);
+            }
+            self.rebuild_active_sms();
+            self.events_dirty = true;
+        }
+        if over(0x0900, 0x0A00) {
+            let a = c.max(0x0900);
+            let b = e.min(0x0A00);
+            let ecat = side == Side::Ecat;
+            self.dc.after_write(
+                &mut self.mem[..REG_END],
+                a as u16,
+                (b - a) as u16,
+                self.now,
+                ecat,
+            );
+            self.events_dirty = true;
+        }
+        if over(0x0F00, 0x0F04) && side == Side::Ecat {
+            let mut v = [0u8; 4];
+            v.copy_from_slice(&self.mem[0x0F00..0x0F04]);
+            self.dout = u32::from_le_bytes(v);
+        }
+    }
+
+    fn sm_read(&mut self, i: usize, side: Side, cur: u32, o: &mut [u8], or: bool) -> bool {
+        let sm = &mut self.sms[i];
+        let refuse = sm.is_producer(side)
+            || if cur == sm.start as u32 {
+                !sm.open_read()
+            } else {
+                !sm.read_open
+            };
+        if refuse {
+            if side == Side::Pdi {
+                // The PDI sees the raw memory; nothing changes.
+                self.copy_out(cur, o, or);
+            }
+            return false;
+        }
+        let off = sm.buf_offset(sm.user_buf);
+        let done = cur + o.len() as u32 == sm.end();
+        if done {
+            sm.close_read();
+        }
+        let status = sm.status_reg();
+        self.mem[0x0805 + 8 * i] = status;
+        self.events_dirty = true;
+        self.copy_out(cur + off, o, or);
+        true
+    }
+
+    fn sm_write(&mut self, i: usize, side: Side, cur: u32, d: &[u8], m: Option<&[u8]>) -> bool {
+        let sm = &mut self.sms[i];
+        let refuse = !sm.is_producer(side)
+            || if cur == sm.start as u32 {
+                !sm.open_write()
+            } else {
+                !sm.write_open
+            };
+        if refuse {
+            return false;
+        }
+        let off = sm.buf_offset(sm.write_buf);
+        let done = cur + d.len() as u32 == sm.end();
+        self.store(cur + off, d, m);
+        let sm = &mut self.sms[i];
+        if done {
+            sm.write_open = false;
+            if side == Side::Ecat {
+                sm.pending_commit = true;
+                self.pending = true;
+            } else {
+                self.commit_sm(i, side);
+                return true;
+            }
+        }
+        let status = self.sms[i].status_reg();
+        self.mem[0x0805 + 8 * i] = status;
+        self.events_dirty = true;
+        true
+    }
+
+    fn commit_sm(&mut self, i: usize, side: Side) {
+        let sm = &mut self.sms[i];
+        sm.commit();
+        let status = sm.status_reg();
+        let wd = sm.ctrl & CTRL_WD_TRIGGER != 0;
+        let start = sm.start as u32;
+        let end = sm.end();
+        let off = sm.buf_offset(sm.last_written.min(2));
+        self.mem[0x0805 + 8 * i] = status;
+        self.events_dirty = true;
+        if side == Side::Ecat && wd {
+            self.pd_wd_last = Some(self.now);
+            self.mem[regs::WD_STATUS_PD as usize] |= 1;
+        }
+        if start < 0x0F04 && end > 0x0F00 {
+            let mut v = self.dout.to_le_bytes();
+            for a in start.max(0x0F00)..end.min(0x0F04) {
+                v[(a - 0x0F00) as usize] = self.mem.get((a + off) as usize).copied().unwrap_or(0);
+            }
+            self.dout = u32::from_le_bytes(v);
+        }
+    }
+
+    fn reload_sm(&mut self, i: usize) {
+        let b = 0x0800 + 8 * i;
+        let mut r = [0u8; 8];
+        r.copy_from_slice(&self.mem[b..b + 8]);
+        let sm = &mut self.sms[i];
+        let (os, ol, oc) = (sm.start, sm.len, sm.ctrl);
+        sm.load_regs(&r);
+        let was = sm.enabled;
+        sm.enabled = sm.should_enable();
+        if sm.enabled && (!was || os != sm.start || ol != sm.len || oc != sm.ctrl) {
+            sm.reset_state();
+        }
+        if !sm.enabled {
+            sm.reset_state();
+        }
+        let status = sm.status_reg();
+        self.mem[b + 5] = status;
+    }
+
+    fn rebuild_active_sms(&mut self) {
+        self.active_sms.clear();
+        for (i, sm) in self.sms.iter().enumerate() {
+            if sm.enabled {
+                self.active_sms.push(i as u8);
+            }
+        }
+    }
+
+    fn rebuild_fmmus(&mut self) {
+        self.fmmus.clear();
+        for n in 0..self.cfg.fmmu_count as usize {
+            let b = 0x0600 + 16 * n;
+            if let Some(f) = Fmmu::decode(&self.mem[b..b + 16]) {
+                self.fmmus.push(f);
+            }
+        }
+        self.fmmu_any_read = self.fmmus.iter().any(|f| f.read);
+        self.fmmu_any_write = self.fmmus.iter().any(|f| f.write);
+        self.fmmu_rw_overlap = self
+            .fmmus
+            .iter()
+            .any(|r| r.read && self.fmmus.iter().any(|w| w.write && w.overlaps(r)));
+    }
+
+    fn update_dl_status(&mut self, event: bool) {
+        let mut s: u16 = 0;
+        if sii::read_ctl(&self.mem) & sii::CTL_NOT_LOADED == 0 {
+            s |= 1;
+        }
+        if self.mem[regs::DL_STATUS as usize] & 2 != 0 {
+            s |= 2;
+        }
+        for p in 0..4u8 {
+            let link = self.link[p as usize] && self.cfg.port_present(p);
+            if link {
+                s |= 1 << (4 + p);
+            }
+            if !self.port_open(p) {
+                s |= 1 << (8 + 2 * p);
+            }
+            if link {
+                s |= 1 << (9 + 2 * p);
+            }
+        }
+        let old = self.reg16(regs::DL_STATUS);
+        if old != s {
+            self.mem[0x0110..0x0112].copy_from_slice(&s.to_le_bytes());
+            if event {
+                self.ecat_ev |= ECAT_EV_DL;
+                self.events_dirty = true;
+            }
+        }
+    }
+
+    fn compute_events(&self) -> (u16, u32) {
+        let mut e = self.ecat_ev;
+        let mut a = self.al_ev;
+        for &i in &self.active_sms {
+            let sm = &self.sms[i as usize];
+            if sm.ecat_event() {
+                e |= 1 << (4 + i);
+            }
+            if sm.al_event() {
+                a |= 1 << (8 + i as u32);
+            }
+        }
+        if self.mem[regs::DC_SYNC0_STATUS as usize] & 1 != 0 {
+            a |= 1 << 2;
+        }
+        if self.mem[regs::DC_SYNC1_STATUS as usize] & 1 != 0 {
+            a |= 1 << 3;
+        }
+        (e, a)
+    }
+
+    fn refresh_events(&mut self) {
+        let (e, a) = self.compute_events();
+        self.mem[0x0210..0x0212].copy_from_slice(&e.to_le_bytes());
+        self.mem[0x0220..0x0224].copy_from_slice(&a.to_le_bytes());
+        self.ecat_irq = e & self.reg16(regs::ECAT_EVENT_MASK);
+        self.events_dirty = false;
+    }
+
+    // ------------------------------------------------------------------ PDI side
+
+    fn wd_unit_ns(&self) -> u64 {
+        (self.reg16(regs::WD_DIVIDER) as u64 + 2) * 40
+    }
+
+    fn pd_wd_deadline(&self) -> Option<u64> {
+        let t = self.reg16(regs::WD_TIME_PD) as u64;
+        match self.pd_wd_last {
+            Some(l) if t != 0 => Some(l + t * self.wd_unit_ns()),
+            _ => None,
+        }
+    }
+
+    fn pdi_wd_deadline(&self) -> Option<u64> {
+        let t = self.reg16(regs::WD_TIME_PDI) as u64;
+        match self.pdi_wd_last {
+            Some(l) if t != 0 => Some(l + t * self.wd_unit_ns()),
+            _ => None,
+        }
+    }
+
+    fn pdi_access(&mut self) {
+        self.pdi_wd_last = Some(self.now);
+        if self.mem[regs::DL_STATUS as usize] & 2 == 0 {
+            self.mem[regs::DL_STATUS as usize] |= 2;
+            self.ecat_ev |= ECAT_EV_DL;
+            self.events_dirty = true;
+        }
+    }
+
+    /// Time passes: watchdogs, SYNC0/1, latch.
+    pub fn advance(&mut self, t: u64) -> EscEvents {
+        if t > self.now {
+            self.now = t;
+        }
+        let dce = self.dc.advance(&mut self.mem[..REG_END], t);
+        let mut ev = EscEvents {
+            sync0: dce.sync0,
+            sync1: dce.sync1,
+            ..EscEvents::default()
+        };
+        if let Some(d) = self.pd_wd_deadline() {
+            if t >= d {
+                self.pd_wd_last = None;
+                self.mem[regs::WD_STATUS_PD as usize] &= !1;
+                let a = regs::WD_COUNTER_PD as usize;
+                self.mem[a] = self.mem[a].saturating_add(1);
+                self.al_ev |= AL_EV_WD;
+                self.dout = 0;
+                ev.pd_watchdog_expired = true;
+            }
+        }
+        if let Some(d) = self.pdi_wd_deadline() {
+            if t >= d {
+                self.pdi_wd_last = None;
+                self.mem[regs::DL_STATUS as usize] &= !2;
+                let a = regs::WD_COUNTER_PDI as usize;
+                self.mem[a] = self.mem[a].saturating_add(1);
+                self.ecat_ev |= ECAT_EV_DL;
+                ev.pdi_watchdog_expired = true;
+            }
+        }
+        self.events_dirty = true;
+        ev
+    }
+
+    /// Global time of the next SYNC edge or watchdog expiry.
+    pub fn next_event(&self) -> Option<u64> {
+        [
+            self.dc.next_event(),
+            self.pd_wd_deadline(),
+            self.pdi_wd_deadline(),
+        ]
+        .into_iter()
+        .flatten()
+        .min()
+    }
+
+    fn pdi_range(&self, addr: u16, len: usize) -> Result<(), PdiError> {
+        if addr as usize + len > self.mem.len() {
+            Err(PdiError::OutOfRange)
+        } else {
+            Ok(())
+        }
+    }
+
+    /// PDI read of `buf.len()` bytes at `addr` (SyncManager rules apply; reading AL
+    /// control clears its event; reading a buffer's last byte frees it).
+    pub fn pdi_read(&mut self, addr: u16, buf: &mut [u8]) -> Result<(), PdiError> {
+        self.pdi_range(addr, buf.len())?;
+        self.pdi_access();
+        self.phys_read(Side::Pdi, addr as u32, buf, false);
+        Ok(())
+    }
+
+    /// PDI write of `data` at `addr` (bytes the PDI may not write are ignored, as in
+    /// silicon; SyncManager rules apply).
+    pub fn pdi_write(&mut self, addr: u16, data: &[u8]) -> Result<(), PdiError> {
+        self.pdi_range(addr, data.len())?;
+        self.pdi_access();
+        self.phys_write(Side::Pdi, addr as u32, data, None);
+        Ok(())
+    }
+
+    /// AL event request 0x0220..0x0223.
+    pub fn al_event_request(&self) -> u32 {
+        self.compute_events().1
+    }
+
+    /// ECAT event request 0x0210 (what is ORed into datagram IRQ fields, before the mask).
+    pub fn ecat_event_request(&self) -> u16 {
+        self.compute_events().0
+    }
+
+    /// The PDI interrupt line: AL event request & AL event mask (0x0204) != 0.
+    pub fn irq_line(&self) -> bool {
+        let m = u32::from_le_bytes([
+            self.mem[0x0204],
+            self.mem[0x0205],
+            self.mem[0x0206],
+            self.mem[0x0207],
+        ]);
+        self.al_event_request() & m != 0
+    }
+
+    /// SYNC0 and SYNC1 output levels now (from the DC SYNC status registers).
+    pub fn sync_lines(&self) -> (bool, bool) {
+        (
+            self.mem[regs::DC_SYNC0_STATUS as usize] & 1 != 0,
+            self.mem[regs::DC_SYNC1_STATUS as usize] & 1 != 0,
+        )
+    }
+
+    /// Sets the level of latch input `n` (0 or 1).
+    pub fn set_latch_input(&mut self, n: u8, level: bool) {
+        if let Some(l) = self.latch_inputs.get_mut(n as usize) {
+            *l = level;
+        }
+    }
+
+    /// Digital outputs 0x0F00..0x0F03 (digital-I/O PDI devices); cleared by the
+    /// process-data watchdog.
+    pub fn digital_outputs(&self) -> u32 {
+        self.dout
+    }
+
+    /// Digital inputs sampled into 0x1000..0x1003 (through the SM covering 0x1000, if any).
+    pub fn set_digital_inputs(&mut self, v: u32) {
+        let bytes = v.to_le_bytes();
+        let n = self
+            .active_sms
+            .iter()
+            .map(|&i| &self.sms[i as usize])
+            .find(|sm| sm.start == regs::PROCESS_RAM)
+            .map_or(4, |sm| (sm.len as usize).min(4));
+        if self.mem.len() >= 0x1004 {
+            self.phys_write(Side::Pdi, regs::PROCESS_RAM as u32, &bytes[..n], None);
+        }
+    }
+
+    /// Current SII EEPROM content.
+    pub fn eeprom(&self) -> &[u8] {
+        &self.eeprom
+    }
+
+    /// Raw view of 0x0000..end of process RAM (tests).
+    pub fn memory(&self) -> &[u8] {
+        &self.mem
+    }
+}
+
+/// The circulating bit of the first datagram, `None` if the frame has no datagram.
+fn circulating(frame: &[u8]) -> Option<bool> {
+    frame.get(9).map(|b| b & 0x40 != 0)
+}
+
+fn set_circulating(frame: &mut [u8]) {
+    if let Some(b) = frame.get_mut(9) {
+        *b |= 0x40;
+    }
+}

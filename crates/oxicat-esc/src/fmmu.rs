@@ -1,0 +1,86 @@
+//! FMMUs: decoded logical-to-physical mappings (bit granular).
+//!
+//! Register layout at 0x0600 + 16n: logical start (u32), length (u16), logical start bit
+//! (u8), logical stop bit (u8), physical start (u16), physical start bit (u8), type (u8:
+//! bit 0 read, bit 1 write), activate (u8 bit 0).
+
+/// One active FMMU, decoded for fast lookup.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Fmmu {
+    /// First logical bit mapped (logical start address * 8 + start bit).
+    pub log_bit_start: u64,
+    /// One past the last logical bit mapped.
+    pub log_bit_end: u64,
+    /// First physical bit (physical start * 8 + physical start bit).
+    pub phys_bit_start: u32,
+    /// Logical start address (byte).
+    pub log_start: u32,
+    /// Logical end address (byte, exclusive) for the byte-aligned fast path.
+    pub log_end: u64,
+    /// Physical start address (byte).
+    pub phys_start: u16,
+    /// Maps for reading (LRD / LRW read part).
+    pub read: bool,
+    /// Maps for writing (LWR / LRW write part).
+    pub write: bool,
+    /// Whole bytes on both sides: byte copies suffice.
+    pub aligned: bool,
+}
+
+impl Fmmu {
+    /// Decodes the 16 register bytes of one FMMU; `None` when inactive or empty.
+    pub fn decode(r: &[u8]) -> Option<Self> {
+        if r.len() < 16 || r[12] & 1 == 0 {
+            return None;
+        }
+        let log_start = u32::from_le_bytes([r[0], r[1], r[2], r[3]]);
+        let len = u16::from_le_bytes([r[4], r[5]]);
+        let start_bit = r[6] & 7;
+        let stop_bit = r[7] & 7;
+        let phys_start = u16::from_le_bytes([r[8], r[9]]);
+        let phys_bit = r[10] & 7;
+        let ty = r[11];
+        if len == 0 || ty & 3 == 0 {
+            return None;
+        }
+        let log_bit_start = log_start as u64 * 8 + start_bit as u64;
+        let log_bit_end = (log_start as u64 + len as u64 - 1) * 8 + stop_bit as u64 + 1;
+        if log_bit_end <= log_bit_start {
+            return None;
+        }
+        Some(Self {
+            log_bit_start,
+            log_bit_end,
+            phys_bit_start: phys_start as u32 * 8 + phys_bit as u32,
+            log_start,
+            log_end: log_start as u64 + len as u64,
+            phys_start,
+            read: ty & 1 != 0,
+            write: ty & 2 != 0,
+            aligned: start_bit == 0 && stop_bit == 7 && phys_bit == 0,
+        })
+    }
+
+    /// True when the logical bit ranges of `self` and `o` overlap.
+    pub fn overlaps(&self, o: &Fmmu) -> bool {
+        self.log_bit_start < o.log_bit_end && o.log_bit_start < self.log_bit_end
+    }
+}
+
+/// Reads bit `i` of `buf` (LSB first); 0 outside.
+#[inline]
+pub fn get_bit(buf: &[u8], i: usize) -> bool {
+    buf.get(i / 8).is_some_and(|b| b & (1 << (i % 8)) != 0)
+}
+
+/// Sets bit `i` of `buf` (LSB first) to `v`; ignored outside.
+#[inline]
+pub fn set_bit(buf: &mut [u8], i: usize, v: bool) {
+    if let Some(b) = buf.get_mut(i / 8) {
+        if v {
+            *b |= 1 << (i % 8);
+        } else {
+            *b &= !(1 << (i % 8));
+        }
+    }
+}
