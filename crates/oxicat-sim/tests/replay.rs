@@ -1,0 +1,364 @@
+//! Replays of real captures (`reference/captures/`) against emulated segments.
+//!
+//! Every master frame of a capture is fed, at its capture timestamp (virtual time), into
+//! a line of software ESCs built from the same SII EEPROMs (from `reference/sii/` or
+//! reconstructed from the EEPROM reads in the capture), and every returned datagram is
+//! compared with the recorded one: header, IRQ, data and working counter. Only the
+//! explicit masks below are ignored; each says why it depends on time, the real cable
+//! or a slave's own firmware rather than on the ESC.
+//!
+//! Chip constants the captures reveal (configured below, with the frame that shows them):
+//! - BRD 0x0000 (ORed over all slaves) reads type 0x13 and revision 0x01 where two chip
+//!   types are present (ET1100 0x11 | ET1200 0x12) and 0xC0/0x02 for the LAN9252;
+//! - FPRD 0x0007/0x0008 give port descriptors (EK1100 0x3B, EL1004 0x4A, LAN9252 0x1F)
+//!   and features (ET1100 in EK1100/EL2889/EK1914: 0x00FC; ET1200 in EL1004/EL2828/
+//!   EL3004: 0x01FC; LAN9252: 0x01CC);
+//! - 0x0502 shows the SII read size (bit 6) per slave.
+//! Which of two chips carries revision bit 0 cannot be told from an ORed read; the
+//! ET1200 gets revision 1 and the ET1100 revision 0.
+
+mod common;
+
+use common::*;
+use oxicat_esc::EscConfig;
+
+/// ET1100 as in the EK1100 coupler (ports 0 MII, 1 EBUS, 2 MII; soem-sdinfo frame 130).
+fn et1100_ek1100() -> EscConfig {
+    EscConfig {
+        esc_type: 0x11,
+        revision: 0x00,
+        port_descriptor: 0x3B,
+        features: 0x00FC,
+        sii_read_8_bytes: true,
+        ..EscConfig::et1100()
+    }
+}
+
+/// ET1100-class ESC of an EL terminal (EL2889, EK1914): E-bus ports 0 and 1. BWR to
+/// FMMU 3..7 (0x0630..) and SM 4..7 (0x0820..) is counted by exactly one slave in every
+/// capture with an EK1100 (rs-example-sii-el2004 frame 330: EK1100 + 2 ET1200 -> WKC 1;
+/// replay-dc frame 12: EK1100 + EL2828 + EL2889 -> WKC 1): the EK1100 has 8/8, so this
+/// chip implements 3 FMMUs and 4 SMs.
+fn et1100_terminal() -> EscConfig {
+    EscConfig {
+        esc_type: 0x11,
+        revision: 0x00,
+        fmmu_count: 3,
+        sm_count: 4,
+        port_descriptor: 0x0A,
+        features: 0x00FC,
+        sii_read_8_bytes: true,
+        ..EscConfig::et1100()
+    }
+}
+
+/// ET1200 of an EL terminal (EL1004, EL2004, EL2828, EL3004; soem-sdinfo frame 202).
+fn et1200_terminal() -> EscConfig {
+    EscConfig {
+        esc_type: 0x12,
+        revision: 0x01,
+        port_descriptor: 0x4A,
+        features: 0x01FC,
+        sii_read_8_bytes: true,
+        ..EscConfig::et1200()
+    }
+}
+
+/// LAN9252 as soem-single-lan9252 shows it (frames 7, 91, 95).
+fn lan9252() -> EscConfig {
+    EscConfig {
+        esc_type: 0xC0,
+        revision: 0x02,
+        port_descriptor: 0x1F,
+        features: 0x01CC,
+        sii_read_8_bytes: false,
+        ..EscConfig::lan9252()
+    }
+}
+
+fn sii(name: &str) -> Vec<u8> {
+    reference_file(&format!("sii/{name}"))
+}
+
+/// Configuration area of a bare-ESC Beckhoff digital terminal (EL2004's words 0..6:
+/// digital I/O PDI, device emulation), used for terminals whose config area no capture
+/// reads.
+fn digital_terminal_config() -> [u8; 14] {
+    let img = sii("el2004-eeprom-dump.bin");
+    let mut c = [0u8; 14];
+    c.copy_from_slice(&img[..14]);
+    c
+}
+
+/// Configuration area of a µC-based slave: PDI SPI (0x05), no device emulation, so AL
+/// status is written by the firmware.
+const MCU_CONFIG: [u8; 14] = [0x05, 0x00, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0];
+
+/// EL1004's SII, reconstructed from the EEPROM reads of soem-sdinfo-ek1100-el1004
+/// (no image of it in reference/sii).
+fn el1004_sii() -> Vec<u8> {
+    let ex = pair(&load_capture("soem-sdinfo-ek1100-el1004.pcapng"));
+    let words = sii_from_capture(&ex);
+    let w = words
+        .get(&1)
+        .expect("EL1004 EEPROM reads in soem-sdinfo capture");
+    sii_image(w, &digital_terminal_config(), 2048)
+}
+
+fn spec(name: &'static str, config: EscConfig, eeprom: Vec<u8>, firmware_echo: bool) -> SlaveSpec {
+    SlaveSpec {
+        name,
+        config,
+        eeprom,
+        out_port: 1,
+        firmware_echo,
+    }
+}
+
+fn std_masks() -> Vec<Mask> {
+    let mut m = Vec::new();
+    m.extend_from_slice(DC_TIME_MASKS);
+    m.extend_from_slice(CABLE_MASKS);
+    m.extend_from_slice(EEPROM_TIMING_MASKS);
+    m
+}
+
+fn replay_basic(name: &str) -> Replay<'_> {
+    Replay {
+        name,
+        masks: std_masks(),
+        logical_masks: Vec::new(),
+        frame_masks: Vec::new(),
+        wkc_masks: Vec::new(),
+    }
+}
+
+fn run(r: &Replay<'_>, bench: &mut Bench, ex: &[Exchange]) -> Stats {
+    let st = r.run(bench, ex);
+    report(r.name, &st);
+    st
+}
+
+fn assert_all_match(name: &str, st: &Stats) {
+    assert!(st.total > 0, "{name}: nothing compared");
+    assert_eq!(
+        st.mismatched, 0,
+        "{name}: {} of {} datagrams differ (see MISMATCH lines)",
+        st.mismatched, st.total
+    );
+}
+
+// ---------------------------------------------------------------- bare-ESC captures
+
+/// ethercrab's detect-slaves example: one BRD of DL status over EK1100 + EL1004.
+#[test]
+fn rs_detect_slaves_ek1100_el1004() {
+    let name = "rs-detect-slaves-ek1100-el1004.pcapng";
+    let ex = pair(&load_capture(name));
+    let mut bench = Bench::new(vec![
+        spec("EK1100", et1100_ek1100(), sii("ek1100.hex"), false),
+        spec("EL1004", et1200_terminal(), el1004_sii(), false),
+    ]);
+    let st = run(&replay_basic(name), &mut bench, &ex);
+    assert_all_match(name, &st);
+}
+
+/// ethercrab's SII example: EK1100 + 2 × EL2004, SII reads.
+#[test]
+fn rs_example_sii_el2004() {
+    let name = "rs-example-sii-el2004.pcapng";
+    let ex = pair(&load_capture(name));
+    let mut bench = Bench::new(vec![
+        spec("EK1100", et1100_ek1100(), sii("ek1100.hex"), false),
+        spec(
+            "EL2004",
+            et1200_terminal(),
+            sii("el2004-eeprom-dump.bin"),
+            false,
+        ),
+        spec(
+            "EL2004",
+            et1200_terminal(),
+            sii("el2004-eeprom-dump.bin"),
+            false,
+        ),
+    ]);
+    let st = run(&replay_basic(name), &mut bench, &ex);
+    assert_all_match(name, &st);
+}
+
+/// ethercrab bring-up to OP and cyclic LRW with EK1100 + EL2828 + EL2889.
+#[test]
+fn replay_ek1100_el2828_el2889() {
+    let name = "replay-ek1100-el2828-el2889.pcapng";
+    let ex = pair(&load_capture(name));
+    let mut bench = Bench::new(vec![
+        spec("EK1100", et1100_ek1100(), sii("ek1100.hex"), false),
+        spec("EL2828", et1200_terminal(), sii("el2828.hex"), false),
+        spec("EL2889", et1100_terminal(), sii("el2889.hex"), false),
+    ]);
+    let st = run(&replay_basic(name), &mut bench, &ex);
+    assert_all_match(name, &st);
+}
+
+/// ethercrab with DC start-up on EK1100 + EL2828 + EL2889.
+#[test]
+fn replay_dc() {
+    let name = "replay-dc.pcapng";
+    let ex = pair(&load_capture(name));
+    let mut bench = Bench::new(vec![
+        spec("EK1100", et1100_ek1100(), sii("ek1100.hex"), false),
+        spec("EL2828", et1200_terminal(), sii("el2828.hex"), false),
+        spec("EL2889", et1100_terminal(), sii("el2889.hex"), false),
+    ]);
+    let st = run(&replay_basic(name), &mut bench, &ex);
+    assert_all_match(name, &st);
+}
+
+/// SOEM slaveinfo-style scan of EK1100 + EL1004.
+#[test]
+fn soem_sdinfo_ek1100_el1004() {
+    let name = "soem-sdinfo-ek1100-el1004.pcapng";
+    let ex = pair(&load_capture(name));
+    let mut bench = Bench::new(vec![
+        spec("EK1100", et1100_ek1100(), sii("ek1100.hex"), false),
+        spec("EL1004", et1200_terminal(), el1004_sii(), false),
+    ]);
+    let st = run(&replay_basic(name), &mut bench, &ex);
+    assert_all_match(name, &st);
+}
+
+/// TwinCAT run-time traffic (DL status, AL status, error counters) of EK1100 + EL1004.
+/// The capture starts with the segment already configured by TwinCAT: station addresses
+/// 1001/1002 (0x03E9/0x03EA) and PREOP, as the first replies show. A pre-roll of two
+/// APWR and one BWR (not compared) brings the emulated segment to that point.
+#[test]
+fn twincat_run_ek1100_el1004() {
+    let name = "twincat-run-ek1100-el1004.pcapng";
+    let ex = pair(&load_capture(name));
+    let mut bench = Bench::new(vec![
+        spec("EK1100", et1100_ek1100(), sii("ek1100.hex"), false),
+        spec("EL1004", et1200_terminal(), el1004_sii(), false),
+    ]);
+    preroll(
+        &mut bench,
+        &[
+            (2, 0x0000, 0x0010, &[0xE9, 0x03]),
+            (2, 0xFFFF, 0x0010, &[0xEA, 0x03]),
+            (8, 0x0000, 0x0120, &[0x02, 0x00]),
+        ],
+    );
+    let st = run(&replay_basic(name), &mut bench, &ex);
+    assert_all_match(name, &st);
+}
+
+/// Sends configuration datagrams (cmd, adp, ado, data) through the bench at t = 0.
+fn preroll(bench: &mut Bench, dgs: &[(u8, u16, u16, &[u8])]) {
+    use oxicat_wire::{Command, DatagramHeader, FrameBuilder};
+    for (i, (cmd, adp, ado, data)) in dgs.iter().enumerate() {
+        let mut buf = [0u8; 128];
+        let eth = EthernetHeader {
+            dst: [0xFF; 6],
+            src: [0; 6],
+            vlan_tci: None,
+            payload_offset: 14,
+        };
+        let mut b = FrameBuilder::new(&mut buf, &eth).expect("frame");
+        let c = Command::from_u8(*cmd).expect("command");
+        b.push(
+            DatagramHeader::physical(c, i as u8, *adp, *ado, data.len() as u16),
+            data,
+        )
+        .expect("datagram");
+        let n = b.finish();
+        let back = bench
+            .exchange(&buf[..n], 0)
+            .expect("pre-roll frame returned");
+        let d = datagrams(&back).expect("pre-roll reply");
+        assert!(d[0].wkc > 0, "pre-roll datagram {i} not acknowledged");
+    }
+}
+
+use oxicat_wire::EthernetHeader;
+
+// ---------------------------------------------------------------- µC-based slaves
+
+/// Masks for slaves whose AL status and mailboxes are driven by firmware.
+fn firmware_masks(r: &mut Replay<'_>) {
+    r.masks.push(Mask {
+        start: 0x0805,
+        end: 0x0805,
+        bits: 0x08,
+        when: When::Always,
+        reason: "SM0 mailbox-full flag: emptied by the slave firmware at its own pace",
+    });
+    r.masks.push(Mask {
+        start: 0x080D,
+        end: 0x080D,
+        bits: 0x08,
+        when: When::Always,
+        reason: "SM1 mailbox-full flag: set when the slave firmware writes a response",
+    });
+    r.wkc_masks.push((
+        0x1080,
+        0x11FF,
+        "mailbox response read (SM1): content and presence come from the slave's CoE server",
+    ));
+}
+
+/// EK1914 + EL3004 configuration by ethercrab (CoE SDOs to the EL3004).
+#[test]
+fn replay_ek1914_el3004_configure() {
+    mcu_ek1914("replay-ek1914-el3004-configure.pcapng");
+}
+
+/// EK1914 + EL3004 segmented SDO upload.
+#[test]
+fn replay_ek1914_segmented_upload() {
+    mcu_ek1914("replay-ek1914-segmented-upload.pcapng");
+}
+
+fn mcu_ek1914(name: &str) {
+    let ex = pair(&load_capture(name));
+    let words = sii_from_capture(&ex);
+    let mut bench = Bench::new(vec![
+        spec(
+            "EK1914",
+            et1100_terminal(),
+            sii_image(&words[&0], &MCU_CONFIG, 2048),
+            true,
+        ),
+        spec(
+            "EL3004",
+            et1200_terminal(),
+            sii_image(&words[&1], &MCU_CONFIG, 2048),
+            true,
+        ),
+    ]);
+    let mut r = replay_basic(name);
+    firmware_masks(&mut r);
+    let st = run(&r, &mut bench, &ex);
+    assert_all_match(name, &st);
+}
+
+/// SOEM with one LAN9252 board running SOES.
+#[test]
+fn soem_single_lan9252() {
+    let name = "soem-single-lan9252.pcapng";
+    let ex = pair(&load_capture(name));
+    let words = sii_from_capture(&ex);
+    // 0x0140 = 0x0E89 (APRD frame 35): PDI type 0x89, ESC configuration 0x0E.
+    let mut cfg = MCU_CONFIG;
+    cfg[0] = 0x89;
+    cfg[1] = 0x0E;
+    let mut bench = Bench::new(vec![spec(
+        "LAN9252",
+        lan9252(),
+        sii_image(&words[&0], &cfg, 4096),
+        true,
+    )]);
+    let mut r = replay_basic(name);
+    firmware_masks(&mut r);
+    let st = run(&r, &mut bench, &ex);
+    assert_all_match(name, &st);
+}
