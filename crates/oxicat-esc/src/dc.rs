@@ -8,12 +8,65 @@
 //!   every port a frame enters, before any processing; port 0 = processing-unit direction).
 //! - `before_read(regs, addr, len, t)`: the ESC is about to read `regs[addr..addr+len]`
 //!   (ECAT or PDI) for a frame/access at `t`: refresh live DC registers in that range.
+//!   For ECAT accesses `t` should be the frame's arrival time at port 0 (the ESC latches
+//!   the system time read by a frame at the frame's start, as the datasheet says).
 //! - `after_write(regs, addr, len, t, from_ecat)`: bytes `regs[addr..addr+len]` were just
 //!   written (the ESC core already stored them, honouring write permissions).
 //! - `advance(regs, t) -> DcEvents`: move to time `t`; SYNC/latch events that happened in
 //!   (previous t, t] are returned with their global times.
 //! - `next_event(&self) -> Option<u64>`: global time of the next SYNC edge, if any.
-//! - `local_time(t)`: the free-running local clock at global time `t`.
+//! - `local_time(t)`: the ESC's local time at global time `t`.
+//!
+//! ADDITIONS (also to be called by the ESC core):
+//! - `after_read(regs, addr, len, t, from_ecat)`: bytes were read. Needed for the
+//!   read-to-clear registers: a PDI read of 0x098E/0x098F acknowledges SYNC0/SYNC1 in
+//!   acknowledge mode (pulse length 0x0982 = 0); a read of a latch time (0x09B0/0x09B8/
+//!   0x09C0/0x09C8) by the side owning that latch unit (0x0980 bits 4/5) clears the
+//!   single-event status bit in 0x09AE/0x09AF.
+//! - `latch_input(regs, n, level, t)`: LATCH0/LATCH1 input pin `n` has `level` from `t` on.
+//! - `sync_levels()`: SYNC0/SYNC1 output levels (for `Esc::sync_lines`).
+//! - `al_event_bits()` / `ecat_event_bits()`: what the core ORs into the AL event request
+//!   0x0220 (bit 1 DC latch event of PDI-owned latch units, bit 2 SYNC0 status 0x098E.0,
+//!   bit 3 SYNC1 status 0x098F.0; the core gates bits 2/3 with 0x0151 bits 3/7) and the
+//!   ECAT event request 0x0210 (bit 0 DC latch event of ECAT-owned latch units). The core
+//!   refreshes them after every `advance`, `after_read`, `after_write` and `latch_input`.
+//! - `reset(regs)`: power-on values of the DC registers (done lazily on the first call that
+//!   gets `regs` otherwise). 0x0982 (pulse length, from the EEPROM) is never written here.
+//!
+//! MODEL
+//! - Oscillator: `osc(t) = start_offset_ns + t + floor(t * drift)`, exact in integers
+//!   (drift kept in parts per 10^12).
+//! - Local time = oscillator + correction of the time-control loop. The correction is an
+//!   exact fixed-point integral of a rate (2^-40 ns per oscillator ns) and is applied in
+//!   whole nanoseconds, like silicon adding 9 or 11 ns instead of 10 ns on some ticks.
+//!   Its magnitude is limited to one nanosecond per 127 ticks of 10 ns (≈787 ppm), the
+//!   shortest speed-counter period (0x0932 range ±(0x0930 − 0x7F)).
+//! - System time = local time + offset (0x0920), 64 bit wrapping.
+//! - An ECAT write to 0x0910..0x0913 feeds the loop: Δt = (system time at the frame's
+//!   arrival − delay 0x0928) − written value, compared in 32 bit; positive = local copy
+//!   ahead. 0x092C holds the mean Δt (exponential average of depth 2^0x0934[3:0]) in
+//!   sign-magnitude form (bit 31 set = local copy smaller than received). The rate is set by
+//!   a proportional-integral law with time constant τ = 0x0930 × 24 414 ns (≈100 ms at the
+//!   reset value 0x1000; larger value = smaller bandwidth, as documented): rate =
+//!   −(2/τ·Δt + 1/τ²·Σ Δt·h) with h the time since the previous write (h limited to τ/4,
+//!   the proportional gain limited to 1/(2h) so sparse writes stay stable). No step
+//!   correction is ever applied: convergence from ±100 ppm takes on the order of a thousand
+//!   1 ms writes. 0x0932 shows the rate as a speed-counter value: ±(0x0930 − P) where P is
+//!   the number of 10 ns ticks between 1 ns corrections (0 when P ≥ 0x0930).
+//!   Writing 0x0930 resets the mean, the integral and the rate.
+//! - SYNC: on activation (0x0981.0 0→1) the first SYNC0 pulse is at the start time 0x0990
+//!   if it is in the near future; ET1100 compares the start time in 32 bit, so a start time
+//!   in the past fires only when the lower 32 bits of the system time come round again
+//!   (≈4.3 s later) — see [`Dc::set_start_time_compare_bits`]. With the plausibility check
+//!   (0x0981.5) a start time outside the near future fires immediately and sets 0x0984.2.
+//!   Pulses then follow every SYNC0 cycle time (0 = single shot). SYNC1: cycle time 0 =
+//!   copy of SYNC0; otherwise a SYNC1 pulse SYNC1-cycle-time after the SYNC0 pulse that
+//!   armed it, re-armed by the first SYNC0 pulse at or after that SYNC1 pulse. Pulse length
+//!   0x0982 in 10 ns (system time); 0 = acknowledge mode (signal and status stay set until a
+//!   PDI read of 0x098E/0x098F). If the system time jumps over several pulses (offset write)
+//!   only one pulse is produced and the schedule continues from the next slot.
+//! - 0x0990 reads back the system time of the next SYNC0 pulse while the unit is active,
+//!   0x0998 the next SYNC1 pulse.
 
 /// How an ESC's local oscillator deviates from ideal time.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
@@ -33,40 +86,899 @@ pub struct DcEvents {
     pub sync1: Option<u64>,
 }
 
+/// DC register addresses (0x0900..0x09FF).
+pub mod reg {
+    /// Receive time port 0 (32 bit); an ECAT write latches all port receive times.
+    pub const RECV_TIME_PORT0: u16 = 0x0900;
+    /// Receive time port 1 (32 bit).
+    pub const RECV_TIME_PORT1: u16 = 0x0904;
+    /// Receive time port 2 (32 bit).
+    pub const RECV_TIME_PORT2: u16 = 0x0908;
+    /// Receive time port 3 (32 bit).
+    pub const RECV_TIME_PORT3: u16 = 0x090C;
+    /// System time (64 bit); an ECAT write feeds the time-control loop.
+    pub const SYSTEM_TIME: u16 = 0x0910;
+    /// Receive time of the processing unit (64 bit).
+    pub const RECV_TIME_EPU: u16 = 0x0918;
+    /// System time offset (64 bit).
+    pub const SYSTEM_TIME_OFFSET: u16 = 0x0920;
+    /// System time delay (32 bit).
+    pub const SYSTEM_TIME_DELAY: u16 = 0x0928;
+    /// System time difference (32 bit, sign-magnitude).
+    pub const SYSTEM_TIME_DIFF: u16 = 0x092C;
+    /// Speed counter start (16 bit).
+    pub const SPEED_COUNTER_START: u16 = 0x0930;
+    /// Speed counter diff (16 bit, two's complement).
+    pub const SPEED_COUNTER_DIFF: u16 = 0x0932;
+    /// System time difference filter depth.
+    pub const SYSTEM_TIME_DIFF_FILTER_DEPTH: u16 = 0x0934;
+    /// Speed counter filter depth.
+    pub const SPEED_COUNTER_FILTER_DEPTH: u16 = 0x0935;
+    /// Cyclic unit control (0: ECAT, 1: PDI for SYNC unit / latch units).
+    pub const CYCLIC_UNIT_CONTROL: u16 = 0x0980;
+    /// Activation register.
+    pub const ACTIVATION: u16 = 0x0981;
+    /// Pulse length of SYNC signals in 10 ns (from the EEPROM).
+    pub const PULSE_LENGTH: u16 = 0x0982;
+    /// Activation status.
+    pub const ACTIVATION_STATUS: u16 = 0x0984;
+    /// SYNC0 status.
+    pub const SYNC0_STATUS: u16 = 0x098E;
+    /// SYNC1 status.
+    pub const SYNC1_STATUS: u16 = 0x098F;
+    /// Start time cyclic operation (write) / next SYNC0 pulse (read), 64 bit.
+    pub const START_TIME: u16 = 0x0990;
+    /// Next SYNC1 pulse (64 bit).
+    pub const NEXT_SYNC1: u16 = 0x0998;
+    /// SYNC0 cycle time (32 bit).
+    pub const SYNC0_CYCLE: u16 = 0x09A0;
+    /// SYNC1 cycle time (32 bit).
+    pub const SYNC1_CYCLE: u16 = 0x09A4;
+    /// Latch0 control.
+    pub const LATCH0_CONTROL: u16 = 0x09A8;
+    /// Latch1 control.
+    pub const LATCH1_CONTROL: u16 = 0x09A9;
+    /// Latch0 status.
+    pub const LATCH0_STATUS: u16 = 0x09AE;
+    /// Latch1 status.
+    pub const LATCH1_STATUS: u16 = 0x09AF;
+    /// Latch0 time positive edge (64 bit).
+    pub const LATCH0_POS: u16 = 0x09B0;
+    /// Latch0 time negative edge (64 bit).
+    pub const LATCH0_NEG: u16 = 0x09B8;
+    /// Latch1 time positive edge (64 bit).
+    pub const LATCH1_POS: u16 = 0x09C0;
+    /// Latch1 time negative edge (64 bit).
+    pub const LATCH1_NEG: u16 = 0x09C8;
+}
+
+const BASE: usize = 0x0900;
+const SHADOW_LEN: usize = 0x100;
+/// Fixed-point shift of the correction rate (rate unit: 2^-40 ns per ns).
+const Q: u32 = 40;
+const ONE_Q: i128 = 1 << Q;
+/// Largest correction rate: 1 ns per 127 ticks of 10 ns.
+const MAX_RATE_Q: i64 = (1i64 << Q) / 1270;
+/// τ per unit of Speed Counter Start, in ns (0x1000 → ≈100 ms).
+const TAU_PER_UNIT_NS: u64 = 24_414;
+/// Largest accepted oscillator error, in parts per 10^12 (±1 %).
+const MAX_DRIFT_PPT: i64 = 10_000_000_000;
+
+/// Is `a` (absolute address) a register this unit maintains in its shadow?
+fn owned(a: usize) -> bool {
+    matches!(a, 0x0900..=0x0935 | 0x0980..=0x0981 | 0x0984..=0x09CF)
+}
+
+/// Write mask of a DC register byte for a side, or `None` if that side may not write it.
+fn write_mask(a: usize, ecat: bool, ctrl: u8) -> Option<u8> {
+    let cyclic_owner_ecat = ctrl & 0x01 == 0;
+    let latch_owner_ecat = |n: u8| ctrl & (0x10 << n) == 0;
+    match a {
+        0x0920..=0x092B if ecat => Some(0xFF),
+        0x0930 if ecat => Some(0xFF),
+        0x0931 if ecat => Some(0x7F),
+        0x0934..=0x0935 if ecat => Some(0x0F),
+        0x0980 if ecat => Some(0x31),
+        0x0981 | 0x0990..=0x0997 | 0x09A0..=0x09A7 if ecat == cyclic_owner_ecat => Some(0xFF),
+        0x09A8 if ecat == latch_owner_ecat(0) => Some(0x03),
+        0x09A9 if ecat == latch_owner_ecat(1) => Some(0x03),
+        _ => None,
+    }
+}
+
+/// Overlap of `addr..addr+len` with `lo..=hi`.
+fn overlaps(addr: u16, len: u16, lo: u16, hi: u16) -> bool {
+    let (s, e) = (addr as u32, addr as u32 + len as u32);
+    s <= hi as u32 && e > lo as u32
+}
+
+/// Does `addr..addr+len` contain all of `lo..=hi`?
+fn covers(addr: u16, len: u16, lo: u16, hi: u16) -> bool {
+    let (s, e) = (addr as u32, addr as u32 + len as u32);
+    s <= lo as u32 && e > hi as u32
+}
+
+/// `a - b` of two wrapping 64-bit times as a signed distance.
+fn sdiff(a: u64, b: u64) -> i64 {
+    a.wrapping_sub(b) as i64
+}
+
+/// The SYNC output unit.
+#[derive(Debug, Clone, Default)]
+struct SyncUnit {
+    /// Cyclic unit activated (0x0981.0).
+    active: bool,
+    /// System time of the next internal SYNC0 pulse.
+    next0: Option<u64>,
+    /// System time of the next SYNC1 pulse (None: waiting to be armed by SYNC0).
+    next1: Option<u64>,
+    /// System time at which the SYNC0 pulse ends.
+    fall0: Option<u64>,
+    /// System time at which the SYNC1 pulse ends.
+    fall1: Option<u64>,
+    /// SYNC0 output level.
+    level0: bool,
+    /// SYNC1 output level.
+    level1: bool,
+    /// First SYNC0 pulse still pending (0x0984.0).
+    first0_pending: bool,
+    /// First SYNC1 pulse still pending (0x0984.1).
+    first1_pending: bool,
+    /// Start time out of near future at activation (0x0984.2).
+    start_out_of_range: bool,
+}
+
 /// The DC unit.
 #[derive(Debug, Clone)]
 pub struct Dc {
     cfg: ClockConfig,
+    drift_ppt: i64,
+    /// Global time of the last rate change.
+    anchor_t: u64,
+    /// Oscillator value at `anchor_t`.
+    anchor_osc: i128,
+    /// Correction accumulator at `anchor_t` (2^-40 ns).
+    anchor_acc: i128,
+    /// Current correction rate (2^-40 ns per oscillator ns).
+    rate_q: i64,
+    /// System time offset (0x0920).
+    offset: u64,
+    /// System time delay (0x0928).
+    delay: u32,
+    /// Mean system time difference, 2^-16 ns.
+    mean_q: i64,
+    /// Integral of Δt over time (ns²).
+    integ: i128,
+    /// Global time of the previous system time write.
+    last_sample: Option<u64>,
+    /// Arrival time of the last frame at port 0.
+    sof0: Option<u64>,
+    /// Ports (bit n) still to latch the receive time of the latch frame.
+    latch_pending: u8,
+    /// Authoritative copy of the owned registers 0x0900..0x09FF.
+    shadow: [u8; SHADOW_LEN],
+    /// Start time as last written (0x0990).
+    start_written: u64,
+    /// Pulse length in 10 ns units (copy of 0x0982).
+    pulse_len: u16,
+    sync: SyncUnit,
+    /// Latch input levels.
+    latch_level: [bool; 2],
+    /// Time up to which SYNC edges were processed.
+    t_done: u64,
+    /// Events found but not yet returned by `advance`.
+    pending: DcEvents,
+    /// Cached `next_event`.
+    next_cache: Option<u64>,
+    /// Width of the start-time comparison (32 for ET1100, 64 for 64-bit compare).
+    compare_bits: u32,
+    inited: bool,
 }
 
 impl Dc {
     /// A DC unit with the given oscillator.
     pub fn new(cfg: ClockConfig) -> Self {
-        Self { cfg }
+        let drift_ppt = (cfg.drift_ppm * 1e6) as i64;
+        let drift_ppt = drift_ppt.clamp(-MAX_DRIFT_PPT, MAX_DRIFT_PPT);
+        let mut dc = Self {
+            cfg,
+            drift_ppt,
+            anchor_t: 0,
+            anchor_osc: 0,
+            anchor_acc: 0,
+            rate_q: 0,
+            offset: 0,
+            delay: 0,
+            mean_q: 0,
+            integ: 0,
+            last_sample: None,
+            sof0: None,
+            latch_pending: 0,
+            shadow: [0; SHADOW_LEN],
+            start_written: 0,
+            pulse_len: 0,
+            sync: SyncUnit::default(),
+            latch_level: [false; 2],
+            t_done: 0,
+            pending: DcEvents::default(),
+            next_cache: None,
+            compare_bits: 32,
+            inited: false,
+        };
+        dc.anchor_osc = dc.osc(0);
+        dc.shadow_reset();
+        dc
     }
 
-    /// The free-running local clock at global time `t`.
-    pub fn local_time(&self, t: u64) -> u64 {
-        let drift = (t as f64) * self.cfg.drift_ppm * 1e-6;
-        (t as i64 + drift as i64) as u64 + self.cfg.start_offset_ns
+    /// Width (32 or 64) of the start-time comparison of the SYNC unit (default 32, ET1100).
+    pub fn set_start_time_compare_bits(&mut self, bits: u32) {
+        self.compare_bits = if bits >= 64 { 64 } else { 32 };
     }
+
+    fn shadow_reset(&mut self) {
+        self.shadow = [0; SHADOW_LEN];
+        self.put16(0x0930, 0x1000);
+        self.shadow[0x34] = 0x04;
+        self.shadow[0x35] = 0x0C;
+    }
+
+    /// Write the power-on values of the DC registers into `regs`.
+    pub fn reset(&mut self, regs: &mut [u8]) {
+        let cfg = self.cfg;
+        let bits = self.compare_bits;
+        *self = Self::new(cfg);
+        self.compare_bits = bits;
+        self.inited = true;
+        self.pulse_len = rd16(regs, 0x0982);
+        self.publish(regs);
+    }
+
+    /// First contact with the register file: power-on values, except for bytes
+    /// `keep.0..keep.1` that the caller is about to process.
+    fn ensure_init_keep(&mut self, regs: &mut [u8], keep: (usize, usize)) {
+        if !self.inited {
+            self.inited = true;
+            self.publish_range(regs, BASE, keep.0.clamp(BASE, BASE + SHADOW_LEN));
+            self.publish_range(
+                regs,
+                keep.1.clamp(BASE, BASE + SHADOW_LEN),
+                BASE + SHADOW_LEN,
+            );
+        }
+        self.pulse_len = rd16(regs, 0x0982);
+    }
+
+    fn ensure_init(&mut self, regs: &mut [u8]) {
+        self.ensure_init_keep(regs, (0, 0));
+        self.pulse_len = rd16(regs, 0x0982);
+    }
+
+    // ---------------------------------------------------------------- clock
+
+    /// Oscillator value (ns) at global time `t`.
+    fn osc(&self, t: u64) -> i128 {
+        let t = t as i128;
+        self.cfg.start_offset_ns as i128
+            + t
+            + (t * self.drift_ppt as i128).div_euclid(1_000_000_000_000)
+    }
+
+    fn acc_at(&self, t: u64) -> i128 {
+        self.anchor_acc + self.rate_q as i128 * (self.osc(t) - self.anchor_osc)
+    }
+
+    /// The ESC's local time (oscillator plus control-loop correction) at global time `t`.
+    pub fn local_time(&self, t: u64) -> u64 {
+        (self.osc(t) + (self.acc_at(t) >> Q)) as u64
+    }
+
+    /// The local copy of the system time (local time + offset) at global time `t`.
+    pub fn system_time(&self, t: u64) -> u64 {
+        self.local_time(t).wrapping_add(self.offset)
+    }
+
+    /// Current correction rate of the time-control loop, in parts per 10^9 (diagnostics).
+    pub fn correction_ppb(&self) -> i64 {
+        ((self.rate_q as i128 * 1_000_000_000) >> Q) as i64
+    }
+
+    fn set_rate(&mut self, t: u64, rate_q: i64) {
+        self.anchor_acc = self.acc_at(t);
+        self.anchor_osc = self.osc(t);
+        self.anchor_t = t;
+        self.rate_q = rate_q.clamp(-MAX_RATE_Q, MAX_RATE_Q);
+    }
+
+    /// Earliest global time ≥ `from` at which the system time reaches `target`.
+    fn global_at_sys(&self, target: u64, from: u64) -> Option<u64> {
+        let d0 = sdiff(target, self.system_time(from));
+        if d0 <= 0 {
+            return Some(from);
+        }
+        if d0 > (1i64 << 62) {
+            return None;
+        }
+        let mut lo = from;
+        let mut hi = from.checked_add(d0 as u64)?;
+        loop {
+            let d = sdiff(target, self.system_time(hi));
+            if d <= 0 {
+                break;
+            }
+            lo = hi;
+            hi = hi.checked_add(d as u64)?;
+        }
+        // Tighten the lower bound using a slope close to one.
+        let over = (-sdiff(target, self.system_time(hi))) as u64;
+        let cand = hi.saturating_sub(over + over / 64 + 3);
+        if cand > lo && sdiff(target, self.system_time(cand)) > 0 {
+            lo = cand;
+        }
+        while hi - lo > 1 {
+            let mid = lo + (hi - lo) / 2;
+            if sdiff(target, self.system_time(mid)) <= 0 {
+                hi = mid;
+            } else {
+                lo = mid;
+            }
+        }
+        Some(hi)
+    }
+
+    // ------------------------------------------------------ time control loop
+
+    fn tau_ns(&self) -> u64 {
+        let start = (self.get16(0x0930) & 0x7FFF).max(0x80) as u64;
+        start * TAU_PER_UNIT_NS
+    }
+
+    /// An ECAT write of `received` to the system time at global time `t`.
+    fn time_control(&mut self, t: u64, received: u32) {
+        let local = (self.system_time(t) as u32).wrapping_sub(self.delay);
+        let dt = local.wrapping_sub(received) as i32 as i64;
+
+        let depth = (self.shadow[0x34] & 0x0F) as u32;
+        self.mean_q += ((dt << 16) - self.mean_q) >> depth;
+        let mean = self.mean_q / (1 << 16);
+        let mag = (mean.unsigned_abs()).min(0x7FFF_FFFF) as u32;
+        let sm = if mean < 0 { mag | 0x8000_0000 } else { mag };
+        self.put32(0x092C, sm);
+
+        let tau = self.tau_ns() as i128;
+        let h_raw = match self.last_sample {
+            Some(p) if t > p => t - p,
+            _ => 0,
+        };
+        self.last_sample = Some(t);
+        let h = (h_raw as i128).min(tau / 4);
+        let integ_max = ((MAX_RATE_Q as i128) * tau * tau) >> Q;
+        self.integ = (self.integ + dt as i128 * h).clamp(-integ_max, integ_max);
+        let mut kp = 2 * ONE_Q / tau;
+        if h_raw > 0 {
+            kp = kp.min(ONE_Q / (2 * h_raw as i128));
+        }
+        let p = dt as i128 * kp;
+        let i = (self.integ << Q) / (tau * tau);
+        let rate = (-(p + i)).clamp(-(MAX_RATE_Q as i128), MAX_RATE_Q as i128) as i64;
+        self.set_rate(t, rate);
+        self.publish_speed_diff();
+    }
+
+    fn publish_speed_diff(&mut self) {
+        let start = (self.get16(0x0930) & 0x7FFF).max(0x80) as i128;
+        let r = (self.rate_q as i128).abs();
+        let diff = if r == 0 {
+            0
+        } else {
+            let period = ONE_Q / (10 * r);
+            if period >= start {
+                0
+            } else {
+                (start - period).min(start - 0x7F)
+            }
+        };
+        let v = if self.rate_q < 0 { -diff } else { diff };
+        self.put16(0x0932, v as i16 as u16);
+    }
+
+    fn reset_filters(&mut self, t: u64) {
+        self.mean_q = 0;
+        self.integ = 0;
+        self.last_sample = None;
+        self.set_rate(t, 0);
+        self.put32(0x092C, 0);
+        self.put16(0x0932, 0);
+    }
+
+    // ------------------------------------------------------------- contract
 
     /// First bit of a frame reached `port` at global time `t`.
-    pub fn frame_arrival(&mut self, _regs: &mut [u8], _port: u8, _t: u64) {}
-
-    /// Refresh live registers in `addr..addr+len` before they are read at `t`.
-    pub fn before_read(&mut self, _regs: &mut [u8], _addr: u16, _len: u16, _t: u64) {}
-
-    /// React to bytes `addr..addr+len` that were just written.
-    pub fn after_write(&mut self, _regs: &mut [u8], _addr: u16, _len: u16, _t: u64, _ecat: bool) {}
-
-    /// Advance to global time `t`.
-    pub fn advance(&mut self, _regs: &mut [u8], _t: u64) -> DcEvents {
-        DcEvents::default()
+    pub fn frame_arrival(&mut self, regs: &mut [u8], port: u8, t: u64) {
+        self.ensure_init(regs);
+        if port == 0 {
+            self.sof0 = Some(t);
+            self.latch_pending = 0;
+        } else if port < 4 && self.latch_pending & (1 << port) != 0 {
+            self.latch_pending &= !(1 << port);
+            let lt = self.local_time(t) as u32;
+            let a = 0x0900 + 4 * port as usize;
+            self.put32(a, lt);
+            self.publish_range(regs, a, a + 4);
+        }
     }
 
-    /// Global time of the next SYNC edge.
+    /// Refresh live registers in `addr..addr+len` before they are read at `t`.
+    pub fn before_read(&mut self, regs: &mut [u8], addr: u16, len: u16, t: u64) {
+        if !overlaps(addr, len, 0x0900, 0x09FF) {
+            return;
+        }
+        self.ensure_init(regs);
+        self.catch_up(t);
+        if overlaps(addr, len, 0x0910, 0x0917) {
+            let s = self.system_time(t);
+            self.put64(0x0910, s);
+        }
+        self.publish(regs);
+    }
+
+    /// Bytes `addr..addr+len` were read at `t` by ECAT (`ecat`) or the PDI.
+    pub fn after_read(&mut self, regs: &mut [u8], addr: u16, len: u16, t: u64, ecat: bool) {
+        if !overlaps(addr, len, 0x0900, 0x09FF) {
+            return;
+        }
+        self.ensure_init(regs);
+        self.catch_up(t);
+        let mut changed = false;
+        if !ecat && self.pulse_len == 0 {
+            if overlaps(addr, len, 0x098E, 0x098E) && self.sync.level0 {
+                self.sync.level0 = false;
+                changed = true;
+            }
+            if overlaps(addr, len, 0x098F, 0x098F) && self.sync.level1 {
+                self.sync.level1 = false;
+                changed = true;
+            }
+        }
+        let ctrl = self.shadow[0x80];
+        for n in 0..2u16 {
+            let owner_ecat = ctrl & (0x10 << n) == 0;
+            if owner_ecat != ecat {
+                continue;
+            }
+            let st = 0xAE + n as usize;
+            if overlaps(addr, len, 0x09B0 + 16 * n, 0x09B7 + 16 * n) && self.shadow[st] & 1 != 0 {
+                self.shadow[st] &= !1;
+                changed = true;
+            }
+            if overlaps(addr, len, 0x09B8 + 16 * n, 0x09BF + 16 * n) && self.shadow[st] & 2 != 0 {
+                self.shadow[st] &= !2;
+                changed = true;
+            }
+        }
+        if changed {
+            self.update_status();
+            self.publish(regs);
+            self.refresh_next();
+        }
+    }
+
+    /// React to bytes `addr..addr+len` that were just written.
+    pub fn after_write(&mut self, regs: &mut [u8], addr: u16, len: u16, t: u64, ecat: bool) {
+        if !overlaps(addr, len, 0x0900, 0x09FF) {
+            return;
+        }
+        self.ensure_init_keep(regs, (addr as usize, addr as usize + len as usize));
+        self.catch_up(t);
+        let old_act = self.shadow[0x81];
+        let start_addr = (addr as usize).max(BASE);
+        let end_addr = (addr as usize + len as usize).min(BASE + SHADOW_LEN);
+        let ctrl = self.shadow[0x80];
+        let mut wrote = [false; SHADOW_LEN];
+        for a in start_addr..end_addr {
+            if let (Some(m), Some(&v)) = (write_mask(a, ecat, ctrl), regs.get(a)) {
+                let i = a - BASE;
+                self.shadow[i] = v & m;
+                wrote[i] = true;
+                if (0x0990..0x0998).contains(&a) {
+                    let sh = 8 * (a - 0x0990) as u32;
+                    self.start_written =
+                        (self.start_written & !(0xFFu64 << sh)) | ((v as u64) << sh);
+                }
+            }
+        }
+        // Frame time for ECAT writes: the frame's arrival at port 0.
+        let tf = match self.sof0 {
+            Some(s) if ecat && s <= t && s >= self.anchor_t => s,
+            _ => t,
+        };
+        if ecat && overlaps(addr, len, 0x0900, 0x0903) {
+            let lt = self.local_time(tf);
+            self.put32(0x0900, lt as u32);
+            self.put64(0x0918, lt);
+            self.latch_pending = 0b1110;
+        }
+        if ecat && covers(addr, len, 0x0910, 0x0913) {
+            let rx = rd32(regs, 0x0910);
+            self.time_control(tf, rx);
+        }
+        if wrote[0x20..0x28].iter().any(|&w| w) {
+            self.offset = self.get64(0x0920);
+        }
+        if wrote[0x28..0x2C].iter().any(|&w| w) {
+            self.delay = self.get32(0x0928);
+        }
+        if wrote[0x30] || wrote[0x31] {
+            self.reset_filters(t);
+        }
+        if (0xA8..0xAA).any(|i| wrote[i]) {
+            for n in 0..2 {
+                if wrote[0xA8 + n] {
+                    self.shadow[0xAE + n] &= !0x03;
+                }
+            }
+        }
+        if wrote[0x81] {
+            let new = self.shadow[0x81];
+            self.shadow[0x81] = new & 0x7F;
+            self.activation_written(t, old_act, new);
+        } else if (0x90..0x98).any(|i| wrote[i]) && self.shadow[0x81] & 0x08 != 0 {
+            // Auto-activation by writing the start time.
+            if self.shadow[0x81] & 0x10 != 0 && !(0x94..0x98).any(|i| wrote[i]) {
+                let now = self.system_time(t);
+                let mut s = (now & !0xFFFF_FFFF) | (self.start_written & 0xFFFF_FFFF);
+                if sdiff(s, now) < 0 {
+                    s = s.wrapping_add(1 << 32);
+                }
+                self.start_written = s;
+            }
+            let act = self.shadow[0x81];
+            self.shadow[0x81] = act | 0x01;
+            self.activation_written(t, act & !0x01, act | 0x01);
+        }
+        let s = self.system_time(t);
+        self.put64(0x0910, s);
+        self.update_status();
+        self.publish(regs);
+        self.refresh_next();
+    }
+
+    /// Advance to global time `t`.
+    pub fn advance(&mut self, regs: &mut [u8], t: u64) -> DcEvents {
+        self.ensure_init(regs);
+        self.catch_up(t);
+        self.update_status();
+        self.publish(regs);
+        self.refresh_next();
+        core::mem::take(&mut self.pending)
+    }
+
+    /// Global time of the next SYNC edge (rising or falling).
     pub fn next_event(&self) -> Option<u64> {
-        None
+        self.next_cache
+    }
+
+    /// SYNC0 and SYNC1 output levels as of the last call.
+    pub fn sync_levels(&self) -> (bool, bool) {
+        (self.sync.level0, self.sync.level1)
+    }
+
+    /// Bits this unit contributes to the AL event request 0x0220 (bits 1, 2, 3; ungated).
+    pub fn al_event_bits(&self) -> u32 {
+        let ctrl = self.shadow[0x80];
+        let mut v = 0;
+        for n in 0..2 {
+            if ctrl & (0x10 << n) != 0 && self.shadow[0xAE + n] & 0x03 != 0 {
+                v |= 1 << 1;
+            }
+        }
+        if self.shadow[0x8E] & 1 != 0 {
+            v |= 1 << 2;
+        }
+        if self.shadow[0x8F] & 1 != 0 {
+            v |= 1 << 3;
+        }
+        v
+    }
+
+    /// Bits this unit contributes to the ECAT event request 0x0210 (bit 0: DC latch event).
+    pub fn ecat_event_bits(&self) -> u16 {
+        let ctrl = self.shadow[0x80];
+        let mut v = 0;
+        for n in 0..2 {
+            if ctrl & (0x10 << n) == 0 && self.shadow[0xAE + n] & 0x03 != 0 {
+                v |= 1;
+            }
+        }
+        v
+    }
+
+    /// LATCH input `n` (0 or 1) changes to `level` at global time `t`.
+    pub fn latch_input(&mut self, regs: &mut [u8], n: u8, level: bool, t: u64) {
+        self.ensure_init(regs);
+        let n = (n & 1) as usize;
+        if self.latch_level[n] == level {
+            return;
+        }
+        self.latch_level[n] = level;
+        let ctrl = self.shadow[0xA8 + n];
+        let st = 0xAE + n;
+        let (single, bit, time_reg) = if level {
+            (ctrl & 0x01 != 0, 0x01, 0x09B0 + 16 * n)
+        } else {
+            (ctrl & 0x02 != 0, 0x02, 0x09B8 + 16 * n)
+        };
+        let time = self.system_time(t);
+        if single {
+            if self.shadow[st] & bit == 0 {
+                self.shadow[st] |= bit;
+                self.put64(time_reg, time);
+            }
+        } else {
+            self.put64(time_reg, time);
+        }
+        if level {
+            self.shadow[st] |= 0x04;
+        } else {
+            self.shadow[st] &= !0x04;
+        }
+        self.publish(regs);
+    }
+
+    // ------------------------------------------------------------ SYNC unit
+
+    fn activation_written(&mut self, t: u64, old: u8, new: u8) {
+        if new & 0x01 == 0 {
+            self.sync = SyncUnit::default();
+            return;
+        }
+        if old & 0x01 == 0 {
+            // Activation.
+            let now = self.system_time(t);
+            let w = self.compare_bits;
+            let mask = if w >= 64 { u64::MAX } else { (1u64 << w) - 1 };
+            let delta = self.start_written.wrapping_sub(now) & mask;
+            let near = if new & 0x40 != 0 || w < 64 {
+                1u64 << 31
+            } else {
+                1u64 << 63
+            };
+            let out = delta >= near;
+            let first = if out && new & 0x20 != 0 {
+                Some(now)
+            } else if delta >= 1u64 << 62 {
+                // 64-bit compare and a start time in the past: reached only after the
+                // 64-bit system time wraps (centuries).
+                None
+            } else {
+                Some(now.wrapping_add(delta))
+            };
+            self.sync = SyncUnit {
+                active: true,
+                next0: first,
+                first0_pending: true,
+                first1_pending: true,
+                start_out_of_range: out,
+                ..SyncUnit::default()
+            };
+        }
+        if new & 0x02 == 0 {
+            self.sync.level0 = false;
+            self.sync.fall0 = None;
+        }
+        if new & 0x04 == 0 {
+            self.sync.level1 = false;
+            self.sync.fall1 = None;
+        }
+        if new & 0x80 != 0 {
+            // Debug pulse: one immediate pulse on the enabled outputs.
+            let now = self.system_time(t);
+            self.rise(0, now, t, new);
+            self.rise(1, now, t, new);
+        }
+    }
+
+    /// A rising edge of SYNC`n` at system time `at` (global `g`), if enabled in `act`.
+    fn rise(&mut self, n: usize, at: u64, g: u64, act: u8) {
+        if act & (0x02 << n) == 0 {
+            return;
+        }
+        let len = self.pulse_len as u64 * 10;
+        let fall = if len == 0 {
+            None
+        } else {
+            Some(at.wrapping_add(len))
+        };
+        let ev = if n == 0 {
+            self.sync.level0 = true;
+            self.sync.fall0 = fall;
+            &mut self.pending.sync0
+        } else {
+            self.sync.level1 = true;
+            self.sync.fall1 = fall;
+            &mut self.pending.sync1
+        };
+        if ev.is_none() {
+            *ev = Some(g);
+        }
+    }
+
+    /// The earliest pending edge: (system time, kind). Kinds: 0 fall0, 1 fall1, 2 sync1, 3 sync0.
+    fn next_edge(&self) -> Option<(u64, u8)> {
+        if !self.sync.active {
+            return None;
+        }
+        let reference = self.system_time(self.t_done);
+        let cands = [
+            (self.sync.fall0, 0u8),
+            (self.sync.fall1, 1),
+            (self.sync.next1, 2),
+            (self.sync.next0, 3),
+        ];
+        let mut best: Option<(i64, u64, u8)> = None;
+        for (c, k) in cands {
+            if let Some(x) = c {
+                let key = sdiff(x, reference);
+                if best.is_none_or(|(bk, _, _)| key < bk) {
+                    best = Some((key, x, k));
+                }
+            }
+        }
+        best.map(|(_, x, k)| (x, k))
+    }
+
+    /// Process all SYNC edges up to global time `t`.
+    fn catch_up(&mut self, t: u64) {
+        let t = t.max(self.t_done);
+        let mut guard = 0u32;
+        while let Some((x, kind)) = self.next_edge() {
+            let Some(g) = self.global_at_sys(x, self.t_done) else {
+                break;
+            };
+            if g > t {
+                break;
+            }
+            self.t_done = g;
+            self.edge(x, kind, g);
+            guard += 1;
+            if guard > 1_000_000 {
+                break;
+            }
+        }
+        self.t_done = t;
+    }
+
+    fn edge(&mut self, x: u64, kind: u8, g: u64) {
+        let act = self.shadow[0x81];
+        let now = self.system_time(g);
+        match kind {
+            0 => {
+                self.sync.fall0 = None;
+                self.sync.level0 = false;
+            }
+            1 => {
+                self.sync.fall1 = None;
+                self.sync.level1 = false;
+            }
+            2 => {
+                self.sync.next1 = None;
+                self.sync.first1_pending = false;
+                self.rise(1, x, g, act);
+            }
+            _ => {
+                let c0 = self.get32(0x09A0) as u64;
+                let c1 = self.get32(0x09A4) as u64;
+                self.sync.first0_pending = false;
+                self.sync.next0 = if c0 == 0 {
+                    None
+                } else {
+                    let mut n = x.wrapping_add(c0);
+                    if sdiff(n, now) <= 0 {
+                        let behind = sdiff(now, x) as u64;
+                        n = x.wrapping_add(c0 * (behind / c0 + 1));
+                    }
+                    Some(n)
+                };
+                self.rise(0, x, g, act);
+                if c1 == 0 {
+                    self.sync.first1_pending = false;
+                    self.rise(1, x, g, act);
+                } else if self.sync.next1.is_none() {
+                    self.sync.next1 = Some(x.wrapping_add(c1));
+                }
+            }
+        }
+    }
+
+    fn update_status(&mut self) {
+        let s = self.sync.clone();
+        let st = (s.active && s.first0_pending) as u8
+            | ((s.active && s.first1_pending) as u8) << 1
+            | (s.start_out_of_range as u8) << 2;
+        self.shadow[0x84] = st;
+        self.shadow[0x8E] = s.level0 as u8;
+        self.shadow[0x8F] = s.level1 as u8;
+        if s.active {
+            if let Some(n0) = s.next0 {
+                self.put64(0x0990, n0);
+            }
+            let c1 = self.get32(0x09A4);
+            let n1 = if c1 == 0 { s.next0 } else { s.next1 };
+            if let Some(n1) = n1 {
+                self.put64(0x0998, n1);
+            }
+        } else {
+            let sw = self.start_written;
+            self.put64(0x0990, sw);
+        }
+    }
+
+    fn refresh_next(&mut self) {
+        self.next_cache = self
+            .next_edge()
+            .and_then(|(x, _)| self.global_at_sys(x, self.t_done));
+    }
+
+    // -------------------------------------------------------- register file
+
+    fn publish(&self, regs: &mut [u8]) {
+        self.publish_range(regs, BASE, BASE + SHADOW_LEN);
+    }
+
+    fn publish_range(&self, regs: &mut [u8], from: usize, to: usize) {
+        for a in from..to {
+            if owned(a) {
+                if let Some(r) = regs.get_mut(a) {
+                    *r = self.shadow[a - BASE];
+                }
+            }
+        }
+    }
+
+    fn get16(&self, a: usize) -> u16 {
+        let i = a - BASE;
+        u16::from_le_bytes([self.shadow[i], self.shadow[i + 1]])
+    }
+
+    fn get32(&self, a: usize) -> u32 {
+        let i = a - BASE;
+        let mut b = [0; 4];
+        b.copy_from_slice(&self.shadow[i..i + 4]);
+        u32::from_le_bytes(b)
+    }
+
+    fn get64(&self, a: usize) -> u64 {
+        let i = a - BASE;
+        let mut b = [0; 8];
+        b.copy_from_slice(&self.shadow[i..i + 8]);
+        u64::from_le_bytes(b)
+    }
+
+    fn put16(&mut self, a: usize, v: u16) {
+        let i = a - BASE;
+        self.shadow[i..i + 2].copy_from_slice(&v.to_le_bytes());
+    }
+
+    fn put32(&mut self, a: usize, v: u32) {
+        let i = a - BASE;
+        self.shadow[i..i + 4].copy_from_slice(&v.to_le_bytes());
+    }
+
+    fn put64(&mut self, a: usize, v: u64) {
+        let i = a - BASE;
+        self.shadow[i..i + 8].copy_from_slice(&v.to_le_bytes());
+    }
+}
+
+fn rd16(regs: &[u8], a: usize) -> u16 {
+    match regs.get(a..a + 2) {
+        Some(b) => u16::from_le_bytes([b[0], b[1]]),
+        None => 0,
+    }
+}
+
+fn rd32(regs: &[u8], a: usize) -> u32 {
+    match regs.get(a..a + 4) {
+        Some(b) => u32::from_le_bytes([b[0], b[1], b[2], b[3]]),
+        None => 0,
     }
 }
