@@ -1,0 +1,138 @@
+//! Arbitrary frames through a line of 3 software ESCs built from a small SII image made in
+//! this target (identity, mailbox, strings, general, SMs, FMMU usage): the ESCs must never
+//! panic, whatever the frames and PDI accesses.
+//!
+//! Input: byte 0 selects the chip model and fault options; then a sequence of
+//! `[len_lo len_hi frame[len]]` records, each frame starting at the EtherCAT header.
+#![no_main]
+
+use libfuzzer_sys::fuzz_target;
+use oxicat_esc::{Esc, EscConfig, Forward};
+use oxicat_wire::mailbox::protocols;
+use oxicat_wire::sii::{
+    write_category, write_strings, CategoryType, MailboxArea, SiiConfig, SiiGeneral,
+    SiiIdentity, SiiMailboxConfig, SiiSyncManager, SmType, FIXED_AREA_LEN, GENERAL_LEN,
+};
+use std::sync::OnceLock;
+
+/// A 1 KiB EEPROM of a CoE device with 4 SMs, built with the oxicat-wire SII writers.
+fn eeprom() -> Vec<u8> {
+    let mut img = vec![0xFFu8; 1024];
+    img[..FIXED_AREA_LEN].fill(0);
+    SiiConfig {
+        pdi_control: 0x0005,
+        pdi_config: 0x0000,
+        sync_impulse_len: 100,
+        ..Default::default()
+    }
+    .write(&mut img)
+    .unwrap();
+    SiiIdentity {
+        vendor_id: 0x0000_0F0F,
+        product_code: 0x0001_0001,
+        revision: 1,
+        serial: 42,
+    }
+    .write(&mut img)
+    .unwrap();
+    let mbx = |offset| MailboxArea { offset, size: 128 };
+    SiiMailboxConfig {
+        bootstrap_rx: mbx(0x1000),
+        bootstrap_tx: mbx(0x1080),
+        standard_rx: mbx(0x1000),
+        standard_tx: mbx(0x1080),
+        protocols: protocols::COE | protocols::FOE,
+    }
+    .write(&mut img)
+    .unwrap();
+    img[0x7C..0x7E].copy_from_slice(&7u16.to_le_bytes()); // 1 KiB
+    img[0x7E..0x80].copy_from_slice(&1u16.to_le_bytes());
+    let mut s = [0u8; 64];
+    let n = write_strings(&mut s, &[b"oxicat", b"FuzzDev", b"Fuzz device"]).unwrap();
+    let mut o = write_category(&mut img, FIXED_AREA_LEN, CategoryType::Strings, &s[..n]).unwrap();
+    let mut g = [0u8; GENERAL_LEN];
+    SiiGeneral {
+        group_idx: 1,
+        order_idx: 2,
+        name_idx: 3,
+        coe_details: 0x23,
+        foe_details: 1,
+        ..Default::default()
+    }
+    .write(&mut g)
+    .unwrap();
+    o = write_category(&mut img, o, CategoryType::General, &g).unwrap();
+    o = write_category(&mut img, o, CategoryType::Fmmu, &[1, 2, 3, 0]).unwrap();
+    let mut sms = [0u8; 32];
+    let sm = |start, length, control, sm_type| SiiSyncManager {
+        start,
+        length,
+        control,
+        status: 0,
+        enable: 1,
+        sm_type,
+    };
+    sm(0x1000, 128, 0x26, SmType::MailboxOut).write(&mut sms[0..]).unwrap();
+    sm(0x1080, 128, 0x22, SmType::MailboxIn).write(&mut sms[8..]).unwrap();
+    sm(0x1100, 8, 0x64, SmType::Outputs).write(&mut sms[16..]).unwrap();
+    sm(0x1180, 8, 0x20, SmType::Inputs).write(&mut sms[24..]).unwrap();
+    o = write_category(&mut img, o, CategoryType::SyncManager, &sms).unwrap();
+    img[o..o + 2].copy_from_slice(&0xFFFFu16.to_le_bytes());
+    img
+}
+
+static EEPROM: OnceLock<Vec<u8>> = OnceLock::new();
+
+fuzz_target!(|data: &[u8]| {
+    let Some((&flags, mut rest)) = data.split_first() else { return };
+    let cfg = match flags & 3 {
+        0 => EscConfig::et1100(),
+        1 => EscConfig::et1200(),
+        _ => EscConfig::lan9252(),
+    };
+    let eeprom = EEPROM.get_or_init(eeprom);
+    let mut escs: Vec<Esc> = (0..3).map(|_| Esc::new(cfg.clone(), eeprom.clone())).collect();
+    for (i, e) in escs.iter_mut().enumerate() {
+        e.set_link(0, true);
+        e.set_link(1, i < 2);
+    }
+    let mut t: u64 = 1_000;
+    let mut frame_no = 0u32;
+    while rest.len() >= 2 && frame_no < 64 {
+        let len = (u16::from_le_bytes([rest[0], rest[1]]) as usize).min(1514).min(rest.len() - 2);
+        let mut frame = rest[2..2 + len].to_vec();
+        rest = &rest[2 + len..];
+        frame_no += 1;
+        // Outbound: processed by each ESC entering port 0.
+        for (i, e) in escs.iter_mut().enumerate() {
+            let ok = !(flags & 4 != 0 && i == 1 && frame_no % 3 == 0);
+            match e.forward(0, &mut frame, t, ok) {
+                Forward::Dropped => break,
+                Forward::Port(_) => {}
+            }
+            t += 500;
+        }
+        // Return path: through port 1 of ESC 1 and 0 (DC receive-time latching only).
+        for e in escs.iter_mut().take(2).rev() {
+            let _ = e.forward(1, &mut frame, t, true);
+            t += 500;
+        }
+        // PDI side: read what the frame may have changed, write back an input image.
+        for e in escs.iter_mut() {
+            let _ = e.advance(t);
+            let _ = e.next_event();
+            let mut b = [0u8; 16];
+            let addr = frame
+                .get(4..6)
+                .map(|a| u16::from_le_bytes([a[0], a[1]]))
+                .unwrap_or(0x0130);
+            let _ = e.pdi_read(addr, &mut b);
+            if flags & 8 != 0 {
+                let _ = e.pdi_write(0x1180, &b[..8]);
+                let _ = e.pdi_write(addr, &b[..2]);
+            }
+            let _ = (e.al_event_request(), e.irq_line(), e.sync_lines());
+        }
+        t += 10_000;
+    }
+});
