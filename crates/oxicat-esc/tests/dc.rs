@@ -606,3 +606,73 @@ fn latch_inputs() {
     d.after_read(&mut r, 0x09C0, 16, 110_000, false);
     assert_eq!(d.al_event_bits() & 0b10, 0);
 }
+
+#[test]
+fn ethercrab_init_sequence_then_converges() {
+    // ethercrab blanks DC registers with BWR (including a write of 0 to 0x0910, which feeds
+    // the loop garbage), then writes 0x0934 = 0x0C00 and 0x0930 = 0x1000 to reset the loop.
+    let mut sl = dc(-100.0, 42_000_000);
+    let mut sr = regs();
+    let mut rf = dc(100.0, 9_000_000);
+    let mut rr = regs();
+    for (d, r) in [(&mut sl, &mut sr), (&mut rf, &mut rr)] {
+        d.frame_arrival(r, 0, 100_000);
+        ecat_write(d, r, 0x0910, &[0; 8], 100_000);
+        ecat_write(d, r, 0x0920, &[0; 8], 110_000);
+        ecat_write(d, r, 0x092C, &[0; 4], 120_000);
+        ecat_write(d, r, 0x0934, &0x0C00u16.to_le_bytes(), 130_000);
+        ecat_write(d, r, 0x0930, &0x1000u16.to_le_bytes(), 140_000);
+        assert_eq!(d.correction_ppb(), 0, "loop reset");
+        assert_eq!(r[0x0934], 0);
+        assert_eq!(r[0x0935], 0x0C);
+    }
+    let mut p = Pair {
+        rf,
+        rr,
+        sl,
+        sr,
+        hop: 640,
+        t: 0,
+    };
+    // Latch, offsets and delay as in Pair::new.
+    let t0 = 5_000_000;
+    p.rf.frame_arrival(&mut p.rr, 0, t0);
+    ecat_write(&mut p.rf, &mut p.rr, 0x0900, &[0; 4], t0);
+    p.sl.frame_arrival(&mut p.sr, 0, t0 + 640);
+    ecat_write(&mut p.sl, &mut p.sr, 0x0900, &[0; 4], t0 + 640);
+    let ref_rx = read64(&mut p.rf, &mut p.rr, 0x0918, t0 + 10_000);
+    let sl_rx = read64(&mut p.sl, &mut p.sr, 0x0918, t0 + 10_000);
+    ecat_write(
+        &mut p.rf,
+        &mut p.rr,
+        0x0920,
+        &ref_rx.wrapping_neg().to_le_bytes(),
+        t0 + 10_000,
+    );
+    ecat_write(
+        &mut p.sl,
+        &mut p.sr,
+        0x0920,
+        &sl_rx.wrapping_neg().to_le_bytes(),
+        t0 + 10_000,
+    );
+    ecat_write(
+        &mut p.sl,
+        &mut p.sr,
+        0x0928,
+        &640u32.to_le_bytes(),
+        t0 + 10_000,
+    );
+    let mut t = t0 + 1_000_000;
+    for _ in 0..3000 {
+        p.frmw(t);
+        t += 1_000_000;
+    }
+    // Filter depth 0: 0x092C is the last difference itself.
+    for _ in 0..1000 {
+        p.frmw(t);
+        let d = sys_diff(&mut p.sl, &mut p.sr, t + 640);
+        assert!(d.abs() < 100, "{d}");
+        t += 1_000_000;
+    }
+}
