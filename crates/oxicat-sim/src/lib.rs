@@ -6,4 +6,9 @@
 #![forbid(unsafe_code)]
 #![warn(missing_docs)]
 
+pub mod capture;
+pub mod model;
+pub mod node;
 pub mod pcapng;
+pub mod segment;
+pub mod transport;

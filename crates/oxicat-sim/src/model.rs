@@ -1,0 +1,63 @@
+//! What the segment needs from an ESC, so the scheduler can also be driven by a stand-in.
+//!
+//! [`oxicat_esc::Esc`] implements [`SegmentEsc`]; unit tests of the walk and the scheduler use
+//! a tiny fake.
+
+/// Events an ESC reported while time advanced (mirrors `oxicat_esc::EscEvents`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct AdvanceEvents {
+    /// Global time of a SYNC0 rising edge in the advanced interval.
+    pub sync0: Option<u64>,
+    /// Global time of a SYNC1 rising edge in the advanced interval.
+    pub sync1: Option<u64>,
+    /// The process-data watchdog expired in the interval.
+    pub pd_watchdog_expired: bool,
+    /// The PDI watchdog expired in the interval.
+    pub pdi_watchdog_expired: bool,
+}
+
+/// The ECAT-side and timing interface of an ESC, as the segment drives it.
+pub trait SegmentEsc: Send {
+    /// A frame (starting at the EtherCAT header) reaches `port` at `t`; returns the egress
+    /// port, or `None` when the ESC drops it.
+    fn forward(&mut self, port: u8, frame: &mut [u8], t: u64, frame_ok: bool) -> Option<u8>;
+    /// Physical link state of `port`.
+    fn set_link(&mut self, port: u8, up: bool);
+    /// Time passes up to `t`.
+    fn advance(&mut self, t: u64) -> AdvanceEvents;
+    /// Global time of the next event (SYNC edge, watchdog expiry), if any.
+    fn next_event(&self) -> Option<u64>;
+    /// Level of the PDI interrupt line.
+    fn irq_line(&self) -> bool;
+}
+
+impl SegmentEsc for oxicat_esc::Esc {
+    fn forward(&mut self, port: u8, frame: &mut [u8], t: u64, frame_ok: bool) -> Option<u8> {
+        match oxicat_esc::Esc::forward(self, port, frame, t, frame_ok) {
+            oxicat_esc::Forward::Port(p) => Some(p),
+            oxicat_esc::Forward::Dropped => None,
+        }
+    }
+
+    fn set_link(&mut self, port: u8, up: bool) {
+        oxicat_esc::Esc::set_link(self, port, up)
+    }
+
+    fn advance(&mut self, t: u64) -> AdvanceEvents {
+        let e = oxicat_esc::Esc::advance(self, t);
+        AdvanceEvents {
+            sync0: e.sync0,
+            sync1: e.sync1,
+            pd_watchdog_expired: e.pd_watchdog_expired,
+            pdi_watchdog_expired: e.pdi_watchdog_expired,
+        }
+    }
+
+    fn next_event(&self) -> Option<u64> {
+        oxicat_esc::Esc::next_event(self)
+    }
+
+    fn irq_line(&self) -> bool {
+        oxicat_esc::Esc::irq_line(self)
+    }
+}

@@ -1,0 +1,34 @@
+//! Whatever sits behind an ESC's PDI (firmware, later) and receives its events at their
+//! virtual times.
+
+/// An event an ESC delivers to the PDI side.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum EscEvent {
+    /// SYNC0 rising edge.
+    Sync0,
+    /// SYNC1 rising edge.
+    Sync1,
+    /// The PDI interrupt line went active (AL event request & mask became non-zero).
+    Irq,
+    /// The process-data watchdog expired.
+    PdWatchdog,
+    /// The PDI watchdog expired.
+    PdiWatchdog,
+}
+
+/// The PDI-side party attached to one ESC (firmware, a plant probe, a test hook).
+///
+/// `E` is the ESC type, [`oxicat_esc::Esc`] unless a test uses a stand-in.
+pub trait Node<E = oxicat_esc::Esc>: Send {
+    /// `ev` happened on `esc` at virtual time `t` (ns); the node may access the ESC's PDI side.
+    fn on_event(&mut self, esc: &mut E, ev: EscEvent, t: u64);
+}
+
+impl<E, F> Node<E> for F
+where
+    F: FnMut(&mut E, EscEvent, u64) + Send,
+{
+    fn on_event(&mut self, esc: &mut E, ev: EscEvent, t: u64) {
+        self(esc, ev, t)
+    }
+}

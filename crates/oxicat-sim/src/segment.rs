@@ -1,0 +1,952 @@
+//! The virtual EtherCAT segment: ESCs wired in a topology, a virtual clock in ns, lockstep
+//! frame exchange with per-hop delays, event delivery to PDI-side nodes, and fault hooks.
+//!
+//! Time model: a frame sent by the master at `now()` reaches slave 0 port 0 after the master
+//! link delay; every ESC it passes holds it for its forwarding delay, every cable adds its
+//! delay (both directions alike, so DC delay measurement is exact when all ESCs have the
+//! same forwarding delay). The frame is back at the master when its first bit leaves slave 0
+//! port 0 plus the master link delay; the master has it when its last bit arrived, i.e. one
+//! wire time later. `now()` then stands at that moment.
+
+use std::sync::atomic::{AtomicU64, Ordering};
+
+use oxicat_wire::EthernetHeader;
+
+use crate::capture::{CaptureSink, Direction};
+use crate::model::SegmentEsc;
+use crate::node::{EscEvent, Node};
+
+/// Ports an ESC can have.
+pub const MAX_PORTS: usize = 4;
+/// Default forwarding delay of an ESC (arrival at a port to departure at the next), in ns.
+pub const DEFAULT_ESC_DELAY_NS: u64 = 450;
+/// Default cable delay of a link (about 10 m), in ns.
+pub const DEFAULT_LINK_DELAY_NS: u64 = 50;
+/// Time of one byte on a 100 Mbit/s wire, in ns.
+pub const BYTE_TIME_NS: u64 = 80;
+/// Bytes on the wire besides the frame itself: preamble + SFD (8), FCS (4), inter-frame gap (12).
+pub const WIRE_OVERHEAD_BYTES: u64 = 24;
+/// Minimum Ethernet frame length without FCS.
+const ETH_MIN: usize = 60;
+/// Hops after which a frame is considered lost (a loop the ESCs failed to break).
+const MAX_HOPS: usize = 4096;
+
+/// Index of an ESC in a segment, in the order it was added.
+pub type SlaveId = usize;
+
+/// Why a topology operation was refused.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum TopologyError {
+    /// No ESC with this index.
+    NoSuchSlave(SlaveId),
+    /// Port number ≥ 4.
+    NoSuchPort(u8),
+    /// The port is already wired (or is the master link).
+    PortInUse(SlaveId, u8),
+    /// The port is not wired.
+    NotWired(SlaveId, u8),
+    /// A port cannot be wired to itself.
+    SelfLoop,
+}
+
+impl core::fmt::Display for TopologyError {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        match self {
+            Self::NoSuchSlave(s) => write!(f, "no slave {s}"),
+            Self::NoSuchPort(p) => write!(f, "no port {p}"),
+            Self::PortInUse(s, p) => write!(f, "slave {s} port {p} is already wired"),
+            Self::NotWired(s, p) => write!(f, "slave {s} port {p} is not wired"),
+            Self::SelfLoop => write!(f, "a port cannot be wired to itself"),
+        }
+    }
+}
+
+impl std::error::Error for TopologyError {}
+
+/// A copyable handle on a segment's virtual clock, e.g. for ethercrab's `now` function.
+#[derive(Debug, Clone, Copy)]
+pub struct SimClock(&'static AtomicU64);
+
+impl SimClock {
+    /// Virtual time in ns.
+    pub fn now(&self) -> u64 {
+        self.0.load(Ordering::Acquire)
+    }
+}
+
+/// What happened to the last frame given to [`Segment::exchange`].
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum FrameFate {
+    /// Back at the master intact.
+    Returned,
+    /// Not an EtherCAT frame; ignored.
+    Ignored,
+    /// Removed by the drop-frames fault.
+    DroppedByFault,
+    /// An ESC dropped it (circulating-frame rule).
+    DroppedByEsc(SlaveId),
+    /// It left through an unwired port whose loop was open.
+    LostAtOpenPort(SlaveId, u8),
+    /// It came back with a bad FCS (corrupted on the way); the master's NIC discards it.
+    Corrupted,
+    /// It was still circulating after many hops.
+    Lost,
+}
+
+/// Counters of the master link.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct SegmentStats {
+    /// Frames the master sent.
+    pub sent: u64,
+    /// Frames returned to the master intact.
+    pub returned: u64,
+    /// Frames that did not come back (or came back corrupted).
+    pub lost: u64,
+    /// Non-EtherCAT frames ignored.
+    pub ignored: u64,
+}
+
+#[derive(Debug, Clone, Copy)]
+struct Link {
+    peer: SlaveId,
+    peer_port: u8,
+    delay_ns: u64,
+    /// Cable plugged in (false after [`Segment::set_cable`] pulled it).
+    up: bool,
+}
+
+struct Slot<E> {
+    esc: E,
+    node: Option<Box<dyn Node<E>>>,
+    links: [Option<Link>; MAX_PORTS],
+    delay_ns: u64,
+    advanced: u64,
+    irq: bool,
+    last_sync0: Option<u64>,
+    last_sync1: Option<u64>,
+}
+
+#[derive(Debug, Clone, Copy)]
+struct Corruption {
+    slave: SlaveId,
+    port: u8,
+    offset: usize,
+}
+
+/// A logged event (when event logging is on).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct LoggedEvent {
+    /// The ESC.
+    pub slave: SlaveId,
+    /// What happened.
+    pub event: EscEvent,
+    /// Virtual time in ns.
+    pub t: u64,
+}
+
+/// A chain/tree of ESCs with a virtual clock; the master link is slave 0 port 0.
+pub struct Segment<E: SegmentEsc = oxicat_esc::Esc> {
+    slots: Vec<Slot<E>>,
+    now: u64,
+    clock: &'static AtomicU64,
+    master_link_delay_ns: u64,
+    master_link_up: bool,
+    horizon: u64,
+    capture: Option<Box<dyn CaptureSink>>,
+    drop_next: u64,
+    corruptions: Vec<Corruption>,
+    stats: SegmentStats,
+    last_fate: Option<FrameFate>,
+    event_log: Option<Vec<LoggedEvent>>,
+}
+
+impl<E: SegmentEsc> Default for Segment<E> {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+impl<E: SegmentEsc> core::fmt::Debug for Segment<E> {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        f.debug_struct("Segment")
+            .field("slaves", &self.slots.len())
+            .field("now", &self.now)
+            .field("stats", &self.stats)
+            .finish_non_exhaustive()
+    }
+}
+
+impl<E: SegmentEsc> Segment<E> {
+    /// An empty segment at virtual time 0.
+    pub fn new() -> Self {
+        Self {
+            slots: Vec::new(),
+            now: 0,
+            clock: Box::leak(Box::new(AtomicU64::new(0))),
+            master_link_delay_ns: DEFAULT_LINK_DELAY_NS,
+            master_link_up: true,
+            horizon: u64::MAX,
+            capture: None,
+            drop_next: 0,
+            corruptions: Vec::new(),
+            stats: SegmentStats::default(),
+            last_fate: None,
+            event_log: None,
+        }
+    }
+
+    /// A line: ESC k port 1 wired to ESC k+1 port 0, default delays.
+    pub fn line(escs: impl IntoIterator<Item = E>) -> Self {
+        let mut s = Self::new();
+        for e in escs {
+            s.add(e);
+        }
+        s
+    }
+
+    /// Adds an ESC at the end of the line (wired to the previous ESC's port 1 if that port is
+    /// free) and returns its index.
+    pub fn add(&mut self, esc: E) -> SlaveId {
+        let id = self.add_unwired(esc);
+        if id > 0 && self.slots[id - 1].links[1].is_none() {
+            // Cannot fail: both ports exist and are free.
+            let _ = self.connect(id - 1, 1, id, 0);
+        }
+        id
+    }
+
+    /// Adds an ESC with no cables (slave 0's port 0 is the master link); wire it with
+    /// [`connect`](Self::connect).
+    pub fn add_unwired(&mut self, mut esc: E) -> SlaveId {
+        let id = self.slots.len();
+        for p in 0..MAX_PORTS as u8 {
+            esc.set_link(p, id == 0 && p == 0 && self.master_link_up);
+        }
+        self.slots.push(Slot {
+            esc,
+            node: None,
+            links: [None; MAX_PORTS],
+            delay_ns: DEFAULT_ESC_DELAY_NS,
+            advanced: self.now,
+            irq: false,
+            last_sync0: None,
+            last_sync1: None,
+        });
+        self.refresh_horizon();
+        id
+    }
+
+    fn check(&self, s: SlaveId, p: u8) -> Result<(), TopologyError> {
+        if s >= self.slots.len() {
+            return Err(TopologyError::NoSuchSlave(s));
+        }
+        if p as usize >= MAX_PORTS {
+            return Err(TopologyError::NoSuchPort(p));
+        }
+        Ok(())
+    }
+
+    fn is_master_port(s: SlaveId, p: u8) -> bool {
+        s == 0 && p == 0
+    }
+
+    /// Wires `a`'s port `pa` to `b`'s port `pb` with the default cable delay.
+    pub fn connect(&mut self, a: SlaveId, pa: u8, b: SlaveId, pb: u8) -> Result<(), TopologyError> {
+        self.connect_with_delay(a, pa, b, pb, DEFAULT_LINK_DELAY_NS)
+    }
+
+    /// Wires `a`'s port `pa` to `b`'s port `pb`; the cable delays frames by `delay_ns` in
+    /// each direction.
+    pub fn connect_with_delay(
+        &mut self,
+        a: SlaveId,
+        pa: u8,
+        b: SlaveId,
+        pb: u8,
+        delay_ns: u64,
+    ) -> Result<(), TopologyError> {
+        self.check(a, pa)?;
+        self.check(b, pb)?;
+        if a == b && pa == pb {
+            return Err(TopologyError::SelfLoop);
+        }
+        for (s, p) in [(a, pa), (b, pb)] {
+            if Self::is_master_port(s, p) || self.slots[s].links[p as usize].is_some() {
+                return Err(TopologyError::PortInUse(s, p));
+            }
+        }
+        self.slots[a].links[pa as usize] = Some(Link {
+            peer: b,
+            peer_port: pb,
+            delay_ns,
+            up: true,
+        });
+        self.slots[b].links[pb as usize] = Some(Link {
+            peer: a,
+            peer_port: pa,
+            delay_ns,
+            up: true,
+        });
+        self.slots[a].esc.set_link(pa, true);
+        self.slots[b].esc.set_link(pb, true);
+        Ok(())
+    }
+
+    /// Removes the cable at `a`'s port `pa` (both ends see link down).
+    pub fn disconnect(&mut self, a: SlaveId, pa: u8) -> Result<(), TopologyError> {
+        self.check(a, pa)?;
+        let l = self.slots[a].links[pa as usize]
+            .take()
+            .ok_or(TopologyError::NotWired(a, pa))?;
+        self.slots[l.peer].links[l.peer_port as usize] = None;
+        self.slots[a].esc.set_link(pa, false);
+        self.slots[l.peer].esc.set_link(l.peer_port, false);
+        Ok(())
+    }
+
+    /// Pulls (`plugged == false`) or re-plugs the cable at `a`'s port `pa`: both ends see the
+    /// link change and close/open their loops as silicon does. Slave 0 port 0 is the master
+    /// link.
+    pub fn set_cable(&mut self, a: SlaveId, pa: u8, plugged: bool) -> Result<(), TopologyError> {
+        self.check(a, pa)?;
+        if Self::is_master_port(a, pa) {
+            self.master_link_up = plugged;
+            self.slots[0].esc.set_link(0, plugged);
+            return Ok(());
+        }
+        let l = self.slots[a].links[pa as usize].ok_or(TopologyError::NotWired(a, pa))?;
+        for (s, p) in [(a, pa), (l.peer, l.peer_port)] {
+            if let Some(x) = self.slots[s].links[p as usize].as_mut() {
+                x.up = plugged;
+            }
+            self.slots[s].esc.set_link(p, plugged);
+        }
+        Ok(())
+    }
+
+    /// Sets the cable delay of the link at `a`'s port `pa` (the master link for slave 0
+    /// port 0).
+    pub fn set_link_delay(
+        &mut self,
+        a: SlaveId,
+        pa: u8,
+        delay_ns: u64,
+    ) -> Result<(), TopologyError> {
+        self.check(a, pa)?;
+        if Self::is_master_port(a, pa) {
+            self.master_link_delay_ns = delay_ns;
+            return Ok(());
+        }
+        let l = self.slots[a].links[pa as usize].ok_or(TopologyError::NotWired(a, pa))?;
+        for (s, p) in [(a, pa), (l.peer, l.peer_port)] {
+            if let Some(x) = self.slots[s].links[p as usize].as_mut() {
+                x.delay_ns = delay_ns;
+            }
+        }
+        Ok(())
+    }
+
+    /// Sets how long ESC `s` holds a frame between arrival and departure, in ns.
+    pub fn set_esc_delay(&mut self, s: SlaveId, delay_ns: u64) -> Result<(), TopologyError> {
+        self.check(s, 0)?;
+        self.slots[s].delay_ns = delay_ns;
+        Ok(())
+    }
+
+    /// The peer (slave, port) wired to `a`'s port `pa`, if any.
+    pub fn peer(&self, a: SlaveId, pa: u8) -> Option<(SlaveId, u8)> {
+        self.slots
+            .get(a)?
+            .links
+            .get(pa as usize)?
+            .map(|l| (l.peer, l.peer_port))
+    }
+
+    /// Attaches the PDI-side party of ESC `s` (replacing any previous one).
+    pub fn attach(&mut self, s: SlaveId, node: Box<dyn Node<E>>) -> Result<(), TopologyError> {
+        self.check(s, 0)?;
+        self.slots[s].node = Some(node);
+        Ok(())
+    }
+
+    /// Number of ESCs.
+    pub fn len(&self) -> usize {
+        self.slots.len()
+    }
+
+    /// Whether the segment has no ESC.
+    pub fn is_empty(&self) -> bool {
+        self.slots.is_empty()
+    }
+
+    /// ESC `s`.
+    pub fn esc(&self, s: SlaveId) -> Option<&E> {
+        self.slots.get(s).map(|x| &x.esc)
+    }
+
+    /// ESC `s`, mutably (PDI-side pokes between cycles).
+    pub fn esc_mut(&mut self, s: SlaveId) -> Option<&mut E> {
+        let e = self.slots.get_mut(s).map(|x| &mut x.esc);
+        // A PDI access may have changed the ESC's schedule.
+        self.horizon = 0;
+        e
+    }
+
+    /// Global time of the last SYNC0 / SYNC1 rising edge of ESC `s`.
+    pub fn last_sync(&self, s: SlaveId) -> (Option<u64>, Option<u64>) {
+        self.slots
+            .get(s)
+            .map_or((None, None), |x| (x.last_sync0, x.last_sync1))
+    }
+
+    /// Starts (or stops, with `false`) logging every delivered event.
+    pub fn log_events(&mut self, on: bool) {
+        self.event_log = if on { Some(Vec::new()) } else { None };
+    }
+
+    /// Removes and returns the logged events.
+    pub fn take_events(&mut self) -> Vec<LoggedEvent> {
+        self.event_log
+            .as_mut()
+            .map(std::mem::take)
+            .unwrap_or_default()
+    }
+
+    /// Sends captured frames to `sink` from now on (replacing any previous sink).
+    pub fn set_capture(
+        &mut self,
+        sink: Option<Box<dyn CaptureSink>>,
+    ) -> Option<Box<dyn CaptureSink>> {
+        std::mem::replace(&mut self.capture, sink)
+    }
+
+    /// Flushes the capture sink, if any.
+    pub fn flush_capture(&mut self) -> std::io::Result<()> {
+        self.capture.as_mut().map_or(Ok(()), |c| c.flush())
+    }
+
+    /// Master link counters.
+    pub fn stats(&self) -> SegmentStats {
+        self.stats
+    }
+
+    /// What happened to the last frame given to [`exchange`](Self::exchange).
+    pub fn last_fate(&self) -> Option<FrameFate> {
+        self.last_fate
+    }
+
+    // ---------------------------------------------------------------- faults
+
+    /// Fault: the next `n` EtherCAT frames are lost on the master link (never reach an ESC).
+    pub fn drop_next_frames(&mut self, n: u64) {
+        self.drop_next += n;
+    }
+
+    /// Fault: the next frame arriving at `slave`'s `port` has byte `offset` (counted from the
+    /// EtherCAT header, wrapped to the frame length) inverted on the cable just before; that
+    /// ESC and all after it see a bad FCS.
+    pub fn corrupt_next_at(
+        &mut self,
+        slave: SlaveId,
+        port: u8,
+        offset: usize,
+    ) -> Result<(), TopologyError> {
+        self.check(slave, port)?;
+        self.corruptions.push(Corruption {
+            slave,
+            port,
+            offset,
+        });
+        Ok(())
+    }
+
+    // ---------------------------------------------------------------- time
+
+    /// Virtual time in ns.
+    pub fn now(&self) -> u64 {
+        self.now
+    }
+
+    /// A copyable handle that reads this segment's virtual time from anywhere.
+    pub fn clock(&self) -> SimClock {
+        SimClock(self.clock)
+    }
+
+    fn set_now(&mut self, t: u64) {
+        if t > self.now {
+            self.now = t;
+            self.clock.store(t, Ordering::Release);
+        }
+    }
+
+    /// Advances virtual time by `dt` ns, delivering events on the way.
+    pub fn advance_by(&mut self, dt: u64) {
+        self.advance_to(self.now.saturating_add(dt));
+    }
+
+    /// Advances virtual time to `t` (no-op if `t` is in the past), delivering every ESC's
+    /// events in time order.
+    pub fn advance_to(&mut self, t: u64) {
+        self.run_events_until(t);
+        for i in 0..self.slots.len() {
+            self.advance_slot(i, t);
+        }
+        self.refresh_horizon();
+        self.set_now(t);
+    }
+
+    fn refresh_horizon(&mut self) {
+        self.horizon = self
+            .slots
+            .iter()
+            .filter_map(|s| s.esc.next_event())
+            .min()
+            .unwrap_or(u64::MAX);
+    }
+
+    /// Delivers all events due up to `t`, earliest first across ESCs.
+    fn run_events_until(&mut self, t: u64) {
+        if t < self.horizon {
+            return;
+        }
+        loop {
+            let mut best: Option<(u64, usize)> = None;
+            for (i, s) in self.slots.iter().enumerate() {
+                if let Some(ne) = s.esc.next_event() {
+                    if ne <= t && ne > s.advanced && best.is_none_or(|(b, _)| ne < b) {
+                        best = Some((ne, i));
+                    }
+                }
+            }
+            match best {
+                Some((ne, i)) => self.advance_slot(i, ne),
+                None => break,
+            }
+        }
+        self.refresh_horizon();
+    }
+
+    fn advance_slot(&mut self, i: usize, t: u64) {
+        let slot = &mut self.slots[i];
+        if t <= slot.advanced {
+            return;
+        }
+        slot.advanced = t;
+        let ev = slot.esc.advance(t);
+        let mut list: [(Option<u64>, EscEvent); 4] = [
+            (ev.sync0, EscEvent::Sync0),
+            (ev.sync1, EscEvent::Sync1),
+            (ev.pd_watchdog_expired.then_some(t), EscEvent::PdWatchdog),
+            (ev.pdi_watchdog_expired.then_some(t), EscEvent::PdiWatchdog),
+        ];
+        list.sort_by_key(|(t, _)| t.unwrap_or(u64::MAX));
+        for (et, e) in list {
+            if let Some(et) = et {
+                match e {
+                    EscEvent::Sync0 => self.slots[i].last_sync0 = Some(et),
+                    EscEvent::Sync1 => self.slots[i].last_sync1 = Some(et),
+                    _ => {}
+                }
+                self.deliver(i, e, et);
+            }
+        }
+        self.check_irq(i, t);
+    }
+
+    fn deliver(&mut self, i: usize, ev: EscEvent, t: u64) {
+        if let Some(log) = self.event_log.as_mut() {
+            log.push(LoggedEvent {
+                slave: i,
+                event: ev,
+                t,
+            });
+        }
+        let slot = &mut self.slots[i];
+        if let Some(node) = slot.node.as_mut() {
+            node.on_event(&mut slot.esc, ev, t);
+            if let Some(ne) = slot.esc.next_event() {
+                self.horizon = self.horizon.min(ne);
+            }
+        }
+    }
+
+    fn check_irq(&mut self, i: usize, t: u64) {
+        let level = self.slots[i].esc.irq_line();
+        let rising = level && !self.slots[i].irq;
+        self.slots[i].irq = level;
+        if rising {
+            self.deliver(i, EscEvent::Irq, t);
+            self.slots[i].irq = self.slots[i].esc.irq_line();
+        }
+    }
+
+    // ---------------------------------------------------------------- frames
+
+    /// Wire time of an Ethernet frame of `len` bytes (padded to 60, plus preamble, FCS, gap).
+    pub fn wire_time_ns(len: usize) -> u64 {
+        (len.max(ETH_MIN) as u64 + WIRE_OVERHEAD_BYTES) * BYTE_TIME_NS
+    }
+
+    /// Sends a whole Ethernet frame from the master at `now()` and returns the frame that
+    /// comes back (with the U/L bit 0x02 set in the first source-MAC octet, as the first
+    /// slave does), or `None` when it is lost, corrupted or not EtherCAT (see
+    /// [`last_fate`](Self::last_fate)). Virtual time advances by the frame's trip.
+    pub fn exchange(&mut self, frame: &[u8]) -> Option<Vec<u8>> {
+        let mut buf = frame.to_vec();
+        self.exchange_in_place(&mut buf).then_some(buf)
+    }
+
+    /// Like [`exchange`](Self::exchange) but processes `frame` in place; returns whether the
+    /// frame came back (then `frame` holds the returned frame).
+    pub fn exchange_in_place(&mut self, frame: &mut [u8]) -> bool {
+        let Ok(eth) = EthernetHeader::parse(frame) else {
+            self.stats.ignored += 1;
+            self.last_fate = Some(FrameFate::Ignored);
+            return false;
+        };
+        let t0 = self.now;
+        self.stats.sent += 1;
+        if let Some(c) = self.capture.as_mut() {
+            c.record(t0, Direction::ToSegment, frame);
+        }
+        let wire = Self::wire_time_ns(frame.len());
+        let fate = if self.drop_next > 0 {
+            self.drop_next -= 1;
+            self.advance_to(t0 + wire);
+            FrameFate::DroppedByFault
+        } else {
+            let (fate, t_back) = self.walk(&mut frame[eth.payload_offset..], t0);
+            self.advance_to(t_back.max(t0) + wire);
+            fate
+        };
+        self.last_fate = Some(fate);
+        if fate != FrameFate::Returned {
+            self.stats.lost += 1;
+            return false;
+        }
+        self.stats.returned += 1;
+        frame[6] |= 0x02;
+        let t = self.now;
+        if let Some(c) = self.capture.as_mut() {
+            c.record(t, Direction::ToMaster, frame);
+        }
+        true
+    }
+
+    /// Walks an EtherCAT frame (from its header) through the topology; returns its fate and
+    /// the time its first bit is back at the master (or was lost).
+    fn walk(&mut self, ecat: &mut [u8], t0: u64) -> (FrameFate, u64) {
+        if self.slots.is_empty() || !self.master_link_up {
+            return (FrameFate::LostAtOpenPort(0, 0), t0);
+        }
+        let mut at: (SlaveId, u8) = (0, 0);
+        let mut t = t0 + self.master_link_delay_ns;
+        let mut ok = true;
+        for _ in 0..MAX_HOPS {
+            if let Some(k) = self
+                .corruptions
+                .iter()
+                .position(|c| c.slave == at.0 && c.port == at.1)
+            {
+                let c = self.corruptions.remove(k);
+                if !ecat.is_empty() {
+                    let o = c.offset % ecat.len();
+                    ecat[o] ^= 0xFF;
+                }
+                ok = false;
+            }
+            self.run_events_until(t);
+            let (s, p) = at;
+            let slot = &mut self.slots[s];
+            // Keep the ESC's own timeline in step so its events come before the frame.
+            let out = slot.esc.forward(p, ecat, t, ok);
+            if let Some(ne) = slot.esc.next_event() {
+                self.horizon = self.horizon.min(ne);
+            }
+            self.check_irq(s, t);
+            let Some(out) = out else {
+                return (FrameFate::DroppedByEsc(s), t);
+            };
+            t += self.slots[s].delay_ns;
+            if s == 0 && out == 0 {
+                let t_back = t + self.master_link_delay_ns;
+                return (
+                    if ok {
+                        FrameFate::Returned
+                    } else {
+                        FrameFate::Corrupted
+                    },
+                    t_back,
+                );
+            }
+            match self.slots[s].links.get(out as usize).copied().flatten() {
+                Some(l) if l.up => {
+                    t += l.delay_ns;
+                    at = (l.peer, l.peer_port);
+                }
+                _ => return (FrameFate::LostAtOpenPort(s, out), t),
+            }
+        }
+        (FrameFate::Lost, t)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::model::AdvanceEvents;
+    use std::sync::{Arc, Mutex};
+
+    /// A stand-in ESC: ET1100 port order, counts frames in byte 2 of the EtherCAT payload,
+    /// SYNC0 every `period` ns from `start`.
+    #[derive(Debug, Default)]
+    struct Fake {
+        links: [bool; 4],
+        seen: Seen,
+        period: u64,
+        next: Option<u64>,
+        irq: bool,
+    }
+
+    impl SegmentEsc for Fake {
+        fn forward(&mut self, port: u8, frame: &mut [u8], t: u64, ok: bool) -> Option<u8> {
+            self.seen.lock().unwrap().push((port, t, ok));
+            if port == 0 && frame.len() > 2 {
+                frame[2] = frame[2].wrapping_add(1);
+            }
+            let order = [0u8, 3, 1, 2];
+            let i = order.iter().position(|&x| x == port).unwrap();
+            for k in 1..=4 {
+                let p = order[(i + k) % 4];
+                if p == 0 || self.links[p as usize] {
+                    return Some(p);
+                }
+            }
+            Some(0)
+        }
+        fn set_link(&mut self, port: u8, up: bool) {
+            self.links[port as usize] = up;
+        }
+        fn advance(&mut self, t: u64) -> AdvanceEvents {
+            let mut ev = AdvanceEvents::default();
+            while let Some(n) = self.next {
+                if n > t {
+                    break;
+                }
+                ev.sync0 = Some(n);
+                self.next = Some(n + self.period);
+            }
+            ev
+        }
+        fn next_event(&self) -> Option<u64> {
+            self.next
+        }
+        fn irq_line(&self) -> bool {
+            self.irq
+        }
+    }
+
+    fn eth_frame() -> Vec<u8> {
+        let mut f = vec![0xFF; 6];
+        f.extend_from_slice(&[0x10; 6]);
+        f.extend_from_slice(&[0x88, 0xA4]);
+        f.extend_from_slice(&[0x0C, 0x10]); // header, len 12
+        f.extend_from_slice(&[0; 12]);
+        f.resize(60, 0);
+        f
+    }
+
+    type Seen = Arc<Mutex<Vec<(u8, u64, bool)>>>;
+
+    fn fakes(n: usize) -> (Vec<Fake>, Vec<Seen>) {
+        let v: Vec<Fake> = (0..n).map(|_| Fake::default()).collect();
+        let seen = v.iter().map(|f| f.seen.clone()).collect();
+        (v, seen)
+    }
+
+    #[test]
+    fn line_walk_order_times_and_mac_bit() {
+        let (v, seen) = fakes(3);
+        let mut seg = Segment::line(v);
+        seg.set_link_delay(1, 1, 100).unwrap(); // cable 1-2
+        let back = seg.exchange(&eth_frame()).unwrap();
+        assert_eq!(back[6], 0x12);
+        assert_eq!(back[16], 3, "each ESC processed it once");
+        let l = DEFAULT_LINK_DELAY_NS;
+        let d = DEFAULT_ESC_DELAY_NS;
+        assert_eq!(
+            *seen[0].lock().unwrap(),
+            vec![
+                (0, l, true),
+                (1, l + d + l + d + 100 + d + 100 + d + l, true)
+            ]
+        );
+        assert_eq!(
+            *seen[1].lock().unwrap(),
+            vec![
+                (0, l + d + l, true),
+                (1, l + d + l + d + 100 + d + 100, true)
+            ]
+        );
+        assert_eq!(
+            *seen[2].lock().unwrap(),
+            vec![(0, l + d + l + d + 100, true)]
+        );
+        let t_back = l + d + l + d + 100 + d + 100 + d + l + d + l;
+        assert_eq!(seg.now(), t_back + Segment::<Fake>::wire_time_ns(60));
+        assert_eq!(seg.clock().now(), seg.now());
+        assert_eq!(seg.last_fate(), Some(FrameFate::Returned));
+    }
+
+    #[test]
+    fn branch_wiring_visits_port3_before_port1() {
+        let (v, seen) = fakes(3);
+        let mut seg = Segment::new();
+        for f in v {
+            seg.add_unwired(f);
+        }
+        seg.connect(0, 3, 1, 0).unwrap();
+        seg.connect(0, 1, 2, 0).unwrap();
+        assert_eq!(seg.connect(0, 1, 2, 1), Err(TopologyError::PortInUse(0, 1)));
+        assert_eq!(seg.connect(0, 0, 2, 1), Err(TopologyError::PortInUse(0, 0)));
+        assert!(seg.exchange(&eth_frame()).is_some());
+        let s0: Vec<u8> = seen[0].lock().unwrap().iter().map(|x| x.0).collect();
+        assert_eq!(s0, vec![0, 3, 1]);
+        let t1 = seen[1].lock().unwrap()[0].1;
+        let t2 = seen[2].lock().unwrap()[0].1;
+        assert!(t1 < t2);
+    }
+
+    #[test]
+    fn non_ethercat_is_ignored() {
+        let (v, seen) = fakes(1);
+        let mut seg = Segment::line(v);
+        let mut f = eth_frame();
+        f[12] = 0x08;
+        f[13] = 0x00;
+        assert!(seg.exchange(&f).is_none());
+        assert_eq!(seg.last_fate(), Some(FrameFate::Ignored));
+        assert!(seen[0].lock().unwrap().is_empty());
+        assert_eq!(seg.now(), 0);
+    }
+
+    #[test]
+    fn drop_next_frames() {
+        let (v, seen) = fakes(2);
+        let mut seg = Segment::line(v);
+        seg.drop_next_frames(2);
+        assert!(seg.exchange(&eth_frame()).is_none());
+        assert!(seg.exchange(&eth_frame()).is_none());
+        assert_eq!(seg.last_fate(), Some(FrameFate::DroppedByFault));
+        assert!(seen[0].lock().unwrap().is_empty());
+        assert!(seg.now() > 0, "time moves even for lost frames");
+        assert!(seg.exchange(&eth_frame()).is_some());
+        assert_eq!(seg.stats().lost, 2);
+        assert_eq!(seg.stats().returned, 1);
+    }
+
+    #[test]
+    fn corruption_marks_downstream_bad() {
+        let (v, seen) = fakes(3);
+        let mut seg = Segment::line(v);
+        seg.corrupt_next_at(1, 0, 5).unwrap();
+        let f = eth_frame();
+        assert!(seg.exchange(&f).is_none());
+        assert_eq!(seg.last_fate(), Some(FrameFate::Corrupted));
+        let oks = |i: usize| -> Vec<bool> { seen[i].lock().unwrap().iter().map(|x| x.2).collect() };
+        assert_eq!(oks(0), vec![true, false]);
+        assert_eq!(oks(1), vec![false, false]);
+        assert_eq!(oks(2), vec![false]);
+        // Only the next frame is hit.
+        assert!(seg.exchange(&f).is_some());
+    }
+
+    #[test]
+    fn pulled_cable_closes_loop_and_replug_opens_it() {
+        let (v, seen) = fakes(3);
+        let mut seg = Segment::line(v);
+        seg.set_cable(1, 1, false).unwrap();
+        assert!(seg.exchange(&eth_frame()).is_some());
+        assert!(
+            seen[2].lock().unwrap().is_empty(),
+            "slave 2 is behind the pulled cable"
+        );
+        assert_eq!(
+            seen[1].lock().unwrap().len(),
+            1,
+            "slave 1 loops back at port 1"
+        );
+        seg.set_cable(2, 0, true).unwrap();
+        assert!(seg.exchange(&eth_frame()).is_some());
+        assert_eq!(seen[2].lock().unwrap().len(), 1);
+        seg.set_cable(0, 0, false).unwrap();
+        assert!(seg.exchange(&eth_frame()).is_none());
+        assert_eq!(seg.last_fate(), Some(FrameFate::LostAtOpenPort(0, 0)));
+    }
+
+    #[test]
+    fn events_in_time_order_across_escs() {
+        let (mut v, _) = fakes(3);
+        v[0].period = 1000;
+        v[0].next = Some(1000);
+        v[1].period = 700;
+        v[1].next = Some(300);
+        v[2].period = 5000;
+        v[2].next = None;
+        let mut seg = Segment::line(v);
+        seg.log_events(true);
+        let got = Arc::new(Mutex::new(Vec::new()));
+        let g = got.clone();
+        seg.attach(
+            1,
+            Box::new(move |_e: &mut Fake, ev: EscEvent, t: u64| g.lock().unwrap().push((ev, t))),
+        )
+        .unwrap();
+        seg.advance_to(3000);
+        let ev = seg.take_events();
+        let times: Vec<(usize, u64)> = ev.iter().map(|e| (e.slave, e.t)).collect();
+        assert_eq!(
+            times,
+            vec![
+                (1, 300),
+                (0, 1000),
+                (1, 1000),
+                (1, 1700),
+                (0, 2000),
+                (1, 2400),
+                (0, 3000)
+            ]
+        );
+        assert_eq!(
+            *got.lock().unwrap(),
+            vec![
+                (EscEvent::Sync0, 300),
+                (EscEvent::Sync0, 1000),
+                (EscEvent::Sync0, 1700),
+                (EscEvent::Sync0, 2400)
+            ]
+        );
+        assert_eq!(seg.last_sync(0).0, Some(3000));
+        assert_eq!(seg.now(), 3000);
+        seg.advance_to(10);
+        assert_eq!(seg.now(), 3000, "time never goes back");
+    }
+
+    #[test]
+    fn capture_both_directions() {
+        let (v, _) = fakes(1);
+        let mut seg = Segment::line(v);
+        let cap = crate::capture::MemoryCapture::new();
+        seg.set_capture(Some(Box::new(cap.clone())));
+        let f = eth_frame();
+        seg.exchange(&f).unwrap();
+        let c = cap.frames();
+        assert_eq!(c.len(), 2);
+        assert_eq!(c[0].dir, Direction::ToSegment);
+        assert_eq!(c[0].t_ns, 0);
+        assert_eq!(c[0].data, f);
+        assert_eq!(c[1].dir, Direction::ToMaster);
+        assert_eq!(c[1].t_ns, seg.now());
+        assert_eq!(c[1].data[6], 0x12);
+    }
+}

@@ -1,0 +1,138 @@
+//! In-process transport for `ethercrab`: frames from its PDU loop go through a [`Segment`]
+//! and back, exactly as they would through a NIC and a cable.
+//!
+//! ```no_run
+//! # use std::sync::{Arc, Mutex};
+//! # use ethercrab::{MainDevice, MainDeviceConfig, PduStorage, Timeouts};
+//! # use oxicat_sim::{segment::Segment, transport::spawn_inprocess};
+//! static PDU_STORAGE: PduStorage<16, 1100> = PduStorage::new();
+//! let segment: Arc<Mutex<Segment>> = Arc::new(Mutex::new(Segment::new()));
+//! let (tx, rx, pdu_loop) = PDU_STORAGE.try_split().expect("split once");
+//! let _thread = spawn_inprocess(segment.clone(), tx, rx);
+//! let maindevice = MainDevice::new(pdu_loop, Timeouts::default(), MainDeviceConfig::default());
+//! ```
+
+use std::future::Future;
+use std::pin::Pin;
+use std::sync::{Arc, Mutex};
+use std::task::{Context, Poll};
+use std::thread::JoinHandle;
+
+use ethercrab::{PduRx, PduTx};
+
+use crate::model::SegmentEsc;
+use crate::segment::Segment;
+
+/// Why the in-process transport stopped.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum TransportError {
+    /// ethercrab refused a frame hand-over.
+    Send(ethercrab::error::Error),
+}
+
+impl core::fmt::Display for TransportError {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        match self {
+            Self::Send(e) => write!(f, "sending a frame failed: {e}"),
+        }
+    }
+}
+
+impl std::error::Error for TransportError {}
+
+/// Options of the in-process transport.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct InProcessConfig {
+    /// Virtual time (ns) that passes before each frame is sent: the master's own time between
+    /// frames. 0 means frames follow each other back to back.
+    pub frame_gap_ns: u64,
+}
+
+/// The TX/RX adapters given back when ethercrab asks the loop to exit.
+pub type Released = (PduTx<'static>, PduRx<'static>);
+
+/// The future that moves frames between ethercrab's PDU loop and a segment; see
+/// [`inprocess_task`].
+pub struct InProcessTask<E: SegmentEsc + 'static> {
+    segment: Arc<Mutex<Segment<E>>>,
+    tx: Option<PduTx<'static>>,
+    rx: Option<PduRx<'static>>,
+    config: InProcessConfig,
+}
+
+impl<E: SegmentEsc + 'static> Future for InProcessTask<E> {
+    type Output = Result<Released, TransportError>;
+
+    fn poll(mut self: Pin<&mut Self>, cx: &mut Context<'_>) -> Poll<Self::Output> {
+        let this = &mut *self;
+        let (Some(tx), Some(rx)) = (this.tx.as_mut(), this.rx.as_mut()) else {
+            return Poll::Pending;
+        };
+        tx.replace_waker(cx.waker());
+        if tx.should_exit() {
+            let (Some(tx), Some(rx)) = (this.tx.take(), this.rx.take()) else {
+                return Poll::Pending;
+            };
+            return Poll::Ready(Ok((tx.release(), rx.release())));
+        }
+        while let Some(frame) = tx.next_sendable_frame() {
+            let mut reply = None;
+            let segment = &this.segment;
+            let gap = this.config.frame_gap_ns;
+            frame
+                .send_blocking(|bytes| {
+                    let mut seg = segment.lock().unwrap_or_else(|e| e.into_inner());
+                    if gap > 0 {
+                        seg.advance_by(gap);
+                    }
+                    reply = seg.exchange(bytes);
+                    Ok(bytes.len())
+                })
+                .map_err(TransportError::Send)?;
+            if let Some(reply) = reply {
+                if let Err(e) = rx.receive_frame(&reply) {
+                    log::warn!("ethercrab did not accept a returned frame: {e}");
+                }
+            }
+        }
+        Poll::Pending
+    }
+}
+
+/// A future that serves ethercrab's PDU loop through `segment` until ethercrab asks it to
+/// exit (`MainDevice::release_all`); run it on any executor.
+pub fn inprocess_task<E: SegmentEsc + 'static>(
+    segment: Arc<Mutex<Segment<E>>>,
+    tx: PduTx<'static>,
+    rx: PduRx<'static>,
+    config: InProcessConfig,
+) -> InProcessTask<E> {
+    InProcessTask {
+        segment,
+        tx: Some(tx),
+        rx: Some(rx),
+        config,
+    }
+}
+
+/// Runs [`inprocess_task`] with default options on its own thread (error: the thread could
+/// not be spawned).
+pub fn spawn_inprocess<E: SegmentEsc + 'static>(
+    segment: Arc<Mutex<Segment<E>>>,
+    tx: PduTx<'static>,
+    rx: PduRx<'static>,
+) -> std::io::Result<JoinHandle<Result<Released, TransportError>>> {
+    spawn_inprocess_with(segment, tx, rx, InProcessConfig::default())
+}
+
+/// Runs [`inprocess_task`] with `config` on its own thread.
+pub fn spawn_inprocess_with<E: SegmentEsc + 'static>(
+    segment: Arc<Mutex<Segment<E>>>,
+    tx: PduTx<'static>,
+    rx: PduRx<'static>,
+    config: InProcessConfig,
+) -> std::io::Result<JoinHandle<Result<Released, TransportError>>> {
+    std::thread::Builder::new()
+        .name("oxicat-sim-inprocess".into())
+        .spawn(move || futures_lite::future::block_on(inprocess_task(segment, tx, rx, config)))
+}
