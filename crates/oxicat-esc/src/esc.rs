@@ -100,6 +100,8 @@ pub struct Esc {
     frame_ok: bool,
     pending: bool,
     events_dirty: bool,
+    ecat_mask: u16,
+    open_ports: u8,
     ecat_irq: u16,
     ecat_ev: u16,
     al_ev: u32,
@@ -167,6 +169,8 @@ impl Esc {
             frame_ok: true,
             pending: false,
             events_dirty: true,
+            ecat_mask: 0,
+            open_ports: 0,
             ecat_irq: 0,
             ecat_ev: 0,
             al_ev: 0,
@@ -207,7 +211,12 @@ impl Esc {
     }
 
     /// True when the port's loop is open (frames leave through it).
+    #[inline]
     pub fn port_open(&self, port: u8) -> bool {
+        self.open_ports & (1 << (port & 3)) != 0
+    }
+
+    fn compute_port_open(&self, port: u8) -> bool {
         if port > 3 || !self.cfg.port_present(port) {
             return false;
         }
@@ -293,7 +302,8 @@ impl Esc {
         });
         if self.pending {
             self.pending = false;
-            for i in 0..self.sms.len() {
+            for k in 0..self.active_sms.len() {
+                let i = self.active_sms[k] as usize;
                 if self.sms[i].pending_commit {
                     if frame_ok {
                         self.commit_sm(i, Side::Ecat);
@@ -313,7 +323,7 @@ impl Esc {
     }
 
     fn process_datagram(&mut self, dg: &mut DatagramMut<'_>) {
-        if self.events_dirty {
+        if self.events_dirty && self.ecat_mask != 0 {
             self.refresh_events();
         }
         let Some(cmd) = dg.header.command() else {
@@ -426,7 +436,8 @@ impl Esc {
             }
         }
         self.scratch = orig;
-        u16::from(rd) + 2 * u16::from(wr)
+        let wr_inc = if cmd == Command::Lwr { 1 } else { 2 };
+        u16::from(rd) + wr_inc * u16::from(wr)
     }
 
     fn fmmu_read(&mut self, f: &Fmmu, addr: u32, data: &mut [u8]) -> bool {
@@ -437,6 +448,10 @@ impl Esc {
             let x1 = de.min(f.log_end);
             if x0 >= x1 {
                 return false;
+            }
+            if let (Some(i), true) = (f.sm, x0 == f.log_start as u64 && x1 == f.log_end) {
+                let o = (x0 - ds) as usize;
+                return self.sm_read_whole(i as usize, &mut data[o..o + f.len as usize]);
             }
             let phys = f.phys_start as u32 + (x0 - f.log_start as u64) as u32;
             let out = &mut data[(x0 - ds) as usize..(x1 - ds) as usize];
@@ -474,6 +489,10 @@ impl Esc {
             let x1 = de.min(f.log_end);
             if x0 >= x1 {
                 return false;
+            }
+            if let (Some(i), true) = (f.sm, x0 == f.log_start as u64 && x1 == f.log_end) {
+                let o = (x0 - ds) as usize;
+                return self.sm_write_whole(i as usize, &src[o..o + f.len as usize]);
             }
             let phys = f.phys_start as u32 + (x0 - f.log_start as u64) as u32;
             let inp = &src[(x0 - ds) as usize..(x1 - ds) as usize];
@@ -685,10 +704,8 @@ impl Esc {
                 continue;
             }
             let v = d[k];
-            match m {
-                None => self.mem[a] = v,
-                Some(m) => self.mem[a] = (self.mem[a] & !m[k]) | (v & m[k]),
-            }
+            let bm = bit_mask(a) & m.map_or(0xFF, |m| m[k]);
+            self.mem[a] = (self.mem[a] & !bm) | (v & bm);
         }
         self.write_side_effects(side, c, e, old_al_ctl, &old_activate);
     }
@@ -725,7 +742,7 @@ impl Esc {
             self.events_dirty = true;
         }
         if over(0x0200, 0x0208) {
-            self.events_dirty = true;
+            self.refresh_events();
         }
         if over(0x0500, 0x0501) && side == Side::Ecat && self.mem[0x0500] & 2 != 0 {
             // Force ECAT access: the PDI loses the EEPROM.
@@ -762,6 +779,7 @@ impl Esc {
                 self.reload_sm(i);
             }
             self.rebuild_active_sms();
+            self.rebuild_fmmus();
             self.events_dirty = true;
         }
         if over(0x0900, 0x0A00) {
@@ -808,6 +826,46 @@ impl Esc {
         self.mem[0x0805 + 8 * i] = status;
         self.events_dirty = true;
         self.copy_out(cur + off, o, or);
+        true
+    }
+
+    /// ECAT reads a whole SM buffer in one access (FMMU fast path).
+    #[inline]
+    fn sm_read_whole(&mut self, i: usize, o: &mut [u8]) -> bool {
+        let sm = &mut self.sms[i];
+        if !sm.open_read() {
+            return false;
+        }
+        sm.close_read();
+        let from = (sm.start as u32 + sm.buf_offset(sm.user_buf)) as usize;
+        let status = sm.status_reg();
+        self.mem[0x0805 + 8 * i] = status;
+        self.events_dirty = true;
+        match self.mem.get(from..from + o.len()) {
+            Some(src) => o.copy_from_slice(src),
+            None => self.copy_out(from as u32, o, false),
+        }
+        true
+    }
+
+    /// ECAT writes a whole SM buffer in one access (FMMU fast path).
+    #[inline]
+    fn sm_write_whole(&mut self, i: usize, d: &[u8]) -> bool {
+        let sm = &mut self.sms[i];
+        if !sm.open_write() {
+            return false;
+        }
+        sm.write_open = false;
+        sm.pending_commit = true;
+        self.pending = true;
+        let to = (sm.start as u32 + sm.buf_offset(sm.write_buf)) as usize;
+        let status = sm.status_reg();
+        self.mem[0x0805 + 8 * i] = status;
+        self.events_dirty = true;
+        match self.mem.get_mut(to..to + d.len()) {
+            Some(dst) => dst.copy_from_slice(d),
+            None => self.store(to as u32, d, None),
+        }
         true
     }
 
@@ -901,6 +959,17 @@ impl Esc {
                 self.fmmus.push(f);
             }
         }
+        for f in self.fmmus.iter_mut() {
+            if !f.aligned || f.read == f.write {
+                continue;
+            }
+            let ps = f.phys_start as u32;
+            let pe = ps + f.len as u32;
+            f.sm = self.active_sms.iter().copied().find(|&i| {
+                let sm = &self.sms[i as usize];
+                sm.start as u32 == ps && sm.end() == pe && sm.ecat_writes() == f.write
+            });
+        }
         self.fmmu_any_read = self.fmmus.iter().any(|f| f.read);
         self.fmmu_any_write = self.fmmus.iter().any(|f| f.write);
         self.fmmu_rw_overlap = self
@@ -910,6 +979,9 @@ impl Esc {
     }
 
     fn update_dl_status(&mut self, event: bool) {
+        self.open_ports = (0..4u8)
+            .filter(|&p| self.compute_port_open(p))
+            .fold(0, |m, p| m | (1 << p));
         let mut s: u16 = 0;
         if sii::read_ctl(&self.mem) & sii::CTL_NOT_LOADED == 0 {
             s |= 1;
@@ -964,7 +1036,8 @@ impl Esc {
         let (e, a) = self.compute_events();
         self.mem[0x0210..0x0212].copy_from_slice(&e.to_le_bytes());
         self.mem[0x0220..0x0224].copy_from_slice(&a.to_le_bytes());
-        self.ecat_irq = e & self.reg16(regs::ECAT_EVENT_MASK);
+        self.ecat_mask = self.reg16(regs::ECAT_EVENT_MASK);
+        self.ecat_irq = e & self.ecat_mask;
         self.events_dirty = false;
     }
 
@@ -1137,6 +1210,22 @@ impl Esc {
     /// Raw view of 0x0000..end of process RAM (tests).
     pub fn memory(&self) -> &[u8] {
         &self.mem
+    }
+}
+
+/// Writable bits of register byte `a` (for registers with read-only bits).
+#[inline]
+fn bit_mask(a: usize) -> u8 {
+    match a {
+        0x0120 => 0x3F,
+        0x0121 => 0x00,
+        0x0500 => 0x03,
+        0x0501 => 0x01,
+        0x0502 => 0x01,
+        0x0503 => 0x07,
+        0x0800..=0x087F if a % 8 == 6 => 0x03,
+        0x0800..=0x087F if a % 8 == 7 => 0x03,
+        _ => 0xFF,
     }
 }
 

@@ -25,6 +25,11 @@ pub struct Fmmu {
     pub write: bool,
     /// Whole bytes on both sides: byte copies suffice.
     pub aligned: bool,
+    /// Logical length in bytes.
+    pub len: u16,
+    /// Fast path: the SM whose whole buffer this FMMU maps exactly (in a direction the SM
+    /// allows for ECAT), set by the ESC when FMMUs or SMs change.
+    pub sm: Option<u8>,
 }
 
 impl Fmmu {
@@ -58,6 +63,8 @@ impl Fmmu {
             read: ty & 1 != 0,
             write: ty & 2 != 0,
             aligned: start_bit == 0 && stop_bit == 7 && phys_bit == 0,
+            len,
+            sm: None,
         })
     }
 

@@ -278,3 +278,217 @@ fn bad_fcs_register_write_ignored() {
     e.forward(0, &mut f, 0, false);
     assert_eq!(e.station_address(), 0);
 }
+
+/// ESC with SM2 (0x1000, 4 bytes, 3-buffer, ECAT writes) and SM3 (0x1100, 4 bytes,
+/// 3-buffer, ECAT reads), FMMU0 log 0..4 -> SM2, FMMU1 log 4..8 <- SM3.
+fn pd_esc() -> Esc {
+    let mut e = esc();
+    sm(&mut e, 2, 0x1000, 4, 0x64, 1);
+    sm(&mut e, 3, 0x1100, 4, 0x20, 1);
+    fmmu(&mut e, 0, 0, 4, 0, 7, 0x1000, 0, 2);
+    fmmu(&mut e, 1, 4, 4, 0, 7, 0x1100, 0, 1);
+    e
+}
+
+#[test]
+fn lrw_through_three_buffer_sms() {
+    let mut e = pd_esc();
+    e.pdi_write(0x1100, &[9, 8, 7, 6]).unwrap();
+    let (d, w) = lrw(&mut e, 0, &[1, 2, 3, 4, 0, 0, 0, 0]);
+    assert_eq!(w, 3);
+    assert_eq!(d, vec![1, 2, 3, 4, 9, 8, 7, 6]);
+    let mut b = [0u8; 4];
+    e.pdi_read(0x1000, &mut b).unwrap();
+    assert_eq!(b, [1, 2, 3, 4]);
+    // AL event for SM2 (control bit 5) was raised and cleared by the PDI read.
+    assert_eq!(e.al_event_request() & (1 << 10), 0);
+    // LRD only reads, LWR only writes.
+    let mut f = frame(&[(DatagramHeader::logical(Command::Lrd, 0, 0, 8), &[0; 8])]);
+    e.forward(0, &mut f, 0, true);
+    assert_eq!(dg(&f, 0).1, 1);
+    let mut f = frame(&[(DatagramHeader::logical(Command::Lwr, 0, 0, 8), &[5; 8])]);
+    e.forward(0, &mut f, 0, true);
+    assert_eq!(dg(&f, 0).1, 1);
+}
+
+#[test]
+fn three_buffer_consumer_sees_newest_complete() {
+    let mut e = pd_esc();
+    lrw(&mut e, 0, &[1, 1, 1, 1, 0, 0, 0, 0]);
+    lrw(&mut e, 0, &[2, 2, 2, 2, 0, 0, 0, 0]);
+    let mut b = [0u8; 4];
+    e.pdi_read(0x1000, &mut b).unwrap();
+    assert_eq!(b, [2, 2, 2, 2]);
+    // A write in a bad frame does not become visible.
+    let mut f = frame(&[(
+        DatagramHeader::logical(Command::Lwr, 0, 0, 4),
+        &[3, 3, 3, 3],
+    )]);
+    e.forward(0, &mut f, 0, false);
+    e.pdi_read(0x1000, &mut b).unwrap();
+    assert_eq!(b, [2, 2, 2, 2]);
+    // Partial write not starting at the start address: ignored, no WKC.
+    let sa = e.station_address();
+    let (_, w) = run(&mut e, Command::Fpwr, sa, 0x1001, &[7, 7, 7]);
+    assert_eq!(w, 0);
+    // Write without the last byte: not visible.
+    let (_, w) = run(&mut e, Command::Fpwr, sa, 0x1000, &[4, 4]);
+    assert_eq!(w, 1);
+    e.pdi_read(0x1000, &mut b).unwrap();
+    assert_eq!(b, [2, 2, 2, 2]);
+    // Consumer reading in two pieces keeps its buffer even if a new one arrives.
+    lrw(&mut e, 0, &[5, 5, 5, 5, 0, 0, 0, 0]);
+    let mut h = [0u8; 2];
+    e.pdi_read(0x1000, &mut h).unwrap();
+    lrw(&mut e, 0, &[6, 6, 6, 6, 0, 0, 0, 0]);
+    e.pdi_read(0x1002, &mut h).unwrap();
+    assert_eq!(h, [5, 5]);
+    e.pdi_read(0x1000, &mut b).unwrap();
+    assert_eq!(b, [6, 6, 6, 6]);
+}
+
+#[test]
+fn mailbox_full_empty_and_lock() {
+    let mut e = esc();
+    sm(&mut e, 0, 0x1800, 8, 0x26, 1); // mailbox, ECAT writes, AL irq
+    sm(&mut e, 1, 0x1900, 8, 0x22, 1); // mailbox, ECAT reads
+    let sa = e.station_address();
+    let (_, w) = run(&mut e, Command::Fpwr, sa, 0x1800, &[1; 8]);
+    assert_eq!(w, 1);
+    assert_eq!(e.memory()[0x0805] & 0x08, 0x08);
+    assert_ne!(e.al_event_request() & (1 << 8), 0);
+    // Full: second write refused.
+    let (_, w) = run(&mut e, Command::Fpwr, sa, 0x1800, &[2; 8]);
+    assert_eq!(w, 0);
+    let mut b = [0u8; 8];
+    e.pdi_read(0x1800, &mut b).unwrap();
+    assert_eq!(b, [1; 8]);
+    assert_eq!(e.memory()[0x0805] & 0x08, 0);
+    // Read mailbox empty: ECAT read refused.
+    let (_, w) = run(&mut e, Command::Fprd, sa, 0x1900, &[0; 8]);
+    assert_eq!(w, 0);
+    e.pdi_write(0x1900, &[3; 8]).unwrap();
+    assert_eq!(e.memory()[0x080D] & 0x08, 0x08);
+    let (d, w) = run(&mut e, Command::Fprd, sa, 0x1900, &[0; 8]);
+    assert_eq!((d, w), (vec![3; 8], 1));
+    assert_eq!(e.memory()[0x080D] & 0x08, 0);
+    // Repeat request toggle raises the SM-change event; PDI acks in its control byte.
+    fpwr(&mut e, 0x080E, &[0x03]);
+    assert_ne!(e.al_event_request() & (1 << 4), 0);
+    e.pdi_write(0x080F, &[0x02]).unwrap();
+    assert_eq!(fprd(&mut e, 0x080F, 1).0, vec![0x02]);
+    // PDI deactivation makes the area plain memory.
+    e.pdi_write(0x080F, &[0x01]).unwrap();
+    let (_, w) = run(&mut e, Command::Fprd, sa, 0x1900, &[0; 8]);
+    assert_eq!(w, 1);
+}
+
+#[test]
+fn fmmu_bit_mapping() {
+    let mut e = esc();
+    // Logical bits 2..5 of byte 0x10 -> physical 0x0F80 bits 4..7.
+    fmmu(&mut e, 0, 0x10, 1, 2, 5, 0x0F80, 4, 3);
+    let mut f = frame(&[(DatagramHeader::logical(Command::Lwr, 0, 0x10, 1), &[0b0011_1100])]);
+    e.forward(0, &mut f, 0, true);
+    assert_eq!(dg(&f, 0).1, 1);
+    assert_eq!(e.memory()[0x0F80], 0xF0);
+    e.pdi_write(0x0F80, &[0b1010_0000]).unwrap();
+    let mut f = frame(&[(DatagramHeader::logical(Command::Lrd, 0, 0x10, 1), &[0xFF])]);
+    e.forward(0, &mut f, 0, true);
+    assert_eq!(dg(&f, 0).0, vec![0b1110_1011]);
+}
+
+#[test]
+fn digital_outputs_and_watchdog() {
+    // EL2004 style: PDI digital I/O, SM2 at 0x0F00 len 1, 3-buffer, watchdog trigger.
+    let mut e = Esc::new(EscConfig::et1100(), eeprom(0x0104, 0));
+    sm(&mut e, 2, 0x0F00, 1, 0x44, 1);
+    fmmu(&mut e, 0, 0x100, 1, 0, 7, 0x0F00, 0, 2);
+    let mut f = frame(&[(DatagramHeader::logical(Command::Lrw, 0, 0x100, 1), &[0x0A])]);
+    e.forward(0, &mut f, 1000, true);
+    assert_eq!(dg(&f, 0).1, 2);
+    assert_eq!(e.digital_outputs(), 0x0A);
+    assert_eq!(e.memory()[0x0440] & 1, 1);
+    // Default watchdog: 1000 * 100 us = 100 ms.
+    assert_eq!(e.next_event(), Some(1000 + 100_000_000));
+    let ev = e.advance(50_000_000);
+    assert!(!ev.pd_watchdog_expired);
+    let ev = e.advance(100_001_000);
+    assert!(ev.pd_watchdog_expired);
+    assert_eq!(e.digital_outputs(), 0);
+    assert_eq!(e.memory()[0x0442], 1);
+    assert_eq!(e.memory()[0x0440] & 1, 0);
+}
+
+#[test]
+fn sii_read_write_reload_and_ownership() {
+    let mut e = esc();
+    // Read word 8 (vendor id low) -> 8 bytes.
+    fpwr(&mut e, 0x0504, &[8, 0, 0, 0]);
+    fpwr(&mut e, 0x0502, &[0x00, 0x01]);
+    let (d, _) = fprd(&mut e, 0x0502, 14);
+    assert_eq!(u16::from_le_bytes([d[0], d[1]]) & 0x8700, 0);
+    assert_ne!(d[0] & 0x40, 0);
+    assert_eq!(&d[6..8], &[0xAA, 0x55]);
+    // Write without write enable: error bit 14.
+    fpwr(&mut e, 0x0508, &[0x11, 0x22]);
+    fpwr(&mut e, 0x0502, &[0x00, 0x02]);
+    assert_ne!(fprd(&mut e, 0x0503, 1).0[0] & 0x40, 0);
+    fpwr(&mut e, 0x0502, &[0x01, 0x02]);
+    assert_eq!(&e.eeprom()[16..18], &[0x11, 0x22]);
+    // Corrupt the config area (alias word 4) and reload: CRC error flagged.
+    fpwr(&mut e, 0x0504, &[4, 0, 0, 0]);
+    fpwr(&mut e, 0x0508, &[0x99, 0x99]);
+    fpwr(&mut e, 0x0502, &[0x01, 0x02]);
+    fpwr(&mut e, 0x0502, &[0x00, 0x04]);
+    assert_ne!(fprd(&mut e, 0x0503, 1).0[0] & 0x08, 0);
+    // PDI ownership: ECAT commands ignored.
+    fpwr(&mut e, 0x0500, &[1]);
+    fpwr(&mut e, 0x0504, &[0x20, 0, 0, 0]);
+    assert_eq!(e.memory()[0x0504], 4);
+    e.pdi_write(0x0504, &[8, 0, 0, 0]).unwrap();
+    e.pdi_write(0x0502, &[0, 1]).unwrap();
+    let mut b = [0u8; 2];
+    e.pdi_read(0x0508, &mut b).unwrap();
+    assert_eq!(b, [0x11, 0x22]);
+}
+
+#[test]
+fn eeprom_crc_error_on_power_up() {
+    let mut ee = eeprom(0x0005, 0x1234);
+    ee[14] ^= 1;
+    let e = Esc::new(EscConfig::et1100(), ee);
+    assert_ne!(e.memory()[0x0503] & 0x08, 0);
+    assert_eq!(e.memory()[0x0110] & 1, 0);
+    assert_eq!(e.memory()[0x0012], 0);
+}
+
+#[test]
+fn port_routing_and_circulating() {
+    let mut e = esc();
+    let mut f = frame(&[(phys(Command::Nop, 0, 0, &[0]), &[0])]);
+    assert_eq!(e.forward(0, &mut f, 0, true), Forward::Port(0));
+    e.set_link(1, true);
+    assert_eq!(e.forward(0, &mut f, 0, true), Forward::Port(1));
+    assert_eq!(e.forward(1, &mut f, 0, true), Forward::Port(0));
+    assert_eq!(e.memory()[0x0110] & 0x30, 0x30);
+    e.set_link(1, false);
+    assert_eq!(e.memory()[0x0311], 1);
+    // Port 0 closed (forced): frame circulates once, then is dropped.
+    e.set_link(1, true);
+    fpwr(&mut e, 0x0101, &[0x03]);
+    assert_eq!(e.forward(1, &mut f, 0, true), Forward::Port(1));
+    assert!(dg(&f, 0).2.circulating);
+    assert_eq!(e.forward(1, &mut f, 0, true), Forward::Dropped);
+}
+
+#[test]
+fn irq_field_ored() {
+    let mut e = esc();
+    fpwr(&mut e, 0x0200, &[0x08, 0]);
+    e.pdi_write(0x0130, &[0x02, 0]).unwrap();
+    let (_, _) = run(&mut e, Command::Nop, 0, 0, &[0]);
+    let mut f = frame(&[(phys(Command::Brd, 0, 0x0F80, &[0]), &[0])]);
+    e.forward(0, &mut f, 0, true);
+    assert_eq!(dg(&f, 0).2.irq, 0x08);
+}
