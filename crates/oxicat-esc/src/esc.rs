@@ -149,7 +149,8 @@ impl Esc {
         for sm in sms.iter_mut() {
             sm.reset_state();
         }
-        let dc = Dc::new(cfg.clock);
+        let mut dc = Dc::new(cfg.clock);
+        dc.reset(&mut mem[..REG_END]);
         let mut esc = Self {
             cfg,
             mem,
@@ -300,6 +301,18 @@ impl Esc {
             self.process_datagram(dg);
             Ok(())
         });
+        if !frame_ok {
+            // A bad frame also abandons a buffer write ECAT had opened.
+            for k in 0..self.active_sms.len() {
+                let i = self.active_sms[k] as usize;
+                let sm = &mut self.sms[i];
+                if sm.write_open && sm.ecat_writes() {
+                    sm.write_open = false;
+                    let st = sm.status_reg();
+                    self.mem[0x0805 + 8 * i] = st;
+                }
+            }
+        }
         if self.pending {
             self.pending = false;
             for k in 0..self.active_sms.len() {
@@ -635,6 +648,19 @@ impl Esc {
                 self.refresh_events();
             }
             self.copy_out(cur, o, or);
+            if c < 0x0A00 && e > 0x0900 {
+                let a = c.max(0x0900);
+                let b = e.min(0x0A00);
+                let ecat = side == Side::Ecat;
+                self.dc.after_read(
+                    &mut self.mem[..REG_END],
+                    a as u16,
+                    (b - a) as u16,
+                    self.now,
+                    ecat,
+                );
+                self.events_dirty = true;
+            }
             self.read_side_effects(side, c, e);
         } else {
             self.copy_out(cur, o, or);
@@ -1023,12 +1049,17 @@ impl Esc {
                 a |= 1 << (8 + i as u32);
             }
         }
-        if self.mem[regs::DC_SYNC0_STATUS as usize] & 1 != 0 {
-            a |= 1 << 2;
+        // DC: latch events, SYNC0/SYNC1 status gated by PDI config 0x0151 bits 3/7.
+        let mut dca = self.dc.al_event_bits();
+        let gate = self.mem[0x0151];
+        if gate & 0x08 == 0 {
+            dca &= !(1 << 2);
         }
-        if self.mem[regs::DC_SYNC1_STATUS as usize] & 1 != 0 {
-            a |= 1 << 3;
+        if gate & 0x80 == 0 {
+            dca &= !(1 << 3);
         }
+        a |= dca;
+        e |= self.dc.ecat_event_bits();
         (e, a)
     }
 
@@ -1167,19 +1198,20 @@ impl Esc {
         self.al_event_request() & m != 0
     }
 
-    /// SYNC0 and SYNC1 output levels now (from the DC SYNC status registers).
+    /// SYNC0 and SYNC1 output levels now.
     pub fn sync_lines(&self) -> (bool, bool) {
-        (
-            self.mem[regs::DC_SYNC0_STATUS as usize] & 1 != 0,
-            self.mem[regs::DC_SYNC1_STATUS as usize] & 1 != 0,
-        )
+        self.dc.sync_levels()
     }
 
-    /// Sets the level of latch input `n` (0 or 1).
+    /// Sets the level of latch input `n` (0 or 1) from the current time on (the time of
+    /// the last `advance`/`forward`).
     pub fn set_latch_input(&mut self, n: u8, level: bool) {
         if let Some(l) = self.latch_inputs.get_mut(n as usize) {
             *l = level;
         }
+        let t = self.now;
+        self.dc.latch_input(&mut self.mem[..REG_END], n, level, t);
+        self.events_dirty = true;
     }
 
     /// Digital outputs 0x0F00..0x0F03 (digital-I/O PDI devices); cleared by the

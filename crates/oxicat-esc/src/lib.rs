@@ -24,4 +24,6 @@ pub use config::EscConfig;
 pub use esc::{Esc, EscEvents, Forward, PdiError};
 
 #[cfg(test)]
+mod proptests;
+#[cfg(test)]
 mod tests;

@@ -131,7 +131,10 @@ fn info_registers_and_read_only() {
 fn auto_increment_addressing() {
     let mut a = esc();
     let mut b = esc();
-    let mut f = frame(&[(phys(Command::Apwr, 0xFFFF, 0x0010, &[0x01, 0x10]), &[0x01, 0x10])]);
+    let mut f = frame(&[(
+        phys(Command::Apwr, 0xFFFF, 0x0010, &[0x01, 0x10]),
+        &[0x01, 0x10],
+    )]);
     a.forward(0, &mut f, 0, true);
     b.forward(0, &mut f, 0, true);
     let (_, w, h) = dg(&f, 0);
@@ -388,7 +391,10 @@ fn fmmu_bit_mapping() {
     let mut e = esc();
     // Logical bits 2..5 of byte 0x10 -> physical 0x0F80 bits 4..7.
     fmmu(&mut e, 0, 0x10, 1, 2, 5, 0x0F80, 4, 3);
-    let mut f = frame(&[(DatagramHeader::logical(Command::Lwr, 0, 0x10, 1), &[0b0011_1100])]);
+    let mut f = frame(&[(
+        DatagramHeader::logical(Command::Lwr, 0, 0x10, 1),
+        &[0b0011_1100],
+    )]);
     e.forward(0, &mut f, 0, true);
     assert_eq!(dg(&f, 0).1, 1);
     assert_eq!(e.memory()[0x0F80], 0xF0);
