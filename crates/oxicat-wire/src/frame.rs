@@ -231,7 +231,7 @@ impl<'a> FrameBuilder<'a> {
     /// is an error.
     pub fn push(&mut self, header: DatagramHeader, data: &[u8]) -> Result<&mut [u8], WireError> {
         if header.len as usize > MAX_DATA_LEN || header.reserved > 7 {
-            return Err(WireError::InvalidField("datagram length"));
+            return Err(WireError::InvalidField("datagram length or reserved bits"));
         }
         let total = header.wire_len();
         let start = self.len;

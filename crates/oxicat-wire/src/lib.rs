@@ -2,9 +2,9 @@
 //!
 //! This crate knows how EtherCAT bytes are laid out and nothing about what they do:
 //! Ethernet II (EtherType 0x88A4, an 802.1Q tag tolerated), EtherCAT over UDP, the
-//! EtherCAT frame header, datagrams with all 15 commands, and the mailbox protocols'
-//! headers. Every parser returns a [`WireError`] for malformed input; nothing here panics
-//! on bytes that came from the wire.
+//! EtherCAT frame header, datagrams with all 15 commands, the mailbox header and the
+//! CoE/FoE/EoE/SoE headers, and the SII EEPROM layout. Every parser returns a
+//! [`WireError`] for malformed input; nothing here panics on bytes that came from the wire.
 #![no_std]
 #![forbid(unsafe_code)]
 #![warn(missing_docs)]
