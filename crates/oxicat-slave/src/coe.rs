@@ -1,0 +1,856 @@
+//! CoE server: SDO download/upload (expedited, normal, segmented, complete access), SDO
+//! information and the abort-code rules.
+
+use oxicat_wire::coe::{
+    od_list_type, write_sdo, write_sdo_abort, write_sdo_segment, CoeHeader, CoeService,
+    SdoAbortCode, SdoHeader, SdoInfoHeader, SdoInfoOpcode, SdoInfoRef, SdoInfoService, SdoRef,
+    SdoRequestCommand, COE_HEADER_LEN, SDO_INFO_HEADER_LEN,
+};
+use oxicat_wire::mailbox::{MailboxErrorDetail, MailboxType};
+
+use crate::device::{PdoEntry, SyncMode};
+use crate::esm::AlState;
+use crate::od::{DataType, EntryDef, Kind, Obj, ObjectCode, MAX_ASSIGN, MAX_PDO_ENTRIES};
+use crate::pdi::Pdi;
+use crate::pdo::{self, Dir, MAX_PD_BYTES};
+use crate::slave::{Application, Slave};
+
+/// State of a multi-message SDO service.
+#[derive(Debug, Clone, Copy, Default)]
+pub(crate) enum SdoState {
+    /// Nothing in progress.
+    #[default]
+    Idle,
+    /// Segmented download in progress.
+    Download {
+        index: u16,
+        sub: u8,
+        ca: bool,
+        size: usize,
+        got: usize,
+        toggle: bool,
+        /// Written straight into the image (too large to stage).
+        direct: bool,
+    },
+    /// Segmented upload in progress.
+    Upload {
+        index: u16,
+        sub: u8,
+        ca: bool,
+        size: usize,
+        sent: usize,
+        toggle: bool,
+    },
+    /// A fragmented OD list reply in progress.
+    InfoList {
+        list_type: u16,
+        next: usize,
+        left: u16,
+    },
+}
+
+type Abort = SdoAbortCode;
+
+fn get_bit(b: &[u8], i: usize) -> bool {
+    b.get(i / 8).is_some_and(|x| (x >> (i % 8)) & 1 != 0)
+}
+
+fn set_bit(b: &mut [u8], i: usize, v: bool) {
+    if let Some(x) = b.get_mut(i / 8) {
+        if v {
+            *x |= 1 << (i % 8);
+        } else {
+            *x &= !(1 << (i % 8));
+        }
+    }
+}
+
+/// Walks the complete-access stream layout of `o` from subindex `start`: calls `f(entry,
+/// object-relative image offset, stream bit position, value bits)`; returns the stream bits.
+fn ca_layout(o: &Obj, start: u8, mut f: impl FnMut(&EntryDef, usize, usize, usize)) -> usize {
+    let mut pos = 0usize;
+    let mut off = 0usize;
+    for e in o.entries {
+        let len = e.storage_len();
+        if e.sub >= start {
+            if e.sub == 0 {
+                f(e, off, pos, 8);
+                pos += 16;
+            } else {
+                if e.bits % 8 == 0 {
+                    pos = pos.div_ceil(8) * 8;
+                }
+                f(e, off, pos, e.bits as usize);
+                pos += e.bits as usize;
+            }
+        }
+        off += len;
+    }
+    pos
+}
+
+fn size_abort(size: usize, needed: usize) -> Option<Abort> {
+    if size > needed {
+        Some(Abort::LengthTooHigh)
+    } else if size < needed {
+        Some(Abort::LengthTooLow)
+    } else {
+        None
+    }
+}
+
+/// Value of an integer entry as i128 from its image bytes.
+fn int_value(e: &EntryDef, b: &[u8]) -> i128 {
+    let mut a = [0u8; 8];
+    let n = b.len().min(8);
+    a[..n].copy_from_slice(&b[..n]);
+    let u = u64::from_le_bytes(a);
+    let bits = e.bits.min(64) as u32;
+    if e.dtype.is_signed() && bits < 64 {
+        let sh = 64 - bits;
+        (((u << sh) as i64) >> sh) as i128
+    } else if e.dtype.is_signed() {
+        u as i64 as i128
+    } else {
+        u as i128
+    }
+}
+
+impl<P: Pdi, const N: usize, const M: usize> Slave<P, N, M> {
+    pub(crate) fn coe_request<A: Application<N>>(&mut self, app: &mut A, p: &[u8]) {
+        let Ok(h) = CoeHeader::parse(p) else {
+            self.mbx_error(MailboxErrorDetail::SizeTooShort);
+            return;
+        };
+        match h.service {
+            CoeService::SdoRequest => self.sdo_request(app, p),
+            CoeService::SdoInformation => self.info_request(p),
+            _ => self.mbx_error(MailboxErrorDetail::ServiceNotSupported),
+        }
+    }
+
+    fn abort(&mut self, index: u16, sub: u8, code: Abort) {
+        self.sdo = SdoState::Idle;
+        let mut b = [0u8; 10];
+        if write_sdo_abort(&mut b, CoeService::SdoResponse, index, sub, code).is_ok() {
+            self.queue_reply(MailboxType::Coe, &b);
+        }
+    }
+
+    fn sdo_reply(&mut self, cmd: u8, index: u16, sub: u8, hdata: [u8; 4], data: &[u8]) {
+        let mut b = [0u8; M];
+        let h = SdoHeader {
+            command: cmd,
+            index,
+            subindex: sub,
+        };
+        if let Ok(n) = write_sdo(&mut b, CoeService::SdoResponse, &h, hdata, data) {
+            self.queue_reply(MailboxType::Coe, &b[..n]);
+        }
+    }
+
+    fn sdo_request<A: Application<N>>(&mut self, app: &mut A, p: &[u8]) {
+        if p.len() < 10 {
+            self.mbx_error(MailboxErrorDetail::SizeTooShort);
+            return;
+        }
+        let Ok(s) = SdoRef::parse(p) else {
+            self.mbx_error(MailboxErrorDetail::InvalidHeader);
+            return;
+        };
+        let (index, sub) = s.index().unwrap_or((0, 0));
+        let cmd = match SdoRequestCommand::from_u8(s.command) {
+            Ok(c) => c,
+            Err(_) => return self.abort(index, sub, Abort::InvalidCommand),
+        };
+        match cmd {
+            SdoRequestCommand::Abort => self.sdo = SdoState::Idle,
+            SdoRequestCommand::InitiateDownload {
+                size_indicated,
+                expedited,
+                unused,
+                complete_access,
+            } => {
+                self.sdo = SdoState::Idle;
+                let r = self.initiate_download(
+                    app,
+                    &s,
+                    index,
+                    sub,
+                    complete_access,
+                    expedited,
+                    size_indicated,
+                    unused,
+                );
+                match r {
+                    Ok(()) => self.sdo_reply(0x60, index, sub, [0; 4], &[]),
+                    Err(c) => self.abort(index, sub, c),
+                }
+            }
+            SdoRequestCommand::DownloadSegment { toggle, last, .. } => {
+                self.download_segment(app, &s, toggle, last)
+            }
+            SdoRequestCommand::InitiateUpload { complete_access } => {
+                self.sdo = SdoState::Idle;
+                if let Err(c) = self.initiate_upload(index, sub, complete_access) {
+                    self.abort(index, sub, c);
+                }
+            }
+            SdoRequestCommand::UploadSegment { toggle } => self.upload_segment(toggle),
+        }
+    }
+
+    /// Resolves and access-checks a transfer target; returns the object and the stream size.
+    fn target(&self, index: u16, sub: u8, ca: bool, write: bool) -> Result<(Obj, usize), Abort> {
+        let o = self.od.find(index).ok_or(Abort::ObjectDoesNotExist)?;
+        let st = self.state;
+        let check = |e: &EntryDef| -> Result<(), Abort> {
+            if write {
+                if !e.access.writable() {
+                    return Err(Abort::ReadOnly);
+                }
+                if !e.access.write_in(st) {
+                    return Err(Abort::CannotTransferDeviceState);
+                }
+            } else {
+                if !e.access.readable() {
+                    return Err(Abort::WriteOnly);
+                }
+                if !e.access.read_in(st) {
+                    return Err(Abort::CannotTransferDeviceState);
+                }
+            }
+            Ok(())
+        };
+        if !ca {
+            let (_, e, off) = o.entry(sub).ok_or(Abort::SubindexDoesNotExist)?;
+            check(e)?;
+            let size = if e.dtype == DataType::VisibleString && !write {
+                let b = self.od.bytes_of(&o, off, e.storage_len());
+                b.iter().position(|&c| c == 0).unwrap_or(b.len())
+            } else {
+                e.storage_len()
+            };
+            return Ok((o, size));
+        }
+        if sub > 1 {
+            return Err(Abort::UnsupportedAccess);
+        }
+        if o.entry(sub).is_none() {
+            return Err(Abort::SubindexDoesNotExist);
+        }
+        if o.code == ObjectCode::Var || o.entries.iter().any(|e| e.dtype.is_string()) {
+            return Err(Abort::CompleteAccessUnsupported);
+        }
+        for e in o.entries.iter().filter(|e| e.sub >= sub) {
+            check(e)?;
+        }
+        let bits = ca_layout(&o, sub, |_, _, _, _| {});
+        Ok((o, bits.div_ceil(8)))
+    }
+
+    /// Reads `out.len()` bytes of the transfer stream from byte `off`.
+    fn stream_read(&self, o: &Obj, sub: u8, ca: bool, off: usize, out: &mut [u8]) {
+        out.fill(0);
+        if !ca {
+            if let Some((_, e, ioff)) = o.entry(sub) {
+                let b = self.od.bytes_of(o, ioff, e.storage_len());
+                let n = out.len().min(b.len().saturating_sub(off));
+                out[..n].copy_from_slice(&b[off..off + n]);
+            }
+            return;
+        }
+        let obj_len: usize = o.entries.iter().map(|e| e.storage_len()).sum();
+        let img = self.od.bytes_of(o, o.base, obj_len);
+        let w0 = off * 8;
+        let w1 = (off + out.len()) * 8;
+        ca_layout(o, sub, |_, eoff, pos, bits| {
+            for k in 0..bits {
+                let p = pos + k;
+                if p >= w0 && p < w1 {
+                    set_bit(out, p - w0, get_bit(img, eoff * 8 + k));
+                }
+            }
+        });
+    }
+
+    #[allow(clippy::too_many_arguments)]
+    fn initiate_download<A: Application<N>>(
+        &mut self,
+        app: &mut A,
+        s: &SdoRef<'_>,
+        index: u16,
+        sub: u8,
+        ca: bool,
+        expedited: bool,
+        size_indicated: bool,
+        unused: u8,
+    ) -> Result<(), Abort> {
+        let (o, needed) = self.target(index, sub, ca, true)?;
+        if !ca && self.state >= AlState::SafeOp {
+            if let Some((_, e, off)) = o.entry(sub) {
+                if self
+                    .rx_mapping()
+                    .maps(o.area == crate::od::Area::App, off, e.storage_len())
+                {
+                    return Err(Abort::MappedToRxPdo);
+                }
+            }
+        }
+        let (size, data): (usize, &[u8]) = if expedited {
+            let n = if size_indicated {
+                4 - unused as usize
+            } else {
+                needed.min(4)
+            };
+            (n, s.rest.get(3..3 + n).ok_or(Abort::LengthTooLow)?)
+        } else {
+            let (sz, d) = s.normal_data().map_err(|_| Abort::LengthTooLow)?;
+            let sz = sz as usize;
+            if !size_indicated && sz == 0 {
+                return Err(Abort::LengthMismatch);
+            }
+            (sz, &d[..d.len().min(sz)])
+        };
+        let e = if ca { None } else { o.entry(sub).map(|x| x.1) };
+        match e {
+            Some(e) if e.dtype == DataType::VisibleString => {
+                if size > needed {
+                    return Err(Abort::LengthTooHigh);
+                }
+            }
+            _ => {
+                if let Some(c) = size_abort(size, needed) {
+                    return Err(c);
+                }
+            }
+        }
+        if data.len() >= size {
+            let mut tmp = [0u8; M];
+            if size > M {
+                return Err(Abort::ObjectTooLong);
+            }
+            tmp[..size].copy_from_slice(&data[..size]);
+            return self.commit(app, &o, sub, ca, &tmp[..size]);
+        }
+        // Segmented download follows.
+        let direct = size > M;
+        if direct {
+            if ca || !e.is_some_and(|e| e.dtype.is_string()) {
+                return Err(Abort::ObjectTooLong);
+            }
+            if let Some((_, e, off)) = o.entry(sub) {
+                let img = self.od.bytes_of_mut(&o, off, e.storage_len());
+                img.fill(0);
+                img[..data.len()].copy_from_slice(data);
+            }
+        } else {
+            self.mbx.stage[..data.len()].copy_from_slice(data);
+        }
+        self.sdo = SdoState::Download {
+            index,
+            sub,
+            ca,
+            size,
+            got: data.len(),
+            toggle: false,
+            direct,
+        };
+        Ok(())
+    }
+
+    fn download_segment<A: Application<N>>(
+        &mut self,
+        app: &mut A,
+        s: &SdoRef<'_>,
+        toggle: bool,
+        last: bool,
+    ) {
+        let SdoState::Download {
+            index,
+            sub,
+            ca,
+            size,
+            got,
+            toggle: t,
+            direct,
+        } = self.sdo
+        else {
+            return self.abort(0, 0, Abort::InvalidCommand);
+        };
+        if toggle != t {
+            return self.abort(index, sub, Abort::ToggleBit);
+        }
+        let data = s.segment_data().unwrap_or(&[]);
+        if got + data.len() > size {
+            return self.abort(index, sub, Abort::LengthTooHigh);
+        }
+        let Some(o) = self.od.find(index) else {
+            return self.abort(index, sub, Abort::ObjectDoesNotExist);
+        };
+        if direct {
+            if let Some((_, e, off)) = o.entry(sub) {
+                let img = self.od.bytes_of_mut(&o, off, e.storage_len());
+                img[got..got + data.len()].copy_from_slice(data);
+            }
+        } else {
+            self.mbx.stage[got..got + data.len()].copy_from_slice(data);
+        }
+        let got = got + data.len();
+        if last {
+            self.sdo = SdoState::Idle;
+            if got != size {
+                return self.abort(index, sub, Abort::LengthTooLow);
+            }
+            if !direct {
+                let mut tmp = [0u8; M];
+                tmp[..size].copy_from_slice(&self.mbx.stage[..size]);
+                if let Err(c) = self.commit(app, &o, sub, ca, &tmp[..size]) {
+                    return self.abort(index, sub, c);
+                }
+            } else {
+                app.sdo_written(index, sub, &mut self.od);
+            }
+        } else {
+            self.sdo = SdoState::Download {
+                index,
+                sub,
+                ca,
+                size,
+                got,
+                toggle: !t,
+                direct,
+            };
+        }
+        let cmd = 0x20 | if toggle { 0x10 } else { 0 };
+        let mut b = [0u8; 10];
+        if write_sdo_segment(&mut b, CoeService::SdoResponse, cmd, &[]).is_ok() {
+            self.queue_reply(MailboxType::Coe, &b);
+        }
+    }
+
+    /// Validates and stores a complete download.
+    fn commit<A: Application<N>>(
+        &mut self,
+        app: &mut A,
+        o: &Obj,
+        sub: u8,
+        ca: bool,
+        data: &[u8],
+    ) -> Result<(), Abort> {
+        let obj_len: usize = o.entries.iter().map(|e| e.storage_len()).sum();
+        if obj_len > M {
+            return Err(Abort::ObjectTooLong);
+        }
+        // Work on a copy of the object's values, validate, then store.
+        let mut tmp = [0u8; M];
+        tmp[..obj_len].copy_from_slice(self.od.bytes_of(o, o.base, obj_len));
+        let mut written_sub0 = false;
+        let mut written_high = false;
+        if ca {
+            ca_layout(o, sub, |e, eoff, pos, bits| {
+                if e.sub == 0 {
+                    written_sub0 = true;
+                } else {
+                    written_high = true;
+                }
+                for k in 0..bits {
+                    set_bit(&mut tmp, eoff * 8 + k, get_bit(data, pos + k));
+                }
+            });
+        } else {
+            let (_, e, off) = o.entry(sub).ok_or(Abort::SubindexDoesNotExist)?;
+            let r = off - o.base;
+            let l = e.storage_len();
+            tmp[r..r + l].fill(0);
+            tmp[r..r + data.len().min(l)].copy_from_slice(&data[..data.len().min(l)]);
+            written_sub0 = sub == 0;
+            written_high = sub != 0;
+        }
+        // Plain value checks on every written entry.
+        let mut eoff = 0;
+        for e in o.entries {
+            let l = e.storage_len();
+            let in_scope = if ca { e.sub >= sub } else { e.sub == sub };
+            if in_scope {
+                let v = &tmp[eoff..eoff + l];
+                if e.dtype == DataType::Bool && v[0] > 1 {
+                    return Err(Abort::ValueRangeExceeded);
+                }
+                if e.dtype.is_integer() && e.range.0 <= e.range.1 {
+                    let x = int_value(e, v);
+                    if x > e.range.1 as i128 {
+                        return Err(Abort::ValueTooHigh);
+                    }
+                    if x < e.range.0 as i128 {
+                        return Err(Abort::ValueTooLow);
+                    }
+                }
+            }
+            eoff += l;
+        }
+        self.check_kind(o, &tmp[..obj_len], written_sub0, written_high, ca)?;
+        self.od
+            .bytes_of_mut(o, o.base, obj_len)
+            .copy_from_slice(&tmp[..obj_len]);
+        app.sdo_written(o.index, sub, &mut self.od);
+        Ok(())
+    }
+
+    /// The subindex-0 protocol and consistency rules of mapping, assignment and sync objects.
+    fn check_kind(&self, o: &Obj, v: &[u8], sub0: bool, high: bool, ca: bool) -> Result<(), Abort> {
+        let cur0 = self.od.bytes_of(o, o.base, 1)[0];
+        let u32at =
+            |k: usize| u32::from_le_bytes([v[1 + 4 * k], v[2 + 4 * k], v[3 + 4 * k], v[4 + 4 * k]]);
+        let u16at = |k: usize| u16::from_le_bytes([v[1 + 2 * k], v[2 + 2 * k]]);
+        match o.kind {
+            Kind::Plain => Ok(()),
+            Kind::RxMap | Kind::TxMap => {
+                let dir = if o.kind == Kind::RxMap {
+                    Dir::Rx
+                } else {
+                    Dir::Tx
+                };
+                if high && !ca && cur0 != 0 {
+                    return Err(Abort::SubindexCannotBeWritten);
+                }
+                let n = v[0] as usize;
+                if n > MAX_PDO_ENTRIES || n > o.entries.len() - 1 {
+                    return Err(Abort::ValueRangeExceeded);
+                }
+                if sub0 {
+                    let mut bits = 0;
+                    for k in 0..n {
+                        bits += pdo::check_entry(&self.od, dir, PdoEntry::decode(u32at(k)))?;
+                    }
+                    if bits > MAX_PD_BYTES * 8 {
+                        return Err(Abort::PdoLengthExceeded);
+                    }
+                } else {
+                    for k in 0..o.entries.len() - 1 {
+                        let x = u32at(k);
+                        if x != 0 {
+                            pdo::check_entry(&self.od, dir, PdoEntry::decode(x))?;
+                        }
+                    }
+                }
+                Ok(())
+            }
+            Kind::RxAssign | Kind::TxAssign => {
+                let dir = if o.kind == Kind::RxAssign {
+                    Dir::Rx
+                } else {
+                    Dir::Tx
+                };
+                if high && !ca && cur0 != 0 {
+                    return Err(Abort::SubindexCannotBeWritten);
+                }
+                let n = v[0] as usize;
+                if n > MAX_ASSIGN || n > o.entries.len() - 1 {
+                    return Err(Abort::ValueRangeExceeded);
+                }
+                let pdos = match dir {
+                    Dir::Rx => self.od.def.rx_pdos,
+                    Dir::Tx => self.od.def.tx_pdos,
+                };
+                let range = if sub0 { n } else { o.entries.len() - 1 };
+                let mut bits = 0;
+                for k in 0..range {
+                    let x = u16at(k);
+                    if x == 0 && !sub0 {
+                        continue;
+                    }
+                    if !pdos.iter().any(|p| p.index == x) {
+                        return Err(Abort::ParameterIncompatible);
+                    }
+                    if sub0 {
+                        if (0..k).any(|j| u16at(j) == x) {
+                            return Err(Abort::ParameterIncompatible);
+                        }
+                        bits += pdo::pdo_bits(&self.od, dir, x)?;
+                    }
+                }
+                if bits > MAX_PD_BYTES * 8 {
+                    return Err(Abort::PdoLengthExceeded);
+                }
+                Ok(())
+            }
+            Kind::SyncPar => {
+                let mode = u16::from_le_bytes([v[1], v[2]]);
+                match SyncMode::from_u16(mode) {
+                    Some(m) if self.od.def.sync.supported & m.support_bit() != 0 => Ok(()),
+                    _ => Err(Abort::ValueRangeExceeded),
+                }
+            }
+        }
+    }
+
+    fn initiate_upload(&mut self, index: u16, sub: u8, ca: bool) -> Result<(), Abort> {
+        let (o, size) = self.target(index, sub, ca, false)?;
+        if !ca && size <= 4 && size > 0 {
+            let mut d = [0u8; 4];
+            self.stream_read(&o, sub, ca, 0, &mut d[..size]);
+            let cmd = 0x43 | (((4 - size) as u8) << 2);
+            self.sdo_reply(cmd, index, sub, d, &[]);
+            return Ok(());
+        }
+        let cap = self.reply_capacity() - 10;
+        let first = size.min(cap);
+        let mut d = [0u8; M];
+        self.stream_read(&o, sub, ca, 0, &mut d[..first]);
+        let cmd = 0x41 | if ca { 0x10 } else { 0 };
+        self.sdo_reply(cmd, index, sub, (size as u32).to_le_bytes(), &d[..first]);
+        if first < size {
+            self.sdo = SdoState::Upload {
+                index,
+                sub,
+                ca,
+                size,
+                sent: first,
+                toggle: false,
+            };
+        }
+        Ok(())
+    }
+
+    fn upload_segment(&mut self, toggle: bool) {
+        let SdoState::Upload {
+            index,
+            sub,
+            ca,
+            size,
+            sent,
+            toggle: t,
+        } = self.sdo
+        else {
+            return self.abort(0, 0, Abort::InvalidCommand);
+        };
+        if toggle != t {
+            return self.abort(index, sub, Abort::ToggleBit);
+        }
+        let Some(o) = self.od.find(index) else {
+            return self.abort(index, sub, Abort::ObjectDoesNotExist);
+        };
+        let cap = self.reply_capacity() - 3;
+        let n = (size - sent).min(cap);
+        let mut d = [0u8; M];
+        self.stream_read(&o, sub, ca, sent, &mut d[..n]);
+        let last = sent + n == size;
+        let unused = if n < 7 { (7 - n) as u8 } else { 0 };
+        let cmd = (if toggle { 0x10 } else { 0 }) | (unused << 1) | u8::from(last);
+        let mut b = [0u8; M];
+        if let Ok(len) = write_sdo_segment(&mut b, CoeService::SdoResponse, cmd, &d[..n]) {
+            self.queue_reply(MailboxType::Coe, &b[..len]);
+        }
+        self.sdo = if last {
+            SdoState::Idle
+        } else {
+            SdoState::Upload {
+                index,
+                sub,
+                ca,
+                size,
+                sent: sent + n,
+                toggle: !t,
+            }
+        };
+    }
+
+    // ------------------------------------------------------------------ SDO information
+
+    fn info_reply(&mut self, opcode: SdoInfoOpcode, incomplete: bool, left: u16, data: &[u8]) {
+        let mut b = [0u8; M];
+        let n = COE_HEADER_LEN + SDO_INFO_HEADER_LEN + data.len();
+        if n > M {
+            return;
+        }
+        if CoeHeader::new(CoeService::SdoInformation)
+            .write(&mut b)
+            .is_err()
+        {
+            return;
+        }
+        let h = SdoInfoHeader {
+            opcode,
+            incomplete,
+            reserved: 0,
+            fragments_left: left,
+        };
+        if h.write(&mut b[COE_HEADER_LEN..]).is_err() {
+            return;
+        }
+        b[COE_HEADER_LEN + SDO_INFO_HEADER_LEN..n].copy_from_slice(data);
+        self.queue_reply(MailboxType::Coe, &b[..n]);
+    }
+
+    fn info_error(&mut self, code: Abort) {
+        self.info_reply(SdoInfoOpcode::Error, false, 0, &code.code().to_le_bytes());
+    }
+
+    fn in_list(&self, n: usize, list_type: u16) -> bool {
+        let Some(o) = self.od.object_at(n) else {
+            return false;
+        };
+        match list_type {
+            od_list_type::ALL => true,
+            od_list_type::RX_PDO_MAPPABLE => o.entries.iter().any(|e| e.pdo.rx()),
+            od_list_type::TX_PDO_MAPPABLE => o.entries.iter().any(|e| e.pdo.tx()),
+            _ => false,
+        }
+    }
+
+    fn info_request(&mut self, p: &[u8]) {
+        let Ok(r) = SdoInfoRef::parse(p) else {
+            self.mbx_error(MailboxErrorDetail::SizeTooShort);
+            return;
+        };
+        self.sdo = SdoState::Idle;
+        match r.service() {
+            Ok(SdoInfoService::GetOdListRequest { list_type }) => {
+                if list_type == od_list_type::LENGTHS {
+                    let total = self.od.object_count();
+                    let mut w = [0u8; 12];
+                    let counts = [
+                        0u16,
+                        total as u16,
+                        (0..total).filter(|&n| self.in_list(n, 2)).count() as u16,
+                        (0..total).filter(|&n| self.in_list(n, 3)).count() as u16,
+                        0,
+                        0,
+                    ];
+                    for (k, c) in counts.iter().enumerate() {
+                        w[2 * k..2 * k + 2].copy_from_slice(&c.to_le_bytes());
+                    }
+                    self.info_reply(SdoInfoOpcode::GetOdListResponse, false, 0, &w);
+                } else if list_type <= od_list_type::SETTINGS {
+                    let total = self.od.object_count();
+                    let count = (0..total).filter(|&n| self.in_list(n, list_type)).count();
+                    let per = (self.reply_capacity() - 6) / 2;
+                    let words = count + 1;
+                    let frags = words.div_ceil(per).max(1);
+                    self.sdo = SdoState::InfoList {
+                        list_type,
+                        next: 0,
+                        left: frags as u16,
+                    };
+                    self.info_list_fragment(true);
+                } else {
+                    self.info_error(Abort::UnsupportedAccess);
+                }
+            }
+            Ok(SdoInfoService::GetObjectDescriptionRequest { index }) => {
+                let Some(o) = self.od.find(index) else {
+                    return self.info_error(Abort::ObjectDoesNotExist);
+                };
+                let mut d = [0u8; M];
+                let name = o.name.as_bytes();
+                let cap = self.reply_capacity() - 6 - 6;
+                let nl = name.len().min(cap);
+                let dt = match o.code {
+                    ObjectCode::Var => o.entries[0].dtype.code(),
+                    ObjectCode::Array => o.entries.last().map_or(0, |e| e.dtype.code()),
+                    ObjectCode::Record => 0x002A,
+                };
+                d[0..2].copy_from_slice(&index.to_le_bytes());
+                d[2..4].copy_from_slice(&dt.to_le_bytes());
+                d[4] = o.max_sub();
+                d[5] = o.code.code();
+                d[6..6 + nl].copy_from_slice(&name[..nl]);
+                self.info_reply(
+                    SdoInfoOpcode::GetObjectDescriptionResponse,
+                    false,
+                    0,
+                    &d[..6 + nl],
+                );
+            }
+            Ok(SdoInfoService::GetEntryDescriptionRequest {
+                index, subindex, ..
+            }) => {
+                let Some(o) = self.od.find(index) else {
+                    return self.info_error(Abort::ObjectDoesNotExist);
+                };
+                let Some((_, e, _)) = o.entry(subindex) else {
+                    return self.info_error(Abort::SubindexDoesNotExist);
+                };
+                let mut d = [0u8; M];
+                let name = e.name.as_bytes();
+                let cap = self.reply_capacity() - 6 - 10;
+                let nl = name.len().min(cap);
+                let mut acc = e.access.0;
+                if e.pdo.rx() {
+                    acc |= 0x40;
+                }
+                if e.pdo.tx() {
+                    acc |= 0x80;
+                }
+                d[0..2].copy_from_slice(&index.to_le_bytes());
+                d[2] = subindex;
+                d[3] = 0;
+                d[4..6].copy_from_slice(&e.dtype.code().to_le_bytes());
+                d[6..8].copy_from_slice(&e.bits.to_le_bytes());
+                d[8..10].copy_from_slice(&acc.to_le_bytes());
+                d[10..10 + nl].copy_from_slice(&name[..nl]);
+                self.info_reply(
+                    SdoInfoOpcode::GetEntryDescriptionResponse,
+                    false,
+                    0,
+                    &d[..10 + nl],
+                );
+            }
+            _ => self.mbx_error(MailboxErrorDetail::ServiceNotSupported),
+        }
+    }
+
+    fn info_list_fragment(&mut self, first: bool) {
+        let SdoState::InfoList {
+            list_type,
+            next,
+            left,
+        } = self.sdo
+        else {
+            return;
+        };
+        let per = (self.reply_capacity() - 6) / 2;
+        let mut d = [0u8; M];
+        let mut w = 0;
+        if first {
+            d[0..2].copy_from_slice(&list_type.to_le_bytes());
+            w = 1;
+        }
+        let total = self.od.object_count();
+        let mut n = next;
+        while n < total && w < per {
+            if self.in_list(n, list_type) {
+                if let Some(o) = self.od.object_at(n) {
+                    d[2 * w..2 * w + 2].copy_from_slice(&o.index.to_le_bytes());
+                    w += 1;
+                }
+            }
+            n += 1;
+        }
+        while n < total && !self.in_list(n, list_type) {
+            n += 1;
+        }
+        let left = left.saturating_sub(1);
+        let more = n < total;
+        self.info_reply(SdoInfoOpcode::GetOdListResponse, more, left, &d[..2 * w]);
+        self.sdo = if more {
+            SdoState::InfoList {
+                list_type,
+                next: n,
+                left,
+            }
+        } else {
+            SdoState::Idle
+        };
+    }
+
+    /// Produces the next fragment of a fragmented reply; true if one was queued.
+    pub(crate) fn sdo_continue(&mut self) -> bool {
+        if matches!(self.sdo, SdoState::InfoList { .. }) {
+            self.info_list_fragment(false);
+            return true;
+        }
+        false
+    }
+}

@@ -1,0 +1,1090 @@
+//! The object dictionary: static definitions ([`ObjectDef`], [`EntryDef`]) and one byte
+//! image per area holding the values, with typed access for the application.
+//!
+//! Values of application objects live in one fixed-size byte image owned by the stack
+//! (`N` bytes, at least [`image_size`] of the definition's objects); every entry occupies
+//! `max(1, bits / 8)` bytes at an offset that follows from the definition order, so there
+//! is no second copy of the dictionary. The standard communication objects (0x1000..0x1C33)
+//! are defined in this crate and derived from the [`DeviceDef`] at start-up; their values
+//! live in a second, internal image.
+
+use crate::device::{DeviceDef, PdoDef, SyncMode};
+use crate::esm::AlState;
+
+/// CoE basic data types (ETG.1000.6 data type indices).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum DataType {
+    /// BOOL (0x0001), 1 bit.
+    Bool,
+    /// INTEGER8 (0x0002).
+    Int8,
+    /// INTEGER16 (0x0003).
+    Int16,
+    /// INTEGER32 (0x0004).
+    Int32,
+    /// INTEGER64 (0x0015).
+    Int64,
+    /// UNSIGNED8 (0x0005).
+    Unsigned8,
+    /// UNSIGNED16 (0x0006).
+    Unsigned16,
+    /// UNSIGNED32 (0x0007).
+    Unsigned32,
+    /// UNSIGNED64 (0x001B).
+    Unsigned64,
+    /// REAL32 (0x0008).
+    Real32,
+    /// REAL64 (0x0011).
+    Real64,
+    /// VISIBLE_STRING (0x0009), bit length = 8 x maximum length.
+    VisibleString,
+    /// OCTET_STRING (0x000A), bit length = 8 x length.
+    OctetString,
+}
+
+impl DataType {
+    /// The data type index used in SDO information.
+    pub const fn code(self) -> u16 {
+        match self {
+            Self::Bool => 0x0001,
+            Self::Int8 => 0x0002,
+            Self::Int16 => 0x0003,
+            Self::Int32 => 0x0004,
+            Self::Unsigned8 => 0x0005,
+            Self::Unsigned16 => 0x0006,
+            Self::Unsigned32 => 0x0007,
+            Self::Real32 => 0x0008,
+            Self::VisibleString => 0x0009,
+            Self::OctetString => 0x000A,
+            Self::Real64 => 0x0011,
+            Self::Int64 => 0x0015,
+            Self::Unsigned64 => 0x001B,
+        }
+    }
+
+    /// Bit length of the scalar types; 0 for strings.
+    pub const fn bits(self) -> u16 {
+        match self {
+            Self::Bool => 1,
+            Self::Int8 | Self::Unsigned8 => 8,
+            Self::Int16 | Self::Unsigned16 => 16,
+            Self::Int32 | Self::Unsigned32 | Self::Real32 => 32,
+            Self::Int64 | Self::Unsigned64 | Self::Real64 => 64,
+            Self::VisibleString | Self::OctetString => 0,
+        }
+    }
+
+    /// True for the string types (variable length on the wire).
+    pub const fn is_string(self) -> bool {
+        matches!(self, Self::VisibleString | Self::OctetString)
+    }
+
+    /// True for the signed integer types.
+    pub const fn is_signed(self) -> bool {
+        matches!(self, Self::Int8 | Self::Int16 | Self::Int32 | Self::Int64)
+    }
+
+    /// True for the integer types (signed or unsigned).
+    pub const fn is_integer(self) -> bool {
+        matches!(
+            self,
+            Self::Int8
+                | Self::Int16
+                | Self::Int32
+                | Self::Int64
+                | Self::Unsigned8
+                | Self::Unsigned16
+                | Self::Unsigned32
+                | Self::Unsigned64
+        )
+    }
+}
+
+/// Access rights per state, in the ETG.1000.6 object-access bit layout (bits 0..2 read in
+/// PREOP/SAFEOP/OP, bits 3..5 write in PREOP/SAFEOP/OP).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Access(pub u16);
+
+impl Access {
+    /// Read-only in every state.
+    pub const RO: Access = Access(0x0007);
+    /// Read and write in every state.
+    pub const RW: Access = Access(0x003F);
+    /// Write-only in every state.
+    pub const WO: Access = Access(0x0038);
+    /// Readable always, writable only in PREOP.
+    pub const RW_PREOP: Access = Access(0x000F);
+    /// Readable always, writable in PREOP and SAFEOP.
+    pub const RW_PREOP_SAFEOP: Access = Access(0x001F);
+
+    fn state_bit(state: AlState) -> u16 {
+        match state {
+            AlState::PreOp => 1,
+            AlState::SafeOp => 2,
+            AlState::Op => 4,
+            _ => 0,
+        }
+    }
+
+    /// Readable in some state.
+    pub const fn readable(self) -> bool {
+        self.0 & 0x07 != 0
+    }
+
+    /// Writable in some state.
+    pub const fn writable(self) -> bool {
+        self.0 & 0x38 != 0
+    }
+
+    /// Readable in `state`.
+    pub fn read_in(self, state: AlState) -> bool {
+        self.0 & Self::state_bit(state) != 0
+    }
+
+    /// Writable in `state`.
+    pub fn write_in(self, state: AlState) -> bool {
+        self.0 & (Self::state_bit(state) << 3) != 0
+    }
+}
+
+/// Whether an entry may be mapped into PDOs.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum PdoMapping {
+    /// Not mappable.
+    None,
+    /// Mappable into RxPDOs (outputs).
+    Rx,
+    /// Mappable into TxPDOs (inputs).
+    Tx,
+    /// Mappable into both.
+    RxTx,
+}
+
+impl PdoMapping {
+    /// Mappable into RxPDOs.
+    pub const fn rx(self) -> bool {
+        matches!(self, Self::Rx | Self::RxTx)
+    }
+
+    /// Mappable into TxPDOs.
+    pub const fn tx(self) -> bool {
+        matches!(self, Self::Tx | Self::RxTx)
+    }
+}
+
+/// Default value of an entry.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum DefaultValue {
+    /// Little-endian bits of a scalar (two's complement for signed, IEEE bits for reals).
+    Bits(u64),
+    /// Bytes of a string entry (shorter than its length: rest zero).
+    Bytes(&'static [u8]),
+}
+
+/// One subindex of an object.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct EntryDef {
+    /// Subindex.
+    pub sub: u8,
+    /// Name (SDO information).
+    pub name: &'static str,
+    /// Data type.
+    pub dtype: DataType,
+    /// Bit length (for strings 8 x maximum length).
+    pub bits: u16,
+    /// Access rights per state.
+    pub access: Access,
+    /// PDO mappability.
+    pub pdo: PdoMapping,
+    /// Default value.
+    pub default: DefaultValue,
+    /// Unit (ETG.1004 unit code; 0 = none).
+    pub unit: u32,
+    /// Allowed range for integer entries (`min > max`: no check).
+    pub range: (i64, i64),
+}
+
+impl EntryDef {
+    /// An entry of a scalar type with default 0.
+    pub const fn new(sub: u8, name: &'static str, dtype: DataType, access: Access) -> Self {
+        Self {
+            sub,
+            name,
+            dtype,
+            bits: dtype.bits(),
+            access,
+            pdo: PdoMapping::None,
+            default: DefaultValue::Bits(0),
+            unit: 0,
+            range: (1, 0),
+        }
+    }
+
+    /// A VISIBLE_STRING of at most `max_len` bytes.
+    pub const fn string(sub: u8, name: &'static str, max_len: u16, access: Access) -> Self {
+        let mut e = Self::new(sub, name, DataType::VisibleString, access);
+        e.bits = max_len * 8;
+        e
+    }
+
+    /// An OCTET_STRING of `len` bytes.
+    pub const fn octets(sub: u8, name: &'static str, len: u16, access: Access) -> Self {
+        let mut e = Self::new(sub, name, DataType::OctetString, access);
+        e.bits = len * 8;
+        e
+    }
+
+    /// With a default value given as raw little-endian bits.
+    pub const fn default_bits(mut self, v: u64) -> Self {
+        self.default = DefaultValue::Bits(v);
+        self
+    }
+
+    /// With a signed default value.
+    pub const fn default_i64(mut self, v: i64) -> Self {
+        self.default = DefaultValue::Bits(v as u64);
+        self
+    }
+
+    /// With a REAL32 default value.
+    pub const fn default_f32(mut self, v: f32) -> Self {
+        self.default = DefaultValue::Bits(v.to_bits() as u64);
+        self
+    }
+
+    /// With a default value for a string entry.
+    pub const fn default_bytes(mut self, v: &'static [u8]) -> Self {
+        self.default = DefaultValue::Bytes(v);
+        self
+    }
+
+    /// With PDO mappability.
+    pub const fn pdo(mut self, m: PdoMapping) -> Self {
+        self.pdo = m;
+        self
+    }
+
+    /// With a unit.
+    pub const fn unit(mut self, u: u32) -> Self {
+        self.unit = u;
+        self
+    }
+
+    /// With an allowed value range (integer entries).
+    pub const fn range(mut self, min: i64, max: i64) -> Self {
+        self.range = (min, max);
+        self
+    }
+
+    /// Bytes this entry occupies in the image.
+    pub const fn storage_len(&self) -> usize {
+        if self.bits < 8 {
+            1
+        } else {
+            self.bits.div_ceil(8) as usize
+        }
+    }
+}
+
+/// Object code (SDO information).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum ObjectCode {
+    /// A single value (7).
+    Var,
+    /// An array of entries of one type (8).
+    Array,
+    /// A record of entries (9).
+    Record,
+}
+
+impl ObjectCode {
+    /// The ETG object code.
+    pub const fn code(self) -> u8 {
+        match self {
+            Self::Var => 7,
+            Self::Array => 8,
+            Self::Record => 9,
+        }
+    }
+}
+
+/// One object of the dictionary.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct ObjectDef {
+    /// Index.
+    pub index: u16,
+    /// Name.
+    pub name: &'static str,
+    /// Object code.
+    pub code: ObjectCode,
+    /// Entries in subindex order; a VAR has exactly one entry with subindex 0, ARRAY and
+    /// RECORD start with subindex 0 (UNSIGNED8, highest subindex).
+    pub entries: &'static [EntryDef],
+}
+
+impl ObjectDef {
+    /// Bytes this object occupies in the image.
+    pub const fn storage_len(&self) -> usize {
+        let mut n = 0;
+        let mut i = 0;
+        while i < self.entries.len() {
+            n += self.entries[i].storage_len();
+            i += 1;
+        }
+        n
+    }
+
+    /// Highest subindex.
+    pub const fn max_sub(&self) -> u8 {
+        match self.entries.last() {
+            Some(e) => e.sub,
+            None => 0,
+        }
+    }
+
+    /// Data type reported for the object (the entry type of a VAR/ARRAY, 0x2A-ish record
+    /// types are not modelled: records report 0).
+    pub const fn data_type(&self) -> u16 {
+        match self.code {
+            ObjectCode::Var => match self.entries.first() {
+                Some(e) => e.dtype.code(),
+                None => 0,
+            },
+            ObjectCode::Array => match self.entries.last() {
+                Some(e) => e.dtype.code(),
+                None => 0,
+            },
+            ObjectCode::Record => 0,
+        }
+    }
+}
+
+/// Image bytes needed for `objects` (use it to size the stack's image: `Slave<_, N>`).
+pub const fn image_size(objects: &[ObjectDef]) -> usize {
+    let mut n = 0;
+    let mut i = 0;
+    while i < objects.len() {
+        n += objects[i].storage_len();
+        i += 1;
+    }
+    n
+}
+
+/// Maximum PDOs per direction.
+pub const MAX_PDOS: usize = 8;
+/// Maximum entries per PDO mapping object.
+pub const MAX_PDO_ENTRIES: usize = 16;
+/// Maximum PDOs in one assignment object.
+pub const MAX_ASSIGN: usize = 8;
+/// Maximum length of the 0x1008/0x1009/0x100A strings.
+pub const STR_MAX: u16 = 32;
+
+const U8: DataType = DataType::Unsigned8;
+const U16: DataType = DataType::Unsigned16;
+const U32: DataType = DataType::Unsigned32;
+
+const fn e(sub: u8, name: &'static str, t: DataType, a: Access) -> EntryDef {
+    EntryDef::new(sub, name, t, a)
+}
+
+const MAP_NAMES: [&str; MAX_PDO_ENTRIES] = [
+    "Mapped object 1",
+    "Mapped object 2",
+    "Mapped object 3",
+    "Mapped object 4",
+    "Mapped object 5",
+    "Mapped object 6",
+    "Mapped object 7",
+    "Mapped object 8",
+    "Mapped object 9",
+    "Mapped object 10",
+    "Mapped object 11",
+    "Mapped object 12",
+    "Mapped object 13",
+    "Mapped object 14",
+    "Mapped object 15",
+    "Mapped object 16",
+];
+
+const ASSIGN_NAMES: [&str; MAX_ASSIGN] = [
+    "PDO 1", "PDO 2", "PDO 3", "PDO 4", "PDO 5", "PDO 6", "PDO 7", "PDO 8",
+];
+
+const fn map_entries(a: Access) -> [EntryDef; MAX_PDO_ENTRIES + 1] {
+    let mut out = [e(0, "Number of entries", U8, a); MAX_PDO_ENTRIES + 1];
+    let mut i = 0;
+    while i < MAX_PDO_ENTRIES {
+        out[i + 1] = e(i as u8 + 1, MAP_NAMES[i], U32, a);
+        i += 1;
+    }
+    out
+}
+
+const fn assign_entries(a: Access) -> [EntryDef; MAX_ASSIGN + 1] {
+    let mut out = [e(0, "Number of assigned PDOs", U8, a); MAX_ASSIGN + 1];
+    let mut i = 0;
+    while i < MAX_ASSIGN {
+        out[i + 1] = e(i as u8 + 1, ASSIGN_NAMES[i], U16, a);
+        i += 1;
+    }
+    out
+}
+
+static MAP_RW: [EntryDef; MAX_PDO_ENTRIES + 1] = map_entries(Access::RW_PREOP);
+static MAP_RO: [EntryDef; MAX_PDO_ENTRIES + 1] = map_entries(Access::RO);
+static ASSIGN_RW: [EntryDef; MAX_ASSIGN + 1] = assign_entries(Access::RW_PREOP);
+static ASSIGN_RO: [EntryDef; MAX_ASSIGN + 1] = assign_entries(Access::RO);
+
+const fn sync_par_entries() -> [EntryDef; 12] {
+    [
+        e(0, "Number of entries", U8, Access::RO).default_bits(0x20),
+        e(1, "Sync mode", U16, Access::RW_PREOP),
+        e(2, "Cycle time", U32, Access::RW_PREOP),
+        e(3, "Shift time", U32, Access::RO),
+        e(4, "Sync modes supported", U16, Access::RO),
+        e(5, "Minimum cycle time", U32, Access::RO),
+        e(6, "Calc and copy time", U32, Access::RO),
+        e(8, "Get cycle time", U16, Access::RW),
+        e(9, "Delay time", U32, Access::RO),
+        e(0x0B, "SM event missed counter", U16, Access::RO),
+        e(0x0C, "Cycle time too small counter", U16, Access::RO),
+        e(0x20, "Sync error", DataType::Bool, Access::RO),
+    ]
+}
+
+static SYNC_PAR: [EntryDef; 12] = sync_par_entries();
+
+/// The communication objects defined by the stack (values derived from the definition).
+static COMM_LOW: [ObjectDef; 7] = [
+    ObjectDef {
+        index: 0x1000,
+        name: "Device type",
+        code: ObjectCode::Var,
+        entries: &[e(0, "Device type", U32, Access::RO)],
+    },
+    ObjectDef {
+        index: 0x1001,
+        name: "Error register",
+        code: ObjectCode::Var,
+        entries: &[e(0, "Error register", U8, Access::RO)],
+    },
+    ObjectDef {
+        index: 0x1008,
+        name: "Device name",
+        code: ObjectCode::Var,
+        entries: &[EntryDef::string(0, "Device name", STR_MAX, Access::RO)],
+    },
+    ObjectDef {
+        index: 0x1009,
+        name: "Hardware version",
+        code: ObjectCode::Var,
+        entries: &[EntryDef::string(0, "Hardware version", STR_MAX, Access::RO)],
+    },
+    ObjectDef {
+        index: 0x100A,
+        name: "Software version",
+        code: ObjectCode::Var,
+        entries: &[EntryDef::string(0, "Software version", STR_MAX, Access::RO)],
+    },
+    ObjectDef {
+        index: 0x1018,
+        name: "Identity",
+        code: ObjectCode::Record,
+        entries: &[
+            e(0, "Number of entries", U8, Access::RO).default_bits(4),
+            e(1, "Vendor ID", U32, Access::RO),
+            e(2, "Product code", U32, Access::RO),
+            e(3, "Revision", U32, Access::RO),
+            e(4, "Serial number", U32, Access::RO),
+        ],
+    },
+    ObjectDef {
+        index: 0x10F1,
+        name: "Error settings",
+        code: ObjectCode::Record,
+        entries: &[
+            e(0, "Number of entries", U8, Access::RO).default_bits(2),
+            e(1, "Local error reaction", U32, Access::RW),
+            e(2, "Sync error counter limit", U16, Access::RW).default_bits(4),
+        ],
+    },
+];
+
+static COMM_HIGH: [ObjectDef; 5] = [
+    ObjectDef {
+        index: 0x1C00,
+        name: "Sync manager type",
+        code: ObjectCode::Array,
+        entries: &[
+            e(0, "Number of used sync manager channels", U8, Access::RO).default_bits(4),
+            e(1, "SM 0", U8, Access::RO).default_bits(1),
+            e(2, "SM 1", U8, Access::RO).default_bits(2),
+            e(3, "SM 2", U8, Access::RO).default_bits(3),
+            e(4, "SM 3", U8, Access::RO).default_bits(4),
+        ],
+    },
+    ObjectDef {
+        index: 0x1C12,
+        name: "RxPDO assign",
+        code: ObjectCode::Array,
+        entries: &ASSIGN_RW,
+    },
+    ObjectDef {
+        index: 0x1C13,
+        name: "TxPDO assign",
+        code: ObjectCode::Array,
+        entries: &ASSIGN_RW,
+    },
+    ObjectDef {
+        index: 0x1C32,
+        name: "SM output parameter",
+        code: ObjectCode::Record,
+        entries: &SYNC_PAR,
+    },
+    ObjectDef {
+        index: 0x1C33,
+        name: "SM input parameter",
+        code: ObjectCode::Record,
+        entries: &SYNC_PAR,
+    },
+];
+
+const COMM_LOW_SIZE: usize = image_size(&COMM_LOW);
+const COMM_HIGH_SIZE: usize = image_size(&COMM_HIGH);
+const MAP_OBJ_SIZE: usize = 1 + 4 * MAX_PDO_ENTRIES;
+/// Bytes of the internal image of the communication objects.
+pub const COMM_IMAGE_SIZE: usize = COMM_LOW_SIZE + COMM_HIGH_SIZE + 2 * MAX_PDOS * MAP_OBJ_SIZE;
+
+/// Which image an object's values live in.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(crate) enum Area {
+    App,
+    Comm,
+}
+
+/// What an object is, for the special write rules.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(crate) enum Kind {
+    Plain,
+    RxMap,
+    TxMap,
+    RxAssign,
+    TxAssign,
+    SyncPar,
+}
+
+/// A resolved object: its definition and where its values are.
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct Obj {
+    pub index: u16,
+    pub name: &'static str,
+    pub code: ObjectCode,
+    pub entries: &'static [EntryDef],
+    pub area: Area,
+    pub base: usize,
+    pub kind: Kind,
+}
+
+impl Obj {
+    /// Position and image offset of subindex `sub`.
+    pub fn entry(&self, sub: u8) -> Option<(usize, &'static EntryDef, usize)> {
+        let mut off = self.base;
+        for (i, e) in self.entries.iter().enumerate() {
+            if e.sub == sub {
+                return Some((i, e, off));
+            }
+            off += e.storage_len();
+        }
+        None
+    }
+
+    /// Highest defined subindex.
+    pub fn max_sub(&self) -> u8 {
+        self.entries.last().map_or(0, |e| e.sub)
+    }
+}
+
+/// Why a typed dictionary access failed.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum OdError {
+    /// No such object.
+    NoObject,
+    /// No such subindex.
+    NoSubindex,
+    /// The entry's bit length does not match the requested type.
+    TypeMismatch,
+}
+
+/// A resolved entry for fast repeated typed access ([`Od::read`], [`Od::write`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct EntryRef {
+    area_app: bool,
+    offset: usize,
+    len: usize,
+    bits: u16,
+}
+
+impl EntryRef {
+    /// Bit length of the entry.
+    pub fn bits(&self) -> u16 {
+        self.bits
+    }
+}
+
+/// Rust types that map onto CoE scalar types for typed access.
+pub trait OdType: Copy {
+    /// Bit length the entry must have.
+    const BITS: u16;
+    /// Decodes from the little-endian image bytes (exactly the storage length).
+    fn from_le(b: &[u8]) -> Self;
+    /// Encodes into the image bytes.
+    fn to_le(self, b: &mut [u8]);
+}
+
+macro_rules! od_type {
+    ($t:ty, $bits:expr) => {
+        impl OdType for $t {
+            const BITS: u16 = $bits;
+            fn from_le(b: &[u8]) -> Self {
+                let mut a = [0u8; core::mem::size_of::<$t>()];
+                let n = a.len().min(b.len());
+                a[..n].copy_from_slice(&b[..n]);
+                <$t>::from_le_bytes(a)
+            }
+            fn to_le(self, b: &mut [u8]) {
+                let a = self.to_le_bytes();
+                let n = a.len().min(b.len());
+                b[..n].copy_from_slice(&a[..n]);
+            }
+        }
+    };
+}
+od_type!(u8, 8);
+od_type!(i8, 8);
+od_type!(u16, 16);
+od_type!(i16, 16);
+od_type!(u32, 32);
+od_type!(i32, 32);
+od_type!(u64, 64);
+od_type!(i64, 64);
+od_type!(f32, 32);
+od_type!(f64, 64);
+
+impl OdType for bool {
+    const BITS: u16 = 1;
+    fn from_le(b: &[u8]) -> Self {
+        b.first().is_some_and(|v| v & 1 != 0)
+    }
+    fn to_le(self, b: &mut [u8]) {
+        if let Some(v) = b.first_mut() {
+            *v = u8::from(self);
+        }
+    }
+}
+
+/// Why a definition cannot be used.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum DefError {
+    /// The image `N` is smaller than the definition needs.
+    ImageTooSmall {
+        /// Bytes needed.
+        needed: usize,
+    },
+    /// Application objects must be sorted, unique and >= 0x2000.
+    BadObjectOrder(u16),
+    /// An object's entries are not in ascending subindex order / a VAR is malformed.
+    BadEntries(u16),
+    /// Too many PDOs, PDO entries or assigned PDOs, or a PDO index in the wrong range.
+    BadPdo(u16),
+}
+
+/// The object dictionary of one device: definition plus value images.
+pub struct Od<const N: usize> {
+    pub(crate) def: &'static DeviceDef,
+    pub(crate) app: [u8; N],
+    pub(crate) comm: [u8; COMM_IMAGE_SIZE],
+}
+
+impl<const N: usize> Od<N> {
+    /// Checks the definition and fills both images with the default values.
+    pub fn new(def: &'static DeviceDef) -> Result<Self, DefError> {
+        let needed = image_size(def.objects);
+        if needed > N {
+            return Err(DefError::ImageTooSmall { needed });
+        }
+        let mut prev: Option<u16> = None;
+        for o in def.objects {
+            if o.index < 0x2000 || prev.is_some_and(|p| p >= o.index) {
+                return Err(DefError::BadObjectOrder(o.index));
+            }
+            prev = Some(o.index);
+            check_entries(o)?;
+        }
+        for (list, lo, hi) in [
+            (def.rx_pdos, 0x1600u16, 0x17FFu16),
+            (def.tx_pdos, 0x1A00, 0x1BFF),
+        ] {
+            if list.len() > MAX_PDOS {
+                return Err(DefError::BadPdo(lo));
+            }
+            let mut prev: Option<u16> = None;
+            for p in list {
+                if p.index < lo
+                    || p.index > hi
+                    || p.entries.len() > MAX_PDO_ENTRIES
+                    || prev.is_some_and(|q| q >= p.index)
+                {
+                    return Err(DefError::BadPdo(p.index));
+                }
+                prev = Some(p.index);
+            }
+        }
+        if def.rx_assign.len() > MAX_ASSIGN || def.tx_assign.len() > MAX_ASSIGN {
+            return Err(DefError::BadPdo(0x1C12));
+        }
+        let mut od = Self {
+            def,
+            app: [0; N],
+            comm: [0; COMM_IMAGE_SIZE],
+        };
+        od.reset_defaults();
+        Ok(od)
+    }
+
+    /// The device definition.
+    pub fn def(&self) -> &'static DeviceDef {
+        self.def
+    }
+
+    /// Resets every value (application and communication objects) to its default.
+    pub fn reset_defaults(&mut self) {
+        let mut off = 0;
+        for o in self.def.objects {
+            for en in o.entries {
+                let len = en.storage_len();
+                write_default(&mut self.app[off..off + len], en, o);
+                off += len;
+            }
+        }
+        let mut off = 0;
+        for o in COMM_LOW.iter().chain(COMM_HIGH.iter()) {
+            for en in o.entries {
+                let len = en.storage_len();
+                write_default(&mut self.comm[off..off + len], en, o);
+                off += len;
+            }
+        }
+        let d = self.def;
+        let _ = self.set(0x1000, 0, d.device_type);
+        copy_str(self.comm_entry_mut(0x1008, 0), d.name);
+        copy_str(self.comm_entry_mut(0x1009, 0), d.hw_version);
+        copy_str(self.comm_entry_mut(0x100A, 0), d.sw_version);
+        let _ = self.set(0x1018, 1, d.identity.vendor_id);
+        let _ = self.set(0x1018, 2, d.identity.product_code);
+        let _ = self.set(0x1018, 3, d.identity.revision);
+        let _ = self.set(0x1018, 4, d.identity.serial);
+        for (i, p) in d.rx_pdos.iter().chain(d.tx_pdos.iter()).enumerate() {
+            let base = COMM_LOW_SIZE + COMM_HIGH_SIZE + i * MAP_OBJ_SIZE;
+            let m = &mut self.comm[base..base + MAP_OBJ_SIZE];
+            m.fill(0);
+            m[0] = p.entries.len() as u8;
+            for (k, pe) in p.entries.iter().enumerate() {
+                m[1 + 4 * k..5 + 4 * k].copy_from_slice(&pe.encode().to_le_bytes());
+            }
+        }
+        for (idx, list) in [(0x1C12u16, d.rx_assign), (0x1C13, d.tx_assign)] {
+            let _ = self.set(idx, 0, list.len() as u8);
+            for (k, p) in list.iter().enumerate() {
+                let _ = self.set(idx, k as u8 + 1, *p);
+            }
+        }
+        for idx in [0x1C32u16, 0x1C33] {
+            let _ = self.set(idx, 1, d.sync.default_mode as u16);
+            let _ = self.set(idx, 4, d.sync.supported);
+            let _ = self.set(idx, 5, d.sync.min_cycle_ns);
+            let _ = self.set(idx, 6, d.sync.calc_copy_ns);
+        }
+    }
+
+    fn comm_entry_mut(&mut self, index: u16, sub: u8) -> &mut [u8] {
+        match self.find(index).and_then(|o| o.entry(sub)) {
+            Some((_, en, off)) => &mut self.comm[off..off + en.storage_len()],
+            None => &mut [],
+        }
+    }
+
+    /// Number of objects (communication + application).
+    pub fn object_count(&self) -> usize {
+        COMM_LOW.len()
+            + self.def.rx_pdos.len()
+            + self.def.tx_pdos.len()
+            + COMM_HIGH.len()
+            + self.def.objects.len()
+    }
+
+    /// The `n`-th object in index order.
+    pub(crate) fn object_at(&self, n: usize) -> Option<Obj> {
+        let d = self.def;
+        let mut n = n;
+        if n < COMM_LOW.len() {
+            return Some(self.comm_obj(&COMM_LOW[n], comm_low_base(n), Kind::Plain));
+        }
+        n -= COMM_LOW.len();
+        if n < d.rx_pdos.len() {
+            return Some(self.map_obj(&d.rx_pdos[n], n, Kind::RxMap));
+        }
+        n -= d.rx_pdos.len();
+        if n < d.tx_pdos.len() {
+            return Some(self.map_obj(&d.tx_pdos[n], d.rx_pdos.len() + n, Kind::TxMap));
+        }
+        n -= d.tx_pdos.len();
+        if n < COMM_HIGH.len() {
+            let o = &COMM_HIGH[n];
+            let kind = match o.index {
+                0x1C12 => Kind::RxAssign,
+                0x1C13 => Kind::TxAssign,
+                0x1C32 | 0x1C33 => Kind::SyncPar,
+                _ => Kind::Plain,
+            };
+            let mut r = self.comm_obj(o, COMM_LOW_SIZE + comm_high_base(n), kind);
+            if matches!(kind, Kind::RxAssign | Kind::TxAssign) {
+                let len = if kind == Kind::RxAssign {
+                    d.rx_assign.len()
+                } else {
+                    d.tx_assign.len()
+                };
+                let full: &'static [EntryDef] = if d.assign_configurable {
+                    &ASSIGN_RW
+                } else {
+                    &ASSIGN_RO
+                };
+                // A fixed assignment shows only its entries; a configurable one all slots.
+                r.entries = if d.assign_configurable {
+                    full
+                } else {
+                    &full[..len + 1]
+                };
+            }
+            return Some(r);
+        }
+        n -= COMM_HIGH.len();
+        let mut base = 0;
+        for (i, o) in d.objects.iter().enumerate() {
+            if i == n {
+                return Some(Obj {
+                    index: o.index,
+                    name: o.name,
+                    code: o.code,
+                    entries: o.entries,
+                    area: Area::App,
+                    base,
+                    kind: Kind::Plain,
+                });
+            }
+            base += o.storage_len();
+        }
+        None
+    }
+
+    fn comm_obj(&self, o: &'static ObjectDef, base: usize, kind: Kind) -> Obj {
+        Obj {
+            index: o.index,
+            name: o.name,
+            code: o.code,
+            entries: o.entries,
+            area: Area::Comm,
+            base,
+            kind,
+        }
+    }
+
+    fn map_obj(&self, p: &'static PdoDef, slot: usize, kind: Kind) -> Obj {
+        let entries: &'static [EntryDef] = if p.configurable {
+            &MAP_RW
+        } else {
+            &MAP_RO[..p.entries.len() + 1]
+        };
+        Obj {
+            index: p.index,
+            name: p.name,
+            code: ObjectCode::Record,
+            entries,
+            area: Area::Comm,
+            base: COMM_LOW_SIZE + COMM_HIGH_SIZE + slot * MAP_OBJ_SIZE,
+            kind,
+        }
+    }
+
+    /// Finds an object by index.
+    pub(crate) fn find(&self, index: u16) -> Option<Obj> {
+        let d = self.def;
+        if let Some(i) = COMM_LOW.iter().position(|o| o.index == index) {
+            return self.object_at(i);
+        }
+        if let Some(i) = d.rx_pdos.iter().position(|p| p.index == index) {
+            return self.object_at(COMM_LOW.len() + i);
+        }
+        if let Some(i) = d.tx_pdos.iter().position(|p| p.index == index) {
+            return self.object_at(COMM_LOW.len() + d.rx_pdos.len() + i);
+        }
+        let hi0 = COMM_LOW.len() + d.rx_pdos.len() + d.tx_pdos.len();
+        if let Some(i) = COMM_HIGH.iter().position(|o| o.index == index) {
+            return self.object_at(hi0 + i);
+        }
+        let i = d.objects.binary_search_by_key(&index, |o| o.index).ok()?;
+        self.object_at(hi0 + COMM_HIGH.len() + i)
+    }
+
+    /// Image bytes of an entry.
+    pub(crate) fn bytes_of(&self, o: &Obj, off: usize, len: usize) -> &[u8] {
+        match o.area {
+            Area::App => &self.app[off..off + len],
+            Area::Comm => &self.comm[off..off + len],
+        }
+    }
+
+    /// Mutable image bytes of an entry.
+    pub(crate) fn bytes_of_mut(&mut self, o: &Obj, off: usize, len: usize) -> &mut [u8] {
+        match o.area {
+            Area::App => &mut self.app[off..off + len],
+            Area::Comm => &mut self.comm[off..off + len],
+        }
+    }
+
+    /// Resolves `index:sub` once for repeated typed access.
+    pub fn entry(&self, index: u16, sub: u8) -> Result<EntryRef, OdError> {
+        let o = self.find(index).ok_or(OdError::NoObject)?;
+        let (_, e, off) = o.entry(sub).ok_or(OdError::NoSubindex)?;
+        Ok(EntryRef {
+            area_app: o.area == Area::App,
+            offset: off,
+            len: e.storage_len(),
+            bits: e.bits,
+        })
+    }
+
+    fn slice(&self, r: EntryRef) -> &[u8] {
+        if r.area_app {
+            &self.app[r.offset..r.offset + r.len]
+        } else {
+            &self.comm[r.offset..r.offset + r.len]
+        }
+    }
+
+    fn slice_mut(&mut self, r: EntryRef) -> &mut [u8] {
+        if r.area_app {
+            &mut self.app[r.offset..r.offset + r.len]
+        } else {
+            &mut self.comm[r.offset..r.offset + r.len]
+        }
+    }
+
+    /// Typed read of a resolved entry (the type is not re-checked).
+    pub fn read<T: OdType>(&self, r: EntryRef) -> T {
+        T::from_le(self.slice(r))
+    }
+
+    /// Typed write of a resolved entry (the type is not re-checked).
+    pub fn write<T: OdType>(&mut self, r: EntryRef, v: T) {
+        v.to_le(self.slice_mut(r))
+    }
+
+    /// Typed read of `index:sub`; the entry's bit length must match `T`.
+    pub fn get<T: OdType>(&self, index: u16, sub: u8) -> Result<T, OdError> {
+        let r = self.entry(index, sub)?;
+        if r.bits != T::BITS {
+            return Err(OdError::TypeMismatch);
+        }
+        Ok(self.read(r))
+    }
+
+    /// Typed write of `index:sub`; the entry's bit length must match `T`.
+    pub fn set<T: OdType>(&mut self, index: u16, sub: u8, v: T) -> Result<(), OdError> {
+        let r = self.entry(index, sub)?;
+        if r.bits != T::BITS {
+            return Err(OdError::TypeMismatch);
+        }
+        self.write(r, v);
+        Ok(())
+    }
+
+    /// Raw image bytes of `index:sub` (strings, octet strings).
+    pub fn bytes(&self, index: u16, sub: u8) -> Result<&[u8], OdError> {
+        let r = self.entry(index, sub)?;
+        Ok(self.slice(r))
+    }
+
+    /// Mutable raw image bytes of `index:sub`.
+    pub fn bytes_mut(&mut self, index: u16, sub: u8) -> Result<&mut [u8], OdError> {
+        let r = self.entry(index, sub)?;
+        Ok(self.slice_mut(r))
+    }
+
+    /// The application image (all application object values).
+    pub fn app_image(&self) -> &[u8] {
+        &self.app
+    }
+
+    /// Sync mode configured in 0x1C32:01 (invalid values read as free run).
+    pub fn sync_mode(&self) -> SyncMode {
+        SyncMode::from_u16(self.get::<u16>(0x1C32, 1).unwrap_or(0)).unwrap_or(SyncMode::FreeRun)
+    }
+}
+
+fn check_entries(o: &ObjectDef) -> Result<(), DefError> {
+    let bad = DefError::BadEntries(o.index);
+    if o.entries.is_empty() {
+        return Err(bad);
+    }
+    if o.code == ObjectCode::Var && (o.entries.len() != 1 || o.entries[0].sub != 0) {
+        return Err(bad);
+    }
+    if o.code != ObjectCode::Var && (o.entries[0].sub != 0 || o.entries[0].bits != 8) {
+        return Err(bad);
+    }
+    for w in o.entries.windows(2) {
+        if w[0].sub >= w[1].sub {
+            return Err(bad);
+        }
+    }
+    for en in o.entries {
+        if en.bits == 0 || (en.bits > 64 && !en.dtype.is_string()) {
+            return Err(bad);
+        }
+    }
+    Ok(())
+}
+
+fn comm_low_base(n: usize) -> usize {
+    COMM_LOW[..n].iter().map(|o| o.storage_len()).sum()
+}
+
+fn comm_high_base(n: usize) -> usize {
+    COMM_HIGH[..n].iter().map(|o| o.storage_len()).sum()
+}
+
+fn write_default(dst: &mut [u8], en: &EntryDef, o: &ObjectDef) {
+    dst.fill(0);
+    match en.default {
+        DefaultValue::Bits(v) => {
+            let v = if en.sub == 0 && o.code != ObjectCode::Var && v == 0 {
+                o.max_sub() as u64
+            } else {
+                v
+            };
+            let b = v.to_le_bytes();
+            let n = dst.len().min(8);
+            dst[..n].copy_from_slice(&b[..n]);
+        }
+        DefaultValue::Bytes(b) => {
+            let n = dst.len().min(b.len());
+            dst[..n].copy_from_slice(&b[..n]);
+        }
+    }
+}
+
+fn copy_str(dst: &mut [u8], s: &str) {
+    dst.fill(0);
+    let n = dst.len().min(s.len());
+    dst[..n].copy_from_slice(&s.as_bytes()[..n]);
+}

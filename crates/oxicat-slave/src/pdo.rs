@@ -1,0 +1,246 @@
+//! PDO mapping compiled from 0x1C12/0x1C13 and 0x16xx/0x1Axx into a flat list of image
+//! slices, and bit-exact packing into / unpacking from the SM2/SM3 buffers.
+
+use oxicat_wire::coe::SdoAbortCode;
+
+use crate::device::PdoEntry;
+use crate::od::{Area, DataType, Od, MAX_PDO_ENTRIES};
+
+/// Maximum process data bytes per direction.
+pub const MAX_PD_BYTES: usize = 256;
+/// Maximum mapped entries per direction.
+pub const MAX_ITEMS: usize = 64;
+
+/// Direction of a mapping.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Dir {
+    /// RxPDO: outputs (master → slave, SM2).
+    Rx,
+    /// TxPDO: inputs (slave → master, SM3).
+    Tx,
+}
+
+#[derive(Debug, Clone, Copy, Default)]
+pub(crate) struct Item {
+    /// Image offset (application image); `usize::MAX` for a gap.
+    off: usize,
+    app: bool,
+    bits: u16,
+}
+
+/// A compiled mapping of one direction.
+#[derive(Debug, Clone, Copy)]
+pub struct Mapping {
+    items: [Item; MAX_ITEMS],
+    n: usize,
+    bits: usize,
+}
+
+impl Default for Mapping {
+    fn default() -> Self {
+        Self {
+            items: [Item::default(); MAX_ITEMS],
+            n: 0,
+            bits: 0,
+        }
+    }
+}
+
+impl Mapping {
+    /// Process data size in bytes.
+    pub fn bytes(&self) -> usize {
+        self.bits.div_ceil(8)
+    }
+
+    /// Process data size in bits.
+    pub fn bits(&self) -> usize {
+        self.bits
+    }
+
+    /// Copies image values into `buf` (inputs → SM3).
+    pub(crate) fn pack<const N: usize>(&self, od: &Od<N>, buf: &mut [u8]) {
+        let mut pos = 0usize;
+        for it in &self.items[..self.n] {
+            let bits = it.bits as usize;
+            if it.off != usize::MAX {
+                let src = if it.app { &od.app[..] } else { &od.comm[..] };
+                if pos & 7 == 0 && bits & 7 == 0 {
+                    let b = pos / 8;
+                    let n = bits / 8;
+                    if let (Some(d), Some(s)) = (buf.get_mut(b..b + n), src.get(it.off..it.off + n))
+                    {
+                        d.copy_from_slice(s);
+                    }
+                } else {
+                    for k in 0..bits {
+                        let v = src
+                            .get(it.off + k / 8)
+                            .is_some_and(|x| x >> (k % 8) & 1 != 0);
+                        set_bit(buf, pos + k, v);
+                    }
+                }
+            }
+            pos += bits;
+        }
+    }
+
+    /// Copies `buf` (SM2 outputs) into the image.
+    pub(crate) fn unpack<const N: usize>(&self, od: &mut Od<N>, buf: &[u8]) {
+        let mut pos = 0usize;
+        for it in &self.items[..self.n] {
+            let bits = it.bits as usize;
+            if it.off != usize::MAX {
+                let dst = if it.app {
+                    &mut od.app[..]
+                } else {
+                    &mut od.comm[..]
+                };
+                if pos & 7 == 0 && bits & 7 == 0 {
+                    let b = pos / 8;
+                    let n = bits / 8;
+                    if let (Some(d), Some(s)) = (dst.get_mut(it.off..it.off + n), buf.get(b..b + n))
+                    {
+                        d.copy_from_slice(s);
+                    }
+                } else {
+                    for k in 0..bits {
+                        let v = get_bit(buf, pos + k);
+                        set_bit(dst, it.off * 8 + k, v);
+                    }
+                }
+            }
+            pos += bits;
+        }
+    }
+
+    /// True when the image bytes `[off, off+len)` of the application image are mapped.
+    pub(crate) fn maps(&self, app: bool, off: usize, len: usize) -> bool {
+        self.items[..self.n].iter().any(|it| {
+            it.off != usize::MAX
+                && it.app == app
+                && it.off < off + len
+                && off < it.off + (it.bits as usize).div_ceil(8)
+        })
+    }
+}
+
+fn get_bit(b: &[u8], i: usize) -> bool {
+    b.get(i / 8).is_some_and(|x| (x >> (i % 8)) & 1 != 0)
+}
+
+fn set_bit(b: &mut [u8], i: usize, v: bool) {
+    if let Some(x) = b.get_mut(i / 8) {
+        if v {
+            *x |= 1 << (i % 8);
+        } else {
+            *x &= !(1 << (i % 8));
+        }
+    }
+}
+
+/// Checks one mapping entry value against the dictionary; returns its bit length.
+pub(crate) fn check_entry<const N: usize>(
+    od: &Od<N>,
+    dir: Dir,
+    pe: PdoEntry,
+) -> Result<usize, SdoAbortCode> {
+    if pe.index == 0 {
+        return Ok(pe.bits as usize);
+    }
+    let o = od.find(pe.index).ok_or(SdoAbortCode::ObjectDoesNotExist)?;
+    let (_, e, _) = o.entry(pe.sub).ok_or(SdoAbortCode::SubindexDoesNotExist)?;
+    let ok = match dir {
+        Dir::Rx => e.pdo.rx(),
+        Dir::Tx => e.pdo.tx(),
+    };
+    if !ok || e.dtype.is_string() && e.bits > 255 {
+        return Err(SdoAbortCode::CannotMap);
+    }
+    if e.bits != pe.bits as u16 {
+        return Err(SdoAbortCode::ParameterIncompatible);
+    }
+    Ok(pe.bits as usize)
+}
+
+/// Mapping object entries (count, values) of the PDO `index` in the comm image.
+pub(crate) fn pdo_entries<const N: usize>(
+    od: &Od<N>,
+    index: u16,
+) -> Option<(usize, [u32; MAX_PDO_ENTRIES])> {
+    let o = od.find(index)?;
+    let base = o.base;
+    let cnt = (od.comm[base] as usize).min(MAX_PDO_ENTRIES);
+    let mut v = [0u32; MAX_PDO_ENTRIES];
+    for (k, x) in v.iter_mut().enumerate().take(cnt) {
+        let a = base + 1 + 4 * k;
+        *x = u32::from_le_bytes([od.comm[a], od.comm[a + 1], od.comm[a + 2], od.comm[a + 3]]);
+    }
+    Some((cnt, v))
+}
+
+/// Bit length of one PDO's current mapping (validated).
+pub(crate) fn pdo_bits<const N: usize>(
+    od: &Od<N>,
+    dir: Dir,
+    index: u16,
+) -> Result<usize, SdoAbortCode> {
+    let in_range = match dir {
+        Dir::Rx => (0x1600..=0x17FF).contains(&index),
+        Dir::Tx => (0x1A00..=0x1BFF).contains(&index),
+    };
+    if !in_range {
+        return Err(SdoAbortCode::ParameterIncompatible);
+    }
+    let (cnt, v) = pdo_entries(od, index).ok_or(SdoAbortCode::ParameterIncompatible)?;
+    let mut bits = 0;
+    for x in &v[..cnt] {
+        bits += check_entry(od, dir, PdoEntry::decode(*x))?;
+    }
+    Ok(bits)
+}
+
+/// Compiles the current assignment of `dir` into a [`Mapping`].
+pub(crate) fn compile<const N: usize>(od: &Od<N>, dir: Dir) -> Result<Mapping, SdoAbortCode> {
+    let assign = match dir {
+        Dir::Rx => 0x1C12,
+        Dir::Tx => 0x1C13,
+    };
+    let cnt: u8 = od.get(assign, 0).map_err(|_| SdoAbortCode::GeneralError)?;
+    let mut m = Mapping::default();
+    for k in 1..=cnt {
+        let pdo: u16 = od
+            .get(assign, k)
+            .map_err(|_| SdoAbortCode::SubindexDoesNotExist)?;
+        pdo_bits(od, dir, pdo)?;
+        let (n, v) = pdo_entries(od, pdo).ok_or(SdoAbortCode::ParameterIncompatible)?;
+        for x in &v[..n] {
+            let pe = PdoEntry::decode(*x);
+            let item = if pe.index == 0 {
+                Item {
+                    off: usize::MAX,
+                    app: true,
+                    bits: pe.bits as u16,
+                }
+            } else {
+                let o = od.find(pe.index).ok_or(SdoAbortCode::ObjectDoesNotExist)?;
+                let (_, e, off) = o.entry(pe.sub).ok_or(SdoAbortCode::SubindexDoesNotExist)?;
+                let _ = e.dtype == DataType::Bool;
+                Item {
+                    off,
+                    app: o.area == Area::App,
+                    bits: pe.bits as u16,
+                }
+            };
+            if m.n >= MAX_ITEMS {
+                return Err(SdoAbortCode::PdoLengthExceeded);
+            }
+            m.items[m.n] = item;
+            m.n += 1;
+            m.bits += pe.bits as usize;
+        }
+    }
+    if m.bytes() > MAX_PD_BYTES {
+        return Err(SdoAbortCode::PdoLengthExceeded);
+    }
+    Ok(m)
+}

@@ -1,0 +1,777 @@
+//! The slave stack: one struct the application owns, generic over the [`Pdi`], driven by
+//! events (`poll`, `on_pdi_irq`, `on_sync0`, `on_sync1`, `on_timer`).
+
+use oxicat_wire::coe::Emergency;
+use oxicat_wire::mailbox::{
+    MailboxErrorDetail, MailboxErrorReply, MailboxHeader, MailboxType, MAILBOX_HEADER_LEN,
+};
+
+use crate::coe::SdoState;
+use crate::device::{DeviceDef, MailboxDef, SyncMode};
+use crate::esm::{AlState, AlStatusCode};
+use crate::od::{DefError, Od};
+use crate::pdi::{reg, Pdi};
+use crate::pdo::{self, Dir, Mapping, MAX_PD_BYTES};
+
+/// Hooks through which the stack calls the application.
+pub trait Application<const N: usize> {
+    /// A state change is about to happen; an upward change may be refused with a code.
+    fn state_change(
+        &mut self,
+        _from: AlState,
+        _to: AlState,
+        _od: &mut Od<N>,
+    ) -> Result<(), AlStatusCode> {
+        Ok(())
+    }
+
+    /// Outputs must go to their safe values (leaving OP, watchdog).
+    fn safe_outputs(&mut self, _od: &mut Od<N>) {}
+
+    /// One application cycle between output and input mapping.
+    fn cycle(&mut self, _od: &mut Od<N>) {}
+
+    /// A local timer fired.
+    fn timer(&mut self, _id: u8, _od: &mut Od<N>) {}
+
+    /// An SDO download changed `index:sub` (subindex 0 for complete access).
+    fn sdo_written(&mut self, _index: u16, _sub: u8, _od: &mut Od<N>) {}
+}
+
+/// An application without hooks.
+impl<const N: usize> Application<N> for () {}
+
+/// Why the stack could not be created.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum InitError<E> {
+    /// The device definition is inconsistent.
+    Def(DefError),
+    /// A mailbox of the definition is larger than the stack's buffer `M` or too small.
+    MailboxSize,
+    /// The ESC could not be accessed.
+    Pdi(E),
+}
+
+/// Counters for diagnostics.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct Stats {
+    /// Mailbox requests processed.
+    pub mbx_requests: u32,
+    /// Duplicate mailbox requests dropped (same counter).
+    pub mbx_duplicates: u32,
+    /// Repeat requests served.
+    pub mbx_repeats: u32,
+    /// Process data cycles run.
+    pub cycles: u32,
+    /// Output updates taken from SM2.
+    pub outputs: u32,
+}
+
+pub(crate) struct MbxState<const M: usize> {
+    pub running: bool,
+    pub boot: bool,
+    pub out: [u8; M],
+    pub out_len: usize,
+    pub last: [u8; M],
+    pub last_len: usize,
+    pub posted: bool,
+    pub toggle: bool,
+    pub out_counter: u8,
+    pub in_counter: u8,
+    pub rx: [u8; M],
+    pub stage: [u8; M],
+    pub emcy: [Option<Emergency>; 4],
+}
+
+impl<const M: usize> MbxState<M> {
+    fn new() -> Self {
+        Self {
+            running: false,
+            boot: false,
+            out: [0; M],
+            out_len: 0,
+            last: [0; M],
+            last_len: 0,
+            posted: false,
+            toggle: false,
+            out_counter: 0,
+            in_counter: 0,
+            rx: [0; M],
+            stage: [0; M],
+            emcy: [None; 4],
+        }
+    }
+
+    fn reset(&mut self) {
+        self.running = false;
+        self.out_len = 0;
+        self.last_len = 0;
+        self.posted = false;
+        self.toggle = false;
+        self.in_counter = 0;
+        self.emcy = [None; 4];
+    }
+}
+
+/// The EtherCAT slave stack.
+///
+/// `N` is the application image size (at least [`crate::od::image_size`] of the
+/// definition's objects), `M` the mailbox buffer size (at least both mailbox lengths).
+pub struct Slave<P: Pdi, const N: usize, const M: usize = 256> {
+    /// The ESC access.
+    pub pdi: P,
+    pub(crate) od: Od<N>,
+    pub(crate) state: AlState,
+    pub(crate) error: bool,
+    pub(crate) code: AlStatusCode,
+    pub(crate) mbx: MbxState<M>,
+    pub(crate) sdo: SdoState,
+    rx_map: Mapping,
+    tx_map: Mapping,
+    sync: SyncMode,
+    pd: [u8; MAX_PD_BYTES],
+    stats: Stats,
+}
+
+type R<P> = Result<(), <P as Pdi>::Error>;
+
+impl<P: Pdi, const N: usize, const M: usize> Slave<P, N, M> {
+    /// Creates the stack: checks the definition, fills the dictionary with defaults,
+    /// deactivates every SyncManager and sets AL status INIT.
+    pub fn new(def: &'static DeviceDef, pdi: P) -> Result<Self, InitError<P::Error>> {
+        let od = Od::new(def).map_err(InitError::Def)?;
+        let fits = |m: &MailboxDef| {
+            (m.rx_len as usize) <= M && (m.tx_len as usize) <= M && m.rx_len >= 16 && m.tx_len >= 16
+        };
+        if !fits(&def.mailbox) || def.boot_mailbox.is_some_and(|m| !fits(&m)) {
+            return Err(InitError::MailboxSize);
+        }
+        let mut s = Self {
+            pdi,
+            od,
+            state: AlState::Init,
+            error: false,
+            code: AlStatusCode::NONE,
+            mbx: MbxState::new(),
+            sdo: SdoState::default(),
+            rx_map: Mapping::default(),
+            tx_map: Mapping::default(),
+            sync: SyncMode::FreeRun,
+            pd: [0; MAX_PD_BYTES],
+            stats: Stats::default(),
+        };
+        for n in 0..4 {
+            s.sm_enable(n, false).map_err(InitError::Pdi)?;
+        }
+        s.write_status().map_err(InitError::Pdi)?;
+        Ok(s)
+    }
+
+    /// The object dictionary.
+    pub fn od(&self) -> &Od<N> {
+        &self.od
+    }
+
+    /// The object dictionary, mutable (application data).
+    pub fn od_mut(&mut self) -> &mut Od<N> {
+        &mut self.od
+    }
+
+    /// Current AL state.
+    pub fn state(&self) -> AlState {
+        self.state
+    }
+
+    /// Current AL status code (0 when no error is indicated).
+    pub fn status_code(&self) -> AlStatusCode {
+        self.code
+    }
+
+    /// True while an error is indicated in AL status.
+    pub fn error_indicated(&self) -> bool {
+        self.error
+    }
+
+    /// The sync mode the stack runs in (decided on PREOP → SAFEOP).
+    pub fn sync_mode(&self) -> SyncMode {
+        self.sync
+    }
+
+    /// Diagnostics counters.
+    pub fn stats(&self) -> Stats {
+        self.stats
+    }
+
+    /// Output (RxPDO) process data size in bytes of the active mapping.
+    pub fn output_bytes(&self) -> usize {
+        self.rx_map.bytes()
+    }
+
+    pub(crate) fn rx_mapping(&self) -> &Mapping {
+        &self.rx_map
+    }
+
+    /// Input (TxPDO) process data size in bytes of the active mapping.
+    pub fn input_bytes(&self) -> usize {
+        self.tx_map.bytes()
+    }
+
+    // ------------------------------------------------------------------ events
+
+    /// Main-loop work: AL control, watchdog, mailbox; in free run also the process data.
+    pub fn poll<A: Application<N>>(&mut self, app: &mut A) -> R<P> {
+        let ev = self.pdi.al_event_request()?;
+        if ev & reg::EV_AL_CONTROL != 0 {
+            self.al_control(app)?;
+        }
+        if ev & reg::EV_WATCHDOG != 0 {
+            self.check_watchdog(app)?;
+        }
+        if self.mbx.running {
+            self.mailbox(app)?;
+        }
+        if self.sync == SyncMode::FreeRun && self.state >= AlState::SafeOp {
+            self.cycle(app, true, true)?;
+        }
+        Ok(())
+    }
+
+    /// PDI interrupt: in SM-synchronous mode runs the cycle on the SM2 (or SM3) event.
+    pub fn on_pdi_irq<A: Application<N>>(&mut self, app: &mut A) -> R<P> {
+        if self.sync != SyncMode::SmSync || self.state < AlState::SafeOp {
+            return Ok(());
+        }
+        let ev = self.pdi.al_event_request()?;
+        let trig = if self.rx_map.bytes() > 0 {
+            ev & reg::ev_sm(2) != 0
+        } else {
+            ev & reg::ev_sm(3) != 0
+        };
+        if trig {
+            self.cycle(app, true, true)?;
+        }
+        Ok(())
+    }
+
+    /// DC SYNC0: outputs, application and (unless SYNC1 latches them) inputs.
+    pub fn on_sync0<A: Application<N>>(&mut self, app: &mut A) -> R<P> {
+        let _ack = self.pdi.read_u8(reg::DC_SYNC0_STATUS)?;
+        match self.sync {
+            SyncMode::DcSync0 if self.state >= AlState::SafeOp => self.cycle(app, true, true),
+            SyncMode::DcSync1 if self.state >= AlState::SafeOp => self.cycle(app, true, false),
+            _ => Ok(()),
+        }
+    }
+
+    /// DC SYNC1: input latch in SYNC0+SYNC1 mode.
+    pub fn on_sync1<A: Application<N>>(&mut self, _app: &mut A) -> R<P> {
+        let _ack = self.pdi.read_u8(reg::DC_SYNC1_STATUS)?;
+        if self.sync == SyncMode::DcSync1 && self.state >= AlState::SafeOp {
+            self.write_inputs()?;
+        }
+        Ok(())
+    }
+
+    /// A local timer fired (e.g. the control loop).
+    pub fn on_timer<A: Application<N>>(&mut self, id: u8, app: &mut A) {
+        app.timer(id, &mut self.od);
+    }
+
+    /// Queues a CoE emergency (and sets 0x1001 to `error_register`); false if the queue
+    /// is full or the mailbox is not running.
+    pub fn emergency(&mut self, error_code: u16, error_register: u8, data: [u8; 5]) -> bool {
+        let _ = self.od.set(0x1001, 0, error_register);
+        if !self.mbx.running {
+            return false;
+        }
+        match self.mbx.emcy.iter_mut().find(|e| e.is_none()) {
+            Some(slot) => {
+                *slot = Some(Emergency {
+                    error_code,
+                    error_register,
+                    data,
+                });
+                true
+            }
+            None => false,
+        }
+    }
+
+    // ------------------------------------------------------------------ process data
+
+    fn cycle<A: Application<N>>(&mut self, app: &mut A, outputs: bool, inputs: bool) -> R<P> {
+        if outputs {
+            self.read_outputs()?;
+        }
+        app.cycle(&mut self.od);
+        if inputs {
+            self.write_inputs()?;
+        }
+        self.stats.cycles = self.stats.cycles.wrapping_add(1);
+        Ok(())
+    }
+
+    fn read_outputs(&mut self) -> R<P> {
+        let n = self.rx_map.bytes();
+        if n == 0 {
+            return Ok(());
+        }
+        let ev = self.pdi.al_event_request()?;
+        if ev & reg::ev_sm(2) == 0 {
+            return Ok(());
+        }
+        let start = self.od.def.sm2_start;
+        self.pdi.read(start, &mut self.pd[..n])?;
+        if self.state == AlState::Op {
+            self.rx_map.unpack(&mut self.od, &self.pd[..n]);
+            self.stats.outputs = self.stats.outputs.wrapping_add(1);
+        }
+        Ok(())
+    }
+
+    fn write_inputs(&mut self) -> R<P> {
+        let n = self.tx_map.bytes();
+        if n == 0 {
+            return Ok(());
+        }
+        self.pd[..n].fill(0);
+        self.tx_map.pack(&self.od, &mut self.pd[..n]);
+        let start = self.od.def.sm3_start;
+        self.pdi.write(start, &self.pd[..n])
+    }
+
+    fn check_watchdog<A: Application<N>>(&mut self, app: &mut A) -> R<P> {
+        let st = self.pdi.read_u8(reg::WD_STATUS_PD)?;
+        if self.state == AlState::Op && st & 1 == 0 {
+            app.safe_outputs(&mut self.od);
+            let _ = app.state_change(AlState::Op, AlState::SafeOp, &mut self.od);
+            self.state = AlState::SafeOp;
+            self.set_error(AlStatusCode::SM_WATCHDOG)?;
+        }
+        Ok(())
+    }
+
+    // ------------------------------------------------------------------ ESM
+
+    fn set_error(&mut self, code: AlStatusCode) -> R<P> {
+        self.error = true;
+        self.code = code;
+        self.write_status()
+    }
+
+    fn write_status(&mut self) -> R<P> {
+        self.pdi.write_u16(reg::AL_STATUS_CODE, self.code.0)?;
+        let st = self.state.code() as u16 | if self.error { 0x10 } else { 0 };
+        self.pdi.write_u16(reg::AL_STATUS, st)
+    }
+
+    fn sm_enable(&mut self, n: u8, on: bool) -> R<P> {
+        let a = reg::sm(n, 7);
+        let cur = self.pdi.read_u8(a)?;
+        let v = if on { cur & !1 } else { cur | 1 };
+        self.pdi.write(a, &[v])
+    }
+
+    fn al_control<A: Application<N>>(&mut self, app: &mut A) -> R<P> {
+        let ctl = self.pdi.read_u16(reg::AL_CONTROL)?;
+        let code = (ctl & 0x0F) as u8;
+        let ack = ctl & 0x10 != 0;
+        if self.error && !ack && code != AlState::Init.code() {
+            // An indicated error must be acknowledged first; status stays.
+            return self.write_status();
+        }
+        if ack || code == AlState::Init.code() {
+            self.error = false;
+            self.code = AlStatusCode::NONE;
+        }
+        let Some(req) = AlState::from_code(code) else {
+            return self.set_error(AlStatusCode::UNKNOWN_STATE);
+        };
+        if req == self.state {
+            return self.write_status();
+        }
+        use AlState::*;
+        let res = match (self.state, req) {
+            (_, Init) => {
+                self.go_down(app, Init)?;
+                Ok(())
+            }
+            (Init, PreOp) => self.start_mailbox(app, false)?,
+            (Init, Boot) => {
+                if self.od.def.boot_mailbox.is_none() {
+                    Err(AlStatusCode::BOOT_NOT_SUPPORTED)
+                } else {
+                    self.start_mailbox(app, true)?
+                }
+            }
+            (PreOp, SafeOp) => self.start_pd(app)?,
+            (SafeOp, Op) => match app.state_change(SafeOp, Op, &mut self.od) {
+                Ok(()) => {
+                    self.state = Op;
+                    Ok(())
+                }
+                Err(c) => Err(c),
+            },
+            (Op, SafeOp) => {
+                app.safe_outputs(&mut self.od);
+                let _ = app.state_change(Op, SafeOp, &mut self.od);
+                self.state = SafeOp;
+                Ok(())
+            }
+            (Op | SafeOp, PreOp) => {
+                self.go_down(app, PreOp)?;
+                Ok(())
+            }
+            _ => Err(AlStatusCode::INVALID_STATE_CHANGE),
+        };
+        match res {
+            Ok(()) => self.write_status(),
+            Err(c) => self.set_error(c),
+        }
+    }
+
+    fn go_down<A: Application<N>>(&mut self, app: &mut A, to: AlState) -> R<P> {
+        let from = self.state;
+        if from >= AlState::SafeOp {
+            app.safe_outputs(&mut self.od);
+            self.sm_enable(2, false)?;
+            self.sm_enable(3, false)?;
+            self.sync = SyncMode::FreeRun;
+        }
+        if to == AlState::Init {
+            self.stop_mailbox()?;
+        }
+        let _ = app.state_change(from, to, &mut self.od);
+        self.state = to;
+        Ok(())
+    }
+
+    fn read_sm(&mut self, n: u8) -> Result<(u16, u16, u8, u8), P::Error> {
+        let mut r = [0u8; 8];
+        self.pdi.read(reg::sm(n, 0), &mut r)?;
+        Ok((
+            u16::from_le_bytes([r[0], r[1]]),
+            u16::from_le_bytes([r[2], r[3]]),
+            r[4],
+            r[6],
+        ))
+    }
+
+    fn start_mailbox<A: Application<N>>(
+        &mut self,
+        app: &mut A,
+        boot: bool,
+    ) -> Result<Result<(), AlStatusCode>, P::Error> {
+        let def = if boot {
+            self.od.def.boot_mailbox
+        } else {
+            Some(self.od.def.mailbox)
+        };
+        let bad = if boot {
+            AlStatusCode::INVALID_BOOT_MBX_CONFIG
+        } else {
+            AlStatusCode::INVALID_MBX_CONFIG
+        };
+        let Some(mb) = def else {
+            return Ok(Err(AlStatusCode::BOOT_NOT_SUPPORTED));
+        };
+        let (s0, l0, c0, a0) = self.read_sm(0)?;
+        let (s1, l1, c1, a1) = self.read_sm(1)?;
+        let ok = s0 == mb.rx_start
+            && l0 == mb.rx_len
+            && c0 & 0x0F == 0x06
+            && a0 & 1 != 0
+            && s1 == mb.tx_start
+            && l1 == mb.tx_len
+            && c1 & 0x0F == 0x02
+            && a1 & 1 != 0;
+        if !ok {
+            return Ok(Err(bad));
+        }
+        let to = if boot { AlState::Boot } else { AlState::PreOp };
+        if let Err(c) = app.state_change(AlState::Init, to, &mut self.od) {
+            return Ok(Err(c));
+        }
+        self.sm_enable(0, true)?;
+        self.sm_enable(1, true)?;
+        self.mbx.reset();
+        self.sdo = SdoState::default();
+        self.mbx.running = true;
+        self.mbx.boot = boot;
+        self.mbx.toggle = a1 & 2 != 0;
+        // Acknowledge state of the repeat bit follows the request bit at start.
+        let p1 = self.pdi.read_u8(reg::sm(1, 7))?;
+        let p1 = if self.mbx.toggle { p1 | 2 } else { p1 & !2 };
+        self.pdi.write(reg::sm(1, 7), &[p1])?;
+        self.state = to;
+        Ok(Ok(()))
+    }
+
+    fn stop_mailbox(&mut self) -> R<P> {
+        self.sm_enable(0, false)?;
+        self.sm_enable(1, false)?;
+        self.mbx.reset();
+        self.sdo = SdoState::default();
+        Ok(())
+    }
+
+    fn start_pd<A: Application<N>>(
+        &mut self,
+        app: &mut A,
+    ) -> Result<Result<(), AlStatusCode>, P::Error> {
+        let rx = match pdo::compile(&self.od, Dir::Rx) {
+            Ok(m) => m,
+            Err(_) => return Ok(Err(AlStatusCode::INVALID_OUTPUT_MAPPING)),
+        };
+        let tx = match pdo::compile(&self.od, Dir::Tx) {
+            Ok(m) => m,
+            Err(_) => return Ok(Err(AlStatusCode::INVALID_INPUT_MAPPING)),
+        };
+        let def = self.od.def;
+        let (s2, l2, c2, a2) = self.read_sm(2)?;
+        let out_ok = if rx.bytes() == 0 {
+            a2 & 1 == 0 || l2 == 0
+        } else {
+            s2 == def.sm2_start && l2 as usize == rx.bytes() && c2 & 0x0F == 0x04 && a2 & 1 != 0
+        };
+        if !out_ok {
+            return Ok(Err(AlStatusCode::INVALID_OUTPUT_CONFIG));
+        }
+        let (s3, l3, c3, a3) = self.read_sm(3)?;
+        let in_ok = if tx.bytes() == 0 {
+            a3 & 1 == 0 || l3 == 0
+        } else {
+            s3 == def.sm3_start && l3 as usize == tx.bytes() && c3 & 0x0F == 0x00 && a3 & 1 != 0
+        };
+        if !in_ok {
+            return Ok(Err(AlStatusCode::INVALID_INPUT_CONFIG));
+        }
+        let mode = match self.check_sync()? {
+            Ok(m) => m,
+            Err(c) => return Ok(Err(c)),
+        };
+        if let Err(c) = app.state_change(AlState::PreOp, AlState::SafeOp, &mut self.od) {
+            return Ok(Err(c));
+        }
+        self.rx_map = rx;
+        self.tx_map = tx;
+        self.sync = mode;
+        app.safe_outputs(&mut self.od);
+        if rx.bytes() > 0 {
+            self.sm_enable(2, true)?;
+        }
+        if tx.bytes() > 0 {
+            self.sm_enable(3, true)?;
+        }
+        self.state = AlState::SafeOp;
+        self.write_inputs()?;
+        Ok(Ok(()))
+    }
+
+    /// Decides the sync mode from 0x1C32:01 and the ESC's DC activation.
+    fn check_sync(&mut self) -> Result<Result<SyncMode, AlStatusCode>, P::Error> {
+        let def = self.od.def;
+        let act = self.pdi.read_u8(reg::DC_ACTIVATION + 1)?;
+        let dc_on = act & 0x03 == 0x03;
+        let sync1 = act & 0x04 != 0;
+        let mut mode = self.od.sync_mode();
+        let supported = |m: SyncMode| def.sync.supported & m.support_bit() != 0;
+        if dc_on {
+            if !matches!(mode, SyncMode::DcSync0 | SyncMode::DcSync1) {
+                mode = if sync1 {
+                    SyncMode::DcSync1
+                } else {
+                    SyncMode::DcSync0
+                };
+            }
+            if !supported(mode) {
+                return Ok(Err(AlStatusCode::INVALID_DC_SYNC_CONFIG));
+            }
+            if mode == SyncMode::DcSync1 && !sync1 {
+                return Ok(Err(AlStatusCode::INVALID_DC_SYNC_CONFIG));
+            }
+            let cyc = self.pdi.read_u32(reg::DC_SYNC0_CYCLE)?;
+            if cyc != 0 && cyc < def.sync.min_cycle_ns {
+                return Ok(Err(AlStatusCode::CYCLE_TIME_TOO_SMALL));
+            }
+            let _ = self.od.set(0x1C32, 2, cyc);
+            let _ = self.od.set(0x1C33, 2, cyc);
+        } else {
+            match mode {
+                SyncMode::DcSync0 | SyncMode::DcSync1 => {
+                    return Ok(Err(AlStatusCode::INVALID_DC_SYNC_CONFIG))
+                }
+                SyncMode::FreeRun if !supported(mode) => {
+                    return Ok(Err(AlStatusCode::FREERUN_NOT_SUPPORTED))
+                }
+                SyncMode::SmSync if !supported(mode) => {
+                    return Ok(Err(AlStatusCode::SYNC_NOT_SUPPORTED))
+                }
+                _ => {}
+            }
+        }
+        let _ = self.od.set(0x1C32, 1, mode as u16);
+        let _ = self.od.set(0x1C33, 1, mode as u16);
+        Ok(Ok(mode))
+    }
+
+    // ------------------------------------------------------------------ mailbox
+
+    fn mbx_def(&self) -> MailboxDef {
+        match (self.mbx.boot, self.od.def.boot_mailbox) {
+            (true, Some(b)) => b,
+            _ => self.od.def.mailbox,
+        }
+    }
+
+    fn mailbox<A: Application<N>>(&mut self, app: &mut A) -> R<P> {
+        let mb = self.mbx_def();
+        if self.mbx.posted {
+            let st = self.pdi.read_u8(reg::sm(1, 5))?;
+            if st & 0x08 == 0 {
+                self.mbx.posted = false;
+            }
+        }
+        // Repeat request: SM1 activate bit 1 toggled by the master.
+        let act = self.pdi.read_u8(reg::sm(1, 6))?;
+        let rep = act & 0x02 != 0;
+        if rep != self.mbx.toggle {
+            if self.mbx.last_len > 0 {
+                if self.mbx.posted {
+                    // The last reply is still in SM1: drop the buffer and write it again.
+                    self.sm_enable(1, false)?;
+                    self.sm_enable(1, true)?;
+                }
+                self.write_sm1_last(mb)?;
+                self.stats.mbx_repeats = self.stats.mbx_repeats.wrapping_add(1);
+            }
+            self.mbx.toggle = rep;
+            let p1 = self.pdi.read_u8(reg::sm(1, 7))?;
+            let p1 = if rep { p1 | 2 } else { p1 & !2 };
+            self.pdi.write(reg::sm(1, 7), &[p1])?;
+        }
+        for _ in 0..2 {
+            if !self.mbx.posted && self.mbx.out_len > 0 {
+                let n = self.mbx.out_len;
+                self.mbx.last[..n].copy_from_slice(&self.mbx.out[..n]);
+                self.mbx.last_len = n;
+                self.mbx.out_len = 0;
+                self.write_sm1_last(mb)?;
+            }
+            if self.mbx.out_len > 0 {
+                break;
+            }
+            // Continuations (segmented SDO info lists) and emergencies before new requests.
+            if self.sdo_continue() {
+                continue;
+            }
+            if let Some(e) = self.mbx.emcy.iter_mut().find_map(|e| e.take()) {
+                let mut p = [0u8; 10];
+                if e.write_coe(&mut p).is_ok() {
+                    self.queue_reply(MailboxType::Coe, &p);
+                }
+                continue;
+            }
+            let st = self.pdi.read_u8(reg::sm(0, 5))?;
+            if st & 0x08 == 0 {
+                break;
+            }
+            self.read_sm0(mb)?;
+            self.handle_request(app, mb);
+        }
+        Ok(())
+    }
+
+    fn write_sm1_last(&mut self, mb: MailboxDef) -> R<P> {
+        let n = self.mbx.last_len.min(mb.tx_len as usize);
+        self.pdi.write(mb.tx_start, &self.mbx.last[..n])?;
+        if n < mb.tx_len as usize {
+            self.pdi.write(mb.tx_start + mb.tx_len - 1, &[0])?;
+        }
+        self.mbx.posted = true;
+        Ok(())
+    }
+
+    fn read_sm0(&mut self, mb: MailboxDef) -> R<P> {
+        let len = mb.rx_len as usize;
+        self.pdi
+            .read(mb.rx_start, &mut self.mbx.rx[..MAILBOX_HEADER_LEN])?;
+        let l = u16::from_le_bytes([self.mbx.rx[0], self.mbx.rx[1]]) as usize;
+        let body = l.min(len - MAILBOX_HEADER_LEN);
+        self.pdi.read(
+            mb.rx_start + MAILBOX_HEADER_LEN as u16,
+            &mut self.mbx.rx[MAILBOX_HEADER_LEN..MAILBOX_HEADER_LEN + body],
+        )?;
+        if MAILBOX_HEADER_LEN + body < len {
+            let mut last = [0u8; 1];
+            self.pdi.read(mb.rx_start + mb.rx_len - 1, &mut last)?;
+            self.mbx.rx[len - 1] = last[0];
+        }
+        Ok(())
+    }
+
+    /// Queues a reply (header written here with the next counter); the service data is
+    /// `payload`.
+    pub(crate) fn queue_reply(&mut self, t: MailboxType, payload: &[u8]) {
+        let max = self.mbx_def().tx_len as usize;
+        let n = MAILBOX_HEADER_LEN + payload.len();
+        if n > max || n > M {
+            return;
+        }
+        self.mbx.out_counter = MailboxHeader::next_counter(self.mbx.out_counter);
+        let h = MailboxHeader::new(payload.len() as u16, 0, t, self.mbx.out_counter);
+        if h.write(&mut self.mbx.out[..]).is_ok() {
+            self.mbx.out[MAILBOX_HEADER_LEN..n].copy_from_slice(payload);
+            self.mbx.out_len = n;
+        }
+    }
+
+    /// Room for service data in one reply.
+    pub(crate) fn reply_capacity(&self) -> usize {
+        (self.mbx_def().tx_len as usize).min(M) - MAILBOX_HEADER_LEN
+    }
+
+    pub(crate) fn mbx_error(&mut self, d: MailboxErrorDetail) {
+        let mut p = [0u8; 4];
+        if (MailboxErrorReply { detail: d }).write(&mut p).is_ok() {
+            self.queue_reply(MailboxType::Error, &p);
+        }
+    }
+
+    fn handle_request<A: Application<N>>(&mut self, app: &mut A, mb: MailboxDef) {
+        let Ok(h) = MailboxHeader::parse(&self.mbx.rx[..]) else {
+            self.mbx_error(MailboxErrorDetail::Syntax);
+            return;
+        };
+        self.stats.mbx_requests = self.stats.mbx_requests.wrapping_add(1);
+        let max_body = mb.rx_len as usize - MAILBOX_HEADER_LEN;
+        if h.length as usize > max_body {
+            self.mbx_error(MailboxErrorDetail::InvalidSize);
+            return;
+        }
+        if h.counter != 0 && h.counter == self.mbx.in_counter {
+            // A repeated request (the master did not see our read): already handled.
+            self.stats.mbx_duplicates = self.stats.mbx_duplicates.wrapping_add(1);
+            return;
+        }
+        self.mbx.in_counter = h.counter;
+        if h.length == 0 {
+            self.mbx_error(MailboxErrorDetail::SizeTooShort);
+            return;
+        }
+        if h.channel != 0 {
+            self.mbx_error(MailboxErrorDetail::InvalidChannel);
+            return;
+        }
+        match h.mailbox_type {
+            MailboxType::Error => self.mbx_error(MailboxErrorDetail::Syntax),
+            MailboxType::Coe if !self.mbx.boot => {
+                let end = MAILBOX_HEADER_LEN + h.length as usize;
+                let mut req = [0u8; M];
+                req[..end].copy_from_slice(&self.mbx.rx[..end]);
+                self.coe_request(app, &req[MAILBOX_HEADER_LEN..end]);
+            }
+            _ => self.mbx_error(MailboxErrorDetail::UnsupportedProtocol),
+        }
+    }
+}
