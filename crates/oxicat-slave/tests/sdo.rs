@@ -1,0 +1,539 @@
+mod common;
+use common::*;
+use oxicat_wire::coe::{write_sdo, CoeService, SdoHeader, SdoInfoRef, SdoInfoService};
+use oxicat_wire::mailbox::{MailboxErrorReply, MailboxType};
+
+fn abort_of(r: Result<impl Sized, u32>) -> u32 {
+    match r {
+        Ok(_) => 0,
+        Err(c) => c,
+    }
+}
+
+#[test]
+fn every_data_type_round_trips() {
+    let mut b = Bench::new();
+    b.enter_preop();
+    let vals: &[(u8, Vec<u8>)] = &[
+        (1, vec![1]),
+        (2, (-3i8).to_le_bytes().to_vec()),
+        (3, (-300i16).to_le_bytes().to_vec()),
+        (4, (-70000i32).to_le_bytes().to_vec()),
+        (5, (-5_000_000_000i64).to_le_bytes().to_vec()),
+        (6, 200u8.to_le_bytes().to_vec()),
+        (7, 60000u16.to_le_bytes().to_vec()),
+        (8, 4_000_000_000u32.to_le_bytes().to_vec()),
+        (9, u64::MAX.to_le_bytes().to_vec()),
+        (10, 3.25f32.to_le_bytes().to_vec()),
+        (11, (-1.5e300f64).to_le_bytes().to_vec()),
+    ];
+    for (sub, v) in vals {
+        b.download(0x2005, *sub, false, v).unwrap();
+        assert_eq!(&b.upload(0x2005, *sub, false).unwrap(), v, "sub {sub}");
+    }
+    assert_eq!(b.s.od().get::<i64>(0x2005, 5), Ok(-5_000_000_000));
+    assert_eq!(b.s.od().get::<f64>(0x2005, 11), Ok(-1.5e300));
+    assert_eq!(b.s.od().get::<bool>(0x2005, 1), Ok(true));
+    // Strings: visible string uploads its current length.
+    assert_eq!(b.upload(0x2006, 0, false).unwrap(), b"hello");
+    b.download(0x2006, 0, false, b"a longer label").unwrap();
+    assert_eq!(b.upload(0x2006, 0, false).unwrap(), b"a longer label");
+    // Standard objects derived from the definition.
+    assert_eq!(b.upload(0x1008, 0, false).unwrap(), b"oxicat test device");
+    assert_eq!(b.upload(0x1018, 1, false).unwrap(), 0x0A5Cu32.to_le_bytes());
+    assert_eq!(b.upload(0x1018, 4, false).unwrap(), 42u32.to_le_bytes());
+    assert_eq!(b.upload(0x1000, 0, false).unwrap(), 0x1389u32.to_le_bytes());
+    assert_eq!(b.upload(0x1C00, 3, false).unwrap(), [3]);
+    assert_eq!(
+        b.upload(0x1C32, 5, false).unwrap(),
+        100_000u32.to_le_bytes()
+    );
+    assert_eq!(b.upload(0x1A00, 0, false).unwrap(), [5]);
+    assert_eq!(
+        b.upload(0x1A00, 4, false).unwrap(),
+        0x6000_0310u32.to_le_bytes()
+    );
+    assert_eq!(b.upload(0x10F1, 2, false).unwrap(), 4u16.to_le_bytes());
+}
+
+#[test]
+fn segmented_1k_both_directions() {
+    let mut b = Bench::new();
+    b.enter_preop();
+    let data: Vec<u8> = (0..1100u32).map(|i| (i * 7 + 3) as u8).collect();
+    b.download(0x2001, 0, false, &data).unwrap();
+    assert_eq!(b.s.od().bytes(0x2001, 0).unwrap(), &data[..]);
+    assert_eq!(b.upload(0x2001, 0, false).unwrap(), data);
+    assert!(b.app.written.contains(&(0x2001, 0)));
+}
+
+#[test]
+fn complete_access() {
+    let mut b = Bench::new();
+    b.enter_preop();
+    // 0x1018: sub0 padded to 16 bits, then four u32.
+    let id = b.upload(0x1018, 0, true).unwrap();
+    assert_eq!(id.len(), 2 + 16);
+    assert_eq!(&id[..2], &[4, 0]);
+    assert_eq!(&id[2..6], &0x0A5Cu32.to_le_bytes());
+    // From subindex 1.
+    assert_eq!(b.upload(0x1018, 1, true).unwrap().len(), 16);
+    // 0x6000 packs two BOOLs into bits; INT16 realigned to a byte.
+    b.s.od_mut().set(0x6000, 1, true).unwrap();
+    b.s.od_mut().set(0x6000, 3, -2i16).unwrap();
+    let v = b.upload(0x6000, 0, true).unwrap();
+    assert_eq!(v, vec![4, 0, 0x01, 0xFE, 0xFF, 0, 0, 0, 0]);
+    // CA download of the RxPDO mapping with the count: new mapping in one go.
+    let mut m = vec![2u8, 0];
+    m.extend_from_slice(&0x7000_0210u32.to_le_bytes());
+    m.extend_from_slice(&0x7000_0308u32.to_le_bytes());
+    m.extend(std::iter::repeat_n(0u8, 4 * 14));
+    b.download(0x1600, 0, true, &m).unwrap();
+    assert_eq!(b.upload(0x1600, 0, false).unwrap(), [2]);
+    assert_eq!(
+        b.upload(0x1600, 2, false).unwrap(),
+        0x7000_0308u32.to_le_bytes()
+    );
+    // CA on a string object is not supported, and must start at subindex 0 or 1.
+    assert_eq!(abort_of(b.upload(0x2006, 0, true)), 0x0601_0004);
+    assert_eq!(abort_of(b.upload(0x1018, 2, true)), 0x0601_0000);
+}
+
+#[test]
+fn dynamic_pdo_assignment() {
+    let mut b = Bench::new();
+    b.enter_preop();
+    // Subindex-0 protocol: writing an entry while sub0 != 0 is refused.
+    assert_eq!(
+        abort_of(b.download(0x1C13, 2, false, &0x1A01u16.to_le_bytes())),
+        0x0601_0003
+    );
+    b.download(0x1C13, 0, false, &[0]).unwrap();
+    b.download(0x1C13, 1, false, &0x1A01u16.to_le_bytes())
+        .unwrap();
+    b.download(0x1C13, 2, false, &0x1A00u16.to_le_bytes())
+        .unwrap();
+    b.download(0x1C13, 0, false, &[2]).unwrap();
+    // Remap 0x1600 to Setpoint only.
+    b.download(0x1600, 0, false, &[0]).unwrap();
+    b.download(0x1600, 1, false, &0x7000_0210u32.to_le_bytes())
+        .unwrap();
+    b.download(0x1600, 0, false, &[1]).unwrap();
+    assert_eq!((b.expected_out(), b.expected_in()), (2, 9));
+    b.config_pd();
+    assert_eq!(b.request(4), (4, 0));
+    assert_eq!((b.s.output_bytes(), b.s.input_bytes()), (2, 9));
+    // Assignment is PREOP-only.
+    assert_eq!(abort_of(b.download(0x1C13, 0, false, &[1])), 0x0800_0022);
+    assert_eq!(b.request(8), (8, 0));
+    b.wr(SM2, &50i16.to_le_bytes());
+    b.poll();
+    let (d, _) = b.rd(SM3, 9);
+    // 0x1A01 first: Analog = 100, then 0x1A00.
+    assert_eq!(i16::from_le_bytes([d[0], d[1]]), 100);
+    assert_eq!(i16::from_le_bytes([d[3], d[4]]), 100);
+}
+
+#[test]
+fn abort_codes_table() {
+    let mut b = Bench::new();
+    b.enter_preop();
+    type Case = (&'static str, u16, u8, bool, Option<Vec<u8>>, u32);
+    let cases: Vec<Case> = vec![
+        (
+            "object does not exist (upload)",
+            0x5555,
+            0,
+            false,
+            None,
+            0x0602_0000,
+        ),
+        (
+            "object does not exist (download)",
+            0x5555,
+            0,
+            false,
+            Some(vec![1]),
+            0x0602_0000,
+        ),
+        (
+            "subindex does not exist",
+            0x1018,
+            9,
+            false,
+            None,
+            0x0609_0011,
+        ),
+        (
+            "read a write-only object",
+            0x2003,
+            0,
+            false,
+            None,
+            0x0601_0001,
+        ),
+        (
+            "write a read-only object",
+            0x2002,
+            0,
+            false,
+            Some(vec![1]),
+            0x0601_0002,
+        ),
+        (
+            "write identity",
+            0x1018,
+            1,
+            false,
+            Some(vec![1, 2, 3, 4]),
+            0x0601_0002,
+        ),
+        (
+            "length too high",
+            0x2000,
+            0,
+            false,
+            Some(vec![1, 0, 0, 0, 0, 0]),
+            0x0607_0012,
+        ),
+        (
+            "length too low",
+            0x2000,
+            0,
+            false,
+            Some(vec![1, 0]),
+            0x0607_0013,
+        ),
+        (
+            "string too long",
+            0x2006,
+            0,
+            false,
+            Some(vec![b'x'; 17]),
+            0x0607_0012,
+        ),
+        (
+            "value too high",
+            0x2000,
+            0,
+            false,
+            Some(1001u32.to_le_bytes().to_vec()),
+            0x0609_0031,
+        ),
+        (
+            "bool out of range",
+            0x2005,
+            1,
+            false,
+            Some(vec![2]),
+            0x0609_0030,
+        ),
+        (
+            "cannot be mapped",
+            0x1600,
+            1,
+            false,
+            Some(0x2000_0020u32.to_le_bytes().to_vec()),
+            0x0601_0003,
+        ),
+        (
+            "assign unknown PDO",
+            0x1C12,
+            0,
+            false,
+            Some(vec![9]),
+            0x0609_0030,
+        ),
+        (
+            "sync mode unsupported",
+            0x1C32,
+            1,
+            false,
+            Some(9u16.to_le_bytes().to_vec()),
+            0x0609_0030,
+        ),
+        ("CA on a VAR", 0x2000, 0, true, None, 0x0601_0004),
+    ];
+    for (what, index, sub, ca, data, code) in cases {
+        let got = match data {
+            None => abort_of(b.upload(index, sub, ca)),
+            Some(d) => abort_of(b.download(index, sub, ca, &d)),
+        };
+        assert_eq!(got, code, "{what}: got {got:#010x}");
+    }
+    // Mapping rules with sub0 = 0 (subindex-0 protocol followed).
+    b.download(0x1600, 0, false, &[0]).unwrap();
+    let table: &[(u32, u32)] = &[
+        (0x2000_0020, 0x0604_0041), // not mappable
+        (0x6000_0310, 0x0604_0041), // TxPDO entry in an RxPDO
+        (0x7000_0208, 0x0604_0043), // wrong bit length
+        (0x7777_0008, 0x0602_0000), // no such object
+        (0x7000_0908, 0x0609_0011), // no such subindex
+    ];
+    for (v, code) in table {
+        assert_eq!(
+            abort_of(b.download(0x1600, 1, false, &v.to_le_bytes())),
+            *code,
+            "{v:#x}"
+        );
+    }
+    assert_eq!(abort_of(b.download(0x1600, 0, false, &[17])), 0x0609_0030);
+    // Fixed PDO mapping is read-only.
+    assert_eq!(abort_of(b.download(0x1A00, 0, false, &[0])), 0x0601_0002);
+    // Assigning a PDO of the wrong direction.
+    b.download(0x1C12, 0, false, &[0]).unwrap();
+    assert_eq!(
+        abort_of(b.download(0x1C12, 1, false, &0x1A00u16.to_le_bytes())),
+        0x0604_0043
+    );
+    // RW in PREOP only: wrong state in SAFEOP; mapped to RxPDO in SAFEOP/OP.
+    b.download(0x1C12, 1, false, &0x1600u16.to_le_bytes())
+        .unwrap();
+    b.download(0x1600, 1, false, &0x7000_0210u32.to_le_bytes())
+        .unwrap();
+    b.download(0x1600, 0, false, &[1]).unwrap();
+    b.download(0x1C12, 0, false, &[1]).unwrap();
+    b.config_pd();
+    assert_eq!(b.request(4), (4, 0));
+    assert_eq!(
+        abort_of(b.download(0x2004, 0, false, &1f32.to_le_bytes())),
+        0x0800_0022
+    );
+    assert_eq!(abort_of(b.download(0x7000, 2, false, &[1, 0])), 0x0601_0006);
+    assert_eq!(abort_of(b.download(0x7000, 3, false, &[1])), 0);
+}
+
+fn raw_sdo(b: &mut Bench, cmd: u8, index: u16, sub: u8, d: [u8; 4]) -> Vec<u8> {
+    let mut p = [0u8; 10];
+    let h = SdoHeader {
+        command: cmd,
+        index,
+        subindex: sub,
+    };
+    write_sdo(&mut p, CoeService::SdoRequest, &h, d, &[]).unwrap();
+    b.coe(&p)
+}
+
+fn abort_in(r: &[u8]) -> u32 {
+    assert_eq!(r[2], 0x80, "not an abort: {r:02x?}");
+    u32::from_le_bytes([r[6], r[7], r[8], r[9]])
+}
+
+#[test]
+fn protocol_aborts() {
+    let mut b = Bench::new();
+    b.enter_preop();
+    // Unknown command specifier (block download 6).
+    assert_eq!(
+        abort_in(&raw_sdo(&mut b, 0xC0, 0x2000, 0, [0; 4])),
+        0x0504_0001
+    );
+    // Upload segment without an upload in progress.
+    assert_eq!(abort_in(&raw_sdo(&mut b, 0x60, 0, 0, [0; 4])), 0x0504_0001);
+    // Toggle bit not alternated: start a segmented upload of 0x2001, send toggle 1 first.
+    let r = raw_sdo(&mut b, 0x40, 0x2001, 0, [0; 4]);
+    assert_eq!(r[2], 0x41);
+    assert_eq!(abort_in(&raw_sdo(&mut b, 0x70, 0, 0, [0; 4])), 0x0503_0000);
+    // Segmented download of the 16-byte label; first segment with toggle 1.
+    let mut p = vec![0u8; 16];
+    let h = SdoHeader {
+        command: 0x21,
+        index: 0x2006,
+        subindex: 0,
+    };
+    let n = write_sdo(&mut p, CoeService::SdoRequest, &h, 16u32.to_le_bytes(), &[]).unwrap();
+    let r = b.coe(&p[..n]);
+    assert_eq!(r[2], 0x60);
+    let r = raw_sdo(&mut b, 0x10, 0, 0, [0; 4]);
+    assert_eq!(abort_in(&r), 0x0503_0000);
+}
+
+#[test]
+fn mailbox_errors_and_counters() {
+    let mut b = Bench::new();
+    b.enter_preop();
+    let err = |b: &mut Bench| {
+        let (h, p) = b.mbx_read().expect("reply");
+        assert_eq!(h.mailbox_type, MailboxType::Error);
+        MailboxErrorReply::parse(&p).unwrap().detail.code()
+    };
+    // Unsupported protocol (FoE).
+    b.mbx_write(MailboxType::Foe, &[1, 2, 3, 4]);
+    assert_eq!(err(&mut b), 2);
+    // Length beyond the mailbox: invalid size.
+    b.mbx_write_raw(&[0xF0, 0x00, 0, 0, 0, 0x03]);
+    assert_eq!(err(&mut b), 8);
+    // Length 0: size too short.
+    b.mbx_write_raw(&[0, 0, 0, 0, 0, 0x03]);
+    assert_eq!(err(&mut b), 6);
+    // CoE shorter than an SDO.
+    b.mbx_write(MailboxType::Coe, &[0x00, 0x20, 0x40]);
+    assert_eq!(err(&mut b), 6);
+    // Channel != 0.
+    b.mbx_write_raw(&[10, 0, 0, 0, 5, 0x03, 0, 0x20, 0x40, 0, 0x20, 0, 0, 0, 0, 0]);
+    assert_eq!(err(&mut b), 3);
+    // Type 0 from the master: syntax.
+    b.mbx_write_raw(&[4, 0, 0, 0, 0, 0x00, 1, 0, 1, 0]);
+    assert_eq!(err(&mut b), 1);
+    // A repeated request (same counter) is not processed twice.
+    let mut p = [0u8; 10];
+    let h = SdoHeader {
+        command: 0x40,
+        index: 0x2000,
+        subindex: 0,
+    };
+    write_sdo(&mut p, CoeService::SdoRequest, &h, [0; 4], &[]).unwrap();
+    let mut raw = vec![10, 0, 0, 0, 0, 0x63];
+    raw.extend_from_slice(&p);
+    b.mbx_write_raw(&raw);
+    assert!(b.mbx_read().is_some());
+    let before = b.s.stats().mbx_requests;
+    b.mbx_write_raw(&raw);
+    assert!(b.mbx_read().is_none());
+    assert_eq!(b.s.stats().mbx_duplicates, 1);
+    assert_eq!(b.s.stats().mbx_requests, before + 1);
+    // Reply counters run 1..7 and skip 0.
+    let mut seen = vec![];
+    for _ in 0..9 {
+        b.mbx_write(MailboxType::Foe, &[0; 4]);
+        seen.push(b.mbx_read().unwrap().0.counter);
+    }
+    assert!(seen.iter().all(|&c| (1..=7).contains(&c)));
+}
+
+#[test]
+fn repeat_request_resends_last_reply() {
+    let mut b = Bench::new();
+    b.enter_preop();
+    let v = b.upload(0x1018, 2, false).unwrap();
+    assert_eq!(v, 1u32.to_le_bytes());
+    // The master lost the reply: toggle the repeat request bit of SM1.
+    let (act, _) = b.rd(0x080E, 1);
+    b.wr(0x080E, &[act[0] ^ 0x02]);
+    b.poll();
+    let (pc, _) = b.rd(0x080F, 1);
+    assert_eq!(
+        pc[0] & 0x02,
+        (act[0] ^ 0x02) & 0x02,
+        "repeat ack follows the request"
+    );
+    let (d, wkc) = b.rd(SM1, MBX);
+    assert_eq!(wkc, 1);
+    assert_eq!(&d[6 + 6..6 + 10], &1u32.to_le_bytes());
+    assert_eq!(b.s.stats().mbx_repeats, 1);
+}
+
+#[test]
+fn sdo_information() {
+    let mut b = Bench::new();
+    b.enter_preop();
+    // List all objects (fragmented: 128-byte mailbox).
+    b.mbx_write(MailboxType::Coe, &[0x00, 0x80, 0x01, 0, 0, 0, 0x01, 0x00]);
+    let mut idx = vec![];
+    let mut first = true;
+    loop {
+        let (_, p) = b.mbx_read().expect("fragment");
+        let r = SdoInfoRef::parse(&p).unwrap();
+        let SdoInfoService::GetOdListResponse { words } = r.service().unwrap() else {
+            panic!()
+        };
+        let mut w: Vec<u16> = words
+            .chunks(2)
+            .map(|c| u16::from_le_bytes([c[0], c[1]]))
+            .collect();
+        if first {
+            assert_eq!(w.remove(0), 1);
+            first = false;
+        }
+        idx.extend(w);
+        if !r.header.incomplete {
+            break;
+        }
+    }
+    assert_eq!(idx.len(), b.s.od().object_count());
+    assert!(idx.windows(2).all(|w| w[0] < w[1]));
+    assert!(idx.contains(&0x1C33) && idx.contains(&0x7000) && idx.contains(&0x1A01));
+    // Object description.
+    b.mbx_write(MailboxType::Coe, &[0x00, 0x80, 0x03, 0, 0, 0, 0x18, 0x10]);
+    let (_, p) = b.mbx_read().unwrap();
+    match SdoInfoRef::parse(&p).unwrap().service().unwrap() {
+        SdoInfoService::GetObjectDescriptionResponse {
+            index,
+            max_subindex,
+            object_code,
+            name,
+            ..
+        } => {
+            assert_eq!((index, max_subindex, object_code), (0x1018, 4, 9));
+            assert_eq!(name, b"Identity");
+        }
+        o => panic!("{o:?}"),
+    }
+    // Entry description.
+    b.mbx_write(
+        MailboxType::Coe,
+        &[0x00, 0x80, 0x05, 0, 0, 0, 0x00, 0x70, 0x02, 0],
+    );
+    let (_, p) = b.mbx_read().unwrap();
+    match SdoInfoRef::parse(&p).unwrap().service().unwrap() {
+        SdoInfoService::GetEntryDescriptionResponse {
+            data_type,
+            bit_length,
+            object_access,
+            data,
+            ..
+        } => {
+            assert_eq!((data_type, bit_length), (3, 16));
+            assert_eq!(object_access, 0x3F | 0x40);
+            assert_eq!(data, b"Setpoint");
+        }
+        o => panic!("{o:?}"),
+    }
+    // Unknown object.
+    b.mbx_write(MailboxType::Coe, &[0x00, 0x80, 0x03, 0, 0, 0, 0x55, 0x55]);
+    let (_, p) = b.mbx_read().unwrap();
+    match SdoInfoRef::parse(&p).unwrap().service().unwrap() {
+        SdoInfoService::Error { code } => assert_eq!(code.code(), 0x0602_0000),
+        o => panic!("{o:?}"),
+    }
+}
+
+#[test]
+fn emergency_is_sent() {
+    let mut b = Bench::new();
+    b.enter_preop();
+    assert!(b.s.emergency(0x5000, 0x81, [1, 2, 3, 4, 5]));
+    let (h, p) = b.mbx_read().unwrap();
+    assert_eq!(h.mailbox_type, MailboxType::Coe);
+    let e = oxicat_wire::coe::Emergency::parse_coe(&p).unwrap();
+    assert_eq!(
+        (e.error_code, e.error_register, e.data),
+        (0x5000, 0x81, [1, 2, 3, 4, 5])
+    );
+    assert_eq!(b.upload(0x1001, 0, false).unwrap(), [0x81]);
+}
+
+#[test]
+fn garbage_mailboxes_never_panic() {
+    let mut b = Bench::new();
+    b.enter_preop();
+    let mut x: u32 = 0x1234_5678;
+    for _ in 0..300 {
+        let mut buf = vec![0u8; MBX];
+        for v in buf.iter_mut() {
+            x ^= x << 13;
+            x ^= x >> 17;
+            x ^= x << 5;
+            *v = x as u8;
+        }
+        buf[0] = (x % 40) as u8;
+        buf[1] = 0;
+        buf[4] = 0;
+        buf[5] = 0x03 | ((x as u8 % 7 + 1) << 4);
+        buf[7] = (buf[7] & 0x0F) | 0x20 | if x & 1 == 0 { 0x80 } else { 0 };
+        b.mbx_write_raw(&buf);
+        let _ = b.mbx_read();
+    }
+    // Still serving.
+    assert_eq!(b.upload(0x1018, 1, false).unwrap(), 0x0A5Cu32.to_le_bytes());
+}
