@@ -4,7 +4,7 @@
 use oxicat_wire::coe::SdoAbortCode;
 
 use crate::device::PdoEntry;
-use crate::od::{Area, DataType, Od, MAX_PDO_ENTRIES};
+use crate::od::{Area, Od, MAX_PDO_ENTRIES};
 
 /// Maximum process data bytes per direction.
 pub const MAX_PD_BYTES: usize = 256;
@@ -223,8 +223,7 @@ pub(crate) fn compile<const N: usize>(od: &Od<N>, dir: Dir) -> Result<Mapping, S
                 }
             } else {
                 let o = od.find(pe.index).ok_or(SdoAbortCode::ObjectDoesNotExist)?;
-                let (_, e, off) = o.entry(pe.sub).ok_or(SdoAbortCode::SubindexDoesNotExist)?;
-                let _ = e.dtype == DataType::Bool;
+                let (_, _, off) = o.entry(pe.sub).ok_or(SdoAbortCode::SubindexDoesNotExist)?;
                 Item {
                     off,
                     app: o.area == Area::App,
