@@ -1,6 +1,8 @@
 //! The slave stack: one struct the application owns, generic over the [`Pdi`], driven by
 //! events (`poll`, `on_pdi_irq`, `on_sync0`, `on_sync1`, `on_timer`).
 
+use core::marker::PhantomData;
+
 use oxicat_wire::coe::Emergency;
 use oxicat_wire::mailbox::{
     MailboxErrorDetail, MailboxErrorReply, MailboxHeader, MailboxType, MAILBOX_HEADER_LEN,
@@ -117,9 +119,13 @@ impl<const M: usize> MbxState<M> {
 ///
 /// `N` is the application image size (at least [`crate::od::image_size`] of the
 /// definition's objects), `M` the mailbox buffer size (at least both mailbox lengths).
+///
+/// The stack does not own its [`Pdi`]: every event takes it (`slave.poll(&mut pdi, &mut
+/// app)`), so the firmware's main (or the simulator, which owns the ESC) keeps the ESC
+/// access and lends it per call. `P` fixes which PDI type (and error type) the stack is
+/// used with.
 pub struct Slave<P: Pdi, const N: usize, const M: usize = 256> {
-    /// The ESC access.
-    pub pdi: P,
+    _pdi: PhantomData<fn() -> P>,
     pub(crate) od: Od<N>,
     pub(crate) state: AlState,
     pub(crate) error: bool,
@@ -137,8 +143,9 @@ type R<P> = Result<(), <P as Pdi>::Error>;
 
 impl<P: Pdi, const N: usize, const M: usize> Slave<P, N, M> {
     /// Creates the stack: checks the definition, fills the dictionary with defaults,
-    /// deactivates every SyncManager and sets AL status INIT.
-    pub fn new(def: &'static DeviceDef, pdi: P) -> Result<Self, InitError<P::Error>> {
+    /// deactivates every SyncManager, sets the AL event mask and AL status INIT through
+    /// `pdi`.
+    pub fn new(def: &'static DeviceDef, pdi: &mut P) -> Result<Self, InitError<P::Error>> {
         let od = Od::new(def).map_err(InitError::Def)?;
         let fits = |m: &MailboxDef| {
             (m.rx_len as usize) <= M && (m.tx_len as usize) <= M && m.rx_len >= 16 && m.tx_len >= 16
@@ -147,7 +154,7 @@ impl<P: Pdi, const N: usize, const M: usize> Slave<P, N, M> {
             return Err(InitError::MailboxSize);
         }
         let mut s = Self {
-            pdi,
+            _pdi: PhantomData,
             od,
             state: AlState::Init,
             error: false,
@@ -161,9 +168,10 @@ impl<P: Pdi, const N: usize, const M: usize> Slave<P, N, M> {
             stats: Stats::default(),
         };
         for n in 0..4 {
-            s.sm_enable(n, false).map_err(InitError::Pdi)?;
+            Self::sm_enable(pdi, n, false).map_err(InitError::Pdi)?;
         }
-        s.write_status().map_err(InitError::Pdi)?;
+        Self::set_event_mask(pdi, reg::EV_AL_CONTROL).map_err(InitError::Pdi)?;
+        s.write_status(pdi).map_err(InitError::Pdi)?;
         Ok(s)
     }
 
@@ -219,60 +227,61 @@ impl<P: Pdi, const N: usize, const M: usize> Slave<P, N, M> {
     // ------------------------------------------------------------------ events
 
     /// Main-loop work: AL control, watchdog, mailbox; in free run also the process data.
-    pub fn poll<A: Application<N>>(&mut self, app: &mut A) -> R<P> {
-        let ev = self.pdi.al_event_request()?;
+    pub fn poll<A: Application<N>>(&mut self, pdi: &mut P, app: &mut A) -> R<P> {
+        let ev = pdi.al_event_request()?;
         if ev & reg::EV_AL_CONTROL != 0 {
-            self.al_control(app)?;
+            self.al_control(pdi, app)?;
         }
         if ev & reg::EV_WATCHDOG != 0 {
-            self.check_watchdog(app)?;
+            self.check_watchdog(pdi, app)?;
         }
         if self.mbx.running {
-            self.mailbox(app)?;
+            self.mailbox(pdi, app)?;
         }
         if self.sync == SyncMode::FreeRun && self.state >= AlState::SafeOp {
-            self.cycle(app, true, true)?;
+            self.cycle(pdi, app, true, true)?;
         }
         Ok(())
     }
 
     /// PDI interrupt: in SM-synchronous mode runs the cycle on the SM2 (or SM3) event.
-    pub fn on_pdi_irq<A: Application<N>>(&mut self, app: &mut A) -> R<P> {
+    pub fn on_pdi_irq<A: Application<N>>(&mut self, pdi: &mut P, app: &mut A) -> R<P> {
         if self.sync != SyncMode::SmSync || self.state < AlState::SafeOp {
             return Ok(());
         }
-        let ev = self.pdi.al_event_request()?;
+        let ev = pdi.al_event_request()?;
         let trig = if self.rx_map.bytes() > 0 {
             ev & reg::ev_sm(2) != 0
         } else {
             ev & reg::ev_sm(3) != 0
         };
         if trig {
-            self.cycle(app, true, true)?;
+            self.cycle(pdi, app, true, true)?;
         }
         Ok(())
     }
 
     /// DC SYNC0: outputs, application and (unless SYNC1 latches them) inputs.
-    pub fn on_sync0<A: Application<N>>(&mut self, app: &mut A) -> R<P> {
-        let _ack = self.pdi.read_u8(reg::DC_SYNC0_STATUS)?;
+    pub fn on_sync0<A: Application<N>>(&mut self, pdi: &mut P, app: &mut A) -> R<P> {
+        let _ack = pdi.read_u8(reg::DC_SYNC0_STATUS)?;
         match self.sync {
-            SyncMode::DcSync0 if self.state >= AlState::SafeOp => self.cycle(app, true, true),
-            SyncMode::DcSync1 if self.state >= AlState::SafeOp => self.cycle(app, true, false),
+            SyncMode::DcSync0 if self.state >= AlState::SafeOp => self.cycle(pdi, app, true, true),
+            SyncMode::DcSync1 if self.state >= AlState::SafeOp => self.cycle(pdi, app, true, false),
             _ => Ok(()),
         }
     }
 
     /// DC SYNC1: input latch in SYNC0+SYNC1 mode.
-    pub fn on_sync1<A: Application<N>>(&mut self, _app: &mut A) -> R<P> {
-        let _ack = self.pdi.read_u8(reg::DC_SYNC1_STATUS)?;
+    pub fn on_sync1<A: Application<N>>(&mut self, pdi: &mut P, _app: &mut A) -> R<P> {
+        let _ack = pdi.read_u8(reg::DC_SYNC1_STATUS)?;
         if self.sync == SyncMode::DcSync1 && self.state >= AlState::SafeOp {
-            self.write_inputs()?;
+            self.write_inputs(pdi)?;
         }
         Ok(())
     }
 
-    /// A local timer fired (e.g. the control loop).
+    /// A local timer fired (e.g. the control loop); the application's hook does not touch
+    /// the ESC, so no PDI is needed.
     pub fn on_timer<A: Application<N>>(&mut self, id: u8, app: &mut A) {
         app.timer(id, &mut self.od);
     }
@@ -299,29 +308,35 @@ impl<P: Pdi, const N: usize, const M: usize> Slave<P, N, M> {
 
     // ------------------------------------------------------------------ process data
 
-    fn cycle<A: Application<N>>(&mut self, app: &mut A, outputs: bool, inputs: bool) -> R<P> {
+    fn cycle<A: Application<N>>(
+        &mut self,
+        pdi: &mut P,
+        app: &mut A,
+        outputs: bool,
+        inputs: bool,
+    ) -> R<P> {
         if outputs {
-            self.read_outputs()?;
+            self.read_outputs(pdi)?;
         }
         app.cycle(&mut self.od);
         if inputs {
-            self.write_inputs()?;
+            self.write_inputs(pdi)?;
         }
         self.stats.cycles = self.stats.cycles.wrapping_add(1);
         Ok(())
     }
 
-    fn read_outputs(&mut self) -> R<P> {
+    fn read_outputs(&mut self, pdi: &mut P) -> R<P> {
         let n = self.rx_map.bytes();
         if n == 0 {
             return Ok(());
         }
-        let ev = self.pdi.al_event_request()?;
+        let ev = pdi.al_event_request()?;
         if ev & reg::ev_sm(2) == 0 {
             return Ok(());
         }
         let start = self.od.def.sm2_start;
-        self.pdi.read(start, &mut self.pd[..n])?;
+        pdi.read(start, &mut self.pd[..n])?;
         if self.state == AlState::Op {
             self.rx_map.unpack(&mut self.od, &self.pd[..n]);
             self.stats.outputs = self.stats.outputs.wrapping_add(1);
@@ -329,7 +344,7 @@ impl<P: Pdi, const N: usize, const M: usize> Slave<P, N, M> {
         Ok(())
     }
 
-    fn write_inputs(&mut self) -> R<P> {
+    fn write_inputs(&mut self, pdi: &mut P) -> R<P> {
         let n = self.tx_map.bytes();
         if n == 0 {
             return Ok(());
@@ -337,74 +352,79 @@ impl<P: Pdi, const N: usize, const M: usize> Slave<P, N, M> {
         self.pd[..n].fill(0);
         self.tx_map.pack(&self.od, &mut self.pd[..n]);
         let start = self.od.def.sm3_start;
-        self.pdi.write(start, &self.pd[..n])
+        pdi.write(start, &self.pd[..n])
     }
 
-    fn check_watchdog<A: Application<N>>(&mut self, app: &mut A) -> R<P> {
-        let st = self.pdi.read_u8(reg::WD_STATUS_PD)?;
+    fn check_watchdog<A: Application<N>>(&mut self, pdi: &mut P, app: &mut A) -> R<P> {
+        let st = pdi.read_u8(reg::WD_STATUS_PD)?;
         if self.state == AlState::Op && st & 1 == 0 {
             app.safe_outputs(&mut self.od);
             let _ = app.state_change(AlState::Op, AlState::SafeOp, &mut self.od);
             self.state = AlState::SafeOp;
-            self.set_error(AlStatusCode::SM_WATCHDOG)?;
+            self.set_error(pdi, AlStatusCode::SM_WATCHDOG)?;
         }
         Ok(())
     }
 
     // ------------------------------------------------------------------ ESM
 
-    fn set_error(&mut self, code: AlStatusCode) -> R<P> {
+    fn set_error(&mut self, pdi: &mut P, code: AlStatusCode) -> R<P> {
         self.error = true;
         self.code = code;
-        self.write_status()
+        self.write_status(pdi)
     }
 
-    fn write_status(&mut self) -> R<P> {
-        self.pdi.write_u16(reg::AL_STATUS_CODE, self.code.0)?;
+    fn write_status(&mut self, pdi: &mut P) -> R<P> {
+        pdi.write_u16(reg::AL_STATUS_CODE, self.code.0)?;
         let st = self.state.code() as u16 | if self.error { 0x10 } else { 0 };
-        self.pdi.write_u16(reg::AL_STATUS, st)
+        pdi.write_u16(reg::AL_STATUS, st)
     }
 
-    fn sm_enable(&mut self, n: u8, on: bool) -> R<P> {
+    /// Sets the AL event mask (0x0204): which AL events drive the PDI interrupt line.
+    fn set_event_mask(pdi: &mut P, mask: u32) -> R<P> {
+        pdi.write(reg::AL_EVENT_MASK, &mask.to_le_bytes())
+    }
+
+    fn sm_enable(pdi: &mut P, n: u8, on: bool) -> R<P> {
         let a = reg::sm(n, 7);
-        let cur = self.pdi.read_u8(a)?;
+        let cur = pdi.read_u8(a)?;
         let v = if on { cur & !1 } else { cur | 1 };
-        self.pdi.write(a, &[v])
+        pdi.write(a, &[v])
     }
 
-    fn al_control<A: Application<N>>(&mut self, app: &mut A) -> R<P> {
-        let ctl = self.pdi.read_u16(reg::AL_CONTROL)?;
+    fn al_control<A: Application<N>>(&mut self, pdi: &mut P, app: &mut A) -> R<P> {
+        let ctl = pdi.read_u16(reg::AL_CONTROL)?;
         let code = (ctl & 0x0F) as u8;
         let ack = ctl & 0x10 != 0;
         if self.error && !ack && code != AlState::Init.code() {
             // An indicated error must be acknowledged first; status stays.
-            return self.write_status();
+            return self.write_status(pdi);
         }
         if ack || code == AlState::Init.code() {
             self.error = false;
             self.code = AlStatusCode::NONE;
         }
         let Some(req) = AlState::from_code(code) else {
-            return self.set_error(AlStatusCode::UNKNOWN_STATE);
+            return self.set_error(pdi, AlStatusCode::UNKNOWN_STATE);
         };
         if req == self.state {
-            return self.write_status();
+            return self.write_status(pdi);
         }
         use AlState::*;
         let res = match (self.state, req) {
             (_, Init) => {
-                self.go_down(app, Init)?;
+                self.go_down(pdi, app, Init)?;
                 Ok(())
             }
-            (Init, PreOp) => self.start_mailbox(app, false)?,
+            (Init, PreOp) => self.start_mailbox(pdi, app, false)?,
             (Init, Boot) => {
                 if self.od.def.boot_mailbox.is_none() {
                     Err(AlStatusCode::BOOT_NOT_SUPPORTED)
                 } else {
-                    self.start_mailbox(app, true)?
+                    self.start_mailbox(pdi, app, true)?
                 }
             }
-            (PreOp, SafeOp) => self.start_pd(app)?,
+            (PreOp, SafeOp) => self.start_pd(pdi, app)?,
             (SafeOp, Op) => match app.state_change(SafeOp, Op, &mut self.od) {
                 Ok(()) => {
                     self.state = Op;
@@ -419,36 +439,37 @@ impl<P: Pdi, const N: usize, const M: usize> Slave<P, N, M> {
                 Ok(())
             }
             (Op | SafeOp, PreOp) => {
-                self.go_down(app, PreOp)?;
+                self.go_down(pdi, app, PreOp)?;
                 Ok(())
             }
             _ => Err(AlStatusCode::INVALID_STATE_CHANGE),
         };
         match res {
-            Ok(()) => self.write_status(),
-            Err(c) => self.set_error(c),
+            Ok(()) => self.write_status(pdi),
+            Err(c) => self.set_error(pdi, c),
         }
     }
 
-    fn go_down<A: Application<N>>(&mut self, app: &mut A, to: AlState) -> R<P> {
+    fn go_down<A: Application<N>>(&mut self, pdi: &mut P, app: &mut A, to: AlState) -> R<P> {
         let from = self.state;
         if from >= AlState::SafeOp {
             app.safe_outputs(&mut self.od);
-            self.sm_enable(2, false)?;
-            self.sm_enable(3, false)?;
+            Self::sm_enable(pdi, 2, false)?;
+            Self::sm_enable(pdi, 3, false)?;
             self.sync = SyncMode::FreeRun;
+            Self::set_event_mask(pdi, reg::EV_AL_CONTROL)?;
         }
         if to == AlState::Init {
-            self.stop_mailbox()?;
+            self.stop_mailbox(pdi)?;
         }
         let _ = app.state_change(from, to, &mut self.od);
         self.state = to;
         Ok(())
     }
 
-    fn read_sm(&mut self, n: u8) -> Result<(u16, u16, u8, u8), P::Error> {
+    fn read_sm(pdi: &mut P, n: u8) -> Result<(u16, u16, u8, u8), P::Error> {
         let mut r = [0u8; 8];
-        self.pdi.read(reg::sm(n, 0), &mut r)?;
+        pdi.read(reg::sm(n, 0), &mut r)?;
         Ok((
             u16::from_le_bytes([r[0], r[1]]),
             u16::from_le_bytes([r[2], r[3]]),
@@ -459,6 +480,7 @@ impl<P: Pdi, const N: usize, const M: usize> Slave<P, N, M> {
 
     fn start_mailbox<A: Application<N>>(
         &mut self,
+        pdi: &mut P,
         app: &mut A,
         boot: bool,
     ) -> Result<Result<(), AlStatusCode>, P::Error> {
@@ -475,8 +497,8 @@ impl<P: Pdi, const N: usize, const M: usize> Slave<P, N, M> {
         let Some(mb) = def else {
             return Ok(Err(AlStatusCode::BOOT_NOT_SUPPORTED));
         };
-        let (s0, l0, c0, a0) = self.read_sm(0)?;
-        let (s1, l1, c1, a1) = self.read_sm(1)?;
+        let (s0, l0, c0, a0) = Self::read_sm(pdi, 0)?;
+        let (s1, l1, c1, a1) = Self::read_sm(pdi, 1)?;
         let ok = s0 == mb.rx_start
             && l0 == mb.rx_len
             && c0 & 0x0F == 0x06
@@ -492,24 +514,24 @@ impl<P: Pdi, const N: usize, const M: usize> Slave<P, N, M> {
         if let Err(c) = app.state_change(AlState::Init, to, &mut self.od) {
             return Ok(Err(c));
         }
-        self.sm_enable(0, true)?;
-        self.sm_enable(1, true)?;
+        Self::sm_enable(pdi, 0, true)?;
+        Self::sm_enable(pdi, 1, true)?;
         self.mbx.reset();
         self.sdo = SdoState::default();
         self.mbx.running = true;
         self.mbx.boot = boot;
         self.mbx.toggle = a1 & 2 != 0;
         // Acknowledge state of the repeat bit follows the request bit at start.
-        let p1 = self.pdi.read_u8(reg::sm(1, 7))?;
+        let p1 = pdi.read_u8(reg::sm(1, 7))?;
         let p1 = if self.mbx.toggle { p1 | 2 } else { p1 & !2 };
-        self.pdi.write(reg::sm(1, 7), &[p1])?;
+        pdi.write(reg::sm(1, 7), &[p1])?;
         self.state = to;
         Ok(Ok(()))
     }
 
-    fn stop_mailbox(&mut self) -> R<P> {
-        self.sm_enable(0, false)?;
-        self.sm_enable(1, false)?;
+    fn stop_mailbox(&mut self, pdi: &mut P) -> R<P> {
+        Self::sm_enable(pdi, 0, false)?;
+        Self::sm_enable(pdi, 1, false)?;
         self.mbx.reset();
         self.sdo = SdoState::default();
         Ok(())
@@ -517,6 +539,7 @@ impl<P: Pdi, const N: usize, const M: usize> Slave<P, N, M> {
 
     fn start_pd<A: Application<N>>(
         &mut self,
+        pdi: &mut P,
         app: &mut A,
     ) -> Result<Result<(), AlStatusCode>, P::Error> {
         let rx = match pdo::compile(&self.od, Dir::Rx) {
@@ -528,7 +551,7 @@ impl<P: Pdi, const N: usize, const M: usize> Slave<P, N, M> {
             Err(_) => return Ok(Err(AlStatusCode::INVALID_INPUT_MAPPING)),
         };
         let def = self.od.def;
-        let (s2, l2, c2, a2) = self.read_sm(2)?;
+        let (s2, l2, c2, a2) = Self::read_sm(pdi, 2)?;
         let out_ok = if rx.bytes() == 0 {
             a2 & 1 == 0 || l2 == 0
         } else {
@@ -537,7 +560,7 @@ impl<P: Pdi, const N: usize, const M: usize> Slave<P, N, M> {
         if !out_ok {
             return Ok(Err(AlStatusCode::INVALID_OUTPUT_CONFIG));
         }
-        let (s3, l3, c3, a3) = self.read_sm(3)?;
+        let (s3, l3, c3, a3) = Self::read_sm(pdi, 3)?;
         let in_ok = if tx.bytes() == 0 {
             a3 & 1 == 0 || l3 == 0
         } else {
@@ -546,7 +569,7 @@ impl<P: Pdi, const N: usize, const M: usize> Slave<P, N, M> {
         if !in_ok {
             return Ok(Err(AlStatusCode::INVALID_INPUT_CONFIG));
         }
-        let mode = match self.check_sync()? {
+        let mode = match self.check_sync(pdi)? {
             Ok(m) => m,
             Err(c) => return Ok(Err(c)),
         };
@@ -556,22 +579,31 @@ impl<P: Pdi, const N: usize, const M: usize> Slave<P, N, M> {
         self.rx_map = rx;
         self.tx_map = tx;
         self.sync = mode;
+        // The PDI interrupt carries exactly what `on_pdi_irq` serves: in SM-synchronous
+        // mode the SM event that triggers the cycle (an AL control event still pending
+        // would otherwise hold the line and hide the next edge); else AL control only.
+        let mask = match mode {
+            SyncMode::SmSync if rx.bytes() > 0 => reg::ev_sm(2),
+            SyncMode::SmSync => reg::ev_sm(3),
+            _ => reg::EV_AL_CONTROL,
+        };
+        Self::set_event_mask(pdi, mask)?;
         app.safe_outputs(&mut self.od);
         if rx.bytes() > 0 {
-            self.sm_enable(2, true)?;
+            Self::sm_enable(pdi, 2, true)?;
         }
         if tx.bytes() > 0 {
-            self.sm_enable(3, true)?;
+            Self::sm_enable(pdi, 3, true)?;
         }
         self.state = AlState::SafeOp;
-        self.write_inputs()?;
+        self.write_inputs(pdi)?;
         Ok(Ok(()))
     }
 
     /// Decides the sync mode from 0x1C32:01 and the ESC's DC activation.
-    fn check_sync(&mut self) -> Result<Result<SyncMode, AlStatusCode>, P::Error> {
+    fn check_sync(&mut self, pdi: &mut P) -> Result<Result<SyncMode, AlStatusCode>, P::Error> {
         let def = self.od.def;
-        let act = self.pdi.read_u8(reg::DC_ACTIVATION + 1)?;
+        let act = pdi.read_u8(reg::DC_ACTIVATION + 1)?;
         let dc_on = act & 0x03 == 0x03;
         let sync1 = act & 0x04 != 0;
         let mut mode = self.od.sync_mode();
@@ -590,7 +622,7 @@ impl<P: Pdi, const N: usize, const M: usize> Slave<P, N, M> {
             if mode == SyncMode::DcSync1 && !sync1 {
                 return Ok(Err(AlStatusCode::INVALID_DC_SYNC_CONFIG));
             }
-            let cyc = self.pdi.read_u32(reg::DC_SYNC0_CYCLE)?;
+            let cyc = pdi.read_u32(reg::DC_SYNC0_CYCLE)?;
             if cyc != 0 && cyc < def.sync.min_cycle_ns {
                 return Ok(Err(AlStatusCode::CYCLE_TIME_TOO_SMALL));
             }
@@ -624,31 +656,31 @@ impl<P: Pdi, const N: usize, const M: usize> Slave<P, N, M> {
         }
     }
 
-    fn mailbox<A: Application<N>>(&mut self, app: &mut A) -> R<P> {
+    fn mailbox<A: Application<N>>(&mut self, pdi: &mut P, app: &mut A) -> R<P> {
         let mb = self.mbx_def();
         if self.mbx.posted {
-            let st = self.pdi.read_u8(reg::sm(1, 5))?;
+            let st = pdi.read_u8(reg::sm(1, 5))?;
             if st & 0x08 == 0 {
                 self.mbx.posted = false;
             }
         }
         // Repeat request: SM1 activate bit 1 toggled by the master.
-        let act = self.pdi.read_u8(reg::sm(1, 6))?;
+        let act = pdi.read_u8(reg::sm(1, 6))?;
         let rep = act & 0x02 != 0;
         if rep != self.mbx.toggle {
             if self.mbx.last_len > 0 {
                 if self.mbx.posted {
                     // The last reply is still in SM1: drop the buffer and write it again.
-                    self.sm_enable(1, false)?;
-                    self.sm_enable(1, true)?;
+                    Self::sm_enable(pdi, 1, false)?;
+                    Self::sm_enable(pdi, 1, true)?;
                 }
-                self.write_sm1_last(mb)?;
+                self.write_sm1_last(pdi, mb)?;
                 self.stats.mbx_repeats = self.stats.mbx_repeats.wrapping_add(1);
             }
             self.mbx.toggle = rep;
-            let p1 = self.pdi.read_u8(reg::sm(1, 7))?;
+            let p1 = pdi.read_u8(reg::sm(1, 7))?;
             let p1 = if rep { p1 | 2 } else { p1 & !2 };
-            self.pdi.write(reg::sm(1, 7), &[p1])?;
+            pdi.write(reg::sm(1, 7), &[p1])?;
         }
         for _ in 0..2 {
             if !self.mbx.posted && self.mbx.out_len > 0 {
@@ -656,7 +688,7 @@ impl<P: Pdi, const N: usize, const M: usize> Slave<P, N, M> {
                 self.mbx.last[..n].copy_from_slice(&self.mbx.out[..n]);
                 self.mbx.last_len = n;
                 self.mbx.out_len = 0;
-                self.write_sm1_last(mb)?;
+                self.write_sm1_last(pdi, mb)?;
             }
             if self.mbx.out_len > 0 {
                 break;
@@ -672,39 +704,38 @@ impl<P: Pdi, const N: usize, const M: usize> Slave<P, N, M> {
                 }
                 continue;
             }
-            let st = self.pdi.read_u8(reg::sm(0, 5))?;
+            let st = pdi.read_u8(reg::sm(0, 5))?;
             if st & 0x08 == 0 {
                 break;
             }
-            self.read_sm0(mb)?;
+            self.read_sm0(pdi, mb)?;
             self.handle_request(app, mb);
         }
         Ok(())
     }
 
-    fn write_sm1_last(&mut self, mb: MailboxDef) -> R<P> {
+    fn write_sm1_last(&mut self, pdi: &mut P, mb: MailboxDef) -> R<P> {
         let n = self.mbx.last_len.min(mb.tx_len as usize);
-        self.pdi.write(mb.tx_start, &self.mbx.last[..n])?;
+        pdi.write(mb.tx_start, &self.mbx.last[..n])?;
         if n < mb.tx_len as usize {
-            self.pdi.write(mb.tx_start + mb.tx_len - 1, &[0])?;
+            pdi.write(mb.tx_start + mb.tx_len - 1, &[0])?;
         }
         self.mbx.posted = true;
         Ok(())
     }
 
-    fn read_sm0(&mut self, mb: MailboxDef) -> R<P> {
+    fn read_sm0(&mut self, pdi: &mut P, mb: MailboxDef) -> R<P> {
         let len = mb.rx_len as usize;
-        self.pdi
-            .read(mb.rx_start, &mut self.mbx.rx[..MAILBOX_HEADER_LEN])?;
+        pdi.read(mb.rx_start, &mut self.mbx.rx[..MAILBOX_HEADER_LEN])?;
         let l = u16::from_le_bytes([self.mbx.rx[0], self.mbx.rx[1]]) as usize;
         let body = l.min(len - MAILBOX_HEADER_LEN);
-        self.pdi.read(
+        pdi.read(
             mb.rx_start + MAILBOX_HEADER_LEN as u16,
             &mut self.mbx.rx[MAILBOX_HEADER_LEN..MAILBOX_HEADER_LEN + body],
         )?;
         if MAILBOX_HEADER_LEN + body < len {
             let mut last = [0u8; 1];
-            self.pdi.read(mb.rx_start + mb.rx_len - 1, &mut last)?;
+            pdi.read(mb.rx_start + mb.rx_len - 1, &mut last)?;
             self.mbx.rx[len - 1] = last[0];
         }
         Ok(())

@@ -18,12 +18,12 @@ fn sm_synchronous() {
         "poll does not run the cycle in SM-sync mode"
     );
     b.wr(SM2, &[0, 5, 0, 0]);
-    assert!(oxicat_slave::Pdi::irq_lines(&mut b.s.pdi).pdi_irq);
-    b.s.on_pdi_irq(&mut b.app).unwrap();
+    assert!(oxicat_slave::Pdi::irq_lines(&mut b.esc).pdi_irq);
+    b.s.on_pdi_irq(&mut b.esc, &mut b.app).unwrap();
     assert_eq!(b.app.cycles, c0 + 1);
     assert_eq!(b.s.od().get::<i16>(0x7000, 2), Ok(5));
     // No new outputs: no cycle.
-    b.s.on_pdi_irq(&mut b.app).unwrap();
+    b.s.on_pdi_irq(&mut b.esc, &mut b.app).unwrap();
     assert_eq!(b.app.cycles, c0 + 1);
     let (d, _) = b.rd(SM3, 7);
     assert_eq!(i16::from_le_bytes([d[1], d[2]]), 10);

@@ -258,6 +258,7 @@ impl Application<IMG> for App {
 }
 
 pub struct Bench {
+    pub esc: Esc,
     pub s: Slave<Esc, IMG, MBX>,
     pub app: App,
     pub t: u64,
@@ -266,9 +267,10 @@ pub struct Bench {
 
 impl Bench {
     pub fn new() -> Self {
-        let esc = Esc::new(EscConfig::et1100(), eeprom(&DEF));
-        let s = Slave::new(&DEF, esc).unwrap();
+        let mut esc = Esc::new(EscConfig::et1100(), eeprom(&DEF));
+        let s = Slave::new(&DEF, &mut esc).unwrap();
         let mut b = Bench {
+            esc,
             s,
             app: App::default(),
             t: 0,
@@ -289,7 +291,7 @@ impl Bench {
         let n = fb.finish();
         buf.truncate(n);
         self.t += 10_000;
-        self.s.pdi.forward(0, &mut buf, self.t, true);
+        self.esc.forward(0, &mut buf, self.t, true);
         let f = EcatFrame::parse(&buf).unwrap();
         let d = f.datagrams().next().unwrap().unwrap();
         (d.data.to_vec(), d.wkc)
@@ -305,19 +307,19 @@ impl Bench {
 
     pub fn poll(&mut self) {
         for _ in 0..3 {
-            self.s.poll(&mut self.app).unwrap();
+            self.s.poll(&mut self.esc, &mut self.app).unwrap();
         }
     }
 
     /// Advances ESC time (watchdogs, SYNC) and delivers SYNC events.
     pub fn advance(&mut self, dt: u64) {
         self.t += dt;
-        let ev = self.s.pdi.advance(self.t);
+        let ev = self.esc.advance(self.t);
         if ev.sync0.is_some() {
-            self.s.on_sync0(&mut self.app).unwrap();
+            self.s.on_sync0(&mut self.esc, &mut self.app).unwrap();
         }
         if ev.sync1.is_some() {
-            self.s.on_sync1(&mut self.app).unwrap();
+            self.s.on_sync1(&mut self.esc, &mut self.app).unwrap();
         }
     }
 
