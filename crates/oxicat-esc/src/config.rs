@@ -3,6 +3,21 @@
 
 use crate::dc::ClockConfig;
 
+/// How much of the Distributed Clocks unit a chip implements. Registers of a missing part
+/// read as 0 and are not counted in the working counter (they do not exist in the chip).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum DcSupport {
+    /// No DC registers at all (0x0900..0x09FF unimplemented).
+    None,
+    /// Only the port receive times 0x0900..0x090F (propagation-delay measurement); no
+    /// system time, no ECAT receive time, no SYNC/latch unit. The ET1200 of the Beckhoff
+    /// EL1004/EL2828/EL3004 behaves so in the reference captures (BWR 0x0910/0x0920/0x0981
+    /// and FPRD 0x0918 not counted by it, BWR 0x0900 counted).
+    ReceiveTimesOnly,
+    /// The complete DC unit (receive times, system time, SYNC0/1, latch).
+    Full,
+}
+
 /// The chip an ESC emulates: contents of the ESC information registers and sizes.
 #[derive(Debug, Clone, PartialEq)]
 pub struct EscConfig {
@@ -24,6 +39,11 @@ pub struct EscConfig {
     pub features: u16,
     /// SII EEPROM read size: 8 bytes (true) or 4 bytes (false); 0x0502 bit 6.
     pub sii_read_8_bytes: bool,
+    /// Which parts of the DC unit exist (registers of missing parts are unimplemented).
+    pub dc: DcSupport,
+    /// Reserved bits of SII control 0x0502 (low byte) that this chip reads as 1. The ET1200
+    /// of EL1004/EL2828/EL3004 reads bit 4 set (0x50 with 8-byte reads) in every capture.
+    pub sii_control_extra: u8,
     /// Oscillator of the DC unit.
     pub clock: ClockConfig,
 }
@@ -41,6 +61,8 @@ impl EscConfig {
             port_descriptor: 0x0F,
             features: 0x01FC,
             sii_read_8_bytes: true,
+            dc: DcSupport::Full,
+            sii_control_extra: 0,
             clock: ClockConfig::default(),
         }
     }
@@ -57,6 +79,8 @@ impl EscConfig {
             port_descriptor: 0x0A,
             features: 0x01FC,
             sii_read_8_bytes: false,
+            dc: DcSupport::Full,
+            sii_control_extra: 0,
             clock: ClockConfig::default(),
         }
     }
@@ -73,6 +97,8 @@ impl EscConfig {
             port_descriptor: 0x0F,
             features: 0x01CC,
             sii_read_8_bytes: true,
+            dc: DcSupport::Full,
+            sii_control_extra: 0,
             clock: ClockConfig::default(),
         }
     }

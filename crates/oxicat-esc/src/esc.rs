@@ -20,10 +20,10 @@ use core::mem::take;
 use oxicat_wire::frame::for_each_datagram_mut;
 use oxicat_wire::{Command, DatagramMut, WireError};
 
-use crate::config::EscConfig;
+use crate::config::{DcSupport, EscConfig};
 use crate::dc::Dc;
 use crate::fmmu::{get_bit, set_bit, Fmmu};
-use crate::regs::{self, PERMISSIONS, P_CLEAR, P_ECAT, P_PDI};
+use crate::regs::{self, PERMISSIONS, P_CLEAR, P_ECAT, P_IMPL, P_PDI};
 use crate::sii;
 use crate::sm::{Side, Sm, CTRL_WD_TRIGGER};
 
@@ -78,12 +78,20 @@ const ECAT_EV_DL: u16 = 1 << 2;
 const ECAT_EV_AL: u16 = 1 << 3;
 
 const REG_END: usize = 0x1000;
+/// PDI control 0x0140 value of the digital I/O PDI.
+const PDI_DIGITAL_IO: u8 = 0x04;
 
 /// A software EtherCAT Slave Controller.
 #[derive(Debug, Clone)]
 pub struct Esc {
     cfg: EscConfig,
     mem: Vec<u8>,
+    /// Per-byte permissions of this chip's register file (the generic table with the
+    /// FMMUs, SMs and DC parts the chip lacks removed).
+    perm: Vec<u8>,
+    /// AL control written by ECAT and not yet read by the PDI (no device emulation: the
+    /// register then behaves like a mailbox and refuses further ECAT writes).
+    al_ctl_unread: bool,
     eeprom: Vec<u8>,
     dc: Dc,
     link: [bool; 4],
@@ -143,8 +151,10 @@ impl Esc {
         if eeprom.len() > 2048 {
             ctl |= sii::CTL_ADDR_2BYTES;
         }
+        ctl |= u16::from(cfg.sii_control_extra & 0x1E);
         sii::write_ctl(&mut mem, ctl);
         sii::load_config(&mut mem, &eeprom);
+        let perm = chip_permissions(&cfg);
         let mut sms = vec![Sm::default(); cfg.sm_count as usize];
         for sm in sms.iter_mut() {
             sm.reset_state();
@@ -154,6 +164,8 @@ impl Esc {
         let mut esc = Self {
             cfg,
             mem,
+            perm,
+            al_ctl_unread: false,
             eeprom,
             dc,
             link: [true, false, false, false],
@@ -181,7 +193,10 @@ impl Esc {
             latch_inputs: [false; 2],
         };
         esc.update_dl_status(false);
-        esc.ecat_ev = 0;
+        // Power-on is a DL status change (links come up, EEPROM loaded): the event is
+        // pending until the master reads 0x0110 (soem-sdinfo-ek1100-el1004: the last
+        // slave, whose links never change later, still shows IRQ 0x0004 until frame 200).
+        esc.ecat_ev = ECAT_EV_DL;
         esc.refresh_events();
         esc
     }
@@ -342,6 +357,10 @@ impl Esc {
         let Some(cmd) = dg.header.command() else {
             return;
         };
+        // The IRQ field passes the ESC before the data: it shows the event state from
+        // before this datagram's own access (a write to the mask 0x0200 or a read of DL
+        // status does not change its own IRQ field).
+        let irq = self.ecat_irq;
         let mut header_changed = false;
         let mut inc: u16 = 0;
         let adp = dg.header.adp();
@@ -373,7 +392,6 @@ impl Esc {
                 inc = self.logical(cmd, dg.header.address, dg.data);
             }
         }
-        let irq = self.ecat_irq;
         if irq & !dg.header.irq != 0 {
             dg.header.irq |= irq;
             header_changed = true;
@@ -558,30 +576,38 @@ impl Esc {
         (pend, None)
     }
 
-    /// Reads physical memory as `side` sees it (SyncManager rules applied). Returns false
-    /// when a SyncManager refused (part of) the access.
+    /// Reads physical memory as `side` sees it (SyncManager rules applied). Returns true
+    /// when the access counts: at least one byte exists in this chip and no SyncManager
+    /// refused (part of) the access.
     fn phys_read(&mut self, side: Side, addr: u32, out: &mut [u8], or: bool) -> bool {
         let end = addr + out.len() as u32;
         let mut cur = addr;
         let mut ok = true;
+        let mut any = false;
         while cur < end {
             let (pe, sm) = self.piece(cur, end);
             let o = &mut out[(cur - addr) as usize..(pe - addr) as usize];
             match sm {
-                Some(i) => ok &= self.sm_read(i, side, cur, o, or),
-                None => self.plain_read(side, cur, o, or),
+                Some(i) => {
+                    let r = self.sm_read(i, side, cur, o, or);
+                    ok &= r;
+                    any |= r;
+                }
+                None => any |= self.plain_read(side, cur, o, or),
             }
             cur = pe;
         }
-        ok
+        ok && any
     }
 
     /// Writes physical memory as `side` (SyncManager rules and register permissions
-    /// applied); `mask` selects the bits to write. Returns false when a SyncManager refused.
+    /// applied); `mask` selects the bits to write. Returns true when the access counts: at
+    /// least one byte is writable by `side` in this chip and no SyncManager refused.
     fn phys_write(&mut self, side: Side, addr: u32, data: &[u8], mask: Option<&[u8]>) -> bool {
         let end = addr + data.len() as u32;
         let mut cur = addr;
         let mut ok = true;
+        let mut any = false;
         while cur < end {
             let (pe, sm) = self.piece(cur, end);
             let a = (cur - addr) as usize;
@@ -589,12 +615,16 @@ impl Esc {
             let d = &data[a..b];
             let m = mask.map(|m| &m[a..b]);
             match sm {
-                Some(i) => ok &= self.sm_write(i, side, cur, d, m),
-                None => self.plain_write(side, cur, d, m),
+                Some(i) => {
+                    let r = self.sm_write(i, side, cur, d, m);
+                    ok &= r;
+                    any |= r;
+                }
+                None => any |= self.plain_write(side, cur, d, m),
             }
             cur = pe;
         }
-        ok
+        ok && any
     }
 
     fn copy_out(&self, from: u32, o: &mut [u8], or: bool) {
@@ -634,10 +664,21 @@ impl Esc {
         }
     }
 
-    fn plain_read(&mut self, side: Side, cur: u32, o: &mut [u8], or: bool) {
+    /// Reads a piece not covered by a SyncManager; returns true when at least one byte of
+    /// it exists in this chip. Bytes that do not exist read as 0 (BRD: contribute nothing).
+    fn plain_read(&mut self, side: Side, cur: u32, o: &mut [u8], or: bool) -> bool {
         let c = cur as usize;
+        let full_end = c + o.len();
+        let ram_any = full_end > REG_END && c.max(REG_END) < self.mem.len();
         if c < REG_END {
-            let e = (c + o.len()).min(REG_END);
+            let e = full_end.min(REG_END);
+            let impl_n = self.perm[c..e].iter().filter(|&&p| p & P_IMPL != 0).count();
+            if impl_n == 0 && !ram_any {
+                if !or {
+                    o.fill(0);
+                }
+                return false;
+            }
             if c < 0x0A00 && e > 0x0900 {
                 let a = c.max(0x0900);
                 let b = e.min(0x0A00);
@@ -647,7 +688,23 @@ impl Esc {
             if c < 0x0224 && e > 0x0210 {
                 self.refresh_events();
             }
-            self.copy_out(cur, o, or);
+            if impl_n == e - c {
+                self.copy_out(cur, o, or);
+            } else {
+                // Bytes the chip does not have read as 0 (the DC unit may keep shadows
+                // there); BRD: they contribute nothing.
+                for (k, a) in (c..e).enumerate() {
+                    let v = if self.perm[a] & P_IMPL != 0 { self.mem[a] } else { 0 };
+                    if or {
+                        o[k] |= v;
+                    } else {
+                        o[k] = v;
+                    }
+                }
+                if full_end > REG_END {
+                    self.copy_out(REG_END as u32, &mut o[e - c..], or);
+                }
+            }
             if c < 0x0A00 && e > 0x0900 {
                 let a = c.max(0x0900);
                 let b = e.min(0x0A00);
@@ -662,8 +719,10 @@ impl Esc {
                 self.events_dirty = true;
             }
             self.read_side_effects(side, c, e);
+            true
         } else {
             self.copy_out(cur, o, or);
+            ram_any
         }
     }
 
@@ -675,8 +734,17 @@ impl Esc {
                     self.ecat_ev &= !ECAT_EV_AL;
                     self.events_dirty = true;
                 }
+                // Reading DL status acknowledges the DL-status-change event.
+                if (hit(0x0110) || hit(0x0111)) && self.ecat_ev & ECAT_EV_DL != 0 {
+                    self.ecat_ev &= !ECAT_EV_DL;
+                    self.events_dirty = true;
+                }
             }
             Side::Pdi => {
+                // AL control is a mailbox for ECAT until the PDI reads (either byte of) it.
+                if hit(0x0120) || hit(0x0121) {
+                    self.al_ctl_unread = false;
+                }
                 if hit(regs::AL_CONTROL as usize) && self.al_ev & AL_EV_CONTROL != 0 {
                     self.al_ev &= !AL_EV_CONTROL;
                     self.events_dirty = true;
@@ -695,18 +763,43 @@ impl Esc {
         }
     }
 
-    fn plain_write(&mut self, side: Side, cur: u32, d: &[u8], m: Option<&[u8]>) {
+    /// Writes a piece not covered by a SyncManager; returns true when at least one byte of
+    /// it is writable by `side` in this chip (the access counts even if a rule then
+    /// discards the value, e.g. EEPROM ownership; it does not count for read-only or
+    /// missing registers, nor for AL control still unread by the PDI).
+    fn plain_write(&mut self, side: Side, cur: u32, d: &[u8], m: Option<&[u8]>) -> bool {
         let c = cur as usize;
+        let full_end = c + d.len();
         if c >= REG_END {
             self.store(cur, d, m);
-            return;
+            return c < self.mem.len();
+        }
+        let mut counted = false;
+        if full_end > REG_END {
+            let k = REG_END - c;
+            self.store(REG_END as u32, &d[k..], m.map(|m| &m[k..]));
+            counted = REG_END < self.mem.len();
+        }
+        let e = full_end.min(REG_END);
+        let bit = if side == Side::Ecat { P_ECAT } else { P_PDI };
+        let al_ctl_locked = side == Side::Ecat
+            && self.al_ctl_unread
+            && c < 0x0122
+            && e > 0x0120
+            && self.mem[regs::ESC_CONFIG as usize] & 1 == 0;
+        for a in c..e {
+            if self.perm[a] & bit != 0 && !(al_ctl_locked && (0x0120..0x0122).contains(&a)) {
+                counted = true;
+                break;
+            }
+        }
+        if !counted {
+            return false;
         }
         if side == Side::Ecat && !self.frame_ok {
             // Register writes take effect only with a good FCS.
-            return;
+            return true;
         }
-        let e = (c + d.len()).min(REG_END);
-        let bit = if side == Side::Ecat { P_ECAT } else { P_PDI };
         let sii_owner_ok = match side {
             Side::Ecat => !sii::pdi_owns(&self.mem),
             Side::Pdi => sii::pdi_owns(&self.mem),
@@ -714,9 +807,13 @@ impl Esc {
         let old_al_ctl = self.reg16(regs::AL_CONTROL);
         let old_activate: [u8; 16] =
             core::array::from_fn(|i| self.mem.get(0x0806 + 8 * i).copied().unwrap_or_default());
+        let dc_ctrl = self.mem[0x0980];
         for (k, a) in (c..e).enumerate() {
-            let p = PERMISSIONS[a];
+            let p = self.perm[a];
             if p & bit == 0 {
+                continue;
+            }
+            if al_ctl_locked && (0x0120..0x0122).contains(&a) {
                 continue;
             }
             if (0x0502..0x0510).contains(&a) && !sii_owner_ok {
@@ -729,11 +826,29 @@ impl Esc {
                 self.mem[a] = 0;
                 continue;
             }
+            let mut bm = bit_mask(a) & m.map_or(0xFF, |m| m[k]);
+            if let Some(owner_ecat) = dc_unit_owner(a, dc_ctrl) {
+                // SYNC/latch unit registers: writable only by the side 0x0980 assigns.
+                if owner_ecat != (side == Side::Ecat) {
+                    continue;
+                }
+                if a == 0x09A8 || a == 0x09A9 {
+                    bm &= 0x03;
+                }
+            }
             let v = d[k];
-            let bm = bit_mask(a) & m.map_or(0xFF, |m| m[k]);
             self.mem[a] = (self.mem[a] & !bm) | (v & bm);
         }
+        if side == Side::Ecat
+            && c < 0x0122
+            && e > 0x0120
+            && !al_ctl_locked
+            && self.mem[regs::ESC_CONFIG as usize] & 1 == 0
+        {
+            self.al_ctl_unread = true;
+        }
         self.write_side_effects(side, c, e, old_al_ctl, &old_activate);
+        true
     }
 
     fn write_side_effects(
@@ -752,9 +867,11 @@ impl Esc {
             let _ = old_al_ctl;
             self.al_ev |= AL_EV_CONTROL;
             if self.mem[regs::ESC_CONFIG as usize] & 1 != 0 {
-                // Device emulation: AL status follows AL control, error indication cleared.
+                // Device emulation: AL status follows AL control including the error
+                // indication acknowledge bit 4 (captures: BWR 0x0120 `11 00` -> 0x0130
+                // reads `11 00`).
                 let ctl = self.mem[regs::AL_CONTROL as usize];
-                let st = ctl & 0x0F;
+                let st = ctl & 0x1F;
                 if self.mem[regs::AL_STATUS as usize] != st || self.mem[0x0131] != 0 {
                     self.ecat_ev |= ECAT_EV_AL;
                 }
@@ -1012,8 +1129,16 @@ impl Esc {
         if sii::read_ctl(&self.mem) & sii::CTL_NOT_LOADED == 0 {
             s |= 1;
         }
-        if self.mem[regs::DL_STATUS as usize] & 2 != 0 {
+        if self.mem[regs::DL_STATUS as usize] & 2 != 0
+            || (s & 1 != 0 && self.mem[regs::PDI_CONTROL as usize] == PDI_DIGITAL_IO)
+        {
+            // PDI watchdog reloaded: by PDI accesses, or continuously by the digital I/O
+            // PDI of a bare-ESC device (captures: EL2828/EL1004 read 0x0110 bit 1 set).
             s |= 2;
+        }
+        if self.mem[regs::ESC_CONFIG as usize] & 0x02 != 0 {
+            // Enhanced link detection enabled for all ports (0x0141 bit 1, from the SII).
+            s |= 4;
         }
         for p in 0..4u8 {
             let link = self.link[p as usize] && self.cfg.port_present(p);
@@ -1243,6 +1368,36 @@ impl Esc {
     pub fn memory(&self) -> &[u8] {
         &self.mem
     }
+}
+
+/// Which side owns the SYNC/latch unit register byte `a` per cyclic unit control 0x0980
+/// (`Some(true)`: ECAT), or `None` when `a` is not such a register.
+#[inline]
+fn dc_unit_owner(a: usize, ctrl: u8) -> Option<bool> {
+    match a {
+        0x0981 | 0x0990..=0x0997 | 0x09A0..=0x09A7 => Some(ctrl & 0x01 == 0),
+        0x09A8 => Some(ctrl & 0x10 == 0),
+        0x09A9 => Some(ctrl & 0x20 == 0),
+        _ => None,
+    }
+}
+
+/// The register permissions of the chip `cfg` describes: the generic table without the
+/// FMMUs/SMs beyond its counts and without the DC parts it lacks.
+fn chip_permissions(cfg: &EscConfig) -> Vec<u8> {
+    let mut p = PERMISSIONS.to_vec();
+    for f in cfg.fmmu_count as usize..16 {
+        p[0x0600 + 16 * f..0x0610 + 16 * f].fill(0);
+    }
+    for n in cfg.sm_count as usize..16 {
+        p[0x0800 + 8 * n..0x0808 + 8 * n].fill(0);
+    }
+    match cfg.dc {
+        DcSupport::Full => {}
+        DcSupport::ReceiveTimesOnly => p[0x0910..0x0A00].fill(0),
+        DcSupport::None => p[0x0900..0x0A00].fill(0),
+    }
+    p
 }
 
 /// Writable bits of register byte `a` (for registers with read-only bits).

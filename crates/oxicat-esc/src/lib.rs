@@ -20,7 +20,7 @@ pub mod regs;
 pub mod sii;
 pub mod sm;
 
-pub use config::EscConfig;
+pub use config::{DcSupport, EscConfig};
 pub use esc::{Esc, EscEvents, Forward, PdiError};
 
 #[cfg(test)]

@@ -212,12 +212,15 @@ const fn build_table() -> [u8; 4096] {
     set(&mut t, 0x0930, 0x0931, e);
     set(&mut t, 0x0932, 0x0933, 0);
     set(&mut t, 0x0934, 0x0936, e);
-    set(&mut t, 0x0980, 0x0981, e);
+    // SYNC/latch unit: 0x0981, 0x0990.., 0x09A0..0x09A9 are written by the side that
+    // cyclic unit control 0x0980 assigns (checked by the core).
+    set(&mut t, 0x0980, 0x0980, e);
+    set(&mut t, 0x0981, 0x0981, e | p);
     set(&mut t, 0x0982, 0x0984, 0);
     set(&mut t, 0x098E, 0x098F, 0);
-    set(&mut t, 0x0990, 0x0997, e);
+    set(&mut t, 0x0990, 0x0997, e | p);
     set(&mut t, 0x0998, 0x099F, 0);
-    set(&mut t, 0x09A0, 0x09A9, e);
+    set(&mut t, 0x09A0, 0x09A9, e | p);
     set(&mut t, 0x09AE, 0x09AF, 0);
     set(&mut t, 0x09B0, 0x09CF, 0);
     set(&mut t, 0x09F0, 0x09F3, 0);

@@ -121,10 +121,14 @@ fn info_registers_and_read_only() {
     assert_eq!(d[4], 8);
     assert_eq!(d[5], 8);
     assert_eq!(d[6], 8);
-    // Writes to read-only registers are ignored but counted.
+    // Writes to read-only registers are ignored and, with no writable byte in the
+    // range, not counted (captures: BWR 0x092C gets WKC 0 from every real ESC).
     let (_, w) = run(&mut e, Command::Apwr, 0, 0, &[0xFF; 4]);
-    assert_eq!(w, 1);
+    assert_eq!(w, 0);
     assert_eq!(e.memory()[0], 0x11);
+    // One writable byte in the range is enough.
+    let (_, w) = run(&mut e, Command::Apwr, 0, 0x000E, &[0, 0, 0, 0]);
+    assert_eq!(w, 1);
 }
 
 #[test]
@@ -242,8 +246,84 @@ fn al_control_event_and_device_emulation() {
     let mut k = Esc::new(EscConfig::et1100(), eeprom(0x0100, 0));
     fpwr(&mut k, 0x0120, &[0x02, 0]);
     assert_eq!(k.al_status(), 2);
+    // Bit 4 (error indication acknowledge) is copied too (captures: BWR 0x0120 `11 00`,
+    // then 0x0130 reads `11 00`).
     fpwr(&mut k, 0x0120, &[0x18, 0]);
-    assert_eq!(k.al_status(), 8);
+    assert_eq!(k.al_status(), 0x18);
+}
+
+#[test]
+fn al_control_is_a_mailbox_without_device_emulation() {
+    // soem-single-lan9252 frames 3/5: the second BWR 0x0120 before the firmware read
+    // AL control gets WKC 0 and does not change it.
+    let mut e = esc();
+    assert_eq!(fpwr(&mut e, 0x0120, &[0x02, 0]), 1);
+    assert_eq!(fpwr(&mut e, 0x0120, &[0x04, 0]), 0);
+    assert_eq!(e.al_control(), 2);
+    let mut b = [0u8; 1];
+    e.pdi_read(0x0121, &mut b).unwrap();
+    assert_eq!(fpwr(&mut e, 0x0120, &[0x04, 0]), 1);
+    assert_eq!(e.al_control(), 4);
+    // With device emulation the register is always writable.
+    let mut k = Esc::new(EscConfig::et1100(), eeprom(0x0100, 0));
+    assert_eq!(fpwr(&mut k, 0x0120, &[0x02, 0]), 1);
+    assert_eq!(fpwr(&mut k, 0x0120, &[0x04, 0]), 1);
+}
+
+#[test]
+fn dl_status_event_pending_from_power_on_until_read() {
+    let mut e = esc();
+    assert_eq!(e.ecat_event_request() & 4, 4);
+    fpwr(&mut e, 0x0200, &[0x04, 0]);
+    // The datagram that reads DL status still carries the IRQ; the next one does not.
+    let f0 = frame(&[(phys(Command::Fprd, 0x0000, 0x0110, &[0; 2]), &[0; 2])]);
+    let mut f = f0.clone();
+    e.forward(0, &mut f, 0, true);
+    assert_eq!(dg(&f, 0).2.irq, 4);
+    let mut f = f0.clone();
+    e.forward(0, &mut f, 0, true);
+    assert_eq!(dg(&f, 0).2.irq, 0);
+}
+
+#[test]
+fn unimplemented_registers_do_not_count() {
+    use crate::DcSupport;
+    let cfg = EscConfig {
+        dc: DcSupport::ReceiveTimesOnly,
+        ..EscConfig::et1200()
+    };
+    let mut e = Esc::new(cfg, eeprom(0x0104, 0));
+    // FMMU 3 and SM 4 do not exist on a 3-FMMU / 4-SM chip; FMMU 2 and SM 3 do.
+    assert_eq!(fpwr(&mut e, 0x0630, &[0; 16]), 0);
+    assert_eq!(fpwr(&mut e, 0x0620, &[0; 16]), 1);
+    assert_eq!(fpwr(&mut e, 0x0820, &[0; 8]), 0);
+    assert_eq!(fpwr(&mut e, 0x0818, &[0; 8]), 1);
+    // Receive times exist, system time does not.
+    assert_eq!(fpwr(&mut e, 0x0900, &[0; 4]), 1);
+    assert_eq!(fprd(&mut e, 0x0900, 16).1, 1);
+    assert_eq!(fpwr(&mut e, 0x0910, &[0; 8]), 0);
+    let (d, w) = fprd(&mut e, 0x0918, 8);
+    assert_eq!((d, w), (vec![0; 8], 0));
+    // Process RAM beyond the chip's size.
+    assert_eq!(fprd(&mut e, 0x1000 + 1024, 4).1, 0);
+    assert_eq!(fprd(&mut e, 0x1000 + 1020, 4).1, 1);
+    // Full DC: all counted.
+    let mut f = esc();
+    assert_eq!(fpwr(&mut f, 0x0910, &[0; 8]), 1);
+}
+
+#[test]
+fn pdi_writes_sync_unit_when_assigned() {
+    let mut e = esc();
+    // SYNC unit owned by ECAT: the PDI cannot write the cycle time.
+    e.pdi_write(0x09A0, &[0x10, 0x27, 0, 0]).unwrap();
+    assert_eq!(&e.memory()[0x09A0..0x09A4], &[0, 0, 0, 0]);
+    // 0x0980 bit 0 assigns it to the PDI: now the PDI can, ECAT cannot.
+    fpwr(&mut e, 0x0980, &[0x01]);
+    e.pdi_write(0x09A0, &[0x10, 0x27, 0, 0]).unwrap();
+    assert_eq!(&e.memory()[0x09A0..0x09A4], &[0x10, 0x27, 0, 0]);
+    fpwr(&mut e, 0x09A0, &[0, 0, 0, 0]);
+    assert_eq!(&e.memory()[0x09A0..0x09A4], &[0x10, 0x27, 0, 0]);
 }
 
 #[test]

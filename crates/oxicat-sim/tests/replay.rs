@@ -31,10 +31,10 @@
 //!    `17 56` expected, `13 56` got).
 //! 5. The DL-status-change ECAT event (IRQ field 0x0004) is not cleared by reading 0x0110.
 
-mod common;
+mod replay_bench;
 
-use common::*;
-use oxicat_esc::EscConfig;
+use replay_bench::*;
+use oxicat_esc::{DcSupport, EscConfig};
 
 /// ET1100 as in the EK1100 coupler (ports 0 MII, 1 EBUS, 2 MII; soem-sdinfo frame 130).
 fn et1100_ek1100() -> EscConfig {
@@ -48,7 +48,7 @@ fn et1100_ek1100() -> EscConfig {
     }
 }
 
-/// ET1100-class ESC of an EL terminal (EL2889, EK1914): E-bus ports 0 and 1. BWR to
+/// ET1100-class ESC of an EL terminal (EL2889): E-bus ports 0 and 1. BWR to
 /// FMMU 3..7 (0x0630..) and SM 4..7 (0x0820..) is counted by exactly one slave in every
 /// capture with an EK1100 (rs-example-sii-el2004 frame 330: EK1100 + 2 ET1200 -> WKC 1;
 /// replay-dc frame 12: EK1100 + EL2828 + EL2889 -> WKC 1): the EK1100 has 8/8, so this
@@ -66,7 +66,33 @@ fn et1100_terminal() -> EscConfig {
     }
 }
 
-/// ET1200 of an EL terminal (EL1004, EL2004, EL2828, EL3004; soem-sdinfo frame 202).
+/// ET1100 of the EK1914 coupler. Without an EK1100 in front, the EK1914 is the slave
+/// that counts BWR to FMMU 3..7 and SM 4..7 (replay-ek1914-* frames 12..20 and 46..52:
+/// WKC 1 of 2, the EL3004 has 3/4), so it implements 8 FMMUs and 8 SMs. Like the ET1200
+/// terminals it has only the port receive times: BWR 0x0910..0x09A4 get WKC 0 from both
+/// slaves (frames 70..88) while BWR 0x0900 gets 2 (frame 358), and its FPRD 0x0918
+/// returns WKC 0 (frame 359).
+fn et1100_ek1914() -> EscConfig {
+    EscConfig {
+        esc_type: 0x11,
+        revision: 0x00,
+        port_descriptor: 0x0A,
+        features: 0x00FC,
+        sii_read_8_bytes: true,
+        dc: DcSupport::ReceiveTimesOnly,
+        ..EscConfig::et1100()
+    }
+}
+
+/// ET1200 of an EL terminal (EL1004, EL2828, EL3004; soem-sdinfo frame 202).
+///
+/// - DC: only the port receive times exist. Every capture with one of these terminals
+///   shows it: BWR 0x0910/0x0920/0x0928/0x0930/0x0934/0x0981/0x0990/0x09A0/0x09A4 are
+///   counted by the other slaves only (replay-dc frames 69..87: WKC 2 of 3), FPRD 0x0918
+///   and 0x092C of this slave return WKC 0 (replay-dc frames 507, 3025), FRMW 0x0910
+///   passing it is not counted, while BWR/FPRD 0x0900..0x090F are.
+/// - SII control 0x0502 reads bit 4 set (`50 00` idle, `50 81` busy) in every capture
+///   (replay-dc, replay-ek1100-el2828-el2889, replay-ek1914-*, soem-sdinfo).
 fn et1200_terminal() -> EscConfig {
     EscConfig {
         esc_type: 0x12,
@@ -74,7 +100,19 @@ fn et1200_terminal() -> EscConfig {
         port_descriptor: 0x4A,
         features: 0x01FC,
         sii_read_8_bytes: true,
+        dc: DcSupport::ReceiveTimesOnly,
+        sii_control_extra: 0x10,
         ..EscConfig::et1200()
+    }
+}
+
+/// ET1200 of the EL2004s of rs-example-sii-el2004: like [`et1200_terminal`], but 0x0502
+/// reads `40 00` (frames 352, 358, 364: no bit 4), so an older chip revision. That capture
+/// has no DC access; the DC parts are taken as in the other ET1200 terminals.
+fn et1200_el2004() -> EscConfig {
+    EscConfig {
+        sii_control_extra: 0,
+        ..et1200_terminal()
     }
 }
 
@@ -186,13 +224,13 @@ fn rs_example_sii_el2004() {
         spec("EK1100", et1100_ek1100(), sii("ek1100.hex"), false),
         spec(
             "EL2004",
-            et1200_terminal(),
+            et1200_el2004(),
             sii("el2004-eeprom-dump.bin"),
             false,
         ),
         spec(
             "EL2004",
-            et1200_terminal(),
+            et1200_el2004(),
             sii("el2004-eeprom-dump.bin"),
             false,
         ),
@@ -338,7 +376,7 @@ fn mcu_ek1914(name: &str) {
     let mut bench = Bench::new(vec![
         spec(
             "EK1914",
-            et1100_terminal(),
+            et1100_ek1914(),
             sii_image(&words[&0], &MCU_CONFIG, 2048),
             true,
         ),
