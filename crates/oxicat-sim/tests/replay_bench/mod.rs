@@ -297,6 +297,9 @@ pub struct Bench {
     pub hop_ns: u64,
     /// Virtual time of the last frame.
     pub now: u64,
+    /// Virtual time before which the µC firmware does not touch its ESC (a slow
+    /// application start or poll loop; see the capture that sets it).
+    pub firmware_from: u64,
 }
 
 impl Bench {
@@ -319,6 +322,7 @@ impl Bench {
             specs,
             hop_ns: 600,
             now: 0,
+            firmware_from: 0,
         }
     }
 
@@ -364,6 +368,9 @@ impl Bench {
 
     /// Runs the firmware echo of every µC slave (after each frame).
     fn firmware_step(&mut self, t: u64) {
+        if t < self.firmware_from {
+            return;
+        }
         for (e, &(_, echo)) in self.escs.iter_mut().zip(&self.specs) {
             if echo {
                 let _ = e.advance(t);
