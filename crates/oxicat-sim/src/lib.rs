@@ -7,6 +7,7 @@
 #![warn(missing_docs)]
 
 pub mod capture;
+pub mod firmware;
 pub mod model;
 pub mod node;
 pub mod pcapng;

@@ -22,6 +22,16 @@ pub enum EscEvent {
 pub trait Node<E = oxicat_esc::Esc>: Send {
     /// `ev` happened on `esc` at virtual time `t` (ns); the node may access the ESC's PDI side.
     fn on_event(&mut self, esc: &mut E, ev: EscEvent, t: u64);
+
+    /// Virtual time (ns) at which the node wants to run on its own (firmware timers, the main
+    /// loop), independent of ESC events; `None` (the default) for never. After
+    /// [`on_wakeup`](Self::on_wakeup) at `t` the segment only honours a later time.
+    fn next_wakeup(&self) -> Option<u64> {
+        None
+    }
+
+    /// Virtual time reached the time [`next_wakeup`](Self::next_wakeup) asked for.
+    fn on_wakeup(&mut self, _esc: &mut E, _t: u64) {}
 }
 
 impl<E, F> Node<E> for F

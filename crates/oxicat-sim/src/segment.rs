@@ -124,6 +124,24 @@ struct Slot<E> {
     irq: bool,
     last_sync0: Option<u64>,
     last_sync1: Option<u64>,
+    /// Time of the node's last wakeup (its next one must be later).
+    last_wake: Option<u64>,
+}
+
+impl<E: SegmentEsc> Slot<E> {
+    /// The node's next wakeup, if it is still to come.
+    fn wakeup(&self) -> Option<u64> {
+        let w = self.node.as_ref()?.next_wakeup()?;
+        self.last_wake.is_none_or(|l| w > l).then_some(w)
+    }
+
+    /// The earliest of the ESC's next event and the node's next wakeup.
+    fn next_due(&self) -> Option<u64> {
+        match (self.esc.next_event(), self.wakeup()) {
+            (Some(a), Some(b)) => Some(a.min(b)),
+            (a, b) => a.or(b),
+        }
+    }
 }
 
 #[derive(Debug, Clone, Copy)]
@@ -231,6 +249,7 @@ impl<E: SegmentEsc> Segment<E> {
             irq: false,
             last_sync0: None,
             last_sync1: None,
+            last_wake: None,
         });
         self.refresh_horizon();
         id
@@ -366,6 +385,8 @@ impl<E: SegmentEsc> Segment<E> {
     pub fn attach(&mut self, s: SlaveId, node: Box<dyn Node<E>>) -> Result<(), TopologyError> {
         self.check(s, 0)?;
         self.slots[s].node = Some(node);
+        self.slots[s].last_wake = None;
+        self.refresh_horizon();
         Ok(())
     }
 
@@ -499,31 +520,52 @@ impl<E: SegmentEsc> Segment<E> {
         self.horizon = self
             .slots
             .iter()
-            .filter_map(|s| s.esc.next_event())
+            .filter_map(|s| s.next_due())
             .min()
             .unwrap_or(u64::MAX);
     }
 
-    /// Delivers all events due up to `t`, earliest first across ESCs.
+    /// Delivers all events and node wakeups due up to `t`, earliest first across ESCs (at
+    /// equal times ESC events come before wakeups).
     fn run_events_until(&mut self, t: u64) {
         if t < self.horizon {
             return;
         }
         loop {
-            let mut best: Option<(u64, usize)> = None;
+            // (time, is a wakeup, slot)
+            let mut best: Option<(u64, bool, usize)> = None;
             for (i, s) in self.slots.iter().enumerate() {
                 if let Some(ne) = s.esc.next_event() {
-                    if ne <= t && ne > s.advanced && best.is_none_or(|(b, _)| ne < b) {
-                        best = Some((ne, i));
+                    if ne <= t && ne > s.advanced && best.is_none_or(|b| (ne, false) < (b.0, b.1)) {
+                        best = Some((ne, false, i));
+                    }
+                }
+                if let Some(w) = s.wakeup() {
+                    if w <= t && best.is_none_or(|b| (w, true) < (b.0, b.1)) {
+                        best = Some((w, true, i));
                     }
                 }
             }
             match best {
-                Some((ne, i)) => self.advance_slot(i, ne),
+                Some((ne, false, i)) => self.advance_slot(i, ne),
+                Some((w, true, i)) => self.wake(i, w),
                 None => break,
             }
         }
         self.refresh_horizon();
+    }
+
+    /// Runs node `i`'s wakeup at `w` (the ESC first brought to `w`, unless it is already
+    /// past it).
+    fn wake(&mut self, i: usize, w: u64) {
+        self.advance_slot(i, w);
+        let slot = &mut self.slots[i];
+        slot.last_wake = Some(w);
+        if let Some(node) = slot.node.as_mut() {
+            node.on_wakeup(&mut slot.esc, w);
+        }
+        let t = w.max(self.slots[i].advanced);
+        self.check_irq(i, t);
     }
 
     fn advance_slot(&mut self, i: usize, t: u64) {
@@ -564,7 +606,7 @@ impl<E: SegmentEsc> Segment<E> {
         let slot = &mut self.slots[i];
         if let Some(node) = slot.node.as_mut() {
             node.on_event(&mut slot.esc, ev, t);
-            if let Some(ne) = slot.esc.next_event() {
+            if let Some(ne) = slot.next_due() {
                 self.horizon = self.horizon.min(ne);
             }
         }

@@ -3,6 +3,7 @@
 //! layout and the ESM checks are all derived from it.
 
 use crate::od::ObjectDef;
+pub use oxicat_wire::sii::FmmuUsage;
 
 /// Identity of a device (object 0x1018, SII words 0x08..0x0F).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -169,4 +170,336 @@ pub struct DeviceDef {
     pub assign_configurable: bool,
     /// Synchronisation support.
     pub sync: SyncDef,
+    /// What the ESI and the SII need beyond the stack (names, groups, ESC configuration,
+    /// DC op modes, FMMU usage, mailbox protocol details).
+    pub info: DeviceInfo,
+}
+
+impl DeviceDef {
+    /// A base definition with empty lists and [`DeviceInfo::DEFAULT`]: start a device with
+    /// `DeviceDef { identity, name, objects, .., ..DeviceDef::BASE }`.
+    pub const BASE: DeviceDef = DeviceDef {
+        identity: Identity {
+            vendor_id: 0,
+            product_code: 0,
+            revision: 0,
+            serial: 0,
+        },
+        device_type: 0,
+        name: "",
+        hw_version: "",
+        sw_version: "",
+        mailbox: MailboxDef {
+            rx_start: 0x1000,
+            rx_len: 128,
+            tx_start: 0x1080,
+            tx_len: 128,
+        },
+        boot_mailbox: None,
+        sm2_start: 0x1100,
+        sm3_start: 0x1180,
+        objects: &[],
+        rx_pdos: &[],
+        tx_pdos: &[],
+        rx_assign: &[],
+        tx_assign: &[],
+        assign_configurable: false,
+        sync: SyncDef {
+            supported: 0x0001,
+            default_mode: SyncMode::FreeRun,
+            min_cycle_ns: 1_000_000,
+            calc_copy_ns: 0,
+        },
+        info: DeviceInfo::DEFAULT,
+    };
+
+    /// The PDO with mapping index `index` (RxPDOs and TxPDOs).
+    pub fn pdo(&self, index: u16) -> Option<&'static PdoDef> {
+        self.rx_pdos
+            .iter()
+            .chain(self.tx_pdos.iter())
+            .find(|p| p.index == index)
+    }
+
+    /// The application object with index `index`.
+    pub fn object(&self, index: u16) -> Option<&'static ObjectDef> {
+        self.objects.iter().find(|o| o.index == index)
+    }
+
+    /// Bits of the default RxPDO assignment (SM2 size in bits).
+    pub fn default_output_bits(&self) -> u32 {
+        assigned_bits(self, self.rx_assign)
+    }
+
+    /// Bits of the default TxPDO assignment (SM3 size in bits).
+    pub fn default_input_bits(&self) -> u32 {
+        assigned_bits(self, self.tx_assign)
+    }
+
+    /// CoE details as the SII general category encodes them (ETG.2010 bit layout).
+    pub fn coe_details(&self) -> u8 {
+        let c = self.info.coe;
+        let mut v = 0;
+        if c.enabled {
+            v |= 0x01;
+        }
+        if c.sdo_info {
+            v |= 0x02;
+        }
+        if self.assign_configurable {
+            v |= 0x04;
+        }
+        if self
+            .rx_pdos
+            .iter()
+            .chain(self.tx_pdos.iter())
+            .any(|p| p.configurable)
+        {
+            v |= 0x08;
+        }
+        if c.pdo_upload {
+            v |= 0x10;
+        }
+        if c.complete_access {
+            v |= 0x20;
+        }
+        v
+    }
+
+    /// Mailbox protocols word (SII word 0x1C): AoE 1, EoE 2, CoE 4, FoE 8, SoE 16, VoE 32.
+    pub fn mailbox_protocols(&self) -> u16 {
+        let i = &self.info;
+        let mut v = 0;
+        if i.eoe {
+            v |= 0x02;
+        }
+        if i.coe.enabled {
+            v |= 0x04;
+        }
+        if i.foe {
+            v |= 0x08;
+        }
+        v
+    }
+}
+
+fn assigned_bits(d: &DeviceDef, assign: &[u16]) -> u32 {
+    assign
+        .iter()
+        .filter_map(|i| d.pdo(*i))
+        .flat_map(|p| p.entries.iter())
+        .map(|e| e.bits as u32)
+        .sum()
+}
+
+/// A device group (ESI `Descriptions/Groups/Group`; the SII group string).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Group {
+    /// Group type: the key devices refer to (`GroupType`).
+    pub type_name: &'static str,
+    /// Display name of the group.
+    pub name: &'static str,
+}
+
+/// The ESC configuration area of the SII (words 0..6), loaded into ESC registers at power-on.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct EscConfigArea {
+    /// PDI control (0x0140/0x0141), e.g. 0x0005 SPI, 0x0080 on-chip bus.
+    pub pdi_control: u16,
+    /// PDI configuration (0x0150/0x0151).
+    pub pdi_config: u16,
+    /// SYNC impulse length in 10 ns units (0x0982).
+    pub sync_impulse_len: u16,
+    /// Extended PDI configuration (0x0152/0x0153).
+    pub pdi_config2: u16,
+    /// Configured station alias (0x0012).
+    pub station_alias: u16,
+}
+
+impl EscConfigArea {
+    /// SPI PDI (LAN9252 / FB1111 style): PDI control 0x0005, SYNC0/1 push-pull active high
+    /// outputs, 1 µs SYNC impulse.
+    pub const SPI: EscConfigArea = EscConfigArea {
+        pdi_control: 0x0005,
+        pdi_config: 0xEE00,
+        sync_impulse_len: 100,
+        pdi_config2: 0x0000,
+        station_alias: 0,
+    };
+}
+
+/// CoE support details (ESI `Mailbox/CoE` attributes; SII general CoE details).
+/// PdoAssign and PdoConfig follow from [`DeviceDef::assign_configurable`] and
+/// [`PdoDef::configurable`].
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct CoeInfo {
+    /// CoE is supported at all.
+    pub enabled: bool,
+    /// SDO information service.
+    pub sdo_info: bool,
+    /// SDO complete access.
+    pub complete_access: bool,
+    /// The master should upload the PDO configuration at start-up.
+    pub pdo_upload: bool,
+    /// Segmented SDO transfers.
+    pub segmented_sdo: bool,
+}
+
+impl CoeInfo {
+    /// What the oxicat stack implements: SDO, SDO info, complete access, segmented SDO.
+    pub const STACK: CoeInfo = CoeInfo {
+        enabled: true,
+        sdo_info: true,
+        complete_access: true,
+        pdo_upload: false,
+        segmented_sdo: true,
+    };
+}
+
+/// One DC operation mode (ESI `Dc/OpMode`, SII DC category entry).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct DcOpMode {
+    /// Short name (e.g. `DC_Sync0`).
+    pub name: &'static str,
+    /// Description shown by configuration tools.
+    pub desc: &'static str,
+    /// Value for the DC activation register 0x0980/0x0981 (0x0300: SYNC0, 0x0700: SYNC0+1).
+    pub assign_activate: u16,
+    /// SYNC0 cycle time in ns (0: the master's cycle time times `sync0_factor`).
+    pub cycle_sync0: u32,
+    /// SYNC0 cycle factor (multiples of the master cycle).
+    pub sync0_factor: i16,
+    /// SYNC0 shift time in ns.
+    pub shift_sync0: u32,
+    /// SYNC1 cycle factor.
+    pub sync1_factor: i16,
+    /// SYNC1 shift time in ns.
+    pub shift_sync1: u32,
+}
+
+impl DcOpMode {
+    /// Free run / SM-synchronous: no DC activation.
+    pub const SM_SYNCHRON: DcOpMode = DcOpMode {
+        name: "SM_Synchron",
+        desc: "SM-Synchron",
+        assign_activate: 0,
+        cycle_sync0: 0,
+        sync0_factor: 0,
+        shift_sync0: 0,
+        sync1_factor: 0,
+        shift_sync1: 0,
+    };
+    /// DC SYNC0 with the master's cycle time.
+    pub const DC_SYNC0: DcOpMode = DcOpMode {
+        name: "DC_Sync0",
+        desc: "DC-Synchron (SYNC0)",
+        assign_activate: 0x0300,
+        cycle_sync0: 0,
+        sync0_factor: 1,
+        shift_sync0: 0,
+        sync1_factor: 0,
+        shift_sync1: 0,
+    };
+    /// DC SYNC0 + SYNC1 (application on SYNC0, input latch on SYNC1), as in the thesis.
+    pub const DC_SYNC01: DcOpMode = DcOpMode {
+        name: "DC_Sync01",
+        desc: "DC-Synchron (SYNC0 + SYNC1)",
+        assign_activate: 0x0700,
+        cycle_sync0: 0,
+        sync0_factor: 1,
+        shift_sync0: 0,
+        sync1_factor: 1,
+        shift_sync1: 0,
+    };
+}
+
+/// Sync manager control bytes (register 0x0804) of the four standard SMs.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct SmControl {
+    /// SM0, mailbox out (default 0x26: mailbox, write, PDI IRQ).
+    pub mbx_out: u8,
+    /// SM1, mailbox in (default 0x22).
+    pub mbx_in: u8,
+    /// SM2, outputs (default 0x64: 3-buffer, write, PDI IRQ, watchdog).
+    pub outputs: u8,
+    /// SM3, inputs (default 0x20: 3-buffer, read).
+    pub inputs: u8,
+}
+
+/// Description data for ESI and SII that the stack itself does not use.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct DeviceInfo {
+    /// Vendor name (ESI `Vendor/Name`).
+    pub vendor_name: &'static str,
+    /// Group of the device.
+    pub group: Group,
+    /// Order code / device type name (ESI `Type` text; SII order string).
+    pub order_code: &'static str,
+    /// Optional description (ESI `Comment`).
+    pub description: Option<&'static str>,
+    /// Optional image name (SII image string; ESI `Image16x14`).
+    pub image: Option<&'static str>,
+    /// Port physics, one letter per port (`Y`: MII/100BASE-TX, `K`: E-bus).
+    pub physics: &'static str,
+    /// CoE profile number (ESI `Profile/ProfileNo`; 5001 generic modular device).
+    pub profile_no: u32,
+    /// ESC configuration area.
+    pub esc: EscConfigArea,
+    /// EEPROM size in bytes (power of two, at least 256).
+    pub eeprom_bytes: u32,
+    /// SII version word (0x3F).
+    pub sii_version: u16,
+    /// FMMU usage, in FMMU order.
+    pub fmmus: &'static [FmmuUsage],
+    /// SM control bytes.
+    pub sm_control: SmControl,
+    /// Minimum and maximum mailbox sizes a master may configure (ESI `MinSize`/`MaxSize`).
+    pub mailbox_size_range: Option<(u16, u16)>,
+    /// CoE details.
+    pub coe: CoeInfo,
+    /// FoE supported.
+    pub foe: bool,
+    /// EoE supported.
+    pub eoe: bool,
+    /// DC operation modes (empty: no `Dc` element, no DC category).
+    pub dc_modes: &'static [DcOpMode],
+    /// Current consumption from the E-bus in mA (negative: feeds current).
+    pub ebus_current_ma: i16,
+}
+
+impl DeviceInfo {
+    /// Defaults: SPI PDI, 2 KiB EEPROM, FMMUs Outputs/Inputs/MBoxState, standard SM control
+    /// bytes, CoE as the stack implements it, no DC modes.
+    pub const DEFAULT: DeviceInfo = DeviceInfo {
+        vendor_name: "",
+        group: Group {
+            type_name: "",
+            name: "",
+        },
+        order_code: "",
+        description: None,
+        image: None,
+        physics: "YY",
+        profile_no: 5001,
+        esc: EscConfigArea::SPI,
+        eeprom_bytes: 2048,
+        sii_version: 1,
+        fmmus: &[
+            FmmuUsage::Outputs,
+            FmmuUsage::Inputs,
+            FmmuUsage::SyncManagerStatus,
+        ],
+        sm_control: SmControl {
+            mbx_out: 0x26,
+            mbx_in: 0x22,
+            outputs: 0x64,
+            inputs: 0x20,
+        },
+        mailbox_size_range: None,
+        coe: CoeInfo::STACK,
+        foe: false,
+        eoe: false,
+        dc_modes: &[],
+        ebus_current_ma: 0,
+    };
 }

@@ -604,6 +604,19 @@ impl Obj {
     }
 }
 
+/// Public description of one object of an [`Od`] ([`Od::object_info`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct ObjectInfo {
+    /// Index.
+    pub index: u16,
+    /// Name.
+    pub name: &'static str,
+    /// Object code.
+    pub code: ObjectCode,
+    /// Entries in subindex order.
+    pub entries: &'static [EntryDef],
+}
+
 /// Why a typed dictionary access failed.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum OdError {
@@ -913,6 +926,18 @@ impl<const N: usize> Od<N> {
             base: COMM_LOW_SIZE + COMM_HIGH_SIZE + slot * MAP_OBJ_SIZE,
             kind,
         }
+    }
+
+    /// The `n`-th object in index order (communication and application objects), as the
+    /// SDO information service lists it; for listings such as the ESI dictionary.
+    pub fn object_info(&self, n: usize) -> Option<ObjectInfo> {
+        let o = self.object_at(n)?;
+        Some(ObjectInfo {
+            index: o.index,
+            name: o.name,
+            code: o.code,
+            entries: o.entries,
+        })
     }
 
     /// Finds an object by index.

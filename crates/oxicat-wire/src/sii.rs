@@ -922,6 +922,17 @@ pub enum FmmuUsage {
 }
 
 impl FmmuUsage {
+    /// The usage byte (unused: 0x00).
+    pub const fn code(self) -> u8 {
+        match self {
+            Self::Unused => 0,
+            Self::Outputs => 1,
+            Self::Inputs => 2,
+            Self::SyncManagerStatus => 3,
+            Self::Other(o) => o,
+        }
+    }
+
     /// Decodes a usage byte.
     pub const fn from_u8(v: u8) -> Self {
         match v {
@@ -977,6 +988,25 @@ pub struct SiiDc {
     pub desc_idx: u8,
     /// Reserved bytes.
     pub reserved: [u8; 4],
+}
+
+impl SiiDc {
+    /// Writes the 24-byte entry.
+    pub fn write(&self, b: &mut [u8]) -> Result<usize, WireError> {
+        if b.len() < Self::LEN {
+            return Err(WireError::BufferFull);
+        }
+        b[0..4].copy_from_slice(&self.cycle_time0.to_le_bytes());
+        b[4..8].copy_from_slice(&self.shift_time0.to_le_bytes());
+        b[8..12].copy_from_slice(&self.shift_time1.to_le_bytes());
+        b[12..14].copy_from_slice(&self.sync1_cycle_factor.to_le_bytes());
+        b[14..16].copy_from_slice(&self.assign_activate.to_le_bytes());
+        b[16..18].copy_from_slice(&self.sync0_cycle_factor.to_le_bytes());
+        b[18] = self.name_idx;
+        b[19] = self.desc_idx;
+        b[20..24].copy_from_slice(&self.reserved);
+        Ok(Self::LEN)
+    }
 }
 
 impl SiiEntry for SiiDc {

@@ -1,0 +1,794 @@
+//! ESI XML (ETG.2000 `EtherCATInfo`) from a definition, and ESI XML → [`DeviceModel`]s.
+//!
+//! Element names and order follow the ESI files of SSC/SOES/KickCAT devices (and so what
+//! TwinCAT reads): `Vendor`, `Descriptions/Groups/Group`, `Devices/Device` with `Type`,
+//! `Name`, `Comment`, `Info`, `GroupType`, `Profile/Dictionary` (`DataTypes`, `Objects`),
+//! `Fmmu`, `Sm`, `RxPdo`, `TxPdo`, `Mailbox`, `Dc`, `Eeprom`.
+
+use std::fmt::Write as _;
+
+use oxicat_slave::device::DeviceDef;
+use oxicat_slave::od::ObjectInfo;
+use oxicat_slave::{Access, DataType, EntryDef, ObjectCode, PdoMapping};
+use roxmltree::Node;
+
+use crate::model::{
+    config_bytes, esi_type_name, hex, type_code, CoeModel, DcModel, DeviceModel, EepromModel,
+    EntryModel, FmmuKind, MailboxModel, ObjectModel, PdoModel, SmKind, SmModel,
+};
+use crate::od::{objects, value_text, OdSnapshot};
+use crate::Error;
+
+/// Escapes text for XML element content and attribute values.
+pub fn escape(s: &str) -> String {
+    let mut o = String::with_capacity(s.len());
+    for c in s.chars() {
+        match c {
+            '&' => o.push_str("&amp;"),
+            '<' => o.push_str("&lt;"),
+            '>' => o.push_str("&gt;"),
+            '"' => o.push_str("&quot;"),
+            '\'' => o.push_str("&apos;"),
+            c => o.push(c),
+        }
+    }
+    o
+}
+
+/// A minimal indenting XML writer.
+struct Xml {
+    out: String,
+    stack: Vec<&'static str>,
+}
+
+impl Xml {
+    fn new() -> Self {
+        Self {
+            out: String::from("<?xml version=\"1.0\" encoding=\"UTF-8\"?>\n"),
+            stack: Vec::new(),
+        }
+    }
+    fn indent(&mut self) {
+        for _ in 0..self.stack.len() {
+            self.out.push_str("  ");
+        }
+    }
+    fn attrs(&mut self, attrs: &[(&str, String)]) {
+        for (k, v) in attrs {
+            let _ = write!(self.out, " {k}=\"{}\"", escape(v));
+        }
+    }
+    fn open(&mut self, name: &'static str, attrs: &[(&str, String)]) {
+        self.indent();
+        self.out.push('<');
+        self.out.push_str(name);
+        self.attrs(attrs);
+        self.out.push_str(">\n");
+        self.stack.push(name);
+    }
+    fn close(&mut self) {
+        if let Some(n) = self.stack.pop() {
+            self.indent();
+            let _ = writeln!(self.out, "</{n}>");
+        }
+    }
+    fn leaf(&mut self, name: &str, attrs: &[(&str, String)], text: &str) {
+        self.indent();
+        self.out.push('<');
+        self.out.push_str(name);
+        self.attrs(attrs);
+        let _ = writeln!(self.out, ">{}</{name}>", escape(text));
+    }
+    fn empty(&mut self, name: &str, attrs: &[(&str, String)]) {
+        self.indent();
+        self.out.push('<');
+        self.out.push_str(name);
+        self.attrs(attrs);
+        self.out.push_str("/>\n");
+    }
+    fn text(&mut self, name: &str, text: &str) {
+        self.leaf(name, &[], text);
+    }
+}
+
+fn hx(v: u32, digits: usize) -> String {
+    format!("#x{v:0digits$X}")
+}
+
+fn b(v: bool) -> String {
+    if v { "true" } else { "false" }.to_string()
+}
+
+fn access_flags(x: &mut Xml, a: Access, pdo: PdoMapping) {
+    x.open("Flags", &[]);
+    let text = if a.writable() && a.readable() {
+        "rw"
+    } else if a.writable() {
+        "wo"
+    } else {
+        "ro"
+    };
+    let mut attrs = Vec::new();
+    if a.writable() {
+        let w = a.0 >> 3 & 7;
+        let r = match w {
+            1 => Some("PreOP"),
+            3 => Some("PreOP_SafeOP"),
+            2 => Some("SafeOP"),
+            6 => Some("SafeOP_OP"),
+            4 => Some("OP"),
+            _ => None,
+        };
+        if let Some(r) = r {
+            attrs.push(("WriteRestrictions", r.to_string()));
+        }
+    }
+    x.leaf("Access", &attrs, text);
+    match pdo {
+        PdoMapping::None => {}
+        PdoMapping::Rx => x.text("PdoMapping", "R"),
+        PdoMapping::Tx => x.text("PdoMapping", "T"),
+        PdoMapping::RxTx => x.text("PdoMapping", "RT"),
+    }
+    x.close();
+}
+
+/// Bit offset layout of a record/array as SSC and TwinCAT lay it out: subindex 0 at 0,
+/// entries from bit 16 on, byte-sized entries byte-aligned, BOOLs packed.
+fn layout(entries: &[EntryDef]) -> (Vec<u32>, u32) {
+    let mut offs = Vec::with_capacity(entries.len());
+    let mut pos = 0u32;
+    for (i, e) in entries.iter().enumerate() {
+        if i == 1 {
+            pos = 16;
+        }
+        if e.bits & 7 == 0 {
+            pos = pos.div_ceil(8) * 8;
+        }
+        offs.push(pos);
+        pos += e.bits as u32;
+    }
+    (offs, pos.div_ceil(8) * 8)
+}
+
+fn dt_name(o: &ObjectInfo) -> String {
+    match o.code {
+        ObjectCode::Var => o
+            .entries
+            .first()
+            .map_or_else(|| "USINT".into(), |e| esi_type_name(e.dtype, e.bits)),
+        _ => format!("DT{:04X}", o.index),
+    }
+}
+
+fn data_types(x: &mut Xml, objs: &[ObjectInfo]) {
+    x.open("DataTypes", &[]);
+    let mut base: Vec<(String, u16)> = Vec::new();
+    let mut add_base = |t: DataType, bits: u16| {
+        let n = esi_type_name(t, bits);
+        if !base.iter().any(|(m, _)| *m == n) {
+            base.push((n, bits));
+        }
+    };
+    for o in objs {
+        for e in o.entries {
+            add_base(e.dtype, e.bits);
+        }
+    }
+    for o in objs.iter().filter(|o| o.code != ObjectCode::Var) {
+        let name = dt_name(o);
+        if o.code == ObjectCode::Array {
+            let el = &o.entries[1..];
+            let (t, bits) = el
+                .first()
+                .map_or((DataType::Unsigned8, 8), |e| (e.dtype, e.bits));
+            let n = el.len() as u32;
+            x.open("DataType", &[]);
+            x.text("Name", &format!("{name}ARR"));
+            x.text("BaseType", &esi_type_name(t, bits));
+            x.text("BitSize", &(n * bits as u32).to_string());
+            x.open("ArrayInfo", &[]);
+            x.text("LBound", "1");
+            x.text("Elements", &n.to_string());
+            x.close();
+            x.close();
+            x.open("DataType", &[]);
+            x.text("Name", &name);
+            x.text("BitSize", &(16 + n * bits as u32).to_string());
+            sub_item(x, 0, &o.entries[0], "USINT", 8, 0);
+            let a = el.first().map_or(Access::RO, |e| e.access);
+            x.open("SubItem", &[]);
+            x.text("Name", "Elements");
+            x.text("Type", &format!("{name}ARR"));
+            x.text("BitSize", &(n * bits as u32).to_string());
+            x.text("BitOffs", "16");
+            access_flags(x, a, el.first().map_or(PdoMapping::None, |e| e.pdo));
+            x.close();
+            x.close();
+        } else {
+            let (offs, total) = layout(o.entries);
+            x.open("DataType", &[]);
+            x.text("Name", &name);
+            x.text("BitSize", &total.to_string());
+            for (e, off) in o.entries.iter().zip(offs) {
+                let t = esi_type_name(e.dtype, e.bits);
+                sub_item(x, e.sub, e, &t, e.bits as u32, off);
+            }
+            x.close();
+        }
+    }
+    for (n, bits) in base {
+        x.open("DataType", &[]);
+        x.text("Name", &n);
+        x.text("BitSize", &bits.to_string());
+        x.close();
+    }
+    x.close();
+}
+
+fn sub_item(x: &mut Xml, sub: u8, e: &EntryDef, t: &str, bits: u32, off: u32) {
+    x.open("SubItem", &[]);
+    x.text("SubIdx", &sub.to_string());
+    x.text("Name", e.name);
+    x.text("Type", t);
+    x.text("BitSize", &bits.to_string());
+    x.text("BitOffs", &off.to_string());
+    access_flags(x, e.access, e.pdo);
+    x.close();
+}
+
+fn default_info(x: &mut Xml, od: &OdSnapshot, index: u16, e: &EntryDef) {
+    x.open("Info", &[]);
+    let v = value_text(od, index, e);
+    if e.dtype == DataType::VisibleString {
+        x.text("DefaultString", &v);
+    } else {
+        x.text("DefaultData", &od.default_data(index, e.sub));
+    }
+    x.close();
+}
+
+fn objects_xml(x: &mut Xml, od: &OdSnapshot, objs: &[ObjectInfo]) {
+    x.open("Objects", &[]);
+    for o in objs {
+        x.open("Object", &[]);
+        x.text("Index", &hx(o.index as u32, 4));
+        x.text("Name", o.name);
+        let (bits, ty) = match o.code {
+            ObjectCode::Var => (o.entries.first().map_or(0, |e| e.bits as u32), dt_name(o)),
+            ObjectCode::Array => {
+                let n = (o.entries.len() - 1) as u32;
+                let b = o.entries.get(1).map_or(0, |e| e.bits as u32);
+                (16 + n * b, dt_name(o))
+            }
+            ObjectCode::Record => (layout(o.entries).1, dt_name(o)),
+        };
+        x.text("Type", &ty);
+        x.text("BitSize", &bits.to_string());
+        match o.code {
+            ObjectCode::Var => {
+                if let Some(e) = o.entries.first() {
+                    default_info(x, od, o.index, e);
+                    access_flags(x, e.access, e.pdo);
+                }
+            }
+            _ => {
+                x.open("Info", &[]);
+                for e in o.entries {
+                    x.open("SubItem", &[]);
+                    x.text("Name", e.name);
+                    x.open("Info", &[]);
+                    if e.dtype == DataType::VisibleString {
+                        x.text("DefaultString", &value_text(od, o.index, e));
+                    } else {
+                        x.text("DefaultData", &od.default_data(o.index, e.sub));
+                    }
+                    x.close();
+                    x.close();
+                }
+                x.close();
+                x.open("Flags", &[]);
+                x.text("Access", "ro");
+                x.close();
+            }
+        }
+        x.close();
+    }
+    x.close();
+}
+
+fn pdo_xml(x: &mut Xml, def: &DeviceDef, tag: &'static str, p: &oxicat_slave::PdoDef, sm: u8) {
+    let assign = if sm == 2 {
+        def.rx_assign
+    } else {
+        def.tx_assign
+    };
+    let assigned = assign.contains(&p.index);
+    let mut attrs = Vec::new();
+    if !p.configurable {
+        attrs.push(("Fixed", "true".to_string()));
+    }
+    if assigned && !def.assign_configurable {
+        attrs.push(("Mandatory", "true".to_string()));
+    }
+    if assigned {
+        attrs.push(("Sm", sm.to_string()));
+    }
+    x.open(tag, &attrs);
+    x.text("Index", &hx(p.index as u32, 4));
+    x.text("Name", p.name);
+    for e in p.entries {
+        x.open("Entry", &[]);
+        x.text("Index", &hx(e.index as u32, 4));
+        if e.index != 0 {
+            x.text("SubIndex", &e.sub.to_string());
+        }
+        x.text("BitLen", &e.bits.to_string());
+        if let Some(en) = def
+            .object(e.index)
+            .and_then(|o| o.entries.iter().find(|x| x.sub == e.sub))
+        {
+            x.text("Name", en.name);
+            x.text("DataType", &esi_type_name(en.dtype, en.bits));
+        }
+        x.close();
+    }
+    x.close();
+}
+
+/// Generates the ESI XML of a definition.
+pub fn generate(def: &'static DeviceDef) -> Result<String, Error> {
+    let od = OdSnapshot::new(def)?;
+    let objs = objects(&od);
+    let i = &def.info;
+    let mut x = Xml::new();
+    x.open(
+        "EtherCATInfo",
+        &[
+            (
+                "xmlns:xsi",
+                "http://www.w3.org/2001/XMLSchema-instance".into(),
+            ),
+            ("xsi:noNamespaceSchemaLocation", "EtherCATInfo.xsd".into()),
+            ("Version", "1.6".into()),
+        ],
+    );
+    x.open("Vendor", &[]);
+    x.text("Id", &hx(def.identity.vendor_id, 8));
+    x.leaf("Name", &[("LcId", "1033".into())], i.vendor_name);
+    x.close();
+    x.open("Descriptions", &[]);
+    x.open("Groups", &[]);
+    x.open("Group", &[]);
+    x.text("Type", i.group.type_name);
+    x.leaf("Name", &[("LcId", "1033".into())], i.group.name);
+    x.close();
+    x.close();
+    x.open("Devices", &[]);
+    x.open("Device", &[("Physics", i.physics.into())]);
+    x.leaf(
+        "Type",
+        &[
+            ("ProductCode", hx(def.identity.product_code, 8)),
+            ("RevisionNo", hx(def.identity.revision, 8)),
+        ],
+        i.order_code,
+    );
+    x.leaf("Name", &[("LcId", "1033".into())], def.name);
+    if let Some(c) = i.description {
+        x.text("Comment", c);
+    }
+    if i.ebus_current_ma != 0 {
+        x.open("Info", &[]);
+        x.open("Electrical", &[]);
+        x.text("EBusCurrent", &i.ebus_current_ma.to_string());
+        x.close();
+        x.close();
+    }
+    x.text("GroupType", i.group.type_name);
+    x.open("Profile", &[]);
+    x.text("ProfileNo", &i.profile_no.to_string());
+    x.text("AddInfo", "0");
+    x.open("Dictionary", &[]);
+    data_types(&mut x, &objs);
+    objects_xml(&mut x, &od, &objs);
+    x.close();
+    x.close();
+    for f in i.fmmus {
+        let t = match f.code() {
+            1 => "Outputs",
+            2 => "Inputs",
+            3 => "MBoxState",
+            _ => continue,
+        };
+        x.text("Fmmu", t);
+    }
+    let m = def.mailbox;
+    let c = i.sm_control;
+    let ob = def.default_output_bits().div_ceil(8);
+    let ib = def.default_input_bits().div_ceil(8);
+    let mbx_attrs = |size: u16, start: u16, ctrl: u8| {
+        let mut a = Vec::new();
+        if let Some((lo, hi)) = i.mailbox_size_range {
+            a.push(("MinSize", lo.to_string()));
+            a.push(("MaxSize", hi.to_string()));
+        }
+        a.push(("DefaultSize", size.to_string()));
+        a.push(("StartAddress", hx(start as u32, 4)));
+        a.push(("ControlByte", hx(ctrl as u32, 2)));
+        a.push(("Enable", "1".into()));
+        a
+    };
+    x.leaf("Sm", &mbx_attrs(m.rx_len, m.rx_start, c.mbx_out), "MBoxOut");
+    x.leaf("Sm", &mbx_attrs(m.tx_len, m.tx_start, c.mbx_in), "MBoxIn");
+    for (size, start, ctrl, name) in [
+        (ob, def.sm2_start, c.outputs, "Outputs"),
+        (ib, def.sm3_start, c.inputs, "Inputs"),
+    ] {
+        x.leaf(
+            "Sm",
+            &[
+                ("DefaultSize", size.to_string()),
+                ("StartAddress", hx(start as u32, 4)),
+                ("ControlByte", hx(ctrl as u32, 2)),
+                ("Enable", u8::from(size > 0).to_string()),
+            ],
+            name,
+        );
+    }
+    for p in def.rx_pdos {
+        pdo_xml(&mut x, def, "RxPdo", p, 2);
+    }
+    for p in def.tx_pdos {
+        pdo_xml(&mut x, def, "TxPdo", p, 3);
+    }
+    x.open("Mailbox", &[("DataLinkLayer", "true".into())]);
+    if i.coe.enabled {
+        let cd = def.coe_details();
+        x.empty(
+            "CoE",
+            &[
+                ("SdoInfo", b(cd & 0x02 != 0)),
+                ("PdoAssign", b(cd & 0x04 != 0)),
+                ("PdoConfig", b(cd & 0x08 != 0)),
+                ("PdoUpload", b(cd & 0x10 != 0)),
+                ("CompleteAccess", b(cd & 0x20 != 0)),
+                ("SegmentedSdo", b(i.coe.segmented_sdo)),
+            ],
+        );
+    }
+    if i.eoe {
+        x.empty("EoE", &[]);
+    }
+    if i.foe {
+        x.empty("FoE", &[]);
+    }
+    x.close();
+    if !i.dc_modes.is_empty() {
+        x.open("Dc", &[]);
+        for d in i.dc_modes {
+            x.open("OpMode", &[]);
+            x.text("Name", d.name);
+            x.text("Desc", d.desc);
+            x.text("AssignActivate", &hx(d.assign_activate as u32, 4));
+            if d.assign_activate & 0x0300 != 0 {
+                x.leaf(
+                    "CycleTimeSync0",
+                    &[("Factor", d.sync0_factor.to_string())],
+                    &d.cycle_sync0.to_string(),
+                );
+                x.text("ShiftTimeSync0", &d.shift_sync0.to_string());
+            }
+            if d.assign_activate & 0x0400 != 0 {
+                x.leaf(
+                    "CycleTimeSync1",
+                    &[("Factor", d.sync1_factor.to_string())],
+                    "0",
+                );
+                x.text("ShiftTimeSync1", &d.shift_sync1.to_string());
+            }
+            x.close();
+        }
+        x.close();
+    }
+    x.open("Eeprom", &[]);
+    x.text("ByteSize", &i.eeprom_bytes.to_string());
+    x.text("ConfigData", &hex(&config_bytes(def)));
+    if let Some(bm) = def.boot_mailbox {
+        let mut v = Vec::new();
+        for w in [bm.rx_start, bm.rx_len, bm.tx_start, bm.tx_len] {
+            v.extend_from_slice(&w.to_le_bytes());
+        }
+        x.text("BootStrap", &hex(&v));
+    }
+    x.close();
+    while !x.stack.is_empty() {
+        x.close();
+    }
+    Ok(x.out)
+}
+
+// ------------------------------------------------------------------------------ parser
+
+/// Parses an ESI number: `#x1A00` hex, `0x..` hex, or decimal (optionally negative).
+pub fn parse_num(s: &str) -> Option<i64> {
+    let s = s.trim();
+    if let Some(h) = s.strip_prefix("#x").or_else(|| s.strip_prefix("#X")) {
+        i64::from_str_radix(h, 16).ok()
+    } else if let Some(h) = s.strip_prefix("0x").or_else(|| s.strip_prefix("0X")) {
+        i64::from_str_radix(h, 16).ok()
+    } else {
+        s.parse().ok()
+    }
+}
+
+fn parse_bool(s: &str) -> Option<bool> {
+    match s.trim() {
+        "1" | "true" => Some(true),
+        "0" | "false" => Some(false),
+        _ => None,
+    }
+}
+
+fn parse_hex_bytes(s: &str) -> Option<Vec<u8>> {
+    let s: String = s.chars().filter(|c| !c.is_whitespace()).collect();
+    if s.len() & 1 != 0 {
+        return None;
+    }
+    (0..s.len() / 2)
+        .map(|i| u8::from_str_radix(&s[2 * i..2 * i + 2], 16).ok())
+        .collect()
+}
+
+fn child<'a, 'i>(n: Node<'a, 'i>, name: &str) -> Option<Node<'a, 'i>> {
+    n.children().find(|c| c.has_tag_name(name))
+}
+
+fn children<'a, 'i: 'a>(n: Node<'a, 'i>, name: &'a str) -> impl Iterator<Item = Node<'a, 'i>> + 'a {
+    n.children().filter(move |c| c.has_tag_name(name))
+}
+
+fn text_of(n: Option<Node>) -> Option<String> {
+    n.map(|n| n.text().unwrap_or("").trim().to_string())
+}
+
+fn num<T: TryFrom<i64>>(what: &'static str, s: &str) -> Result<T, Error> {
+    parse_num(s)
+        .and_then(|v| T::try_from(v).ok())
+        .ok_or_else(|| Error::BadValue {
+            what,
+            text: s.to_string(),
+        })
+}
+
+fn num_u32(what: &'static str, s: &str) -> Result<u32, Error> {
+    // Product codes and vendor IDs may be written as negative decimals (signed 32-bit).
+    let v = parse_num(s).ok_or_else(|| Error::BadValue {
+        what,
+        text: s.to_string(),
+    })?;
+    if (i32::MIN as i64..=u32::MAX as i64).contains(&v) {
+        Ok(v as u32)
+    } else {
+        Err(Error::BadValue {
+            what,
+            text: s.to_string(),
+        })
+    }
+}
+
+fn attr_num<T: TryFrom<i64>>(n: Node, a: &'static str) -> Result<Option<T>, Error> {
+    n.attribute(a).map(|v| num(a, v)).transpose()
+}
+
+fn attr_bool(n: Node, a: &'static str) -> Result<bool, Error> {
+    match n.attribute(a) {
+        None => Ok(false),
+        Some(v) => parse_bool(v).ok_or_else(|| Error::BadValue {
+            what: a,
+            text: v.to_string(),
+        }),
+    }
+}
+
+fn pdo(n: Node) -> Result<PdoModel, Error> {
+    let index = num(
+        "Pdo/Index",
+        &text_of(child(n, "Index")).ok_or(Error::Missing("Pdo/Index"))?,
+    )?;
+    let mut entries = Vec::new();
+    for e in children(n, "Entry") {
+        let idx = text_of(child(e, "Index")).ok_or(Error::Missing("Entry/Index"))?;
+        let bits = text_of(child(e, "BitLen")).ok_or(Error::Missing("Entry/BitLen"))?;
+        let sub = match text_of(child(e, "SubIndex")) {
+            Some(s) => num("Entry/SubIndex", &s)?,
+            None => 0,
+        };
+        entries.push(EntryModel {
+            index: num("Entry/Index", &idx)?,
+            sub,
+            bits: num("Entry/BitLen", &bits)?,
+            name: text_of(child(e, "Name")).filter(|s| !s.is_empty()),
+            data_type: text_of(child(e, "DataType")).and_then(|t| type_code(&t)),
+        });
+    }
+    Ok(PdoModel {
+        index,
+        name: text_of(child(n, "Name")),
+        sm: attr_num(n, "Sm")?,
+        fixed: attr_bool(n, "Fixed")?,
+        mandatory: attr_bool(n, "Mandatory")?,
+        entries,
+    })
+}
+
+fn device(vendor_id: u32, vendor_name: Option<String>, d: Node) -> Result<DeviceModel, Error> {
+    let t = child(d, "Type").ok_or(Error::Missing("Device/Type"))?;
+    let mut m = DeviceModel {
+        vendor_id,
+        vendor_name,
+        product_code: t
+            .attribute("ProductCode")
+            .map(|v| num_u32("ProductCode", v))
+            .transpose()?
+            .unwrap_or(0),
+        revision: t
+            .attribute("RevisionNo")
+            .map(|v| num_u32("RevisionNo", v))
+            .transpose()?
+            .unwrap_or(0),
+        name: text_of(child(d, "Name")),
+        order_code: Some(t.text().unwrap_or("").trim().to_string()),
+        group_type: text_of(child(d, "GroupType")),
+        ..Default::default()
+    };
+    for f in children(d, "Fmmu") {
+        m.fmmus.push(match f.text().unwrap_or("").trim() {
+            "Outputs" => FmmuKind::Outputs,
+            "Inputs" => FmmuKind::Inputs,
+            "MBoxState" => FmmuKind::MBoxState,
+            _ => FmmuKind::Other,
+        });
+    }
+    for s in children(d, "Sm") {
+        m.sms.push(SmModel {
+            kind: match s.text().unwrap_or("").trim() {
+                "MBoxOut" => SmKind::MBoxOut,
+                "MBoxIn" => SmKind::MBoxIn,
+                "Outputs" => SmKind::Outputs,
+                "Inputs" => SmKind::Inputs,
+                _ => SmKind::Other,
+            },
+            start: attr_num(s, "StartAddress")?.unwrap_or(0),
+            default_size: attr_num(s, "DefaultSize")?,
+            control: attr_num(s, "ControlByte")?.unwrap_or(0),
+            enable: attr_bool(s, "Enable")?,
+        });
+    }
+    for p in children(d, "RxPdo") {
+        m.rx_pdos.push(pdo(p)?);
+    }
+    for p in children(d, "TxPdo") {
+        m.tx_pdos.push(pdo(p)?);
+    }
+    if let Some(mb) = child(d, "Mailbox") {
+        let coe = match child(mb, "CoE") {
+            Some(c) => Some(CoeModel {
+                sdo_info: attr_bool(c, "SdoInfo")?,
+                pdo_assign: attr_bool(c, "PdoAssign")?,
+                pdo_config: attr_bool(c, "PdoConfig")?,
+                pdo_upload: attr_bool(c, "PdoUpload")?,
+                complete_access: attr_bool(c, "CompleteAccess")?,
+            }),
+            None => None,
+        };
+        m.mailbox = Some(MailboxModel {
+            coe,
+            foe: child(mb, "FoE").is_some(),
+            eoe: child(mb, "EoE").is_some(),
+            soe: child(mb, "SoE").is_some(),
+        });
+    }
+    if let Some(dc) = child(d, "Dc") {
+        for o in children(dc, "OpMode") {
+            let n = |name: &'static str| -> Result<i64, Error> {
+                match text_of(child(o, name)) {
+                    Some(s) if !s.is_empty() => num(name, &s),
+                    _ => Ok(0),
+                }
+            };
+            let factor = |name: &str| -> Result<i16, Error> {
+                match child(o, name) {
+                    Some(c) => Ok(attr_num(c, "Factor")?.unwrap_or(1)),
+                    None => Ok(0),
+                }
+            };
+            m.dc.push(DcModel {
+                name: text_of(child(o, "Name")),
+                desc: text_of(child(o, "Desc")),
+                assign_activate: num(
+                    "AssignActivate",
+                    &text_of(child(o, "AssignActivate")).unwrap_or_else(|| "0".into()),
+                )?,
+                cycle0: u32::try_from(n("CycleTimeSync0")?).unwrap_or(0),
+                shift0: n("ShiftTimeSync0")?,
+                sync0_factor: factor("CycleTimeSync0")?,
+                sync1_factor: factor("CycleTimeSync1")?,
+                shift1: n("ShiftTimeSync1")?,
+            });
+        }
+    }
+    if let Some(e) = child(d, "Eeprom") {
+        let bad = |what: &'static str, t: String| Error::BadValue { what, text: t };
+        let cd = text_of(child(e, "ConfigData")).unwrap_or_default();
+        let bs = text_of(child(e, "BootStrap"));
+        let bootstrap = match bs {
+            Some(s) => {
+                let v = parse_hex_bytes(&s)
+                    .filter(|v| v.len() >= 8)
+                    .ok_or_else(|| bad("BootStrap", s.clone()))?;
+                let w = |i: usize| u16::from_le_bytes([v[2 * i], v[2 * i + 1]]);
+                Some([w(0), w(1), w(2), w(3)])
+            }
+            None => None,
+        };
+        m.eeprom = Some(EepromModel {
+            byte_size: match text_of(child(e, "ByteSize")) {
+                Some(s) => num("ByteSize", &s)?,
+                None => 0,
+            },
+            config_data: parse_hex_bytes(&cd).ok_or_else(|| bad("ConfigData", cd.clone()))?,
+            bootstrap,
+        });
+    }
+    if let Some(dict) = child(d, "Profile").and_then(|p| child(p, "Dictionary")) {
+        if let Some(objs) = child(dict, "Objects") {
+            let types = child(dict, "DataTypes");
+            for o in children(objs, "Object") {
+                let idx = text_of(child(o, "Index")).ok_or(Error::Missing("Object/Index"))?;
+                let type_name = text_of(child(o, "Type")).unwrap_or_default();
+                let sub_names = types
+                    .and_then(|t| {
+                        children(t, "DataType")
+                            .find(|dt| text_of(child(*dt, "Name")).as_deref() == Some(&type_name))
+                    })
+                    .map(|dt| {
+                        children(dt, "SubItem")
+                            .filter_map(|s| text_of(child(s, "Name")))
+                            .collect()
+                    })
+                    .unwrap_or_default();
+                m.objects.push(ObjectModel {
+                    index: num("Object/Index", &idx)?,
+                    name: text_of(child(o, "Name")).unwrap_or_default(),
+                    type_name,
+                    bit_size: match text_of(child(o, "BitSize")) {
+                        Some(s) => num("Object/BitSize", &s)?,
+                        None => 0,
+                    },
+                    sub_names,
+                });
+            }
+        }
+    }
+    Ok(m)
+}
+
+/// Parses ESI XML into one model per `Device` element.
+pub fn parse(xml: &str) -> Result<Vec<DeviceModel>, Error> {
+    let doc = roxmltree::Document::parse(xml).map_err(|e| Error::Xml(e.to_string()))?;
+    let root = doc.root_element();
+    if !root.has_tag_name("EtherCATInfo") {
+        return Err(Error::Missing("EtherCATInfo"));
+    }
+    let vendor = child(root, "Vendor").ok_or(Error::Missing("Vendor"))?;
+    let vid = text_of(child(vendor, "Id")).ok_or(Error::Missing("Vendor/Id"))?;
+    let vendor_id = num_u32("Vendor/Id", &vid)?;
+    let vendor_name = text_of(child(vendor, "Name"));
+    let devices = child(root, "Descriptions")
+        .and_then(|d| child(d, "Devices"))
+        .ok_or(Error::Missing("Descriptions/Devices"))?;
+    children(devices, "Device")
+        .map(|d| device(vendor_id, vendor_name.clone(), d))
+        .collect()
+}

@@ -1,0 +1,91 @@
+//! `oxicat-device`: device description tooling around the one static
+//! [`oxicat_slave::DeviceDef`] of a device.
+//!
+//! - [`esi::generate`]: definition → ESI XML (ETG.2000 `EtherCATInfo`),
+//! - [`sii::generate`]: definition → SII EEPROM image (ETG.2010, built with
+//!   `oxicat_wire::sii`),
+//! - [`esi::parse`] / [`sii::parse`]: ESI XML / SII image → a comparable [`DeviceModel`],
+//! - [`model::from_def`] and [`check`]: the definition, its ESI and its SII compared field
+//!   by field; differences are typed [`Finding`]s,
+//! - [`od::table`]: the object dictionary as the stack serves it, as a text table.
+#![forbid(unsafe_code)]
+#![warn(missing_docs)]
+
+pub mod esi;
+pub mod model;
+pub mod od;
+pub mod sii;
+
+pub use model::{compare, DeviceModel, Finding};
+
+use oxicat_slave::DeviceDef;
+
+/// Errors of the generators and parsers.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum Error {
+    /// The XML is not well-formed.
+    Xml(String),
+    /// A required ESI element or attribute is missing.
+    Missing(&'static str),
+    /// An ESI value does not parse as a number / boolean.
+    BadValue {
+        /// Element or attribute.
+        what: &'static str,
+        /// The text found.
+        text: String,
+    },
+    /// The SII image is malformed.
+    Sii(oxicat_wire::WireError),
+    /// The definition does not fit the SII (too many strings, image too small…).
+    DoesNotFit(&'static str),
+    /// The definition is rejected by the stack's object dictionary.
+    Definition(String),
+}
+
+impl core::fmt::Display for Error {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        match self {
+            Error::Xml(e) => write!(f, "XML not well-formed: {e}"),
+            Error::Missing(w) => write!(f, "missing ESI element/attribute {w}"),
+            Error::BadValue { what, text } => write!(f, "bad value {text:?} for {what}"),
+            Error::Sii(e) => write!(f, "malformed SII: {e:?}"),
+            Error::DoesNotFit(w) => write!(f, "definition does not fit the SII: {w}"),
+            Error::Definition(e) => write!(f, "definition rejected: {e}"),
+        }
+    }
+}
+
+impl std::error::Error for Error {}
+
+impl From<oxicat_wire::WireError> for Error {
+    fn from(e: oxicat_wire::WireError) -> Self {
+        Error::Sii(e)
+    }
+}
+
+/// Three-way consistency check of a definition, its generated ESI and its generated SII:
+/// definition vs ESI, definition vs SII, ESI vs SII (each finding tagged with the pair).
+pub fn check(def: &'static DeviceDef) -> Result<Vec<(Pair, Finding)>, Error> {
+    let d = model::from_def(def);
+    let e = esi::parse(&esi::generate(def)?)?
+        .into_iter()
+        .next()
+        .ok_or(Error::Missing("Device"))?;
+    let s = sii::parse(&sii::generate(def)?)?;
+    let mut out = Vec::new();
+    out.extend(compare(&d, &e).into_iter().map(|f| (Pair::DefEsi, f)));
+    out.extend(compare(&d, &s).into_iter().map(|f| (Pair::DefSii, f)));
+    out.extend(compare(&e, &s).into_iter().map(|f| (Pair::EsiSii, f)));
+    Ok(out)
+}
+
+/// Which two descriptions a [`Finding`] of [`check`] compares (left, right).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Pair {
+    /// Definition vs generated ESI.
+    DefEsi,
+    /// Definition vs generated SII.
+    DefSii,
+    /// Generated ESI vs generated SII.
+    EsiSii,
+}

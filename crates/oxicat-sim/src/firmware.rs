@@ -1,0 +1,277 @@
+//! Firmware on a simulated ESC: a [`FirmwareNode`] hosts an `oxicat-slave` [`Slave`] and
+//! its [`Application`] behind one ESC of a [`Segment`] and delivers the firmware's events
+//! at their virtual times, as interrupts and the main loop do on a microcontroller:
+//!
+//! | MCU | simulator |
+//! |---|---|
+//! | PDI IRQ ISR | [`EscEvent::Irq`]: the ESC's IRQ line rose (e.g. a frame wrote SM2) → [`Slave::on_pdi_irq`] |
+//! | SYNC0 / SYNC1 ISR | [`EscEvent::Sync0`] / [`EscEvent::Sync1`] → [`Slave::on_sync0`] / [`Slave::on_sync1`] |
+//! | timer ISRs | periodic wakeups per [`FirmwareConfig::timers`] → [`Slave::on_timer`] |
+//! | main loop | a wakeup every [`FirmwareConfig::poll_period_ns`] → [`Slave::poll`] |
+//!
+//! The segment owns the ESC; the firmware gets `&mut Esc` (its [`oxicat_slave::Pdi`]) only
+//! while it handles an event. The stack and the application live behind a mutex shared with
+//! the [`FirmwareHandle`] a test or tool keeps to look at them between cycles.
+
+use std::sync::{Arc, Mutex, MutexGuard};
+
+use oxicat_esc::{Esc, PdiError};
+use oxicat_slave::{Application, DeviceDef, InitError, Slave};
+
+use crate::node::{EscEvent, Node};
+use crate::segment::{Segment, SlaveId, TopologyError};
+
+/// Default main-loop period: 50 µs of virtual time.
+pub const DEFAULT_POLL_PERIOD_NS: u64 = 50_000;
+
+/// How the simulated MCU runs the firmware.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct FirmwareConfig {
+    /// Virtual time between two main-loop passes ([`Slave::poll`]); at least 1 ns.
+    pub poll_period_ns: u64,
+    /// Periodic timers: `(id, period in ns)`, each delivered as [`Slave::on_timer`]`(id)`.
+    pub timers: Vec<(u8, u64)>,
+}
+
+impl Default for FirmwareConfig {
+    fn default() -> Self {
+        Self {
+            poll_period_ns: DEFAULT_POLL_PERIOD_NS,
+            timers: Vec::new(),
+        }
+    }
+}
+
+impl FirmwareConfig {
+    /// Adds a periodic timer `id` every `period_ns` (builder style).
+    pub fn timer(mut self, id: u8, period_ns: u64) -> Self {
+        self.timers.push((id, period_ns));
+        self
+    }
+
+    /// Sets the main-loop period (builder style).
+    pub fn poll_every(mut self, period_ns: u64) -> Self {
+        self.poll_period_ns = period_ns;
+        self
+    }
+}
+
+/// Counters of what the simulated MCU delivered.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct FirmwareCounters {
+    /// Main-loop passes.
+    pub polls: u64,
+    /// PDI interrupts.
+    pub irqs: u64,
+    /// SYNC0 interrupts.
+    pub sync0: u64,
+    /// SYNC1 interrupts.
+    pub sync1: u64,
+    /// Timer interrupts (all ids).
+    pub timers: u64,
+    /// PDI accesses the ESC refused (the event handler stopped there).
+    pub pdi_errors: u64,
+}
+
+/// The firmware of one node: the stack, the application and the MCU's schedule.
+pub struct Firmware<A, const N: usize, const M: usize> {
+    /// The slave stack.
+    pub slave: Slave<Esc, N, M>,
+    /// The application.
+    pub app: A,
+    /// What was delivered so far.
+    pub counters: FirmwareCounters,
+    /// The last PDI error, if any.
+    pub last_pdi_error: Option<PdiError>,
+    poll_period: u64,
+    next_poll: u64,
+    /// `(id, period, next due time)`.
+    timers: Vec<(u8, u64, u64)>,
+}
+
+impl<A: Application<N>, const N: usize, const M: usize> Firmware<A, N, M> {
+    fn note(&mut self, r: Result<(), PdiError>) {
+        if let Err(e) = r {
+            self.counters.pdi_errors += 1;
+            self.last_pdi_error = Some(e);
+        }
+    }
+
+    fn next_wakeup(&self) -> u64 {
+        self.timers
+            .iter()
+            .map(|t| t.2)
+            .fold(self.next_poll, u64::min)
+    }
+
+    fn event(&mut self, esc: &mut Esc, ev: EscEvent) {
+        let r = match ev {
+            EscEvent::Irq => {
+                self.counters.irqs += 1;
+                self.slave.on_pdi_irq(esc, &mut self.app)
+            }
+            EscEvent::Sync0 => {
+                self.counters.sync0 += 1;
+                self.slave.on_sync0(esc, &mut self.app)
+            }
+            EscEvent::Sync1 => {
+                self.counters.sync1 += 1;
+                self.slave.on_sync1(esc, &mut self.app)
+            }
+            // The watchdogs raise AL events the main loop handles.
+            EscEvent::PdWatchdog | EscEvent::PdiWatchdog => Ok(()),
+        };
+        self.note(r);
+    }
+
+    fn wakeup(&mut self, esc: &mut Esc, t: u64) {
+        for k in 0..self.timers.len() {
+            let (id, period, due) = self.timers[k];
+            if due <= t {
+                self.counters.timers += 1;
+                self.slave.on_timer(id, &mut self.app);
+                self.timers[k].2 = next_after(due, period, t);
+            }
+        }
+        if self.next_poll <= t {
+            self.counters.polls += 1;
+            let r = self.slave.poll(esc, &mut self.app);
+            self.note(r);
+            self.next_poll = next_after(self.next_poll, self.poll_period, t);
+        }
+    }
+}
+
+/// The first `due + k·period` (k ≥ 1) after `t`: a late MCU skips missed ticks.
+fn next_after(due: u64, period: u64, t: u64) -> u64 {
+    let n = due.saturating_add(period);
+    if n > t {
+        n
+    } else {
+        let behind = (t - due) / period + 1;
+        due.saturating_add(behind.saturating_mul(period))
+    }
+}
+
+/// Access to a node's [`Firmware`] from outside the segment (tests, tools).
+pub struct FirmwareHandle<A, const N: usize, const M: usize>(Arc<Mutex<Firmware<A, N, M>>>);
+
+impl<A, const N: usize, const M: usize> Clone for FirmwareHandle<A, N, M> {
+    fn clone(&self) -> Self {
+        Self(self.0.clone())
+    }
+}
+
+impl<A, const N: usize, const M: usize> FirmwareHandle<A, N, M> {
+    /// Locks the firmware (do not hold it while waiting for the segment).
+    pub fn lock(&self) -> MutexGuard<'_, Firmware<A, N, M>> {
+        self.0.lock().unwrap_or_else(|e| e.into_inner())
+    }
+}
+
+/// A [`Node`] running firmware on its ESC; see the module documentation.
+pub struct FirmwareNode<A, const N: usize, const M: usize>(Arc<Mutex<Firmware<A, N, M>>>);
+
+impl<A: Application<N> + Send + 'static, const N: usize, const M: usize> FirmwareNode<A, N, M> {
+    /// Boots the firmware on `esc` (the stack initialises the ESC through its PDI); the
+    /// main loop and the timers start at virtual time `start_ns`.
+    pub fn new(
+        def: &'static DeviceDef,
+        esc: &mut Esc,
+        app: A,
+        config: &FirmwareConfig,
+        start_ns: u64,
+    ) -> Result<(Self, FirmwareHandle<A, N, M>), InitError<PdiError>> {
+        let slave = Slave::new(def, esc)?;
+        let poll_period = config.poll_period_ns.max(1);
+        let fw = Firmware {
+            slave,
+            app,
+            counters: FirmwareCounters::default(),
+            last_pdi_error: None,
+            poll_period,
+            next_poll: start_ns,
+            timers: config
+                .timers
+                .iter()
+                .map(|&(id, p)| (id, p.max(1), start_ns.saturating_add(p.max(1))))
+                .collect(),
+        };
+        let inner = Arc::new(Mutex::new(fw));
+        Ok((Self(inner.clone()), FirmwareHandle(inner)))
+    }
+
+    fn lock(&self) -> MutexGuard<'_, Firmware<A, N, M>> {
+        self.0.lock().unwrap_or_else(|e| e.into_inner())
+    }
+}
+
+impl<A: Application<N> + Send + 'static, const N: usize, const M: usize> Node<Esc>
+    for FirmwareNode<A, N, M>
+{
+    fn on_event(&mut self, esc: &mut Esc, ev: EscEvent, _t: u64) {
+        self.lock().event(esc, ev);
+    }
+
+    fn next_wakeup(&self) -> Option<u64> {
+        Some(self.lock().next_wakeup())
+    }
+
+    fn on_wakeup(&mut self, esc: &mut Esc, t: u64) {
+        self.lock().wakeup(esc, t);
+    }
+}
+
+/// Why firmware could not be attached to a segment's ESC.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum AttachError {
+    /// No such ESC.
+    Topology(TopologyError),
+    /// The stack refused to start.
+    Init(InitError<PdiError>),
+}
+
+impl core::fmt::Display for AttachError {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        match self {
+            Self::Topology(e) => write!(f, "{e}"),
+            Self::Init(e) => write!(f, "the slave stack did not start: {e:?}"),
+        }
+    }
+}
+
+impl std::error::Error for AttachError {}
+
+/// Boots firmware (`def` + `app`) on ESC `id` of `segment` now and attaches it as the ESC's
+/// node; returns the handle to look at it.
+pub fn attach_firmware<A: Application<N> + Send + 'static, const N: usize, const M: usize>(
+    segment: &mut Segment,
+    id: SlaveId,
+    def: &'static DeviceDef,
+    app: A,
+    config: &FirmwareConfig,
+) -> Result<FirmwareHandle<A, N, M>, AttachError> {
+    let now = segment.now();
+    let esc = segment
+        .esc_mut(id)
+        .ok_or(AttachError::Topology(TopologyError::NoSuchSlave(id)))?;
+    let (node, handle) =
+        FirmwareNode::<A, N, M>::new(def, esc, app, config, now).map_err(AttachError::Init)?;
+    segment
+        .attach(id, Box::new(node))
+        .map_err(AttachError::Topology)?;
+    Ok(handle)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::next_after;
+
+    #[test]
+    fn next_after_skips_missed_ticks() {
+        assert_eq!(next_after(100, 50, 100), 150);
+        assert_eq!(next_after(100, 50, 149), 150);
+        assert_eq!(next_after(100, 50, 150), 200);
+        assert_eq!(next_after(100, 50, 420), 450);
+    }
+}

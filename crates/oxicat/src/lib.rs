@@ -1,0 +1,134 @@
+//! `oxicat`: the command-line tool. Verbs are subcommands of [`Command`]; each has a
+//! function that returns its output so tests can call it without a process.
+#![forbid(unsafe_code)]
+#![warn(missing_docs)]
+
+use std::io::Write;
+use std::path::PathBuf;
+
+use clap::{Parser, Subcommand, ValueEnum};
+use oxicat_slave::DeviceDef;
+
+/// The command line.
+#[derive(Debug, Parser)]
+#[command(
+    name = "oxicat",
+    version,
+    about = "EtherCAT device stack and virtual test bench"
+)]
+pub struct Cli {
+    /// The verb.
+    #[command(subcommand)]
+    pub command: Command,
+}
+
+/// The verbs (later: trot, slaves, sim, …).
+#[derive(Debug, Subcommand)]
+pub enum Command {
+    /// Device definitions: write a device's ESI XML, SII EEPROM image or object dictionary.
+    Device(DeviceArgs),
+}
+
+/// Arguments of `oxicat device`.
+#[derive(Debug, clap::Args)]
+pub struct DeviceArgs {
+    /// Device name (see `oxicat device list`).
+    pub name: String,
+    /// What to produce.
+    #[arg(value_enum, default_value = "od")]
+    pub what: DeviceOutput,
+    /// Output file (default: standard output).
+    #[arg(short, long)]
+    pub output: Option<PathBuf>,
+}
+
+/// What `oxicat device` produces.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum DeviceOutput {
+    /// ESI XML (ETG.2000).
+    Esi,
+    /// SII EEPROM image, binary (ETG.2010).
+    Sii,
+    /// The object dictionary as a table.
+    Od,
+    /// Consistency check of definition, ESI and SII (one line per finding).
+    Check,
+}
+
+/// The devices the CLI knows: (name, definition, description).
+pub fn devices() -> Vec<(&'static str, &'static DeviceDef, &'static str)> {
+    vec![
+        (
+            "demo",
+            &oxicat_devices::demo::DEF,
+            "thesis Table 2-2 generic EtherCAT Application",
+        ),
+        (
+            "demo-additions",
+            &oxicat_devices::demo::additions::DEF,
+            "demo + record Additions 0x7030 (thesis section 6.7, one edit)",
+        ),
+    ]
+}
+
+/// Errors of the CLI.
+#[derive(Debug)]
+pub enum CliError {
+    /// No device of that name.
+    UnknownDevice(String),
+    /// Generation failed.
+    Device(oxicat_device::Error),
+    /// Writing the output failed.
+    Io(std::io::Error),
+}
+
+impl std::fmt::Display for CliError {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            CliError::UnknownDevice(n) => {
+                let names: Vec<_> = devices().iter().map(|d| d.0).collect();
+                write!(f, "unknown device {n:?}; known: {}", names.join(", "))
+            }
+            CliError::Device(e) => write!(f, "{e}"),
+            CliError::Io(e) => write!(f, "{e}"),
+        }
+    }
+}
+
+impl std::error::Error for CliError {}
+
+/// The bytes `oxicat device <name> <what>` writes.
+pub fn device_output(name: &str, what: DeviceOutput) -> Result<Vec<u8>, CliError> {
+    let def = devices()
+        .into_iter()
+        .find(|d| d.0 == name)
+        .map(|d| d.1)
+        .ok_or_else(|| CliError::UnknownDevice(name.to_string()))?;
+    let r = match what {
+        DeviceOutput::Esi => oxicat_device::esi::generate(def).map(String::into_bytes),
+        DeviceOutput::Sii => oxicat_device::sii::generate(def),
+        DeviceOutput::Od => oxicat_device::od::table(def).map(String::into_bytes),
+        DeviceOutput::Check => oxicat_device::check(def).map(|f| {
+            let mut s = String::new();
+            for (pair, finding) in &f {
+                s.push_str(&format!("{pair:?}: {finding:?}\n"));
+            }
+            s.push_str(&format!("{} findings\n", f.len()));
+            s.into_bytes()
+        }),
+    };
+    r.map_err(CliError::Device)
+}
+
+/// Runs a parsed command line.
+pub fn run(cli: Cli) -> Result<(), CliError> {
+    match cli.command {
+        Command::Device(a) => {
+            let bytes = device_output(&a.name, a.what)?;
+            match a.output {
+                Some(p) => std::fs::write(p, bytes).map_err(CliError::Io),
+                None => std::io::stdout().write_all(&bytes).map_err(CliError::Io),
+            }
+        }
+    }
+}

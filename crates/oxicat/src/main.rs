@@ -1,0 +1,14 @@
+//! The `oxicat` binary.
+#![forbid(unsafe_code)]
+
+use clap::Parser;
+
+fn main() -> std::process::ExitCode {
+    match oxicat::run(oxicat::Cli::parse()) {
+        Ok(()) => std::process::ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("oxicat: {e}");
+            std::process::ExitCode::FAILURE
+        }
+    }
+}
