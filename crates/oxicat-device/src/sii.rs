@@ -259,7 +259,15 @@ pub fn parse(bytes: &[u8]) -> Result<DeviceModel, Error> {
     let im = SiiImage::new(bytes)?;
     let id = im.identity();
     let strings = im.strings()?;
-    let s = |i: u8| strings.and_then(|t| t.get_str(i)).map(str::to_string);
+    // Strings are UTF-8 or, in Beckhoff EEPROMs, Latin-1 (e.g. "µs").
+    let s = |i: u8| {
+        strings
+            .and_then(|t| t.get(i))
+            .map(|b| match std::str::from_utf8(b) {
+                Ok(v) => v.to_string(),
+                Err(_) => b.iter().map(|c| *c as char).collect(),
+            })
+    };
     let mut m = DeviceModel {
         vendor_id: id.vendor_id,
         product_code: id.product_code,
