@@ -439,18 +439,30 @@ impl Esc {
             return 0;
         }
         let need_copy = do_read && do_write && self.fmmu_rw_overlap;
-        let mut orig = take(&mut self.scratch);
-        if need_copy {
-            orig.clear();
-            orig.extend_from_slice(data);
-        }
         let mut rd = false;
         let mut wr = false;
         let n = self.fmmus.len();
+        // Only a logical datagram that touches the FMMUs' logical ranges does work.
+        let ds = addr as u64;
+        let de = ds + data.len() as u64;
+        // Writes use the data as it arrived (before this ESC's reads) when a read and a
+        // write FMMU overlap.
+        let orig = if need_copy {
+            let mut o = take(&mut self.scratch);
+            o.clear();
+            o.extend_from_slice(data);
+            Some(o)
+        } else {
+            None
+        };
         if do_read {
             for k in 0..n {
                 let f = self.fmmus[k];
-                if f.read && self.fmmu_read(&f, addr, data) {
+                if f.read
+                    && f.log_bit_start < de * 8
+                    && f.log_bit_end > ds * 8
+                    && self.fmmu_read(&f, addr, data)
+                {
                     rd = true;
                 }
             }
@@ -458,15 +470,17 @@ impl Esc {
         if do_write {
             for k in 0..n {
                 let f = self.fmmus[k];
-                if f.write {
-                    let src: &[u8] = if need_copy { &orig } else { data };
+                if f.write && f.log_bit_start < de * 8 && f.log_bit_end > ds * 8 {
+                    let src: &[u8] = orig.as_deref().unwrap_or(data);
                     if self.fmmu_write(&f, addr, src) {
                         wr = true;
                     }
                 }
             }
         }
-        self.scratch = orig;
+        if let Some(o) = orig {
+            self.scratch = o;
+        }
         let wr_inc = if cmd == Command::Lwr { 1 } else { 2 };
         u16::from(rd) + wr_inc * u16::from(wr)
     }
@@ -694,7 +708,11 @@ impl Esc {
                 // Bytes the chip does not have read as 0 (the DC unit may keep shadows
                 // there); BRD: they contribute nothing.
                 for (k, a) in (c..e).enumerate() {
-                    let v = if self.perm[a] & P_IMPL != 0 { self.mem[a] } else { 0 };
+                    let v = if self.perm[a] & P_IMPL != 0 {
+                        self.mem[a]
+                    } else {
+                        0
+                    };
                     if or {
                         o[k] |= v;
                     } else {

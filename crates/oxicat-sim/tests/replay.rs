@@ -31,8 +31,8 @@
 
 mod replay_bench;
 
-use replay_bench::*;
 use oxicat_esc::{DcSupport, EscConfig};
+use replay_bench::*;
 
 /// ET1100 as in the EK1100 coupler (ports 0 MII, 1 EBUS, 2 MII; soem-sdinfo frame 130).
 fn et1100_ek1100() -> EscConfig {
