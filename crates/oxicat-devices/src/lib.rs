@@ -12,6 +12,7 @@
 pub use oxicat_slave as __slave;
 
 pub mod demo;
+pub mod laelaps;
 
 /// Declares process-data records and their PDOs in one table and generates, in the
 /// current module, `OBJECTS` (records, inputs then outputs, index order), `RX_PDOS`,
