@@ -56,9 +56,9 @@ pub struct JointState {
     pub speed: SpeedEstimator,
     /// PIV controller.
     pub controller: JointController,
-    /// Measured angle [rev], joint frame.
+    /// Measured angle \[rev\], joint frame.
     pub angle_rev: f32,
-    /// Desired angle [rev], joint frame.
+    /// Desired angle \[rev\], joint frame.
     pub desired_rev: f32,
     /// Last PIV output (signed PWM fraction).
     pub u: f32,
@@ -205,17 +205,17 @@ impl<P: PwmOut, E: EncoderIn, L: Leds> LegNode<P, E, L> {
         (self.knee_gains.gains(), self.hip_gains.gains())
     }
 
-    /// Derivative-filter bandwidth in use [Hz].
+    /// Derivative-filter bandwidth in use \[Hz\].
     pub fn filter_hz(&self) -> f32 {
         self.filter_hz
     }
 
-    /// `Transition_time` in use [s].
+    /// `Transition_time` in use \[s\].
     pub fn transition_s(&self) -> f32 {
         self.transition_s
     }
 
-    /// The last toe target of the ellipse `(x, y)` [m] (may be outside the workspace).
+    /// The last toe target of the ellipse `(x, y)` \[m\] (may be outside the workspace).
     pub fn target(&self) -> (f32, f32) {
         self.target
     }
@@ -225,7 +225,7 @@ impl<P: PwmOut, E: EncoderIn, L: Leds> LegNode<P, E, L> {
         self.ik.point()
     }
 
-    /// The desired angles, kinematic frame [rad].
+    /// The desired angles, kinematic frame \[rad\].
     pub fn desired_angles(&self) -> LegAngles {
         self.ik.angles()
     }
@@ -245,7 +245,7 @@ impl<P: PwmOut, E: EncoderIn, L: Leds> LegNode<P, E, L> {
         }
     }
 
-    /// Measured angles, kinematic frame [rad].
+    /// Measured angles, kinematic frame \[rad\].
     pub fn measured_angles(&self) -> LegAngles {
         LegAngles {
             hip: self.side.to_kinematic(self.hip.angle_rev * TAU),

@@ -172,9 +172,9 @@ pub struct Command {
     pub blue_led: bool,
     /// Red LED.
     pub red_led: bool,
-    /// `Transition_time` [s] (0: keep the previous one).
+    /// `Transition_time` \[s\] (0: keep the previous one).
     pub transition_time_s: f32,
-    /// `FilterBandwidth` [Hz] (0: keep the previous one).
+    /// `FilterBandwidth` \[Hz\] (0: keep the previous one).
     pub filter_hz: f32,
     /// Knee PIV gains.
     pub knee: Gains,
@@ -256,23 +256,23 @@ impl Command {
 /// Everything the node reports, in SI units and the joint frame (encoded to Table 3-2).
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub struct Feedback {
-    /// Measured hip angle [rad].
+    /// Measured hip angle \[rad\].
     pub hip: f32,
-    /// Desired hip angle [rad].
+    /// Desired hip angle \[rad\].
     pub hip_desired: f32,
-    /// Measured knee angle [rad].
+    /// Measured knee angle \[rad\].
     pub knee: f32,
-    /// Desired knee angle [rad].
+    /// Desired knee angle \[rad\].
     pub knee_desired: f32,
-    /// Trajectory clock [s].
+    /// Trajectory clock \[s\].
     pub time_s: f32,
     /// Knee PIV output (signed PWM fraction).
     pub u_knee: f32,
     /// Hip PIV output (signed PWM fraction).
     pub u_hip: f32,
-    /// Knee motor speed [rad/s].
+    /// Knee motor speed \[rad/s\].
     pub velocity_knee: f32,
-    /// Hip motor speed [rad/s].
+    /// Hip motor speed \[rad/s\].
     pub velocity_hip: f32,
 }
 
@@ -309,7 +309,7 @@ impl Feedback {
         }
     }
 
-    /// The measured angle of `joint` [rad].
+    /// The measured angle of `joint` \[rad\].
     pub fn angle(&self, joint: Joint) -> f32 {
         match joint {
             Joint::Hip => self.hip,

@@ -81,7 +81,7 @@ pub fn counts_to_joint_revs(counts: i32, joint: Joint) -> f32 {
 /// eQEP capture unit configuration (`QCAPCTL`) and clock.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct CaptureConfig {
-    /// eQEP clock (SYSCLKOUT) [Hz].
+    /// eQEP clock (SYSCLKOUT) \[Hz\].
     pub sysclk_hz: f32,
     /// `QCAPCTL.CCPS`: capture timer clock = SYSCLK / 2^CCPS.
     pub ccps: u8,
@@ -91,7 +91,7 @@ pub struct CaptureConfig {
 
 impl CaptureConfig {
     /// A configuration reproducing Table 3-4: 200 MHz F28379D SYSCLK, CCPS = 7 (÷128),
-    /// UPPS = 2 (4 edges), giving SpeedScaler = 2π·3125 = 19634.95 rad/s. [derived] The
+    /// UPPS = 2 (4 edges), giving SpeedScaler = 2π·3125 = 19634.95 rad/s. \[derived\] The
     /// thesis prints neither register; any pair with CCPS − UPPS = 5 gives its table.
     pub const THESIS: CaptureConfig = CaptureConfig {
         sysclk_hz: 200.0e6,
@@ -99,7 +99,7 @@ impl CaptureConfig {
         upps: 2,
     };
 
-    /// Capture timer tick [s].
+    /// Capture timer tick \[s\].
     pub fn tick_s(&self) -> f32 {
         (1u32 << self.ccps) as f32 / self.sysclk_hz
     }
@@ -109,17 +109,17 @@ impl CaptureConfig {
         TAU * (1u32 << self.upps) as f32 / (ENCODER_COUNTS_PER_REV * self.tick_s())
     }
 
-    /// Largest measurable motor speed [rad/s] (`QCPRD` = 1).
+    /// Largest measurable motor speed \[rad/s\] (`QCPRD` = 1).
     pub fn max_speed(&self) -> f32 {
         self.speed_scaler()
     }
 
-    /// Smallest measurable motor speed [rad/s] (`QCPRD` = 0xFFFF).
+    /// Smallest measurable motor speed \[rad/s\] (`QCPRD` = 0xFFFF).
     pub fn min_speed(&self) -> f32 {
         self.speed_scaler() / 65535.0
     }
 
-    /// Longest time between unit events that is still measurable [s].
+    /// Longest time between unit events that is still measurable \[s\].
     pub fn max_period_s(&self) -> f32 {
         65535.0 * self.tick_s()
     }
@@ -148,7 +148,7 @@ impl SpeedEstimator {
         self.cfg
     }
 
-    /// The current motor speed estimate [rad/s] (sign: QDF).
+    /// The current motor speed estimate \[rad/s\] (sign: QDF).
     pub fn speed(&self) -> f32 {
         self.speed
     }

@@ -31,9 +31,9 @@ impl Joint {
     }
 }
 
-/// Upper (actual) link length l1 [m] (§3.2).
+/// Upper (actual) link length l1 \[m\] (§3.2).
 pub const L1: f32 = 0.25;
-/// Lower (virtual) link length l2 [m] (§3.2).
+/// Lower (virtual) link length l2 \[m\] (§3.2).
 pub const L2: f32 = 0.35;
 
 /// Encoder counts per motor revolution (quadrature edges), both joints.
@@ -64,16 +64,16 @@ pub const U_MAX_KNEE: f32 = 0.3825;
 /// Hip PIV output limit: 41.17 % of full PWM (≈ 4.94 A of the 12 A amplifier).
 pub const U_MAX_HIP: f32 = 0.4117;
 
-/// Joint control loop period [s]: 10 kHz (the Matlab model's `T = 1/10000`).
+/// Joint control loop period \[s\]: 10 kHz (the Matlab model's `T = 1/10000`).
 pub const CONTROL_PERIOD_S: f32 = 1.0e-4;
 /// Id of the 10 kHz joint-loop timer event ([`oxicat_slave::Slave::on_timer`]).
 pub const JOINT_LOOP_TIMER: u8 = 0;
 
-/// Derivative-filter bandwidth [Hz] until the master writes a non-zero `FilterBandwidth`.
+/// Derivative-filter bandwidth \[Hz\] until the master writes a non-zero `FilterBandwidth`.
 pub const DEFAULT_FILTER_HZ: f32 = 20.0;
-/// `Transition_time` [s] until the master writes a non-zero value (Table 4-1's value).
+/// `Transition_time` \[s\] until the master writes a non-zero value (Table 4-1's value).
 pub const DEFAULT_TRANSITION_TIME_S: f32 = 3.0;
-/// Application cycle [ns] assumed when no SYNC0 cycle time is known (free run / SM
+/// Application cycle \[ns\] assumed when no SYNC0 cycle time is known (free run / SM
 /// synchronous; 0x1C32:02 is 0): the thesis' 400 µs bus cycle.
 pub const DEFAULT_CYCLE_NS: u32 = 400_000;
 

@@ -58,7 +58,7 @@ impl Side {
     }
 }
 
-/// Hip and knee angles [rad], kinematic frame.
+/// Hip and knee angles \[rad\], kinematic frame.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub struct LegAngles {
     /// θ1: upper link from the downward vertical.
@@ -72,7 +72,7 @@ pub const R_MIN: f32 = 0.430_116_3;
 /// Largest toe distance from the hip: l1 + l2 (equation 3-4).
 pub const R_MAX: f32 = L1 + L2;
 
-/// Toe position of the angles (equation 3-1): `(x, y)` [m], y downward.
+/// Toe position of the angles (equation 3-1): `(x, y)` \[m\], y downward.
 pub fn forward(a: LegAngles) -> (f32, f32) {
     use super::fmath::{cos, sin};
     (

@@ -51,4 +51,6 @@ pub use piv::{Gains, PwmCommand};
 pub use trajectory::Ellipse;
 
 #[cfg(test)]
+mod stack_tests;
+#[cfg(test)]
 mod tests;

@@ -28,7 +28,7 @@ use core::f32::consts::TAU;
 pub struct Gains {
     /// Proportional gain [PWM fraction per revolution].
     pub kp: f32,
-    /// Velocity (derivative) gain [s], multiplied by `kp` in the loop.
+    /// Velocity (derivative) gain \[s\], multiplied by `kp` in the loop.
     pub kd: f32,
     /// Integral gain [1/s], multiplied by `kp` in the loop.
     pub ki: f32,

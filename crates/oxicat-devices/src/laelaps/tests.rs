@@ -28,7 +28,7 @@ struct Plant {
     speed: [f64; 2],
     /// Counts at the last unit event.
     last_event: [f64; 2],
-    /// Time since the last unit event [s].
+    /// Time since the last unit event \[s\].
     since: [f64; 2],
     /// Last PWM command per joint.
     pwm: [PwmCommand; 2],

@@ -18,24 +18,24 @@ use core::f32::consts::{PI, TAU};
 /// Ellipse parameters in SI units.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub struct Ellipse {
-    /// Centre x [m].
+    /// Centre x \[m\].
     pub x_centre: f32,
-    /// Centre y [m] (downward from the hip).
+    /// Centre y \[m\] (downward from the hip).
     pub y_centre: f32,
-    /// Semi-axis along x [m] (step length / 2).
+    /// Semi-axis along x \[m\] (step length / 2).
     pub a: f32,
-    /// Semi-axis along y [m] (ground clearance).
+    /// Semi-axis along y \[m\] (ground clearance).
     pub b: f32,
-    /// Stepping frequency [Hz].
+    /// Stepping frequency \[Hz\].
     pub freq: f32,
-    /// Initial phase [rad].
+    /// Initial phase \[rad\].
     pub phase: f32,
     /// Flatness of the stance half: 0 = flat, 1 = full ellipse.
     pub flatness: f32,
 }
 
 impl Ellipse {
-    /// The trajectory angle at time `t` [s], reduced to `[0, 2π)`.
+    /// The trajectory angle at time `t` \[s\], reduced to `[0, 2π)`.
     pub fn angle(&self, t: f32) -> f32 {
         // Reduce the whole number of turns first, so long runs keep f32 precision.
         let turns = self.freq * t;
@@ -43,7 +43,7 @@ impl Ellipse {
         rem_euclid(TAU * frac + self.phase, TAU)
     }
 
-    /// The toe target `(x, y)` [m] at time `t` [s].
+    /// The toe target `(x, y)` \[m\] at time `t` \[s\].
     pub fn point(&self, t: f32) -> (f32, f32) {
         let angle = self.angle(t);
         let b = if angle < PI {
