@@ -1,0 +1,144 @@
+//! Incremental motor encoder (2000 quadrature counts per motor revolution) with the edge
+//! timing an eQEP-style capture unit sees. The speed estimator itself belongs to firmware.
+
+use core::f64::consts::PI;
+
+/// Quadrature counts per motor revolution (thesis §6.10: "2000 counts per revolution").
+pub const COUNTS_PER_REV: f64 = 2000.0;
+
+/// One unit-position capture, as eQEP latches QCPRD on a unit position event (UPEVNT).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct UnitCapture {
+    /// Time between this unit position event and the previous one [s] (QCPRD × capture tick).
+    pub period: f64,
+    /// Virtual time of this unit position event [s].
+    pub time: f64,
+    /// Direction changed since the previous unit event (eQEP CDEF).
+    pub direction_changed: bool,
+}
+
+/// State of one encoder channel as the firmware can read it.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Encoder {
+    count: i64,
+    zero_angle: f64,
+    upps: u32,
+    edges_since_unit: u32,
+    last_edge_time: f64,
+    last_unit_time: f64,
+    forward: bool,
+    dir_changed: bool,
+    capture: Option<UnitCapture>,
+    edges_total: u64,
+}
+
+impl Encoder {
+    /// Encoder zeroed at motor angle `zero_angle` [rad], unit event every `upps` edges.
+    pub fn new(zero_angle: f64, upps: u32) -> Self {
+        Encoder {
+            count: 0,
+            zero_angle,
+            upps: upps.max(1),
+            edges_since_unit: 0,
+            last_edge_time: 0.0,
+            last_unit_time: 0.0,
+            forward: true,
+            dir_changed: false,
+            capture: None,
+            edges_total: 0,
+        }
+    }
+
+    /// Position counter relative to the reset pose (QPOSCNT, wraps like a 32-bit counter).
+    pub fn count(&self) -> i32 {
+        self.count as i32
+    }
+
+    /// Direction of the last edge: `true` when counting up (eQEP QDF = 1).
+    pub fn forward(&self) -> bool {
+        self.forward
+    }
+
+    /// Virtual time of the last quadrature edge [s] (interpolated within the substep).
+    pub fn last_edge_time(&self) -> f64 {
+        self.last_edge_time
+    }
+
+    /// Edges per unit position event (eQEP UPPS prescaler).
+    pub fn unit_prescaler(&self) -> u32 {
+        self.upps
+    }
+
+    /// Latest unit capture not yet taken (eQEP UPEVNT flag set), without clearing it.
+    pub fn peek_capture(&self) -> Option<UnitCapture> {
+        self.capture
+    }
+
+    /// Take the latest unit capture and clear the UPEVNT flag (as firmware writes 1 to clear).
+    pub fn take_capture(&mut self) -> Option<UnitCapture> {
+        self.capture.take()
+    }
+
+    /// Total number of edges seen since construction (either direction).
+    pub fn edges_total(&self) -> u64 {
+        self.edges_total
+    }
+
+    /// Zero the counter at motor angle `angle` (the thesis' Reset button).
+    pub fn reset(&mut self, angle: f64) {
+        self.zero_angle = angle;
+        self.count = 0;
+        self.edges_since_unit = 0;
+        self.capture = None;
+        self.dir_changed = false;
+    }
+
+    #[inline]
+    fn count_at(&self, angle: f64) -> i64 {
+        // Edges half a count either side of the reset angle.
+        ((angle - self.zero_angle) * (COUNTS_PER_REV / (2.0 * PI)) + 0.5).floor() as i64
+    }
+
+    /// Move the shaft from `a0` at `t0` to `a1` at `t0 + h`; records every edge crossed.
+    #[inline]
+    pub(crate) fn update(&mut self, a0: f64, a1: f64, t0: f64, h: f64) {
+        let c1 = self.count_at(a1);
+        let c0 = self.count;
+        if c1 == c0 {
+            return;
+        }
+        let k = COUNTS_PER_REV / (2.0 * PI);
+        let up = c1 > c0;
+        let n = (c1 - c0).unsigned_abs();
+        let da = a1 - a0;
+        for e in 1..=n {
+            // Edge between count c and c±1 lies at (c ± 0.5)/k from zero.
+            let c = if up { c0 + e as i64 } else { c0 - e as i64 };
+            let edge_angle = self.zero_angle + (c as f64 - if up { 0.5 } else { -0.5 }) / k;
+            let frac = if da != 0.0 {
+                ((edge_angle - a0) / da).clamp(0.0, 1.0)
+            } else {
+                1.0
+            };
+            let t = t0 + h * frac;
+            if up != self.forward {
+                self.dir_changed = true;
+                self.forward = up;
+            }
+            self.last_edge_time = t;
+            self.edges_total += 1;
+            self.edges_since_unit += 1;
+            if self.edges_since_unit >= self.upps {
+                self.edges_since_unit = 0;
+                self.capture = Some(UnitCapture {
+                    period: t - self.last_unit_time,
+                    time: t,
+                    direction_changed: self.dir_changed,
+                });
+                self.dir_changed = false;
+                self.last_unit_time = t;
+            }
+        }
+        self.count = c1;
+    }
+}
