@@ -24,12 +24,13 @@ fn pd_step(leg: &mut Leg, t: f64, phase: f64) {
     leg.advance(DT);
 }
 
-fn legs() -> Vec<Leg> {
+fn legs(substep: f64) -> Vec<Leg> {
     [Side::Right, Side::Left, Side::Left, Side::Right]
         .into_iter()
         .map(|s| {
             let mut p = LegParams::laelaps(s);
             p.treadmill.speed = 0.3;
+            p.substep = substep;
             Leg::new(p)
         })
         .collect()
@@ -47,7 +48,13 @@ fn bench(c: &mut Criterion) {
     });
 
     // Simulated seconds per wall second, four legs, 10 s of virtual time.
-    let mut four = legs();
+    for substep in [50e-6, 100e-6] {
+        four_legs(substep);
+    }
+}
+
+fn four_legs(substep: f64) {
+    let mut four = legs(substep);
     let steps = 100_000u32;
     let start = Instant::now();
     for n in 0..steps {
@@ -67,7 +74,8 @@ fn bench(c: &mut Criterion) {
     let wall = start.elapsed().as_secs_f64();
     let sim = steps as f64 * DT;
     println!(
-        "four legs: {sim:.1} s simulated in {wall:.3} s wall = {:.0}x real time ({:.0} ns per leg step)",
+        "four legs, substep {:.0} µs: {sim:.1} s simulated in {wall:.3} s wall = {:.0}x real time ({:.0} ns per leg step)",
+        substep * 1e6,
         sim / wall,
         wall * 1e9 / (steps as f64 * 4.0)
     );
