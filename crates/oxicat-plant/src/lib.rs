@@ -24,6 +24,7 @@
 //! * Joint index 0 = hip, 1 = knee ([`Joint`]).
 
 #![forbid(unsafe_code)]
+#![deny(missing_docs)]
 
 pub mod encoder;
 pub mod gear;
