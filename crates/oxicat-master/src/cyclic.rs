@@ -1,0 +1,352 @@
+//! Cyclic process data: bring the slaves to OP (free run, or DC SYNC0-synchronous), exchange
+//! the process image every cycle, and give each cycle's inputs/outputs to a callback —
+//! the base of `watch`, `write` and `record`.
+
+use std::io::Write;
+use std::time::Duration;
+
+use ethercrab::subdevice_group::DcConfiguration;
+use ethercrab::DcSync;
+
+use crate::pdo::{Dir, SlavePdos, Variable};
+use crate::{Master, MasterError, Slot};
+
+/// How the master cycles.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct CycleOptions {
+    /// Cycle time.
+    pub cycle: Duration,
+    /// DC SYNC0-synchronous (every slave with DC support), otherwise free run.
+    pub dc: bool,
+}
+
+impl Default for CycleOptions {
+    fn default() -> Self {
+        Self {
+            cycle: Duration::from_millis(1),
+            dc: false,
+        }
+    }
+}
+
+/// The process image of one cycle, per slave.
+pub struct CycleIo {
+    /// Cycle number (0 = first cycle in OP).
+    pub cycle: u64,
+    /// Time of the cycle in ns (virtual on a simulated segment), from the first cycle.
+    pub time_ns: u64,
+    /// Outputs the master sends (per slave), kept from cycle to cycle.
+    pub outputs: Vec<Vec<u8>>,
+    /// Inputs received in this cycle (per slave).
+    pub inputs: Vec<Vec<u8>>,
+    /// Working counter of the cycle.
+    pub working_counter: u16,
+}
+
+impl CycleIo {
+    /// The current value of a variable (outputs: what the master sends).
+    pub fn get(&self, v: &Variable) -> Vec<u8> {
+        let img = match v.dir {
+            Dir::Output => self.outputs.get(v.position),
+            Dir::Input => self.inputs.get(v.position),
+        };
+        img.map(|i| v.get(i)).unwrap_or_default()
+    }
+
+    /// Sets an output variable (inputs cannot be written).
+    pub fn set(&mut self, v: &Variable, value: &[u8]) -> Result<(), MasterError> {
+        if v.dir != Dir::Output {
+            return Err(MasterError::Usage(format!(
+                "{} is an input (TxPDO) of slave {}; only outputs can be written",
+                v.name, v.position
+            )));
+        }
+        if let Some(img) = self.outputs.get_mut(v.position) {
+            v.set(img, value);
+        }
+        Ok(())
+    }
+}
+
+/// What the callback wants after a cycle.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Flow {
+    /// Run another cycle.
+    Continue,
+    /// Stop.
+    Stop,
+}
+
+/// Statistics of a cyclic run.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct CycleStats {
+    /// Cycles run in OP.
+    pub cycles: u64,
+    /// Cycles whose working counter was not the expected one.
+    pub wkc_errors: u64,
+}
+
+impl Master {
+    /// The PDO layouts of all slaves.
+    pub fn layouts(&self) -> Result<Vec<SlavePdos>, MasterError> {
+        (0..self.len()).map(|p| self.pdos(p)).collect()
+    }
+
+    /// Resolves variable names (see [`crate::pdo::resolve`]).
+    pub fn resolve(
+        &self,
+        names: &[String],
+        layouts: &[SlavePdos],
+    ) -> Result<Vec<Vec<Variable>>, MasterError> {
+        let slave_names: Vec<String> = self.found.iter().map(|f| f.name.clone()).collect();
+        names
+            .iter()
+            .map(|n| crate::pdo::resolve(n, layouts, &slave_names))
+            .collect()
+    }
+
+    /// Brings the slaves to OP and calls `step` after every cycle until it says stop.
+    pub fn run_cyclic(
+        &mut self,
+        opts: CycleOptions,
+        mut step: impl FnMut(&mut CycleIo) -> Result<Flow, MasterError>,
+    ) -> Result<CycleStats, MasterError> {
+        let n = self.len();
+        let period = opts.cycle.as_nanos() as u64;
+        if period == 0 {
+            return Err(MasterError::Usage("the cycle time must be above 0".into()));
+        }
+        let mut dc = opts.dc;
+        if dc {
+            // DC-synchronous slaves: SYNC0 on, and (CoE) sync mode 0x1C32:01 = 2 (DC SYNC0).
+            let supports: Vec<bool> = match &self.slot {
+                Some(Slot::PreOp(g)) => g
+                    .iter(&self.md)
+                    .map(|s| {
+                        !matches!(
+                            s.dc_support(),
+                            ethercrab::DcSupport::None | ethercrab::DcSupport::RefOnly
+                        )
+                    })
+                    .collect(),
+                _ => vec![false; n],
+            };
+            if !supports.iter().any(|&s| s) {
+                log::warn!("no slave supports DC SYNC0: cycling in free run");
+                dc = false;
+            } else {
+                for (p, &s) in supports.iter().enumerate() {
+                    if s {
+                        if let Err(e) = self.sdo_download(p, 0x1C32, 1, &2u16.to_le_bytes()) {
+                            log::info!("slave {p}: sync mode not set ({e})");
+                        }
+                    }
+                }
+                if let Some(Slot::PreOp(g)) = &mut self.slot {
+                    for (mut sd, &s) in g.iter_mut(&self.md).zip(supports.iter()) {
+                        if s {
+                            sd.set_dc_sync(DcSync::Sync0);
+                        }
+                    }
+                }
+            }
+        }
+        let group = self.take_pdi_group()?;
+        let md = &self.md;
+        let time = self.time.clone();
+        let e = |what: &str| {
+            let what = what.to_string();
+            move |e| MasterError::Ethercrab(what, e)
+        };
+        let mut io = CycleIo {
+            cycle: 0,
+            time_ns: 0,
+            outputs: vec![Vec::new(); n],
+            inputs: vec![Vec::new(); n],
+            working_counter: 0,
+        };
+        let mut stats = CycleStats::default();
+        futures_lite::future::block_on(async {
+            if dc {
+                let group = group
+                    .configure_dc_sync(
+                        md,
+                        DcConfiguration {
+                            start_delay: Duration::from_millis(1).max(opts.cycle * 4),
+                            sync0_period: opts.cycle,
+                            sync0_shift: opts.cycle / 2,
+                        },
+                    )
+                    .await
+                    .map_err(e("DC configuration"))?;
+                let group = group
+                    .into_safe_op(md)
+                    .await
+                    .map_err(e("PRE-OP -> SAFE-OP"))?;
+                let group = group.request_into_op(md).await.map_err(e("request OP"))?;
+                for (p, sd) in group.iter(md).enumerate() {
+                    io.outputs[p] = vec![0; sd.outputs_raw().len()];
+                }
+                let deadline = std::time::Instant::now() + self.options.timeouts.state_transition;
+                let mut t0 = None;
+                loop {
+                    for (p, sd) in group.iter(md).enumerate() {
+                        let mut o = sd.outputs_raw_mut();
+                        let l = o.len().min(io.outputs[p].len());
+                        o[..l].copy_from_slice(&io.outputs[p][..l]);
+                    }
+                    let t = time.now();
+                    let r = group.tx_rx_dc(md).await.map_err(e("cyclic exchange"))?;
+                    let all_op = r.all_op();
+                    if all_op {
+                        // Row time: the DC system time of the cycle (the slaves' clock).
+                        let dct = r.extra.dc_system_time;
+                        let start = *t0.get_or_insert(dct);
+                        for (p, sd) in group.iter(md).enumerate() {
+                            io.inputs[p] = sd.inputs_raw().to_vec();
+                        }
+                        io.working_counter = r.working_counter;
+                        io.time_ns = dct.saturating_sub(start);
+                        stats.cycles += 1;
+                        let flow = step(&mut io)?;
+                        io.cycle += 1;
+                        if flow == Flow::Stop {
+                            break;
+                        }
+                    } else if t0.is_some() {
+                        stats.wkc_errors += 1;
+                    } else if std::time::Instant::now() > deadline {
+                        return Err(MasterError::Usage(format!(
+                            "the slaves did not reach OP: {:?}",
+                            r.subdevice_states
+                        )));
+                    }
+                    time.wait_until(t + r.extra.next_cycle_wait.as_nanos() as u64);
+                }
+            } else {
+                let group = group.into_op(md).await.map_err(e("PRE-OP -> OP"))?;
+                for (p, sd) in group.iter(md).enumerate() {
+                    io.outputs[p] = vec![0; sd.outputs_raw().len()];
+                }
+                let t0 = time.now();
+                let mut expected = None;
+                loop {
+                    for (p, sd) in group.iter(md).enumerate() {
+                        let mut o = sd.outputs_raw_mut();
+                        let l = o.len().min(io.outputs[p].len());
+                        o[..l].copy_from_slice(&io.outputs[p][..l]);
+                    }
+                    let due = t0 + io.cycle * period;
+                    time.wait_until(due);
+                    let r = group.tx_rx(md).await.map_err(e("cyclic exchange"))?;
+                    for (p, sd) in group.iter(md).enumerate() {
+                        io.inputs[p] = sd.inputs_raw().to_vec();
+                    }
+                    io.working_counter = r.working_counter;
+                    if *expected.get_or_insert(r.working_counter) != r.working_counter {
+                        stats.wkc_errors += 1;
+                    }
+                    io.time_ns = time.now().saturating_sub(t0).max(io.cycle * period);
+                    stats.cycles += 1;
+                    let flow = step(&mut io)?;
+                    io.cycle += 1;
+                    if flow == Flow::Stop {
+                        break;
+                    }
+                }
+            }
+            Ok(stats)
+        })
+    }
+
+    /// `write`: cycles in OP, sets every variable in `vars` to `value` in one cycle and keeps
+    /// cycling `settle` more cycles so the slaves take it; returns the values read back.
+    pub fn write_online(
+        &mut self,
+        opts: CycleOptions,
+        vars: &[Variable],
+        value: &[u8],
+        settle: u64,
+    ) -> Result<Vec<String>, MasterError> {
+        let warm = 5u64;
+        let mut back = Vec::new();
+        self.run_cyclic(opts, |io| {
+            if io.cycle == warm {
+                for v in vars {
+                    io.set(v, value)?;
+                }
+            }
+            if io.cycle >= warm + settle {
+                back = vars.iter().map(|v| v.format(&io.get(v))).collect();
+                return Ok(Flow::Stop);
+            }
+            Ok(Flow::Continue)
+        })?;
+        Ok(back)
+    }
+
+    /// `record`: cycles `cycles` times in OP (DC-synchronous when `opts.dc`) and writes one
+    /// CSV row per cycle: cycle, time in s, then each variable; the header carries units.
+    pub fn record(
+        &mut self,
+        opts: CycleOptions,
+        vars: &[Variable],
+        cycles: u64,
+        out: &mut dyn Write,
+        progress: &mut dyn FnMut(u64, u64),
+    ) -> Result<CycleStats, MasterError> {
+        let mut header = vec!["cycle".to_string(), "time [s]".to_string()];
+        header.extend(vars.iter().map(|v| format!("{} [{}]", v.name, v.unit)));
+        writeln!(out, "{}", header.join(",")).map_err(MasterError::Output)?;
+        let mut err = None;
+        let stats = self.run_cyclic(opts, |io| {
+            let mut row = vec![
+                io.cycle.to_string(),
+                format!("{:.9}", io.time_ns as f64 * 1e-9),
+            ];
+            row.extend(vars.iter().map(|v| v.format(&io.get(v))));
+            if let Err(e) = writeln!(out, "{}", row.join(",")) {
+                err = Some(e);
+                return Ok(Flow::Stop);
+            }
+            progress(io.cycle + 1, cycles);
+            Ok(if io.cycle + 1 >= cycles {
+                Flow::Stop
+            } else {
+                Flow::Continue
+            })
+        })?;
+        if let Some(e) = err {
+            return Err(MasterError::Output(e));
+        }
+        Ok(stats)
+    }
+
+    /// `watch`: cycles in OP and calls `line` every `every` cycles with `name=value` pairs,
+    /// `count` times (0: until the callback returns false).
+    pub fn watch(
+        &mut self,
+        opts: CycleOptions,
+        vars: &[Variable],
+        every: u64,
+        count: u64,
+        line: &mut dyn FnMut(&str) -> bool,
+    ) -> Result<CycleStats, MasterError> {
+        let every = every.max(1);
+        let mut shown = 0u64;
+        self.run_cyclic(opts, |io| {
+            if io.cycle % every == every - 1 {
+                let s: Vec<String> = vars
+                    .iter()
+                    .map(|v| format!("{}={}", v.name, v.format(&io.get(v))))
+                    .collect();
+                shown += 1;
+                let go_on = line(&s.join("  "));
+                if !go_on || (count > 0 && shown >= count) {
+                    return Ok(Flow::Stop);
+                }
+            }
+            Ok(Flow::Continue)
+        })
+    }
+}

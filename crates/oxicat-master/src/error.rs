@@ -1,0 +1,224 @@
+//! The errors of the master functions, each with a message a user can act on.
+
+use oxicat_wire::coe::SdoAbortCode;
+
+use crate::value::ValueType;
+
+/// Why a master function failed.
+#[derive(Debug)]
+pub enum MasterError {
+    /// The network interface does not exist.
+    NoInterface(String),
+    /// Opening a raw socket was refused (no CAP_NET_RAW).
+    NoPermission(String),
+    /// Another I/O error on the interface.
+    Io(String, std::io::Error),
+    /// Nothing answered on the segment.
+    NoSlaves(String),
+    /// No slave at that position.
+    NoSuchSlave {
+        /// Requested position.
+        position: usize,
+        /// Slaves found.
+        count: usize,
+    },
+    /// A slave did not answer a datagram (working counter 0) or timed out.
+    NotAnswering {
+        /// Position of the slave.
+        position: usize,
+        /// What was asked.
+        what: String,
+    },
+    /// An SDO transfer was aborted by the slave.
+    SdoAbort {
+        /// Position of the slave.
+        position: usize,
+        /// Index.
+        index: u16,
+        /// Subindex.
+        sub: u8,
+        /// The abort code.
+        code: SdoAbortCode,
+    },
+    /// The slave has no CoE mailbox.
+    NoCoe(usize),
+    /// The mailbox exchange broke the protocol.
+    Mailbox {
+        /// Position of the slave.
+        position: usize,
+        /// What went wrong.
+        what: String,
+    },
+    /// A value could not be parsed for its type.
+    BadValue {
+        /// The text given.
+        value: String,
+        /// The type it was parsed as.
+        ty: ValueType,
+        /// Why it was refused.
+        why: String,
+    },
+    /// An unknown type name.
+    UnknownType(String),
+    /// A state change was refused or did not complete.
+    StateChange {
+        /// Position of the slave.
+        position: usize,
+        /// Requested state.
+        requested: crate::al::AlState,
+        /// The AL status seen.
+        status: crate::al::AlStatus,
+    },
+    /// An SII image is for another device than the slave.
+    SiiOtherDevice {
+        /// Position of the slave.
+        position: usize,
+        /// Identity in the image (vendor, product, revision).
+        image: (u32, u32, u32),
+        /// Identity of the slave.
+        slave: (u32, u32, u32),
+    },
+    /// The configuration area checksum of an SII image is wrong.
+    SiiCrc {
+        /// Stored CRC (word 7 low byte).
+        stored: u8,
+        /// CRC computed over words 0..6.
+        computed: u8,
+    },
+    /// An SII image is not valid.
+    SiiImage(String),
+    /// The SII interface reported an error or the EEPROM is held by the PDI.
+    SiiInterface {
+        /// Position of the slave.
+        position: usize,
+        /// What happened.
+        what: String,
+    },
+    /// A word read back after writing differs.
+    SiiVerify {
+        /// Position of the slave.
+        position: usize,
+        /// Word address.
+        word: u16,
+        /// Written value.
+        wrote: u16,
+        /// Value read back.
+        read: u16,
+    },
+    /// A variable name matched nothing.
+    UnknownVariable {
+        /// The name.
+        name: String,
+        /// Some names that exist.
+        known: Vec<String>,
+    },
+    /// A device name for an SII image is not known.
+    UnknownDevice(String),
+    /// Another ethercrab error.
+    Ethercrab(String, ethercrab::error::Error),
+    /// A bad argument.
+    Usage(String),
+    /// Writing an output file failed.
+    Output(std::io::Error),
+}
+
+impl std::fmt::Display for MasterError {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        use MasterError::*;
+        match self {
+            NoInterface(i) => write!(
+                f,
+                "network interface {i:?} does not exist (see `ip link`; for a virtual segment use --sim <devices>)"
+            ),
+            NoPermission(i) => write!(
+                f,
+                "no permission to open a raw socket on {i:?}: EtherCAT needs CAP_NET_RAW (run as root, or `sudo setcap cap_net_raw,cap_net_admin+ep $(which oxicat)`)"
+            ),
+            Io(i, e) => write!(f, "interface {i:?}: {e}"),
+            NoSlaves(w) => write!(
+                f,
+                "no slaves found on {w}: check the cable/link, that the slaves are powered, or that `oxicat sim` runs on the peer interface"
+            ),
+            NoSuchSlave { position, count } => write!(
+                f,
+                "no slave at position {position}: {count} slave(s) found (positions 0..{})",
+                count.saturating_sub(1)
+            ),
+            NotAnswering { position, what } => {
+                write!(f, "slave {position} is not answering ({what})")
+            }
+            SdoAbort {
+                position,
+                index,
+                sub,
+                code,
+            } => write!(
+                f,
+                "SDO abort from slave {position} at 0x{index:04X}:{sub:02X}: 0x{:08X} {}",
+                code.code(),
+                code.text()
+            ),
+            NoCoe(p) => write!(f, "slave {p} has no CoE mailbox (SII mailbox protocols)"),
+            Mailbox { position, what } => write!(f, "mailbox of slave {position}: {what}"),
+            BadValue { value, ty, why } => {
+                write!(f, "value {value:?} is not valid for type {ty}: {why}")
+            }
+            UnknownType(t) => write!(
+                f,
+                "unknown type {t:?}; known: {}",
+                crate::value::ValueType::NAMES
+            ),
+            StateChange {
+                position,
+                requested,
+                status,
+            } => write!(
+                f,
+                "slave {position} did not reach {requested}: AL status {status}"
+            ),
+            SiiOtherDevice {
+                position,
+                image,
+                slave,
+            } => write!(
+                f,
+                "the SII image is for another device (vendor 0x{:08X}, product 0x{:08X}, revision 0x{:08X}) than slave {position} (vendor 0x{:08X}, product 0x{:08X}, revision 0x{:08X}); use --force to write it anyway",
+                image.0, image.1, image.2, slave.0, slave.1, slave.2
+            ),
+            SiiCrc { stored, computed } => write!(
+                f,
+                "SII image configuration area CRC is wrong: stored 0x{stored:02X}, computed 0x{computed:02X} over words 0..6"
+            ),
+            SiiImage(w) => write!(f, "SII image is not valid: {w}"),
+            SiiInterface { position, what } => {
+                write!(f, "SII interface of slave {position}: {what}")
+            }
+            SiiVerify {
+                position,
+                word,
+                wrote,
+                read,
+            } => write!(
+                f,
+                "SII verify failed on slave {position} at word 0x{word:04X}: wrote 0x{wrote:04X}, read back 0x{read:04X}"
+            ),
+            UnknownVariable { name, known } => {
+                write!(f, "no process data variable {name:?}")?;
+                if !known.is_empty() {
+                    let n = known.len().min(12);
+                    write!(f, "; known: {}", known[..n].join(", "))?;
+                    if known.len() > n {
+                        write!(f, ", … ({} in all)", known.len())?;
+                    }
+                }
+                Ok(())
+            }
+            UnknownDevice(n) => write!(f, "unknown device {n:?}"),
+            Ethercrab(what, e) => write!(f, "{what}: {e}"),
+            Usage(w) => f.write_str(w),
+            Output(e) => write!(f, "writing the output failed: {e}"),
+        }
+    }
+}
+
+impl std::error::Error for MasterError {}

@@ -1,0 +1,382 @@
+//! SII EEPROM access through the ESC's SII interface (0x0500 ownership, 0x0502 control/
+//! status, 0x0504 address, 0x0508 data): read, decode, check and write an image.
+
+use oxicat_wire::sii::{sii_crc8, CategoryType, SiiImage};
+
+use crate::{Master, MasterError};
+
+const CTL: u16 = 0x0502;
+const ADDR: u16 = 0x0504;
+const DATA: u16 = 0x0508;
+const BUSY: u16 = 0x8000;
+const ERR_ACK: u16 = 0x2000;
+const ERR_WE: u16 = 0x4000;
+const READ8: u16 = 0x0040;
+
+/// What to do with an SII image before writing it.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct WriteOptions {
+    /// Write even when the image's identity differs from the slave's.
+    pub force: bool,
+}
+
+fn sii_err(position: usize, what: impl Into<String>) -> MasterError {
+    MasterError::SiiInterface {
+        position,
+        what: what.into(),
+    }
+}
+
+/// Checks an image before it is written: even length, fixed area present, configuration
+/// area CRC (word 7) right.
+pub fn check_image(img: &[u8]) -> Result<(), MasterError> {
+    if img.len() < 0x80 {
+        return Err(MasterError::SiiImage(format!(
+            "{} bytes; an SII image has at least the 128-byte fixed area",
+            img.len()
+        )));
+    }
+    if img.len() & 1 != 0 {
+        return Err(MasterError::SiiImage(
+            "odd length; the SII is 16-bit words".into(),
+        ));
+    }
+    let computed = sii_crc8(&img[..14]);
+    if img[14] != computed {
+        return Err(MasterError::SiiCrc {
+            stored: img[14],
+            computed,
+        });
+    }
+    Ok(())
+}
+
+/// Identity (vendor, product, revision) of an image.
+pub fn image_identity(img: &[u8]) -> Result<(u32, u32, u32), MasterError> {
+    let im = SiiImage::new(img).map_err(|e| MasterError::SiiImage(format!("{e:?}")))?;
+    let id = im.identity();
+    Ok((id.vendor_id, id.product_code, id.revision))
+}
+
+impl Master {
+    async fn sii_take(&self, position: usize) -> Result<u16, MasterError> {
+        // The master owns the EEPROM when 0x0500 bit 0 is 0; the PDI may hold it (0x0501).
+        let own = self.fprd(position, 0x0500, 2).await?;
+        if own[0] & 1 != 0 {
+            if own[1] & 1 != 0 {
+                return Err(sii_err(
+                    position,
+                    "the EEPROM is being accessed by the PDI (0x0501)",
+                ));
+            }
+            self.fpwr(position, 0x0500, &[0]).await?;
+        }
+        self.sii_wait(position).await
+    }
+
+    async fn sii_wait(&self, position: usize) -> Result<u16, MasterError> {
+        let deadline = std::time::Instant::now()
+            + self
+                .options
+                .timeouts
+                .eeprom
+                .max(std::time::Duration::from_millis(100));
+        loop {
+            let c = self.read_u16(position, CTL).await?;
+            if c & BUSY == 0 {
+                return Ok(c);
+            }
+            if std::time::Instant::now() > deadline {
+                return Err(sii_err(position, "stays busy (0x0502 bit 15)"));
+            }
+            self.pause().await;
+        }
+    }
+
+    async fn sii_read_chunk(&self, position: usize, word: u16) -> Result<Vec<u8>, MasterError> {
+        self.fpwr(position, ADDR, &(word as u32).to_le_bytes())
+            .await?;
+        self.fpwr(position, CTL, &0x0100u16.to_le_bytes()).await?;
+        let c = self.sii_wait(position).await?;
+        if c & ERR_ACK != 0 {
+            return Err(sii_err(
+                position,
+                format!("read of word 0x{word:04X} not acknowledged (0x0502 = 0x{c:04X})"),
+            ));
+        }
+        let n = if c & READ8 != 0 { 8 } else { 4 };
+        self.fprd(position, DATA, n).await
+    }
+
+    async fn sii_read_words(
+        &self,
+        position: usize,
+        buf: &mut Vec<u8>,
+        upto: usize,
+    ) -> Result<(), MasterError> {
+        while buf.len() < upto {
+            let w = (buf.len() / 2) as u16;
+            let d = self.sii_read_chunk(position, w).await?;
+            buf.extend_from_slice(&d);
+        }
+        Ok(())
+    }
+
+    /// Reads the SII of the slave at `position`: up to and including the end-of-categories
+    /// marker, or the whole EEPROM with `full`.
+    pub fn sii_read(&self, position: usize, full: bool) -> Result<Vec<u8>, MasterError> {
+        futures_lite::future::block_on(async {
+            self.sii_take(position).await?;
+            let mut b = Vec::new();
+            self.sii_read_words(position, &mut b, 0x80).await?;
+            let size_word = u16::from_le_bytes([b[0x7C], b[0x7D]]);
+            let size = ((size_word as usize + 1) * 128).min(64 * 1024);
+            let end = if full {
+                size
+            } else {
+                let mut pos = 0x80usize;
+                loop {
+                    if pos + 2 > size {
+                        break size;
+                    }
+                    self.sii_read_words(position, &mut b, pos + 4).await?;
+                    let t = u16::from_le_bytes([b[pos], b[pos + 1]]);
+                    if t == 0xFFFF {
+                        break pos + 2;
+                    }
+                    let len = u16::from_le_bytes([b[pos + 2], b[pos + 3]]) as usize * 2;
+                    pos += 4 + len;
+                    if pos > size {
+                        break size;
+                    }
+                }
+            };
+            self.sii_read_words(position, &mut b, end).await?;
+            b.truncate(end);
+            Ok(b)
+        })
+    }
+
+    /// Writes `img` into the SII of the slave at `position` word by word and verifies it;
+    /// `progress(done, total)` is called after each word.
+    pub fn sii_write(
+        &self,
+        position: usize,
+        img: &[u8],
+        opts: WriteOptions,
+        progress: &mut dyn FnMut(usize, usize),
+    ) -> Result<(), MasterError> {
+        check_image(img)?;
+        let image = image_identity(img)?;
+        let (v, p, r, _) = self.identity(position)?;
+        if image != (v, p, r) && !opts.force {
+            return Err(MasterError::SiiOtherDevice {
+                position,
+                image,
+                slave: (v, p, r),
+            });
+        }
+        futures_lite::future::block_on(async {
+            self.sii_take(position).await?;
+            let words = img.len() / 2;
+            for w in 0..words {
+                let val = [img[2 * w], img[2 * w + 1]];
+                self.sii_wait(position).await?;
+                self.fpwr(position, ADDR, &(w as u32).to_le_bytes()).await?;
+                self.fpwr(position, DATA, &val).await?;
+                // Write enable (bit 0) with the write command (0x02 in bits 8..10).
+                self.fpwr(position, CTL, &[0x01, 0x02]).await?;
+                let c = self.sii_wait(position).await?;
+                if c & (ERR_ACK | ERR_WE) != 0 {
+                    return Err(sii_err(
+                        position,
+                        format!("write of word 0x{w:04X} refused (0x0502 = 0x{c:04X})"),
+                    ));
+                }
+                progress(w + 1, words);
+            }
+            // Verify.
+            let mut back = Vec::new();
+            self.sii_read_words(position, &mut back, img.len()).await?;
+            for w in 0..words {
+                let a = u16::from_le_bytes([img[2 * w], img[2 * w + 1]]);
+                let b = u16::from_le_bytes([back[2 * w], back[2 * w + 1]]);
+                if a != b {
+                    return Err(MasterError::SiiVerify {
+                        position,
+                        word: w as u16,
+                        wrote: a,
+                        read: b,
+                    });
+                }
+            }
+            Ok(())
+        })
+    }
+}
+
+/// A hex dump of an image, 16 bytes a line with the word address.
+pub fn hex_dump(img: &[u8]) -> String {
+    let mut s = String::new();
+    for (i, c) in img.chunks(16).enumerate() {
+        s.push_str(&format!("{:04x}: {}\n", i * 8, crate::value::hex(c)));
+    }
+    s
+}
+
+/// The decoded categories of an image, as text.
+pub fn decode(img: &[u8]) -> Result<String, MasterError> {
+    use std::fmt::Write;
+    let im = SiiImage::new(img).map_err(|e| MasterError::SiiImage(format!("{e:?}")))?;
+    let m = oxicat_device::sii::parse(img).map_err(|e| MasterError::SiiImage(e.to_string()))?;
+    let cfg = im.config();
+    let id = im.identity();
+    let mut s = String::new();
+    let _ = writeln!(s, "Configuration area:");
+    let _ = writeln!(s, "  PDI control:     0x{:04x}", cfg.pdi_control);
+    let _ = writeln!(s, "  PDI config:      0x{:04x}", cfg.pdi_config);
+    let _ = writeln!(s, "  Station alias:   0x{:04x}", cfg.station_alias);
+    let _ = writeln!(
+        s,
+        "  Checksum:        0x{:02x} ({})",
+        img[14],
+        if im.crc_ok() { "ok" } else { "WRONG" }
+    );
+    let _ = writeln!(s, "Identity:");
+    let _ = writeln!(s, "  Vendor ID:       0x{:08x}", id.vendor_id);
+    let _ = writeln!(s, "  Product code:    0x{:08x}", id.product_code);
+    let _ = writeln!(s, "  Revision:        0x{:08x}", id.revision);
+    let _ = writeln!(s, "  Serial:          0x{:08x}", id.serial);
+    let mbx = im.mailbox();
+    let _ = writeln!(s, "Mailbox:");
+    let _ = writeln!(
+        s,
+        "  Standard:        rx 0x{:04x}/{} tx 0x{:04x}/{}",
+        mbx.standard_rx.offset, mbx.standard_rx.size, mbx.standard_tx.offset, mbx.standard_tx.size
+    );
+    let _ = writeln!(
+        s,
+        "  Bootstrap:       rx 0x{:04x}/{} tx 0x{:04x}/{}",
+        mbx.bootstrap_rx.offset,
+        mbx.bootstrap_rx.size,
+        mbx.bootstrap_tx.offset,
+        mbx.bootstrap_tx.size
+    );
+    let mut protos = Vec::new();
+    for (bit, n) in [
+        (0x01, "AoE"),
+        (0x02, "EoE"),
+        (0x04, "CoE"),
+        (0x08, "FoE"),
+        (0x10, "SoE"),
+        (0x20, "VoE"),
+    ] {
+        if mbx.protocols & bit != 0 {
+            protos.push(n);
+        }
+    }
+    let _ = writeln!(
+        s,
+        "  Protocols:       {}",
+        if protos.is_empty() {
+            "none".into()
+        } else {
+            protos.join(" ")
+        }
+    );
+    let _ = writeln!(
+        s,
+        "EEPROM:            {} bytes, version {}",
+        im.eeprom_size_bytes(),
+        im.version()
+    );
+    let _ = writeln!(s, "Categories:");
+    for c in im.categories() {
+        let Ok(c) = c else {
+            let _ = writeln!(s, "  (broken category list)");
+            break;
+        };
+        let _ = writeln!(
+            s,
+            "  word 0x{:04x}: {:?} ({} bytes)",
+            c.word_address,
+            c.kind,
+            c.data.len()
+        );
+        if c.kind == CategoryType::Strings {
+            if let Ok(st) = c.strings() {
+                for (i, t) in st.iter().enumerate() {
+                    let t = t.unwrap_or(b"?");
+                    let _ = writeln!(s, "    string {}: {:?}", i + 1, String::from_utf8_lossy(t));
+                }
+            }
+        }
+    }
+    let _ = writeln!(s, "General:");
+    let _ = writeln!(s, "  Name:            {}", m.name.as_deref().unwrap_or("-"));
+    let _ = writeln!(
+        s,
+        "  Order:           {}",
+        m.order_code.as_deref().unwrap_or("-")
+    );
+    let _ = writeln!(
+        s,
+        "  Group:           {}",
+        m.group_type.as_deref().unwrap_or("-")
+    );
+    if let Some(c) = m.mailbox.and_then(|x| x.coe) {
+        let _ = writeln!(
+            s,
+            "  CoE:             SDO info {}, PDO assign {}, PDO config {}, complete access {}",
+            c.sdo_info, c.pdo_assign, c.pdo_config, c.complete_access
+        );
+    }
+    if !m.fmmus.is_empty() {
+        let _ = writeln!(s, "FMMUs:             {:?}", m.fmmus);
+    }
+    for (i, sm) in m.sms.iter().enumerate() {
+        let _ = writeln!(
+            s,
+            "SM{i}: start 0x{:04x} size {} control 0x{:02x} {} {:?}",
+            sm.start,
+            sm.default_size.unwrap_or(0),
+            sm.control,
+            if sm.enable { "enabled" } else { "disabled" },
+            sm.kind
+        );
+    }
+    for (dir, list) in [("RxPDO", &m.rx_pdos), ("TxPDO", &m.tx_pdos)] {
+        for p in list {
+            let _ = writeln!(
+                s,
+                "{dir} 0x{:04x} \"{}\" SM{}{}",
+                p.index,
+                p.name.as_deref().unwrap_or(""),
+                p.sm.map(|x| x.to_string()).unwrap_or("-".into()),
+                if p.fixed { " fixed" } else { "" }
+            );
+            for e in &p.entries {
+                let _ = writeln!(
+                    s,
+                    "  0x{:04x}:{:02x} {:>2} bit {} \"{}\"",
+                    e.index,
+                    e.sub,
+                    e.bits,
+                    e.data_type.map(crate::coe::type_name).unwrap_or_default(),
+                    e.name.as_deref().unwrap_or("")
+                );
+            }
+        }
+    }
+    for d in &m.dc {
+        let _ = writeln!(
+            s,
+            "DC mode \"{}\": AssignActivate 0x{:04x}, cycle0 {}, shift0 {}",
+            d.name.as_deref().unwrap_or(""),
+            d.assign_activate,
+            d.cycle0,
+            d.shift0
+        );
+    }
+    Ok(s)
+}
