@@ -17,8 +17,7 @@ use alloc::vec;
 use alloc::vec::Vec;
 use core::mem::take;
 
-use oxicat_wire::frame::for_each_datagram_mut;
-use oxicat_wire::{Command, DatagramMut, WireError};
+use oxicat_wire::{Command, DatagramMut};
 
 use crate::config::{DcSupport, EscConfig};
 use crate::dc::Dc;
@@ -78,8 +77,46 @@ const ECAT_EV_DL: u16 = 1 << 2;
 const ECAT_EV_AL: u16 = 1 << 3;
 
 const REG_END: usize = 0x1000;
+/// EtherCAT frame header length and the type code of a frame carrying datagrams.
+const ECAT_HEADER_LEN: usize = 2;
+const ECAT_TYPE_DATAGRAMS: u16 = 1;
+/// Datagram header length (before the data).
+const DG_HEADER_LEN: usize = 10;
+/// Command codes of the logical datagrams.
+const CMD_LRD: u8 = Command::Lrd as u8;
+const CMD_LWR: u8 = Command::Lwr as u8;
+const CMD_LRW: u8 = Command::Lrw as u8;
 /// PDI control 0x0140 value of the digital I/O PDI.
 const PDI_DIGITAL_IO: u8 = 0x04;
+
+/// One step of the logical fast path: a whole SyncManager buffer mapped byte-aligned by
+/// an FMMU, pre-resolved when FMMUs or SMs change.
+#[derive(Debug, Clone, Copy, Default)]
+struct PlanOp {
+    /// Offset of the FMMU's logical range from the plan window's start.
+    off: u32,
+    /// Length in bytes (= the SM length).
+    len: u32,
+    /// SM index.
+    sm: u8,
+}
+
+/// Most FMMUs a fast-path plan holds (more take the general route).
+const PLAN_MAX: usize = 4;
+
+/// Copies `s` into `d` (equal lengths) in 16-byte chunks: process-data images are small,
+/// and a call into `memcpy` costs more than the copy.
+#[inline(always)]
+fn copy_small(d: &mut [u8], s: &[u8]) {
+    let mut dc = d.chunks_exact_mut(16);
+    let mut sc = s.chunks_exact(16);
+    for (x, y) in (&mut dc).zip(&mut sc) {
+        x.copy_from_slice(y);
+    }
+    for (x, y) in dc.into_remainder().iter_mut().zip(sc.remainder()) {
+        *x = *y;
+    }
+}
 
 /// A software EtherCAT Slave Controller.
 #[derive(Debug, Clone)]
@@ -99,6 +136,20 @@ pub struct Esc {
     active_sms: Vec<u8>,
     fmmus: Vec<Fmmu>,
     fmmu_rw_overlap: bool,
+    /// Every active FMMU is byte-aligned and maps a whole SM buffer (`Fmmu::sm`).
+    fmmu_all_sm: bool,
+    /// Logical fast path: usable (every FMMU a whole SM buffer, no read/write overlap,
+    /// at most `PLAN_MAX`), the window `[plan_lo, plan_hi)` (bytes) covering all of them,
+    /// and the steps (reads first, then writes, each in FMMU order).
+    plan_ok: bool,
+    plan_len: u8,
+    plan_reads: u8,
+    plan_lo: u64,
+    plan_hi: u64,
+    plan: [PlanOp; PLAN_MAX],
+    /// Union of the active FMMUs' logical bit ranges: `[log_bit_lo, log_bit_hi)`.
+    log_bit_lo: u64,
+    log_bit_hi: u64,
     fmmu_any_read: bool,
     fmmu_any_write: bool,
     scratch: Vec<u8>,
@@ -106,7 +157,8 @@ pub struct Esc {
     scratch_mask: Vec<u8>,
     now: u64,
     frame_ok: bool,
-    pending: bool,
+    /// SMs (bit n) with a producer write completed by ECAT in the current frame.
+    pending_sms: u16,
     events_dirty: bool,
     ecat_mask: u16,
     open_ports: u8,
@@ -173,6 +225,15 @@ impl Esc {
             active_sms: Vec::with_capacity(16),
             fmmus: Vec::with_capacity(16),
             fmmu_rw_overlap: false,
+            fmmu_all_sm: false,
+            plan_ok: false,
+            plan_len: 0,
+            plan_reads: 0,
+            plan_lo: 0,
+            plan_hi: 0,
+            plan: [PlanOp::default(); PLAN_MAX],
+            log_bit_lo: u64::MAX,
+            log_bit_hi: 0,
             fmmu_any_read: false,
             fmmu_any_write: false,
             scratch: Vec::with_capacity(2048),
@@ -180,7 +241,7 @@ impl Esc {
             scratch_mask: Vec::with_capacity(2050),
             now: 0,
             frame_ok: true,
-            pending: false,
+            pending_sms: 0,
             events_dirty: true,
             ecat_mask: 0,
             open_ports: 0,
@@ -312,10 +373,7 @@ impl Esc {
 
     fn process_frame(&mut self, frame: &mut [u8], frame_ok: bool) {
         self.frame_ok = frame_ok;
-        let _ = for_each_datagram_mut::<WireError>(frame, |dg| {
-            self.process_datagram(dg);
-            Ok(())
-        });
+        self.walk_datagrams(frame);
         if !frame_ok {
             // A bad frame also abandons a buffer write ECAT had opened.
             for k in 0..self.active_sms.len() {
@@ -328,20 +386,88 @@ impl Esc {
                 }
             }
         }
-        if self.pending {
-            self.pending = false;
-            for k in 0..self.active_sms.len() {
-                let i = self.active_sms[k] as usize;
-                if self.sms[i].pending_commit {
-                    if frame_ok {
-                        self.commit_sm(i, Side::Ecat);
-                    } else {
-                        self.sms[i].discard();
-                    }
+        // Only SMs flagged in this frame can have a pending commit (deactivating or
+        // reconfiguring an SM clears its flag); lowest index first, as before.
+        let mut pending = take(&mut self.pending_sms);
+        while pending != 0 {
+            let i = pending.trailing_zeros() as usize;
+            pending &= pending - 1;
+            if self.sms[i].pending_commit {
+                if frame_ok {
+                    self.commit_sm(i, Side::Ecat);
+                } else {
+                    self.sms[i].discard();
                 }
             }
         }
         self.frame_ok = true;
+    }
+
+    /// Walks the datagrams of `frame` exactly as `oxicat_wire::frame::for_each_datagram_mut`
+    /// does (same bounds checks, stops at the first malformed datagram), but hands logical
+    /// datagrams to [`Esc::logical_datagram`] without building a decoded header.
+    #[inline]
+    fn walk_datagrams(&mut self, frame: &mut [u8]) {
+        let Some(hdr) = frame.get(..ECAT_HEADER_LEN) else {
+            return;
+        };
+        let w = u16::from_le_bytes([hdr[0], hdr[1]]);
+        if w >> 12 != ECAT_TYPE_DATAGRAMS {
+            return;
+        }
+        let end = ECAT_HEADER_LEN + (w & 0x07FF) as usize;
+        let Some(mut rest) = frame.get_mut(ECAT_HEADER_LEN..end) else {
+            return;
+        };
+        loop {
+            let Some(h) = rest.get(..DG_HEADER_LEN) else {
+                return;
+            };
+            let cmd = h[0];
+            let lf = u16::from_le_bytes([h[6], h[7]]);
+            let len = (lf & 0x07FF) as usize;
+            let total = DG_HEADER_LEN + len + 2;
+            if rest.len() < total {
+                return;
+            }
+            let (dg, tail) = take(&mut rest).split_at_mut(total);
+            if (CMD_LRD..=CMD_LRW).contains(&cmd) {
+                self.logical_datagram(dg, cmd);
+            } else if let Ok((mut d, _)) = DatagramMut::parse(dg) {
+                self.process_datagram(&mut d);
+            }
+            if lf & 0x8000 == 0 {
+                return;
+            }
+            rest = tail;
+        }
+    }
+
+    /// A logical datagram (`dg`: header, data and working counter, already bounds-checked;
+    /// `cmd` is LRD, LWR or LRW): what [`Esc::process_datagram`] does for it, on the raw bytes.
+    #[inline]
+    fn logical_datagram(&mut self, dg: &mut [u8], cmd: u8) {
+        if self.events_dirty && self.ecat_mask != 0 {
+            self.refresh_events();
+        }
+        let irq = self.ecat_irq;
+        let (hdr, rest) = dg.split_at_mut(DG_HEADER_LEN);
+        let (data, wkc) = rest.split_at_mut(rest.len() - 2);
+        let addr = u32::from_le_bytes([hdr[2], hdr[3], hdr[4], hdr[5]]);
+        let cmd = match cmd {
+            CMD_LRD => Command::Lrd,
+            CMD_LWR => Command::Lwr,
+            _ => Command::Lrw,
+        };
+        let inc = self.logical(cmd, addr, data);
+        let hirq = u16::from_le_bytes([hdr[8], hdr[9]]);
+        if irq & !hirq != 0 {
+            hdr[8..10].copy_from_slice(&(hirq | irq).to_le_bytes());
+        }
+        if inc != 0 {
+            let w = u16::from_le_bytes([wkc[0], wkc[1]]).wrapping_add(inc);
+            wkc.copy_from_slice(&w.to_le_bytes());
+        }
     }
 
     fn configured_match(&self, adp: u16) -> bool {
@@ -432,13 +558,113 @@ impl Esc {
     }
 
     /// Logical access through the FMMUs; returns the WKC increment.
+    #[inline]
     fn logical(&mut self, cmd: Command, addr: u32, data: &mut [u8]) -> u16 {
+        let ds = addr as u64;
+        let de = ds + data.len() as u64;
+        // O(1) rejection: the datagram misses every FMMU's logical range.
+        if self.log_bit_lo >= de * 8 || self.log_bit_hi <= ds * 8 {
+            return 0;
+        }
         let do_read = cmd != Command::Lwr && self.fmmu_any_read;
         let do_write = cmd != Command::Lrd && self.fmmu_any_write;
         if !do_read && !do_write {
             return 0;
         }
+        if self.plan_ok && ds <= self.plan_lo && self.plan_hi <= de {
+            // The datagram covers every FMMU: each step is a whole-buffer SM access.
+            return self.logical_plan(cmd, (self.plan_lo - ds) as usize, data);
+        }
         let need_copy = do_read && do_write && self.fmmu_rw_overlap;
+        if need_copy || !self.fmmu_all_sm {
+            return self.logical_generic(cmd, addr, data, do_read, do_write, need_copy);
+        }
+        // Every FMMU maps a whole SyncManager buffer byte-aligned (the usual process-data
+        // layout): a datagram covering an FMMU's range accesses the SM buffer in one go;
+        // a partial cover takes the general per-FMMU route.
+        let mut rd = false;
+        let mut wr = false;
+        let n = self.fmmus.len();
+        if do_read {
+            for k in 0..n {
+                let f = &self.fmmus[k];
+                let (s, e) = (f.log_start as u64, f.log_end);
+                if !f.read || s >= de || e <= ds {
+                    continue;
+                }
+                if s >= ds && e <= de {
+                    let i = f.sm.unwrap_or(0) as usize;
+                    let out = &mut data[(s - ds) as usize..(e - ds) as usize];
+                    rd |= self.sm_read_whole(i, out);
+                } else {
+                    let f = *f;
+                    rd |= self.fmmu_read(&f, addr, data);
+                }
+            }
+        }
+        if do_write {
+            for k in 0..n {
+                let f = &self.fmmus[k];
+                let (s, e) = (f.log_start as u64, f.log_end);
+                if !f.write || s >= de || e <= ds {
+                    continue;
+                }
+                if s >= ds && e <= de {
+                    let i = f.sm.unwrap_or(0) as usize;
+                    let inp = &data[(s - ds) as usize..(e - ds) as usize];
+                    wr |= self.sm_write_whole(i, inp);
+                } else {
+                    let f = *f;
+                    wr |= self.fmmu_write(&f, addr, data);
+                }
+            }
+        }
+        let wr_inc = if cmd == Command::Lwr { 1 } else { 2 };
+        u16::from(rd) + wr_inc * u16::from(wr)
+    }
+
+    /// The logical fast path: `data[base..]` starts at the plan window.
+    #[inline(always)]
+    fn logical_plan(&mut self, cmd: Command, base: usize, data: &mut [u8]) -> u16 {
+        let Some(win) = data.get_mut(base..) else {
+            return 0;
+        };
+        let mut rd = false;
+        let mut wr = false;
+        let n = self.plan_len as usize;
+        let nr = self.plan_reads as usize;
+        if cmd != Command::Lwr {
+            for k in 0..nr.min(n) {
+                let op = self.plan[k];
+                let (o, l) = (op.off as usize, op.len as usize);
+                if let Some(out) = win.get_mut(o..o + l) {
+                    rd |= self.sm_read_whole(op.sm as usize, out);
+                }
+            }
+        }
+        if cmd != Command::Lrd {
+            for k in nr..n.min(PLAN_MAX) {
+                let op = self.plan[k];
+                let (o, l) = (op.off as usize, op.len as usize);
+                if let Some(inp) = win.get(o..o + l) {
+                    wr |= self.sm_write_whole(op.sm as usize, inp);
+                }
+            }
+        }
+        let wr_inc = if cmd == Command::Lwr { 1 } else { 2 };
+        u16::from(rd) + wr_inc * u16::from(wr)
+    }
+
+    /// Logical access through arbitrary (bit-granular, overlapping, non-SM) FMMUs.
+    fn logical_generic(
+        &mut self,
+        cmd: Command,
+        addr: u32,
+        data: &mut [u8],
+        do_read: bool,
+        do_write: bool,
+        need_copy: bool,
+    ) -> u16 {
         let mut rd = false;
         let mut wr = false;
         let n = self.fmmus.len();
@@ -991,7 +1217,7 @@ impl Esc {
     }
 
     /// ECAT reads a whole SM buffer in one access (FMMU fast path).
-    #[inline]
+    #[inline(always)]
     fn sm_read_whole(&mut self, i: usize, o: &mut [u8]) -> bool {
         let sm = &mut self.sms[i];
         if !sm.open_read() {
@@ -1003,14 +1229,14 @@ impl Esc {
         self.mem[0x0805 + 8 * i] = status;
         self.events_dirty = true;
         match self.mem.get(from..from + o.len()) {
-            Some(src) => o.copy_from_slice(src),
+            Some(src) => copy_small(o, src),
             None => self.copy_out(from as u32, o, false),
         }
         true
     }
 
     /// ECAT writes a whole SM buffer in one access (FMMU fast path).
-    #[inline]
+    #[inline(always)]
     fn sm_write_whole(&mut self, i: usize, d: &[u8]) -> bool {
         let sm = &mut self.sms[i];
         if !sm.open_write() {
@@ -1018,13 +1244,13 @@ impl Esc {
         }
         sm.write_open = false;
         sm.pending_commit = true;
-        self.pending = true;
+        self.pending_sms |= 1 << i;
         let to = (sm.start as u32 + sm.buf_offset(sm.write_buf)) as usize;
         let status = sm.status_reg();
         self.mem[0x0805 + 8 * i] = status;
         self.events_dirty = true;
         match self.mem.get_mut(to..to + d.len()) {
-            Some(dst) => dst.copy_from_slice(d),
+            Some(dst) => copy_small(dst, d),
             None => self.store(to as u32, d, None),
         }
         true
@@ -1049,7 +1275,7 @@ impl Esc {
             sm.write_open = false;
             if side == Side::Ecat {
                 sm.pending_commit = true;
-                self.pending = true;
+                self.pending_sms |= 1 << i;
             } else {
                 self.commit_sm(i, side);
                 return true;
@@ -1131,12 +1357,54 @@ impl Esc {
                 sm.start as u32 == ps && sm.end() == pe && sm.ecat_writes() == f.write
             });
         }
+        self.fmmu_all_sm = self.fmmus.iter().all(|f| f.aligned && f.sm.is_some());
+        self.log_bit_lo = self
+            .fmmus
+            .iter()
+            .map(|f| f.log_bit_start)
+            .min()
+            .unwrap_or(u64::MAX);
+        self.log_bit_hi = self.fmmus.iter().map(|f| f.log_bit_end).max().unwrap_or(0);
         self.fmmu_any_read = self.fmmus.iter().any(|f| f.read);
         self.fmmu_any_write = self.fmmus.iter().any(|f| f.write);
         self.fmmu_rw_overlap = self
             .fmmus
             .iter()
             .any(|r| r.read && self.fmmus.iter().any(|w| w.write && w.overlaps(r)));
+        self.rebuild_plan();
+    }
+
+    /// Pre-resolves the FMMUs for the logical fast path (see `plan_ok`).
+    fn rebuild_plan(&mut self) {
+        self.plan_ok = self.fmmu_all_sm
+            && !self.fmmu_rw_overlap
+            && !self.fmmus.is_empty()
+            && self.fmmus.len() <= PLAN_MAX;
+        self.plan_len = 0;
+        if !self.plan_ok {
+            return;
+        }
+        self.plan_lo = self
+            .fmmus
+            .iter()
+            .map(|f| f.log_start as u64)
+            .min()
+            .unwrap_or(0);
+        self.plan_hi = self.fmmus.iter().map(|f| f.log_end).max().unwrap_or(0);
+        // Reads first, then writes, each in FMMU order (the order `logical` executes).
+        let reads = self.fmmus.iter().filter(|f| f.read);
+        let writes = self.fmmus.iter().filter(|f| f.write);
+        let mut n = 0;
+        for f in reads.chain(writes) {
+            self.plan[n] = PlanOp {
+                off: (f.log_start as u64 - self.plan_lo) as u32,
+                len: f.len as u32,
+                sm: f.sm.unwrap_or(0),
+            };
+            n += 1;
+        }
+        self.plan_len = n as u8;
+        self.plan_reads = self.fmmus.iter().filter(|f| f.read).count() as u8;
     }
 
     fn update_dl_status(&mut self, event: bool) {

@@ -133,6 +133,7 @@ impl Sm {
     }
 
     /// The status byte as the register 0x0805 + 8n shows it.
+    #[inline]
     pub fn status_reg(&self) -> u8 {
         let mut s = self.status & (STATUS_IRQ_WRITE | STATUS_IRQ_READ | STATUS_MBX_FULL);
         if !self.is_mailbox() {
@@ -149,6 +150,7 @@ impl Sm {
     }
 
     /// Completes a producer write: mailbox becomes full / a new buffer becomes the newest.
+    #[inline]
     pub fn commit(&mut self) {
         self.pending_commit = false;
         if self.is_mailbox() {
@@ -170,6 +172,7 @@ impl Sm {
 
     /// Consumer opens the buffer (first byte accessed). Returns false when the access is
     /// refused (empty mailbox).
+    #[inline]
     pub fn open_read(&mut self) -> bool {
         if self.is_mailbox() {
             if self.status & STATUS_MBX_FULL == 0 {
@@ -184,6 +187,7 @@ impl Sm {
     }
 
     /// Consumer has read the last byte.
+    #[inline]
     pub fn close_read(&mut self) {
         self.read_open = false;
         if self.is_mailbox() {
@@ -194,6 +198,7 @@ impl Sm {
 
     /// Producer opens the buffer (first byte written). Returns false when refused (full
     /// mailbox).
+    #[inline]
     pub fn open_write(&mut self) -> bool {
         if self.is_mailbox() && self.status & STATUS_MBX_FULL != 0 {
             return false;
@@ -204,6 +209,7 @@ impl Sm {
     }
 
     /// The event this SM raises towards the PDI (AL event request bit 8 + n).
+    #[inline]
     pub fn al_event(&self) -> bool {
         if !self.enabled || self.ctrl & CTRL_AL_IRQ == 0 {
             return false;
@@ -216,6 +222,7 @@ impl Sm {
     }
 
     /// The event this SM raises towards ECAT (ECAT event request bit 4 + n).
+    #[inline]
     pub fn ecat_event(&self) -> bool {
         if !self.enabled || self.ctrl & CTRL_ECAT_IRQ == 0 {
             return false;
