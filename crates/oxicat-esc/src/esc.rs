@@ -1220,11 +1220,10 @@ impl Esc {
     #[inline(always)]
     fn sm_read_whole(&mut self, i: usize, o: &mut [u8]) -> bool {
         let sm = &mut self.sms[i];
-        if !sm.open_read() {
+        let Some(off) = sm.read_whole() else {
             return false;
-        }
-        sm.close_read();
-        let from = (sm.start as u32 + sm.buf_offset(sm.user_buf)) as usize;
+        };
+        let from = (sm.start as u32 + off) as usize;
         let status = sm.status_reg();
         self.mem[0x0805 + 8 * i] = status;
         self.events_dirty = true;
@@ -1239,13 +1238,11 @@ impl Esc {
     #[inline(always)]
     fn sm_write_whole(&mut self, i: usize, d: &[u8]) -> bool {
         let sm = &mut self.sms[i];
-        if !sm.open_write() {
+        let Some(off) = sm.write_whole() else {
             return false;
-        }
-        sm.write_open = false;
-        sm.pending_commit = true;
+        };
         self.pending_sms |= 1 << i;
-        let to = (sm.start as u32 + sm.buf_offset(sm.write_buf)) as usize;
+        let to = (sm.start as u32 + off) as usize;
         let status = sm.status_reg();
         self.mem[0x0805 + 8 * i] = status;
         self.events_dirty = true;

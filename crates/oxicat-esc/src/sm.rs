@@ -165,6 +165,45 @@ impl Sm {
         self.status |= STATUS_IRQ_WRITE;
     }
 
+    /// The consumer reads the whole buffer in one access (open, read, close): the
+    /// offset of the buffer it reads, or `None` when refused (empty mailbox). Same effect
+    /// as `open_read` + `close_read`, with the buffered-mode case kept branch-light.
+    #[inline(always)]
+    pub fn read_whole(&mut self) -> Option<u32> {
+        if self.is_mailbox() {
+            if !self.open_read() {
+                return None;
+            }
+            self.close_read();
+            return Some(0);
+        }
+        if let Some(n) = self.next_buf.take() {
+            self.user_buf = n;
+        }
+        self.read_open = false;
+        self.status = (self.status & !STATUS_IRQ_WRITE) | STATUS_IRQ_READ;
+        Some(self.user_buf as u32 * self.len as u32)
+    }
+
+    /// The producer writes the whole buffer in one access (open, write, close; commit at
+    /// frame end): the offset of the buffer it writes, or `None` when refused (full
+    /// mailbox). Same effect as `open_write` followed by closing the write.
+    #[inline(always)]
+    pub fn write_whole(&mut self) -> Option<u32> {
+        if self.is_mailbox() {
+            if !self.open_write() {
+                return None;
+            }
+            self.write_open = false;
+            self.pending_commit = true;
+            return Some(0);
+        }
+        self.status &= !STATUS_IRQ_READ;
+        self.write_open = false;
+        self.pending_commit = true;
+        Some(self.write_buf as u32 * self.len as u32)
+    }
+
     /// Drops a producer write that was not committed (frame with bad FCS).
     pub fn discard(&mut self) {
         self.pending_commit = false;
