@@ -192,6 +192,7 @@ impl MasterOptions {
                     state_transition: Duration::from_secs(20),
                     pdu: Duration::from_secs(2),
                     mailbox_response: Duration::from_secs(5),
+                    eeprom: Duration::from_secs(2),
                     ..Timeouts::default()
                 },
                 mailbox_timeout: Duration::from_secs(5),
@@ -202,6 +203,7 @@ impl MasterOptions {
                     pdu: Duration::from_millis(100),
                     mailbox_response: Duration::from_secs(2),
                     wait_loop_delay: Duration::from_micros(500),
+                    eeprom: Duration::from_millis(500),
                     ..Timeouts::default()
                 },
                 mailbox_timeout: Duration::from_secs(2),

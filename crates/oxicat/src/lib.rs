@@ -9,6 +9,8 @@ use std::path::PathBuf;
 use clap::{Parser, Subcommand, ValueEnum};
 use oxicat_slave::DeviceDef;
 
+pub mod master_cmd;
+
 /// The command line.
 #[derive(Debug, Parser)]
 #[command(
@@ -27,6 +29,9 @@ pub struct Cli {
 pub enum Command {
     /// Device definitions: write a device's ESI XML, SII EEPROM image or object dictionary.
     Device(DeviceArgs),
+    /// Master verbs (IgH `ethercat` style) on an interface or a virtual segment.
+    #[command(flatten)]
+    Master(master_cmd::MasterCommand),
 }
 
 /// Arguments of `oxicat device`.
@@ -80,6 +85,8 @@ pub enum CliError {
     Device(oxicat_device::Error),
     /// Writing the output failed.
     Io(std::io::Error),
+    /// A master verb failed.
+    Master(oxicat_master::MasterError),
 }
 
 impl std::fmt::Display for CliError {
@@ -91,6 +98,7 @@ impl std::fmt::Display for CliError {
             }
             CliError::Device(e) => write!(f, "{e}"),
             CliError::Io(e) => write!(f, "{e}"),
+            CliError::Master(e) => write!(f, "{e}"),
         }
     }
 }
@@ -129,6 +137,9 @@ pub fn run(cli: Cli) -> Result<(), CliError> {
                 Some(p) => std::fs::write(p, bytes).map_err(CliError::Io),
                 None => std::io::stdout().write_all(&bytes).map_err(CliError::Io),
             }
+        }
+        Command::Master(c) => {
+            master_cmd::run(c, &mut std::io::stdout().lock()).map_err(CliError::Master)
         }
     }
 }

@@ -1,0 +1,754 @@
+//! The master verbs of `oxicat`, after the IgH `ethercat` tool: `slaves`, `states`,
+//! `sii-read`, `sii-write`, `upload`, `download`, `sdos`, `pdos`, `xml`, `reg-read`,
+//! `reg-write`, `watch`, `write`, `record`. Each runs on `--iface <if>` (or `OXICAT_IFACE`)
+//! or, for tests and trying things out, on an in-process virtual segment `--sim demo:2`.
+//!
+//! The `--sim` device registry here is small (demo devices); `oxicat sim`'s registry
+//! (`sim_devices`) is the one to grow.
+
+use std::io::Write;
+use std::path::PathBuf;
+use std::sync::{Arc, Mutex};
+use std::time::Duration;
+
+use clap::{Args, Subcommand};
+use oxicat_master::cyclic::CycleOptions;
+use oxicat_master::value::{parse_int, parse_u16, ValueType};
+use oxicat_master::{AlState, Link, Master, MasterError};
+
+/// Where the slaves are.
+#[derive(Debug, Clone, Args)]
+pub struct LinkArgs {
+    /// Network interface with the EtherCAT segment (default: $OXICAT_IFACE).
+    #[arg(long, short = 'i')]
+    pub iface: Option<String>,
+    /// Run against an in-process virtual segment instead: devices by name with a count,
+    /// comma-separated (e.g. `demo:2`).
+    #[arg(long, conflicts_with = "iface")]
+    pub sim: Option<String>,
+}
+
+/// Slave selection.
+#[derive(Debug, Clone, Args)]
+pub struct PosArgs {
+    /// Slave position (0 = first).
+    #[arg(long, short = 'p')]
+    pub position: Option<usize>,
+}
+
+/// The master verbs (fields are documented by their `--help` text).
+#[allow(missing_docs)]
+#[derive(Debug, Subcommand)]
+pub enum MasterCommand {
+    /// List the slaves: position, address, alias, AL state, name, identity, ports.
+    Slaves {
+        #[command(flatten)]
+        link: LinkArgs,
+        #[command(flatten)]
+        pos: PosArgs,
+    },
+    /// Request an AL state (INIT, PREOP, SAFEOP, OP, BOOT) for all slaves or one.
+    States {
+        /// INIT | PREOP | SAFEOP | OP | BOOT.
+        state: String,
+        #[command(flatten)]
+        link: LinkArgs,
+        #[command(flatten)]
+        pos: PosArgs,
+    },
+    /// Read a slave's SII EEPROM (decoded by default).
+    SiiRead {
+        #[command(flatten)]
+        link: LinkArgs,
+        #[command(flatten)]
+        pos: PosArgs,
+        /// Raw binary to standard output (or -o).
+        #[arg(long, conflicts_with_all = ["hex", "decode"])]
+        raw: bool,
+        /// Hex dump.
+        #[arg(long, conflicts_with = "decode")]
+        hex: bool,
+        /// Decoded categories (default).
+        #[arg(long)]
+        decode: bool,
+        /// The whole EEPROM, not only up to the end of the categories.
+        #[arg(long)]
+        full: bool,
+        /// Output file.
+        #[arg(long, short = 'o')]
+        output: Option<PathBuf>,
+    },
+    /// Write an SII image (a file, or one generated for a device) and verify it.
+    SiiWrite {
+        #[command(flatten)]
+        link: LinkArgs,
+        #[command(flatten)]
+        pos: PosArgs,
+        /// Image file (binary or Intel HEX).
+        file: Option<PathBuf>,
+        /// Generate the image of this device (see `oxicat device`).
+        #[arg(long, conflicts_with = "file")]
+        device: Option<String>,
+        /// Write even when the image's identity differs from the slave's.
+        #[arg(long)]
+        force: bool,
+    },
+    /// SDO upload (read) of index:subindex.
+    Upload {
+        #[command(flatten)]
+        link: LinkArgs,
+        #[command(flatten)]
+        pos: PosArgs,
+        /// Object index (0x1018).
+        index: String,
+        /// Subindex.
+        sub: String,
+        /// Value type (default: from SDO information, else by size).
+        #[arg(long, short = 't')]
+        r#type: Option<String>,
+    },
+    /// SDO download (write) of a typed value to index:subindex.
+    Download {
+        #[command(flatten)]
+        link: LinkArgs,
+        #[command(flatten)]
+        pos: PosArgs,
+        /// Object index.
+        index: String,
+        /// Subindex.
+        sub: String,
+        /// The value.
+        #[arg(allow_hyphen_values = true)]
+        value: String,
+        /// Value type (default: from SDO information).
+        #[arg(long, short = 't')]
+        r#type: Option<String>,
+    },
+    /// List the CoE dictionary (SDO information).
+    Sdos {
+        #[command(flatten)]
+        link: LinkArgs,
+        #[command(flatten)]
+        pos: PosArgs,
+    },
+    /// Show the PDO assignment and mapping.
+    Pdos {
+        #[command(flatten)]
+        link: LinkArgs,
+        #[command(flatten)]
+        pos: PosArgs,
+    },
+    /// Write an ESI (EtherCATInfo XML) for a live slave.
+    Xml {
+        #[command(flatten)]
+        link: LinkArgs,
+        #[command(flatten)]
+        pos: PosArgs,
+        /// Output file.
+        #[arg(long, short = 'o')]
+        output: Option<PathBuf>,
+    },
+    /// Read ESC registers (FPRD).
+    RegRead {
+        #[command(flatten)]
+        link: LinkArgs,
+        #[command(flatten)]
+        pos: PosArgs,
+        /// Address.
+        address: String,
+        /// Length in bytes (default: the type's size, else 1).
+        length: Option<String>,
+        /// Show as this type.
+        #[arg(long, short = 't')]
+        r#type: Option<String>,
+    },
+    /// Write ESC registers (FPWR).
+    RegWrite {
+        #[command(flatten)]
+        link: LinkArgs,
+        #[command(flatten)]
+        pos: PosArgs,
+        /// Address.
+        address: String,
+        /// Value (hex bytes with --type hex).
+        #[arg(allow_hyphen_values = true)]
+        value: String,
+        /// Value type (default u8).
+        #[arg(long, short = 't')]
+        r#type: Option<String>,
+    },
+    /// Show process-data variables live (`<pos>.<entry>` or `<device>.<entry>`).
+    Watch {
+        #[command(flatten)]
+        link: LinkArgs,
+        /// Variables.
+        #[arg(required = true)]
+        vars: Vec<String>,
+        /// Cycle time (e.g. 1ms, 400us).
+        #[arg(long, default_value = "1ms")]
+        cycle: String,
+        /// Refresh every this many cycles.
+        #[arg(long, default_value_t = 100)]
+        every: u64,
+        /// Stop after this many refreshes (0: until Ctrl-C).
+        #[arg(long, default_value_t = 0)]
+        count: u64,
+    },
+    /// Write a process-data output while cycling (to every slave the name links).
+    Write {
+        #[command(flatten)]
+        link: LinkArgs,
+        /// Variable.
+        var: String,
+        /// Value.
+        #[arg(allow_hyphen_values = true)]
+        value: String,
+        /// Cycle time.
+        #[arg(long, default_value = "1ms")]
+        cycle: String,
+        /// Cycles to keep cycling after the write.
+        #[arg(long, default_value_t = 20)]
+        settle: u64,
+    },
+    /// Record variables every cycle (DC-synchronous) into a CSV file.
+    Record {
+        #[command(flatten)]
+        link: LinkArgs,
+        /// Variables.
+        #[arg(required = true)]
+        vars: Vec<String>,
+        /// Cycle time.
+        #[arg(long, default_value = "1ms")]
+        cycle: String,
+        /// Duration (e.g. 10s, 500ms).
+        #[arg(long, default_value = "1s")]
+        duration: String,
+        /// Output CSV.
+        #[arg(long, short = 'o')]
+        output: PathBuf,
+        /// Free run instead of DC SYNC0.
+        #[arg(long)]
+        free_run: bool,
+    },
+}
+
+/// Parses `400us`, `1ms`, `10s`, `250ns`, `2m`.
+pub fn parse_duration(s: &str) -> Result<Duration, MasterError> {
+    let t = s.trim();
+    let split = t
+        .find(|c: char| !(c.is_ascii_digit() || c == '.'))
+        .unwrap_or(t.len());
+    let (num, unit) = t.split_at(split);
+    let v: f64 = num
+        .parse()
+        .map_err(|_| MasterError::Usage(format!("not a duration: {s:?} (e.g. 400us, 10s)")))?;
+    let ns = match unit.trim() {
+        "ns" => v,
+        "us" | "µs" => v * 1e3,
+        "ms" => v * 1e6,
+        "s" | "" => v * 1e9,
+        "m" | "min" => v * 60e9,
+        u => {
+            return Err(MasterError::Usage(format!(
+                "unknown time unit {u:?} in {s:?}"
+            )))
+        }
+    };
+    Ok(Duration::from_nanos(ns.round() as u64))
+}
+
+fn build_sim(spec: &str) -> Result<Arc<Mutex<oxicat_sim::segment::Segment>>, MasterError> {
+    use oxicat_esc::{Esc, EscConfig};
+    use oxicat_sim::firmware::{attach_firmware, FirmwareConfig};
+    let mut seg = oxicat_sim::segment::Segment::new();
+    let mut k = 0usize;
+    for part in spec.split(',').map(str::trim).filter(|p| !p.is_empty()) {
+        let (name, count) = match part.split_once(':') {
+            Some((n, c)) => (
+                n,
+                c.parse::<usize>()
+                    .map_err(|_| MasterError::Usage(format!("bad count in {part:?}")))?,
+            ),
+            None => (part, 1),
+        };
+        let def: &'static oxicat_slave::DeviceDef = match name {
+            "demo" => &oxicat_devices::demo::DEF,
+            "demo-additions" => &oxicat_devices::demo::additions::DEF,
+            _ => {
+                return Err(MasterError::Usage(format!(
+                    "unknown --sim device {name:?}; known: demo, demo-additions"
+                )))
+            }
+        };
+        let sii =
+            oxicat_device::sii::generate(def).map_err(|e| MasterError::SiiImage(e.to_string()))?;
+        for _ in 0..count {
+            let id = seg.add(Esc::new(EscConfig::et1100(), sii.clone()));
+            let app = oxicat_devices::demo::Demo::new(NoLeds, FixedButtons(0xA0 | k as u8));
+            let cfg = FirmwareConfig::default();
+            let r = if name == "demo" {
+                attach_firmware::<_, { oxicat_devices::demo::IMAGE }, 128>(
+                    &mut seg, id, def, app, &cfg,
+                )
+                .map(|_| ())
+            } else {
+                attach_firmware::<_, { oxicat_devices::demo::additions::IMAGE }, 128>(
+                    &mut seg, id, def, app, &cfg,
+                )
+                .map(|_| ())
+            };
+            r.map_err(|e| MasterError::Usage(format!("firmware of {name} did not boot: {e}")))?;
+            k += 1;
+        }
+    }
+    Ok(Arc::new(Mutex::new(seg)))
+}
+
+struct NoLeds;
+impl oxicat_devices::demo::Leds for NoLeds {
+    fn set(&mut self, _blue: bool, _red: bool) {}
+}
+struct FixedButtons(u8);
+impl oxicat_devices::demo::Buttons for FixedButtons {
+    fn read(&mut self) -> u8 {
+        self.0
+    }
+}
+
+fn open(link: &LinkArgs) -> Result<Master, MasterError> {
+    if let Some(spec) = &link.sim {
+        return Master::open(Link::Sim(build_sim(spec)?));
+    }
+    let iface = link
+        .iface
+        .clone()
+        .or_else(|| std::env::var("OXICAT_IFACE").ok())
+        .ok_or_else(|| {
+            MasterError::Usage(
+                "no network interface: give --iface <if> (or set OXICAT_IFACE), or --sim demo:2 for a virtual segment"
+                    .into(),
+            )
+        })?;
+    Master::open(Link::Iface(iface))
+}
+
+fn one(m: &Master, pos: &PosArgs) -> Result<usize, MasterError> {
+    let p = pos.position.unwrap_or(0);
+    m.address(p)?;
+    Ok(p)
+}
+
+fn idx(s: &str) -> Result<u16, MasterError> {
+    parse_u16(s).ok_or_else(|| MasterError::Usage(format!("not an index/address: {s:?}")))
+}
+
+fn sub(s: &str) -> Result<u8, MasterError> {
+    parse_int(s)
+        .and_then(|v| u8::try_from(v).ok())
+        .ok_or_else(|| MasterError::Usage(format!("not a subindex: {s:?}")))
+}
+
+/// The type of `index:sub` from SDO information, if the slave tells.
+fn sdo_type(m: &Master, p: usize, index: u16, s: u8) -> Option<ValueType> {
+    let o = m.sdo_describe(p, index).ok()?;
+    let e = o.entries.iter().find(|e| e.sub == s)?;
+    ValueType::from_coe(e.data_type)
+}
+
+fn progress_bar(total: u64, what: &str) -> indicatif::ProgressBar {
+    let pb = indicatif::ProgressBar::new(total);
+    pb.set_style(
+        indicatif::ProgressStyle::with_template("{msg} [{bar:40}] {pos}/{len} ({eta} left)")
+            .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar())
+            .progress_chars("=> "),
+    );
+    pb.set_message(what.to_string());
+    pb
+}
+
+/// Runs a master verb, writing its output to `out`.
+pub fn run(cmd: MasterCommand, out: &mut dyn Write) -> Result<(), MasterError> {
+    let w = |out: &mut dyn Write, s: &str| out.write_all(s.as_bytes()).map_err(MasterError::Output);
+    match cmd {
+        MasterCommand::Slaves { link, pos } => {
+            let m = open(&link)?;
+            let list = m.scan()?;
+            w(out, "pos  addr    alias   state                 vendor      product     revision    serial      ports            name\n")?;
+            for s in list
+                .iter()
+                .filter(|s| pos.position.is_none_or(|p| p == s.position))
+            {
+                w(
+                    out,
+                    &format!(
+                        "{:<4} 0x{:04x}  0x{:04x}  {:<21} 0x{:08x}  0x{:08x}  0x{:08x}  0x{:08x}  {}  {}\n",
+                        s.position,
+                        s.address,
+                        s.alias,
+                        s.status.to_string(),
+                        s.vendor_id,
+                        s.product_code,
+                        s.revision,
+                        s.serial,
+                        s.ports(),
+                        s.name
+                    ),
+                )?;
+            }
+            if let Some(p) = pos.position {
+                m.address(p)?;
+            }
+            Ok(())
+        }
+        MasterCommand::States { state, link, pos } => {
+            let st = AlState::parse(&state).ok_or_else(|| {
+                MasterError::Usage(format!(
+                    "unknown state {state:?}; one of INIT, PREOP, SAFEOP, OP, BOOT"
+                ))
+            })?;
+            let mut m = open(&link)?;
+            let ps = m.positions(pos.position)?;
+            for (p, s) in m.request_state(&ps, st)? {
+                w(out, &format!("{p}: {s}\n"))?;
+            }
+            Ok(())
+        }
+        MasterCommand::SiiRead {
+            link,
+            pos,
+            raw,
+            hex,
+            decode: _,
+            full,
+            output,
+        } => {
+            let m = open(&link)?;
+            let p = one(&m, &pos)?;
+            let img = m.sii_read(p, full || raw)?;
+            let bytes = if raw {
+                img
+            } else if hex {
+                oxicat_master::sii::hex_dump(&img).into_bytes()
+            } else {
+                oxicat_master::sii::decode(&img)?.into_bytes()
+            };
+            match output {
+                Some(f) => std::fs::write(f, bytes).map_err(MasterError::Output),
+                None => out.write_all(&bytes).map_err(MasterError::Output),
+            }
+        }
+        MasterCommand::SiiWrite {
+            link,
+            pos,
+            file,
+            device,
+            force,
+        } => {
+            let img = match (file, device) {
+                (Some(f), _) => {
+                    let b = std::fs::read(&f).map_err(|e| {
+                        MasterError::Usage(format!("cannot read {}: {e}", f.display()))
+                    })?;
+                    if b.first() == Some(&b':') {
+                        oxicat_device::sii::intel_hex(&b)
+                            .map_err(|e| MasterError::SiiImage(e.to_string()))?
+                    } else {
+                        b
+                    }
+                }
+                (None, Some(d)) => crate::device_output(&d, crate::DeviceOutput::Sii)
+                    .map_err(|_| MasterError::UnknownDevice(d))?,
+                (None, None) => {
+                    return Err(MasterError::Usage(
+                        "give an image file or --device <name>".into(),
+                    ))
+                }
+            };
+            oxicat_master::sii::check_image(&img)?;
+            let m = open(&link)?;
+            let p = one(&m, &pos)?;
+            let pb = progress_bar((img.len() / 2) as u64, "writing SII");
+            let r = m.sii_write(
+                p,
+                &img,
+                oxicat_master::sii::WriteOptions { force },
+                &mut |d, _| pb.set_position(d as u64),
+            );
+            pb.finish_and_clear();
+            r?;
+            w(
+                out,
+                &format!("slave {p}: wrote and verified {} bytes of SII\n", img.len()),
+            )
+        }
+        MasterCommand::Upload {
+            link,
+            pos,
+            index,
+            sub: s,
+            r#type,
+        } => {
+            let (i, s) = (idx(&index)?, sub(&s)?);
+            let m = open(&link)?;
+            let p = one(&m, &pos)?;
+            let data = m.sdo_upload(p, i, s)?;
+            let ty = match r#type {
+                Some(t) => ValueType::parse(&t)?,
+                None => sdo_type(&m, p, i, s).unwrap_or(match data.len() {
+                    1 => ValueType::U8,
+                    2 => ValueType::U16,
+                    4 => ValueType::U32,
+                    8 => ValueType::U64,
+                    _ => ValueType::Hex,
+                }),
+            };
+            w(out, &format!("{}\n", ty.format(&data)))
+        }
+        MasterCommand::Download {
+            link,
+            pos,
+            index,
+            sub: s,
+            value,
+            r#type,
+        } => {
+            let (i, s) = (idx(&index)?, sub(&s)?);
+            // A type given on the command line is checked before the bus is touched.
+            let given = r#type.map(|t| ValueType::parse(&t)).transpose()?;
+            if let Some(t) = given {
+                t.encode(&value)?;
+            }
+            let m = open(&link)?;
+            let p = one(&m, &pos)?;
+            let ty = match given {
+                Some(t) => t,
+                None => sdo_type(&m, p, i, s).ok_or_else(|| {
+                    MasterError::Usage(format!(
+                        "the type of 0x{i:04X}:{s:02X} is not known from the slave; give --type ({})",
+                        ValueType::NAMES
+                    ))
+                })?,
+            };
+            let data = ty.encode(&value)?;
+            m.sdo_download(p, i, s, &data)
+        }
+        MasterCommand::Sdos { link, pos } => {
+            let m = open(&link)?;
+            for p in m.positions(pos.position)? {
+                if pos.position.is_none() {
+                    w(out, &format!("=== slave {p} ===\n"))?;
+                }
+                for o in m.dictionary(p)? {
+                    let kind = match o.object_code {
+                        7 => "VAR",
+                        8 => "ARRAY",
+                        9 => "RECORD",
+                        _ => "?",
+                    };
+                    w(
+                        out,
+                        &format!("SDO 0x{:04x}, \"{}\" ({kind})\n", o.index, o.name),
+                    )?;
+                    for e in &o.entries {
+                        w(
+                            out,
+                            &format!(
+                                "  0x{:04x}:{:02x}, {}, {}, {} bit, \"{}\"\n",
+                                o.index,
+                                e.sub,
+                                e.access_text(),
+                                oxicat_master::coe::type_name(e.data_type),
+                                e.bits,
+                                e.name
+                            ),
+                        )?;
+                    }
+                }
+            }
+            Ok(())
+        }
+        MasterCommand::Pdos { link, pos } => {
+            let m = open(&link)?;
+            for p in m.positions(pos.position)? {
+                let l = m.pdos(p)?;
+                w(out, &format!("=== slave {p} ({:?}) ===\n", l.source))?;
+                for (sm, dir, list) in [(2, "Output", &l.rx), (3, "Input", &l.tx)] {
+                    w(out, &format!("SM{sm}: {dir}\n"))?;
+                    for pdo in list {
+                        w(
+                            out,
+                            &format!("  PDO 0x{:04x} \"{}\"\n", pdo.index, pdo.name),
+                        )?;
+                        for e in &pdo.entries {
+                            w(
+                                out,
+                                &format!(
+                                    "    PDO entry 0x{:04x}:{:02x}, {:>2} bit, \"{}\"\n",
+                                    e.index, e.sub, e.bits, e.name
+                                ),
+                            )?;
+                        }
+                    }
+                }
+            }
+            Ok(())
+        }
+        MasterCommand::Xml { link, pos, output } => {
+            let m = open(&link)?;
+            let p = one(&m, &pos)?;
+            let xml = m.esi(p)?;
+            match output {
+                Some(f) => std::fs::write(f, xml).map_err(MasterError::Output),
+                None => w(out, &xml),
+            }
+        }
+        MasterCommand::RegRead {
+            link,
+            pos,
+            address,
+            length,
+            r#type,
+        } => {
+            let a = idx(&address)?;
+            let ty = r#type.map(|t| ValueType::parse(&t)).transpose()?;
+            let len = match (&length, ty.and_then(|t| t.size())) {
+                (Some(l), _) => idx(l)?,
+                (None, Some(s)) => s as u16,
+                (None, None) => 1,
+            };
+            let m = open(&link)?;
+            let p = one(&m, &pos)?;
+            let b = m.reg_read(p, a, len)?;
+            match ty {
+                Some(t) => w(out, &format!("{}\n", t.format(&b))),
+                None => w(out, &format!("{}\n", oxicat_master::value::hex(&b))),
+            }
+        }
+        MasterCommand::RegWrite {
+            link,
+            pos,
+            address,
+            value,
+            r#type,
+        } => {
+            let a = idx(&address)?;
+            let ty = match r#type {
+                Some(t) => ValueType::parse(&t)?,
+                None => ValueType::U8,
+            };
+            let data = ty.encode(&value)?;
+            let m = open(&link)?;
+            let p = one(&m, &pos)?;
+            m.reg_write(p, a, &data)
+        }
+        MasterCommand::Watch {
+            link,
+            vars,
+            cycle,
+            every,
+            count,
+        } => {
+            let cycle = parse_duration(&cycle)?;
+            let mut m = open(&link)?;
+            let layouts = m.layouts()?;
+            let vars: Vec<_> = m.resolve(&vars, &layouts)?.into_iter().flatten().collect();
+            let mut err = None;
+            m.watch(
+                CycleOptions { cycle, dc: false },
+                &vars,
+                every,
+                count,
+                &mut |line| match writeln!(out, "{line}") {
+                    Ok(()) => true,
+                    Err(e) => {
+                        err = Some(e);
+                        false
+                    }
+                },
+            )?;
+            match err {
+                Some(e) => Err(MasterError::Output(e)),
+                None => Ok(()),
+            }
+        }
+        MasterCommand::Write {
+            link,
+            var,
+            value,
+            cycle,
+            settle,
+        } => {
+            let cycle = parse_duration(&cycle)?;
+            let mut m = open(&link)?;
+            let layouts = m.layouts()?;
+            let vars = m.resolve(std::slice::from_ref(&var), &layouts)?.remove(0);
+            let data = vars[0].ty.encode(&value)?;
+            if let Some(v) = vars
+                .iter()
+                .find(|v| v.dir == oxicat_master::pdo::Dir::Input)
+            {
+                return Err(MasterError::Usage(format!(
+                    "{} is an input (TxPDO) of slave {}; only outputs can be written",
+                    var, v.position
+                )));
+            }
+            let back = m.write_online(CycleOptions { cycle, dc: false }, &vars, &data, settle)?;
+            for (v, b) in vars.iter().zip(back) {
+                w(
+                    out,
+                    &format!(
+                        "{}.{} = {b}\n",
+                        v.position,
+                        var.split_once('.').map(|x| x.1).unwrap_or(&var)
+                    ),
+                )?;
+            }
+            Ok(())
+        }
+        MasterCommand::Record {
+            link,
+            vars,
+            cycle,
+            duration,
+            output,
+            free_run,
+        } => {
+            let cycle = parse_duration(&cycle)?;
+            let duration = parse_duration(&duration)?;
+            let cycles = (duration.as_nanos() / cycle.as_nanos().max(1)).max(1) as u64;
+            let mut m = open(&link)?;
+            let layouts = m.layouts()?;
+            let vars: Vec<_> = m.resolve(&vars, &layouts)?.into_iter().flatten().collect();
+            let f = std::fs::File::create(&output).map_err(MasterError::Output)?;
+            let mut f = std::io::BufWriter::new(f);
+            let pb = progress_bar(cycles, "recording");
+            let r = m.record(
+                CycleOptions {
+                    cycle,
+                    dc: !free_run,
+                },
+                &vars,
+                cycles,
+                &mut f,
+                &mut |k, _| {
+                    if k % 64 == 0 || k == cycles {
+                        pb.set_position(k)
+                    }
+                },
+            );
+            pb.finish_and_clear();
+            let stats = r?;
+            f.flush().map_err(MasterError::Output)?;
+            w(
+                out,
+                &format!(
+                    "{} cycles of {} variables to {} ({} working-counter errors)\n",
+                    stats.cycles,
+                    vars.len(),
+                    output.display(),
+                    stats.wkc_errors
+                ),
+            )
+        }
+    }
+}
