@@ -492,6 +492,18 @@ impl Dc {
 
     // ------------------------------------------------------------- contract
 
+    /// `frame_arrival` at port 0 (the ESC's fused frame path): the same effects, inlined.
+    #[inline(always)]
+    pub fn frame_arrival_port0(&mut self, regs: &mut [u8], t: u64) {
+        if self.inited {
+            self.pulse_len = rd16(regs, 0x0982);
+        } else {
+            self.ensure_init(regs);
+        }
+        self.sof0 = Some(t);
+        self.latch_pending = 0;
+    }
+
     /// First bit of a frame reached `port` at global time `t`.
     pub fn frame_arrival(&mut self, regs: &mut [u8], port: u8, t: u64) {
         self.ensure_init(regs);

@@ -104,6 +104,41 @@ struct PlanOp {
 /// Most FMMUs a fast-path plan holds (more take the general route).
 const PLAN_MAX: usize = 4;
 
+/// One step of the fused path: a whole buffered-mode SM buffer, byte-aligned.
+#[derive(Debug, Clone, Copy, Default)]
+struct FusedStep {
+    /// Offset of the step's bytes from the plan window's start in the datagram data.
+    off: u16,
+    /// The SM's start address relative to `REG_END` and length (one buffer).
+    ram: u16,
+    len: u16,
+    /// SM index.
+    sm: u8,
+    /// The SM triggers the process-data watchdog (write steps).
+    wd: bool,
+}
+
+/// The fused path (`Esc::forward_fused`): a frame entering port 0 with a good FCS that
+/// holds a single logical datagram covering the plan window, at an ESC whose plan steps
+/// are all distinct buffered-mode (3-buffer) SMs in process RAM and which has an open
+/// port (the frame does not loop back into the processing unit). Rebuilt with the plan and on port changes.
+#[derive(Debug, Clone, Copy, Default)]
+struct Fused {
+    /// The fused path applies to this ESC's configuration.
+    ok: bool,
+    /// Port the frame leaves through (first open port after port 0).
+    exit: u8,
+    /// Number of read steps (they come first), total steps.
+    nr: u8,
+    n: u8,
+    /// Plan window `[lo, hi)` (logical bytes).
+    lo: u64,
+    hi: u64,
+    /// Working-counter increment for LRD, LWR, LRW.
+    inc: [u16; 3],
+    steps: [FusedStep; PLAN_MAX],
+}
+
 /// Copies `s` into `d` (equal lengths) in 16-byte chunks: process-data images are small,
 /// and a call into `memcpy` costs more than the copy.
 #[inline(always)]
@@ -121,6 +156,13 @@ fn copy_small(d: &mut [u8], s: &[u8]) {
 /// A software EtherCAT Slave Controller.
 #[derive(Debug, Clone)]
 pub struct Esc {
+    /// Hot state of the fused LRW path.
+    fused: Fused,
+    /// Test switch: never take the fused path (differential tests).
+    fused_disabled: bool,
+    /// Frames the fused path processed (tests).
+    #[cfg(test)]
+    pub(crate) fused_hits: u64,
     cfg: EscConfig,
     mem: Vec<u8>,
     /// Per-byte permissions of this chip's register file (the generic table with the
@@ -132,7 +174,8 @@ pub struct Esc {
     eeprom: Vec<u8>,
     dc: Dc,
     link: [bool; 4],
-    sms: Vec<Sm>,
+    /// SyncManagers; the chip has the first `cfg.sm_count` (the others stay disabled).
+    sms: [Sm; 16],
     active_sms: Vec<u8>,
     fmmus: Vec<Fmmu>,
     fmmu_rw_overlap: bool,
@@ -207,13 +250,17 @@ impl Esc {
         sii::write_ctl(&mut mem, ctl);
         sii::load_config(&mut mem, &eeprom);
         let perm = chip_permissions(&cfg);
-        let mut sms = vec![Sm::default(); cfg.sm_count as usize];
+        let mut sms: [Sm; 16] = core::array::from_fn(|_| Sm::default());
         for sm in sms.iter_mut() {
             sm.reset_state();
         }
         let mut dc = Dc::new(cfg.clock);
         dc.reset(&mut mem[..REG_END]);
         let mut esc = Self {
+            fused: Fused::default(),
+            fused_disabled: false,
+            #[cfg(test)]
+            fused_hits: 0,
             cfg,
             mem,
             perm,
@@ -335,10 +382,119 @@ impl Esc {
 
     /// A frame's first bit reaches `port` at time `t`; see the API contract. Returns the
     /// port the frame leaves through or `Dropped` (circulating frame rule).
+    #[inline]
     pub fn forward(&mut self, port: u8, frame: &mut [u8], t: u64, frame_ok: bool) -> Forward {
+        if port == 0 && frame_ok && self.fused.ok {
+            self.now = t;
+            self.dc.frame_arrival_port0(&mut self.mem[..REG_END], t);
+            if let Some(out) = self.process_fused(frame, t) {
+                return out;
+            }
+            return self.forward_after_arrival(0, frame, true);
+        }
+        self.forward_generic(port, frame, t, frame_ok)
+    }
+
+    /// The fused path (see `Fused`), after the frame's arrival: the checks first (no state
+    /// touched when they fail and the generic path takes over), then the plan steps with
+    /// the end-of-frame commit of each written SM, IRQ and working counter, exit port.
+    /// Same effects as `process_frame` plus the exit-port search on such a frame.
+    #[inline(always)]
+    fn process_fused(&mut self, frame: &mut [u8], t: u64) -> Option<Forward> {
+        if frame.len() < ECAT_HEADER_LEN + DG_HEADER_LEN + 2 {
+            return None;
+        }
+        let w = u16::from_le_bytes([frame[0], frame[1]]);
+        let cmd = frame[2];
+        let lf = u16::from_le_bytes([frame[8], frame[9]]);
+        let len = (lf & 0x07FF) as usize;
+        // Frame end (header length); the single datagram must fit in it.
+        let end = ECAT_HEADER_LEN + (w & 0x07FF) as usize;
+        let dg_end = ECAT_HEADER_LEN + DG_HEADER_LEN + len + 2;
+        // One logical datagram (no more-follows) in a datagram frame.
+        if w >> 12 != ECAT_TYPE_DATAGRAMS
+            || !(CMD_LRD..=CMD_LRW).contains(&cmd)
+            || lf & 0x8000 != 0
+            || dg_end > end
+            || end > frame.len()
+        {
+            return None;
+        }
+        let ds = u32::from_le_bytes([frame[4], frame[5], frame[6], frame[7]]) as u64;
+        let (lo, hi) = (self.fused.lo, self.fused.hi);
+        if ds > lo || hi > ds + len as u64 {
+            return None;
+        }
+        if self.events_dirty && self.ecat_mask != 0 {
+            self.refresh_events();
+        }
+        #[cfg(test)]
+        {
+            self.fused_hits += 1;
+        }
+        let irq = self.ecat_irq;
+        // The plan window in the frame (inside the datagram data, checked above).
+        let wstart = ECAT_HEADER_LEN + DG_HEADER_LEN + (lo - ds) as usize;
+        let win = frame.get_mut(wstart..wstart + (hi - lo) as usize)?;
+        // Registers (SM status, watchdog status) and process RAM (the SM buffers, which
+        // the fused path requires to lie at or above `REG_END`).
+        let (regs, ram) = self.mem.split_at_mut(REG_END);
+        let regs: &mut [u8; REG_END] = regs.try_into().ok()?;
+        let fused = &self.fused;
+        let (reads, writes) = fused.steps[..fused.n as usize].split_at(fused.nr as usize);
+        if cmd != CMD_LWR {
+            for st in reads {
+                let i = st.sm as usize & 15;
+                let sm = &mut self.sms[i];
+                let b = sm.buffered_read_whole();
+                regs[0x0805 + 8 * i] = sm.buffered_status_reg();
+                let l = st.len as usize;
+                let from = st.ram as usize + b as usize * l;
+                let o = st.off as usize;
+                copy_small(&mut win[o..o + l], &ram[from..from + l]);
+            }
+        }
+        if cmd != CMD_LRD {
+            for st in writes {
+                let i = st.sm as usize & 15;
+                let sm = &mut self.sms[i];
+                let b = sm.buffered_write_commit();
+                regs[0x0805 + 8 * i] = sm.buffered_status_reg();
+                let l = st.len as usize;
+                let to = st.ram as usize + b as usize * l;
+                let o = st.off as usize;
+                copy_small(&mut ram[to..to + l], &win[o..o + l]);
+                if st.wd {
+                    self.pd_wd_last = Some(t);
+                    regs[regs::WD_STATUS_PD as usize] |= 1;
+                }
+            }
+        }
+        let inc = self.fused.inc[(cmd - CMD_LRD) as usize];
+        // Some step ran exactly when the working counter counts.
+        self.events_dirty |= inc != 0;
+        let hirq = u16::from_le_bytes([frame[10], frame[11]]);
+        if irq & !hirq != 0 {
+            frame[10..12].copy_from_slice(&(hirq | irq).to_le_bytes());
+        }
+        if inc != 0 {
+            let wkc = &mut frame[dg_end - 2..dg_end];
+            let w = u16::from_le_bytes([wkc[0], wkc[1]]).wrapping_add(inc);
+            wkc.copy_from_slice(&w.to_le_bytes());
+        }
+        Some(Forward::Port(self.fused.exit))
+    }
+
+    /// `forward` for every frame (the fused path is a shortcut for one kind).
+    fn forward_generic(&mut self, port: u8, frame: &mut [u8], t: u64, frame_ok: bool) -> Forward {
         let port = port & 3;
         self.now = t;
         self.dc.frame_arrival(&mut self.mem[..REG_END], port, t);
+        self.forward_after_arrival(port, frame, frame_ok)
+    }
+
+    /// `forward` after the DC unit saw the frame's arrival.
+    fn forward_after_arrival(&mut self, port: u8, frame: &mut [u8], frame_ok: bool) -> Forward {
         if !frame_ok {
             let a = regs::RX_ERROR_COUNTER as usize + 2 * port as usize;
             self.mem[a] = self.mem[a].saturating_add(1);
@@ -998,7 +1154,7 @@ impl Esc {
                     self.events_dirty = true;
                 }
                 if self.al_ev & AL_EV_SM_CHANGE != 0
-                    && (0..self.sms.len()).any(|i| hit(0x0806 + 8 * i))
+                    && (0..self.cfg.sm_count as usize).any(|i| hit(0x0806 + 8 * i))
                 {
                     self.al_ev &= !AL_EV_SM_CHANGE;
                     self.events_dirty = true;
@@ -1155,7 +1311,7 @@ impl Esc {
         if over(0x0800, 0x0880) {
             let first = (c.max(0x0800) - 0x0800) / 8;
             let last = (e.min(0x0880) - 1 - 0x0800) / 8;
-            let n = self.sms.len();
+            let n = self.cfg.sm_count as usize;
             for (i, &old) in old_activate.iter().enumerate().take(last + 1).skip(first) {
                 if i >= n {
                     break;
@@ -1328,7 +1484,7 @@ impl Esc {
 
     fn rebuild_active_sms(&mut self) {
         self.active_sms.clear();
-        for (i, sm) in self.sms.iter().enumerate() {
+        for (i, sm) in self.sms.iter().enumerate().take(self.cfg.sm_count as usize) {
             if sm.enabled {
                 self.active_sms.push(i as u8);
             }
@@ -1379,6 +1535,7 @@ impl Esc {
             && self.fmmus.len() <= PLAN_MAX;
         self.plan_len = 0;
         if !self.plan_ok {
+            self.rebuild_fused();
             return;
         }
         self.plan_lo = self
@@ -1402,12 +1559,71 @@ impl Esc {
         }
         self.plan_len = n as u8;
         self.plan_reads = self.fmmus.iter().filter(|f| f.read).count() as u8;
+        self.rebuild_fused();
+    }
+
+    /// Decides whether the fused path applies (see `Fused`) and pre-resolves it.
+    fn rebuild_fused(&mut self) {
+        let mut f = Fused::default();
+        // Exit port of a frame entering port 0: the first open port in processing order
+        // (port 0 itself last; all closed: the frame loops back, generic path).
+        let exit = [3u8, 1, 2, 0].into_iter().find(|&p| self.port_open(p));
+        let n = self.plan_len as usize;
+        let mut ok = !self.fused_disabled && self.plan_ok && n > 0 && exit.is_some();
+        let mut seen = 0u32;
+        for (k, op) in self.plan[..n].iter().enumerate() {
+            let i = op.sm as usize;
+            let Some(sm) = self.sms.get(i) else {
+                ok = false;
+                break;
+            };
+            let ram_ok = sm.start as usize >= REG_END
+                && sm.start as usize + 3 * sm.len as usize <= self.mem.len();
+            if sm.is_mailbox()
+                || !ram_ok
+                || seen & (1 << i) != 0
+                || op.len != sm.len as u32
+                || op.off > u16::MAX as u32
+            {
+                ok = false;
+                break;
+            }
+            seen |= 1 << i;
+            f.steps[k] = FusedStep {
+                off: op.off as u16,
+                ram: sm.start - REG_END as u16,
+                len: sm.len,
+                sm: op.sm,
+                wd: sm.ctrl & CTRL_WD_TRIGGER != 0,
+            };
+        }
+        if ok {
+            let nr = self.plan_reads.min(self.plan_len);
+            let rd = u16::from(nr > 0);
+            let wr = u16::from(self.plan_len > nr);
+            f.ok = true;
+            f.exit = exit.unwrap_or(0);
+            f.nr = nr;
+            f.n = self.plan_len;
+            f.lo = self.plan_lo;
+            f.hi = self.plan_hi;
+            f.inc = [rd, wr, rd + 2 * wr];
+        }
+        self.fused = f;
+    }
+
+    /// Test switch: `false` forces every frame through the generic path.
+    #[cfg(test)]
+    pub(crate) fn set_fused_enabled(&mut self, on: bool) {
+        self.fused_disabled = !on;
+        self.rebuild_fused();
     }
 
     fn update_dl_status(&mut self, event: bool) {
         self.open_ports = (0..4u8)
             .filter(|&p| self.compute_port_open(p))
             .fold(0, |m, p| m | (1 << p));
+        self.rebuild_fused();
         let mut s: u16 = 0;
         if sii::read_ctl(&self.mem) & sii::CTL_NOT_LOADED == 0 {
             s |= 1;

@@ -6,7 +6,7 @@ use alloc::vec::Vec;
 use oxicat_wire::{Command, DatagramHeader, EcatFrame};
 use proptest::prelude::*;
 
-use crate::tests::{dg, esc, fmmu, frame, sm};
+use crate::tests::{dg, esc, fmmu, fpwr, frame, sm};
 
 proptest! {
     /// The 3-buffer consumer (PDI) only ever sees a buffer that was written completely
@@ -135,5 +135,181 @@ proptest! {
         // And the frame header parse of the intact frame still works.
         e.forward(0, &mut f, 0, true);
         prop_assert!(EcatFrame::parse(&f).is_ok());
+    }
+}
+
+/// One SM of a random configuration: (start in 16-byte units or `None` for its own
+/// 128-byte slot, length, control).
+fn arb_sm() -> impl Strategy<Value = (Option<u16>, u16, u8)> {
+    (
+        proptest::option::weighted(0.15, 0u16..24),
+        prop_oneof![Just(32u16), 1u16..40],
+        prop_oneof![
+            3 => Just(0x64u8),
+            3 => Just(0x20u8),
+            1 => Just(0x24u8),
+            1 => Just(0x00u8),
+            1 => Just(0x26u8),
+            1 => Just(0x22u8),
+            1 => any::<u8>()
+        ],
+    )
+}
+
+/// One FMMU of a random configuration: (gap before it in the logical layout, SM it maps
+/// (`None`: FMMU n maps SM n, modulo their number; an index without an SM: a random
+/// physical start), length override, type override, bit-aligned).
+fn arb_fmmu() -> impl Strategy<Value = (u32, Option<u8>, Option<u16>, Option<u8>, bool)> {
+    (
+        prop_oneof![6 => Just(0u32), 2 => 0u32..8, 1 => Just(u32::MAX)],
+        proptest::option::weighted(0.15, 0u8..5),
+        proptest::option::weighted(0.1, 1u16..40),
+        proptest::option::weighted(0.15, 1u8..4),
+        proptest::bool::weighted(0.95),
+    )
+}
+
+/// Logical layout base of the differential test.
+const LOG_BASE: u32 = 0x40;
+
+/// An operation of the differential test.
+#[derive(Debug, Clone)]
+enum Op {
+    /// Logical datagram: command (0 LRD, 1 LWR, 2 LRW), start relative to the layout base
+    /// (`None`: random), extra length, data pattern, IRQ field, good FCS, a second
+    /// datagram behind it.
+    Logical(u8, Option<i32>, u16, u8, u16, bool, bool),
+    /// PDI read of `len` bytes at an offset from 0x1000.
+    PdiRead(u16, u16),
+    /// PDI write at an offset from 0x1000.
+    PdiWrite(u16, Vec<u8>),
+    /// ECAT FPWR of the event mask (IRQ field contents).
+    Mask(u16),
+    /// Link change on port 1.
+    Link(bool),
+    /// Time passes.
+    Advance(u64),
+}
+
+fn arb_op() -> impl Strategy<Value = Op> {
+    prop_oneof![
+        8 => (0u8..3, proptest::option::weighted(0.9, -3i32..2), 0u16..0x60, any::<u8>(),
+              prop_oneof![3 => Just(0u16), 1 => any::<u16>()],
+              proptest::bool::weighted(0.9), proptest::bool::weighted(0.1))
+            .prop_map(|(c, a, x, d, i, ok, two)| Op::Logical(c, a, x, d, i, ok, two)),
+        3 => (0u16..0x280, 1u16..48).prop_map(|(a, l)| Op::PdiRead(a, l)),
+        3 => (0u16..0x280, proptest::collection::vec(any::<u8>(), 1..48))
+            .prop_map(|(a, d)| Op::PdiWrite(a, d)),
+        1 => any::<u16>().prop_map(Op::Mask),
+        1 => any::<bool>().prop_map(Op::Link),
+        1 => (0u64..2_000_000).prop_map(Op::Advance),
+    ]
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(600))]
+
+    /// The fused LRW path and the generic path leave identical frames, memory, registers
+    /// and events for random SM/FMMU configurations and random logical frames.
+    #[test]
+    fn fused_path_equals_generic(
+        sms in proptest::collection::vec(arb_sm(), 1..5),
+        fmmus in proptest::collection::vec(arb_fmmu(), 1..5),
+        fmmus_per_sm in proptest::bool::weighted(0.8),
+        ops in proptest::collection::vec(arb_op(), 1..40),
+    ) {
+        let mut a = esc();
+        let mut b = esc();
+        b.set_fused_enabled(false);
+        let sm_start = |n: usize| match sms[n].0 {
+            Some(u) => 0x1000 + 16 * u,
+            None => 0x1000 + 0x80 * n as u16,
+        };
+        // Logical layout: FMMUs one after the other (with gaps; `u32::MAX`: random).
+        let mut layout = Vec::new();
+        let mut log = LOG_BASE;
+        let mut hi = LOG_BASE;
+        // Mostly at most one FMMU per SM (the usual process-data layout).
+        let nf = if fmmus_per_sm { fmmus.len().min(sms.len()) } else { fmmus.len() };
+        for (n, &(gap, k, len, ty, aligned)) in fmmus.iter().take(nf).enumerate() {
+            let k = k.map_or(n % sms.len(), usize::from);
+            let (phys, slen, ctrl) = match sms.get(k) {
+                Some(&(_, l, c)) => (sm_start(k), l, c),
+                None => (0x1000 + 16 * k as u16, 8, 0),
+            };
+            let len = len.unwrap_or(slen);
+            let ty = ty.unwrap_or(if ctrl & 0x0C == 0x04 { 2 } else { 1 });
+            let start = if gap == u32::MAX { (n as u32 * 29) % 0x50 } else { log + gap };
+            log = start + len as u32;
+            hi = hi.max(log);
+            layout.push((n as u16, start, len, aligned, phys, ty));
+        }
+        let window = hi.saturating_sub(LOG_BASE);
+        for e in [&mut a, &mut b] {
+            for (n, &(_, len, ctrl)) in sms.iter().enumerate() {
+                sm(e, n as u16, sm_start(n), len, ctrl, 1);
+            }
+            for &(n, start, len, aligned, phys, ty) in &layout {
+                let (sbit, ebit) = if aligned { (0, 7) } else { (1, 5) };
+                fmmu(e, n, start, len, sbit, ebit, phys, 0, ty);
+            }
+        }
+        let mut t = 0u64;
+        for op in ops {
+            t += 1000;
+            match op {
+                Op::Logical(c, rel, extra, pat, irq, ok, two) => {
+                    let cmd = [Command::Lrd, Command::Lwr, Command::Lrw][c as usize];
+                    let (addr, len) = match rel {
+                        Some(r) => {
+                            let addr = (LOG_BASE as i32 + r) as u32;
+                            let len = (window as i32 - r).clamp(0, 0x200) as u16;
+                            (addr, len + extra % 4)
+                        }
+                        None => (extra as u32, pat as u16 % 0x90),
+                    };
+                    let data: Vec<u8> = (0..len).map(|i| pat.wrapping_add(i as u8)).collect();
+                    let mut h = DatagramHeader::logical(cmd, 0, addr, data.len() as u16);
+                    h.irq = irq;
+                    let mut f = if two {
+                        frame(&[(h, &data), (h, &data)])
+                    } else {
+                        frame(&[(h, &data)])
+                    };
+                    let mut g = f.clone();
+                    let ra = a.forward(0, &mut f, t, ok);
+                    let rb = b.forward(0, &mut g, t, ok);
+                    prop_assert_eq!(ra, rb);
+                    prop_assert_eq!(f, g);
+                }
+                Op::PdiRead(off, len) => {
+                    let mut x = vec![0u8; len as usize];
+                    let mut y = vec![0u8; len as usize];
+                    prop_assert_eq!(a.pdi_read(0x1000 + off, &mut x), b.pdi_read(0x1000 + off, &mut y));
+                    prop_assert_eq!(x, y);
+                }
+                Op::PdiWrite(off, d) => {
+                    prop_assert_eq!(a.pdi_write(0x1000 + off, &d), b.pdi_write(0x1000 + off, &d));
+                }
+                Op::Mask(m) => {
+                    prop_assert_eq!(fpwr(&mut a, 0x0200, &m.to_le_bytes()), fpwr(&mut b, 0x0200, &m.to_le_bytes()));
+                }
+                Op::Link(up) => {
+                    a.set_link(1, up);
+                    b.set_link(1, up);
+                }
+                Op::Advance(dt) => {
+                    t += dt;
+                    prop_assert_eq!(a.advance(t), b.advance(t));
+                }
+            }
+            prop_assert_eq!(a.memory(), b.memory());
+            prop_assert_eq!(a.al_event_request(), b.al_event_request());
+            prop_assert_eq!(a.ecat_event_request(), b.ecat_event_request());
+            prop_assert_eq!(a.irq_line(), b.irq_line());
+            prop_assert_eq!(a.digital_outputs(), b.digital_outputs());
+            prop_assert_eq!(a.next_event(), b.next_event());
+        }
+        prop_assert_eq!(b.fused_hits, 0);
     }
 }

@@ -204,6 +204,42 @@ impl Sm {
         Some(self.write_buf as u32 * self.len as u32)
     }
 
+    /// Buffered mode, ECAT consumer: `read_whole` for an SM known to be in buffered mode
+    /// (fused LRW path): the index of the buffer it reads.
+    #[inline(always)]
+    pub fn buffered_read_whole(&mut self) -> u8 {
+        if let Some(n) = self.next_buf.take() {
+            self.user_buf = n;
+        }
+        self.read_open = false;
+        self.status = (self.status & !STATUS_IRQ_WRITE) | STATUS_IRQ_READ;
+        self.user_buf
+    }
+
+    /// Buffered mode, ECAT producer: `write_whole` immediately followed by `commit` (a
+    /// good frame's end), for an SM known to be in buffered mode (fused LRW path): the
+    /// index of the buffer written.
+    #[inline(always)]
+    pub fn buffered_write_commit(&mut self) -> u8 {
+        let w = self.write_buf;
+        self.write_open = false;
+        self.pending_commit = false;
+        self.next_buf = Some(w);
+        self.last_written = w;
+        self.write_buf = 3 - w - self.user_buf;
+        self.status = (self.status & !STATUS_IRQ_READ) | STATUS_IRQ_WRITE;
+        w
+    }
+
+    /// `status_reg` for an SM known to be in buffered mode.
+    #[inline(always)]
+    pub fn buffered_status_reg(&self) -> u8 {
+        (self.status & (STATUS_IRQ_WRITE | STATUS_IRQ_READ))
+            | ((self.last_written & 3) << 4)
+            | (u8::from(self.read_open) << 6)
+            | (u8::from(self.write_open) << 7)
+    }
+
     /// Drops a producer write that was not committed (frame with bad FCS).
     pub fn discard(&mut self) {
         self.pending_commit = false;

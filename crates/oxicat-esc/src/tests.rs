@@ -578,3 +578,36 @@ fn irq_field_ored() {
     e.forward(0, &mut f, 0, true);
     assert_eq!(dg(&f, 0).2.irq, 0x08);
 }
+
+/// The benchmark's configuration (SM2/SM3 3-buffer, two FMMUs mapping a 64-byte LRW's
+/// halves) takes the fused path, and it gives the generic path's results.
+#[test]
+fn fused_path_taken_for_the_lrw_benchmark_shape() {
+    let mk = |fused: bool| {
+        let mut e = esc();
+        e.set_fused_enabled(fused);
+        sm(&mut e, 2, 0x1000, 32, 0x64, 1);
+        sm(&mut e, 3, 0x1100, 32, 0x20, 1);
+        fmmu(&mut e, 0, 0x0001_0000, 32, 0, 7, 0x1000, 0, 2);
+        fmmu(&mut e, 1, 0x0001_0020, 32, 0, 7, 0x1100, 0, 1);
+        e
+    };
+    let (mut a, mut b) = (mk(true), mk(false));
+    for k in 0..5u8 {
+        e_pdi(&mut a, k);
+        e_pdi(&mut b, k);
+        let (da, wa) = lrw(&mut a, 0x0001_0000, &[k; 64]);
+        let (db, wb) = lrw(&mut b, 0x0001_0000, &[k; 64]);
+        assert_eq!((da, wa), (db, wb));
+        assert_eq!(wa, 3);
+        assert_eq!(a.memory(), b.memory());
+    }
+    assert_eq!(a.fused_hits, 5);
+    assert_eq!(b.fused_hits, 0);
+
+    fn e_pdi(e: &mut Esc, k: u8) {
+        e.pdi_write(0x1100, &[k.wrapping_mul(3); 32]).unwrap();
+        let mut o = [0u8; 32];
+        e.pdi_read(0x1000, &mut o).unwrap();
+    }
+}
