@@ -139,17 +139,35 @@ struct Fused {
     steps: [FusedStep; PLAN_MAX],
 }
 
-/// Copies `s` into `d` (equal lengths) in 16-byte chunks: process-data images are small,
-/// and a call into `memcpy` costs more than the copy.
+/// Copies `s` into `d` (equal lengths): process-data images are small, and a call into
+/// `memcpy` costs more than the copy. 16..=64 bytes take two or four overlapping 16-byte
+/// moves (no loop), 4..16 bytes two overlapping 4- or 8-byte moves; longer images go in
+/// 16-byte chunks.
 #[inline(always)]
-fn copy_small(d: &mut [u8], s: &[u8]) {
-    let mut dc = d.chunks_exact_mut(16);
-    let mut sc = s.chunks_exact(16);
-    for (x, y) in (&mut dc).zip(&mut sc) {
-        x.copy_from_slice(y);
-    }
-    for (x, y) in dc.into_remainder().iter_mut().zip(sc.remainder()) {
-        *x = *y;
+pub(crate) fn copy_small(d: &mut [u8], s: &[u8]) {
+    let n = d.len();
+    let s = &s[..n];
+    if (16..=32).contains(&n) {
+        d[..16].copy_from_slice(&s[..16]);
+        d[n - 16..].copy_from_slice(&s[n - 16..]);
+    } else if (33..=64).contains(&n) {
+        d[..32].copy_from_slice(&s[..32]);
+        d[n - 32..].copy_from_slice(&s[n - 32..]);
+    } else if (8..16).contains(&n) {
+        d[..8].copy_from_slice(&s[..8]);
+        d[n - 8..].copy_from_slice(&s[n - 8..]);
+    } else if (4..8).contains(&n) {
+        d[..4].copy_from_slice(&s[..4]);
+        d[n - 4..].copy_from_slice(&s[n - 4..]);
+    } else {
+        let mut dc = d.chunks_exact_mut(16);
+        let mut sc = s.chunks_exact(16);
+        for (x, y) in (&mut dc).zip(&mut sc) {
+            x.copy_from_slice(y);
+        }
+        for (x, y) in dc.into_remainder().iter_mut().zip(sc.remainder()) {
+            *x = *y;
+        }
     }
 }
 

@@ -611,3 +611,14 @@ fn fused_path_taken_for_the_lrw_benchmark_shape() {
         e.pdi_read(0x1000, &mut o).unwrap();
     }
 }
+
+/// The small-copy helper of the fast paths equals `copy_from_slice` for every length.
+#[test]
+fn copy_small_equals_copy_from_slice() {
+    for n in 0..200usize {
+        let s: Vec<u8> = (0..n).map(|i| (i * 7 + 3) as u8).collect();
+        let mut d = vec![0xEEu8; n];
+        crate::esc::copy_small(&mut d, &s);
+        assert_eq!(d, s, "length {n}");
+    }
+}
