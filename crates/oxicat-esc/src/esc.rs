@@ -114,6 +114,8 @@ struct FusedStep {
     len: u16,
     /// SM index.
     sm: u8,
+    /// ECAT writes the SM (a write step; otherwise a read step).
+    write: bool,
     /// The SM triggers the process-data watchdog (write steps).
     wd: bool,
 }
@@ -128,9 +130,9 @@ struct Fused {
     ok: bool,
     /// Port the frame leaves through (first open port after port 0).
     exit: u8,
-    /// Number of read steps (they come first), total steps.
-    nr: u8,
-    n: u8,
+    /// The steps LRD, LWR and LRW run: `steps[range[c].0..range[c].1]` (reads come
+    /// first, then writes).
+    range: [(u8, u8); 3],
     /// Plan window `[lo, hi)` (logical bytes).
     lo: u64,
     hi: u64,
@@ -419,26 +421,25 @@ impl Esc {
     /// Same effects as `process_frame` plus the exit-port search on such a frame.
     #[inline(always)]
     fn process_fused(&mut self, frame: &mut [u8], t: u64) -> Option<Forward> {
-        if frame.len() < ECAT_HEADER_LEN + DG_HEADER_LEN + 2 {
-            return None;
-        }
-        let w = u16::from_le_bytes([frame[0], frame[1]]);
-        let cmd = frame[2];
-        let lf = u16::from_le_bytes([frame[8], frame[9]]);
+        // Frame header, command, index, address and length word in one load.
+        let h = u64::from_le_bytes(*frame.first_chunk::<8>()?);
+        let lf = u16::from_le_bytes(*frame.get(8..10)?.first_chunk::<2>()?);
+        let w = h as u16;
+        let cmd = (h >> 16) as u8;
         let len = (lf & 0x07FF) as usize;
         // Frame end (header length); the single datagram must fit in it.
         let end = ECAT_HEADER_LEN + (w & 0x07FF) as usize;
         let dg_end = ECAT_HEADER_LEN + DG_HEADER_LEN + len + 2;
         // One logical datagram (no more-follows) in a datagram frame.
         if w >> 12 != ECAT_TYPE_DATAGRAMS
-            || !(CMD_LRD..=CMD_LRW).contains(&cmd)
+            || cmd.wrapping_sub(CMD_LRD) > CMD_LRW - CMD_LRD
             || lf & 0x8000 != 0
             || dg_end > end
             || end > frame.len()
         {
             return None;
         }
-        let ds = u32::from_le_bytes([frame[4], frame[5], frame[6], frame[7]]) as u64;
+        let ds = h >> 32;
         let (lo, hi) = (self.fused.lo, self.fused.hi);
         if ds > lo || hi > ds + len as u64 {
             return None;
@@ -458,34 +459,28 @@ impl Esc {
         // the fused path requires to lie at or above `REG_END`).
         let (regs, ram) = self.mem.split_at_mut(REG_END);
         let regs: &mut [u8; REG_END] = regs.try_into().ok()?;
-        let fused = &self.fused;
-        let (reads, writes) = fused.steps[..fused.n as usize].split_at(fused.nr as usize);
-        if cmd != CMD_LWR {
-            for st in reads {
-                let i = st.sm as usize & 15;
-                let sm = &mut self.sms[i];
-                let b = sm.buffered_read_whole();
-                regs[0x0805 + 8 * i] = sm.buffered_status_reg();
-                let l = st.len as usize;
-                let from = st.ram as usize + b as usize * l;
-                let o = st.off as usize;
-                copy_small(&mut win[o..o + l], &ram[from..from + l]);
-            }
-        }
-        if cmd != CMD_LRD {
-            for st in writes {
-                let i = st.sm as usize & 15;
-                let sm = &mut self.sms[i];
+        // The steps this command runs (reads come first, then writes): one loop.
+        let c = (cmd - CMD_LRD) as usize;
+        let (from_step, to_step) = self.fused.range[c];
+        for st in self.fused.steps.get(from_step as usize..to_step as usize)? {
+            let i = st.sm as usize & 15;
+            let sm = &mut self.sms[i];
+            let l = st.len as usize;
+            let o = st.off as usize;
+            if st.write {
                 let b = sm.buffered_write_commit();
                 regs[0x0805 + 8 * i] = sm.buffered_status_reg();
-                let l = st.len as usize;
                 let to = st.ram as usize + b as usize * l;
-                let o = st.off as usize;
                 copy_small(&mut ram[to..to + l], &win[o..o + l]);
                 if st.wd {
                     self.pd_wd_last = Some(t);
                     regs[regs::WD_STATUS_PD as usize] |= 1;
                 }
+            } else {
+                let b = sm.buffered_read_whole();
+                regs[0x0805 + 8 * i] = sm.buffered_status_reg();
+                let from = st.ram as usize + b as usize * l;
+                copy_small(&mut win[o..o + l], &ram[from..from + l]);
             }
         }
         let inc = self.fused.inc[(cmd - CMD_LRD) as usize];
@@ -1612,6 +1607,7 @@ impl Esc {
                 ram: sm.start - REG_END as u16,
                 len: sm.len,
                 sm: op.sm,
+                write: k >= self.plan_reads as usize,
                 wd: sm.ctrl & CTRL_WD_TRIGGER != 0,
             };
         }
@@ -1621,8 +1617,7 @@ impl Esc {
             let wr = u16::from(self.plan_len > nr);
             f.ok = true;
             f.exit = exit.unwrap_or(0);
-            f.nr = nr;
-            f.n = self.plan_len;
+            f.range = [(0, nr), (nr, self.plan_len), (0, self.plan_len)];
             f.lo = self.plan_lo;
             f.hi = self.plan_hi;
             f.inc = [rd, wr, rd + 2 * wr];
