@@ -14,7 +14,11 @@ pub mod coe;
 pub mod cyclic;
 mod error;
 pub mod esi;
+pub mod experiment;
 pub mod pdo;
+pub mod plot;
+pub mod results;
+pub mod scenario;
 pub mod sii;
 pub mod value;
 

@@ -8,6 +8,7 @@
 
 pub mod capture;
 pub mod firmware;
+pub mod laelaps;
 pub mod model;
 pub mod node;
 pub mod pcapng;

@@ -10,6 +10,7 @@ use clap::{Parser, Subcommand, ValueEnum};
 use oxicat_slave::DeviceDef;
 
 pub mod master_cmd;
+pub mod trot_cmd;
 
 /// The command line.
 #[derive(Debug, Parser)]
@@ -32,6 +33,9 @@ pub enum Command {
     /// Master verbs (IgH `ethercat` style) on an interface or a virtual segment.
     #[command(flatten)]
     Master(master_cmd::MasterCommand),
+    /// The Laelaps II trotting experiment (thesis Table 4-1) on the virtual segment: CSV,
+    /// figures, summary.
+    Trot(trot_cmd::TrotArgs),
 }
 
 /// Arguments of `oxicat device`.
@@ -141,5 +145,8 @@ pub fn run(cli: Cli) -> Result<(), CliError> {
         Command::Master(c) => {
             master_cmd::run(c, &mut std::io::stdout().lock()).map_err(CliError::Master)
         }
+        Command::Trot(a) => trot_cmd::run(a)
+            .map(|text| print!("{text}"))
+            .map_err(CliError::Master),
     }
 }

@@ -1,0 +1,696 @@
+//! The Laelaps II trotting experiment (thesis §4, Table 4-1) on the virtual segment:
+//! four leg nodes (`oxicat_sim::laelaps`) in the thesis' chain order, ethercrab in this
+//! process and on this thread, DC SYNC0 every 400 µs, the thesis' procedure, and every
+//! input variable recorded every cycle.
+//!
+//! # Procedure, in master cycles
+//!
+//! 1. Bring-up (ethercrab: discovery, sync type DC via 0x1C32:01, DC configuration,
+//!    SAFE-OP, OP). Its length in virtual time varies from run to run — ethercrab waits in
+//!    real time — and nothing after it depends on it.
+//! 2. Settle: `State_Machine = 0`, every Table 4-1 parameter written with a = b = 0, for
+//!    `settle_s` (≥ `Transition_time`, so the gain transitions are complete). The rig holds
+//!    the legs at their reset pose.
+//! 3. Cycle 0 of the record: the one linked `State_Machine` variable is set to 1 in all four
+//!    nodes' outputs in the same frame. Each node enters Operational at the same SYNC0, the
+//!    rig lets its leg go there (see `oxicat_sim::laelaps`), and its trajectory clock
+//!    starts. From here on every cycle is recorded.
+//! 4. Stand (`stand_s`), b ramps to its value, then a (each over `Transition_time`, done by
+//!    the firmware's linear transitions), steady trot (`trot_s`), a back to 0, b back to 0,
+//!    stand, `State_Machine = 0`, `stop_s` more.
+//!
+//! The recorded data depend only on the scenario: the master's outputs are a function of
+//! the cycle number since step 3, each leg's physics of the time since its release, and no
+//! wall-clock time, hash order or platform formatting enters the CSV.
+
+use std::sync::{Arc, Mutex};
+use std::time::{Duration, Instant};
+
+use ethercrab::subdevice_group::DcConfiguration;
+use ethercrab::{DcSync, MainDevice, MainDeviceConfig, PduStorage, Timeouts};
+use oxicat_devices::laelaps::device;
+use oxicat_esc::{Esc, EscConfig};
+use oxicat_sim::laelaps::{
+    attach_leg, chain_legs, BeltProfile, LegId, LegRigHandle, RigConfig, TOWER_CHAIN,
+};
+use oxicat_sim::segment::Segment;
+use oxicat_sim::transport::{inprocess_task, InProcessConfig};
+use oxicat_slave::DeviceDef;
+
+use crate::scenario::Scenario;
+use crate::MasterError;
+
+type Storage = PduStorage<16, { PduStorage::element_size(1100) }>;
+const MAX_SUBDEVICES: usize = 8;
+const PDI_LEN: usize = 512;
+/// Expected LRW working counter: every node's outputs written and inputs read (3 each).
+pub const EXPECTED_WKC: u16 = 3 * 4;
+
+/// Where a variable lives in a slave's process image.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct PdoPlace {
+    /// Bit offset from the start of the slave's outputs or inputs.
+    pub bit: usize,
+    /// Bit length.
+    pub bits: u8,
+}
+
+/// Finds `(index, sub)` in a PDO assignment of `def` (rx: outputs, else inputs) — the
+/// layout a master derives from the SII/ESI, here from the same one definition.
+pub fn pdo_place(def: &DeviceDef, rx: bool, index: u16, sub: u8) -> Option<PdoPlace> {
+    let (assign, pdos) = if rx {
+        (def.rx_assign, def.rx_pdos)
+    } else {
+        (def.tx_assign, def.tx_pdos)
+    };
+    let mut bit = 0usize;
+    for a in assign {
+        let pdo = pdos.iter().find(|p| p.index == *a)?;
+        for e in pdo.entries {
+            if e.index == index && e.sub == sub {
+                return Some(PdoPlace { bit, bits: e.bits });
+            }
+            bit += usize::from(e.bits);
+        }
+    }
+    None
+}
+
+fn put(image: &mut [u8], p: PdoPlace, v: i64) {
+    if p.bits == 1 {
+        let (byte, b) = (p.bit / 8, p.bit % 8);
+        if v != 0 {
+            image[byte] |= 1 << b;
+        } else {
+            image[byte] &= !(1 << b);
+        }
+        return;
+    }
+    let byte = p.bit / 8;
+    let n = usize::from(p.bits) / 8;
+    image[byte..byte + n].copy_from_slice(&v.to_le_bytes()[..n]);
+}
+
+fn get(image: &[u8], p: PdoPlace, signed: bool) -> i32 {
+    let byte = p.bit / 8;
+    let n = usize::from(p.bits) / 8;
+    let mut b = [0u8; 4];
+    b[..n].copy_from_slice(&image[byte..byte + n]);
+    let u = u32::from_le_bytes(b);
+    if signed && n < 4 {
+        let shift = 32 - 8 * n as u32;
+        ((u << shift) as i32) >> shift
+    } else {
+        u as i32
+    }
+}
+
+/// The 9 input variables of a leg node (Table 3-2), in record order, with their scaling.
+pub const INPUTS: [InputVar; 9] = [
+    InputVar::new("hip_angle", 0x6010, 1, true, "deg", 100),
+    InputVar::new("Desired_hip_angle", 0x6010, 2, true, "deg", 100),
+    InputVar::new("Time", 0x6012, 1, false, "s", 100),
+    InputVar::new("knee_angle", 0x6014, 1, true, "deg", 100),
+    InputVar::new("Desired_knee_angle", 0x6014, 2, true, "deg", 100),
+    InputVar::new("PWM_knee", 0x6020, 1, true, "%", 100),
+    InputVar::new("PWM_hip", 0x6020, 2, true, "%", 100),
+    InputVar::new("velocity_knee", 0x6030, 1, true, "rad/s motor", 1000),
+    InputVar::new("velocity_hip", 0x6030, 2, true, "rad/s motor", 1000),
+];
+
+/// Index of each variable in [`INPUTS`].
+pub mod var {
+    /// hip_angle.
+    pub const HIP: usize = 0;
+    /// Desired_hip_angle.
+    pub const HIP_DES: usize = 1;
+    /// Time.
+    pub const TIME: usize = 2;
+    /// knee_angle.
+    pub const KNEE: usize = 3;
+    /// Desired_knee_angle.
+    pub const KNEE_DES: usize = 4;
+    /// PWM_knee.
+    pub const PWM_KNEE: usize = 5;
+    /// PWM_hip.
+    pub const PWM_HIP: usize = 6;
+    /// velocity_knee.
+    pub const VEL_KNEE: usize = 7;
+    /// velocity_hip.
+    pub const VEL_HIP: usize = 8;
+}
+
+/// One recorded input variable: where it is and how its integer scales to its unit.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct InputVar {
+    /// Column name after `<leg>.`.
+    pub name: &'static str,
+    /// Object index.
+    pub index: u16,
+    /// Subindex.
+    pub sub: u8,
+    /// Signed integer.
+    pub signed: bool,
+    /// Unit of the scaled value.
+    pub unit: &'static str,
+    /// Raw value = scaled value × `divisor` (10^decimals).
+    pub divisor: i32,
+}
+
+impl InputVar {
+    const fn new(
+        name: &'static str,
+        index: u16,
+        sub: u8,
+        signed: bool,
+        unit: &'static str,
+        divisor: i32,
+    ) -> Self {
+        Self {
+            name,
+            index,
+            sub,
+            signed,
+            unit,
+            divisor,
+        }
+    }
+
+    /// The value in its unit.
+    pub fn scale(&self, raw: i32) -> f64 {
+        f64::from(raw) / f64::from(self.divisor)
+    }
+}
+
+/// The master's outputs for one leg, as Table 3-1 integers.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+struct LegOutputs {
+    state_machine: bool,
+    transition_time: i8,
+    filter_hz: u16,
+    gains: [i16; 6],
+    traj: [i16; 7],
+}
+
+struct OutputMap {
+    state_machine: PdoPlace,
+    transition_time: PdoPlace,
+    filter: PdoPlace,
+    gains: [PdoPlace; 6],
+    traj: [PdoPlace; 7],
+}
+
+impl OutputMap {
+    fn new(def: &DeviceDef) -> Result<Self, MasterError> {
+        let p = |i: u16, s: u8| {
+            pdo_place(def, true, i, s).ok_or_else(|| {
+                MasterError::Usage(format!("leg node has no output {i:#06x}:{s:02}"))
+            })
+        };
+        let mut gains = [PdoPlace { bit: 0, bits: 0 }; 6];
+        for (k, g) in gains.iter_mut().enumerate() {
+            *g = p(0x7020, k as u8 + 1)?;
+        }
+        let mut traj = [PdoPlace { bit: 0, bits: 0 }; 7];
+        for (k, g) in traj.iter_mut().enumerate() {
+            *g = p(0x7030, k as u8 + 1)?;
+        }
+        Ok(Self {
+            state_machine: p(0x7000, 1)?,
+            transition_time: p(0x7000, 9)?,
+            filter: p(0x7012, 1)?,
+            gains,
+            traj,
+        })
+    }
+
+    fn write(&self, o: &LegOutputs, image: &mut [u8]) {
+        put(image, self.state_machine, i64::from(o.state_machine));
+        put(image, self.transition_time, i64::from(o.transition_time));
+        put(image, self.filter, i64::from(o.filter_hz));
+        for (p, v) in self.gains.iter().zip(o.gains) {
+            put(image, *p, i64::from(v));
+        }
+        for (p, v) in self.traj.iter().zip(o.traj) {
+            put(image, *p, i64::from(v));
+        }
+    }
+}
+
+/// A variable of the master linked to the same PDO entry of several slaves (TwinCAT's
+/// multi-link): one write sets it in every slave's outputs of the same cycle.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct LinkedVariable {
+    /// Its name.
+    pub name: &'static str,
+    /// `(slave position, place in that slave's outputs)`.
+    pub targets: Vec<(usize, PdoPlace)>,
+    /// The value.
+    pub value: i64,
+}
+
+impl LinkedVariable {
+    /// Writes the value into each linked slave's output image.
+    pub fn apply(&self, images: &mut [Vec<u8>]) {
+        for (pos, place) in &self.targets {
+            put(&mut images[*pos], *place, self.value);
+        }
+    }
+}
+
+fn round_i16(v: f64) -> i16 {
+    v.round().clamp(f64::from(i16::MIN), f64::from(i16::MAX)) as i16
+}
+
+/// The procedure's cycle numbers (0 = the cycle that sets `State_Machine = 1`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Phases {
+    /// b starts its ramp.
+    pub ramp_b: u64,
+    /// a starts its ramp.
+    pub ramp_a: u64,
+    /// Steady trot starts (a and b at their values).
+    pub trot: u64,
+    /// a ramps back.
+    pub back_a: u64,
+    /// b ramps back.
+    pub back_b: u64,
+    /// `State_Machine = 0`.
+    pub stop: u64,
+    /// Cycles recorded.
+    pub end: u64,
+}
+
+impl Phases {
+    /// The phases of `s`.
+    pub fn of(s: &Scenario) -> Self {
+        let p = &s.procedure;
+        let tr = s.cycles(f64::from(p.transition_time_s));
+        let ramp_b = s.cycles(p.stand_s);
+        let ramp_a = ramp_b + tr;
+        let trot = ramp_a + tr;
+        let back_a = trot + s.cycles(p.trot_s);
+        let back_b = back_a + tr;
+        let stop = back_b + tr + s.cycles(p.stand_s);
+        let end = stop + s.cycles(p.stop_s).max(1);
+        Self {
+            ramp_b,
+            ramp_a,
+            trot,
+            back_a,
+            back_b,
+            stop,
+            end,
+        }
+    }
+
+    /// `(a, b)` commanded in cycle `k` as fractions of their Table 4-1 values.
+    pub fn ab(&self, k: u64) -> (bool, bool) {
+        let a = k >= self.ramp_a && k < self.back_a;
+        let b = k >= self.ramp_b && k < self.back_b;
+        (a, b)
+    }
+}
+
+/// One recorded cycle.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Row {
+    /// `State_Machine` written this cycle.
+    pub state_machine: bool,
+    /// a commanded per leg (Table 3-1 `a_ellipse100`: whole cm), Table 4-1 order.
+    pub a_cmd: [i16; 4],
+    /// b commanded per leg (whole cm).
+    pub b_cmd: [i16; 4],
+    /// The inputs of each leg (Table 4-1 order FL, FR, HL, HR), raw PDO integers in
+    /// [`INPUTS`] order.
+    pub inputs: [[i32; 9]; 4],
+    /// Working counter of the cycle's LRW.
+    pub wkc: u16,
+}
+
+/// Bus statistics of a run.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct BusStats {
+    /// Recorded cycles.
+    pub cycles: u64,
+    /// Cycles whose working counter was not [`EXPECTED_WKC`].
+    pub wkc_errors: u64,
+    /// Largest spread of one SYNC0 pulse's time across the four nodes \[ns\].
+    pub sync0_spread_max_ns: u64,
+    /// Cycles with more or fewer than one SYNC0 per node since the previous cycle.
+    pub sync0_missed: u64,
+    /// SYNC0 count (per node, since boot) at which each node released its leg; all equal
+    /// when the four trajectory clocks started in the same cycle.
+    pub release_sync0: [u64; 4],
+    /// Virtual time the bring-up took \[ns\] (varies between runs; not in the CSV).
+    pub bringup_ns: u64,
+}
+
+/// Everything a run produced.
+#[derive(Debug, Clone)]
+pub struct TrotRun {
+    /// The scenario.
+    pub scenario: Scenario,
+    /// The procedure's cycle numbers.
+    pub phases: Phases,
+    /// One row per recorded cycle.
+    pub rows: Vec<Row>,
+    /// Bus statistics.
+    pub bus: BusStats,
+    /// Wall-clock time of the whole run (bring-up included).
+    pub wall: Duration,
+    /// Wall-clock time of the recorded part.
+    pub wall_recorded: Duration,
+    /// Virtual time simulated in total \[s\].
+    pub simulated_s: f64,
+    /// Trajectory clock of each leg's firmware at the end, ns (Table 4-1 order).
+    pub final_clock_ns: [u64; 4],
+}
+
+/// Progress of a run, for a progress bar.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Progress {
+    /// Recorded cycles done.
+    pub done: u64,
+    /// Recorded cycles in total.
+    pub total: u64,
+}
+
+/// Position of a Table 4-1 leg in [`LegId::TABLE`].
+pub fn table_index(leg: LegId) -> usize {
+    LegId::TABLE
+        .iter()
+        .position(|l| *l == leg)
+        .expect("a leg of the table")
+}
+
+/// The rig of `leg` for scenario `s`.
+pub fn rig_config(s: &Scenario, leg: LegId, phases: &Phases) -> RigConfig {
+    let cyc = s.cycle_ns() as f64 * 1e-9;
+    let tr = f64::from(s.procedure.transition_time_s);
+    let v = s.rig.belt_speed_m_s;
+    let (a0, a1) = (phases.ramp_a as f64 * cyc, phases.back_a as f64 * cyc);
+    let mut c = RigConfig::laelaps(leg).belt_depth(s.rig.belt_depth_m);
+    c.plant_period_ns = 1_000_000_000 / u64::from(s.rig.plant_rate_hz);
+    c.belt = BeltProfile {
+        points: vec![(a0, 0.0), (a0 + tr, v), (a1, v), (a1 + tr, 0.0)],
+    };
+    c
+}
+
+/// Runs scenario `s`; `progress` is called every 250 recorded cycles.
+pub fn run_trot(s: &Scenario, progress: &mut dyn FnMut(Progress)) -> Result<TrotRun, MasterError> {
+    let wall0 = Instant::now();
+    let phases = Phases::of(s);
+
+    // The segment: four towers in chain order, each an ET1100-class ESC (the FB1111) with
+    // the SII generated from its build's definition, each driving the opposite leg.
+    let mut seg = Segment::new();
+    let mut handles: Vec<(LegId, LegRigHandle)> = Vec::new();
+    for leg in chain_legs() {
+        let def = device::device(leg.side());
+        let sii = oxicat_device::sii::generate(def)
+            .map_err(|e| MasterError::Usage(format!("SII of the leg node: {e}")))?;
+        let id = seg.add(Esc::new(EscConfig::et1100(), sii));
+        let h = attach_leg(&mut seg, id, leg, rig_config(s, leg, &phases))
+            .map_err(|e| MasterError::Usage(format!("tower {id}: {e}")))?;
+        handles.push((leg, h));
+    }
+    debug_assert_eq!(TOWER_CHAIN.len(), handles.len());
+    let segment = Arc::new(Mutex::new(seg));
+
+    let storage: &'static Storage = Box::leak(Box::new(Storage::new()));
+    let (tx, rx, pdu_loop) = storage
+        .try_split()
+        .map_err(|_| MasterError::Usage("PDU storage already in use".into()))?;
+    let md = MainDevice::new(
+        pdu_loop,
+        Timeouts {
+            wait_loop_delay: Duration::from_micros(100),
+            state_transition: Duration::from_secs(20),
+            pdu: Duration::from_secs(2),
+            mailbox_response: Duration::from_secs(5),
+            ..Timeouts::default()
+        },
+        MainDeviceConfig {
+            dc_static_sync_iterations: 1000,
+            ..MainDeviceConfig::default()
+        },
+    );
+    let transport = inprocess_task(
+        segment.clone(),
+        tx,
+        rx,
+        InProcessConfig {
+            frame_gap_ns: crate::SIM_FRAME_GAP_NS,
+        },
+    );
+    let master = run_master(s, &phases, &md, &segment, &handles, progress);
+    let out = futures_lite::future::block_on(futures_lite::future::or(master, async {
+        let r = transport.await;
+        Err(MasterError::Usage(format!(
+            "the in-process transport stopped: {:?}",
+            r.err()
+        )))
+    }));
+    let (rows, mut bus, wall_recorded) = out?;
+    let end_ns = segment.lock().unwrap_or_else(|e| e.into_inner()).now();
+    let mut final_clock_ns = [0u64; 4];
+    for (leg, h) in &handles {
+        let r = h.lock();
+        final_clock_ns[table_index(*leg)] = r.app.clock().nanos();
+        bus.release_sync0[table_index(*leg)] = r.released_at_sync0.unwrap_or(0);
+    }
+    Ok(TrotRun {
+        scenario: s.clone(),
+        phases,
+        rows,
+        bus,
+        wall: wall0.elapsed(),
+        wall_recorded,
+        simulated_s: end_ns as f64 * 1e-9,
+        final_clock_ns,
+    })
+}
+
+fn eth(what: &str) -> impl Fn(ethercrab::error::Error) -> MasterError + '_ {
+    move |e| MasterError::Ethercrab(what.to_string(), e)
+}
+
+async fn run_master(
+    s: &Scenario,
+    phases: &Phases,
+    md: &MainDevice<'static>,
+    segment: &Arc<Mutex<Segment>>,
+    handles: &[(LegId, LegRigHandle)],
+    progress: &mut dyn FnMut(Progress),
+) -> Result<(Vec<Row>, BusStats, Duration), MasterError> {
+    let lock = || segment.lock().unwrap_or_else(|e| e.into_inner());
+    let clock = lock().clock();
+    let cycle_ns = s.cycle_ns();
+    let mut group = md
+        .init_single_group::<MAX_SUBDEVICES, PDI_LEN>(move || clock.now())
+        .await
+        .map_err(eth("discovery"))?;
+    if group.len() != 4 {
+        return Err(MasterError::Usage(format!(
+            "expected 4 leg nodes, found {}",
+            group.len()
+        )));
+    }
+    for mut sd in group.iter_mut(md) {
+        // Sync type: DC SYNC0 (0x1C32:01 = 2), then SYNC0 in the DC unit.
+        sd.sdo_write(0x1C32, 1, 2u16)
+            .await
+            .map_err(eth("0x1C32:01 (sync type)"))?;
+        sd.set_dc_sync(DcSync::Sync0);
+    }
+    let group = group
+        .into_pre_op_pdi(md)
+        .await
+        .map_err(eth("PDO configuration"))?;
+    let group = group
+        .configure_dc_sync(
+            md,
+            DcConfiguration {
+                start_delay: Duration::from_millis(1),
+                sync0_period: Duration::from_nanos(cycle_ns),
+                sync0_shift: Duration::from_nanos(u64::from(s.bus.sync0_shift_us) * 1000),
+            },
+        )
+        .await
+        .map_err(eth("DC configuration"))?;
+    let group = group.into_safe_op(md).await.map_err(eth("SAFE-OP"))?;
+    let group = group.request_into_op(md).await.map_err(eth("OP request"))?;
+
+    // Table 4-1 per node, in chain order; layouts from the node's own definition.
+    let legs: Vec<LegId> = handles.iter().map(|h| h.0).collect();
+    let def = device::device(legs[0].side());
+    let map = OutputMap::new(def)?;
+    let in_places: Vec<PdoPlace> = INPUTS
+        .iter()
+        .map(|v| {
+            pdo_place(def, false, v.index, v.sub)
+                .ok_or_else(|| MasterError::Usage(format!("no input {}", v.name)))
+        })
+        .collect::<Result<_, _>>()?;
+    let mut state_machine = LinkedVariable {
+        name: "State_Machine",
+        targets: (0..4).map(|p| (p, map.state_machine)).collect(),
+        value: 0,
+    };
+    let base: Vec<LegOutputs> = legs
+        .iter()
+        .map(|l| {
+            let t = s.leg(*l);
+            let c = &s.control;
+            LegOutputs {
+                state_machine: false,
+                transition_time: s.procedure.transition_time_s,
+                filter_hz: c.filter_hz,
+                gains: [
+                    round_i16(c.knee.kp * 100.0),
+                    round_i16(c.knee.kd * 1000.0),
+                    round_i16(c.knee.ki * 100.0),
+                    round_i16(c.hip.kp * 100.0),
+                    round_i16(c.hip.kd * 1000.0),
+                    round_i16(c.hip.ki * 100.0),
+                ],
+                traj: [
+                    round_i16(t.x_centre_cm * 10.0),
+                    round_i16(t.y_centre_cm * 10.0),
+                    0,
+                    0,
+                    round_i16(t.freq_hz * 100.0),
+                    round_i16(t.phase_deg),
+                    round_i16(t.flatness * 100.0),
+                ],
+            }
+        })
+        .collect();
+    let ab_full: Vec<(i16, i16)> = legs
+        .iter()
+        .map(|l| {
+            let t = s.leg(*l);
+            // Table 3-1: a_ellipse100 / b_ellipse100 carry a × 100 in metres, i.e. whole cm.
+            (round_i16(t.a_cm), round_i16(t.b_cm))
+        })
+        .collect();
+    let out_len = group
+        .iter(md)
+        .map(|sd| sd.outputs_raw().len())
+        .max()
+        .unwrap_or(0);
+    let mut images = vec![vec![0u8; out_len]; 4];
+
+    // Bring the cycle in line with SYNC0 until everyone is in OP.
+    let mut warm = 0;
+    let mut guard = 0u32;
+    loop {
+        let t = clock.now();
+        let r = group.tx_rx_dc(md).await.map_err(eth("cycle"))?;
+        lock().advance_to(t + r.extra.next_cycle_wait.as_nanos() as u64);
+        if r.all_op() {
+            warm += 1;
+            if warm == 10 {
+                break;
+            }
+        }
+        guard += 1;
+        if guard > 100_000 {
+            return Err(MasterError::Usage("the leg nodes did not reach OP".into()));
+        }
+    }
+    let bringup_ns = clock.now();
+
+    let mut bus = BusStats {
+        bringup_ns,
+        ..BusStats::default()
+    };
+    let settle = s.cycles(s.procedure.settle_s);
+    let total = phases.end;
+    let mut rows = Vec::with_capacity(total as usize);
+    let mut last_sync = [None::<u64>; 4];
+    let mut rec_start = Instant::now();
+    for k in 0..settle + total {
+        let recording = k >= settle;
+        let j = k.saturating_sub(settle);
+        if k == settle {
+            rec_start = Instant::now();
+        }
+        // The master's outputs of this cycle.
+        let (a_on, b_on) = if recording {
+            phases.ab(j)
+        } else {
+            (false, false)
+        };
+        state_machine.value = i64::from(recording && j < phases.stop);
+        let mut a_cmd = [0i16; 4];
+        let mut b_cmd = [0i16; 4];
+        for (pos, o) in base.iter().enumerate() {
+            let mut o = *o;
+            o.traj[2] = if a_on { ab_full[pos].0 } else { 0 };
+            o.traj[3] = if b_on { ab_full[pos].1 } else { 0 };
+            map.write(&o, &mut images[pos]);
+            let ti = table_index(legs[pos]);
+            a_cmd[ti] = o.traj[2];
+            b_cmd[ti] = o.traj[3];
+        }
+        state_machine.apply(&mut images);
+        for (pos, sd) in group.iter(md).enumerate() {
+            let mut o = sd.outputs_raw_mut();
+            let n = o.len().min(images[pos].len());
+            o[..n].copy_from_slice(&images[pos][..n]);
+        }
+        let t = clock.now();
+        let r = group.tx_rx_dc(md).await.map_err(eth("cycle"))?;
+        if recording {
+            let mut inputs = [[0i32; 9]; 4];
+            for (pos, sd) in group.iter(md).enumerate() {
+                let img = sd.inputs_raw();
+                let ti = table_index(legs[pos]);
+                for (v, (var, place)) in INPUTS.iter().zip(&in_places).enumerate() {
+                    inputs[ti][v] = get(&img, *place, var.signed);
+                }
+            }
+            if r.working_counter != EXPECTED_WKC {
+                bus.wkc_errors += 1;
+            }
+            rows.push(Row {
+                state_machine: state_machine.value != 0,
+                a_cmd,
+                b_cmd,
+                inputs,
+                wkc: r.working_counter,
+            });
+            if (j + 1) % 250 == 0 || j + 1 == total {
+                progress(Progress { done: j + 1, total });
+            }
+        }
+        let mut seg = lock();
+        seg.advance_to(t + r.extra.next_cycle_wait.as_nanos() as u64);
+        // SYNC0 of the four nodes: one pulse per cycle each, and how far apart.
+        let now: Vec<Option<u64>> = (0..4).map(|i| seg.last_sync(i).0).collect();
+        drop(seg);
+        if recording {
+            let times: Vec<u64> = now.iter().flatten().copied().collect();
+            if times.len() == 4 {
+                let spread = times.iter().max().unwrap_or(&0) - times.iter().min().unwrap_or(&0);
+                bus.sync0_spread_max_ns = bus.sync0_spread_max_ns.max(spread);
+            }
+            for i in 0..4 {
+                let fresh = match (last_sync[i], now[i]) {
+                    (Some(a), Some(b)) => b > a && b - a <= cycle_ns + cycle_ns / 2,
+                    (None, Some(_)) => true,
+                    _ => false,
+                };
+                if !fresh {
+                    bus.sync0_missed += 1;
+                }
+            }
+        }
+        last_sync.copy_from_slice(&now);
+    }
+    bus.cycles = rows.len() as u64;
+    Ok((rows, bus, rec_start.elapsed()))
+}

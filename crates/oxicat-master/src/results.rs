@@ -1,0 +1,346 @@
+//! Results of a trot run: the CSV (one row per cycle, `<leg>.<variable> [unit]` columns),
+//! the derived quantities the thesis' post-processing computes (kinematic-frame angles,
+//! toe positions, joint speeds), and the summary table.
+//!
+//! Everything here is a pure function of the recorded integers, formatted with fixed
+//! decimals, so equal runs give equal bytes.
+
+use std::fmt::Write as _;
+
+use oxicat_devices::laelaps::hw::{
+    JOINT_RATIO_HIP, JOINT_RATIO_KNEE, L1, L2, U_MAX_HIP, U_MAX_KNEE,
+};
+use oxicat_sim::laelaps::LegId;
+
+use crate::experiment::{var, TrotRun, INPUTS};
+
+/// Hip joint speed limit \[rad/s\]: 75.83 rpm (the thesis' post-processing,
+/// `Hip_max_velocity`; the EC 45's maximum speed through 79.15).
+pub const HIP_MAX_SPEED: f64 = 75.83 * std::f64::consts::TAU / 60.0;
+/// Knee joint speed limit \[rad/s\]: 55.5 rpm (`Knee_max_velocity`).
+pub const KNEE_MAX_SPEED: f64 = 55.5 * std::f64::consts::TAU / 60.0;
+/// Knee PWM limit \[%\].
+pub const KNEE_PWM_LIMIT: f64 = U_MAX_KNEE as f64 * 100.0;
+/// Hip PWM limit \[%\].
+pub const HIP_PWM_LIMIT: f64 = U_MAX_HIP as f64 * 100.0;
+
+/// Sign from the joint (PDO) frame to the kinematic frame: the right legs' angles are
+/// negated, as the thesis' post-processing does.
+pub fn frame_sign(leg: LegId) -> f64 {
+    match leg.side() {
+        oxicat_devices::laelaps::Side::Left => 1.0,
+        oxicat_devices::laelaps::Side::Right => -1.0,
+    }
+}
+
+/// Toe position `(x, y)` \[m\] of kinematic-frame angles (hip, knee) \[rad\] (thesis eq. 3-1).
+pub fn toe(hip: f64, knee: f64) -> (f64, f64) {
+    let (l1, l2) = (f64::from(L1), f64::from(L2));
+    (
+        l1 * hip.sin() + l2 * knee.sin(),
+        l1 * hip.cos() + l2 * knee.cos(),
+    )
+}
+
+/// One leg in one cycle, in SI units and the kinematic frame.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct LegSample {
+    /// Hip angle \[rad\].
+    pub hip: f64,
+    /// Desired hip angle \[rad\].
+    pub hip_des: f64,
+    /// Knee angle \[rad\].
+    pub knee: f64,
+    /// Desired knee angle \[rad\].
+    pub knee_des: f64,
+    /// Knee PWM \[%\] (signed, joint frame as sent).
+    pub pwm_knee: f64,
+    /// Hip PWM \[%\].
+    pub pwm_hip: f64,
+    /// Knee joint speed \[rad/s\] (motor speed / ratio, kinematic frame).
+    pub speed_knee: f64,
+    /// Hip joint speed \[rad/s\].
+    pub speed_hip: f64,
+    /// Trajectory clock \[s\].
+    pub time: f64,
+    /// Toe from the measured angles \[m\].
+    pub toe: (f64, f64),
+    /// Toe from the desired angles \[m\].
+    pub toe_des: (f64, f64),
+}
+
+/// Decodes leg `li` (Table 4-1 order) of a row.
+pub fn sample(raw: &[i32; 9], leg: LegId) -> LegSample {
+    let s = frame_sign(leg);
+    let deg = |v: usize| f64::from(raw[v]) / 100.0;
+    let rad = |v: usize| s * deg(v).to_radians();
+    let (hip, hip_des, knee, knee_des) = (
+        rad(var::HIP),
+        rad(var::HIP_DES),
+        rad(var::KNEE),
+        rad(var::KNEE_DES),
+    );
+    LegSample {
+        hip,
+        hip_des,
+        knee,
+        knee_des,
+        pwm_knee: f64::from(raw[var::PWM_KNEE]) / 100.0,
+        pwm_hip: f64::from(raw[var::PWM_HIP]) / 100.0,
+        speed_knee: s * f64::from(raw[var::VEL_KNEE]) / 1000.0 / f64::from(JOINT_RATIO_KNEE),
+        speed_hip: s * f64::from(raw[var::VEL_HIP]) / 1000.0 / f64::from(JOINT_RATIO_HIP),
+        time: f64::from(raw[var::TIME]) / 100.0,
+        toe: toe(hip, knee),
+        toe_des: toe(hip_des, knee_des),
+    }
+}
+
+/// Writes `raw / 10^decimals` exactly (no float rounding).
+fn fixed(out: &mut String, raw: i64, decimals: u32) {
+    let d = 10i64.pow(decimals);
+    let sign = if raw < 0 { "-" } else { "" };
+    let a = raw.unsigned_abs();
+    let d = d as u64;
+    if decimals == 0 {
+        let _ = write!(out, "{sign}{a}");
+    } else {
+        let _ = write!(out, "{sign}{}.{:0w$}", a / d, a % d, w = decimals as usize);
+    }
+}
+
+/// Millimetres with two decimals, `-0.00` written as `0.00`.
+fn mm(out: &mut String, m: f64) {
+    let v = (m * 100_000.0).round() as i64;
+    fixed(out, v, 2);
+}
+
+/// The CSV of a run: one header line, one row per recorded cycle.
+pub fn csv(run: &TrotRun) -> String {
+    let cyc_ns = run.scenario.cycle_ns();
+    let mut h = String::from("cycle,t [s],State_Machine,wkc");
+    for leg in LegId::TABLE {
+        let c = leg.code();
+        let _ = write!(h, ",{c}.a_ellipse [cm],{c}.b_ellipse [cm]");
+        for v in INPUTS {
+            let _ = write!(h, ",{c}.{} [{}]", v.name, v.unit);
+        }
+        let _ = write!(
+            h,
+            ",{c}.toe_x_desired [mm],{c}.toe_y_desired [mm],{c}.toe_x [mm],{c}.toe_y [mm]"
+        );
+    }
+    h.push('\n');
+    let mut out = String::with_capacity(h.len() + run.rows.len() * 420);
+    out.push_str(&h);
+    for (k, r) in run.rows.iter().enumerate() {
+        let _ = write!(out, "{k},");
+        // t in µs resolution, exact.
+        fixed(&mut out, (k as u64 * cyc_ns / 1000) as i64, 6);
+        let _ = write!(out, ",{},{}", u8::from(r.state_machine), r.wkc);
+        for (li, leg) in LegId::TABLE.into_iter().enumerate() {
+            out.push(',');
+            fixed(&mut out, i64::from(r.a_cmd[li]), 0);
+            out.push(',');
+            fixed(&mut out, i64::from(r.b_cmd[li]), 0);
+            for (v, iv) in INPUTS.iter().enumerate() {
+                out.push(',');
+                let dec = iv.divisor.ilog10();
+                fixed(&mut out, i64::from(r.inputs[li][v]), dec);
+            }
+            let s = sample(&r.inputs[li], leg);
+            for m in [s.toe_des.0, s.toe_des.1, s.toe.0, s.toe.1] {
+                out.push(',');
+                mm(&mut out, m);
+            }
+        }
+        out.push('\n');
+    }
+    out
+}
+
+/// Summary of one leg over the steady trot.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct LegSummary {
+    /// Knee error RMS \[deg\].
+    pub knee_rms_deg: f64,
+    /// Knee error max \[deg\].
+    pub knee_max_deg: f64,
+    /// Hip error RMS \[deg\].
+    pub hip_rms_deg: f64,
+    /// Hip error max \[deg\].
+    pub hip_max_deg: f64,
+    /// Toe path error RMS \[mm\] (measured against desired toe, same cycle).
+    pub toe_rms_mm: f64,
+    /// Share of cycles with the knee PWM at its limit \[%\].
+    pub knee_at_limit_pct: f64,
+    /// Share of cycles with the hip PWM at its limit \[%\].
+    pub hip_at_limit_pct: f64,
+    /// Peak knee joint speed \[rad/s\].
+    pub knee_peak_speed: f64,
+    /// Peak hip joint speed \[rad/s\].
+    pub hip_peak_speed: f64,
+}
+
+/// Summary of a run.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Summary {
+    /// Per leg, Table 4-1 order.
+    pub legs: [LegSummary; 4],
+    /// Correlation of toe heights (y) over the steady trot: `(a, b, r)`.
+    pub toe_height_correlation: Vec<(LegId, LegId, f64)>,
+    /// Window the summary covers: `[start, end)` cycles.
+    pub window: (u64, u64),
+}
+
+/// The steady-trot window: from the first full period after a and b reached their values
+/// to the start of the ramp back.
+pub fn steady_window(run: &TrotRun) -> (u64, u64) {
+    let p = &run.phases;
+    let f = run
+        .scenario
+        .legs
+        .iter()
+        .map(|l| l.freq_hz)
+        .fold(f64::INFINITY, f64::min);
+    let settle = run.scenario.cycles(1.0 / f).min((p.back_a - p.trot) / 2);
+    (p.trot + settle, p.back_a.min(run.rows.len() as u64))
+}
+
+fn correlation(a: &[f64], b: &[f64]) -> f64 {
+    let n = a.len().min(b.len()) as f64;
+    if n < 2.0 {
+        return 0.0;
+    }
+    let ma = a.iter().sum::<f64>() / n;
+    let mb = b.iter().sum::<f64>() / n;
+    let (mut sab, mut saa, mut sbb) = (0.0, 0.0, 0.0);
+    for (x, y) in a.iter().zip(b) {
+        sab += (x - ma) * (y - mb);
+        saa += (x - ma) * (x - ma);
+        sbb += (y - mb) * (y - mb);
+    }
+    if saa == 0.0 || sbb == 0.0 {
+        0.0
+    } else {
+        sab / (saa * sbb).sqrt()
+    }
+}
+
+/// Computes the summary over [`steady_window`].
+pub fn summarize(run: &TrotRun) -> Summary {
+    let (w0, w1) = steady_window(run);
+    let rows = &run.rows[w0 as usize..w1 as usize];
+    let n = rows.len().max(1) as f64;
+    let mut legs = [LegSummary::default(); 4];
+    let mut heights: Vec<Vec<f64>> = (0..4).map(|_| Vec::with_capacity(rows.len())).collect();
+    for (li, leg) in LegId::TABLE.into_iter().enumerate() {
+        let mut s = LegSummary::default();
+        let (mut ek2, mut eh2, mut et2) = (0.0, 0.0, 0.0);
+        let (mut kl, mut hl) = (0u64, 0u64);
+        for r in rows {
+            let x = sample(&r.inputs[li], leg);
+            let ek = (x.knee_des - x.knee).to_degrees();
+            let eh = (x.hip_des - x.hip).to_degrees();
+            ek2 += ek * ek;
+            eh2 += eh * eh;
+            s.knee_max_deg = s.knee_max_deg.max(ek.abs());
+            s.hip_max_deg = s.hip_max_deg.max(eh.abs());
+            let (dx, dy) = (x.toe.0 - x.toe_des.0, x.toe.1 - x.toe_des.1);
+            et2 += (dx * dx + dy * dy) * 1e6;
+            // At the limit: within one PDO step (0.01 %) plus the f32 truncation.
+            if x.pwm_knee.abs() >= KNEE_PWM_LIMIT - 0.02 {
+                kl += 1;
+            }
+            if x.pwm_hip.abs() >= HIP_PWM_LIMIT - 0.02 {
+                hl += 1;
+            }
+            s.knee_peak_speed = s.knee_peak_speed.max(x.speed_knee.abs());
+            s.hip_peak_speed = s.hip_peak_speed.max(x.speed_hip.abs());
+            heights[li].push(x.toe.1);
+        }
+        s.knee_rms_deg = (ek2 / n).sqrt();
+        s.hip_rms_deg = (eh2 / n).sqrt();
+        s.toe_rms_mm = (et2 / n).sqrt();
+        s.knee_at_limit_pct = kl as f64 * 100.0 / n;
+        s.hip_at_limit_pct = hl as f64 * 100.0 / n;
+        legs[li] = s;
+    }
+    let t = LegId::TABLE;
+    let mut toe_height_correlation = Vec::new();
+    for (a, b) in [(0, 3), (1, 2), (0, 1), (2, 3), (0, 2), (1, 3)] {
+        toe_height_correlation.push((t[a], t[b], correlation(&heights[a], &heights[b])));
+    }
+    Summary {
+        legs,
+        toe_height_correlation,
+        window: (w0, w1),
+    }
+}
+
+/// The summary as a Markdown document (tables), for `summary.md` and the terminal.
+pub fn summary_markdown(run: &TrotRun, s: &Summary) -> String {
+    let cyc = run.scenario.cycle_ns() as f64 * 1e-9;
+    let mut o = String::new();
+    let _ = writeln!(o, "# {}\n", run.scenario.name);
+    let _ = writeln!(
+        o,
+        "Steady trot, cycles {}–{} ({:.1}–{:.1} s after `State_Machine = 1`); joint errors \
+         desired − measured in the kinematic frame; toe error = distance between the toe of \
+         the measured and of the desired angles in the same cycle.\n",
+        s.window.0,
+        s.window.1,
+        s.window.0 as f64 * cyc,
+        s.window.1 as f64 * cyc
+    );
+    let _ = writeln!(
+        o,
+        "| leg | knee RMS / max [deg] | hip RMS / max [deg] | toe RMS [mm] | knee PWM at limit | hip PWM at limit | peak knee speed [rad/s] (limit {KNEE_MAX_SPEED:.2}) | peak hip speed [rad/s] (limit {HIP_MAX_SPEED:.2}) |"
+    );
+    let _ = writeln!(o, "|---|---|---|---|---|---|---|---|");
+    for (li, leg) in LegId::TABLE.into_iter().enumerate() {
+        let l = &s.legs[li];
+        let _ = writeln!(
+            o,
+            "| {} | {:.2} / {:.2} | {:.2} / {:.2} | {:.1} | {:.1} % | {:.1} % | {:.2} | {:.2} |",
+            leg.code(),
+            l.knee_rms_deg,
+            l.knee_max_deg,
+            l.hip_rms_deg,
+            l.hip_max_deg,
+            l.toe_rms_mm,
+            l.knee_at_limit_pct,
+            l.hip_at_limit_pct,
+            l.knee_peak_speed,
+            l.hip_peak_speed
+        );
+    }
+    let _ = writeln!(
+        o,
+        "\nToe-height correlation (trot: diagonals +1, the others −1):\n"
+    );
+    let _ = writeln!(o, "| legs | r |\n|---|---|");
+    for (a, b, r) in &s.toe_height_correlation {
+        let _ = writeln!(o, "| {}–{} | {:+.3} |", a.code(), b.code(), r);
+    }
+    let b = &run.bus;
+    let _ = writeln!(
+        o,
+        "\nBus (DC SYNC0 every {} µs):\n",
+        run.scenario.bus.cycle_us
+    );
+    let _ = writeln!(o, "| cycles recorded | WKC errors | SYNC0 spread max [ns] | cycles without exactly one SYNC0 per node | trajectory clocks started at SYNC0 # (FL FR HL HR) |");
+    let _ = writeln!(o, "|---|---|---|---|---|");
+    let _ = writeln!(
+        o,
+        "| {} | {} | {} | {} | {} {} {} {} |",
+        b.cycles,
+        b.wkc_errors,
+        b.sync0_spread_max_ns,
+        b.sync0_missed,
+        b.release_sync0[0],
+        b.release_sync0[1],
+        b.release_sync0[2],
+        b.release_sync0[3]
+    );
+    o
+}

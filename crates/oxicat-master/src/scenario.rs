@@ -1,0 +1,239 @@
+//! Experiment scenarios: the thesis' Table 4-1 and its procedure as a TOML file
+//! (`scenarios/laelaps-trot.toml`, built into the binary as [`DEFAULT_TOML`]).
+
+use serde::Deserialize;
+
+use crate::MasterError;
+use oxicat_sim::laelaps::LegId;
+
+/// The shipped scenario: Laelaps II trotting experiment 1 (thesis Table 4-1).
+pub const DEFAULT_TOML: &str = include_str!("../../../scenarios/laelaps-trot.toml");
+
+/// A trotting experiment.
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Scenario {
+    /// Title (goes into the summary).
+    pub name: String,
+    /// Bus timing.
+    pub bus: Bus,
+    /// The thesis' procedure, phase lengths.
+    pub procedure: Procedure,
+    /// Gains and filter.
+    pub control: Control,
+    /// Treadmill and plant.
+    pub rig: Rig,
+    /// Table 4-1, one entry per leg.
+    #[serde(rename = "leg")]
+    pub legs: Vec<LegTable>,
+}
+
+/// DC cycle.
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Bus {
+    /// SYNC0 period \[µs\].
+    pub cycle_us: u32,
+    /// Master frame after SYNC0 \[µs\].
+    pub sync0_shift_us: u32,
+}
+
+/// Phase lengths of the procedure \[s\].
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Procedure {
+    /// Configuration state before the start (not recorded).
+    pub settle_s: f64,
+    /// Standing with a = b = 0 before and after the trot.
+    pub stand_s: f64,
+    /// `Transition_time` \[s\] (INT8 in the PDO).
+    pub transition_time_s: i8,
+    /// Steady trot with full a and b.
+    pub trot_s: f64,
+    /// Recorded time after `State_Machine = 0`.
+    pub stop_s: f64,
+}
+
+/// PIV gains of one joint.
+#[derive(Debug, Clone, Copy, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct GainSet {
+    /// Proportional gain.
+    pub kp: f64,
+    /// Velocity (derivative-on-feedback) gain.
+    pub kd: f64,
+    /// Integral gain.
+    pub ki: f64,
+}
+
+/// Controller settings for all legs.
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Control {
+    /// Knee gains.
+    pub knee: GainSet,
+    /// Hip gains.
+    pub hip: GainSet,
+    /// Derivative filter bandwidth \[Hz\].
+    pub filter_hz: u16,
+}
+
+/// Treadmill and plant.
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Rig {
+    /// Belt surface below the hip axis \[m\].
+    pub belt_depth_m: f64,
+    /// Belt speed during the trot \[m/s\].
+    pub belt_speed_m_s: f64,
+    /// Plant integration rate \[Hz\] (10 000 … 1 000 000, dividing 1 s in whole ns).
+    pub plant_rate_hz: u32,
+}
+
+/// One leg's column of Table 4-1.
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct LegTable {
+    /// `FL`, `FR`, `HL` or `HR`.
+    pub leg: String,
+    /// Ellipse centre x \[cm\].
+    pub x_centre_cm: f64,
+    /// Ellipse centre y \[cm\] (down from the hip).
+    pub y_centre_cm: f64,
+    /// Semi-axis a (step length) \[cm\].
+    pub a_cm: f64,
+    /// Semi-axis b (ground clearance) \[cm\].
+    pub b_cm: f64,
+    /// Stepping frequency \[Hz\].
+    pub freq_hz: f64,
+    /// Initial phase \[deg\].
+    pub phase_deg: f64,
+    /// Flatness parameter.
+    pub flatness: f64,
+}
+
+impl Scenario {
+    /// The shipped Table 4-1 scenario.
+    pub fn thesis() -> Self {
+        Self::parse(DEFAULT_TOML).expect("the shipped scenario parses")
+    }
+
+    /// Parses and checks a scenario.
+    pub fn parse(text: &str) -> Result<Self, MasterError> {
+        let s: Scenario =
+            toml::from_str(text).map_err(|e| MasterError::Usage(format!("scenario: {e}")))?;
+        s.check()?;
+        Ok(s)
+    }
+
+    /// Reads a scenario file.
+    pub fn load(path: &std::path::Path) -> Result<Self, MasterError> {
+        let text = std::fs::read_to_string(path)
+            .map_err(|e| MasterError::Io(path.display().to_string(), e))?;
+        Self::parse(&text)
+    }
+
+    fn check(&self) -> Result<(), MasterError> {
+        let bad = |m: String| Err(MasterError::Usage(format!("scenario: {m}")));
+        if self.bus.cycle_us < 100 || self.bus.sync0_shift_us >= self.bus.cycle_us {
+            return bad("bus.cycle_us ≥ 100 and sync0_shift_us < cycle_us".into());
+        }
+        let p = &self.procedure;
+        for (n, v) in [
+            ("settle_s", p.settle_s),
+            ("stand_s", p.stand_s),
+            ("trot_s", p.trot_s),
+            ("stop_s", p.stop_s),
+        ] {
+            if !(0.0..=3600.0).contains(&v) {
+                return bad(format!("procedure.{n} = {v} is not in 0…3600 s"));
+            }
+        }
+        if p.transition_time_s <= 0 {
+            return bad("procedure.transition_time_s must be ≥ 1 s".into());
+        }
+        if p.settle_s < f64::from(p.transition_time_s) {
+            return bad("procedure.settle_s must be ≥ transition_time_s (gains ramp)".into());
+        }
+        let r = self.rig.plant_rate_hz;
+        if !(10_000..=1_000_000).contains(&r) || 1_000_000_000 % r != 0 {
+            return bad(format!("rig.plant_rate_hz = {r}"));
+        }
+        let mut seen = Vec::new();
+        for l in &self.legs {
+            let Some(id) = LegId::parse(&l.leg) else {
+                return bad(format!("unknown leg {:?} (FL, FR, HL, HR)", l.leg));
+            };
+            if seen.contains(&id) {
+                return bad(format!("leg {} twice", l.leg));
+            }
+            seen.push(id);
+            if l.freq_hz <= 0.0 {
+                return bad(format!("leg {}: freq_hz must be > 0", l.leg));
+            }
+        }
+        if seen.len() != 4 {
+            return bad("all four legs (FL, FR, HL, HR) need a [[leg]] entry".into());
+        }
+        Ok(())
+    }
+
+    /// The Table 4-1 column of `leg`.
+    pub fn leg(&self, leg: LegId) -> &LegTable {
+        self.legs
+            .iter()
+            .find(|l| LegId::parse(&l.leg) == Some(leg))
+            .expect("checked: every leg present")
+    }
+
+    /// Bus cycle \[ns\].
+    pub fn cycle_ns(&self) -> u64 {
+        u64::from(self.bus.cycle_us) * 1000
+    }
+
+    /// Number of bus cycles in `s` seconds (rounded).
+    pub fn cycles(&self, s: f64) -> u64 {
+        (s * 1e9 / self.cycle_ns() as f64).round() as u64
+    }
+
+    /// Sets the steady-trot length (`--duration`).
+    pub fn with_trot(mut self, s: f64) -> Self {
+        self.procedure.trot_s = s;
+        self
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn shipped_scenario_is_table_4_1() {
+        let s = Scenario::thesis();
+        assert_eq!(s.cycle_ns(), 400_000);
+        assert_eq!(s.procedure.transition_time_s, 3);
+        assert_eq!(s.control.knee.kp, 80.0);
+        assert_eq!(s.control.hip.kd, 0.05);
+        assert_eq!(s.control.filter_hz, 20);
+        let fl = s.leg(LegId::ForeLeft);
+        assert_eq!((fl.y_centre_cm, fl.phase_deg), (59.9, 180.0));
+        let hr = s.leg(LegId::HindRight);
+        assert_eq!((hr.y_centre_cm, hr.phase_deg), (59.8, 180.0));
+        assert_eq!(s.leg(LegId::ForeRight).phase_deg, 0.0);
+        assert_eq!(s.leg(LegId::HindLeft).phase_deg, 0.0);
+        for l in &s.legs {
+            assert_eq!(
+                (l.a_cm, l.b_cm, l.freq_hz, l.flatness),
+                (5.0, 4.0, 1.0, 0.0)
+            );
+        }
+    }
+
+    #[test]
+    fn bad_scenarios_are_refused() {
+        let s = DEFAULT_TOML.replace("leg = \"HR\"", "leg = \"XX\"");
+        assert!(Scenario::parse(&s).is_err());
+        let s = DEFAULT_TOML.replace("cycle_us = 400", "cycle_us = 400\nfoo = 1");
+        assert!(Scenario::parse(&s).is_err());
+    }
+}

@@ -1,0 +1,582 @@
+//! The Laelaps II rig on the virtual segment: one [`LegRigNode`] per EtherCAT Control Tower
+//! that runs the leg-node firmware (`oxicat_devices::laelaps`) on the slave stack behind
+//! its ESC **and** owns the leg it drives (`oxicat_plant::Leg`: amplifiers, motors,
+//! gearheads, coupler, pulley, encoders, two links, treadmill belt).
+//!
+//! # What happens when, in virtual time
+//!
+//! | event | what runs |
+//! |---|---|
+//! | ESC SYNC0 | `Slave::on_sync0` → application cycle (trajectory clock, ellipse, IK) |
+//! | ESC PDI IRQ | `Slave::on_pdi_irq` |
+//! | tick, every 100 µs (10 kHz) | 1. the leg catches up to now, integrated in fixed substeps of `plant_period_ns` (default 50 µs: 20 kHz) with the PWM the firmware last wrote; 2. eQEP registers latched from the plant's encoders (position, direction, unit-event capture period) → `Slave::on_timer(JOINT_LOOP_TIMER)` (the two PIV loops) → PWM into the plant's amplifiers; 3. every `poll_every` ticks the main loop, `Slave::poll` (ESM, mailbox) |
+//!
+//! The plant is integrated at 20 kHz but only *observed* (encoders) and *driven* (PWM) at
+//! the 10 kHz joint-loop instants, as on the real board, so it is stepped in one go per
+//! tick: one segment wakeup per node per 100 µs. At equal times ESC events come first (the
+//! segment's rule), then the tick in the fixed order above, so a run is a function of the
+//! frames and their virtual times only.
+//!
+//! # The support rig holds the legs until the node starts
+//!
+//! ethercrab's bring-up waits in real time, so how much virtual time passes before OP
+//! differs from run to run (and with it the phase of SYNC0 against virtual time zero). The
+//! rig therefore holds each leg at its reset pose — the plant is not stepped — while the
+//! node is in its Configuration state. At the first SYNC0 whose application cycle enters
+//! the Operational state (`State_Machine = 1`), the rig lets go: from that SYNC0 time `T0`
+//! on, plant ticks fall at `T0 + k·plant_period` and joint-loop ticks at
+//! `T0 + 50 µs + k·100 µs` (half a plant period away from SYNC0, so SYNC0's DC jitter can
+//! never reorder them). Everything the leg does afterwards depends only on `t − T0` and on
+//! the outputs the node sees at each SYNC0. Joint-loop ticks before `T0` run with the leg
+//! at rest (zero error, zero duty), which leaves the firmware in the same state however
+//! many there were.
+//!
+//! # Towers and legs
+//!
+//! Network order follows the towers (thesis §3.1): the chain starts at the tower by the
+//! Hind Right leg and ends at the tower by the Fore Right leg ([`TOWER_CHAIN`]). Because
+//! of the motor mounting each tower drives the leg **on the opposite side**
+//! ([`LegId::driven_by_tower_at`]): the tower by Hind Right drives Hind Left, with the
+//! `LEFT_LEG` build. Both the firmware build and the plant's mirrored motors follow the
+//! driven leg, never the tower's location.
+
+use std::sync::{Arc, Mutex, MutexGuard};
+
+use oxicat_devices::demo::Leds;
+use oxicat_devices::laelaps::{
+    self, device, CaptureConfig, EncoderIn, Joint, LegNode, Mode, PwmCommand, PwmOut, QepSample,
+    Side, JOINT_LOOP_TIMER,
+};
+use oxicat_esc::{Esc, PdiError};
+use oxicat_plant::{Leg, LegParams, Treadmill};
+use oxicat_slave::{InitError, Slave};
+
+use crate::node::{EscEvent, Node};
+use crate::segment::{Segment, SlaveId, TopologyError};
+
+/// Mailbox size of the leg node (its device definition: 128 bytes).
+pub const MBX: usize = 128;
+/// The leg node's stack type on a software ESC.
+pub type LegSlave = Slave<Esc, { device::IMAGE }, MBX>;
+/// The leg-node application wired to the rig.
+pub type LegApp = LegNode<PwmLatch, QepRegisters, NoLeds>;
+
+/// Joint-loop period: 10 kHz, the thesis' control loop (`hw::CONTROL_PERIOD_S`).
+pub const JOINT_LOOP_NS: u64 = 100_000;
+/// Offset of the joint-loop ticks after the release SYNC0.
+pub const JOINT_LOOP_PHASE_NS: u64 = 50_000;
+
+/// A leg of Laelaps II.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash)]
+pub enum LegId {
+    /// Fore Left.
+    ForeLeft,
+    /// Fore Right.
+    ForeRight,
+    /// Hind Left.
+    HindLeft,
+    /// Hind Right.
+    HindRight,
+}
+
+/// Tower locations in network order: Hind Right first, Fore Right last (thesis §3.1).
+pub const TOWER_CHAIN: [LegId; 4] = [
+    LegId::HindRight,
+    LegId::HindLeft,
+    LegId::ForeLeft,
+    LegId::ForeRight,
+];
+
+impl LegId {
+    /// All legs in the order of the thesis' Table 4-1 (FL, FR, HL, HR).
+    pub const TABLE: [LegId; 4] = [
+        LegId::ForeLeft,
+        LegId::ForeRight,
+        LegId::HindLeft,
+        LegId::HindRight,
+    ];
+
+    /// The thesis' prefix: `FL`, `FR`, `HL`, `HR`.
+    pub const fn code(self) -> &'static str {
+        match self {
+            LegId::ForeLeft => "FL",
+            LegId::ForeRight => "FR",
+            LegId::HindLeft => "HL",
+            LegId::HindRight => "HR",
+        }
+    }
+
+    /// Parses `FL`/`FR`/`HL`/`HR` (any case).
+    pub fn parse(s: &str) -> Option<Self> {
+        LegId::TABLE
+            .into_iter()
+            .find(|l| l.code().eq_ignore_ascii_case(s))
+    }
+
+    /// The firmware build / mirrored-motor side of this leg.
+    pub const fn side(self) -> Side {
+        match self {
+            LegId::ForeLeft | LegId::HindLeft => Side::Left,
+            LegId::ForeRight | LegId::HindRight => Side::Right,
+        }
+    }
+
+    /// The plant's side of this leg.
+    pub const fn plant_side(self) -> oxicat_plant::Side {
+        match self.side() {
+            Side::Left => oxicat_plant::Side::Left,
+            Side::Right => oxicat_plant::Side::Right,
+        }
+    }
+
+    /// The leg on the other side at the same end.
+    pub const fn opposite(self) -> Self {
+        match self {
+            LegId::ForeLeft => LegId::ForeRight,
+            LegId::ForeRight => LegId::ForeLeft,
+            LegId::HindLeft => LegId::HindRight,
+            LegId::HindRight => LegId::HindLeft,
+        }
+    }
+
+    /// The leg the tower next to `tower` drives: the opposite one (thesis §3.1).
+    pub const fn driven_by_tower_at(tower: LegId) -> Self {
+        tower.opposite()
+    }
+}
+
+/// The driven legs in network order (HL, HR, FR, FL).
+pub fn chain_legs() -> [LegId; 4] {
+    TOWER_CHAIN.map(LegId::driven_by_tower_at)
+}
+
+/// Belt speed as a piecewise-linear function of the time since the rig released the leg.
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct BeltProfile {
+    /// `(time since release [s], belt speed [m/s])`, times increasing; constant outside.
+    pub points: Vec<(f64, f64)>,
+}
+
+impl BeltProfile {
+    /// The belt speed at `t` seconds after release.
+    pub fn at(&self, t: f64) -> f64 {
+        let p = &self.points;
+        match p.len() {
+            0 => 0.0,
+            _ if t <= p[0].0 => p[0].1,
+            _ => {
+                for w in p.windows(2) {
+                    let ((t0, v0), (t1, v1)) = (w[0], w[1]);
+                    if t <= t1 {
+                        return if t1 > t0 {
+                            v0 + (v1 - v0) * (t - t0) / (t1 - t0)
+                        } else {
+                            v1
+                        };
+                    }
+                }
+                p[p.len() - 1].1
+            }
+        }
+    }
+}
+
+/// How one leg and its rig are set up.
+#[derive(Debug, Clone, PartialEq)]
+pub struct RigConfig {
+    /// The leg's physics (side, links, drives, contact, belt height).
+    pub leg: LegParams,
+    /// Plant integration substep \[ns\] (≤ 100 µs; default 50 µs = 20 kHz).
+    pub plant_period_ns: u64,
+    /// The main loop runs every `poll_every` joint-loop ticks (≥ 1).
+    pub poll_every: u64,
+    /// Belt speed after release.
+    pub belt: BeltProfile,
+}
+
+impl RigConfig {
+    /// The thesis' leg for `leg`, encoders set up as the firmware's eQEP capture unit
+    /// (`2^UPPS` edges per unit event), 20 kHz plant, main loop every 400 µs, belt at rest.
+    pub fn laelaps(leg: LegId) -> Self {
+        let mut p = LegParams::laelaps(leg.plant_side());
+        p.encoder_unit_prescaler = 1 << CaptureConfig::THESIS.upps;
+        Self {
+            leg: p,
+            plant_period_ns: 50_000,
+            poll_every: 4,
+            belt: BeltProfile::default(),
+        }
+    }
+
+    /// Sets the belt surface depth below the hip axis \[m\] (builder style).
+    pub fn belt_depth(mut self, depth_m: f64) -> Self {
+        self.leg.treadmill = Treadmill {
+            height: depth_m,
+            ..self.leg.treadmill
+        };
+        self
+    }
+}
+
+/// The amplifier inputs the firmware last wrote (ePWM + DIR pins), per joint.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct PwmLatch {
+    /// Hip command.
+    pub hip: PwmCommand,
+    /// Knee command.
+    pub knee: PwmCommand,
+}
+
+impl PwmOut for PwmLatch {
+    fn set(&mut self, joint: Joint, cmd: PwmCommand) {
+        match joint {
+            Joint::Hip => self.hip = cmd,
+            Joint::Knee => self.knee = cmd,
+        }
+    }
+}
+
+/// The eQEP registers as the rig last latched them from the plant's encoders; a read
+/// clears the event flags, as the firmware's write-1-to-clear does.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct QepRegisters {
+    /// Hip eQEP.
+    pub hip: QepSample,
+    /// Knee eQEP.
+    pub knee: QepSample,
+}
+
+impl EncoderIn for QepRegisters {
+    fn sample(&mut self, joint: Joint) -> QepSample {
+        let r = match joint {
+            Joint::Hip => &mut self.hip,
+            Joint::Knee => &mut self.knee,
+        };
+        let s = *r;
+        r.unit_event = false;
+        r.capture_overflow = false;
+        r.direction_change = false;
+        s
+    }
+}
+
+/// The LaunchPad LEDs (not modelled: remembered only).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct NoLeds {
+    /// Blue, red.
+    pub state: (bool, bool),
+}
+
+impl Leds for NoLeds {
+    fn set(&mut self, blue: bool, red: bool) {
+        self.state = (blue, red);
+    }
+}
+
+/// Counters of one rig node.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct RigCounters {
+    /// SYNC0 interrupts.
+    pub sync0: u64,
+    /// Joint-loop ticks.
+    pub joint_loops: u64,
+    /// Plant ticks.
+    pub plant_ticks: u64,
+    /// Main-loop passes.
+    pub polls: u64,
+    /// PDI accesses the ESC refused.
+    pub pdi_errors: u64,
+}
+
+/// One tower: the leg-node firmware and the leg it drives.
+pub struct LegRig {
+    /// The leg this tower drives.
+    pub leg_id: LegId,
+    /// The slave stack.
+    pub slave: LegSlave,
+    /// The application.
+    pub app: LegApp,
+    /// The leg.
+    pub plant: Leg,
+    /// What ran so far.
+    pub counters: RigCounters,
+    /// SYNC0 time at which the rig released the leg (`T0`), if it has.
+    pub released_at: Option<u64>,
+    /// SYNC0 count (since boot) of the release.
+    pub released_at_sync0: Option<u64>,
+    config: RigConfig,
+    next_tick: u64,
+    ticks: u64,
+    /// Virtual time the plant has advanced since the release \[ns\].
+    plant_ns: u64,
+}
+
+impl LegRig {
+    fn sample_encoders(&mut self) {
+        let tick = CaptureConfig::THESIS.tick_s() as f64;
+        for (pj, fj) in [
+            (oxicat_plant::Joint::Hip, Joint::Hip),
+            (oxicat_plant::Joint::Knee, Joint::Knee),
+        ] {
+            let enc = self.plant.encoder_mut(pj);
+            let mut s = QepSample {
+                position: enc.count() as u32,
+                forward: enc.forward(),
+                ..QepSample::default()
+            };
+            if let Some(c) = enc.take_capture() {
+                s.unit_event = true;
+                s.direction_change = c.direction_changed;
+                let ticks = (c.period / tick).round();
+                if ticks > 65535.0 {
+                    s.capture_overflow = true;
+                    s.capture_period = 0xFFFF;
+                } else {
+                    s.capture_period = ticks.max(0.0) as u16;
+                }
+            }
+            // Flags accumulate until the firmware reads them.
+            let r = match fj {
+                Joint::Hip => &mut self.app.encoders.hip,
+                Joint::Knee => &mut self.app.encoders.knee,
+            };
+            let keep = *r;
+            *r = s;
+            if !s.unit_event && keep.unit_event {
+                r.unit_event = true;
+                r.capture_period = keep.capture_period;
+                r.capture_overflow = keep.capture_overflow;
+                r.direction_change = keep.direction_change;
+            }
+        }
+    }
+
+    fn apply_pwm(&mut self) {
+        let p = self.app.pwm;
+        self.plant
+            .set_duty(oxicat_plant::Joint::Hip, p.hip.duty as f64, p.hip.reverse);
+        self.plant.set_duty(
+            oxicat_plant::Joint::Knee,
+            p.knee.duty as f64,
+            p.knee.reverse,
+        );
+    }
+
+    fn note(&mut self, r: Result<(), PdiError>) {
+        if r.is_err() {
+            self.counters.pdi_errors += 1;
+        }
+    }
+
+    fn next_wakeup(&self) -> u64 {
+        self.next_tick
+    }
+
+    fn event(&mut self, esc: &mut Esc, ev: EscEvent, t: u64) {
+        match ev {
+            EscEvent::Sync0 => {
+                self.counters.sync0 += 1;
+                let before = self.app.mode();
+                let r = self.slave.on_sync0(esc, &mut self.app);
+                self.note(r);
+                if self.released_at.is_none()
+                    && before == Mode::Configuration
+                    && self.app.mode() == Mode::Operational
+                {
+                    self.released_at = Some(t);
+                    self.released_at_sync0 = Some(self.counters.sync0);
+                    self.plant_ns = 0;
+                    self.next_tick = t + JOINT_LOOP_PHASE_NS;
+                }
+            }
+            EscEvent::Irq => {
+                let r = self.slave.on_pdi_irq(esc, &mut self.app);
+                self.note(r);
+            }
+            EscEvent::Sync1 | EscEvent::PdWatchdog | EscEvent::PdiWatchdog => {}
+        }
+    }
+
+    /// One tick at `t`: the plant catches up to `t` (in substeps of the plant period), then
+    /// the joint loop, then (every `poll_every` ticks) the main loop.
+    fn wakeup(&mut self, esc: &mut Esc, t: u64) {
+        if t < self.next_tick {
+            return;
+        }
+        if let Some(t0) = self.released_at {
+            let since = t - t0;
+            if since > self.plant_ns {
+                let belt = self.config.belt.at(self.plant_ns as f64 * 1e-9);
+                if belt != self.plant.params().treadmill.speed {
+                    self.plant.set_belt_speed(belt);
+                }
+                self.plant.advance((since - self.plant_ns) as f64 * 1e-9);
+                self.counters.plant_ticks +=
+                    (since - self.plant_ns).div_ceil(self.config.plant_period_ns);
+                self.plant_ns = since;
+            }
+        }
+        self.sample_encoders();
+        self.slave.on_timer(JOINT_LOOP_TIMER, &mut self.app);
+        self.counters.joint_loops += 1;
+        if self.released_at.is_some() {
+            self.apply_pwm();
+        }
+        self.ticks += 1;
+        if self.ticks.is_multiple_of(self.config.poll_every) {
+            self.counters.polls += 1;
+            let r = self.slave.poll(esc, &mut self.app);
+            self.note(r);
+        }
+        while self.next_tick <= t {
+            self.next_tick += JOINT_LOOP_NS;
+        }
+    }
+
+    /// The rig's configuration.
+    pub fn config(&self) -> &RigConfig {
+        &self.config
+    }
+}
+
+/// Access to a rig node from outside the segment (tests, tools).
+#[derive(Clone)]
+pub struct LegRigHandle(Arc<Mutex<LegRig>>);
+
+impl LegRigHandle {
+    /// Locks the rig (do not hold it while the segment runs).
+    pub fn lock(&self) -> MutexGuard<'_, LegRig> {
+        self.0.lock().unwrap_or_else(|e| e.into_inner())
+    }
+}
+
+/// The [`Node`] of one tower on its ESC; see the module documentation.
+pub struct LegRigNode(Arc<Mutex<LegRig>>);
+
+impl LegRigNode {
+    fn lock(&self) -> MutexGuard<'_, LegRig> {
+        self.0.lock().unwrap_or_else(|e| e.into_inner())
+    }
+}
+
+impl Node<Esc> for LegRigNode {
+    fn on_event(&mut self, esc: &mut Esc, ev: EscEvent, t: u64) {
+        self.lock().event(esc, ev, t);
+    }
+
+    fn next_wakeup(&self) -> Option<u64> {
+        Some(self.lock().next_wakeup())
+    }
+
+    fn on_wakeup(&mut self, esc: &mut Esc, t: u64) {
+        self.lock().wakeup(esc, t);
+    }
+}
+
+/// Why a tower could not be put on the segment.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum RigError {
+    /// No such ESC.
+    Topology(TopologyError),
+    /// The slave stack refused to start.
+    Init(InitError<PdiError>),
+}
+
+impl core::fmt::Display for RigError {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        match self {
+            Self::Topology(e) => write!(f, "{e}"),
+            Self::Init(e) => write!(f, "the leg node's stack did not start: {e:?}"),
+        }
+    }
+}
+
+impl std::error::Error for RigError {}
+
+/// Boots the leg-node firmware for `leg` (its side's build) on ESC `id` and attaches it with
+/// the leg's plant; the leg is held at its reset pose (encoders zeroed there) until the node
+/// goes Operational.
+pub fn attach_leg(
+    segment: &mut Segment,
+    id: SlaveId,
+    leg: LegId,
+    config: RigConfig,
+) -> Result<LegRigHandle, RigError> {
+    let now = segment.now();
+    let esc = segment
+        .esc_mut(id)
+        .ok_or(RigError::Topology(TopologyError::NoSuchSlave(id)))?;
+    let def = device::device(leg.side());
+    let slave = LegSlave::new(def, esc).map_err(RigError::Init)?;
+    let mut params = config.leg;
+    params.substep = config.plant_period_ns.clamp(1_000, 100_000) as f64 * 1e-9;
+    let plant = Leg::new(params);
+    let app = laelaps::LegNode::new(
+        leg.side(),
+        PwmLatch::default(),
+        QepRegisters::default(),
+        NoLeds::default(),
+    );
+    let rig = LegRig {
+        leg_id: leg,
+        slave,
+        app,
+        plant,
+        counters: RigCounters::default(),
+        released_at: None,
+        released_at_sync0: None,
+        next_tick: now + JOINT_LOOP_NS,
+        ticks: 0,
+        plant_ns: 0,
+        config,
+    };
+    let inner = Arc::new(Mutex::new(rig));
+    segment
+        .attach(id, Box::new(LegRigNode(inner.clone())))
+        .map_err(RigError::Topology)?;
+    Ok(LegRigHandle(inner))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn towers_drive_the_opposite_leg() {
+        assert_eq!(TOWER_CHAIN[0], LegId::HindRight);
+        assert_eq!(TOWER_CHAIN[3], LegId::ForeRight);
+        let legs = chain_legs();
+        assert_eq!(
+            legs,
+            [
+                LegId::HindLeft,
+                LegId::HindRight,
+                LegId::ForeRight,
+                LegId::ForeLeft
+            ]
+        );
+        assert_eq!(LegId::HindLeft.side(), Side::Left);
+        assert_eq!(LegId::ForeRight.side(), Side::Right);
+    }
+
+    #[test]
+    fn belt_profile_is_piecewise_linear() {
+        let b = BeltProfile {
+            points: vec![(1.0, 0.0), (3.0, 0.2), (5.0, 0.2), (6.0, 0.0)],
+        };
+        assert_eq!(b.at(0.0), 0.0);
+        assert!((b.at(2.0) - 0.1).abs() < 1e-12);
+        assert_eq!(b.at(4.0), 0.2);
+        assert!((b.at(5.5) - 0.1).abs() < 1e-12);
+        assert_eq!(b.at(9.0), 0.0);
+    }
+
+    #[test]
+    fn qep_read_clears_flags() {
+        let mut q = QepRegisters::default();
+        q.knee.unit_event = true;
+        q.knee.capture_period = 100;
+        assert!(q.sample(Joint::Knee).unit_event);
+        assert!(!q.sample(Joint::Knee).unit_event);
+    }
+}

@@ -1,0 +1,99 @@
+//! `oxicat trot`: the Laelaps II trotting experiment (thesis §4, Table 4-1) on the virtual
+//! segment — four leg nodes, ethercrab at a 400 µs DC cycle, the thesis' procedure — and
+//! its results: `trot.csv`, the seven §4.1 figures (PNG + SVG) and `summary.md`.
+
+use std::path::PathBuf;
+use std::time::Instant;
+
+use indicatif::{ProgressBar, ProgressStyle};
+use oxicat_master::experiment::run_trot;
+use oxicat_master::results::{csv, summarize, summary_markdown};
+use oxicat_master::scenario::Scenario;
+use oxicat_master::{plot, MasterError};
+
+/// Arguments of `oxicat trot`.
+#[derive(Debug, clap::Args)]
+pub struct TrotArgs {
+    /// Scenario file (TOML; default: the shipped Table 4-1 scenario,
+    /// `scenarios/laelaps-trot.toml`).
+    #[arg(long)]
+    pub scenario: Option<PathBuf>,
+    /// Length of the steady trot in seconds (the ramps and stands around it stay).
+    #[arg(long)]
+    pub duration: Option<f64>,
+    /// Output directory.
+    #[arg(long, default_value = "out/trot")]
+    pub out: PathBuf,
+    /// Skip the figures.
+    #[arg(long)]
+    pub no_plots: bool,
+    /// No progress bar.
+    #[arg(long, short)]
+    pub quiet: bool,
+}
+
+/// Runs `oxicat trot`; returns the text it printed.
+pub fn run(a: TrotArgs) -> Result<String, MasterError> {
+    let mut s = match &a.scenario {
+        Some(p) => Scenario::load(p)?,
+        None => Scenario::thesis(),
+    };
+    if let Some(d) = a.duration {
+        if !(0.0..=3600.0).contains(&d) {
+            return Err(MasterError::Usage(format!("--duration {d}: 0…3600 s")));
+        }
+        s = s.with_trot(d);
+    }
+    std::fs::create_dir_all(&a.out).map_err(|e| MasterError::Io(a.out.display().to_string(), e))?;
+    let bar = if a.quiet {
+        ProgressBar::hidden()
+    } else {
+        let b = ProgressBar::new(0);
+        b.set_style(
+            ProgressStyle::with_template(
+                "{msg} [{bar:40}] {pos}/{len} cycles ({elapsed}, {eta} left)",
+            )
+            .unwrap_or_else(|_| ProgressStyle::default_bar())
+            .progress_chars("=> "),
+        );
+        b.set_message("trot");
+        b
+    };
+    let run = run_trot(&s, &mut |p| {
+        bar.set_length(p.total);
+        bar.set_position(p.done);
+    })?;
+    bar.finish_and_clear();
+    let t_out = Instant::now();
+    let csv_path = a.out.join("trot.csv");
+    std::fs::write(&csv_path, csv(&run))
+        .map_err(|e| MasterError::Io(csv_path.display().to_string(), e))?;
+    let sum = summarize(&run);
+    let mut md = summary_markdown(&run, &sum);
+    let rec_s = run.rows.len() as f64 * s.cycle_ns() as f64 * 1e-9;
+    let speed = format!(
+        "\nSimulated {:.1} s ({:.1} s recorded) in {:.2} s of wall-clock time ({:.2} s for the \
+         recorded part: {:.1}× real time; bring-up {:.2} s).\n",
+        run.simulated_s,
+        rec_s,
+        run.wall.as_secs_f64(),
+        run.wall_recorded.as_secs_f64(),
+        rec_s / run.wall_recorded.as_secs_f64().max(1e-9),
+        (run.wall - run.wall_recorded).as_secs_f64(),
+    );
+    let sum_path = a.out.join("summary.md");
+    std::fs::write(&sum_path, &md)
+        .map_err(|e| MasterError::Io(sum_path.display().to_string(), e))?;
+    let mut files = vec![csv_path, sum_path];
+    if !a.no_plots {
+        files.extend(plot::write_figures(&run, &a.out)?);
+    }
+    md.push_str(&speed);
+    md.push_str(&format!(
+        "Wrote {} files to {} in {:.2} s.\n",
+        files.len(),
+        a.out.display(),
+        t_out.elapsed().as_secs_f64()
+    ));
+    Ok(md)
+}
