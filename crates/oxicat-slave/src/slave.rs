@@ -11,7 +11,7 @@ use oxicat_wire::mailbox::{
 use crate::coe::SdoState;
 use crate::device::{DeviceDef, MailboxDef, SyncMode};
 use crate::esm::{AlState, AlStatusCode};
-use crate::od::{DefError, Od};
+use crate::od::{DefError, EntryRef, Od};
 use crate::pdi::{reg, Pdi};
 use crate::pdo::{self, Dir, Mapping, MAX_PD_BYTES};
 
@@ -67,6 +67,45 @@ pub struct Stats {
     pub cycles: u32,
     /// Output updates taken from SM2.
     pub outputs: u32,
+}
+
+/// The sync-manager parameter entries the stack keeps up to date each DC cycle
+/// (ETG.1020: 0x1C32/0x1C33 subindices 0x0B, 0x0C, 0x20; limit 0x10F1:02), resolved once.
+#[derive(Debug, Clone, Copy)]
+struct SyncDiag {
+    missed: [EntryRef; 2],
+    exceeded: [EntryRef; 2],
+    error: [EntryRef; 2],
+    limit: EntryRef,
+    /// SM event missed counter (ETG.1020 / SSC: +3 per SYNC0 without an SM event, -1 per
+    /// SM event, not incremented beyond the limit).
+    missed_count: u16,
+    /// Cycle exceeded ("cycle time too small") counter.
+    exceeded_count: u16,
+}
+
+impl SyncDiag {
+    fn new<const N: usize>(od: &Od<N>) -> Result<Self, DefError> {
+        let r = |i: u16, s: u8| od.entry(i, s).map_err(|_| DefError::BadEntries(i));
+        Ok(Self {
+            missed: [r(0x1C32, 0x0B)?, r(0x1C33, 0x0B)?],
+            exceeded: [r(0x1C32, 0x0C)?, r(0x1C33, 0x0C)?],
+            error: [r(0x1C32, 0x20)?, r(0x1C33, 0x20)?],
+            limit: r(0x10F1, 2)?,
+            missed_count: 0,
+            exceeded_count: 0,
+        })
+    }
+
+    /// Writes the counters and the sync error flag (counter > 0x10F1:02) into the dictionary.
+    fn publish<const N: usize>(&self, od: &mut Od<N>) {
+        let limit: u16 = od.read(self.limit);
+        for k in 0..2 {
+            od.write(self.missed[k], self.missed_count);
+            od.write(self.exceeded[k], self.exceeded_count);
+            od.write(self.error[k], self.missed_count > limit);
+        }
+    }
 }
 
 pub(crate) struct MbxState<const M: usize> {
@@ -137,6 +176,7 @@ pub struct Slave<P: Pdi, const N: usize, const M: usize = 256> {
     sync: SyncMode,
     pd: [u8; MAX_PD_BYTES],
     stats: Stats,
+    diag: SyncDiag,
 }
 
 type R<P> = Result<(), <P as Pdi>::Error>;
@@ -147,6 +187,7 @@ impl<P: Pdi, const N: usize, const M: usize> Slave<P, N, M> {
     /// `pdi`.
     pub fn new(def: &'static DeviceDef, pdi: &mut P) -> Result<Self, InitError<P::Error>> {
         let od = Od::new(def).map_err(InitError::Def)?;
+        let diag = SyncDiag::new(&od).map_err(InitError::Def)?;
         let fits = |m: &MailboxDef| {
             (m.rx_len as usize) <= M && (m.tx_len as usize) <= M && m.rx_len >= 16 && m.tx_len >= 16
         };
@@ -166,6 +207,7 @@ impl<P: Pdi, const N: usize, const M: usize> Slave<P, N, M> {
             sync: SyncMode::FreeRun,
             pd: [0; MAX_PD_BYTES],
             stats: Stats::default(),
+            diag,
         };
         for n in 0..4 {
             Self::sm_enable(pdi, n, false).map_err(InitError::Pdi)?;
@@ -256,19 +298,68 @@ impl<P: Pdi, const N: usize, const M: usize> Slave<P, N, M> {
             ev & reg::ev_sm(3) != 0
         };
         if trig {
-            self.cycle(pdi, app, true, true)?;
+            self.cycle_ev(pdi, app, ev, true, true)?;
+            self.check_exceeded(pdi)?;
         }
         Ok(())
     }
 
     /// DC SYNC0: outputs, application and (unless SYNC1 latches them) inputs.
+    ///
+    /// Keeps the ETG.1020 diagnostics of 0x1C32/0x1C33 as the SSC does: a SYNC0 without a
+    /// new SM2 buffer since the previous one (input-only devices: SM3 not read by the master)
+    /// adds 3 to the SM event missed counter (0x0B; not beyond the sync error counter limit
+    /// 0x10F1:02), every SYNC0 with one subtracts 1; the sync error flag (0x20) is set while
+    /// the counter exceeds the limit. A new SM2 buffer that arrives while the cycle runs
+    /// counts in the cycle time too small counter (0x0C).
     pub fn on_sync0<A: Application<N>>(&mut self, pdi: &mut P, app: &mut A) -> R<P> {
         let _ack = pdi.read_u8(reg::DC_SYNC0_STATUS)?;
-        match self.sync {
-            SyncMode::DcSync0 if self.state >= AlState::SafeOp => self.cycle(pdi, app, true, true),
-            SyncMode::DcSync1 if self.state >= AlState::SafeOp => self.cycle(pdi, app, true, false),
-            _ => Ok(()),
+        let inputs = match self.sync {
+            SyncMode::DcSync0 => true,
+            SyncMode::DcSync1 => false,
+            _ => return Ok(()),
+        };
+        if self.state < AlState::SafeOp {
+            return Ok(());
         }
+        let ev = pdi.al_event_request()?;
+        let sm_event = if self.rx_map.bytes() > 0 {
+            Some(ev & reg::ev_sm(2) != 0)
+        } else if self.tx_map.bytes() > 0 {
+            Some(ev & reg::ev_sm(3) != 0)
+        } else {
+            None
+        };
+        if let Some(seen) = sm_event {
+            let d = &mut self.diag;
+            let before = d.missed_count;
+            if seen {
+                d.missed_count = d.missed_count.saturating_sub(1);
+            } else if d.missed_count <= self.od.read::<u16>(d.limit) {
+                d.missed_count = d.missed_count.saturating_add(3);
+            }
+            if d.missed_count != before {
+                d.publish(&mut self.od);
+            }
+        }
+        self.cycle_ev(pdi, app, ev, true, inputs)?;
+        if self.rx_map.bytes() > 0 {
+            self.check_exceeded(pdi)?;
+        }
+        Ok(())
+    }
+
+    /// After a synchronous cycle: a new SM2 buffer already waiting means the next output
+    /// update arrived while the cycle ran (0x1C32:0C / 0x1C33:0C).
+    fn check_exceeded(&mut self, pdi: &mut P) -> R<P> {
+        if self.rx_map.bytes() == 0 {
+            return Ok(());
+        }
+        if pdi.al_event_request()? & reg::ev_sm(2) != 0 {
+            self.diag.exceeded_count = self.diag.exceeded_count.wrapping_add(1);
+            self.diag.publish(&mut self.od);
+        }
+        Ok(())
     }
 
     /// DC SYNC1: input latch in SYNC0+SYNC1 mode.
@@ -315,8 +406,25 @@ impl<P: Pdi, const N: usize, const M: usize> Slave<P, N, M> {
         outputs: bool,
         inputs: bool,
     ) -> R<P> {
+        let ev = if outputs && self.rx_map.bytes() > 0 {
+            pdi.al_event_request()?
+        } else {
+            0
+        };
+        self.cycle_ev(pdi, app, ev, outputs, inputs)
+    }
+
+    /// One cycle with the AL event request `ev` already read.
+    fn cycle_ev<A: Application<N>>(
+        &mut self,
+        pdi: &mut P,
+        app: &mut A,
+        ev: u32,
+        outputs: bool,
+        inputs: bool,
+    ) -> R<P> {
         if outputs {
-            self.read_outputs(pdi)?;
+            self.read_outputs(pdi, ev)?;
         }
         app.cycle(&mut self.od);
         if inputs {
@@ -326,12 +434,11 @@ impl<P: Pdi, const N: usize, const M: usize> Slave<P, N, M> {
         Ok(())
     }
 
-    fn read_outputs(&mut self, pdi: &mut P) -> R<P> {
+    fn read_outputs(&mut self, pdi: &mut P, ev: u32) -> R<P> {
         let n = self.rx_map.bytes();
         if n == 0 {
             return Ok(());
         }
-        let ev = pdi.al_event_request()?;
         if ev & reg::ev_sm(2) == 0 {
             return Ok(());
         }
@@ -579,6 +686,9 @@ impl<P: Pdi, const N: usize, const M: usize> Slave<P, N, M> {
         self.rx_map = rx;
         self.tx_map = tx;
         self.sync = mode;
+        self.diag.missed_count = 0;
+        self.diag.exceeded_count = 0;
+        self.diag.publish(&mut self.od);
         // The PDI interrupt carries exactly what `on_pdi_irq` serves: in SM-synchronous
         // mode the SM event that triggers the cycle (an AL control event still pending
         // would otherwise hold the line and hide the next edge); else AL control only.

@@ -83,3 +83,70 @@ fn dc_sync1_mode_needs_sync1() {
     assert_eq!(b.request(0x14), (4, 0));
     assert_eq!(b.s.sync_mode(), SyncMode::DcSync1);
 }
+
+fn up_u16(b: &mut Bench, index: u16, sub: u8) -> u16 {
+    let v = b.upload(index, sub, false).unwrap();
+    u16::from_le_bytes([v[0], v[1]])
+}
+
+/// ETG.1020 diagnostics of 0x1C32/0x1C33 after a DC run in which the master skips cycles:
+/// +3 per SYNC0 without new outputs, -1 per SYNC0 with, sync error while above 0x10F1:02.
+#[test]
+fn dc_sm_event_missed_counter() {
+    let mut b = Bench::new();
+    b.enter_preop();
+    assert_eq!(up_u16(&mut b, 0x10F1, 2), 4, "sync error counter limit");
+    b.config_pd();
+    activate_dc(&mut b, 200_000, false);
+    assert_eq!(b.request(4), (4, 0));
+    assert_eq!(b.request(8), (8, 0));
+    // Definition values.
+    assert_eq!(
+        b.upload(0x1C32, 5, false).unwrap(),
+        100_000u32.to_le_bytes()
+    );
+    assert_eq!(b.upload(0x1C32, 6, false).unwrap(), 10_000u32.to_le_bytes());
+    assert_eq!(b.upload(0x1C33, 6, false).unwrap(), 10_000u32.to_le_bytes());
+    let mut k = 0i16;
+    let mut good = |b: &mut Bench, n: usize| {
+        for _ in 0..n {
+            k += 1;
+            let v = k.to_le_bytes();
+            b.wr(SM2, &[0, v[0], v[1], 0]);
+            b.advance(200_000);
+        }
+    };
+    // Outputs every cycle: whatever the start-up missed has decayed.
+    good(&mut b, 20);
+    assert_eq!(up_u16(&mut b, 0x1C32, 0x0B), 0);
+    assert_eq!(b.upload(0x1C32, 0x20, false).unwrap(), [0]);
+    // The master skips one cycle.
+    b.advance(200_000);
+    assert_eq!(up_u16(&mut b, 0x1C32, 0x0B), 3);
+    assert_eq!(up_u16(&mut b, 0x1C33, 0x0B), 3);
+    assert_eq!(b.upload(0x1C32, 0x20, false).unwrap(), [0], "3 <= limit 4");
+    good(&mut b, 1);
+    assert_eq!(up_u16(&mut b, 0x1C32, 0x0B), 2);
+    // Two skipped cycles in a row: 2 + 3 = 5 > 4 is a sync error; no increment beyond.
+    b.advance(200_000);
+    b.advance(200_000);
+    assert_eq!(up_u16(&mut b, 0x1C32, 0x0B), 5);
+    assert_eq!(b.upload(0x1C32, 0x20, false).unwrap(), [1]);
+    assert_eq!(b.upload(0x1C33, 0x20, false).unwrap(), [1]);
+    // Outputs again: the counter decays and the error clears.
+    good(&mut b, 1);
+    assert_eq!(up_u16(&mut b, 0x1C32, 0x0B), 4);
+    assert_eq!(b.upload(0x1C32, 0x20, false).unwrap(), [0]);
+    good(&mut b, 10);
+    assert_eq!(up_u16(&mut b, 0x1C32, 0x0B), 0);
+    // No output update arrived while a cycle ran.
+    assert_eq!(up_u16(&mut b, 0x1C32, 0x0C), 0);
+    assert_eq!(b.s.od().get::<i16>(0x7000, 2), Ok(k));
+    // Re-entering SAFEOP starts the counters afresh.
+    b.advance(200_000);
+    assert_eq!(up_u16(&mut b, 0x1C32, 0x0B), 3);
+    assert_eq!(b.request(2), (2, 0));
+    b.config_pd();
+    assert_eq!(b.request(4), (4, 0));
+    assert_eq!(up_u16(&mut b, 0x1C32, 0x0B), 0);
+}
