@@ -273,6 +273,8 @@ impl<P: Pdi, const N: usize, const M: usize> Slave<P, N, M> {
         let ev = pdi.al_event_request()?;
         if ev & reg::EV_AL_CONTROL != 0 {
             self.al_control(pdi, app)?;
+        } else if ev & reg::EV_SM_CHANGE != 0 {
+            self.sm_change(pdi, app)?;
         }
         if ev & reg::EV_WATCHDOG != 0 {
             self.check_watchdog(pdi, app)?;
@@ -585,6 +587,78 @@ impl<P: Pdi, const N: usize, const M: usize> Slave<P, N, M> {
         ))
     }
 
+    /// SM0/SM1 as the mailbox definition `mb` requires; also returns SM1's activate byte.
+    fn mbx_config_ok(pdi: &mut P, mb: MailboxDef) -> Result<(bool, u8), P::Error> {
+        let (s0, l0, c0, a0) = Self::read_sm(pdi, 0)?;
+        let (s1, l1, c1, a1) = Self::read_sm(pdi, 1)?;
+        let ok = s0 == mb.rx_start
+            && l0 == mb.rx_len
+            && c0 & 0x0F == 0x06
+            && a0 & 1 != 0
+            && s1 == mb.tx_start
+            && l1 == mb.tx_len
+            && c1 & 0x0F == 0x02
+            && a1 & 1 != 0;
+        Ok((ok, a1))
+    }
+
+    /// SM2/SM3 against process data sizes `out`/`inp` (bytes): 0x001D / 0x001E if not.
+    fn pd_config_ok(
+        &self,
+        pdi: &mut P,
+        out: usize,
+        inp: usize,
+    ) -> Result<Result<(), AlStatusCode>, P::Error> {
+        let def = self.od.def;
+        let (s2, l2, c2, a2) = Self::read_sm(pdi, 2)?;
+        let out_ok = if out == 0 {
+            a2 & 1 == 0 || l2 == 0
+        } else {
+            s2 == def.sm2_start && l2 as usize == out && c2 & 0x0F == 0x04 && a2 & 1 != 0
+        };
+        if !out_ok {
+            return Ok(Err(AlStatusCode::INVALID_OUTPUT_CONFIG));
+        }
+        let (s3, l3, c3, a3) = Self::read_sm(pdi, 3)?;
+        let in_ok = if inp == 0 {
+            a3 & 1 == 0 || l3 == 0
+        } else {
+            s3 == def.sm3_start && l3 as usize == inp && c3 & 0x0F == 0x00 && a3 & 1 != 0
+        };
+        if !in_ok {
+            return Ok(Err(AlStatusCode::INVALID_INPUT_CONFIG));
+        }
+        Ok(Ok(()))
+    }
+
+    /// The SM change AL event (a master changed an SM activation) outside a state change,
+    /// checked as SOES does: in PREOP and above the mailbox SMs against the definition
+    /// (else INIT + 0x0016, BOOT: 0x0015); in SAFEOP/OP SM2/SM3 against the running mapping
+    /// (else PREOP + 0x001D / 0x001E). Reading the SM registers clears the event.
+    fn sm_change<A: Application<N>>(&mut self, pdi: &mut P, app: &mut A) -> R<P> {
+        if !self.mbx.running {
+            return Ok(());
+        }
+        let (ok, _) = Self::mbx_config_ok(pdi, self.mbx_def())?;
+        if !ok {
+            let code = if self.mbx.boot {
+                AlStatusCode::INVALID_BOOT_MBX_CONFIG
+            } else {
+                AlStatusCode::INVALID_MBX_CONFIG
+            };
+            self.go_down(pdi, app, AlState::Init)?;
+            return self.set_error(pdi, code);
+        }
+        if self.state >= AlState::SafeOp {
+            let (out, inp) = (self.rx_map.bytes(), self.tx_map.bytes());
+            if let Err(code) = self.pd_config_ok(pdi, out, inp)? {
+                self.go_down(pdi, app, AlState::PreOp)?;
+                return self.set_error(pdi, code);
+            }
+        }
+        Ok(())
+    }
+
     fn start_mailbox<A: Application<N>>(
         &mut self,
         pdi: &mut P,
@@ -604,16 +678,7 @@ impl<P: Pdi, const N: usize, const M: usize> Slave<P, N, M> {
         let Some(mb) = def else {
             return Ok(Err(AlStatusCode::BOOT_NOT_SUPPORTED));
         };
-        let (s0, l0, c0, a0) = Self::read_sm(pdi, 0)?;
-        let (s1, l1, c1, a1) = Self::read_sm(pdi, 1)?;
-        let ok = s0 == mb.rx_start
-            && l0 == mb.rx_len
-            && c0 & 0x0F == 0x06
-            && a0 & 1 != 0
-            && s1 == mb.tx_start
-            && l1 == mb.tx_len
-            && c1 & 0x0F == 0x02
-            && a1 & 1 != 0;
+        let (ok, a1) = Self::mbx_config_ok(pdi, mb)?;
         if !ok {
             return Ok(Err(bad));
         }
@@ -657,24 +722,8 @@ impl<P: Pdi, const N: usize, const M: usize> Slave<P, N, M> {
             Ok(m) => m,
             Err(_) => return Ok(Err(AlStatusCode::INVALID_INPUT_MAPPING)),
         };
-        let def = self.od.def;
-        let (s2, l2, c2, a2) = Self::read_sm(pdi, 2)?;
-        let out_ok = if rx.bytes() == 0 {
-            a2 & 1 == 0 || l2 == 0
-        } else {
-            s2 == def.sm2_start && l2 as usize == rx.bytes() && c2 & 0x0F == 0x04 && a2 & 1 != 0
-        };
-        if !out_ok {
-            return Ok(Err(AlStatusCode::INVALID_OUTPUT_CONFIG));
-        }
-        let (s3, l3, c3, a3) = Self::read_sm(pdi, 3)?;
-        let in_ok = if tx.bytes() == 0 {
-            a3 & 1 == 0 || l3 == 0
-        } else {
-            s3 == def.sm3_start && l3 as usize == tx.bytes() && c3 & 0x0F == 0x00 && a3 & 1 != 0
-        };
-        if !in_ok {
-            return Ok(Err(AlStatusCode::INVALID_INPUT_CONFIG));
+        if let Err(c) = self.pd_config_ok(pdi, rx.bytes(), tx.bytes())? {
+            return Ok(Err(c));
         }
         let mode = match self.check_sync(pdi)? {
             Ok(m) => m,

@@ -149,3 +149,48 @@ fn sm_watchdog_drops_to_safeop() {
     b.wr(SM2, &[0x01, 0x10, 0x00, 0x01]);
     assert_eq!(b.request(8), (8, 0));
 }
+
+/// SM change AL event outside a state change: SM2/SM3 re-checked against the running
+/// mapping in SAFEOP/OP (PREOP + 0x001D / 0x001E), the mailbox SMs against the definition
+/// (INIT + 0x0016), as SOES does.
+#[test]
+fn sm_change_rechecked() {
+    let mut b = Bench::new();
+    b.enter_op();
+    let (o, i) = (b.expected_out(), b.expected_in());
+    // The same configuration written again (deactivated and re-activated before the
+    // firmware looks): still valid, stays in OP.
+    b.config_sm(2, SM2, 0, 0x64);
+    b.config_sm(2, SM2, o, 0x64);
+    b.poll();
+    assert_eq!(b.al_status(), (8, 0));
+    // SM2 deactivated in OP: outputs go safe, PREOP + invalid output configuration.
+    let safe = b.app.safe;
+    b.config_sm(2, SM2, 0, 0x64);
+    b.poll();
+    assert_eq!(b.al_status(), (0x12, 0x001D));
+    assert!(b.app.safe > safe, "safe outputs applied");
+    assert_eq!(b.s.state(), oxicat_slave::AlState::PreOp);
+    // Acknowledge, back up to SAFEOP; then SM3 re-enabled with another length.
+    assert_eq!(b.request(0x12), (2, 0));
+    b.config_pd();
+    assert_eq!(b.request(4), (4, 0));
+    b.config_sm(3, SM3, 0, 0x20);
+    b.config_sm(3, SM3, i + 2, 0x20);
+    b.poll();
+    assert_eq!(b.al_status(), (0x12, 0x001E));
+    // In PREOP, SM2/SM3 changes are the master's business (no error).
+    assert_eq!(b.request(0x12), (2, 0));
+    b.config_sm(2, SM2, 0, 0x64);
+    b.config_sm(3, SM3, 0, 0x20);
+    b.poll();
+    assert_eq!(b.al_status(), (2, 0));
+    // The mailbox SMs are checked in PREOP and above: SM1 deactivated -> INIT + 0x0016.
+    b.config_sm(1, SM1, 0, 0x22);
+    b.poll();
+    assert_eq!(b.al_status(), (0x11, 0x0016));
+    b.config_mailbox();
+    assert_eq!(b.request(0x12), (2, 0));
+    // Mailbox still serves.
+    assert_eq!(b.upload(0x1018, 1, false).unwrap(), 0x0A5Cu32.to_le_bytes());
+}
