@@ -99,6 +99,24 @@ fn size_abort(size: usize, needed: usize) -> Option<Abort> {
     }
 }
 
+/// Minimum and maximum of an entry as raw little-endian bits: the definition's range for
+/// integers when it has one, else the limits of the data type; `None` for strings.
+fn value_limits(e: &EntryDef) -> Option<(u64, u64)> {
+    let bits = e.bits.clamp(1, 64) as u32;
+    Some(match e.dtype {
+        DataType::Bool => (0, 1),
+        DataType::Real32 => (f32::MIN.to_bits() as u64, f32::MAX.to_bits() as u64),
+        DataType::Real64 => (f64::MIN.to_bits(), f64::MAX.to_bits()),
+        DataType::VisibleString | DataType::OctetString => return None,
+        _ if e.range.0 <= e.range.1 => (e.range.0 as u64, e.range.1 as u64),
+        t if t.is_signed() => {
+            let max = (u64::MAX >> (65 - bits)) as i64;
+            ((-max - 1) as u64, max as u64)
+        }
+        _ => (0, u64::MAX >> (64 - bits)),
+    })
+}
+
 /// Value of an integer entry as i128 from its image bytes.
 fn int_value(e: &EntryDef, b: &[u8]) -> i128 {
     let mut a = [0u8; 8];
@@ -764,7 +782,9 @@ impl<P: Pdi, const N: usize, const M: usize> Slave<P, N, M> {
                 );
             }
             Ok(SdoInfoService::GetEntryDescriptionRequest {
-                index, subindex, ..
+                index,
+                subindex,
+                value_info,
             }) => {
                 let Some(o) = self.od.find(index) else {
                     return self.info_error(Abort::ObjectDoesNotExist);
@@ -773,9 +793,10 @@ impl<P: Pdi, const N: usize, const M: usize> Slave<P, N, M> {
                     return self.info_error(Abort::SubindexDoesNotExist);
                 };
                 let mut d = [0u8; M];
+                let cap = (self.reply_capacity() - 6).min(M);
+                let (vi, mut at) = self.value_info(&o, e, value_info, &mut d[..cap]);
                 let name = e.name.as_bytes();
-                let cap = self.reply_capacity() - 6 - 10;
-                let nl = name.len().min(cap);
+                let nl = name.len().min(cap - at);
                 let mut acc = e.access.0;
                 if e.pdo.rx() {
                     acc |= 0x40;
@@ -785,20 +806,56 @@ impl<P: Pdi, const N: usize, const M: usize> Slave<P, N, M> {
                 }
                 d[0..2].copy_from_slice(&index.to_le_bytes());
                 d[2] = subindex;
-                d[3] = 0;
+                d[3] = vi;
                 d[4..6].copy_from_slice(&e.dtype.code().to_le_bytes());
                 d[6..8].copy_from_slice(&e.bits.to_le_bytes());
                 d[8..10].copy_from_slice(&acc.to_le_bytes());
-                d[10..10 + nl].copy_from_slice(&name[..nl]);
+                d[at..at + nl].copy_from_slice(&name[..nl]);
+                at += nl;
                 self.info_reply(
                     SdoInfoOpcode::GetEntryDescriptionResponse,
                     false,
                     0,
-                    &d[..10 + nl],
+                    &d[..at],
                 );
             }
             _ => self.mbx_error(MailboxErrorDetail::ServiceNotSupported),
         }
+    }
+
+    /// Fills the optional fields of an entry description after the 10 fixed bytes of `d`
+    /// as requested by `req` (ETG.1000.6 value info: 0x08 unit type (UNSIGNED32, ETG.1004),
+    /// 0x10 default, 0x20 minimum, 0x40 maximum value, each in the entry's storage length);
+    /// returns the value info actually served (strings have no minimum/maximum; a field
+    /// that does not fit the reply is left out) and the end offset.
+    fn value_info(&self, o: &Obj, e: &EntryDef, req: u8, d: &mut [u8]) -> (u8, usize) {
+        let len = e.storage_len();
+        let mut vi = 0u8;
+        let mut at = 10;
+        if req & 0x08 != 0 && at + 4 <= d.len() {
+            d[at..at + 4].copy_from_slice(&e.unit.to_le_bytes());
+            at += 4;
+            vi |= 0x08;
+        }
+        if req & 0x10 != 0 && at + len <= d.len() {
+            self.od.default_of(o, e, &mut d[at..at + len]);
+            at += len;
+            vi |= 0x10;
+        }
+        let limits = value_limits(e);
+        for (bit, v) in [(0x20u8, limits.map(|l| l.0)), (0x40, limits.map(|l| l.1))] {
+            if let Some(v) = v {
+                if req & bit != 0 && at + len <= d.len() {
+                    let b = v.to_le_bytes();
+                    let n = len.min(8);
+                    d[at..at + len].fill(0);
+                    d[at..at + n].copy_from_slice(&b[..n]);
+                    at += len;
+                    vi |= bit;
+                }
+            }
+        }
+        (vi, at)
     }
 
     fn info_list_fragment(&mut self, first: bool) {

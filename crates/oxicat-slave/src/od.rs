@@ -928,6 +928,78 @@ impl<const N: usize> Od<N> {
         }
     }
 
+    /// Writes the default value of entry `e` of `o` (as [`Od::reset_defaults`] sets it:
+    /// from the definition, including the values derived from the [`DeviceDef`]) into
+    /// `out` (its storage length, little endian).
+    pub(crate) fn default_of(&self, o: &Obj, e: &EntryDef, out: &mut [u8]) {
+        out.fill(0);
+        let d = self.def;
+        let put = |out: &mut [u8], v: u64| {
+            let b = v.to_le_bytes();
+            let n = out.len().min(8);
+            out[..n].copy_from_slice(&b[..n]);
+        };
+        let put_str = |out: &mut [u8], s: &str| {
+            let n = out.len().min(s.len());
+            out[..n].copy_from_slice(&s.as_bytes()[..n]);
+        };
+        match (o.kind, o.index, e.sub) {
+            (Kind::Plain, 0x1000, 0) => put(out, d.device_type as u64),
+            (Kind::Plain, 0x1008, 0) => put_str(out, d.name),
+            (Kind::Plain, 0x1009, 0) => put_str(out, d.hw_version),
+            (Kind::Plain, 0x100A, 0) => put_str(out, d.sw_version),
+            (Kind::Plain, 0x1018, 1) => put(out, d.identity.vendor_id as u64),
+            (Kind::Plain, 0x1018, 2) => put(out, d.identity.product_code as u64),
+            (Kind::Plain, 0x1018, 3) => put(out, d.identity.revision as u64),
+            (Kind::Plain, 0x1018, 4) => put(out, d.identity.serial as u64),
+            (Kind::RxMap | Kind::TxMap, _, sub) => {
+                if let Some(p) = d.pdo(o.index) {
+                    match sub {
+                        0 => put(out, p.entries.len() as u64),
+                        k => {
+                            if let Some(pe) = p.entries.get(k as usize - 1) {
+                                put(out, pe.encode() as u64);
+                            }
+                        }
+                    }
+                }
+            }
+            (Kind::RxAssign | Kind::TxAssign, _, sub) => {
+                let list = if o.kind == Kind::RxAssign {
+                    d.rx_assign
+                } else {
+                    d.tx_assign
+                };
+                match sub {
+                    0 => put(out, list.len() as u64),
+                    k => {
+                        if let Some(p) = list.get(k as usize - 1) {
+                            put(out, *p as u64);
+                        }
+                    }
+                }
+            }
+            (Kind::SyncPar, _, 1) => put(out, d.sync.default_mode as u64),
+            (Kind::SyncPar, _, 4) => put(out, d.sync.supported as u64),
+            (Kind::SyncPar, _, 5) => put(out, d.sync.min_cycle_ns as u64),
+            (Kind::SyncPar, _, 6) => put(out, d.sync.calc_copy_ns as u64),
+            _ => match e.default {
+                DefaultValue::Bits(v) => {
+                    let v = if e.sub == 0 && o.code != ObjectCode::Var && v == 0 {
+                        o.max_sub() as u64
+                    } else {
+                        v
+                    };
+                    put(out, v);
+                }
+                DefaultValue::Bytes(b) => {
+                    let n = out.len().min(b.len());
+                    out[..n].copy_from_slice(&b[..n]);
+                }
+            },
+        }
+    }
+
     /// The `n`-th object in index order (communication and application objects), as the
     /// SDO information service lists it; for listings such as the ESI dictionary.
     pub fn object_info(&self, n: usize) -> Option<ObjectInfo> {

@@ -537,3 +537,85 @@ fn garbage_mailboxes_never_panic() {
     // Still serving.
     assert_eq!(b.upload(0x1018, 1, false).unwrap(), 0x0A5Cu32.to_le_bytes());
 }
+
+/// Entry description with value info (ETG.1000.6: 0x08 unit, 0x10 default, 0x20 minimum,
+/// 0x40 maximum): the reply says which fields it carries, values from the definition.
+fn entry_desc(b: &mut Bench, index: u16, sub: u8, vi: u8) -> (u8, Vec<u8>) {
+    let i = index.to_le_bytes();
+    b.mbx_write(
+        MailboxType::Coe,
+        &[0x00, 0x80, 0x05, 0, 0, 0, i[0], i[1], sub, vi],
+    );
+    let (_, p) = b.mbx_read().unwrap();
+    match SdoInfoRef::parse(&p).unwrap().service().unwrap() {
+        SdoInfoService::GetEntryDescriptionResponse {
+            index: ri,
+            subindex,
+            value_info,
+            data,
+            ..
+        } => {
+            assert_eq!((ri, subindex), (index, sub));
+            (value_info, data.to_vec())
+        }
+        o => panic!("{o:?}"),
+    }
+}
+
+#[test]
+fn entry_description_value_info() {
+    let mut b = Bench::new();
+    b.enter_preop();
+    // UNSIGNED32 with unit (mA), default 7, range 0..=1000.
+    let (vi, d) = entry_desc(&mut b, 0x2000, 0, 0x78);
+    assert_eq!(vi, 0x78);
+    let mut want = Vec::new();
+    want.extend_from_slice(&0xFD04_0000u32.to_le_bytes());
+    want.extend_from_slice(&7u32.to_le_bytes());
+    want.extend_from_slice(&0u32.to_le_bytes());
+    want.extend_from_slice(&1000u32.to_le_bytes());
+    want.extend_from_slice(b"Param");
+    assert_eq!(d, want);
+    // Only some fields: maximum alone, then unit + minimum.
+    let (vi, d) = entry_desc(&mut b, 0x2000, 0, 0x40);
+    assert_eq!(
+        (vi, &d[..4], &d[4..]),
+        (0x40, &1000u32.to_le_bytes()[..], &b"Param"[..])
+    );
+    let (vi, d) = entry_desc(&mut b, 0x2000, 0, 0x28);
+    assert_eq!(vi, 0x28);
+    assert_eq!(&d[..8], &[0, 0, 0x04, 0xFD, 0, 0, 0, 0]);
+    // No value info: the name only (as before).
+    assert_eq!(entry_desc(&mut b, 0x2000, 0, 0), (0, b"Param".to_vec()));
+    // INTEGER8 without a range: default -5, the type's limits; no unit (0).
+    let (vi, d) = entry_desc(&mut b, 0x2002, 0, 0x78);
+    assert_eq!(vi, 0x78);
+    assert_eq!(
+        d,
+        [&[0u8, 0, 0, 0][..], &[0xFB, 0x80, 0x7F], b"Const"].concat()
+    );
+    // REAL32 default 1.5; limits of the type.
+    let (_, d) = entry_desc(&mut b, 0x2004, 0, 0x70);
+    assert_eq!(&d[..4], &1.5f32.to_le_bytes());
+    assert_eq!(&d[4..8], &f32::MIN.to_le_bytes());
+    assert_eq!(&d[8..12], &f32::MAX.to_le_bytes());
+    // A string has a default (its full length) but no minimum/maximum.
+    let (vi, d) = entry_desc(&mut b, 0x2006, 0, 0x78);
+    assert_eq!(vi, 0x18);
+    let mut label = b"hello".to_vec();
+    label.resize(16, 0);
+    assert_eq!(&d[4..20], &label[..]);
+    assert_eq!(&d[20..], b"Label");
+    // A BOOL: 0..1 in one byte each.
+    let (vi, d) = entry_desc(&mut b, 0x7000, 1, 0x70);
+    assert_eq!((vi, &d[..3]), (0x70, &[0u8, 0, 1][..]));
+    // Standard objects: defaults derived from the device definition.
+    let (_, d) = entry_desc(&mut b, 0x1018, 1, 0x10);
+    assert_eq!(&d[..4], &0x0A5Cu32.to_le_bytes());
+    let (_, d) = entry_desc(&mut b, 0x1C32, 5, 0x10);
+    assert_eq!(&d[..4], &100_000u32.to_le_bytes());
+    let (_, d) = entry_desc(&mut b, 0x1A00, 4, 0x10);
+    assert_eq!(&d[..4], &0x6000_0310u32.to_le_bytes());
+    let (_, d) = entry_desc(&mut b, 0x1C13, 0, 0x10);
+    assert_eq!(d[0], 1);
+}
