@@ -446,7 +446,9 @@ pub fn run_trot(s: &Scenario, progress: &mut dyn FnMut(Progress)) -> Result<Trot
         },
     );
     let master = run_master(s, &phases, &md, &segment, &handles, progress);
-    let out = futures_lite::future::block_on(futures_lite::future::or(master, async {
+    // async-io's executor: ethercrab's PDU timers live in its reactor, which then runs on
+    // this thread instead of waking a reactor thread for every frame.
+    let out = async_io::block_on(futures_lite::future::or(master, async {
         let r = transport.await;
         Err(MasterError::Usage(format!(
             "the in-process transport stopped: {:?}",
