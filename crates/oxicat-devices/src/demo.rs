@@ -11,7 +11,7 @@
 //! the thesis' 16-step change (record "Additions" 0x7030 with two INT16 outputs) done as one
 //! extra line in one place.
 
-use oxicat_slave::{AlState, AlStatusCode, Application, Od};
+use oxicat_slave::{AlState, AlStatusCode, Application, Od, Var};
 
 /// The two LEDs of the LaunchPad (GPIO31 blue, GPIO34 red; the driver handles active-low).
 pub trait Leds {
@@ -149,6 +149,49 @@ pub mod additions {
     }
 }
 
+/// Typed handles on the entries the demo application touches each cycle, resolved once
+/// (on PREOP -> SAFEOP, or on first use) instead of looked up by index every cycle.
+#[derive(Debug, Clone, Copy)]
+struct DemoIo {
+    blue: Var<bool>,
+    red: Var<bool>,
+    sync: Var<i8>,
+    o1: Var<i32>,
+    u1: Var<u16>,
+    o2: Var<i32>,
+    a: Var<i16>,
+    b: Var<i16>,
+    i1: Var<i32>,
+    iu1: Var<u16>,
+    i2: Var<i32>,
+    sum: Var<i16>,
+    diff: Var<i16>,
+    counter: Var<i32>,
+    buttons: Var<i32>,
+}
+
+impl DemoIo {
+    fn resolve<const N: usize>(od: &Od<N>) -> Option<Self> {
+        Some(Self {
+            blue: od.var(0x7000, 5).ok()?,
+            red: od.var(0x7000, 6).ok()?,
+            sync: od.var(0x7000, 9).ok()?,
+            o1: od.var(0x7010, 1).ok()?,
+            u1: od.var(0x7012, 1).ok()?,
+            o2: od.var(0x7014, 1).ok()?,
+            a: od.var(0x7020, 1).ok()?,
+            b: od.var(0x7020, 2).ok()?,
+            i1: od.var(0x6010, 1).ok()?,
+            iu1: od.var(0x6012, 1).ok()?,
+            i2: od.var(0x6014, 1).ok()?,
+            sum: od.var(0x6020, 1).ok()?,
+            diff: od.var(0x6020, 2).ok()?,
+            counter: od.var(0x6030, 1).ok()?,
+            buttons: od.var(0x6030, 2).ok()?,
+        })
+    }
+}
+
 /// The demo application: LEDs follow `Blue_LED`/`Red_LED`, inputs echo outputs.
 ///
 /// Each cycle: `InINT32Var1 = OutINT32Var1`, `InUINT16Var1 = OutUINT16Var1`,
@@ -163,6 +206,7 @@ pub struct Demo<L: Leds, B: Buttons> {
     pub buttons: B,
     /// Application cycles run.
     pub cycles: u32,
+    io: Option<DemoIo>,
 }
 
 impl<L: Leds, B: Buttons> Demo<L, B> {
@@ -172,6 +216,7 @@ impl<L: Leds, B: Buttons> Demo<L, B> {
             leds,
             buttons,
             cycles: 0,
+            io: None,
         }
     }
 }
@@ -181,10 +226,13 @@ impl<const N: usize, L: Leds, B: Buttons> Application<N> for Demo<L, B> {
         &mut self,
         _from: AlState,
         to: AlState,
-        _od: &mut Od<N>,
+        od: &mut Od<N>,
     ) -> Result<(), AlStatusCode> {
         if matches!(to, AlState::Init | AlState::PreOp) {
             self.leds.set(false, false);
+        }
+        if to == AlState::SafeOp && self.io.is_none() {
+            self.io = DemoIo::resolve(od);
         }
         Ok(())
     }
@@ -209,22 +257,26 @@ impl<const N: usize, L: Leds, B: Buttons> Application<N> for Demo<L, B> {
 
     fn cycle(&mut self, od: &mut Od<N>) {
         self.cycles = self.cycles.wrapping_add(1);
-        let blue: bool = od.get(0x7000, 5).unwrap_or(false);
-        let red: bool = od.get(0x7000, 6).unwrap_or(false);
-        self.leds.set(blue, red);
-        let o1: i32 = od.get(0x7010, 1).unwrap_or(0);
-        let u1: u16 = od.get(0x7012, 1).unwrap_or(0);
-        let o2: i32 = od.get(0x7014, 1).unwrap_or(0);
-        let a: i16 = od.get(0x7020, 1).unwrap_or(0);
-        let b: i16 = od.get(0x7020, 2).unwrap_or(0);
-        let sync: i8 = od.get(0x7000, 9).unwrap_or(0);
-        let _ = od.set(0x6010, 1, o1);
-        let _ = od.set(0x6012, 1, u1);
-        let _ = od.set(0x6014, 1, o2);
-        let _ = od.set(0x6020, 1, a.wrapping_add(b));
-        let _ = od.set(0x6020, 2, a.wrapping_sub(b));
-        let _ = od.set(0x6030, 1, self.cycles as i32);
+        if self.io.is_none() {
+            self.io = DemoIo::resolve(od);
+        }
+        let Some(io) = self.io else {
+            return;
+        };
+        self.leds.set(od.load(io.blue), od.load(io.red));
+        let o1 = od.load(io.o1);
+        let u1 = od.load(io.u1);
+        let o2 = od.load(io.o2);
+        let a = od.load(io.a);
+        let b = od.load(io.b);
+        let sync = od.load(io.sync);
+        od.store(io.i1, o1);
+        od.store(io.iu1, u1);
+        od.store(io.i2, o2);
+        od.store(io.sum, a.wrapping_add(b));
+        od.store(io.diff, a.wrapping_sub(b));
+        od.store(io.counter, self.cycles as i32);
         let buttons = self.buttons.read() as i32 | ((sync as u8 as i32) << 8);
-        let _ = od.set(0x6030, 2, buttons);
+        od.store(io.buttons, buttons);
     }
 }

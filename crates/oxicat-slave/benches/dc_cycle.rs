@@ -8,7 +8,13 @@
 //!   `dc_cycle/write+sync0`).
 //! - Instructions: `OXICAT_CYCLES=10000 valgrind --tool=callgrind
 //!   --toggle-collect='dc_cycle::Rig::sync0' target/release/deps/dc_cycle-*` counts the
-//!   instructions of 10 000 `on_sync0` calls (each after a fresh master write).
+//!   instructions of 10 000 `on_sync0` calls (each after a fresh master write); run it at
+//!   10 000 and 20 000 and divide the difference by 10 000 for one cycle. Measured: 16 956
+//!   instructions per cycle with dictionary lookups by index in the PDO copy and the
+//!   application, 9 391 with the mapping resolved to copy steps at PREOP -> SAFEOP and
+//!   the application on typed handles ([`oxicat_slave::Var`]); of these about 7 500 are
+//!   the software ESC's side of the PDI accesses (its DC time keeping on the SYNC0
+//!   status read), about 1 900 the stack and the application.
 
 use criterion::{criterion_group, Criterion};
 use oxicat_devices::demo::{self, Buttons, Demo, Leds};

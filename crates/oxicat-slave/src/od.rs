@@ -644,6 +644,30 @@ impl EntryRef {
     }
 }
 
+/// A typed handle on one dictionary entry, resolved and type-checked once ([`Od::var`]):
+/// [`Od::load`] and [`Od::store`] are then a plain offset access, no lookup by index.
+/// Resolve handles when the application starts (e.g. on PREOP -> SAFEOP), not per cycle.
+#[derive(Debug, PartialEq, Eq)]
+pub struct Var<T: OdType> {
+    r: EntryRef,
+    _t: core::marker::PhantomData<fn() -> T>,
+}
+
+impl<T: OdType> Clone for Var<T> {
+    fn clone(&self) -> Self {
+        *self
+    }
+}
+
+impl<T: OdType> Copy for Var<T> {}
+
+impl<T: OdType> Var<T> {
+    /// The untyped entry reference.
+    pub fn entry(&self) -> EntryRef {
+        self.r
+    }
+}
+
 /// Rust types that map onto CoE scalar types for typed access.
 pub trait OdType: Copy {
     /// Bit length the entry must have.
@@ -1060,6 +1084,7 @@ impl<const N: usize> Od<N> {
         })
     }
 
+    #[inline]
     fn slice(&self, r: EntryRef) -> &[u8] {
         if r.area_app {
             &self.app[r.offset..r.offset + r.len]
@@ -1068,6 +1093,7 @@ impl<const N: usize> Od<N> {
         }
     }
 
+    #[inline]
     fn slice_mut(&mut self, r: EntryRef) -> &mut [u8] {
         if r.area_app {
             &mut self.app[r.offset..r.offset + r.len]
@@ -1084,6 +1110,30 @@ impl<const N: usize> Od<N> {
     /// Typed write of a resolved entry (the type is not re-checked).
     pub fn write<T: OdType>(&mut self, r: EntryRef, v: T) {
         v.to_le(self.slice_mut(r))
+    }
+
+    /// Resolves `index:sub` into a typed handle; the entry's bit length must match `T`.
+    pub fn var<T: OdType>(&self, index: u16, sub: u8) -> Result<Var<T>, OdError> {
+        let r = self.entry(index, sub)?;
+        if r.bits != T::BITS {
+            return Err(OdError::TypeMismatch);
+        }
+        Ok(Var {
+            r,
+            _t: core::marker::PhantomData,
+        })
+    }
+
+    /// Reads the entry behind a handle.
+    #[inline]
+    pub fn load<T: OdType>(&self, v: Var<T>) -> T {
+        self.read(v.r)
+    }
+
+    /// Writes the entry behind a handle.
+    #[inline]
+    pub fn store<T: OdType>(&mut self, v: Var<T>, x: T) {
+        self.write(v.r, x)
     }
 
     /// Typed read of `index:sub`; the entry's bit length must match `T`.

@@ -28,12 +28,29 @@ pub(crate) struct Item {
     bits: u16,
 }
 
+/// One copy step between the process data buffer and an image, resolved when the mapping
+/// is compiled (PREOP -> SAFEOP): byte-aligned entries that follow each other in both the
+/// buffer and the image are merged into one byte copy; everything else is a bit copy.
+#[derive(Debug, Clone, Copy, Default)]
+pub(crate) struct Op {
+    /// Byte-aligned: byte offset in the buffer; else bit position.
+    pd: u32,
+    /// Byte-aligned: byte offset in the image; else bit position.
+    img: u32,
+    /// Byte-aligned: bytes; else bits.
+    len: u16,
+    aligned: bool,
+    app: bool,
+}
+
 /// A compiled mapping of one direction.
 #[derive(Debug, Clone, Copy)]
 pub struct Mapping {
     items: [Item; MAX_ITEMS],
     n: usize,
     bits: usize,
+    ops: [Op; MAX_ITEMS],
+    n_ops: usize,
 }
 
 impl Default for Mapping {
@@ -42,6 +59,8 @@ impl Default for Mapping {
             items: [Item::default(); MAX_ITEMS],
             n: 0,
             bits: 0,
+            ops: [Op::default(); MAX_ITEMS],
+            n_ops: 0,
         }
     }
 }
@@ -57,56 +76,91 @@ impl Mapping {
         self.bits
     }
 
-    /// Copies image values into `buf` (inputs → SM3).
+    /// True when the copy steps write every bit of the buffer (no gaps, whole bytes), so
+    /// the buffer need not be cleared before [`Mapping::pack`].
+    pub(crate) fn covers_all(&self) -> bool {
+        self.bits & 7 == 0 && self.items[..self.n].iter().all(|it| it.off != usize::MAX)
+    }
+
+    /// Copies image values into `buf` (inputs → SM3); gaps are left as they are.
     pub(crate) fn pack<const N: usize>(&self, od: &Od<N>, buf: &mut [u8]) {
-        let mut pos = 0usize;
-        for it in &self.items[..self.n] {
-            let bits = it.bits as usize;
-            if it.off != usize::MAX {
-                let src = if it.app { &od.app[..] } else { &od.comm[..] };
-                if pos & 7 == 0 && bits & 7 == 0 {
-                    let b = pos / 8;
-                    let n = bits / 8;
-                    if let (Some(d), Some(s)) = (buf.get_mut(b..b + n), src.get(it.off..it.off + n))
-                    {
-                        d.copy_from_slice(s);
-                    }
-                } else {
-                    for k in 0..bits {
-                        let v = src
-                            .get(it.off + k / 8)
-                            .is_some_and(|x| x >> (k % 8) & 1 != 0);
-                        set_bit(buf, pos + k, v);
-                    }
+        for op in &self.ops[..self.n_ops] {
+            let src = if op.app { &od.app[..] } else { &od.comm[..] };
+            let (pd, img, len) = (op.pd as usize, op.img as usize, op.len as usize);
+            if op.aligned {
+                if let (Some(d), Some(s)) = (buf.get_mut(pd..pd + len), src.get(img..img + len)) {
+                    d.copy_from_slice(s);
+                }
+            } else {
+                for k in 0..len {
+                    set_bit(buf, pd + k, get_bit(src, img + k));
                 }
             }
-            pos += bits;
         }
     }
 
     /// Copies `buf` (SM2 outputs) into the image.
     pub(crate) fn unpack<const N: usize>(&self, od: &mut Od<N>, buf: &[u8]) {
+        for op in &self.ops[..self.n_ops] {
+            let dst = if op.app {
+                &mut od.app[..]
+            } else {
+                &mut od.comm[..]
+            };
+            let (pd, img, len) = (op.pd as usize, op.img as usize, op.len as usize);
+            if op.aligned {
+                if let (Some(d), Some(s)) = (dst.get_mut(img..img + len), buf.get(pd..pd + len)) {
+                    d.copy_from_slice(s);
+                }
+            } else {
+                for k in 0..len {
+                    set_bit(dst, img + k, get_bit(buf, pd + k));
+                }
+            }
+        }
+    }
+
+    /// Resolves the items into copy steps (see [`Op`]).
+    fn build_ops(&mut self) {
         let mut pos = 0usize;
+        self.n_ops = 0;
         for it in &self.items[..self.n] {
             let bits = it.bits as usize;
             if it.off != usize::MAX {
-                let dst = if it.app {
-                    &mut od.app[..]
+                let aligned = pos & 7 == 0 && bits & 7 == 0;
+                let op = if aligned {
+                    Op {
+                        pd: (pos / 8) as u32,
+                        img: it.off as u32,
+                        len: (bits / 8) as u16,
+                        aligned,
+                        app: it.app,
+                    }
                 } else {
-                    &mut od.comm[..]
+                    Op {
+                        pd: pos as u32,
+                        img: (it.off * 8) as u32,
+                        len: bits as u16,
+                        aligned,
+                        app: it.app,
+                    }
                 };
-                if pos & 7 == 0 && bits & 7 == 0 {
-                    let b = pos / 8;
-                    let n = bits / 8;
-                    if let (Some(d), Some(s)) = (dst.get_mut(it.off..it.off + n), buf.get(b..b + n))
+                let merged = match self.n_ops.checked_sub(1).map(|i| &mut self.ops[i]) {
+                    Some(last)
+                        if aligned
+                            && last.aligned
+                            && last.app == op.app
+                            && last.pd + last.len as u32 == op.pd
+                            && last.img + last.len as u32 == op.img =>
                     {
-                        d.copy_from_slice(s);
+                        last.len += op.len;
+                        true
                     }
-                } else {
-                    for k in 0..bits {
-                        let v = get_bit(buf, pos + k);
-                        set_bit(dst, it.off * 8 + k, v);
-                    }
+                    _ => false,
+                };
+                if !merged {
+                    self.ops[self.n_ops] = op;
+                    self.n_ops += 1;
                 }
             }
             pos += bits;
@@ -241,5 +295,6 @@ pub(crate) fn compile<const N: usize>(od: &Od<N>, dir: Dir) -> Result<Mapping, S
     if m.bytes() > MAX_PD_BYTES {
         return Err(SdoAbortCode::PdoLengthExceeded);
     }
+    m.build_ops();
     Ok(m)
 }

@@ -177,6 +177,8 @@ pub struct Slave<P: Pdi, const N: usize, const M: usize = 256> {
     pd: [u8; MAX_PD_BYTES],
     stats: Stats,
     diag: SyncDiag,
+    /// The TxPDO mapping writes every bit of SM3 (no clearing needed).
+    tx_full: bool,
 }
 
 type R<P> = Result<(), <P as Pdi>::Error>;
@@ -208,6 +210,7 @@ impl<P: Pdi, const N: usize, const M: usize> Slave<P, N, M> {
             pd: [0; MAX_PD_BYTES],
             stats: Stats::default(),
             diag,
+            tx_full: false,
         };
         for n in 0..4 {
             Self::sm_enable(pdi, n, false).map_err(InitError::Pdi)?;
@@ -458,7 +461,9 @@ impl<P: Pdi, const N: usize, const M: usize> Slave<P, N, M> {
         if n == 0 {
             return Ok(());
         }
-        self.pd[..n].fill(0);
+        if !self.tx_full {
+            self.pd[..n].fill(0);
+        }
         self.tx_map.pack(&self.od, &mut self.pd[..n]);
         let start = self.od.def.sm3_start;
         pdi.write(start, &self.pd[..n])
@@ -734,6 +739,7 @@ impl<P: Pdi, const N: usize, const M: usize> Slave<P, N, M> {
         }
         self.rx_map = rx;
         self.tx_map = tx;
+        self.tx_full = tx.covers_all();
         self.sync = mode;
         self.diag.missed_count = 0;
         self.diag.exceeded_count = 0;
