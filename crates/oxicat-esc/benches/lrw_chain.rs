@@ -9,12 +9,14 @@
 //! `valgrind --tool=callgrind <target>/release/examples/lrw_profile 256 N` for N = 100 and
 //! 300; (Ir(300) - Ir(100)) / (200 * 256).
 //!
-//! Figures (2-core shared box, load average ~7 while measuring; wall-clock is noisy):
+//! Figures (2-core shared box, load average 4-7 while measuring; wall-clock is noisy, see
+//! the crate README "Performance" for all runs):
 //!
 //! | version                        | Ir/ESC/dg | ns/ESC/dg 1 / 16 / 256, best | median of 3        |
 //! |--------------------------------|-----------|------------------------------|--------------------|
 //! | before (generic datagram path) | 592       | ~50 (previous engineer)      |                    |
 //! | logical fast path + plan       | 495       | 43.8 / 53.6 / 47.3           | 54.6 / 55.0 / 71.3 |
+//! | fused path from `forward`      | 262       | 19.3 / 21.2 / 22.3           | 22.2 / 24.1 / 27.4 |
 
 use criterion::{black_box, criterion_group, criterion_main, BenchmarkId, Criterion, Throughput};
 use oxicat_esc::{Esc, EscConfig};
