@@ -10,6 +10,8 @@ use clap::{Parser, Subcommand, ValueEnum};
 use oxicat_slave::DeviceDef;
 
 pub mod master_cmd;
+pub mod sim_cmd;
+pub mod sim_devices;
 pub mod trot_cmd;
 
 /// The command line.
@@ -33,6 +35,8 @@ pub enum Command {
     /// Master verbs (IgH `ethercat` style) on an interface or a virtual segment.
     #[command(flatten)]
     Master(master_cmd::MasterCommand),
+    /// Serve a virtual segment in real time on a network interface or UDP until Ctrl-C.
+    Sim(sim_cmd::SimArgs),
     /// The Laelaps II trotting experiment (thesis Table 4-1) on the virtual segment: CSV,
     /// figures, summary.
     Trot(trot_cmd::TrotArgs),
@@ -89,6 +93,8 @@ pub enum CliError {
     Device(oxicat_device::Error),
     /// Writing the output failed.
     Io(std::io::Error),
+    /// `oxicat sim` failed.
+    Sim(sim_cmd::SimError),
     /// A master verb failed.
     Master(oxicat_master::MasterError),
 }
@@ -102,6 +108,7 @@ impl std::fmt::Display for CliError {
             }
             CliError::Device(e) => write!(f, "{e}"),
             CliError::Io(e) => write!(f, "{e}"),
+            CliError::Sim(e) => write!(f, "{e}"),
             CliError::Master(e) => write!(f, "{e}"),
         }
     }
@@ -142,6 +149,7 @@ pub fn run(cli: Cli) -> Result<(), CliError> {
                 None => std::io::stdout().write_all(&bytes).map_err(CliError::Io),
             }
         }
+        Command::Sim(a) => sim_cmd::run(a).map_err(CliError::Sim),
         Command::Master(c) => {
             master_cmd::run(c, &mut std::io::stdout().lock()).map_err(CliError::Master)
         }

@@ -1,0 +1,485 @@
+//! `oxicat sim`: a virtual segment served in real time on a network interface (raw
+//! Ethernet, EtherType 0x88A4) or on UDP (EtherCAT over UDP, port 34980), for any master.
+//!
+//! Devices come from the command line (`demo:4`, a name with a count) or from a TOML
+//! segment file:
+//!
+//! ```toml
+//! master_link_delay_ns = 50   # optional, cable master → first slave
+//! esc_delay_ns = 450          # optional, default forwarding delay of every ESC
+//! link_delay_ns = 50          # optional, default cable delay between slaves
+//!
+//! [[device]]
+//! name = "demo"
+//! count = 2
+//! drift_ppm = 40.0            # optional, oscillator error of these nodes
+//! esc_delay_ns = 600          # optional, overrides the default for these nodes
+//! link_delay_ns = 120         # optional, cable in front of each of these nodes
+//! ```
+//!
+//! The nodes form a line in the order given (port 1 of one to port 0 of the next).
+
+use std::io::{IsTerminal, Write};
+use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::{Arc, Mutex};
+use std::time::{Duration, Instant};
+
+use oxicat_sim::net::NetError;
+use oxicat_sim::realtime::{serve, FramePort, RealtimeConfig, RealtimeStats};
+use oxicat_sim::segment::{Segment, TopologyError};
+use serde::Deserialize;
+
+use crate::sim_devices::{add_node, find_sim_device, sim_devices, NodeError};
+
+/// Arguments of `oxicat sim`.
+#[derive(Debug, clap::Args)]
+pub struct SimArgs {
+    /// Serve on this network interface (raw Ethernet; needs CAP_NET_RAW), e.g. veth1.
+    #[arg(long, conflicts_with = "udp")]
+    pub iface: Option<String>,
+    /// Serve EtherCAT over UDP on this address, e.g. 127.0.0.1:34980.
+    #[arg(long)]
+    pub udp: Option<String>,
+    /// A TOML segment file (devices with counts, delays, drift) instead of DEVICES.
+    #[arg(long, conflicts_with = "devices")]
+    pub segment: Option<PathBuf>,
+    /// Devices in line order, each NAME or NAME:COUNT (see --list), e.g. demo:4.
+    pub devices: Vec<String>,
+    /// List the devices that can be simulated and exit.
+    #[arg(long)]
+    pub list: bool,
+    /// Busy-poll for frames (one core at 100 %, lowest latency) instead of sleeping.
+    #[arg(long)]
+    pub spin: bool,
+    /// No live status line.
+    #[arg(short, long)]
+    pub quiet: bool,
+}
+
+/// Why `oxicat sim` failed.
+#[derive(Debug)]
+pub enum SimError {
+    /// Neither --iface nor --udp.
+    NoTransport,
+    /// No devices given.
+    NoDevices,
+    /// A device spec is not NAME or NAME:COUNT.
+    BadSpec(String),
+    /// No device of that name.
+    UnknownDevice(String),
+    /// The segment file could not be read.
+    SegmentFile(PathBuf, std::io::Error),
+    /// The segment file is not valid.
+    SegmentToml(PathBuf, String),
+    /// A node could not be put on the segment.
+    Node {
+        /// Position on the segment.
+        position: usize,
+        /// Device name.
+        device: String,
+        /// The cause.
+        error: NodeError,
+    },
+    /// A delay could not be set.
+    Topology(TopologyError),
+    /// The network transport failed.
+    Net(NetError),
+    /// The Ctrl-C handler could not be installed.
+    Signal(String),
+}
+
+impl std::fmt::Display for SimError {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Self::NoTransport => write!(
+                f,
+                "say where to serve the segment: --iface <interface> (raw Ethernet) or --udp \
+                 <addr:port> (EtherCAT over UDP)"
+            ),
+            Self::NoDevices => write!(
+                f,
+                "no devices: give NAME:COUNT (e.g. demo:4) or --segment file.toml; --list shows \
+                 the devices"
+            ),
+            Self::BadSpec(s) => write!(f, "{s:?} is not NAME or NAME:COUNT (e.g. demo:4)"),
+            Self::UnknownDevice(n) => {
+                let names: Vec<_> = sim_devices().iter().map(|d| d.name).collect();
+                write!(f, "unknown device {n:?}; known: {}", names.join(", "))
+            }
+            Self::SegmentFile(p, e) => write!(f, "cannot read {}: {e}", p.display()),
+            Self::SegmentToml(p, e) => write!(f, "{}: {e}", p.display()),
+            Self::Node {
+                position,
+                device,
+                error,
+            } => write!(f, "node {position} ({device}): {error}"),
+            Self::Topology(e) => write!(f, "{e}"),
+            Self::Net(e) => write!(f, "{e}"),
+            Self::Signal(e) => write!(f, "cannot catch Ctrl-C: {e}"),
+        }
+    }
+}
+
+impl std::error::Error for SimError {}
+
+/// A segment description (the TOML segment file, or the command-line devices).
+#[derive(Debug, Clone, Default, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SegmentFile {
+    /// Cable delay master → first slave, ns.
+    pub master_link_delay_ns: Option<u64>,
+    /// Default ESC forwarding delay, ns.
+    pub esc_delay_ns: Option<u64>,
+    /// Default cable delay between slaves, ns.
+    pub link_delay_ns: Option<u64>,
+    /// The devices in line order.
+    #[serde(default, rename = "device")]
+    pub devices: Vec<DeviceEntry>,
+}
+
+/// One `[[device]]` of a segment file.
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct DeviceEntry {
+    /// Device name (see `oxicat sim --list`).
+    pub name: String,
+    /// How many in a row.
+    #[serde(default = "one")]
+    pub count: usize,
+    /// Oscillator error in ppm.
+    #[serde(default)]
+    pub drift_ppm: f64,
+    /// Forwarding delay of each of these ESCs, ns.
+    pub esc_delay_ns: Option<u64>,
+    /// Cable delay in front of each of these nodes, ns.
+    pub link_delay_ns: Option<u64>,
+}
+
+fn one() -> usize {
+    1
+}
+
+/// Parses `NAME` or `NAME:COUNT` specs into a segment description.
+pub fn parse_specs(specs: &[String]) -> Result<SegmentFile, SimError> {
+    let mut seg = SegmentFile::default();
+    for s in specs {
+        let (name, count) = match s.split_once(':') {
+            Some((n, c)) => (
+                n,
+                c.parse::<usize>()
+                    .ok()
+                    .filter(|&c| c > 0)
+                    .ok_or_else(|| SimError::BadSpec(s.clone()))?,
+            ),
+            None => (s.as_str(), 1),
+        };
+        if name.is_empty() {
+            return Err(SimError::BadSpec(s.clone()));
+        }
+        seg.devices.push(DeviceEntry {
+            name: name.to_string(),
+            count,
+            drift_ppm: 0.0,
+            esc_delay_ns: None,
+            link_delay_ns: None,
+        });
+    }
+    Ok(seg)
+}
+
+/// Reads a TOML segment file.
+pub fn read_segment_file(path: &Path) -> Result<SegmentFile, SimError> {
+    let text = std::fs::read_to_string(path).map_err(|e| SimError::SegmentFile(path.into(), e))?;
+    toml::from_str(&text).map_err(|e| SimError::SegmentToml(path.into(), e.to_string()))
+}
+
+/// Builds the segment (firmware booted at virtual time 0); returns it with the device name
+/// of every node.
+pub fn build_segment(desc: &SegmentFile) -> Result<(Segment, Vec<String>), SimError> {
+    if desc.devices.iter().all(|d| d.count == 0) {
+        return Err(SimError::NoDevices);
+    }
+    let mut seg = Segment::new();
+    let mut names = Vec::new();
+    for entry in &desc.devices {
+        let dev = find_sim_device(&entry.name)
+            .ok_or_else(|| SimError::UnknownDevice(entry.name.clone()))?;
+        for k in 0..entry.count {
+            let position = seg.len();
+            let id =
+                add_node(&mut seg, &dev, k, entry.drift_ppm).map_err(|error| SimError::Node {
+                    position,
+                    device: entry.name.clone(),
+                    error,
+                })?;
+            if let Some(d) = entry.esc_delay_ns.or(desc.esc_delay_ns) {
+                seg.set_esc_delay(id, d).map_err(SimError::Topology)?;
+            }
+            if id > 0 {
+                if let Some(d) = entry.link_delay_ns.or(desc.link_delay_ns) {
+                    seg.set_link_delay(id, 0, d).map_err(SimError::Topology)?;
+                }
+            }
+            names.push(entry.name.clone());
+        }
+    }
+    if let Some(d) = desc.master_link_delay_ns {
+        seg.set_link_delay(0, 0, d).map_err(SimError::Topology)?;
+    }
+    Ok((seg, names))
+}
+
+/// AL state name of an AL status register value (error flag as "+ERR").
+pub fn al_state_name(al_status: u16) -> String {
+    let s = match al_status & 0x0F {
+        1 => "INIT",
+        2 => "PREOP",
+        3 => "BOOT",
+        4 => "SAFEOP",
+        8 => "OP",
+        _ => "?",
+    };
+    if al_status & 0x10 != 0 {
+        format!("{s}+ERR")
+    } else {
+        s.to_string()
+    }
+}
+
+/// Text of an AL status code (ETG.1000.6 table 11).
+pub fn al_code_text(code: u16) -> String {
+    use ethercrab::EtherCrabWireRead;
+    match ethercrab::AlStatusCode::unpack_from_slice(&code.to_le_bytes()) {
+        Ok(c) => format!("0x{code:04X} {c}"),
+        Err(_) => format!("0x{code:04X}"),
+    }
+}
+
+/// One status line: frames/s and every node's AL state (and AL status code if in error).
+pub fn status_line(seg: &Segment, frames_per_s: f64) -> String {
+    let mut s = format!("{frames_per_s:>7.0} frames/s |");
+    for i in 0..seg.len() {
+        let Some(esc) = seg.esc(i) else { continue };
+        let st = esc.al_status();
+        s.push_str(&format!(" {i}:{}", al_state_name(st)));
+        if st & 0x10 != 0 {
+            let code = esc
+                .memory()
+                .get(0x134..0x136)
+                .map_or(0, |b| u16::from_le_bytes([b[0], b[1]]));
+            s.push_str(&format!("({})", al_code_text(code)));
+        }
+    }
+    s
+}
+
+fn status_thread(
+    segment: Arc<Mutex<Segment>>,
+    stats: Arc<RealtimeStats>,
+    stop: Arc<AtomicBool>,
+) -> std::thread::JoinHandle<()> {
+    std::thread::spawn(move || {
+        let tty = std::io::stderr().is_terminal();
+        let mut last = (Instant::now(), stats.frames());
+        let mut last_printed = String::new();
+        let mut last_print_at = Instant::now();
+        while !stop.load(Ordering::Relaxed) {
+            std::thread::sleep(Duration::from_millis(500));
+            let now = (Instant::now(), stats.frames());
+            let rate = (now.1 - last.1) as f64 / now.0.duration_since(last.0).as_secs_f64();
+            last = now;
+            let line = {
+                let seg = segment.lock().unwrap_or_else(|e| e.into_inner());
+                status_line(&seg, rate)
+            };
+            let mut err = std::io::stderr().lock();
+            if tty {
+                let _ = write!(err, "\r\x1b[K{line}");
+            } else {
+                // Logs: print when the states change, or every 10 s.
+                let states = line.split_once('|').map_or("", |x| x.1);
+                let old = last_printed.split_once('|').map_or("", |x| x.1);
+                if states != old || last_print_at.elapsed() >= Duration::from_secs(10) {
+                    let _ = writeln!(err, "{line}");
+                    last_printed = line;
+                    last_print_at = Instant::now();
+                }
+            }
+            let _ = err.flush();
+        }
+        if tty {
+            let _ = writeln!(std::io::stderr());
+        }
+    })
+}
+
+/// Serves the segment of `args` until `stop` is set.
+pub fn serve_until(args: &SimArgs, stop: Arc<AtomicBool>) -> Result<(), SimError> {
+    if args.iface.is_none() && args.udp.is_none() {
+        return Err(SimError::NoTransport);
+    }
+    let desc = match &args.segment {
+        Some(p) => read_segment_file(p)?,
+        None => parse_specs(&args.devices)?,
+    };
+    let (seg, names) = build_segment(&desc)?;
+    let n = seg.len();
+    let segment = Arc::new(Mutex::new(seg));
+    let config = RealtimeConfig {
+        spin: args.spin,
+        ..RealtimeConfig::default()
+    };
+    let wait = if config.spin {
+        Duration::ZERO
+    } else {
+        config.idle
+    };
+    let summary = summarize(&names);
+    if let Some(iface) = &args.iface {
+        #[cfg(unix)]
+        {
+            let port = oxicat_sim::net::raw::RawPort::open(iface, wait).map_err(SimError::Net)?;
+            run_port(port, segment, &config, stop, args.quiet, n, &summary)
+        }
+        #[cfg(not(unix))]
+        {
+            let _ = (iface, wait);
+            Err(SimError::NoTransport)
+        }
+    } else {
+        let addr = args.udp.as_deref().unwrap_or_default();
+        let port = oxicat_sim::net::udp::UdpPort::bind(addr).map_err(SimError::Net)?;
+        run_port(port, segment, &config, stop, args.quiet, n, &summary)
+    }
+}
+
+fn summarize(names: &[String]) -> String {
+    let mut parts: Vec<(String, usize)> = Vec::new();
+    for n in names {
+        match parts.last_mut() {
+            Some((last, c)) if last == n => *c += 1,
+            _ => parts.push((n.clone(), 1)),
+        }
+    }
+    parts
+        .iter()
+        .map(|(n, c)| format!("{n}:{c}"))
+        .collect::<Vec<_>>()
+        .join(" ")
+}
+
+fn run_port<P: FramePort>(
+    mut port: P,
+    segment: Arc<Mutex<Segment>>,
+    config: &RealtimeConfig,
+    stop: Arc<AtomicBool>,
+    quiet: bool,
+    n: usize,
+    summary: &str,
+) -> Result<(), SimError> {
+    let stats = Arc::new(RealtimeStats::default());
+    eprintln!(
+        "oxicat sim: serving {n} slave{} ({summary}) on {}; Ctrl-C to stop",
+        if n == 1 { "" } else { "s" },
+        port.describe()
+    );
+    let status = (!quiet).then(|| status_thread(segment.clone(), stats.clone(), stop.clone()));
+    let r = serve(&segment, &mut port, config, &stats, &stop);
+    stop.store(true, Ordering::Relaxed);
+    if let Some(h) = status {
+        let _ = h.join();
+    }
+    eprintln!(
+        "oxicat sim: {} frames, {} answered, {} lost, longest turnaround {} µs",
+        stats.frames(),
+        stats.replies.load(Ordering::Relaxed),
+        stats.lost.load(Ordering::Relaxed),
+        stats.max_turnaround_ns.load(Ordering::Relaxed) / 1000
+    );
+    r.map_err(SimError::Net)
+}
+
+/// `oxicat sim`: lists devices, or serves until Ctrl-C.
+pub fn run(args: SimArgs) -> Result<(), SimError> {
+    if args.list {
+        for d in sim_devices() {
+            println!("{:<16} {}", d.name, d.description);
+        }
+        return Ok(());
+    }
+    let _ = env_logger::Builder::from_env(env_logger::Env::default().default_filter_or("warn"))
+        .try_init();
+    let stop = Arc::new(AtomicBool::new(false));
+    let s = stop.clone();
+    ctrlc::set_handler(move || s.store(true, Ordering::Relaxed))
+        .map_err(|e| SimError::Signal(e.to_string()))?;
+    serve_until(&args, stop)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn specs() {
+        let s = parse_specs(&["demo:4".into(), "demo".into()]).unwrap();
+        assert_eq!(s.devices.len(), 2);
+        assert_eq!(s.devices[0].count, 4);
+        assert_eq!(s.devices[1].count, 1);
+        for bad in ["demo:0", "demo:x", ":3", "demo:-1"] {
+            assert!(matches!(
+                parse_specs(&[bad.into()]),
+                Err(SimError::BadSpec(_))
+            ));
+        }
+    }
+
+    #[test]
+    fn unknown_device_lists_known_ones() {
+        let e = build_segment(&parse_specs(&["nope:2".into()]).unwrap()).unwrap_err();
+        let m = e.to_string();
+        assert!(m.contains("nope") && m.contains("demo"), "{m}");
+        assert!(matches!(
+            build_segment(&SegmentFile::default()),
+            Err(SimError::NoDevices)
+        ));
+    }
+
+    #[test]
+    fn segment_file_builds_line_with_delays_and_drift() {
+        let desc: SegmentFile = toml::from_str(
+            r#"
+            master_link_delay_ns = 70
+            esc_delay_ns = 500
+            [[device]]
+            name = "demo"
+            count = 2
+            drift_ppm = 25.0
+            [[device]]
+            name = "demo-additions"
+            link_delay_ns = 300
+            "#,
+        )
+        .unwrap();
+        let (seg, names) = build_segment(&desc).unwrap();
+        assert_eq!(seg.len(), 3);
+        assert_eq!(names, vec!["demo", "demo", "demo-additions"]);
+        assert_eq!(summarize(&names), "demo:2 demo-additions:1");
+        assert_eq!(seg.peer(1, 1), Some((2, 0)));
+        assert_eq!(seg.esc(0).unwrap().config().clock.drift_ppm, 25.0);
+        assert_eq!(seg.esc(2).unwrap().config().clock.drift_ppm, 0.0);
+        let bad: Result<SegmentFile, _> = toml::from_str("[[device]]\nnmae = \"demo\"\n");
+        assert!(bad.is_err(), "unknown keys are refused");
+    }
+
+    #[test]
+    fn status_shows_states() {
+        let (seg, _) = build_segment(&parse_specs(&["demo:2".into()]).unwrap()).unwrap();
+        let l = status_line(&seg, 2500.0);
+        assert!(l.contains("2500 frames/s"), "{l}");
+        assert!(l.contains("0:INIT") && l.contains("1:INIT"), "{l}");
+        assert_eq!(al_state_name(0x14), "SAFEOP+ERR");
+        assert!(al_code_text(0x001B).starts_with("0x001B "));
+    }
+}
