@@ -1,0 +1,111 @@
+//! Minimal firmware image of the thesis' demo device for an STM32F446 (Cortex-M4F): the
+//! `oxicat-slave` stack with `oxicat_devices::demo::DEF` and the `Demo` application, driven
+//! the way an MCU drives it (interrupt lines polled in the main loop).
+//!
+//! **A size/link check, not a working board firmware.** The ESC is reached through
+//! [`StubPdi`], a stand-in for the LAN9252 SPI driver of a later issue: reads return opaque
+//! zeros and writes are swallowed (both through `core::hint::black_box`, so the optimiser
+//! cannot prove anything about the ESC and keeps the whole stack: ESM, mailbox, CoE, PDO
+//! mapping, sync modes). No clocks, GPIO, SPI or interrupts are set up. What it shows is
+//! that the stack and the device link for `thumbv7em-none-eabihf` and how much flash and
+//! RAM they take: `cargo build --release`, then `llvm-size` on
+//! `target/thumbv7em-none-eabihf/release/oxicat-firmware-minimal`.
+#![no_std]
+#![no_main]
+
+use core::hint::black_box;
+
+use cortex_m_rt::entry;
+use oxicat_devices::demo::{self, Buttons, Demo, Leds};
+use oxicat_slave::{IrqLines, Pdi, Slave};
+use panic_halt as _;
+
+/// Mailbox buffer size of the stack: the demo's mailboxes are 128 bytes.
+const MBX: usize = 128;
+
+/// The stack type of this image.
+type Stack = Slave<StubPdi, { demo::IMAGE }, MBX>;
+
+/// Bytes of the stack's state (the `Slave` value), readable from the ELF symbol table.
+#[no_mangle]
+#[used]
+pub static OXICAT_SLAVE_BYTES: usize = core::mem::size_of::<Stack>();
+
+/// Stand-in for the ESC driver (LAN9252 over SPI in a later issue).
+pub struct StubPdi;
+
+/// Errors of the stub (none; a real SPI driver reports bus errors here).
+#[derive(Debug)]
+pub struct NoError;
+
+impl Pdi for StubPdi {
+    type Error = NoError;
+
+    fn read(&mut self, addr: u16, buf: &mut [u8]) -> Result<(), NoError> {
+        black_box(addr);
+        for b in buf.iter_mut() {
+            *b = black_box(0);
+        }
+        Ok(())
+    }
+
+    fn write(&mut self, addr: u16, data: &[u8]) -> Result<(), NoError> {
+        black_box((addr, data));
+        Ok(())
+    }
+
+    fn al_event_request(&mut self) -> Result<u32, NoError> {
+        Ok(black_box(0))
+    }
+
+    fn irq_lines(&mut self) -> IrqLines {
+        IrqLines {
+            pdi_irq: black_box(false),
+            sync0: black_box(false),
+            sync1: black_box(false),
+        }
+    }
+}
+
+/// The board's LEDs (GPIO writes on real hardware).
+struct BoardLeds;
+impl Leds for BoardLeds {
+    fn set(&mut self, blue: bool, red: bool) {
+        black_box((blue, red));
+    }
+}
+
+/// The board's buttons (GPIO reads on real hardware).
+struct BoardButtons;
+impl Buttons for BoardButtons {
+    fn read(&mut self) -> u8 {
+        black_box(0)
+    }
+}
+
+#[entry]
+fn main() -> ! {
+    let mut pdi = StubPdi;
+    let mut app = Demo::new(BoardLeds, BoardButtons);
+    let Ok(mut slave) = Stack::new(&demo::DEF, &mut pdi) else {
+        #[allow(clippy::empty_loop)]
+        loop {}
+    };
+    loop {
+        // On hardware: the PDI IRQ, SYNC0 and SYNC1 interrupt handlers and a 1 kHz timer.
+        let lines = pdi.irq_lines();
+        if lines.pdi_irq {
+            let _ = slave.on_pdi_irq(&mut pdi, &mut app);
+        }
+        if lines.sync0 {
+            let _ = slave.on_sync0(&mut pdi, &mut app);
+        }
+        if lines.sync1 {
+            let _ = slave.on_sync1(&mut pdi, &mut app);
+        }
+        if black_box(false) {
+            slave.on_timer(0, &mut app);
+        }
+        let _ = slave.poll(&mut pdi, &mut app);
+    }
+}
