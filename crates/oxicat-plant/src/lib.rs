@@ -29,6 +29,9 @@
 pub mod encoder;
 pub mod gear;
 pub mod motor;
+pub mod onewire;
+pub mod thermal;
+pub mod ws2812;
 
 mod leg;
 

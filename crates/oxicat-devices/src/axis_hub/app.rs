@@ -1,0 +1,507 @@
+//! The hub's tasks: the application ([`HubApp`], the stack's [`Application`]) and the
+//! firmware main ([`HubFirmware`]) that owns the slave stack and runs the EtherCAT
+//! supervisor.
+
+use oxicat_slave::{AlState, AlStatusCode, Application, Od, Pdi, Slave, Var};
+
+use super::codes::{self, SystemState};
+use super::device::{self, IMAGE, MBX, SENSORS, TEMP_INVALID};
+use super::onewire::{OneWireBus, TempFrame, TempTask, TEMP_PERIOD_MS};
+use super::ws2812::{self, LedStrip, LedTask, Rgb, LED_PERIOD_MS};
+
+/// CMSIS-RTOS priority of a task (higher runs first when several are due at once).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord)]
+pub enum Priority {
+    /// `osPriorityNormal` (24).
+    Normal = 24,
+    /// `osPriorityAboveNormal` (32).
+    AboveNormal = 32,
+    /// `osPriorityHigh` (40).
+    High = 40,
+}
+
+/// A periodic task: the timer id the firmware's `on_timer` is called with.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Task {
+    /// Timer id.
+    pub id: u8,
+    /// The report's thread name.
+    pub name: &'static str,
+    /// Priority.
+    pub priority: Priority,
+    /// Release period in ns.
+    pub period_ns: u64,
+}
+
+/// Timer id of the application task (SOES APP SDM: stack poll + process data).
+pub const TIMER_APP: u8 = 1;
+/// Timer id of the LED task.
+pub const TIMER_LED: u8 = 2;
+/// Timer id of the EtherCAT supervisor (ECAT SDM).
+pub const TIMER_SUPERVISOR: u8 = 3;
+/// Timer id of the temperature task.
+pub const TIMER_TEMP: u8 = 4;
+
+/// The periodic tasks in priority order (report Table 5.3 / Table 4.2). The event handler
+/// (AboveNormal, event driven) is not a timer: it runs after every task that posted.
+pub const TASKS: [Task; 4] = [
+    Task {
+        id: TIMER_APP,
+        name: "SOES APP SDM",
+        priority: Priority::AboveNormal,
+        period_ns: 10_000_000,
+    },
+    Task {
+        id: TIMER_LED,
+        name: "LED SDM",
+        priority: Priority::Normal,
+        period_ns: LED_PERIOD_MS as u64 * 1_000_000,
+    },
+    Task {
+        id: TIMER_SUPERVISOR,
+        name: "ECAT SDM",
+        priority: Priority::Normal,
+        period_ns: SUPERVISOR_PERIOD_MS as u64 * 1_000_000,
+    },
+    Task {
+        id: TIMER_TEMP,
+        name: "Temperature SDM",
+        priority: Priority::Normal,
+        period_ns: TEMP_PERIOD_MS as u64 * 1_000_000,
+    },
+];
+
+/// The supervisor's period (report: 100 ms in the connected state).
+pub const SUPERVISOR_PERIOD_MS: u32 = 100;
+/// No new outputs in OP for this long is communication loss.
+pub const QUIET_LIMIT_MS: u32 = 300;
+/// Consecutive failed PDI accesses that make the ESC "gone".
+pub const PDI_FAULT_LIMIT: u32 = 3;
+/// Time between attempts to restart the stack after a PDI fault.
+pub const RESTART_MS: u32 = 1000;
+
+#[derive(Debug, Clone, Copy)]
+struct HubIo {
+    temps: [Var<i16>; SENSORS],
+    status: Var<u32>,
+    event: Var<u16>,
+    error: Var<u16>,
+    cmd: [Var<u16>; 4],
+}
+
+impl HubIo {
+    fn resolve<const N: usize>(od: &Od<N>) -> Option<Self> {
+        let mut temps = [od.var(0x6000, 1).ok()?; SENSORS];
+        for (i, t) in temps.iter_mut().enumerate() {
+            *t = od.var(0x6000, i as u8 + 1).ok()?;
+        }
+        Some(Self {
+            temps,
+            status: od.var(0x6001, 1).ok()?,
+            event: od.var(0x6001, 2).ok()?,
+            error: od.var(0x6001, 3).ok()?,
+            cmd: [
+                od.var(0x7000, 1).ok()?,
+                od.var(0x7000, 2).ok()?,
+                od.var(0x7000, 3).ok()?,
+                od.var(0x7000, 4).ok()?,
+            ],
+        })
+    }
+}
+
+/// The hub application: temperature task, LED task, event handler and the process data.
+///
+/// The temperature task hands its readings to the application task **by value** through
+/// `temp_slot` (a one-element mailbox); see the module documentation for why this cannot
+/// race.
+pub struct HubApp<B: OneWireBus, L: LedStrip> {
+    /// System state and event handler.
+    pub sys: SystemState,
+    /// Temperature task state.
+    pub temp: TempTask,
+    /// LED task state.
+    pub led: LedTask,
+    /// The 1-Wire bus.
+    pub bus: B,
+    /// The LED strips.
+    pub strip: L,
+    temp_slot: Option<TempFrame>,
+    published: [i16; SENSORS],
+    last_cmd: [u16; 4],
+    /// The master's custom colour, if one is commanded.
+    pub custom: Option<Rgb>,
+    /// The node is in OP (kept by the state-change hook).
+    pub op: bool,
+    /// Application cycles run.
+    pub cycles: u32,
+    io: Option<HubIo>,
+}
+
+impl<B: OneWireBus, L: LedStrip> HubApp<B, L> {
+    /// The application on its hardware.
+    pub fn new(bus: B, strip: L) -> Self {
+        Self {
+            sys: SystemState::default(),
+            temp: TempTask::default(),
+            led: LedTask::default(),
+            bus,
+            strip,
+            temp_slot: None,
+            published: [TEMP_INVALID; SENSORS],
+            last_cmd: [0; 4],
+            custom: None,
+            op: false,
+            cycles: 0,
+            io: None,
+        }
+    }
+
+    /// The temperatures the process data carries (0.01 °C).
+    pub fn published(&self) -> &[i16; SENSORS] {
+        &self.published
+    }
+
+    fn command(&mut self, cmd: [u16; 4]) {
+        if cmd == self.last_cmd {
+            return;
+        }
+        self.last_cmd = cmd;
+        let [c, v0, v1, v2] = cmd;
+        let ok = match c {
+            device::CMD_NONE => return,
+            device::CMD_LED_CUSTOM => {
+                let b = |v: u16| v.min(255) as u8;
+                self.custom = Some(Rgb::new(b(v0), b(v1), b(v2)));
+                true
+            }
+            device::CMD_LED_AUTO => {
+                self.custom = None;
+                true
+            }
+            device::CMD_SET_THRESHOLD => {
+                self.temp.threshold = v0 as i16;
+                true
+            }
+            _ => false,
+        };
+        self.sys.post(if ok {
+            codes::EV_ECAT_CMD_ACK
+        } else {
+            codes::ERR_ECAT_CMD_SOFTFAULT
+        });
+    }
+}
+
+impl<const N: usize, B: OneWireBus, L: LedStrip> Application<N> for HubApp<B, L> {
+    fn state_change(
+        &mut self,
+        _from: AlState,
+        to: AlState,
+        _od: &mut Od<N>,
+    ) -> Result<(), AlStatusCode> {
+        self.op = to == AlState::Op;
+        Ok(())
+    }
+
+    fn safe_outputs(&mut self, _od: &mut Od<N>) {
+        self.custom = None;
+        self.last_cmd = [0; 4];
+    }
+
+    /// The application task's process-data step: take the newest temperature frame (the one
+    /// hand-over point), execute a changed master command, run the event handler, publish.
+    fn cycle(&mut self, od: &mut Od<N>) {
+        self.cycles = self.cycles.wrapping_add(1);
+        if self.io.is_none() {
+            self.io = HubIo::resolve(od);
+        }
+        let Some(io) = self.io else {
+            return;
+        };
+        if let Some(frame) = self.temp_slot.take() {
+            self.published = frame.values;
+        }
+        if self.op {
+            let cmd = io.cmd.map(|v| od.load(v));
+            self.command(cmd);
+        }
+        self.sys.handle_events();
+        for (v, &t) in io.temps.iter().zip(self.published.iter()) {
+            od.store(*v, t);
+        }
+        od.store(io.status, self.sys.word().0);
+        od.store(io.event, self.sys.last_event());
+        od.store(io.error, self.sys.active_error());
+    }
+
+    fn timer(&mut self, id: u8, _od: &mut Od<N>) {
+        self.run_task(id);
+    }
+}
+
+impl<B: OneWireBus, L: LedStrip> HubApp<B, L> {
+    /// One release of task `id` (temperature or LED), then the event handler.
+    pub fn run_task(&mut self, id: u8) {
+        match id {
+            TIMER_TEMP => {
+                if let Some(frame) = self.temp.run(&mut self.bus, &mut self.sys) {
+                    // Newest wins: an unread older frame is replaced, never half-written.
+                    self.temp_slot = Some(frame);
+                }
+            }
+            TIMER_LED => {
+                let shown = ws2812::choose(&self.sys, self.op, self.custom);
+                self.led.run(&mut self.strip, &mut self.sys, shown);
+            }
+            _ => {}
+        }
+        self.sys.handle_events();
+    }
+}
+
+/// The supervisor's view of the EtherCAT side.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum EcatPhase {
+    /// The ESC does not answer on the PDI; the stack is down and retried.
+    Fault,
+    /// The stack runs; the master has not lost us.
+    Connected,
+    /// Link down, SM watchdog expired, or no outputs in OP: communication lost.
+    CommLost,
+}
+
+/// The EtherCAT supervisor (ECAT SDM + the report's task manager).
+#[derive(Debug, Clone)]
+pub struct Supervisor {
+    /// Current phase.
+    pub phase: EcatPhase,
+    /// PDI accesses that failed (all time).
+    pub pdi_errors: u32,
+    /// Stack restarts after a PDI fault.
+    pub restarts: u32,
+    /// Times communication was lost.
+    pub losses: u32,
+    /// Port 0 link as DL status last showed it.
+    pub link_up: bool,
+    consecutive: u32,
+    fault_ms: u32,
+    last_outputs: u32,
+    quiet_ms: u32,
+    op_reported: bool,
+    was_op: bool,
+}
+
+impl Default for Supervisor {
+    fn default() -> Self {
+        Self {
+            phase: EcatPhase::Fault,
+            pdi_errors: 0,
+            restarts: 0,
+            losses: 0,
+            link_up: false,
+            consecutive: 0,
+            fault_ms: 0,
+            last_outputs: 0,
+            quiet_ms: 0,
+            op_reported: false,
+            was_op: false,
+        }
+    }
+}
+
+/// The hub's stack type on PDI `P`.
+pub type HubSlave<P> = Slave<P, IMAGE, MBX>;
+
+/// The firmware main: owns the slave stack (while the ESC answers) and the application,
+/// lends the PDI to the stack per event, and supervises the EtherCAT side. Nothing in it
+/// waits on an ESC register: every PDI access returns (the driver has a timeout) and a
+/// failed one is counted; [`PDI_FAULT_LIMIT`] in a row take the stack down and it is
+/// re-created every [`RESTART_MS`] until the ESC answers again — no MCU reset.
+pub struct HubFirmware<P: Pdi, B: OneWireBus, L: LedStrip> {
+    slave: Option<HubSlave<P>>,
+    /// The application.
+    pub app: HubApp<B, L>,
+    /// The supervisor.
+    pub sup: Supervisor,
+    /// The last PDI error.
+    pub last_pdi_error: Option<P::Error>,
+}
+
+impl<P: Pdi, B: OneWireBus, L: LedStrip> HubFirmware<P, B, L> {
+    /// Boots: starts the stack if the ESC answers (otherwise the supervisor retries).
+    pub fn new(pdi: &mut P, bus: B, strip: L) -> Self {
+        let mut fw = Self {
+            slave: None,
+            app: HubApp::new(bus, strip),
+            sup: Supervisor::default(),
+            last_pdi_error: None,
+        };
+        fw.app.sys.post(codes::EV_ECAT_DSM_INIT);
+        fw.start_stack(pdi);
+        fw.app.sys.handle_events();
+        fw
+    }
+
+    fn start_stack(&mut self, pdi: &mut P) {
+        match HubSlave::<P>::new(&device::DEF, pdi) {
+            Ok(s) => {
+                self.slave = Some(s);
+                self.sup.phase = EcatPhase::Connected;
+                self.sup.consecutive = 0;
+                self.sup.fault_ms = 0;
+                self.app.op = false;
+                self.app.sys.post(codes::EV_ECAT_ESC_INIT);
+            }
+            Err(e) => {
+                if let oxicat_slave::InitError::Pdi(e) = e {
+                    self.last_pdi_error = Some(e);
+                }
+                self.sup.pdi_errors = self.sup.pdi_errors.saturating_add(1);
+                if self.sup.phase != EcatPhase::Fault || self.sup.restarts == 0 {
+                    self.app.sys.post(codes::ERR_ECAT_TIMEOUT);
+                }
+                self.enter_fault();
+            }
+        }
+    }
+
+    fn enter_fault(&mut self) {
+        self.slave = None;
+        self.sup.phase = EcatPhase::Fault;
+        self.sup.fault_ms = 0;
+        self.app.op = false;
+        self.sup.op_reported = false;
+    }
+
+    /// The stack, while it runs.
+    pub fn slave(&self) -> Option<&HubSlave<P>> {
+        self.slave.as_ref()
+    }
+
+    fn note(&mut self, r: Result<(), P::Error>) {
+        match r {
+            Ok(()) => self.sup.consecutive = 0,
+            Err(e) => {
+                self.last_pdi_error = Some(e);
+                self.sup.pdi_errors = self.sup.pdi_errors.saturating_add(1);
+                self.sup.consecutive += 1;
+                if self.sup.consecutive >= PDI_FAULT_LIMIT && self.sup.phase != EcatPhase::Fault {
+                    self.app.sys.post(codes::ERR_ECAT_TIMEOUT);
+                    self.enter_fault();
+                    self.app.sys.handle_events();
+                }
+            }
+        }
+    }
+
+    /// Main-loop pass (mailbox, ESM; the free-run cycle).
+    pub fn poll(&mut self, pdi: &mut P) {
+        if let Some(s) = self.slave.as_mut() {
+            let r = s.poll(pdi, &mut self.app);
+            self.note(r);
+        }
+    }
+
+    /// PDI interrupt (SM-synchronous cycle).
+    pub fn on_pdi_irq(&mut self, pdi: &mut P) {
+        if let Some(s) = self.slave.as_mut() {
+            let r = s.on_pdi_irq(pdi, &mut self.app);
+            self.note(r);
+        }
+    }
+
+    /// SYNC0 (DC-synchronous cycle).
+    pub fn on_sync0(&mut self, pdi: &mut P) {
+        if let Some(s) = self.slave.as_mut() {
+            let r = s.on_sync0(pdi, &mut self.app);
+            self.note(r);
+        }
+    }
+
+    /// SYNC1.
+    pub fn on_sync1(&mut self, pdi: &mut P) {
+        if let Some(s) = self.slave.as_mut() {
+            let r = s.on_sync1(pdi, &mut self.app);
+            self.note(r);
+        }
+    }
+
+    /// Timer `id` of [`TASKS`] fired.
+    pub fn on_timer(&mut self, id: u8, pdi: &mut P) {
+        match id {
+            TIMER_APP => self.poll(pdi),
+            TIMER_SUPERVISOR => self.supervise(pdi),
+            // The tasks run with or without the stack (their data waits for it).
+            _ => self.app.run_task(id),
+        }
+    }
+
+    fn supervise(&mut self, pdi: &mut P) {
+        let Some(slave) = self.slave.as_ref() else {
+            self.sup.fault_ms += SUPERVISOR_PERIOD_MS;
+            if self.sup.fault_ms >= RESTART_MS {
+                self.sup.fault_ms = 0;
+                let before = self.sup.restarts;
+                self.sup.restarts += 1;
+                self.start_stack(pdi);
+                if self.slave.is_some() {
+                    self.app.sys.post(codes::EV_SOES_RESPAWNED);
+                } else {
+                    self.sup.restarts = before.saturating_add(1);
+                }
+            }
+            self.app.sys.handle_events();
+            return;
+        };
+        let state = slave.state();
+        let wd_error = slave.error_indicated() && slave.status_code() == AlStatusCode::SM_WATCHDOG;
+        let outputs = slave.stats().outputs;
+        let dl = pdi.read_u16(0x0110);
+        let dl = match dl {
+            Ok(v) => {
+                self.note(Ok(()));
+                v
+            }
+            Err(e) => {
+                self.note(Err(e));
+                return;
+            }
+        };
+        self.sup.link_up = dl & (1 << 4) != 0;
+        if state == AlState::Op && outputs != self.sup.last_outputs {
+            self.sup.quiet_ms = 0;
+        } else if state == AlState::Op {
+            self.sup.quiet_ms = self.sup.quiet_ms.saturating_add(SUPERVISOR_PERIOD_MS);
+        }
+        self.sup.last_outputs = outputs;
+        let lost = !self.sup.link_up
+            || wd_error
+            || (state == AlState::Op && self.sup.quiet_ms >= QUIET_LIMIT_MS);
+        let sys = &mut self.app.sys;
+        match self.sup.phase {
+            EcatPhase::Connected if lost && (self.sup.was_op || wd_error) => {
+                self.sup.phase = EcatPhase::CommLost;
+                self.sup.losses += 1;
+                self.sup.op_reported = false;
+                sys.post(codes::ERR_ECAT_COMM_LOST);
+            }
+            _ => {}
+        }
+        if state == AlState::Op && !lost && self.sup.quiet_ms == 0 && !self.sup.op_reported {
+            self.sup.phase = EcatPhase::Connected;
+            self.sup.op_reported = true;
+            sys.post(codes::EV_ECAT_APP_OP);
+        }
+        if self.sup.was_op && state != AlState::Op && self.sup.phase == EcatPhase::Connected {
+            self.sup.op_reported = false;
+            sys.post(if state == AlState::Init {
+                codes::EV_ECAT_APP_INIT
+            } else {
+                codes::EV_ECAT_APP_NOOP
+            });
+        }
+        self.sup.was_op = state == AlState::Op;
+        sys.handle_events();
+    }
+}
