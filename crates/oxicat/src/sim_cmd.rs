@@ -474,6 +474,15 @@ mod tests {
     }
 
     #[test]
+    fn laelaps_legs_boot_in_chain_order() {
+        let (seg, names) = build_segment(&parse_specs(&["laelaps-leg:4".into()]).unwrap()).unwrap();
+        assert_eq!(seg.len(), 4);
+        assert_eq!(summarize(&names), "laelaps-leg:4");
+        let l = status_line(&seg, 0.0);
+        assert!((0..4).all(|i| l.contains(&format!("{i}:INIT"))), "{l}");
+    }
+
+    #[test]
     fn status_shows_states() {
         let (seg, _) = build_segment(&parse_specs(&["demo:2".into()]).unwrap()).unwrap();
         let l = status_line(&seg, 2500.0);

@@ -54,6 +54,15 @@ pub fn sim_devices() -> Vec<SimDevice> {
             esc: EscConfig::et1100,
             attach: demo::attach_additions,
         },
+        SimDevice {
+            name: "laelaps-leg",
+            description: "Laelaps II leg node (F28379D + FB1111) driving its leg on the treadmill \
+                          (motors, gears, coupler, encoders); nodes in tower order HR HL FL FR, \
+                          each driving the opposite leg",
+            def: |k| oxicat_devices::laelaps::device::device(leg_of(k).side()),
+            esc: EscConfig::et1100,
+            attach: attach_laelaps_leg,
+        },
     ]
 }
 
@@ -95,6 +104,22 @@ pub fn add_node(
     let id = segment.add(Esc::new(cfg, sii));
     (dev.attach)(segment, id, k).map_err(NodeError::Attach)?;
     Ok(id)
+}
+
+/// The leg driven by `laelaps-leg` node `k` (the thesis' chain order, repeating).
+fn leg_of(k: usize) -> oxicat_sim::laelaps::LegId {
+    oxicat_sim::laelaps::chain_legs()[k % 4]
+}
+
+fn attach_laelaps_leg(segment: &mut Segment, id: SlaveId, k: usize) -> Result<(), AttachError> {
+    use oxicat_sim::laelaps::{attach_leg, RigConfig, RigError};
+    let leg = leg_of(k);
+    attach_leg(segment, id, leg, RigConfig::laelaps(leg))
+        .map(drop)
+        .map_err(|e| match e {
+            RigError::Topology(t) => AttachError::Topology(t),
+            RigError::Init(i) => AttachError::Init(i),
+        })
 }
 
 mod demo {
