@@ -14,6 +14,7 @@ pub use oxicat_slave as __slave;
 pub mod axis_hub;
 pub mod demo;
 pub mod laelaps;
+pub mod tue_es030;
 
 /// Declares process-data records and their PDOs in one table and generates, in the
 /// current module, `OBJECTS` (records, inputs then outputs, index order), `RX_PDOS`,

@@ -372,8 +372,9 @@ pub const fn image_size(objects: &[ObjectDef]) -> usize {
 
 /// Maximum PDOs per direction.
 pub const MAX_PDOS: usize = 8;
-/// Maximum entries per PDO mapping object.
-pub const MAX_PDO_ENTRIES: usize = 16;
+/// Maximum entries per PDO mapping object (the TUeES030's 0x1A00 maps 28; 31 keeps a
+/// mapping object, 1 + 4 × 31 bytes, within a 128-byte mailbox).
+pub const MAX_PDO_ENTRIES: usize = 31;
 /// Maximum PDOs in one assignment object.
 pub const MAX_ASSIGN: usize = 8;
 /// Maximum length of the 0x1008/0x1009/0x100A strings.
@@ -404,6 +405,21 @@ const MAP_NAMES: [&str; MAX_PDO_ENTRIES] = [
     "Mapped object 14",
     "Mapped object 15",
     "Mapped object 16",
+    "Mapped object 17",
+    "Mapped object 18",
+    "Mapped object 19",
+    "Mapped object 20",
+    "Mapped object 21",
+    "Mapped object 22",
+    "Mapped object 23",
+    "Mapped object 24",
+    "Mapped object 25",
+    "Mapped object 26",
+    "Mapped object 27",
+    "Mapped object 28",
+    "Mapped object 29",
+    "Mapped object 30",
+    "Mapped object 31",
 ];
 
 const ASSIGN_NAMES: [&str; MAX_ASSIGN] = [

@@ -87,7 +87,7 @@ fn complete_access() {
     let mut m = vec![2u8, 0];
     m.extend_from_slice(&0x7000_0210u32.to_le_bytes());
     m.extend_from_slice(&0x7000_0308u32.to_le_bytes());
-    m.extend(std::iter::repeat_n(0u8, 4 * 14));
+    m.extend(std::iter::repeat_n(0u8, 4 * 29));
     b.download(0x1600, 0, true, &m).unwrap();
     assert_eq!(b.upload(0x1600, 0, false).unwrap(), [2]);
     assert_eq!(
@@ -277,7 +277,7 @@ fn abort_codes_table() {
             "{v:#x}"
         );
     }
-    assert_eq!(abort_of(b.download(0x1600, 0, false, &[17])), 0x0609_0030);
+    assert_eq!(abort_of(b.download(0x1600, 0, false, &[32])), 0x0609_0030);
     // Fixed PDO mapping is read-only.
     assert_eq!(abort_of(b.download(0x1A00, 0, false, &[0])), 0x0601_0002);
     // Assigning a PDO of the wrong direction.

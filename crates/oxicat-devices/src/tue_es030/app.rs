@@ -1,0 +1,562 @@
+//! The TUeES030 application ([`TuEs030`]): `handle_RXPDO`/`handle_TXPDO` on every RxPDO
+//! (SM-synchronous), `i_handler_pwm` on the 20 kHz timer, `i_handler_ec` on the 1 kHz
+//! timer. Hardware only through the small traits below.
+
+use oxicat_slave::{AlState, AlStatusCode, Application, Od, Var};
+
+use super::control::q8mul;
+use super::control::{
+    param2int, phases, u2pwm, Motor, MotorParams, KILLVOLTAGE, R2IGAINCH1_Q8, R2IGAIN_Q8, R2U_FP,
+};
+use super::device::FRF_PER_CYCLE;
+use super::ring::Ring;
+
+/// Timer id of the 20 kHz current loop (`INTPWM` → `i_handler_pwm`).
+pub const CURRENT_TIMER: u8 = 0;
+/// Timer id of the 1 kHz service routine (`INTEC` → `i_handler_ec`).
+pub const SERVICE_TIMER: u8 = 1;
+
+/// Normal-mode `mcom` bit: controlled (public driver header: 0 braked, 1/3 controlled,
+/// 2 tristate).
+pub const MCOM_ENABLE: u8 = 0x01;
+/// Normal-mode `mcom` bit: tristate when not controlled.
+pub const MCOM_TRISTATE: u8 = 0x02;
+/// FRF `mcom` bits 0–1: motor channel (0-based, clamped to 2).
+pub const MCOM_FRF_MMASK: u8 = 0x03;
+/// FRF `mcom` bit 2: controlled.
+pub const MCOM_FRF_ENABLE: u8 = 0x04;
+/// FRF `mcom` bit 3: tristate.
+pub const MCOM_FRF_TRISTATE: u8 = 0x08;
+
+/// `mstate` bit 0: enabled.
+pub const MSTATE_ENABLED: u8 = 0x01;
+/// `mstate` bit 1: driver FAULT.
+pub const MSTATE_FAULT: u8 = 0x02;
+/// `mstate` bit 2: driver over-temperature warning.
+pub const MSTATE_OTW: u8 = 0x04;
+/// Digital input bit of `M1_FAULT` (derived from the firmware's shifts).
+pub const DI_M1_FAULT: u8 = 0x10;
+/// Digital input bit of `M1_OTW`.
+pub const DI_M1_OTW: u8 = 0x20;
+/// Digital input bit of `M2_M3_FAULT`.
+pub const DI_M23_FAULT: u8 = 0x40;
+/// Digital input bit of `M2_M3_OTW`.
+pub const DI_M23_OTW: u8 = 0x80;
+/// Internal digital output toggled by the service routine (`FRUN`), in the upper nibble
+/// the firmware keeps for itself.
+pub const DO_FRUN: u8 = 0x10;
+
+/// ADC2 channel of the line voltage.
+pub const ADC2_LINE: usize = 2;
+/// ADC2 channels of the motor currents 1..3.
+pub const ADC2_CURRENT: [usize; 3] = [3, 4, 5];
+/// ADC1 channels: hall positions 1..3 (0–2), forces 1..3 (3–5), analog 1..2 (6–7); the
+/// manual names the signals, not the channel order.
+pub const ADC1_POS: [usize; 3] = [0, 1, 2];
+/// ADC1 channels of the force sensors.
+pub const ADC1_FORCE: [usize; 3] = [3, 4, 5];
+/// ADC1 channels of the spare analog inputs.
+pub const ADC1_ANALOG: [usize; 2] = [6, 7];
+
+/// The PWM2ph3 comparators of one H-bridge and the DRV8412 enable (`set_drvena`).
+pub trait Bridges {
+    /// Sets phase A/B compare values (0..=PWMPER, taken at the counter's bottom) and the
+    /// driver enable of channel `ch` (0..3); `enable = false` is tristate.
+    fn set_bridge(&mut self, ch: usize, cmp_a: u16, cmp_b: u16, enable: bool);
+}
+
+/// The two multiplexed 12-bit ADCs (AS154x).
+pub trait Adcs {
+    /// ADC1 channel `ch` (0..8).
+    fn adc1(&mut self, ch: usize) -> u16;
+    /// ADC2 channel `ch` (0..8), sampled at the PWM counter's top.
+    fn adc2(&mut self, ch: usize) -> u16;
+}
+
+/// The three quadrature decoders.
+pub trait Encoders {
+    /// `ENCn_HOLD`: the count and its 40 MHz capture timestamp, latched together.
+    fn latch(&mut self, ch: usize) -> (u32, u32);
+}
+
+/// GPIO, the AD5722R DAC and the caliper UART.
+pub trait Io {
+    /// Digital inputs (driver FAULT/OTW lines in bits 4–7).
+    fn digin(&mut self) -> u8;
+    /// Digital outputs.
+    fn digout(&mut self, v: u8);
+    /// DAC channel `ch` (0..2), 12-bit code.
+    fn dac(&mut self, ch: usize, code: u16);
+    /// Caliper readings \[0.01 mm\].
+    fn calipers(&mut self) -> [u16; 2];
+}
+
+/// Everything the firmware touches.
+pub trait Board: Bridges + Adcs + Encoders + Io {}
+impl<T: Bridges + Adcs + Encoders + Io> Board for T {}
+
+/// Operation mode, from the PDO assignment.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum Mode {
+    /// `OPERATION_STD`: 0x1600 / 0x1A00.
+    #[default]
+    Normal,
+    /// `OPERATION_FRF`: 0x1601 / 0x1A01.
+    Frf,
+}
+
+#[derive(Debug, Clone, Copy)]
+struct NormalIo {
+    mcom: [Var<u8>; 3],
+    sp: [Var<i16>; 3],
+    ff: [Var<i16>; 3],
+    dig_out: Var<u8>,
+    aout: [Var<i16>; 2],
+    mstate: [Var<u8>; 3],
+    count: [Var<u32>; 3],
+    ts: [Var<u32>; 3],
+    vel: [Var<i16>; 3],
+    cur: [Var<i16>; 3],
+    dig_in: Var<u8>,
+    others: [Var<u16>; 12],
+}
+
+#[derive(Debug, Clone, Copy)]
+struct FrfIo {
+    mcom: Var<u8>,
+    entries: Var<u8>,
+    sp: [Var<i16>; FRF_PER_CYCLE],
+    mstate: Var<u8>,
+    buffer: Var<u8>,
+    entries_out: Var<u8>,
+    ectime: Var<u16>,
+    cur: [Var<i16>; FRF_PER_CYCLE],
+}
+
+fn arr<T: Copy, const K: usize>(f: impl Fn(usize) -> Option<T>) -> Option<[T; K]> {
+    let first = f(0)?;
+    let mut out = [first; K];
+    for (k, o) in out.iter_mut().enumerate() {
+        *o = f(k)?;
+    }
+    Some(out)
+}
+
+impl NormalIo {
+    fn resolve<const N: usize>(od: &Od<N>) -> Option<Self> {
+        let m = |k: usize| 0x7000 + k as u16;
+        let t = |k: usize| 0x6000 + k as u16;
+        Some(Self {
+            mcom: arr(|k| od.var(m(k), 1).ok())?,
+            sp: arr(|k| od.var(m(k), 2).ok())?,
+            ff: arr(|k| od.var(m(k), 3).ok())?,
+            dig_out: od.var(0x7010, 1).ok()?,
+            aout: arr(|k| od.var(0x7010, k as u8 + 2).ok())?,
+            mstate: arr(|k| od.var(t(k), 1).ok())?,
+            count: arr(|k| od.var(t(k), 2).ok())?,
+            ts: arr(|k| od.var(t(k), 3).ok())?,
+            vel: arr(|k| od.var(t(k), 4).ok())?,
+            cur: arr(|k| od.var(t(k), 5).ok())?,
+            dig_in: od.var(0x6010, 1).ok()?,
+            others: arr(|k| od.var(0x6010, k as u8 + 2).ok())?,
+        })
+    }
+}
+
+impl FrfIo {
+    fn resolve<const N: usize>(od: &Od<N>) -> Option<Self> {
+        Some(Self {
+            mcom: od.var(0x7020, 1).ok()?,
+            entries: od.var(0x7020, 2).ok()?,
+            sp: arr(|k| od.var(0x7020, k as u8 + 3).ok())?,
+            mstate: od.var(0x6020, 1).ok()?,
+            buffer: od.var(0x6020, 2).ok()?,
+            entries_out: od.var(0x6020, 3).ok()?,
+            ectime: od.var(0x6020, 4).ok()?,
+            cur: arr(|k| od.var(0x6021, k as u8 + 1).ok())?,
+        })
+    }
+}
+
+/// Counters for diagnostics.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct Counters {
+    /// Current-loop runs.
+    pub current_loops: u64,
+    /// Service-routine runs.
+    pub services: u64,
+    /// RxPDOs handled in OP.
+    pub rx_pdos: u64,
+    /// Current-loop runs with the line voltage above the kill threshold.
+    pub kills: u64,
+    /// FRF setpoints dropped because the buffer was full.
+    pub frf_dropped: u64,
+}
+
+/// The TUeES030 firmware.
+pub struct TuEs030<B: Board> {
+    /// The hardware.
+    pub board: B,
+    /// The three motor channels.
+    pub motors: [Motor; 3],
+    /// Motor parameters in SI (mirrors 0x8000–0x8002).
+    pub params: [MotorParams; 3],
+    /// Mode of the running PDO assignment.
+    pub mode: Mode,
+    /// FRF setpoints (master → current loop), `rx_buffer`.
+    pub rx: Ring,
+    /// FRF measured currents (current loop → master), `tx_buffer`.
+    pub tx: Ring,
+    /// FRF motor channel (0-based).
+    pub frf_channel: usize,
+    /// Line voltage \[10 mV\] (`linevoltage_i`).
+    pub linevoltage: i16,
+    /// The 1 kHz tick counter (`icnt`, reported as `ectime`).
+    pub icnt: u16,
+    /// What ran.
+    pub counters: Counters,
+    u2pwm: i32,
+    output: bool,
+    input: bool,
+    dostate: u8,
+    ledcnt: u16,
+    normal: Option<NormalIo>,
+    frf: Option<FrfIo>,
+}
+
+impl<B: Board> TuEs030<B> {
+    /// The firmware on `board`, parameters at the manual's defaults, motors braked.
+    pub fn new(board: B) -> Self {
+        let par = param2int(&MotorParams::DEFAULT);
+        let mut motors = [Motor::default(); 3];
+        for m in &mut motors {
+            m.par = par;
+        }
+        let mut s = Self {
+            board,
+            motors,
+            params: [MotorParams::DEFAULT; 3],
+            mode: Mode::Normal,
+            rx: Ring::new(),
+            tx: Ring::new(),
+            frf_channel: 0,
+            linevoltage: 2400,
+            icnt: 0,
+            counters: Counters::default(),
+            u2pwm: u2pwm(2400),
+            output: false,
+            input: false,
+            dostate: 0,
+            ledcnt: 0,
+            normal: None,
+            frf: None,
+        };
+        s.clear_pwm();
+        s
+    }
+
+    /// Outputs are live (`APPSTATE_OUTPUT`: OP).
+    pub fn outputs_active(&self) -> bool {
+        self.output
+    }
+
+    fn read_params<const N: usize>(&mut self, od: &Od<N>, k: usize) {
+        let i = 0x8000 + k as u16;
+        let d = MotorParams::DEFAULT;
+        let p = MotorParams {
+            r: od.get(i, 1).unwrap_or(d.r),
+            kv: od.get(i, 2).unwrap_or(d.kv),
+            pgain: od.get(i, 3).unwrap_or(d.pgain),
+            igain: od.get(i, 4).unwrap_or(d.igain),
+            ilimit: od.get(i, 5).unwrap_or(d.ilimit),
+            encdir: od.get(i, 6).unwrap_or(d.encdir),
+            encres: od.get(i, 7).unwrap_or(d.encres),
+            czero: od.get(i, 8).unwrap_or(d.czero),
+        };
+        self.params[k] = p;
+        self.motors[k].par = param2int(&p);
+    }
+
+    fn resolve<const N: usize>(&mut self, od: &Od<N>) {
+        if self.normal.is_none() {
+            self.normal = NormalIo::resolve(od);
+        }
+        if self.frf.is_none() {
+            self.frf = FrfIo::resolve(od);
+        }
+    }
+
+    /// Brakes every motor (50/50, drivers enabled), the `clear_PWM` of a stopped output.
+    fn clear_pwm(&mut self) {
+        let (a, b) = phases(0);
+        for ch in 0..3 {
+            self.board.set_bridge(ch, a, b, true);
+        }
+    }
+
+    fn stop_motors(&mut self) {
+        for m in &mut self.motors {
+            m.enabled = false;
+            m.tristate = false;
+            m.current_setpoint = 0;
+            m.setpoint_ff = 0;
+            m.idle();
+        }
+        self.rx.clear();
+        self.tx.clear();
+        self.clear_pwm();
+    }
+
+    fn mstate_bits(di: u8, fault: u8, otw: u8) -> u8 {
+        (if di & fault != 0 { MSTATE_FAULT } else { 0 })
+            | if di & otw != 0 { MSTATE_OTW } else { 0 }
+    }
+
+    /// `handle_RXPDO` (normal mode: `update_actuators`).
+    fn handle_rx_normal<const N: usize>(&mut self, od: &Od<N>, io: &NormalIo) {
+        for k in 0..3 {
+            let m = &mut self.motors[k];
+            m.current_setpoint = od.load(io.sp[k]);
+            m.setpoint_ff = od.load(io.ff[k]).clamp(
+                -super::control::MAXVOLTAGE as i16,
+                super::control::MAXVOLTAGE as i16,
+            );
+            let mcom = od.load(io.mcom[k]);
+            m.enabled = mcom & MCOM_ENABLE != 0;
+            m.tristate = mcom & MCOM_TRISTATE != 0;
+        }
+        let d = od.load(io.dig_out);
+        self.board.digout((d & 0x0F) | (self.dostate & 0xF0));
+        for k in 0..2 {
+            let code = (od.load(io.aout[k]) as i32 + 2048).clamp(0, 4095) as u16;
+            self.board.dac(k, code);
+        }
+    }
+
+    /// `handle_RXPDO` (FRF mode).
+    fn handle_rx_frf<const N: usize>(&mut self, od: &Od<N>, io: &FrfIo) {
+        let mcom = od.load(io.mcom);
+        self.frf_channel = ((mcom & MCOM_FRF_MMASK) as usize).min(2);
+        for m in &mut self.motors {
+            m.enabled = false;
+        }
+        let m = &mut self.motors[self.frf_channel];
+        m.enabled = mcom & MCOM_FRF_ENABLE != 0;
+        m.tristate = mcom & MCOM_FRF_TRISTATE != 0;
+        let count = (od.load(io.entries) as usize).min(FRF_PER_CYCLE);
+        for k in 0..count {
+            if self.rx.free() > 0 {
+                self.rx.write(od.load(io.sp[k]));
+            } else {
+                self.counters.frf_dropped += 1;
+            }
+        }
+    }
+
+    /// `handle_TXPDO` (normal mode).
+    fn handle_tx_normal<const N: usize>(&mut self, od: &mut Od<N>, io: &NormalIo) {
+        let di = self.board.digin();
+        let drv = [
+            Self::mstate_bits(di, DI_M1_FAULT, DI_M1_OTW),
+            Self::mstate_bits(di, DI_M23_FAULT, DI_M23_OTW),
+            Self::mstate_bits(di, DI_M23_FAULT, DI_M23_OTW),
+        ];
+        for k in 0..3 {
+            let m = &self.motors[k];
+            od.store(io.mstate[k], m.enabled as u8 | drv[k]);
+            od.store(io.count[k], m.position);
+            od.store(io.ts[k], m.poscaptime);
+            od.store(io.vel[k], m.velocity);
+            od.store(io.cur[k], m.current);
+        }
+        od.store(io.dig_in, di);
+        let cal = self.board.calipers();
+        let mut v = [0u16; 12];
+        v[0] = cal[0];
+        v[1] = cal[1];
+        for k in 0..3 {
+            v[2 + k] = self.board.adc1(ADC1_FORCE[k]);
+            v[5 + k] = self.board.adc1(ADC1_POS[k]);
+        }
+        v[8] = self.board.adc1(ADC1_ANALOG[0]);
+        v[9] = self.board.adc1(ADC1_ANALOG[1]);
+        v[10] = self.linevoltage.max(0) as u16;
+        v[11] = self.icnt;
+        for (var, x) in io.others.iter().zip(v) {
+            od.store(*var, x);
+        }
+    }
+
+    /// `handle_TXPDO` (FRF mode): up to 22 buffered currents per RxPDO.
+    fn handle_tx_frf<const N: usize>(&mut self, od: &mut Od<N>, io: &FrfIo) {
+        let mut n = 0;
+        while n < FRF_PER_CYCLE {
+            let Some(c) = self.tx.read() else { break };
+            od.store(io.cur[n], c);
+            n += 1;
+        }
+        for k in n..FRF_PER_CYCLE {
+            od.store(io.cur[k], 0);
+        }
+        // The listing stores the index of the last entry; we report the count (see README).
+        od.store(io.entries_out, n as u8);
+        let di = self.board.digin();
+        let en = self.motors.iter().any(|m| m.enabled) as u8;
+        od.store(
+            io.mstate,
+            en | Self::mstate_bits(di, DI_M1_FAULT, DI_M1_OTW)
+                | Self::mstate_bits(di, DI_M23_FAULT, DI_M23_OTW),
+        );
+        od.store(io.buffer, self.rx.len().min(255) as u8);
+        od.store(io.ectime, self.icnt);
+    }
+
+    /// `i_handler_pwm`: the 20 kHz current loop.
+    pub fn current_loop(&mut self) {
+        self.counters.current_loops += 1;
+        for k in 0..3 {
+            let raw = self.board.adc2(ADC2_CURRENT[k]) as i32;
+            let m = &mut self.motors[k];
+            let gain = if k == 0 { R2IGAINCH1_Q8 } else { R2IGAIN_Q8 };
+            m.current = q8mul(raw - m.par.czero, gain as i32);
+        }
+        if self.mode == Mode::Frf && self.output {
+            let ch = self.frf_channel;
+            match self.rx.read() {
+                Some(sp) => {
+                    self.motors[ch].current_setpoint = sp;
+                    self.tx.write(self.motors[ch].current);
+                }
+                None => self.motors[ch].current_setpoint = 0,
+            }
+        }
+        let u2pwm = self.u2pwm;
+        for m in &mut self.motors {
+            m.current_pi(u2pwm);
+        }
+        if self.board.adc2(ADC2_LINE) > KILLVOLTAGE {
+            self.counters.kills += 1;
+            for m in &mut self.motors {
+                m.enabled = false;
+            }
+        }
+        let output = self.output;
+        for ch in 0..3 {
+            let m = &mut self.motors[ch];
+            if !m.enabled {
+                m.idle();
+            }
+            let enable = m.enabled || !m.tristate;
+            let (a, b) = if output { phases(m.cc_pwm) } else { phases(0) };
+            self.board.set_bridge(ch, a, b, enable || !output);
+        }
+    }
+
+    /// `i_handler_ec`: the 1 kHz service routine.
+    pub fn service(&mut self) {
+        self.counters.services += 1;
+        self.icnt = self.icnt.wrapping_add(1);
+        for k in 0..3 {
+            let (pos, t) = self.board.latch(k);
+            let m = &mut self.motors[k];
+            m.position = pos;
+            m.poscaptime = t;
+            m.encoder_calculations();
+        }
+        let raw = self.board.adc2(ADC2_LINE) as i32;
+        self.linevoltage = q8mul(raw, R2U_FP as i32);
+        self.u2pwm = u2pwm(self.linevoltage as i32);
+        self.ledcnt = self.ledcnt.wrapping_add(1);
+        if self.ledcnt & 0x100 != 0 {
+            self.dostate ^= DO_FRUN;
+        }
+    }
+}
+
+impl<const N: usize, B: Board> Application<N> for TuEs030<B> {
+    fn state_change(
+        &mut self,
+        _from: AlState,
+        to: AlState,
+        od: &mut Od<N>,
+    ) -> Result<(), AlStatusCode> {
+        self.resolve(od);
+        match to {
+            AlState::SafeOp if !self.input => {
+                // `init_param` at the start of the application; the assignment decides the mode.
+                for k in 0..3 {
+                    self.read_params(od, k);
+                }
+                self.mode = match od.get::<u16>(0x1C12, 1) {
+                    Ok(0x1601) => Mode::Frf,
+                    _ => Mode::Normal,
+                };
+                self.rx.clear();
+                self.tx.clear();
+                self.input = true;
+            }
+            AlState::Op => self.output = true,
+            AlState::SafeOp => {}
+            _ => {
+                self.input = false;
+                self.output = false;
+                self.stop_motors();
+            }
+        }
+        Ok(())
+    }
+
+    fn safe_outputs(&mut self, od: &mut Od<N>) {
+        // Leaving OP or the watchdog: outputs stop, the motors brake.
+        self.output = false;
+        self.stop_motors();
+        for k in 0..3u16 {
+            let _ = od.set(0x7000 + k, 1, 0u8);
+            let _ = od.set(0x7000 + k, 2, 0i16);
+            let _ = od.set(0x7000 + k, 3, 0i16);
+        }
+        let _ = od.set(0x7010, 1, 0u8);
+        let _ = od.set(0x7020, 1, 0u8);
+        let _ = od.set(0x7020, 2, 0u8);
+    }
+
+    fn cycle(&mut self, od: &mut Od<N>) {
+        self.resolve(od);
+        match self.mode {
+            Mode::Normal => {
+                let Some(io) = self.normal else { return };
+                if self.output {
+                    self.counters.rx_pdos += 1;
+                    self.handle_rx_normal(od, &io);
+                }
+                if self.input {
+                    self.handle_tx_normal(od, &io);
+                }
+            }
+            Mode::Frf => {
+                let Some(io) = self.frf else { return };
+                if self.output {
+                    self.counters.rx_pdos += 1;
+                    self.handle_rx_frf(od, &io);
+                }
+                if self.input {
+                    self.handle_tx_frf(od, &io);
+                }
+            }
+        }
+    }
+
+    fn timer(&mut self, id: u8, _od: &mut Od<N>) {
+        match id {
+            CURRENT_TIMER => self.current_loop(),
+            SERVICE_TIMER => self.service(),
+            _ => {}
+        }
+    }
+
+    fn sdo_written(&mut self, index: u16, _sub: u8, od: &mut Od<N>) {
+        if (0x8000..=0x8002).contains(&index) {
+            self.read_params(od, (index - 0x8000) as usize);
+        }
+    }
+}

@@ -1,0 +1,354 @@
+//! The TUeES030's process data and parameters exactly as the manual lists them (Listings
+//! 4.11–4.15, Fig. 7.4), its [`DEF`], and the one place where PDO integers are named.
+//!
+//! | mode | RxPDO (0x1C12:01) | bytes | TxPDO (0x1C13:01) | bytes |
+//! |---|---|---|---|---|
+//! | normal (`OPERATION_STD`) | 0x1600: 0x7000–0x7002 (mcom, setpoint, ff) + 0x7010 (digital, aout1, aout2) | 20 | 0x1A00: 0x6000–0x6002 (mstate, count, timestamp, velocity, current) + 0x6010 (13 others) | 64 |
+//! | FRF (`OPERATION_FRF`) | 0x1601: 0x7020 (mcom, entries, setpoint\[22\]) | 46 | 0x1A01: 0x6020 (mstate, buffer, entries, ectime) + 0x6021 (current\[22\]) | 49 |
+//!
+//! The manual does not list the mapping objects' contents; the entries above are the
+//! records of its object dictionary (Fig. 7.4) in listing order, which give exactly the
+//! packed structs' byte layouts. The assignment is switched in PREOP (0x1C12/0x1C13
+//! writable; sub 0 to 0, sub 1, sub 0 to 1), as `ec_Set_TUeES030mode` does.
+//!
+//! Motor parameters 0x8000/0x8001/0x8002, subindex 1–8 (Listing 4.15, SOEMw Fig. 7.4):
+//! resistance \[Ω\] (REAL32, 0.61), KV \[V s/rad\] (REAL32, 0.03), CC p gain \[V/A\]
+//! (REAL32, 2.0), CC i gain \[V/As\] (REAL32, 2.0), CC i limit \[As\] (REAL32, 0.2),
+//! encoder direction (INT8, 1), encoder resolution (UINT16, 1024), current zero (INT16,
+//! 2168). 0x8040 "Internal voltages" has undocumented content and is left out.
+
+use oxicat_slave::device::{DeviceInfo, Group};
+use oxicat_slave::{
+    Access as A, DataType as T, DeviceDef, EntryDef as E, Identity, MailboxDef, ObjectCode,
+    ObjectDef, PdoDef, PdoEntry as PE, PdoMapping as M, SyncDef, SyncMode,
+};
+
+const SUB0: E = E::new(0, "SubIndex 000", T::Unsigned8, A::RO);
+
+const fn tx(sub: u8, name: &'static str, t: T) -> E {
+    E::new(sub, name, t, A::RO).pdo(M::Tx)
+}
+const fn rx(sub: u8, name: &'static str, t: T) -> E {
+    E::new(sub, name, t, A::RW).pdo(M::Rx)
+}
+
+/// FRF samples per cycle in each direction (`FRFBUFFERSIZE`).
+pub const FRF_PER_CYCLE: usize = 22;
+
+static NUMBERED: [&str; FRF_PER_CYCLE] = [
+    "1", "2", "3", "4", "5", "6", "7", "8", "9", "10", "11", "12", "13", "14", "15", "16", "17",
+    "18", "19", "20", "21", "22",
+];
+
+const fn motor_tx() -> [E; 6] {
+    [
+        SUB0,
+        tx(1, "State", T::Unsigned8),
+        tx(2, "Count", T::Unsigned32),
+        tx(3, "Timestamp", T::Unsigned32),
+        tx(4, "Velocity", T::Int16),
+        tx(5, "Current", T::Int16),
+    ]
+}
+static MOTOR_TX: [E; 6] = motor_tx();
+
+static OTHERS_TX: [E; 14] = [
+    SUB0,
+    tx(1, "Digital", T::Unsigned8),
+    tx(2, "Caliper1", T::Unsigned16),
+    tx(3, "Caliper2", T::Unsigned16),
+    tx(4, "Force1", T::Unsigned16),
+    tx(5, "Force2", T::Unsigned16),
+    tx(6, "Force3", T::Unsigned16),
+    tx(7, "Pos1", T::Unsigned16),
+    tx(8, "Pos2", T::Unsigned16),
+    tx(9, "Pos3", T::Unsigned16),
+    tx(10, "Analog1", T::Unsigned16),
+    tx(11, "Analog2", T::Unsigned16),
+    tx(12, "Linevoltage", T::Unsigned16),
+    tx(13, "Ectime", T::Unsigned16),
+];
+
+static SEQ_TX: [E; 5] = [
+    SUB0,
+    tx(1, "State", T::Unsigned8),
+    tx(2, "Buffer", T::Unsigned8),
+    tx(3, "Entries", T::Unsigned8),
+    tx(4, "Ectime", T::Unsigned16),
+];
+
+const fn current_buffer() -> [E; FRF_PER_CYCLE + 1] {
+    let mut out = [SUB0; FRF_PER_CYCLE + 1];
+    let mut i = 0;
+    while i < FRF_PER_CYCLE {
+        out[i + 1] = tx(i as u8 + 1, NUMBERED[i], T::Int16);
+        i += 1;
+    }
+    out
+}
+static CURRENT_BUF: [E; FRF_PER_CYCLE + 1] = current_buffer();
+
+static MOTOR_RX: [E; 4] = [
+    SUB0,
+    rx(1, "Mcom", T::Unsigned8),
+    rx(2, "Setpoint", T::Int16),
+    rx(3, "Ff", T::Int16),
+];
+
+static OTHERS_RX: [E; 4] = [
+    SUB0,
+    rx(1, "Digital", T::Unsigned8),
+    rx(2, "Aout1", T::Int16),
+    rx(3, "Aout2", T::Int16),
+];
+
+const fn sequencer_rx() -> [E; FRF_PER_CYCLE + 3] {
+    let mut out = [SUB0; FRF_PER_CYCLE + 3];
+    out[1] = rx(1, "Mcom", T::Unsigned8);
+    out[2] = rx(2, "Entries", T::Unsigned8);
+    let mut i = 0;
+    while i < FRF_PER_CYCLE {
+        out[i + 3] = rx(i as u8 + 3, NUMBERED[i], T::Int16);
+        i += 1;
+    }
+    out
+}
+static SEQ_RX: [E; FRF_PER_CYCLE + 3] = sequencer_rx();
+
+/// Manual defaults of one motor's parameters (Fig. 5.2 mask, Fig. 7.4 SOEMw).
+pub mod defaults {
+    /// Resistance \[Ω\].
+    pub const R: f32 = 0.61;
+    /// KV \[V s/rad\].
+    pub const KV: f32 = 0.03;
+    /// Current-loop P gain \[V/A\].
+    pub const P: f32 = 2.0;
+    /// Current-loop I gain (see [`super::super::control::param2int`]).
+    pub const I: f32 = 2.0;
+    /// Current-loop integrator limit \[A s\].
+    pub const ILIMIT: f32 = 0.2;
+    /// Encoder direction (±1).
+    pub const ENCDIR: i8 = 1;
+    /// Encoder resolution (lines per revolution).
+    pub const ENCRES: u16 = 1024;
+    /// Current zero (raw ADC counts, labelled "\[mA\]" in the OD).
+    pub const CZERO: i16 = 2168;
+}
+
+const fn params() -> [E; 9] {
+    use defaults::*;
+    [
+        SUB0.default_bits(8),
+        E::new(1, "Resistance [ohm]", T::Real32, A::RW).default_f32(R),
+        E::new(2, "KV [Vs/rad]", T::Real32, A::RW).default_f32(KV),
+        E::new(3, "CC p_gain [V/A]", T::Real32, A::RW).default_f32(P),
+        E::new(4, "CC i_gain [V/As]", T::Real32, A::RW).default_f32(I),
+        E::new(5, "CC i_limit [As]", T::Real32, A::RW).default_f32(ILIMIT),
+        E::new(6, "Encoder direction", T::Int8, A::RW)
+            .default_i64(ENCDIR as i64)
+            .range(-1, 1),
+        E::new(7, "Encoder resolution", T::Unsigned16, A::RW)
+            .default_bits(ENCRES as u64)
+            .range(1, 65535),
+        E::new(8, "Current zero [mA]", T::Int16, A::RW)
+            .default_i64(CZERO as i64)
+            .range(0, 4095),
+    ]
+}
+static PARAMS: [E; 9] = params();
+
+const fn rec(index: u16, name: &'static str, entries: &'static [E]) -> ObjectDef {
+    ObjectDef {
+        index,
+        name,
+        code: ObjectCode::Record,
+        entries,
+    }
+}
+
+/// Application objects: inputs 0x60xx, outputs 0x70xx, parameters 0x800x.
+pub static OBJECTS: &[ObjectDef] = &[
+    rec(0x6000, "TXPDO motor 1", &MOTOR_TX),
+    rec(0x6001, "TXPDO motor 2", &MOTOR_TX),
+    rec(0x6002, "TXPDO motor 3", &MOTOR_TX),
+    rec(0x6010, "TXPDO others", &OTHERS_TX),
+    rec(0x6020, "TXPDO sequencer", &SEQ_TX),
+    rec(0x6021, "TXPDO current buffer", &CURRENT_BUF),
+    rec(0x7000, "RXPDO motor 1", &MOTOR_RX),
+    rec(0x7001, "RXPDO motor 2", &MOTOR_RX),
+    rec(0x7002, "RXPDO motor 3", &MOTOR_RX),
+    rec(0x7010, "RXPDO others", &OTHERS_RX),
+    rec(0x7020, "RXPDO sequencer", &SEQ_RX),
+    rec(0x8000, "Motor 1 parameters", &PARAMS),
+    rec(0x8001, "Motor 2 parameters", &PARAMS),
+    rec(0x8002, "Motor 3 parameters", &PARAMS),
+];
+
+/// Object image size of [`OBJECTS`].
+pub const IMAGE: usize = oxicat_slave::image_size(OBJECTS);
+
+const MOTOR_TX_MAP: [(u8, u8); 5] = [(1, 8), (2, 32), (3, 32), (4, 16), (5, 16)];
+
+const fn pdo_1a00() -> [PE; 28] {
+    let mut out = [PE::new(0, 0, 0); 28];
+    let mut k = 0;
+    let mut m = 0;
+    while m < 3 {
+        let mut j = 0;
+        while j < 5 {
+            out[k] = PE::new(0x6000 + m, MOTOR_TX_MAP[j].0, MOTOR_TX_MAP[j].1);
+            k += 1;
+            j += 1;
+        }
+        m += 1;
+    }
+    out[k] = PE::new(0x6010, 1, 8);
+    k += 1;
+    let mut s = 2;
+    while s <= 13 {
+        out[k] = PE::new(0x6010, s, 16);
+        k += 1;
+        s += 1;
+    }
+    out
+}
+
+const fn pdo_1600() -> [PE; 12] {
+    let mut out = [PE::new(0, 0, 0); 12];
+    let mut m = 0;
+    while m < 4 {
+        let idx = if m < 3 { 0x7000 + m } else { 0x7010 };
+        let k = 3 * m as usize;
+        out[k] = PE::new(idx, 1, 8);
+        out[k + 1] = PE::new(idx, 2, 16);
+        out[k + 2] = PE::new(idx, 3, 16);
+        m += 1;
+    }
+    out
+}
+
+const fn pdo_1601() -> [PE; FRF_PER_CYCLE + 2] {
+    let mut out = [PE::new(0x7020, 1, 8); FRF_PER_CYCLE + 2];
+    out[1] = PE::new(0x7020, 2, 8);
+    let mut i = 0;
+    while i < FRF_PER_CYCLE {
+        out[i + 2] = PE::new(0x7020, i as u8 + 3, 16);
+        i += 1;
+    }
+    out
+}
+
+const fn pdo_1a01() -> [PE; FRF_PER_CYCLE + 4] {
+    let mut out = [PE::new(0x6020, 1, 8); FRF_PER_CYCLE + 4];
+    out[1] = PE::new(0x6020, 2, 8);
+    out[2] = PE::new(0x6020, 3, 8);
+    out[3] = PE::new(0x6020, 4, 16);
+    let mut i = 0;
+    while i < FRF_PER_CYCLE {
+        out[i + 4] = PE::new(0x6021, i as u8 + 1, 16);
+        i += 1;
+    }
+    out
+}
+
+static PDO_1600: [PE; 12] = pdo_1600();
+static PDO_1601: [PE; FRF_PER_CYCLE + 2] = pdo_1601();
+static PDO_1A00: [PE; 28] = pdo_1a00();
+static PDO_1A01: [PE; FRF_PER_CYCLE + 4] = pdo_1a01();
+
+/// RxPDOs: 0x1600 normal (20 bytes), 0x1601 FRF (46 bytes).
+pub static RX_PDOS: &[PdoDef] = &[
+    PdoDef {
+        index: 0x1600,
+        name: "RXPDO normal",
+        entries: &PDO_1600,
+        configurable: false,
+    },
+    PdoDef {
+        index: 0x1601,
+        name: "RXPDO FRF",
+        entries: &PDO_1601,
+        configurable: false,
+    },
+];
+
+/// TxPDOs: 0x1A00 normal (64 bytes), 0x1A01 FRF (49 bytes).
+pub static TX_PDOS: &[PdoDef] = &[
+    PdoDef {
+        index: 0x1A00,
+        name: "TXPDO normal",
+        entries: &PDO_1A00,
+        configurable: false,
+    },
+    PdoDef {
+        index: 0x1A01,
+        name: "TXPDO FRF",
+        entries: &PDO_1A01,
+        configurable: false,
+    },
+];
+
+/// Normal-mode output bytes (`rxpdo1_t`).
+pub const NORMAL_RX_BYTES: usize = 20;
+/// Normal-mode input bytes (`txpdo1_t`).
+pub const NORMAL_TX_BYTES: usize = 64;
+/// FRF-mode output bytes (`rxpdo2_t`).
+pub const FRF_RX_BYTES: usize = 46;
+/// FRF-mode input bytes (`txpdo2_t`).
+pub const FRF_TX_BYTES: usize = 49;
+
+/// ESI/SII description data.
+pub const INFO: DeviceInfo = DeviceInfo {
+    vendor_name: "TU Eindhoven, Control Systems Technology",
+    group: Group {
+        type_name: "TUeES030",
+        name: "TU/e motor I/O boards",
+    },
+    order_code: "TUeES030",
+    description: Some(
+        "TUeES030 motor I/O board (manual CST 2016.141): 3 current-controlled DC motor channels, \
+         encoders, ADC/DAC/digital I/O; normal and FRF PDO modes",
+    ),
+    mailbox_size_range: Some((34, 128)),
+    dc_modes: &[],
+    ebus_current_ma: 0,
+    ..DeviceInfo::DEFAULT
+};
+
+/// The device definition: the one source of OD, ESI and SII. Vendor ID: none is given in
+/// the manual; the ETG test range (as the other oxicat devices).
+pub static DEF: DeviceDef = DeviceDef {
+    identity: Identity {
+        vendor_id: crate::demo::VENDOR_ID,
+        product_code: 0x0000_E030,
+        revision: 1,
+        serial: 0,
+    },
+    device_type: 0x0000_0000,
+    name: "TUeES030",
+    hw_version: "TUeES030 (Spartan-6 soft core, ET1200)",
+    sw_version: env!("CARGO_PKG_VERSION"),
+    mailbox: MailboxDef {
+        rx_start: 0x1000,
+        rx_len: 128,
+        tx_start: 0x1080,
+        tx_len: 128,
+    },
+    boot_mailbox: None,
+    sm2_start: 0x1100,
+    sm3_start: 0x1180,
+    objects: OBJECTS,
+    rx_pdos: RX_PDOS,
+    tx_pdos: TX_PDOS,
+    rx_assign: &[0x1600],
+    tx_assign: &[0x1A00],
+    assign_configurable: true,
+    sync: SyncDef {
+        // The firmware handles outputs on the SM2 event (Listing 4.3): SM-synchronous.
+        supported: 0x0003,
+        default_mode: SyncMode::SmSync,
+        min_cycle_ns: 1_000_000,
+        calc_copy_ns: 0,
+    },
+    info: INFO,
+};
