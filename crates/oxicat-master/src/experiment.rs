@@ -27,7 +27,7 @@ use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
 use ethercrab::subdevice_group::DcConfiguration;
-use ethercrab::{DcSync, MainDevice, MainDeviceConfig, PduStorage, Timeouts};
+use ethercrab::{DcSync, MainDevice, MainDeviceConfig, PduStorage};
 use oxicat_devices::laelaps::device;
 use oxicat_esc::{Esc, EscConfig};
 use oxicat_sim::laelaps::{
@@ -425,17 +425,7 @@ pub fn run_trot(s: &Scenario, progress: &mut dyn FnMut(Progress)) -> Result<Trot
         .map_err(|_| MasterError::Usage("PDU storage already in use".into()))?;
     let md = MainDevice::new(
         pdu_loop,
-        // ethercrab's timeouts run in real time while the segment runs in virtual time,
-        // on a machine that may be busy: generous, so a loaded CI box cannot fail a run.
-        Timeouts {
-            wait_loop_delay: Duration::from_micros(100),
-            state_transition: Duration::from_secs(120),
-            pdu: Duration::from_secs(60),
-            eeprom: Duration::from_secs(60),
-            mailbox_echo: Duration::from_secs(60),
-            mailbox_response: Duration::from_secs(60),
-            ..Timeouts::default()
-        },
+        oxicat_sim::transport::virtual_timeouts(),
         MainDeviceConfig {
             dc_static_sync_iterations: 1000,
             ..MainDeviceConfig::default()

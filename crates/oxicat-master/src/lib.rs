@@ -20,6 +20,7 @@ pub mod plot;
 pub mod results;
 pub mod scenario;
 pub mod sii;
+pub mod tue_es030;
 pub mod value;
 
 use std::cell::Cell;
@@ -191,14 +192,7 @@ impl MasterOptions {
     pub fn for_link(link: &Link) -> Self {
         match link {
             Link::Sim(_) => Self {
-                timeouts: Timeouts {
-                    wait_loop_delay: Duration::from_micros(200),
-                    state_transition: Duration::from_secs(20),
-                    pdu: Duration::from_secs(2),
-                    mailbox_response: Duration::from_secs(5),
-                    eeprom: Duration::from_secs(2),
-                    ..Timeouts::default()
-                },
+                timeouts: oxicat_sim::transport::virtual_timeouts(),
                 mailbox_timeout: Duration::from_secs(5),
             },
             Link::Iface(_) => Self {

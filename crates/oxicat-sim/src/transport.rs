@@ -3,13 +3,13 @@
 //!
 //! ```no_run
 //! # use std::sync::{Arc, Mutex};
-//! # use ethercrab::{MainDevice, MainDeviceConfig, PduStorage, Timeouts};
-//! # use oxicat_sim::{segment::Segment, transport::spawn_inprocess};
+//! # use ethercrab::{MainDevice, MainDeviceConfig, PduStorage};
+//! # use oxicat_sim::{segment::Segment, transport::{spawn_inprocess, virtual_timeouts}};
 //! static PDU_STORAGE: PduStorage<16, 1100> = PduStorage::new();
 //! let segment: Arc<Mutex<Segment>> = Arc::new(Mutex::new(Segment::new()));
 //! let (tx, rx, pdu_loop) = PDU_STORAGE.try_split().expect("split once");
 //! let _thread = spawn_inprocess(segment.clone(), tx, rx);
-//! let maindevice = MainDevice::new(pdu_loop, Timeouts::default(), MainDeviceConfig::default());
+//! let maindevice = MainDevice::new(pdu_loop, virtual_timeouts(), MainDeviceConfig::default());
 //! ```
 
 use std::future::Future;
@@ -18,9 +18,28 @@ use std::sync::{Arc, Mutex};
 use std::task::{Context, Poll};
 use std::thread::JoinHandle;
 
-use ethercrab::{PduRx, PduTx};
+use ethercrab::{PduRx, PduTx, Timeouts};
 
 use crate::model::SegmentEsc;
+
+/// ethercrab timeouts for a master on a virtual segment.
+///
+/// ethercrab measures its timeouts in real time, while the segment answers in virtual
+/// time at once; on a busy host (a 2-core CI box compiling in parallel) its defaults —
+/// 10 ms for an EEPROM read — can expire although nothing is wrong. These are generous
+/// in every field, so only a real hang fails, and one definition serves every test and
+/// tool that drives a virtual segment.
+pub fn virtual_timeouts() -> Timeouts {
+    use std::time::Duration;
+    Timeouts {
+        wait_loop_delay: Duration::from_micros(200),
+        state_transition: Duration::from_secs(60),
+        pdu: Duration::from_secs(10),
+        eeprom: Duration::from_secs(10),
+        mailbox_echo: Duration::from_secs(10),
+        mailbox_response: Duration::from_secs(10),
+    }
+}
 use crate::segment::Segment;
 
 /// Why the in-process transport stopped.

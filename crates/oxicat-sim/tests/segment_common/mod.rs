@@ -114,10 +114,5 @@ pub fn real_segment() -> Segment {
 /// ethercrab timeouts for a loaded test machine: the segment answers at once, but the
 /// host may be busy (real-time timeouts are not what these tests are about).
 pub fn timeouts() -> ethercrab::Timeouts {
-    ethercrab::Timeouts {
-        pdu: std::time::Duration::from_secs(2),
-        eeprom: std::time::Duration::from_secs(2),
-        state_transition: std::time::Duration::from_secs(20),
-        ..ethercrab::Timeouts::default()
-    }
+    oxicat_sim::transport::virtual_timeouts()
 }

@@ -8,7 +8,6 @@
 #![allow(dead_code)]
 
 use std::sync::{Arc, Mutex};
-use std::time::Duration;
 
 use ethercrab::{MainDeviceConfig, Timeouts};
 use oxicat_esc::{Esc, EscConfig};
@@ -527,13 +526,7 @@ pub fn flex_segment() -> (Arc<Mutex<Segment>>, Vec<Fw>) {
 
 /// ethercrab timeouts for the virtual segment (ethercrab waits in real time).
 pub fn timeouts() -> Timeouts {
-    Timeouts {
-        wait_loop_delay: Duration::from_micros(200),
-        state_transition: Duration::from_secs(20),
-        pdu: Duration::from_secs(2),
-        mailbox_response: Duration::from_secs(5),
-        ..Timeouts::default()
-    }
+    oxicat_sim::transport::virtual_timeouts()
 }
 
 /// ethercrab configuration: fewer static drift iterations than the default 10 000.
