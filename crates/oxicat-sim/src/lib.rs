@@ -6,6 +6,7 @@
 #![forbid(unsafe_code)]
 #![warn(missing_docs)]
 
+pub mod axis_hub;
 pub mod capture;
 pub mod firmware;
 pub mod laelaps;

@@ -403,12 +403,14 @@ impl<P: Pdi, B: OneWireBus, L: LedStrip> HubFirmware<P, B, L> {
         }
     }
 
-    /// PDI interrupt (SM-synchronous cycle).
+    /// PDI interrupt: the SM-synchronous cycle, then the ESM/mailbox work the interrupt
+    /// announces (an AL control write is handled at once, not at the next poll).
     pub fn on_pdi_irq(&mut self, pdi: &mut P) {
         if let Some(s) = self.slave.as_mut() {
             let r = s.on_pdi_irq(pdi, &mut self.app);
             self.note(r);
         }
+        self.poll(pdi);
     }
 
     /// SYNC0 (DC-synchronous cycle).
