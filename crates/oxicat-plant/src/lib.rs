@@ -29,6 +29,7 @@
 pub mod encoder;
 pub mod gear;
 pub mod motor;
+pub mod re30;
 pub mod onewire;
 pub mod thermal;
 pub mod ws2812;

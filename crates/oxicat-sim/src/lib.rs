@@ -17,3 +17,4 @@ pub mod pcapng;
 pub mod realtime;
 pub mod segment;
 pub mod transport;
+pub mod tue_es030;

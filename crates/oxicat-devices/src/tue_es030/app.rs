@@ -216,6 +216,7 @@ pub struct TuEs030<B: Board> {
     /// What ran.
     pub counters: Counters,
     u2pwm: i32,
+    killed: bool,
     output: bool,
     input: bool,
     dostate: u8,
@@ -244,6 +245,7 @@ impl<B: Board> TuEs030<B> {
             icnt: 0,
             counters: Counters::default(),
             u2pwm: u2pwm(2400),
+            killed: false,
             output: false,
             input: false,
             dostate: 0,
@@ -322,7 +324,8 @@ impl<B: Board> TuEs030<B> {
                 super::control::MAXVOLTAGE as i16,
             );
             let mcom = od.load(io.mcom[k]);
-            m.enabled = mcom & MCOM_ENABLE != 0;
+            // The kill holds while the line voltage stays above the threshold.
+            m.enabled = mcom & MCOM_ENABLE != 0 && !self.killed;
             m.tristate = mcom & MCOM_TRISTATE != 0;
         }
         let d = od.load(io.dig_out);
@@ -341,7 +344,7 @@ impl<B: Board> TuEs030<B> {
             m.enabled = false;
         }
         let m = &mut self.motors[self.frf_channel];
-        m.enabled = mcom & MCOM_FRF_ENABLE != 0;
+        m.enabled = mcom & MCOM_FRF_ENABLE != 0 && !self.killed;
         m.tristate = mcom & MCOM_FRF_TRISTATE != 0;
         let count = (od.load(io.entries) as usize).min(FRF_PER_CYCLE);
         for k in 0..count {
@@ -434,7 +437,8 @@ impl<B: Board> TuEs030<B> {
         for m in &mut self.motors {
             m.current_pi(u2pwm);
         }
-        if self.board.adc2(ADC2_LINE) > KILLVOLTAGE {
+        self.killed = self.board.adc2(ADC2_LINE) > KILLVOLTAGE;
+        if self.killed {
             self.counters.kills += 1;
             for m in &mut self.motors {
                 m.enabled = false;

@@ -1,0 +1,712 @@
+//! The TUeES030 from the master, what the manual's Simulink S-functions and `ec.c` do:
+//! switch the PDO mode (`ec_Set_TUeES030mode`: PRE-OP, reassign 0x1C12/0x1C13, back to
+//! OP), write and read back the motor parameters (`ec_Set_TUeES030params`), run the normal
+//! 1 kHz cycle (`ec_TU_ES_030`), and the FRF experiment (`ec_TU_ES_030FRF`): stream a
+//! current excitation at up to 22 setpoints per 1 ms cycle with the manual's buffer-level
+//! flow control (22 below 50 queued, 20 at 50, 18 above), record the measured currents,
+//! check that none was lost, and compute the closed-loop frequency response at the
+//! excitation lines (own DFT), with bandwidth and phase margin, and Bode plots.
+
+use std::path::{Path, PathBuf};
+
+use crate::cyclic::{CycleOptions, Flow};
+use crate::{Link, Master, MasterError};
+
+/// PDO mode of the board.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum TueMode {
+    /// 0x1600 / 0x1A00 (`mode` 1).
+    Normal,
+    /// 0x1601 / 0x1A01 (`mode` 2).
+    Frf,
+}
+
+impl TueMode {
+    /// (RxPDO, TxPDO) mapping indices.
+    pub const fn pdos(self) -> (u16, u16) {
+        match self {
+            TueMode::Normal => (0x1600, 0x1A00),
+            TueMode::Frf => (0x1601, 0x1A01),
+        }
+    }
+}
+
+/// The motor parameters of the three channels, as the Simulink mask holds them.
+#[derive(Debug, Clone, PartialEq)]
+pub struct TueParams {
+    /// Resistance \[Ω\] (sub 1).
+    pub r: [f32; 3],
+    /// KV \[V s/rad\] (sub 2).
+    pub kv: [f32; 3],
+    /// P gain \[V/A\] (sub 3).
+    pub pgain: [f32; 3],
+    /// I gain (sub 4).
+    pub igain: [f32; 3],
+    /// Integrator limit \[A s\] (sub 5).
+    pub ilimit: [f32; 3],
+    /// Encoder direction (sub 6).
+    pub encdir: [i8; 3],
+    /// Encoder resolution (sub 7).
+    pub encres: [u16; 3],
+    /// Current zero (sub 8).
+    pub czero: [i16; 3],
+}
+
+impl Default for TueParams {
+    /// The Simulink mask defaults (manual Fig. 5.2).
+    fn default() -> Self {
+        Self {
+            r: [0.61; 3],
+            kv: [0.03; 3],
+            pgain: [2.0; 3],
+            igain: [2.0; 3],
+            ilimit: [0.2; 3],
+            encdir: [1; 3],
+            encres: [1024; 3],
+            czero: [2168; 3],
+        }
+    }
+}
+
+impl TueParams {
+    fn encode(&self, k: usize, sub: u8) -> Vec<u8> {
+        match sub {
+            1 => self.r[k].to_le_bytes().to_vec(),
+            2 => self.kv[k].to_le_bytes().to_vec(),
+            3 => self.pgain[k].to_le_bytes().to_vec(),
+            4 => self.igain[k].to_le_bytes().to_vec(),
+            5 => self.ilimit[k].to_le_bytes().to_vec(),
+            6 => self.encdir[k].to_le_bytes().to_vec(),
+            7 => self.encres[k].to_le_bytes().to_vec(),
+            _ => self.czero[k].to_le_bytes().to_vec(),
+        }
+    }
+
+    fn decode(&mut self, k: usize, sub: u8, b: &[u8]) -> Result<(), MasterError> {
+        let bad = || MasterError::Usage(format!("0x{:04X}:{sub}: short reply", 0x8000 + k));
+        let f =
+            |b: &[u8]| -> Option<f32> { Some(f32::from_le_bytes(b.get(..4)?.try_into().ok()?)) };
+        match sub {
+            1 => self.r[k] = f(b).ok_or_else(bad)?,
+            2 => self.kv[k] = f(b).ok_or_else(bad)?,
+            3 => self.pgain[k] = f(b).ok_or_else(bad)?,
+            4 => self.igain[k] = f(b).ok_or_else(bad)?,
+            5 => self.ilimit[k] = f(b).ok_or_else(bad)?,
+            6 => self.encdir[k] = *b.first().ok_or_else(bad)? as i8,
+            7 => {
+                self.encres[k] =
+                    u16::from_le_bytes(b.get(..2).ok_or_else(bad)?.try_into().map_err(|_| bad())?)
+            }
+            _ => {
+                self.czero[k] =
+                    i16::from_le_bytes(b.get(..2).ok_or_else(bad)?.try_into().map_err(|_| bad())?)
+            }
+        }
+        Ok(())
+    }
+}
+
+/// Normal-mode inputs of one cycle (`txpdo1_t`, 64 bytes).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct NormalIn {
+    /// mstate per motor (bit 0 enabled, 1 fault, 2 OTW).
+    pub mstate: [u8; 3],
+    /// Encoder counts.
+    pub count: [u32; 3],
+    /// Encoder timestamps (40 MHz).
+    pub timestamp: [u32; 3],
+    /// Velocity \[0.1 rad/s\].
+    pub velocity: [i16; 3],
+    /// Current \[mA\].
+    pub current: [i16; 3],
+    /// Digital inputs.
+    pub digital: u8,
+    /// caliper1, caliper2, force1..3, pos1..3, analog1..2.
+    pub analog: [u16; 10],
+    /// Line voltage \[10 mV\].
+    pub linevoltage: u16,
+    /// 1 kHz tick counter.
+    pub ectime: u16,
+}
+
+fn u16at(b: &[u8], o: usize) -> u16 {
+    b.get(o..o + 2)
+        .map(|x| u16::from_le_bytes([x[0], x[1]]))
+        .unwrap_or(0)
+}
+fn u32at(b: &[u8], o: usize) -> u32 {
+    b.get(o..o + 4)
+        .map(|x| u32::from_le_bytes([x[0], x[1], x[2], x[3]]))
+        .unwrap_or(0)
+}
+
+impl NormalIn {
+    /// Decodes the 64-byte input image (short images read as zeros).
+    pub fn decode(b: &[u8]) -> Self {
+        let mut s = Self::default();
+        for k in 0..3 {
+            let o = 13 * k;
+            s.mstate[k] = b.get(o).copied().unwrap_or(0);
+            s.count[k] = u32at(b, o + 1);
+            s.timestamp[k] = u32at(b, o + 5);
+            s.velocity[k] = u16at(b, o + 9) as i16;
+            s.current[k] = u16at(b, o + 11) as i16;
+        }
+        s.digital = b.get(39).copied().unwrap_or(0);
+        for j in 0..10 {
+            s.analog[j] = u16at(b, 40 + 2 * j);
+        }
+        s.linevoltage = u16at(b, 60);
+        s.ectime = u16at(b, 62);
+        s
+    }
+}
+
+/// Normal-mode outputs (`rxpdo1_t`, 20 bytes).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct NormalOut {
+    /// mcom per motor (0 braked, 1 controlled, 2 tristate).
+    pub mcom: [u8; 3],
+    /// Current setpoints \[mA\].
+    pub setpoint: [i16; 3],
+    /// Voltage feed-forward \[10 mV\].
+    pub ff: [i16; 3],
+    /// Digital outputs (bits 0–3).
+    pub digital: u8,
+    /// DAC outputs (−2048..2047).
+    pub aout: [i16; 2],
+}
+
+impl NormalOut {
+    /// Encodes into the 20-byte output image.
+    pub fn encode(&self, b: &mut [u8]) {
+        if b.len() < 20 {
+            return;
+        }
+        for k in 0..3 {
+            let o = 5 * k;
+            b[o] = self.mcom[k];
+            b[o + 1..o + 3].copy_from_slice(&self.setpoint[k].to_le_bytes());
+            b[o + 3..o + 5].copy_from_slice(&self.ff[k].to_le_bytes());
+        }
+        b[15] = self.digital;
+        b[16..18].copy_from_slice(&self.aout[0].to_le_bytes());
+        b[18..20].copy_from_slice(&self.aout[1].to_le_bytes());
+    }
+}
+
+const FRF_N: usize = 22;
+
+/// Reads the running assignment (0x1C12:01, 0x1C13:01).
+pub fn mode(m: &Master, position: usize) -> Result<Option<TueMode>, MasterError> {
+    let rx = m.sdo_upload(position, 0x1C12, 1)?;
+    let tx = m.sdo_upload(position, 0x1C13, 1)?;
+    let (rx, tx) = (u16at(&rx, 0), u16at(&tx, 0));
+    Ok([TueMode::Normal, TueMode::Frf]
+        .into_iter()
+        .find(|md| md.pdos() == (rx, tx)))
+}
+
+/// `ec_Set_TUeES030mode`: if the board is not in `target`, brings the slaves to PRE-OP,
+/// writes 0x1C12/0x1C13 (sub 0 = 0, sub 1, sub 0 = 1), reads them back, and opens a new
+/// master on `link` (ethercrab's group is configured once, so "remap" is a new discovery;
+/// the board keeps its assignment through INIT). Returns the master to use and whether
+/// it switched. The next cyclic run brings the slaves to SAFE-OP and OP with the new
+/// process data.
+pub fn set_mode(
+    link: &Link,
+    mut m: Master,
+    position: usize,
+    target: TueMode,
+) -> Result<(Master, bool), MasterError> {
+    if mode(&m, position)? == Some(target) {
+        log::info!("slave {position} is already in the correct mode");
+        return Ok((m, false));
+    }
+    let all: Vec<usize> = (0..m.len()).collect();
+    m.request_state(&all, crate::AlState::PreOp)?;
+    let (rx, tx) = target.pdos();
+    m.sdo_download(position, 0x1C12, 0, &[0])?;
+    m.sdo_download(position, 0x1C12, 1, &rx.to_le_bytes())?;
+    m.sdo_download(position, 0x1C12, 0, &[1])?;
+    m.sdo_download(position, 0x1C13, 0, &[0])?;
+    m.sdo_download(position, 0x1C13, 1, &tx.to_le_bytes())?;
+    m.sdo_download(position, 0x1C13, 0, &[1])?;
+    if mode(&m, position)? != Some(target) {
+        return Err(MasterError::Usage(format!(
+            "slave {position} did not switch mode"
+        )));
+    }
+    drop(m);
+    let m = Master::open(link.clone())?;
+    Ok((m, true))
+}
+
+/// `ec_Set_TUeES030params` for every subindex 1–8: writes each channel's value and reads
+/// it back; returns what the board holds afterwards.
+pub fn write_params(m: &Master, position: usize, p: &TueParams) -> Result<TueParams, MasterError> {
+    let mut back = p.clone();
+    for sub in 1..=8u8 {
+        for k in 0..3 {
+            let idx = 0x8000 + k as u16;
+            m.sdo_download(position, idx, sub, &p.encode(k, sub))?;
+            let b = m.sdo_upload(position, idx, sub)?;
+            back.decode(k, sub, &b)?;
+        }
+    }
+    Ok(back)
+}
+
+/// Reads the motor parameters.
+pub fn read_params(m: &Master, position: usize) -> Result<TueParams, MasterError> {
+    let mut p = TueParams::default();
+    for sub in 1..=8u8 {
+        for k in 0..3 {
+            let b = m.sdo_upload(position, 0x8000 + k as u16, sub)?;
+            p.decode(k, sub, &b)?;
+        }
+    }
+    Ok(p)
+}
+
+/// One normal-mode cycle as recorded.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct NormalRow {
+    /// Cycle.
+    pub cycle: u64,
+    /// Time \[s\].
+    pub time: f64,
+    /// What came back.
+    pub input: NormalIn,
+    /// What was sent.
+    pub output: NormalOut,
+}
+
+/// The normal 1 kHz cycle: `control(cycle, inputs)` gives the outputs of the next cycle;
+/// runs `cycles` cycles in OP and records every one.
+pub fn run_normal(
+    m: &mut Master,
+    position: usize,
+    cycles: u64,
+    mut control: impl FnMut(u64, &NormalIn) -> NormalOut,
+) -> Result<Vec<NormalRow>, MasterError> {
+    let mut rows = Vec::with_capacity(cycles as usize);
+    m.run_cyclic(CycleOptions::default(), |io| {
+        let inp = NormalIn::decode(io.inputs.get(position).map(|v| &v[..]).unwrap_or(&[]));
+        let out = control(io.cycle, &inp);
+        if let Some(o) = io.outputs.get_mut(position) {
+            out.encode(o);
+        }
+        rows.push(NormalRow {
+            cycle: io.cycle,
+            time: io.time_ns as f64 * 1e-9,
+            input: inp,
+            output: out,
+        });
+        Ok(if io.cycle + 1 >= cycles {
+            Flow::Stop
+        } else {
+            Flow::Continue
+        })
+    })?;
+    Ok(rows)
+}
+
+/// CSV of a normal-mode run: cycle, time, then per motor mcom, setpoint, count, velocity,
+/// current, and the line voltage.
+pub fn normal_csv(rows: &[NormalRow]) -> String {
+    let mut s = String::from("cycle,time [s]");
+    for k in 1..=3 {
+        s += &format!(
+            ",mcom{k},setpoint{k} [mA],count{k},timestamp{k},velocity{k} [0.1 rad/s],current{k} [mA]"
+        );
+    }
+    s += ",linevoltage [10 mV],ectime\n";
+    for r in rows {
+        s += &format!("{},{:.6}", r.cycle, r.time);
+        for k in 0..3 {
+            s += &format!(
+                ",{},{},{},{},{},{}",
+                r.output.mcom[k],
+                r.output.setpoint[k],
+                r.input.count[k],
+                r.input.timestamp[k],
+                r.input.velocity[k],
+                r.input.current[k]
+            );
+        }
+        s += &format!(",{},{}\n", r.input.linevoltage, r.input.ectime);
+    }
+    s
+}
+
+/// The manual's flow control: entries to send for the fill level `buf`.
+pub const fn frf_entries(buf: u8) -> usize {
+    if buf < 50 {
+        22
+    } else if buf == 50 {
+        20
+    } else {
+        18
+    }
+}
+
+/// An FRF run.
+#[derive(Debug, Clone, PartialEq)]
+pub struct FrfRun {
+    /// Setpoints sent \[mA\] (20 kHz samples).
+    pub setpoints: Vec<i16>,
+    /// Currents received \[mA\], one per consumed setpoint.
+    pub currents: Vec<i16>,
+    /// Buffer fill level reported each cycle.
+    pub buffer: Vec<u8>,
+    /// Cycles run.
+    pub cycles: u64,
+}
+
+impl FrfRun {
+    /// True when as many currents came back as setpoints were sent.
+    pub fn complete(&self) -> bool {
+        self.currents.len() == self.setpoints.len()
+    }
+}
+
+/// Streams `setpoints` to motor `channel` (0-based) in FRF mode (`mcom` = channel |
+/// enable), with the manual's flow control, and collects the measured currents.
+pub fn run_frf(
+    m: &mut Master,
+    position: usize,
+    channel: u8,
+    setpoints: &[i16],
+    progress: &mut dyn FnMut(usize, usize),
+) -> Result<FrfRun, MasterError> {
+    let n = setpoints.len();
+    let warm = 10u64;
+    let limit = warm + (n as u64) / 18 + 200;
+    let mut run = FrfRun {
+        setpoints: setpoints.to_vec(),
+        currents: Vec::with_capacity(n),
+        buffer: Vec::new(),
+        cycles: 0,
+    };
+    let mut sent = 0usize;
+    let mcom = (channel & 0x03) | 0x04;
+    m.run_cyclic(CycleOptions::default(), |io| {
+        let inp = io.inputs.get(position).cloned().unwrap_or_default();
+        let buf = inp.get(1).copied().unwrap_or(0);
+        let got = (inp.get(2).copied().unwrap_or(0) as usize).min(FRF_N);
+        if io.cycle >= warm {
+            for j in 0..got {
+                run.currents.push(u16at(&inp, 5 + 2 * j) as i16);
+            }
+            run.buffer.push(buf);
+        }
+        let go = io.cycle >= warm;
+        let entries = if go {
+            frf_entries(buf).min(n - sent)
+        } else {
+            0
+        };
+        if let Some(o) = io.outputs.get_mut(position) {
+            if o.len() >= 46 {
+                o[0] = mcom;
+                o[1] = entries as u8;
+                for j in 0..FRF_N {
+                    let v = if j < entries { setpoints[sent + j] } else { 0 };
+                    o[2 + 2 * j..4 + 2 * j].copy_from_slice(&v.to_le_bytes());
+                }
+            }
+        }
+        sent += entries;
+        run.cycles = io.cycle + 1;
+        progress(run.currents.len(), n);
+        Ok(if run.currents.len() >= n || io.cycle >= limit {
+            Flow::Stop
+        } else {
+            Flow::Continue
+        })
+    })?;
+    Ok(run)
+}
+
+/// A multisine: `periods` periods of `period` samples at 20 kHz, lines log-spaced between
+/// `f_lo` and `f_hi` (distinct DFT bins), Schroeder phases, peak-normalised to `amp_ma`.
+/// Returns the samples and the excited bins.
+pub fn multisine(
+    period: usize,
+    periods: usize,
+    f_lo: f64,
+    f_hi: f64,
+    lines: usize,
+    amp_ma: f64,
+) -> (Vec<i16>, Vec<usize>) {
+    let fs = 20_000.0;
+    let df = fs / period as f64;
+    let mut bins: Vec<usize> = (0..lines)
+        .map(|j| {
+            let f = f_lo * (f_hi / f_lo).powf(j as f64 / (lines.max(2) - 1) as f64);
+            ((f / df).round() as usize).clamp(1, period / 2 - 1)
+        })
+        .collect();
+    bins.dedup();
+    let nl = bins.len() as f64;
+    let one: Vec<f64> = (0..period)
+        .map(|t| {
+            bins.iter()
+                .enumerate()
+                .map(|(j, &b)| {
+                    let ph = -std::f64::consts::PI * (j as f64) * (j as f64 + 1.0) / nl;
+                    (2.0 * std::f64::consts::PI * b as f64 * t as f64 / period as f64 + ph).cos()
+                })
+                .sum()
+        })
+        .collect();
+    let peak = one.iter().fold(0.0f64, |a, &x| a.max(x.abs())).max(1e-9);
+    let mut out = Vec::with_capacity(period * periods);
+    for _ in 0..periods {
+        out.extend(one.iter().map(|&x| (x / peak * amp_ma).round() as i16));
+    }
+    (out, bins)
+}
+
+/// One line of a frequency response.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct FrfPoint {
+    /// Frequency \[Hz\].
+    pub f: f64,
+    /// Closed loop T = Y/R (measured current over setpoint).
+    pub t: (f64, f64),
+    /// Loop gain L = T/(1 − T) (the manual's LRR).
+    pub l: (f64, f64),
+}
+
+impl FrfPoint {
+    /// |T| in dB.
+    pub fn t_db(&self) -> f64 {
+        20.0 * self.t.0.hypot(self.t.1).log10()
+    }
+    /// Phase of T in degrees.
+    pub fn t_deg(&self) -> f64 {
+        self.t.1.atan2(self.t.0).to_degrees()
+    }
+    /// |L| in dB.
+    pub fn l_db(&self) -> f64 {
+        20.0 * self.l.0.hypot(self.l.1).log10()
+    }
+}
+
+fn dft(x: &[f64], bin: usize, n: usize) -> (f64, f64) {
+    let (mut re, mut im) = (0.0, 0.0);
+    for (t, &v) in x.iter().enumerate() {
+        let a = -2.0 * std::f64::consts::PI * (bin * (t % n)) as f64 / n as f64;
+        re += v * a.cos();
+        im += v * a.sin();
+    }
+    (re, im)
+}
+
+fn cdiv(a: (f64, f64), b: (f64, f64)) -> (f64, f64) {
+    let d = b.0 * b.0 + b.1 * b.1;
+    ((a.0 * b.0 + a.1 * b.1) / d, (a.1 * b.0 - a.0 * b.1) / d)
+}
+
+/// The closed-loop response at the excited `bins`, averaging all periods after the first
+/// (transient) one.
+pub fn frequency_response(run: &FrfRun, period: usize, bins: &[usize]) -> Vec<FrfPoint> {
+    let n = run.currents.len().min(run.setpoints.len());
+    let periods = n / period;
+    if periods < 2 {
+        return Vec::new();
+    }
+    let r: Vec<f64> = run.setpoints[period..periods * period]
+        .iter()
+        .map(|&v| v as f64)
+        .collect();
+    let y: Vec<f64> = run.currents[period..periods * period]
+        .iter()
+        .map(|&v| v as f64)
+        .collect();
+    bins.iter()
+        .map(|&b| {
+            let t = cdiv(dft(&y, b, period), dft(&r, b, period));
+            let l = cdiv(t, (1.0 - t.0, -t.1));
+            FrfPoint {
+                f: b as f64 * 20_000.0 / period as f64,
+                t,
+                l,
+            }
+        })
+        .collect()
+}
+
+/// Bandwidth, crossover and phase margin from a response.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Margins {
+    /// First frequency where |T| falls below −3 dB \[Hz\] (None: not within the lines).
+    pub bandwidth: Option<f64>,
+    /// Peak of |T| \[dB\].
+    pub peak_db: f64,
+    /// Crossover of the loop gain |L| = 1 \[Hz\].
+    pub crossover: Option<f64>,
+    /// Phase margin at the crossover \[deg\].
+    pub phase_margin: Option<f64>,
+}
+
+/// Finds the margins (log-linear interpolation between lines).
+pub fn margins(pts: &[FrfPoint]) -> Margins {
+    let mut out = Margins {
+        bandwidth: None,
+        peak_db: pts.iter().map(|p| p.t_db()).fold(f64::MIN, f64::max),
+        crossover: None,
+        phase_margin: None,
+    };
+    let interp = |a: &FrfPoint, b: &FrfPoint, ya: f64, yb: f64, y: f64| {
+        let s = if yb != ya { (y - ya) / (yb - ya) } else { 0.0 };
+        (a.f.ln() + s * (b.f.ln() - a.f.ln())).exp()
+    };
+    for w in pts.windows(2) {
+        let (a, b) = (&w[0], &w[1]);
+        if out.bandwidth.is_none() && a.t_db() >= -3.0 && b.t_db() < -3.0 {
+            out.bandwidth = Some(interp(a, b, a.t_db(), b.t_db(), -3.0));
+        }
+        if out.crossover.is_none() && a.l_db() >= 0.0 && b.l_db() < 0.0 {
+            let fc = interp(a, b, a.l_db(), b.l_db(), 0.0);
+            let s = (fc.ln() - a.f.ln()) / (b.f.ln() - a.f.ln());
+            // Phase of L interpolated (unwrapped between the two lines).
+            let pa = a.l.1.atan2(a.l.0);
+            let mut pb = b.l.1.atan2(b.l.0);
+            while pb - pa > std::f64::consts::PI {
+                pb -= 2.0 * std::f64::consts::PI;
+            }
+            while pb - pa < -std::f64::consts::PI {
+                pb += 2.0 * std::f64::consts::PI;
+            }
+            let ph = (pa + s * (pb - pa)).to_degrees();
+            let mut pm = 180.0 + ph;
+            while pm > 180.0 {
+                pm -= 360.0;
+            }
+            while pm < -180.0 {
+                pm += 360.0;
+            }
+            out.crossover = Some(fc);
+            out.phase_margin = Some(pm);
+        }
+    }
+    out
+}
+
+fn font_ready() -> Result<(), MasterError> {
+    use plotters::style::FontStyle;
+    use std::sync::OnceLock;
+    static FONT: &[u8] = include_bytes!("../../../assets/fonts/DejaVuSans.ttf");
+    static OK: OnceLock<bool> = OnceLock::new();
+    let ok = *OK.get_or_init(|| {
+        plotters::style::register_font("sans-serif", FontStyle::Normal, FONT).is_ok()
+    });
+    if ok {
+        Ok(())
+    } else {
+        Err(MasterError::Usage("the built-in font did not load".into()))
+    }
+}
+
+/// Writes the Bode plot of T (and L dashed) as PNG and SVG: `<stem>.png`, `<stem>.svg`.
+pub fn plot_bode(
+    curves: &[(&str, &[FrfPoint])],
+    dir: &Path,
+    stem: &str,
+    title: &str,
+) -> Result<Vec<PathBuf>, MasterError> {
+    font_ready()?;
+    let png = dir.join(format!("{stem}.png"));
+    let svg = dir.join(format!("{stem}.svg"));
+    let err = |e: Box<dyn std::error::Error>| MasterError::Usage(format!("plot {stem}: {e}"));
+    {
+        let root = plotters::prelude::BitMapBackend::new(&png, (1000, 760));
+        draw_bode(root, curves, title).map_err(err)?;
+    }
+    {
+        let root = plotters::prelude::SVGBackend::new(&svg, (1000, 760));
+        draw_bode(root, curves, title).map_err(err)?;
+    }
+    Ok(vec![png, svg])
+}
+
+fn draw_bode<DB: plotters::prelude::DrawingBackend>(
+    backend: DB,
+    curves: &[(&str, &[FrfPoint])],
+    title: &str,
+) -> Result<(), Box<dyn std::error::Error>>
+where
+    DB::ErrorType: 'static,
+{
+    use plotters::prelude::*;
+    let root = backend.into_drawing_area();
+    root.fill(&WHITE)?;
+    let root = root.titled(title, ("sans-serif", 22))?;
+    let (top, bot) = root.split_vertically(360);
+    let f0 = curves
+        .iter()
+        .flat_map(|c| c.1.iter().map(|p| p.f))
+        .fold(f64::MAX, f64::min)
+        .min(1e4);
+    let f1 = curves
+        .iter()
+        .flat_map(|c| c.1.iter().map(|p| p.f))
+        .fold(1.0, f64::max);
+    let colors = [BLUE, RED, GREEN, MAGENTA];
+    let mut ch = ChartBuilder::on(&top)
+        .margin(10)
+        .x_label_area_size(35)
+        .y_label_area_size(55)
+        .build_cartesian_2d((f0..f1).log_scale(), -30.0f64..15.0)?;
+    ch.configure_mesh()
+        .x_desc("frequency [Hz]")
+        .y_desc("|T| [dB]")
+        .draw()?;
+    for (k, (name, pts)) in curves.iter().enumerate() {
+        let c = colors[k % colors.len()];
+        ch.draw_series(LineSeries::new(
+            pts.iter().map(|p| (p.f, p.t_db().clamp(-30.0, 15.0))),
+            c.stroke_width(2),
+        ))?
+        .label(*name)
+        .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], c));
+    }
+    ch.draw_series(LineSeries::new([(f0, -3.0), (f1, -3.0)], BLACK.mix(0.4)))?;
+    ch.configure_series_labels()
+        .background_style(WHITE.mix(0.8))
+        .border_style(BLACK)
+        .draw()?;
+    let mut ch = ChartBuilder::on(&bot)
+        .margin(10)
+        .x_label_area_size(35)
+        .y_label_area_size(55)
+        .build_cartesian_2d((f0..f1).log_scale(), -360.0f64..30.0)?;
+    ch.configure_mesh()
+        .x_desc("frequency [Hz]")
+        .y_desc("phase T [deg]")
+        .draw()?;
+    for (k, (_, pts)) in curves.iter().enumerate() {
+        let c = colors[k % colors.len()];
+        let mut prev = 0.0f64;
+        let unwrapped: Vec<(f64, f64)> = pts
+            .iter()
+            .map(|p| {
+                let mut ph = p.t_deg();
+                while ph - prev > 180.0 {
+                    ph -= 360.0;
+                }
+                while ph - prev < -180.0 {
+                    ph += 360.0;
+                }
+                prev = ph;
+                (p.f, ph.clamp(-360.0, 30.0))
+            })
+            .collect();
+        ch.draw_series(LineSeries::new(unwrapped, c.stroke_width(2)))?;
+    }
+    root.present()?;
+    Ok(())
+}

@@ -1,0 +1,324 @@
+//! The TUeES030 board on the virtual segment: one [`TueNode`] runs the board's firmware
+//! (`oxicat_devices::tue_es030`) on the slave stack behind its ESC and owns the three motor
+//! channels it drives (`oxicat_plant::re30`: DRV8412 bridge, RE 30 motor, LT1999 sense
+//! with its RC filter, encoder), the supply and the other I/O.
+//!
+//! # What happens when, in virtual time
+//!
+//! | event | what runs |
+//! |---|---|
+//! | ESC PDI IRQ (SM2 written) | `Slave::on_pdi_irq`: RxPDO → application → TxPDO (SM-synchronous) |
+//! | tick every 50 µs (20 kHz, the PWM counter's top) | 1. the plants catch up to now in [`TueConfig::substeps`] exact steps; the bridge duties the firmware wrote at the previous tick took effect at its counter bottom, 6.25 µs after it; 2. every 20th tick the 1 kHz service routine (encoders latched with their timestamps, line voltage); 3. the current loop (ADC2 sampled now) → new duties, effective 6.25 µs later; 4. the main loop (`Slave::poll`: ESM, mailbox, watchdog) |
+//!
+//! At equal times ESC events come first (the segment's rule), then the tick in the order
+//! above, so a run is a function of the frames and their virtual times only.
+
+use std::sync::{Arc, Mutex, MutexGuard};
+
+use oxicat_devices::tue_es030::{
+    self, control, device, Adcs, Bridges, Encoders, Io, TuEs030, CURRENT_TIMER, SERVICE_TIMER,
+};
+use oxicat_esc::{Esc, PdiError};
+use oxicat_plant::re30::{BridgeCommand, Re30Drive, Re30Params};
+use oxicat_slave::Slave;
+
+use crate::firmware::AttachError;
+use crate::node::{EscEvent, Node};
+use crate::segment::{Segment, SlaveId, TopologyError};
+
+/// Mailbox size of the board (its definition: 128 bytes).
+pub const MBX: usize = 128;
+/// The board's stack on a software ESC.
+pub type TueSlave = Slave<Esc, { device::IMAGE }, MBX>;
+/// The firmware on the bench hardware.
+pub type TueApp = TuEs030<BenchBoard>;
+
+/// Current-loop tick \[ns\] (20 kHz).
+pub const TICK_NS: u64 = 50_000;
+/// Ticks per service-routine run (1 kHz).
+pub const TICKS_PER_SERVICE: u64 = 20;
+/// Delay from the ADC sample (counter top) to the new duty (counter bottom) \[ns\]: half
+/// an 80 kHz period.
+pub const PWM_UPDATE_DELAY_NS: u64 = 6_250;
+
+/// How the board is set up.
+#[derive(Debug, Clone, PartialEq)]
+pub struct TueConfig {
+    /// Motor on M1, M2, M3.
+    pub motors: [Re30Params; 3],
+    /// Supply (line) voltage \[V\].
+    pub supply: f64,
+    /// Plant steps per 50 µs tick (a multiple of 8 keeps the 6.25 µs PWM update on a step
+    /// boundary).
+    pub substeps: u32,
+}
+
+impl Default for TueConfig {
+    /// Maxon RE 30 310007 on every channel (M1 with its 5 mΩ sense), 24 V, 32 steps per
+    /// tick (1.5625 µs).
+    fn default() -> Self {
+        Self {
+            motors: [
+                Re30Params::maxon_310007_on_m1(),
+                Re30Params::maxon_310007(),
+                Re30Params::maxon_310007(),
+            ],
+            supply: 24.0,
+            substeps: 32,
+        }
+    }
+}
+
+/// The board's hardware as the firmware sees it, with the plant behind it.
+#[derive(Debug, Clone)]
+pub struct BenchBoard {
+    /// Motor channels M1..M3.
+    pub drives: [Re30Drive; 3],
+    /// Supply voltage \[V\] (tests raise it to trip the kill threshold).
+    pub supply: f64,
+    /// ADC1 inputs (hall positions, forces, spare analog) in counts.
+    pub adc1: [u16; 8],
+    /// Digital inputs 0–3 from the outside.
+    pub digin_low: u8,
+    /// Last digital output byte.
+    pub digout: u8,
+    /// Last DAC codes.
+    pub dac: [u16; 2],
+    /// Caliper readings.
+    pub calipers: [u16; 2],
+    /// Bridge commands the firmware wrote, not yet at the counter's bottom.
+    pending: [BridgeCommand; 3],
+}
+
+impl BenchBoard {
+    fn new(cfg: &TueConfig) -> Self {
+        Self {
+            drives: cfg.motors.map(Re30Drive::new),
+            supply: cfg.supply,
+            adc1: [0; 8],
+            digin_low: 0,
+            digout: 0,
+            dac: [2048; 2],
+            calipers: [0; 2],
+            pending: [BridgeCommand::default(); 3],
+        }
+    }
+
+    /// ADC2 counts of the line voltage (1/11 divider).
+    pub fn line_counts(&self) -> u16 {
+        (self.supply / control::LINE_DIVIDER as f64 / control::ADC_VREF as f64
+            * control::ADC_COUNTS as f64)
+            .clamp(0.0, 4095.0) as u16
+    }
+}
+
+impl Bridges for BenchBoard {
+    fn set_bridge(&mut self, ch: usize, cmp_a: u16, cmp_b: u16, enable: bool) {
+        if let Some(p) = self.pending.get_mut(ch) {
+            let top = control::PWMPER as f64;
+            *p = BridgeCommand {
+                duty_a: cmp_a as f64 / top,
+                duty_b: cmp_b as f64 / top,
+                enabled: enable,
+            };
+        }
+    }
+}
+
+impl Adcs for BenchBoard {
+    fn adc1(&mut self, ch: usize) -> u16 {
+        self.adc1.get(ch).copied().unwrap_or(0)
+    }
+    fn adc2(&mut self, ch: usize) -> u16 {
+        match ch {
+            tue_es030::app::ADC2_LINE => self.line_counts(),
+            3..=5 => self.drives[ch - 3].adc_counts(),
+            _ => 0,
+        }
+    }
+}
+
+impl Encoders for BenchBoard {
+    fn latch(&mut self, ch: usize) -> (u32, u32) {
+        self.drives
+            .get(ch)
+            .map(|d| (d.count(), d.edge_timestamp()))
+            .unwrap_or((0, 0))
+    }
+}
+
+impl Io for BenchBoard {
+    fn digin(&mut self) -> u8 {
+        let d = &self.drives;
+        let mut v = self.digin_low & 0x0F;
+        if d[0].fault {
+            v |= tue_es030::app::DI_M1_FAULT;
+        }
+        if d[0].otw {
+            v |= tue_es030::app::DI_M1_OTW;
+        }
+        if d[1].fault || d[2].fault {
+            v |= tue_es030::app::DI_M23_FAULT;
+        }
+        if d[1].otw || d[2].otw {
+            v |= tue_es030::app::DI_M23_OTW;
+        }
+        v
+    }
+    fn digout(&mut self, v: u8) {
+        self.digout = v;
+    }
+    fn dac(&mut self, ch: usize, code: u16) {
+        if let Some(d) = self.dac.get_mut(ch) {
+            *d = code;
+        }
+    }
+    fn calipers(&mut self) -> [u16; 2] {
+        self.calipers
+    }
+}
+
+/// Counters of the node.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct TueCounters {
+    /// 20 kHz ticks.
+    pub ticks: u64,
+    /// PDI accesses the ESC refused.
+    pub pdi_errors: u64,
+}
+
+/// The board: stack, firmware and plant.
+pub struct TueBoard {
+    /// The slave stack.
+    pub slave: TueSlave,
+    /// The firmware (its `board` holds the plant).
+    pub app: TueApp,
+    /// What ran.
+    pub counters: TueCounters,
+    substeps: u32,
+    next_tick: u64,
+    plant_ns: u64,
+}
+
+impl TueBoard {
+    fn note(&mut self, r: Result<(), PdiError>) {
+        if r.is_err() {
+            self.counters.pdi_errors += 1;
+        }
+    }
+
+    /// Steps the plant from `plant_ns` to `t`, applying pending duties at `apply`.
+    fn step_plant(&mut self, t: u64, apply: u64) {
+        let n = self.substeps.max(1) as u64;
+        let h_ns = TICK_NS / n;
+        let b = &mut self.app.board;
+        while self.plant_ns + h_ns <= t {
+            if self.plant_ns >= apply {
+                for (d, p) in b.drives.iter_mut().zip(b.pending) {
+                    d.bridge = p;
+                }
+            }
+            let supply = b.supply;
+            for d in &mut b.drives {
+                d.step(h_ns as f64 * 1e-9, supply);
+            }
+            self.plant_ns += h_ns;
+        }
+    }
+
+    fn tick(&mut self, esc: &mut Esc, t: u64) {
+        // The duties written at the previous tick took effect at its counter bottom.
+        let apply = t.saturating_sub(TICK_NS) + PWM_UPDATE_DELAY_NS;
+        self.step_plant(t, apply);
+        if self.counters.ticks % TICKS_PER_SERVICE == 0 {
+            self.slave.on_timer(SERVICE_TIMER, &mut self.app);
+        }
+        self.slave.on_timer(CURRENT_TIMER, &mut self.app);
+        self.counters.ticks += 1;
+        let r = self.slave.poll(esc, &mut self.app);
+        self.note(r);
+    }
+}
+
+/// Access to the board from outside the segment.
+#[derive(Clone)]
+pub struct TueHandle(Arc<Mutex<TueBoard>>);
+
+impl TueHandle {
+    /// Locks the board (do not hold it while the segment runs).
+    pub fn lock(&self) -> MutexGuard<'_, TueBoard> {
+        self.0.lock().unwrap_or_else(|e| e.into_inner())
+    }
+}
+
+/// The board as a segment node.
+pub struct TueNode(Arc<Mutex<TueBoard>>);
+
+impl TueNode {
+    fn lock(&self) -> MutexGuard<'_, TueBoard> {
+        self.0.lock().unwrap_or_else(|e| e.into_inner())
+    }
+}
+
+impl Node<Esc> for TueNode {
+    fn on_event(&mut self, esc: &mut Esc, ev: EscEvent, _t: u64) {
+        let mut b = self.lock();
+        let r = match ev {
+            EscEvent::Irq => {
+                let TueBoard { slave, app, .. } = &mut *b;
+                slave.on_pdi_irq(esc, app)
+            }
+            EscEvent::Sync0 => {
+                let TueBoard { slave, app, .. } = &mut *b;
+                slave.on_sync0(esc, app)
+            }
+            EscEvent::Sync1 => {
+                let TueBoard { slave, app, .. } = &mut *b;
+                slave.on_sync1(esc, app)
+            }
+            EscEvent::PdWatchdog | EscEvent::PdiWatchdog => Ok(()),
+        };
+        b.note(r);
+    }
+
+    fn next_wakeup(&self) -> Option<u64> {
+        Some(self.lock().next_tick)
+    }
+
+    fn on_wakeup(&mut self, esc: &mut Esc, t: u64) {
+        let mut b = self.lock();
+        while b.next_tick <= t {
+            let tk = b.next_tick;
+            b.tick(esc, tk);
+            b.next_tick = tk + TICK_NS;
+        }
+    }
+}
+
+/// Boots the TUeES030 firmware on ESC `id` of `segment` with the bench `config`; the
+/// ticks start at the next multiple of 50 µs.
+pub fn attach(
+    segment: &mut Segment,
+    id: SlaveId,
+    config: &TueConfig,
+) -> Result<TueHandle, AttachError> {
+    let now = segment.now();
+    let esc = segment
+        .esc_mut(id)
+        .ok_or(AttachError::Topology(TopologyError::NoSuchSlave(id)))?;
+    let slave = TueSlave::new(&device::DEF, esc).map_err(AttachError::Init)?;
+    let start = now.div_ceil(TICK_NS) * TICK_NS;
+    let board = TueBoard {
+        slave,
+        app: TuEs030::new(BenchBoard::new(config)),
+        counters: TueCounters::default(),
+        substeps: config.substeps,
+        next_tick: start,
+        plant_ns: start,
+    };
+    let inner = Arc::new(Mutex::new(board));
+    segment
+        .attach(id, Box::new(TueNode(inner.clone())))
+        .map_err(AttachError::Topology)?;
+    Ok(TueHandle(inner))
+}
