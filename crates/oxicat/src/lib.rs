@@ -9,6 +9,7 @@ use std::path::PathBuf;
 use clap::{Parser, Subcommand, ValueEnum};
 use oxicat_slave::DeviceDef;
 
+pub mod hub_cmd;
 pub mod master_cmd;
 pub mod sim_cmd;
 pub mod sim_devices;
@@ -32,6 +33,9 @@ pub struct Cli {
 pub enum Command {
     /// Device definitions: write a device's ESI XML, SII EEPROM image or object dictionary.
     Device(DeviceArgs),
+    /// The axis communication hub scenario (overheat, sensor lost, cable open) on the
+    /// virtual segment.
+    HubDemo(hub_cmd::HubDemoArgs),
     /// Master verbs (IgH `ethercat` style) on an interface or a virtual segment.
     #[command(flatten)]
     Master(master_cmd::MasterCommand),
@@ -75,6 +79,11 @@ pub fn devices() -> Vec<(&'static str, &'static DeviceDef, &'static str)> {
             "demo",
             &oxicat_devices::demo::DEF,
             "thesis Table 2-2 generic EtherCAT Application",
+        ),
+        (
+            "axis-hub",
+            &oxicat_devices::axis_hub::device::DEF,
+            "axis communication hub: 15 DS18B20, WS2812 rings, status/event/error",
         ),
         (
             "demo-additions",
@@ -150,6 +159,7 @@ pub fn run(cli: Cli) -> Result<(), CliError> {
             }
         }
         Command::Sim(a) => sim_cmd::run(a).map_err(CliError::Sim),
+        Command::HubDemo(a) => hub_cmd::run(a),
         Command::Master(c) => {
             master_cmd::run(c, &mut std::io::stdout().lock()).map_err(CliError::Master)
         }

@@ -406,6 +406,7 @@ impl TempTask {
         frame
     }
 
+    #[allow(clippy::needless_range_loop)]
     fn scan<B: OneWireBus>(&mut self, bus: &mut B, sys: &mut SystemState) {
         self.stats.searches += 1;
         let n = match search_all(bus, &mut self.roms) {
@@ -436,6 +437,8 @@ impl TempTask {
         }
     }
 
+    // One index walks the ROM, resolution, failing and value tables together.
+    #[allow(clippy::needless_range_loop)]
     fn read_all<B: OneWireBus>(&mut self, bus: &mut B, sys: &mut SystemState) -> TempFrame {
         let mut values = [TEMP_INVALID; SENSORS];
         let was_failing = self.failing.iter().any(|&f| f);
