@@ -13,6 +13,7 @@
 pub mod coe;
 pub mod device;
 pub mod esm;
+pub mod foe;
 pub mod od;
 pub mod pdi;
 pub mod pdo;

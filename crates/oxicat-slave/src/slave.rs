@@ -11,6 +11,7 @@ use oxicat_wire::mailbox::{
 use crate::coe::SdoState;
 use crate::device::{DeviceDef, MailboxDef, SyncMode};
 use crate::esm::{AlState, AlStatusCode};
+use crate::foe::{FoeFiles, FoeState};
 use crate::od::{DefError, EntryRef, Od};
 use crate::pdi::{reg, Pdi};
 use crate::pdo::{self, Dir, Mapping, MAX_PD_BYTES};
@@ -38,6 +39,11 @@ pub trait Application<const N: usize> {
 
     /// An SDO download changed `index:sub` (subindex 0 for complete access).
     fn sdo_written(&mut self, _index: u16, _sub: u8, _od: &mut Od<N>) {}
+
+    /// The application's FoE files; `None` (the default): FoE is not supported.
+    fn foe(&mut self) -> Option<&mut dyn FoeFiles> {
+        None
+    }
 }
 
 /// An application without hooks.
@@ -171,6 +177,7 @@ pub struct Slave<P: Pdi, const N: usize, const M: usize = 256> {
     pub(crate) code: AlStatusCode,
     pub(crate) mbx: MbxState<M>,
     pub(crate) sdo: SdoState,
+    pub(crate) foe: FoeState,
     rx_map: Mapping,
     tx_map: Mapping,
     sync: SyncMode,
@@ -204,6 +211,7 @@ impl<P: Pdi, const N: usize, const M: usize> Slave<P, N, M> {
             code: AlStatusCode::NONE,
             mbx: MbxState::new(),
             sdo: SdoState::default(),
+            foe: FoeState::Idle,
             rx_map: Mapping::default(),
             tx_map: Mapping::default(),
             sync: SyncMode::FreeRun,
@@ -574,6 +582,7 @@ impl<P: Pdi, const N: usize, const M: usize> Slave<P, N, M> {
             Self::set_event_mask(pdi, reg::EV_AL_CONTROL)?;
         }
         if to == AlState::Init {
+            self.foe_reset(app);
             self.stop_mailbox(pdi)?;
         }
         let _ = app.state_change(from, to, &mut self.od);
@@ -695,6 +704,7 @@ impl<P: Pdi, const N: usize, const M: usize> Slave<P, N, M> {
         Self::sm_enable(pdi, 1, true)?;
         self.mbx.reset();
         self.sdo = SdoState::default();
+        self.foe_reset(app);
         self.mbx.running = true;
         self.mbx.boot = boot;
         self.mbx.toggle = a1 & 2 != 0;
@@ -814,7 +824,7 @@ impl<P: Pdi, const N: usize, const M: usize> Slave<P, N, M> {
 
     // ------------------------------------------------------------------ mailbox
 
-    fn mbx_def(&self) -> MailboxDef {
+    pub(crate) fn mbx_def(&self) -> MailboxDef {
         match (self.mbx.boot, self.od.def.boot_mailbox) {
             (true, Some(b)) => b,
             _ => self.od.def.mailbox,
@@ -966,6 +976,12 @@ impl<P: Pdi, const N: usize, const M: usize> Slave<P, N, M> {
                 let mut req = [0u8; M];
                 req[..end].copy_from_slice(&self.mbx.rx[..end]);
                 self.coe_request(app, &req[MAILBOX_HEADER_LEN..end]);
+            }
+            MailboxType::Foe => {
+                let end = MAILBOX_HEADER_LEN + h.length as usize;
+                let mut req = [0u8; M];
+                req[..end].copy_from_slice(&self.mbx.rx[..end]);
+                self.foe_request(app, &req[MAILBOX_HEADER_LEN..end]);
             }
             _ => self.mbx_error(MailboxErrorDetail::UnsupportedProtocol),
         }

@@ -259,22 +259,29 @@ impl Application<IMG> for App {
     }
 }
 
-pub struct Bench {
+pub struct Bench<A = App> {
     pub esc: Esc,
     pub s: Slave<Esc, IMG, MBX>,
-    pub app: App,
+    pub app: A,
     pub t: u64,
     pub counter: u8,
 }
 
 impl Bench {
     pub fn new() -> Self {
+        Bench::with_app(App::default())
+    }
+}
+
+impl<A: Application<IMG>> Bench<A> {
+    /// A bench whose firmware runs `app`.
+    pub fn with_app(app: A) -> Self {
         let mut esc = Esc::new(EscConfig::et1100(), eeprom(&DEF));
         let s = Slave::new(&DEF, &mut esc).unwrap();
         let mut b = Bench {
             esc,
             s,
-            app: App::default(),
+            app,
             t: 0,
             counter: 0,
         };
