@@ -1,1 +1,113 @@
-fn main() {}
+//! SPI bus time of one Laelaps leg DC cycle (38 output + 22 input bytes, plus the
+//! SYNC0 status and AL event reads the stack does in its SYNC0 handler) through each
+//! driver at 10, 20 and 30 MHz SCLK, measured on the simulated chips with the real
+//! slave stack; and the node's minimum cycle time set against the thesis' 85 µs
+//! (67 µs output mapping + 1 µs application + 17 µs input mapping, F28379D + ET1100).
+//!
+//! `cargo run -p oxicat-pdi --features sim --example bus_time`
+
+#[path = "../tests/common/mod.rs"]
+mod common;
+
+use common::{laelaps, Chip};
+use oxicat_devices::laelaps::device::{self, INPUT_BYTES, OUTPUT_BYTES};
+use oxicat_devices::laelaps::hw::JOINT_LOOP_TIMER;
+use oxicat_devices::laelaps::kinematics::Side;
+use oxicat_esc::EscConfig;
+use oxicat_pdi::sim::{BusConfig, BusStats};
+use oxicat_slave::Pdi;
+
+/// The thesis' application time per cycle on the F28379D (Table 2-3).
+const APP_US: f64 = 1.0;
+/// The device accepts SYNC0 cycles from 200 µs (its 0x1C32:05); the bus time per cycle does
+/// not depend on the cycle time, so it is measured at the thesis' 400 µs.
+const CYCLE_NS: u32 = 400_000;
+
+struct Row {
+    cycle: BusStats,
+    out: BusStats,
+    inp: BusStats,
+    poll: BusStats,
+}
+
+fn measure<C: Chip>(esc: EscConfig, mhz: u32) -> Row {
+    let def = device::device(Side::Right);
+    let mut b = laelaps::leg_to_op::<C>(esc, BusConfig::mhz(mhz), CYCLE_NS);
+    let out = laelaps::outputs();
+    b.wr(def.sm2_start, &out);
+    for _ in 0..20 {
+        b.advance(CYCLE_NS as u64, 1, Some(JOINT_LOOP_TIMER));
+        b.wr(def.sm2_start, &out);
+    }
+    let n = 100;
+    b.h.reset_stats();
+    let s0 = b.sync0;
+    for _ in 0..n {
+        b.advance(CYCLE_NS as u64, 1, Some(JOINT_LOOP_TIMER));
+        // The master's frame: new outputs (not on the SPI bus).
+        let st = b.h.stats();
+        b.wr(def.sm2_start, &out);
+        assert_eq!(b.h.stats(), st);
+    }
+    let cycles = b.sync0 - s0;
+    assert!(cycles >= n as u64);
+    let t = b.h.stats();
+    let per = |x: u64| x / cycles;
+    let cycle = BusStats {
+        transactions: per(t.transactions),
+        bytes: per(t.bytes),
+        ps: per(t.ps),
+        protocol_errors: t.protocol_errors,
+    };
+    // The two mappings alone, as the stack does them.
+    b.h.reset_stats();
+    let mut o = [0u8; OUTPUT_BYTES];
+    b.drv.read(def.sm2_start, &mut o).unwrap();
+    let out = b.h.stats();
+    b.h.reset_stats();
+    b.drv.write(def.sm3_start, &[0u8; INPUT_BYTES]).unwrap();
+    let inp = b.h.stats();
+    b.h.reset_stats();
+    b.s.poll(&mut b.drv, &mut b.app).unwrap();
+    let poll = b.h.stats();
+    Row {
+        cycle,
+        out,
+        inp,
+        poll,
+    }
+}
+
+fn table<C: Chip>(esc: EscConfig) {
+    for mhz in [10, 20, 30] {
+        let r = measure::<C>(esc.clone(), mhz);
+        let min = r.cycle.us() + APP_US;
+        println!(
+            "| {:<38} | {:>2} | {:>3} / {:>4} | {:>6.1} | {:>6.1} | {:>6.1} | {:>6.1} | {:>6.1} | {} |",
+            C::NAME,
+            mhz,
+            r.cycle.transactions,
+            r.cycle.bytes,
+            r.out.us(),
+            r.inp.us(),
+            r.cycle.us(),
+            min,
+            r.poll.us(),
+            if min <= 100.0 { "yes" } else { "no" },
+        );
+    }
+}
+
+fn main() {
+    println!("Laelaps leg DC cycle (SYNC0 handler: SYNC0 status, AL event, 38 B outputs, 22 B inputs, AL event),");
+    println!("SPI bus time per cycle; CS overhead 100 ns per transaction; min cycle = bus + 1 us application (thesis).");
+    println!("Thesis (F28379D + ET1100, Table 2-3): 67 us output mapping + 1 us application + 17 us input mapping = 85 us.");
+    println!();
+    println!("| driver                                 | MHz | transactions / bytes per cycle | output mapping us | input mapping us | bus us per cycle | min cycle us | main-loop poll us | 100 us cycle |");
+    println!("|---|---|---|---|---|---|---|---|---|");
+    table::<common::Lan>(EscConfig::lan9252());
+    table::<common::LanFast>(EscConfig::lan9252());
+    table::<common::Et2>(EscConfig::et1100());
+    table::<common::Et3>(EscConfig::et1100());
+    table::<common::EtDelay>(EscConfig::et1100());
+}

@@ -20,6 +20,8 @@ pub struct Lan9252Model {
     csr_busy_left: u32,
     /// CSR polls that still read busy after a command (default 0).
     pub csr_busy_polls: u32,
+    /// What ID_REV reads (default [`ID_REV`]).
+    pub id_rev: u32,
     /// HW_CFG reads that report not ready after a reset (default 1).
     pub reset_not_ready_polls: u32,
     not_ready_left: u32,
@@ -49,6 +51,7 @@ impl Lan9252Model {
             csr_cmd: 0,
             csr_busy_left: 0,
             csr_busy_polls: 0,
+            id_rev: ID_REV,
             reset_not_ready_polls: 1,
             not_ready_left: 0,
             rd_addr_len: 0,
@@ -73,7 +76,7 @@ impl Lan9252Model {
     fn read_reg(&mut self, a: u16) -> u32 {
         let fault = self.core.fault;
         match a {
-            reg::ID_REV => ID_REV,
+            reg::ID_REV => self.id_rev,
             reg::IRQ_CFG => self.irq_cfg,
             reg::INT_STS => u32::from(self.core.esc.irq_line()),
             reg::INT_EN => self.int_en,

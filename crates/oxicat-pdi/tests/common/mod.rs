@@ -4,6 +4,7 @@
 #![allow(dead_code)]
 
 pub mod device;
+pub mod laelaps;
 
 use device::*;
 use oxicat_esc::{Esc, EscConfig};
