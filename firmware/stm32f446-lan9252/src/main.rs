@@ -1,0 +1,139 @@
+//! The demo device (thesis Table 2-2) on the oxicat slave stack, on an STM32F446
+//! (Nucleo-F446RE) with a LAN9252 EtherCAT slave controller on SPI1, reached through
+//! `oxicat_pdi::Lan9252`. Wiring and flashing: README.md.
+//!
+//! Main loop as on the seeds' boards: the LAN9252 IRQ (active low, open drain), SYNC0 and
+//! SYNC1 pins are polled; SYNC0/SYNC1 act on their rising edge, the IRQ while asserted;
+//! `poll` runs the ESM and the mailbox every pass.
+#![no_std]
+#![no_main]
+
+use cortex_m_rt::entry;
+use embedded_hal::digital::InputPin;
+use embedded_hal_bus::spi::ExclusiveDevice;
+use oxicat_devices::demo::{self, Buttons, Demo, Leds};
+use oxicat_pdi::{Lan9252, Lan9252Config, Pins};
+use oxicat_slave::{Pdi, Slave};
+use panic_halt as _;
+use stm32f4xx_hal::{
+    gpio::{Output, Pin},
+    pac,
+    prelude::*,
+    spi::{Mode, Phase, Polarity, Spi},
+};
+
+/// Mailbox buffer size of the stack: the demo's mailboxes are 128 bytes.
+const MBX: usize = 128;
+
+/// LD2-style indicator LEDs on PC8 (blue) and PC9 (red), active high.
+struct BoardLeds {
+    blue: Pin<'C', 8, Output>,
+    red: Pin<'C', 9, Output>,
+}
+
+impl Leds for BoardLeds {
+    fn set(&mut self, blue: bool, red: bool) {
+        let _ = self.blue.set_state(blue.into());
+        let _ = self.red.set_state(red.into());
+    }
+}
+
+/// The user button B1 (PC13, active low) as button 1.
+struct BoardButtons<P: InputPin>(P);
+
+impl<P: InputPin> Buttons for BoardButtons<P> {
+    fn read(&mut self) -> u8 {
+        u8::from(self.0.is_low().unwrap_or(false))
+    }
+}
+
+/// Blinks the red LED forever: the ESC did not answer at start-up.
+fn fail(leds: &mut BoardLeds, delay: &mut impl embedded_hal::delay::DelayNs) -> ! {
+    loop {
+        leds.set(false, true);
+        delay.delay_ms(100);
+        leds.set(false, false);
+        delay.delay_ms(100);
+    }
+}
+
+#[entry]
+fn main() -> ! {
+    let dp = pac::Peripherals::take().unwrap();
+    let cp = cortex_m::Peripherals::take().unwrap();
+    // 8 MHz HSE (ST-LINK MCO on the Nucleo) -> 180 MHz SYSCLK, APB2 90 MHz.
+    let rcc = dp.RCC.constrain();
+    let clocks = rcc
+        .cfgr
+        .use_hse(8.MHz())
+        .sysclk(180.MHz())
+        .pclk1(45.MHz())
+        .pclk2(90.MHz())
+        .freeze();
+    let mut delay = cp.SYST.delay(&clocks);
+
+    let gpioa = dp.GPIOA.split();
+    let gpiob = dp.GPIOB.split();
+    let gpioc = dp.GPIOC.split();
+
+    let mut leds = BoardLeds {
+        blue: gpioc.pc8.into_push_pull_output(),
+        red: gpioc.pc9.into_push_pull_output(),
+    };
+    let buttons = BoardButtons(gpioc.pc13.into_floating_input());
+
+    // SPI1: SCK PA5, MISO PA6, MOSI PA7, mode 0 (the LAN9252 also accepts mode 3),
+    // 90 MHz / 4 = 22.5 MHz (the LAN9252's read 0x03 allows up to 30 MHz).
+    let spi = Spi::new(
+        dp.SPI1,
+        (gpioa.pa5, gpioa.pa6, gpioa.pa7),
+        Mode {
+            polarity: Polarity::IdleLow,
+            phase: Phase::CaptureOnFirstTransition,
+        },
+        22500.kHz(),
+        &clocks,
+    );
+    // Chip select PB6 under software control, one CS-low frame per transaction.
+    let cs = gpiob.pb6.into_push_pull_output_in_state(true.into());
+    let Ok(spi) = ExclusiveDevice::new_no_delay(spi, cs);
+
+    // IRQ PA10 (open drain, active low: pull-up), SYNC0 PB3, SYNC1 PB5 (push-pull).
+    let pins = Pins {
+        irq: gpioa.pa10.into_pull_up_input(),
+        sync0: gpiob.pb3.into_floating_input(),
+        sync1: gpiob.pb5.into_floating_input(),
+        irq_active_low: true,
+        sync_active_low: false,
+    };
+    let mut esc = Lan9252::new(spi, pins, Lan9252Config::default());
+    // The LAN9252 needs ~ 30 ms after power-on before the SPI answers; init's BYTE_TEST
+    // polling covers the rest.
+    delay.delay_ms(50);
+    if esc.init().is_err() {
+        fail(&mut leds, &mut delay);
+    }
+
+    let mut app = Demo::new(leds, buttons);
+    let mut slave = match Slave::<_, { demo::IMAGE }, MBX>::new(&demo::DEF, &mut esc) {
+        Ok(s) => s,
+        Err(_) => fail(&mut app.leds, &mut delay),
+    };
+
+    let (mut sync0_was, mut sync1_was) = (false, false);
+    loop {
+        let lines = esc.irq_lines();
+        if lines.pdi_irq {
+            let _ = slave.on_pdi_irq(&mut esc, &mut app);
+        }
+        if lines.sync0 && !sync0_was {
+            let _ = slave.on_sync0(&mut esc, &mut app);
+        }
+        if lines.sync1 && !sync1_was {
+            let _ = slave.on_sync1(&mut esc, &mut app);
+        }
+        sync0_was = lines.sync0;
+        sync1_was = lines.sync1;
+        let _ = slave.poll(&mut esc, &mut app);
+    }
+}
