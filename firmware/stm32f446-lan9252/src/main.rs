@@ -33,8 +33,8 @@ struct BoardLeds {
 
 impl Leds for BoardLeds {
     fn set(&mut self, blue: bool, red: bool) {
-        let _ = self.blue.set_state(blue.into());
-        let _ = self.red.set_state(red.into());
+        self.blue.set_state(blue.into());
+        self.red.set_state(red.into());
     }
 }
 
