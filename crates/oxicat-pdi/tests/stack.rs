@@ -121,3 +121,38 @@ fn laelaps_cycle_traffic_per_driver() {
     assert_eq!(cycle_traffic::<Et2>(), (5, 75));
     assert_eq!(cycle_traffic::<Et3>(), (5, 78));
 }
+
+/// SM-synchronous mode driven by the chip's IRQ pin as the MCU sees it (polarity as
+/// configured), the cycle run from `on_pdi_irq`.
+fn sm_sync_on_irq_pin<C: Chip>() {
+    use oxicat_slave::{Pdi, SyncMode};
+    let mut b = Bench::<C, App, IMG>::new();
+    b.config_mailbox(&DEF);
+    assert_eq!(b.request(2), (2, 0));
+    assert_eq!(b.download(0x1C32, 1, &1u16.to_le_bytes()), Ok(()));
+    b.config_sm(2, SM2, 4, 0x64);
+    b.config_sm(3, SM3, 7, 0x20);
+    assert_eq!(b.request(4), (4, 0));
+    assert_eq!(b.s.sync_mode(), SyncMode::SmSync);
+    assert_eq!(b.request(8), (8, 0));
+    let c0 = b.app.cycles;
+    for k in 1..=10u8 {
+        assert!(!b.drv.irq_lines().pdi_irq, "{}", C::NAME);
+        b.wr(SM2, &[0, k, 0, 0]);
+        assert!(b.drv.irq_lines().pdi_irq, "{}", C::NAME);
+        b.s.on_pdi_irq(&mut b.drv, &mut b.app).unwrap();
+        assert_eq!(b.app.cycles, c0 + k as u32);
+        let (d, _) = b.rd(SM3, 7);
+        assert_eq!(i16::from_le_bytes([d[1], d[2]]), 2 * k as i16);
+    }
+    assert_eq!(b.h.stats().protocol_errors, 0);
+}
+
+#[test]
+fn sm_sync_on_irq_pin_every_driver() {
+    sm_sync_on_irq_pin::<Lan>();
+    sm_sync_on_irq_pin::<LanFast>();
+    sm_sync_on_irq_pin::<Et2>();
+    sm_sync_on_irq_pin::<Et3>();
+    sm_sync_on_irq_pin::<EtDelay>();
+}
