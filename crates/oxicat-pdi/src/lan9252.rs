@@ -2,8 +2,9 @@
 //!
 //! SPI frames (CS low for the whole transaction): `0x03 A[15:8] A[7:0] data…` (read),
 //! `0x0B A[15:8] A[7:0] dummy data…` (fast read), `0x02 A[15:8] A[7:0] data…` (write).
-//! Bit 14 of the address field selects auto-increment (set for register bursts, clear
-//! for FIFO bursts). System registers are 32-bit little-endian.
+//! Bit 14 of the address field is set for auto-increment on every access (as SOES's
+//! `esc_hw.c` does); FIFO bursts stay inside the FIFO's 32-byte alias window, so they are
+//! correct whether or not the chip increments. System registers are 32-bit little-endian.
 //!
 //! The EtherCAT core (ESC registers 0x0000..0x0FFF) is reached only indirectly: the CSR
 //! data (0x0300) and command (0x0304: busy bit 31, read bit 30, size 18:16, address
@@ -104,6 +105,10 @@ pub struct Lan9252Config {
     pub retries: u32,
     /// IRQ pin push-pull active high (else open drain, active low).
     pub irq_active_high: bool,
+    /// Longest PRAM FIFO burst in DWORDs (1..=8). FIFO bursts use auto-increment
+    /// addressing inside the FIFO's 32-byte alias window (0x00..0x1F read, 0x20..0x3F
+    /// write), so 8 is the most one CS frame may carry.
+    pub fifo_burst_dwords: u8,
 }
 
 impl Default for Lan9252Config {
@@ -112,6 +117,7 @@ impl Default for Lan9252Config {
             fast_read: false,
             retries: 64,
             irq_active_high: false,
+            fifo_burst_dwords: 8,
         }
     }
 }
@@ -318,6 +324,10 @@ impl<SPI: SpiDevice, L: Lines> Lan9252<SPI, L> {
         self.write_raw(addr_len, true, &b)
     }
 
+    fn burst(&self) -> usize {
+        usize::from(self.cfg.fifo_burst_dwords.clamp(1, 8))
+    }
+
     /// Process RAM read through the read FIFO.
     pub fn pram_read(&mut self, addr: u16, buf: &mut [u8]) -> R<(), SPI> {
         if buf.is_empty() {
@@ -329,10 +339,15 @@ impl<SPI: SpiDevice, L: Lines> Lan9252<SPI, L> {
         let mut skip = (addr & 3) as usize;
         let mut total = (skip + buf.len()).div_ceil(4);
         let mut out = 0;
+        let mut avail = 0;
         while total > 0 {
-            let n = self.pram_wait(reg::PRAM_RD_CMD)?.min(total);
-            let mut fifo = [0u8; 4 * reg::PRAM_FIFO_DWORDS as usize];
-            self.read_raw(reg::PRAM_RD_FIFO, false, &mut fifo[..4 * n])?;
+            if avail == 0 {
+                avail = self.pram_wait(reg::PRAM_RD_CMD)?;
+            }
+            let n = avail.min(total).min(self.burst());
+            let mut fifo = [0u8; 32];
+            self.read_raw(reg::PRAM_RD_FIFO, true, &mut fifo[..4 * n])?;
+            avail -= n;
             let take = (4 * n - skip).min(buf.len() - out);
             buf[out..out + take].copy_from_slice(&fifo[skip..skip + take]);
             out += take;
@@ -354,12 +369,17 @@ impl<SPI: SpiDevice, L: Lines> Lan9252<SPI, L> {
         let mut lead = (addr & 3) as usize;
         let mut total = (lead + data.len()).div_ceil(4);
         let mut inp = 0;
+        let mut free = 0;
         while total > 0 {
-            let n = self.pram_wait(reg::PRAM_WR_CMD)?.min(total);
-            let mut fifo = [0u8; 4 * reg::PRAM_FIFO_DWORDS as usize];
+            if free == 0 {
+                free = self.pram_wait(reg::PRAM_WR_CMD)?;
+            }
+            let n = free.min(total).min(self.burst());
+            let mut fifo = [0u8; 32];
             let take = (4 * n - lead).min(data.len() - inp);
             fifo[lead..lead + take].copy_from_slice(&data[inp..inp + take]);
-            self.write_raw(reg::PRAM_WR_FIFO, false, &fifo[..4 * n])?;
+            self.write_raw(reg::PRAM_WR_FIFO, true, &fifo[..4 * n])?;
+            free -= n;
             inp += take;
             lead = 0;
             total -= n;

@@ -172,11 +172,16 @@ fn lan9252_pram_fifo_read_write() {
         want.extend_from_slice(&reg::PRAM_BUSY.to_le_bytes());
         assert_eq!(l[0], want);
         assert_eq!(l[1][..3], [0x03, 0x43, 0x14]);
-        // First FIFO burst: 16 DWORDs at the fixed FIFO address, 3 pad bytes first.
-        assert_eq!(l[2][..3], [0x02, 0x00, 0x20]);
-        assert_eq!(l[2].len(), 3 + 64);
+        // 19 DWORDs (3 pad bytes first): 16 free -> bursts of 8 + 8 inside the FIFO's
+        // 32-byte window, poll again, the last 3.
+        assert_eq!(l[2][..3], [0x02, 0x40, 0x20]);
+        assert_eq!(l[2].len(), 3 + 32);
         assert_eq!(l[2][3..6], [0, 0, 0]);
         assert_eq!(l[2][6], data[0]);
+        assert_eq!(l[3].len(), 3 + 32);
+        assert_eq!(l[4][..3], [0x03, 0x43, 0x14]);
+        assert_eq!(l[5].len(), 3 + 12);
+        assert_eq!(l.len(), 6);
     }
     let mut back = vec![0u8; 71];
     h.with_esc(|e| e.pdi_read(0x1203, &mut back)).unwrap();
@@ -188,7 +193,8 @@ fn lan9252_pram_fifo_read_write() {
     {
         let l = log.borrow();
         assert_eq!(l[0][..3], [0x02, 0x43, 0x08]);
-        assert_eq!(l[2][..3], [0x03, 0x00, 0x00]);
+        assert_eq!(l[2][..3], [0x03, 0x40, 0x00]);
+        assert_eq!(l.len(), 6);
     }
     // Through Pdi: a range straddling 0x1000 splits into CSR and PRAM.
     d.write(0x0FFE, &[9, 8, 7, 6]).unwrap();

@@ -114,8 +114,9 @@ fn cycle_traffic<C: Chip>() -> (u64, u64) {
 #[test]
 fn laelaps_cycle_traffic_per_driver() {
     // SYNC0 status (CSR: command, poll, data = 3 x 7 B), AL event (3 x 7 B), outputs
-    // (PRAM start 11 B, poll 7 B, FIFO 3 + 40 B), inputs (11 + 7 + 3 + 24 B), AL event.
-    assert_eq!(cycle_traffic::<Lan>(), (15, 169));
+    // (PRAM start 11 B, poll 7 B, FIFO bursts 3 + 32 and 3 + 8 B), inputs (11 + 7 + 3 +
+    // 24 B), AL event.
+    assert_eq!(cycle_traffic::<Lan>(), (16, 172));
     // SYNC0 status read (2 + 1 + 1 B), NOP (3 B), outputs (2 + 1 + 38 B), inputs
     // (2 + 22 B), NOP (3 B).
     assert_eq!(cycle_traffic::<Et2>(), (5, 75));
