@@ -7,11 +7,13 @@
 //! - [`esi::parse`] / [`sii::parse`]: ESI XML / SII image → a comparable [`DeviceModel`],
 //! - [`model::from_def`] and [`check`]: the definition, its ESI and its SII compared field
 //!   by field; differences are typed [`Finding`]s,
-//! - [`od::table`]: the object dictionary as the stack serves it, as a text table.
+//! - [`od::table`]: the object dictionary as the stack serves it, as a text table,
+//! - [`fwimage::build`]: a firmware image (header + payload) for the FoE update flow.
 #![forbid(unsafe_code)]
 #![warn(missing_docs)]
 
 pub mod esi;
+pub mod fwimage;
 pub mod model;
 pub mod od;
 pub mod sii;

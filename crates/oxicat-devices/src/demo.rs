@@ -90,7 +90,13 @@ macro_rules! demo_device {
                 tx_start: 0x1080,
                 tx_len: 128,
             },
-            boot_mailbox: None,
+            // Bootstrap mailbox (FoE firmware download) on the standard mailbox's memory.
+            boot_mailbox: Some($crate::__slave::MailboxDef {
+                rx_start: 0x1000,
+                rx_len: 128,
+                tx_start: 0x1080,
+                tx_len: 128,
+            }),
             sm2_start: 0x1100,
             sm3_start: 0x1400,
             objects: OBJECTS,
@@ -129,6 +135,8 @@ pub const INFO: oxicat_slave::device::DeviceInfo = oxicat_slave::device::DeviceI
         oxicat_slave::device::DcOpMode::DC_SYNC01,
     ],
     ebus_current_ma: 0,
+    // FoE: firmware download in BOOT, version.txt (see `oxicat_slave::foe`).
+    foe: true,
     ..oxicat_slave::device::DeviceInfo::DEFAULT
 };
 

@@ -14,11 +14,11 @@ use crate::{Master, MasterError};
 
 /// SM0/SM1 of a slave as configured for the mailbox.
 #[derive(Debug, Clone, Copy)]
-struct Mbx {
-    out_start: u16,
-    out_len: u16,
-    in_start: u16,
-    in_len: u16,
+pub(crate) struct Mbx {
+    pub(crate) out_start: u16,
+    pub(crate) out_len: u16,
+    pub(crate) in_start: u16,
+    pub(crate) in_len: u16,
 }
 
 /// The description of one object (SDO information).
@@ -116,7 +116,7 @@ impl Master {
         Ok(m)
     }
 
-    fn next_counter(&self) -> u8 {
+    pub(crate) fn next_counter(&self) -> u8 {
         // 2..=7: ethercrab's own mailbox traffic starts at counter 1, so its first message
         // never repeats the last counter of ours.
         let c = self.mbx_counter.get();
@@ -136,7 +136,8 @@ impl Master {
         let mut first = true;
         loop {
             let counter = self.next_counter();
-            self.mbx_send(position, &m, payload, counter).await?;
+            self.mbx_send(position, &m, MailboxType::Coe, payload, counter)
+                .await?;
             // The first try waits briefly: a message dropped as a repeat (same counter as the
             // slave's last one) is sent again with the next counter.
             let wait = if first {
@@ -144,7 +145,10 @@ impl Master {
             } else {
                 self.options.mailbox_timeout
             };
-            match self.mbx_receive(position, &m, wait).await? {
+            match self
+                .mbx_receive(position, &m, MailboxType::Coe, wait)
+                .await?
+            {
                 Some(r) => return Ok(r),
                 None if first => first = false,
                 None => {
@@ -157,10 +161,17 @@ impl Master {
         }
     }
 
-    async fn mbx_send(
+    /// The slave's mailbox SyncManagers (for the other mailbox protocols, e.g. FoE).
+    pub(crate) async fn mbx_for(&self, position: usize) -> Result<Mbx, MasterError> {
+        self.mailbox(position).await
+    }
+
+    /// Writes one message of type `t` into SM0 once it is empty.
+    pub(crate) async fn mbx_send(
         &self,
         position: usize,
         m: &Mbx,
+        t: MailboxType,
         payload: &[u8],
         counter: u8,
     ) -> Result<(), MasterError> {
@@ -183,17 +194,20 @@ impl Master {
             self.pause().await;
         }
         let mut buf = vec![0u8; m.out_len as usize];
-        let h = MailboxHeader::new(payload.len() as u16, 0, MailboxType::Coe, counter);
+        let h = MailboxHeader::new(payload.len() as u16, 0, t, counter);
         h.write(&mut buf)
             .map_err(|e| mbx_err(position, format!("{e:?}")))?;
         buf[MAILBOX_HEADER_LEN..MAILBOX_HEADER_LEN + payload.len()].copy_from_slice(payload);
         self.fpwr(position, m.out_start, &buf).await
     }
 
-    async fn mbx_receive(
+    /// Waits up to `wait` for a reply of type `t` in SM1 (CoE emergencies and other types
+    /// are logged and dropped); `None` if none came.
+    pub(crate) async fn mbx_receive(
         &self,
         position: usize,
         m: &Mbx,
+        t: MailboxType,
         wait: Duration,
     ) -> Result<Option<Vec<u8>>, MasterError> {
         let deadline = Instant::now() + wait;
@@ -204,7 +218,10 @@ impl Master {
                 let r = MailboxRef::parse(&b)
                     .map_err(|e| mbx_err(position, format!("bad mailbox header: {e:?}")))?;
                 match r.header.mailbox_type {
-                    MailboxType::Coe => {
+                    x if x == t && t != MailboxType::Coe => {
+                        return Ok(Some(r.payload.to_vec()));
+                    }
+                    MailboxType::Coe if t == MailboxType::Coe => {
                         let coe = CoeHeader::parse(r.payload)
                             .map_err(|e| mbx_err(position, format!("bad CoE header: {e:?}")))?;
                         if coe.service == CoeService::Emergency {
@@ -514,7 +531,7 @@ impl Master {
             }
             // The next fragment comes without a new request.
             reply = self
-                .mbx_receive(position, &m, self.options.mailbox_timeout)
+                .mbx_receive(position, &m, MailboxType::Coe, self.options.mailbox_timeout)
                 .await?
                 .ok_or_else(|| MasterError::NotAnswering {
                     position,

@@ -49,6 +49,15 @@ pub enum MasterError {
         /// What went wrong.
         what: String,
     },
+    /// An FoE transfer was refused by the slave.
+    Foe {
+        /// Position of the slave.
+        position: usize,
+        /// The FoE error code (0x8000..).
+        code: u32,
+        /// Standard description and the slave's error text.
+        text: String,
+    },
     /// A value could not be parsed for its type.
     BadValue {
         /// The text given.
@@ -160,6 +169,11 @@ impl std::fmt::Display for MasterError {
             ),
             NoCoe(p) => write!(f, "slave {p} has no CoE mailbox (SII mailbox protocols)"),
             Mailbox { position, what } => write!(f, "mailbox of slave {position}: {what}"),
+            Foe {
+                position,
+                code,
+                text,
+            } => write!(f, "slave {position}: FoE error 0x{code:04X}: {text}"),
             BadValue { value, ty, why } => {
                 write!(f, "value {value:?} is not valid for type {ty}: {why}")
             }

@@ -15,6 +15,7 @@ pub mod cyclic;
 mod error;
 pub mod esi;
 pub mod experiment;
+pub mod foe;
 pub mod pdo;
 pub mod plot;
 pub mod results;

@@ -9,6 +9,7 @@ use std::path::PathBuf;
 use clap::{Parser, Subcommand, ValueEnum};
 use oxicat_slave::DeviceDef;
 
+pub mod foe_cmd;
 pub mod hub_cmd;
 pub mod master_cmd;
 pub mod sim_cmd;
@@ -39,6 +40,9 @@ pub enum Command {
     /// Master verbs (IgH `ethercat` style) on an interface or a virtual segment.
     #[command(flatten)]
     Master(master_cmd::MasterCommand),
+    /// FoE verbs: `foe-write` (firmware download through BOOT), `foe-read`.
+    #[command(flatten)]
+    Foe(foe_cmd::FoeCommand),
     /// Serve a virtual segment in real time on a network interface or UDP until Ctrl-C.
     Sim(sim_cmd::SimArgs),
     /// The Laelaps II trotting experiment (thesis Table 4-1) on the virtual segment: CSV,
@@ -163,6 +167,7 @@ pub fn run(cli: Cli) -> Result<(), CliError> {
         Command::Master(c) => {
             master_cmd::run(c, &mut std::io::stdout().lock()).map_err(CliError::Master)
         }
+        Command::Foe(c) => foe_cmd::run(c, &mut std::io::stdout().lock()).map_err(CliError::Master),
         Command::Trot(a) => trot_cmd::run(a)
             .map(|text| print!("{text}"))
             .map_err(CliError::Master),

@@ -284,7 +284,10 @@ fn build_sim(spec: &str) -> Result<Arc<Mutex<oxicat_sim::segment::Segment>>, Mas
             oxicat_device::sii::generate(def).map_err(|e| MasterError::SiiImage(e.to_string()))?;
         for _ in 0..count {
             let id = seg.add(Esc::new(EscConfig::et1100(), sii.clone()));
-            let app = oxicat_devices::demo::Demo::new(NoLeds, FixedButtons(0xA0 | k as u8));
+            let app = oxicat_slave::foe::WithFoe {
+                app: oxicat_devices::demo::Demo::new(NoLeds, FixedButtons(0xA0 | k as u8)),
+                files: crate::foe_cmd::demo_files(def),
+            };
             let cfg = FirmwareConfig::default();
             let r = if name == "demo" {
                 attach_firmware::<_, { oxicat_devices::demo::IMAGE }, 128>(
@@ -315,7 +318,8 @@ impl oxicat_devices::demo::Buttons for FixedButtons {
     }
 }
 
-fn open(link: &LinkArgs) -> Result<Master, MasterError> {
+/// Opens the master on `link` (an interface or an in-process `--sim` segment).
+pub(crate) fn open(link: &LinkArgs) -> Result<Master, MasterError> {
     if let Some(spec) = &link.sim {
         return Master::open(Link::Sim(build_sim(spec)?));
     }

@@ -152,12 +152,28 @@ mod demo {
         Demo::new(LogLeds(k, None), FixedButtons(0xA0 | (k as u8 & 0x0F)))
     }
 
+    /// The demo application with its FoE files (firmware slots in RAM, `version.txt`).
+    fn with_foe<A>(
+        app: A,
+        def: &'static DeviceDef,
+    ) -> oxicat_slave::foe::WithFoe<
+        A,
+        oxicat_slave::foe::FirmwareUpdate<
+            oxicat_slave::foe::RamStore<2, { crate::foe_cmd::DEMO_SLOT_BYTES }>,
+        >,
+    > {
+        oxicat_slave::foe::WithFoe {
+            app,
+            files: crate::foe_cmd::demo_files(def),
+        }
+    }
+
     pub fn attach(segment: &mut Segment, id: SlaveId, k: usize) -> Result<(), AttachError> {
         attach_firmware::<_, { oxicat_devices::demo::IMAGE }, MBX>(
             segment,
             id,
             &oxicat_devices::demo::DEF,
-            app(k),
+            with_foe(app(k), &oxicat_devices::demo::DEF),
             &FirmwareConfig::default(),
         )
         .map(drop)
@@ -172,7 +188,7 @@ mod demo {
             segment,
             id,
             &oxicat_devices::demo::additions::DEF,
-            app(k),
+            with_foe(app(k), &oxicat_devices::demo::additions::DEF),
             &FirmwareConfig::default(),
         )
         .map(drop)

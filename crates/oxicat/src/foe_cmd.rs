@@ -1,0 +1,188 @@
+//! The FoE verbs of `oxicat`: `foe-write` (firmware download: the slave is walked
+//! INIT → BOOT, the file written, and back to INIT, as TwinCAT does) and `foe-read`; and the
+//! FoE files of the demo devices on the virtual segment (firmware slots in RAM).
+
+use std::io::Write;
+use std::path::PathBuf;
+
+use clap::Subcommand;
+use oxicat_master::value::parse_int;
+use oxicat_master::MasterError;
+use oxicat_slave::foe::{FirmwareUpdate, RamStore, UpdateConfig};
+use oxicat_slave::DeviceDef;
+
+use crate::master_cmd::{LinkArgs, PosArgs};
+
+/// Bytes per firmware slot of the simulated demo devices.
+pub const DEMO_SLOT_BYTES: usize = 16 * 1024;
+
+/// Name of the firmware file the demo devices take in BOOT.
+pub const DEMO_FIRMWARE_FILE: &str = "firmware.bin";
+
+/// The FoE files of a simulated demo device: two RAM slots, the factory image (payload
+/// `oxicat demo firmware <sw_version>`) bootable in slot 0, `firmware.bin` writable in BOOT,
+/// `version.txt` readable always.
+pub fn demo_files(def: &'static DeviceDef) -> FirmwareUpdate<RamStore<2, DEMO_SLOT_BYTES>> {
+    let payload = format!("oxicat demo firmware {}", def.sw_version);
+    let img = oxicat_device::fwimage::build(def, payload.as_bytes());
+    let store = RamStore::with_image(&img).unwrap_or_default();
+    FirmwareUpdate::new(
+        store,
+        UpdateConfig {
+            identity: def.identity,
+            file_name: DEMO_FIRMWARE_FILE,
+            password: 0,
+            read_back: true,
+        },
+    )
+}
+
+/// The FoE verbs.
+#[allow(missing_docs)]
+#[derive(Debug, Subcommand)]
+pub enum FoeCommand {
+    /// FoE write of a file (firmware download): INIT -> BOOT, write, back to INIT.
+    FoeWrite {
+        #[command(flatten)]
+        link: LinkArgs,
+        #[command(flatten)]
+        pos: PosArgs,
+        /// The file to send.
+        file: PathBuf,
+        /// File name on the slave (default: the file's name).
+        #[arg(long)]
+        name: Option<String>,
+        /// FoE password (number, 0x… allowed; default none).
+        #[arg(long)]
+        password: Option<String>,
+        /// Write in the slave's current state (no BOOT walk).
+        #[arg(long)]
+        no_boot: bool,
+    },
+    /// FoE read of a file.
+    FoeRead {
+        #[command(flatten)]
+        link: LinkArgs,
+        #[command(flatten)]
+        pos: PosArgs,
+        /// File name on the slave.
+        name: String,
+        /// Output file (default: standard output).
+        #[arg(long, short = 'o')]
+        output: Option<PathBuf>,
+        /// FoE password.
+        #[arg(long)]
+        password: Option<String>,
+    },
+}
+
+fn password(p: &Option<String>) -> Result<u32, MasterError> {
+    match p {
+        None => Ok(0),
+        Some(s) => parse_int(s)
+            .and_then(|v| u32::try_from(v).ok())
+            .ok_or_else(|| MasterError::Usage(format!("not a password (u32): {s:?}"))),
+    }
+}
+
+fn bar(total: u64, what: &str) -> indicatif::ProgressBar {
+    let pb = indicatif::ProgressBar::new(total);
+    pb.set_style(
+        indicatif::ProgressStyle::with_template("{msg} [{bar:40}] {bytes}/{total_bytes}")
+            .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar())
+            .progress_chars("=> "),
+    );
+    pb.set_message(what.to_string());
+    pb
+}
+
+fn io(e: std::io::Error) -> MasterError {
+    MasterError::Usage(format!("output: {e}"))
+}
+
+/// Runs an FoE verb, writing its report to `out`.
+pub fn run(cmd: FoeCommand, out: &mut dyn Write) -> Result<(), MasterError> {
+    match cmd {
+        FoeCommand::FoeWrite {
+            link,
+            pos,
+            file,
+            name,
+            password: pw,
+            no_boot,
+        } => {
+            let data = std::fs::read(&file)
+                .map_err(|e| MasterError::Usage(format!("{}: {e}", file.display())))?;
+            let name = match name {
+                Some(n) => n,
+                None => file
+                    .file_name()
+                    .map(|n| n.to_string_lossy().into_owned())
+                    .ok_or_else(|| MasterError::Usage("give --name".into()))?,
+            };
+            let pw = password(&pw)?;
+            let mut m = crate::master_cmd::open(&link)?;
+            let p = pos.position.unwrap_or(0);
+            m.address(p)?;
+            if !no_boot {
+                m.enter_boot(p)?;
+            }
+            let pb = bar(data.len() as u64, &format!("FoE write {name}"));
+            let r = m.foe_write(p, &name, pw, &data, &mut |done, _| {
+                pb.set_position(done as u64)
+            });
+            pb.finish_and_clear();
+            // What the slave now reports (BOOT serves version.txt too), before leaving.
+            let version = match &r {
+                Ok(()) => m.foe_read(p, "version.txt", 0, &mut |_, _| {}).ok(),
+                Err(_) => None,
+            };
+            if !no_boot {
+                let back = m.leave_boot(p);
+                back?;
+            }
+            r?;
+            writeln!(
+                out,
+                "slave {p}: wrote {} bytes as {name:?}{}",
+                data.len(),
+                if no_boot {
+                    ""
+                } else {
+                    " in BOOT; back in INIT"
+                }
+            )
+            .map_err(io)?;
+            if let Some(v) = version {
+                write!(out, "slave {p} reports:\n{}", String::from_utf8_lossy(&v)).map_err(io)?;
+            }
+            Ok(())
+        }
+        FoeCommand::FoeRead {
+            link,
+            pos,
+            name,
+            output,
+            password: pw,
+        } => {
+            let pw = password(&pw)?;
+            let m = crate::master_cmd::open(&link)?;
+            let p = pos.position.unwrap_or(0);
+            m.address(p)?;
+            let data = m.foe_read(p, &name, pw, &mut |_, _| {})?;
+            match output {
+                Some(f) => {
+                    std::fs::write(&f, &data).map_err(io)?;
+                    writeln!(
+                        out,
+                        "slave {p}: read {} bytes of {name:?} into {}",
+                        data.len(),
+                        f.display()
+                    )
+                    .map_err(io)
+                }
+                None => out.write_all(&data).map_err(io),
+            }
+        }
+    }
+}
