@@ -539,6 +539,35 @@ pub fn frequency_response(run: &FrfRun, period: usize, bins: &[usize]) -> Vec<Fr
         .collect()
 }
 
+/// Share of the measured current's energy (periods after the first) that lies **outside**
+/// the excited lines: near 0 for a stable linear loop (quantisation only), large for a
+/// limit cycle or an unstable, saturating loop.
+pub fn unexcited_share(run: &FrfRun, period: usize, bins: &[usize]) -> f64 {
+    let n = run.currents.len().min(run.setpoints.len());
+    let periods = n / period;
+    let (mut on, mut off) = (0.0, 0.0);
+    for p in 1..periods {
+        let y: Vec<f64> = run.currents[p * period..(p + 1) * period]
+            .iter()
+            .map(|&v| v as f64)
+            .collect();
+        for k in 1..period / 2 {
+            let (re, im) = dft(&y, k, period);
+            let e = re * re + im * im;
+            if bins.contains(&k) {
+                on += e;
+            } else {
+                off += e;
+            }
+        }
+    }
+    if on + off > 0.0 {
+        off / (on + off)
+    } else {
+        0.0
+    }
+}
+
 /// Bandwidth, crossover and phase margin from a response.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Margins {

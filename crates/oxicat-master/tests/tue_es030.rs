@@ -226,3 +226,81 @@ fn mode_switch_to_frf_and_back_body() {
     assert_eq!(h.lock().slave.output_bytes(), 20);
     assert_eq!(h.lock().slave.input_bytes(), 64);
 }
+
+/// Identifies the closed current loop of M2 with gains (P, I, limit) from a short
+/// multisine; returns the response and its margins.
+fn identify(p: f32, i: f32, lim: f32) -> (Vec<tue::FrfPoint>, tue::Margins, tue::FrfRun) {
+    let (link, _seg, _h) = bench();
+    let m = Master::open(link.clone()).unwrap();
+    let par = TueParams {
+        pgain: [p; 3],
+        igain: [i; 3],
+        ilimit: [lim; 3],
+        // Feed-forward off, as in the manual's identification.
+        r: [0.0; 3],
+        kv: [0.0; 3],
+        encres: [500; 3],
+        ..TueParams::default()
+    };
+    tue::write_params(&m, 0, &par).unwrap();
+    let (mut m, _) = tue::set_mode(&link, m, 0, TueMode::Frf).unwrap();
+    let period = 1000;
+    let (sp, bins) = tue::multisine(period, 3, 40.0, 9800.0, 30, 400.0);
+    let run = tue::run_frf(&mut m, 0, 1, &sp, &mut |_, _| {}).unwrap();
+    let pts = tue::frequency_response(&run, period, &bins);
+    let mg = tue::margins(&pts);
+    (pts, mg, run)
+}
+
+#[test]
+fn frf_identifies_the_closed_current_loop() {
+    big(frf_body);
+}
+
+fn frf_body() {
+    // The manual's settings: P = 6, I = 4, limit 1 (feed-forward off, axis free).
+    let (pts, mg, run) = identify(6.0, 4.0, 1.0);
+    assert!(run.complete(), "no sample lost");
+    let share = tue::unexcited_share(&run, 1000, &BINS.with(|b| b.clone()));
+    eprintln!("P=6: {mg:?}, unexcited share {share:.4}");
+    for p in &pts {
+        eprintln!(
+            "{:8.1} Hz  T {:6.2} dB {:7.1} deg  L {:6.2} dB",
+            p.f,
+            p.t_db(),
+            p.t_deg(),
+            p.l_db()
+        );
+    }
+    // Stable but lightly damped in the model: crossover of several kHz, small margin.
+    let pm = mg.phase_margin.unwrap();
+    let fc = mg.crossover.unwrap();
+    assert!(pm > 0.0 && pm < 30.0, "PM {pm}");
+    assert!(fc > 3000.0, "crossover {fc}");
+    assert!(mg.peak_db > 6.0);
+    assert!(share < 0.05, "linear: {share}");
+    // P = 6/4.2 (the hardware's loop gain if its current scaling was for 42 mOhm).
+    let (_, mg14, run14) = identify(6.0 / 4.2, 4.0, 1.0);
+    let share14 = tue::unexcited_share(&run14, 1000, &BINS.with(|b| b.clone()));
+    eprintln!("P=1.43: {mg14:?}, unexcited share {share14:.4}");
+    let pm14 = mg14.phase_margin.unwrap();
+    assert!(pm14 > 40.0 && pm14 < 70.0, "PM {pm14}");
+    // P = 10: the model's loop is unstable: it oscillates at the PWM limit, most of the
+    // current is at frequencies that were not excited.
+    let (_, mg10, run10) = identify(10.0, 4.0, 1.0);
+    let share10 = tue::unexcited_share(&run10, 1000, &BINS.with(|b| b.clone()));
+    let peak10 = run10
+        .currents
+        .iter()
+        .map(|c| c.unsigned_abs())
+        .max()
+        .unwrap_or(0);
+    eprintln!("P=10: {mg10:?}, unexcited share {share10:.4}, peak current {peak10} mA");
+    assert!(run10.complete());
+    assert!(share10 > 0.3, "P=10 unstable: {share10}");
+    assert!(peak10 > 2000);
+}
+
+thread_local! {
+    static BINS: Vec<usize> = tue::multisine(1000, 1, 40.0, 9800.0, 30, 400.0).1;
+}

@@ -14,6 +14,7 @@ pub mod hub_cmd;
 pub mod master_cmd;
 pub mod sim_cmd;
 pub mod sim_devices;
+pub mod tue_cmd;
 pub mod trot_cmd;
 
 /// The command line.
@@ -48,6 +49,9 @@ pub enum Command {
     /// The Laelaps II trotting experiment (thesis Table 4-1) on the virtual segment: CSV,
     /// figures, summary.
     Trot(trot_cmd::TrotArgs),
+    /// The TUeES030 motor I/O board (normal-mode position loop, FRF current-loop
+    /// identification) on the virtual segment.
+    TueEs030(tue_cmd::TueArgs),
 }
 
 /// Arguments of `oxicat device`.
@@ -93,6 +97,11 @@ pub fn devices() -> Vec<(&'static str, &'static DeviceDef, &'static str)> {
             "demo-additions",
             &oxicat_devices::demo::additions::DEF,
             "demo + record Additions 0x7030 (thesis section 6.7, one edit)",
+        ),
+        (
+            "tue-es030",
+            &oxicat_devices::tue_es030::device::DEF,
+            "TUeES030 motor I/O board: 3 current-controlled DC motors, normal/FRF PDO modes",
         ),
     ]
 }
@@ -169,6 +178,9 @@ pub fn run(cli: Cli) -> Result<(), CliError> {
         }
         Command::Foe(c) => foe_cmd::run(c, &mut std::io::stdout().lock()).map_err(CliError::Master),
         Command::Trot(a) => trot_cmd::run(a)
+            .map(|text| print!("{text}"))
+            .map_err(CliError::Master),
+        Command::TueEs030(a) => tue_cmd::run(a)
             .map(|text| print!("{text}"))
             .map_err(CliError::Master),
     }

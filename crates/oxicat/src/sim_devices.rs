@@ -55,6 +55,21 @@ pub fn sim_devices() -> Vec<SimDevice> {
             attach: demo::attach_additions,
         },
         SimDevice {
+            name: "tue-es030",
+            description: "TUeES030 motor I/O board (ET1200) with three Maxon RE 30 motors on its \
+                          bridges (current loops, encoders, line voltage)",
+            def: |_| &oxicat_devices::tue_es030::device::DEF,
+            esc: EscConfig::et1200,
+            attach: |segment, id, _k| {
+                oxicat_sim::tue_es030::attach(
+                    segment,
+                    id,
+                    &oxicat_sim::tue_es030::TueConfig::default(),
+                )
+                .map(drop)
+            },
+        },
+        SimDevice {
             name: "laelaps-leg",
             description: "Laelaps II leg node (F28379D + FB1111) driving its leg on the treadmill \
                           (motors, gears, coupler, encoders); nodes in tower order HR HL FL FR, \
