@@ -12,6 +12,7 @@
 pub use oxicat_slave as __slave;
 
 pub mod axis_hub;
+pub mod cia402;
 pub mod demo;
 pub mod laelaps;
 pub mod tue_es030;

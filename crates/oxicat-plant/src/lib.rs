@@ -26,6 +26,7 @@
 #![forbid(unsafe_code)]
 #![deny(missing_docs)]
 
+pub mod bldc_joint;
 pub mod encoder;
 pub mod gear;
 pub mod motor;

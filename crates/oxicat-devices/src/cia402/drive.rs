@@ -1,0 +1,906 @@
+//! The drive application: the state machine, the modes of operation and the cascaded
+//! loops on [`JointHw`].
+//!
+//! | event | what runs |
+//! |---|---|
+//! | local timer [`CURRENT_LOOP_TIMER`], 20 kHz | current (q-axis) PI loop: `i_q` reference → voltage; over-current monitor |
+//! | DC SYNC0 (or the free-run / SM cycle) | encoder → position/velocity actual; state machine; mode set-point generation; position P loop → velocity PI loop → `i_q` reference; following-error and limit monitors; statusword and actual values |
+//!
+//! The joint torque sensor is sampled each cycle and reported in 0x2002 (mN·m, output
+//! side); it is not used in the loops.
+
+use super::fsm::{cw, sw, Events, Fsm, Options, Ramp, State};
+use oxicat_slave::{AlState, AlStatusCode, Application, Od, Var};
+
+/// The hardware the drive runs on.
+pub trait JointHw {
+    /// The motor encoder counter (increments; wraps).
+    fn encoder(&mut self) -> i32;
+    /// The counter value latched at the last index pulse since the previous call.
+    fn index_latch(&mut self) -> Option<i32>;
+    /// The home switch input.
+    fn home_switch(&mut self) -> bool;
+    /// The measured q-axis current \[A\].
+    fn current(&mut self) -> f32;
+    /// The joint torque sensor \[N·m\].
+    fn joint_torque(&mut self) -> f32;
+    /// Drives the bridge: `enable` false switches it off (motor coasts), else applies `volts`
+    /// on the q axis.
+    fn set_voltage(&mut self, enable: bool, volts: f32);
+}
+
+/// Local timer of the current loop.
+pub const CURRENT_LOOP_TIMER: u8 = 0;
+/// Current loop rate.
+pub const CURRENT_LOOP_HZ: u32 = 20_000;
+
+/// Modes of operation (0x6060 / 0x6061).
+pub mod mode {
+    /// Profile position.
+    pub const PP: i8 = 1;
+    /// Profile velocity.
+    pub const PV: i8 = 3;
+    /// Profile torque.
+    pub const PT: i8 = 4;
+    /// Homing.
+    pub const HM: i8 = 6;
+    /// Cyclic synchronous position.
+    pub const CSP: i8 = 8;
+    /// Cyclic synchronous velocity.
+    pub const CSV: i8 = 9;
+    /// Cyclic synchronous torque.
+    pub const CST: i8 = 10;
+}
+
+/// Error codes (0x603F, emergency) this drive raises.
+pub mod error {
+    /// Following error.
+    pub const FOLLOWING_ERROR: u16 = 0x8611;
+    /// Over-current (short circuit / earth leakage, motor side).
+    pub const OVERCURRENT: u16 = 0x2310;
+}
+
+/// Hardware constants of the drive.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct DriveParams {
+    /// Encoder increments per motor revolution.
+    pub counts_per_rev: u32,
+    /// Motor torque constant \[N·m/A\].
+    pub kt: f32,
+    /// DC bus voltage \[V\].
+    pub bus_voltage: f32,
+    /// Application cycle when 0x1C32:02 does not say \[s\].
+    pub cycle_s: f32,
+    /// Over-current trip \[A\].
+    pub max_current: f32,
+}
+
+impl Default for DriveParams {
+    fn default() -> Self {
+        Self {
+            counts_per_rev: 16_384,
+            kt: 0.05,
+            bus_voltage: 48.0,
+            cycle_s: 0.001,
+            max_current: 20.0,
+        }
+    }
+}
+
+#[derive(Debug, Clone, Copy)]
+struct Io {
+    controlword: Var<u16>,
+    statusword: Var<u16>,
+    mode: Var<i8>,
+    mode_display: Var<i8>,
+    target_position: Var<i32>,
+    target_velocity: Var<i32>,
+    target_torque: Var<i16>,
+    position_actual: Var<i32>,
+    position_demand: Var<i32>,
+    velocity_actual: Var<i32>,
+    torque_actual: Var<i16>,
+    current_actual: Var<i16>,
+    error_code: Var<u16>,
+    following_error: Var<i32>,
+    joint_torque: Var<i32>,
+    digital_inputs: Var<u32>,
+    position_offset: Var<i32>,
+    velocity_offset: Var<i32>,
+    torque_offset: Var<i16>,
+}
+
+impl Io {
+    fn resolve<const N: usize>(od: &Od<N>) -> Option<Self> {
+        Some(Self {
+            controlword: od.var(0x6040, 0).ok()?,
+            statusword: od.var(0x6041, 0).ok()?,
+            mode: od.var(0x6060, 0).ok()?,
+            mode_display: od.var(0x6061, 0).ok()?,
+            target_position: od.var(0x607A, 0).ok()?,
+            target_velocity: od.var(0x60FF, 0).ok()?,
+            target_torque: od.var(0x6071, 0).ok()?,
+            position_actual: od.var(0x6064, 0).ok()?,
+            position_demand: od.var(0x6062, 0).ok()?,
+            velocity_actual: od.var(0x606C, 0).ok()?,
+            torque_actual: od.var(0x6077, 0).ok()?,
+            current_actual: od.var(0x6078, 0).ok()?,
+            error_code: od.var(0x603F, 0).ok()?,
+            following_error: od.var(0x60F4, 0).ok()?,
+            joint_torque: od.var(0x2002, 0).ok()?,
+            digital_inputs: od.var(0x60FD, 0).ok()?,
+            position_offset: od.var(0x60B0, 0).ok()?,
+            velocity_offset: od.var(0x60B1, 0).ok()?,
+            torque_offset: od.var(0x60B2, 0).ok()?,
+        })
+    }
+}
+
+/// Position/velocity demand of the profile generator: integer increments plus a fraction,
+/// so that f32 keeps sub-increment resolution over the whole i32 range.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+struct Profile {
+    pos: i32,
+    frac: f32,
+    vel: f32,
+}
+
+impl Profile {
+    fn at(pos: i32) -> Self {
+        Self {
+            pos,
+            frac: 0.0,
+            vel: 0.0,
+        }
+    }
+
+    fn advance(&mut self, dt: f32) {
+        self.frac += self.vel * dt;
+        let whole = libm_floor(self.frac);
+        self.pos = self.pos.wrapping_add(whole as i32);
+        self.frac -= whole;
+    }
+
+    fn shift(&mut self, d: i32) {
+        self.pos = self.pos.wrapping_sub(d);
+    }
+
+    /// One step of a trapezoidal move towards `target`; true when there.
+    fn move_to(&mut self, target: i32, vmax: f32, acc: f32, dec: f32, dt: f32) -> bool {
+        let rem = target.wrapping_sub(self.pos) as f32 - self.frac;
+        if rem.abs() < 0.5 && self.vel.abs() <= dec * dt {
+            self.pos = target;
+            self.frac = 0.0;
+            self.vel = 0.0;
+            return true;
+        }
+        let dir = if rem >= 0.0 { 1.0 } else { -1.0 };
+        // Velocity that still stops in the remaining distance (v² = 2 a d), one step early.
+        let v_stop = sqrtf(2.0 * dec * (rem.abs() - (self.vel.abs() * dt).min(rem.abs())));
+        let v_goal = dir * vmax.min(v_stop);
+        self.ramp_to(v_goal, acc, dec, dt);
+        // Never overshoot within a step.
+        let step = self.vel * dt;
+        if (step > 0.0 && step > rem) || (step < 0.0 && step < rem) {
+            self.pos = target;
+            self.frac = 0.0;
+            self.vel = 0.0;
+            return true;
+        }
+        self.advance(dt);
+        false
+    }
+
+    /// Ramps the velocity towards `v` (acceleration away from 0, deceleration towards it).
+    fn ramp_to(&mut self, v: f32, acc: f32, dec: f32, dt: f32) {
+        let dv = v - self.vel;
+        let speeding_up = v.abs() > self.vel.abs() && v * self.vel >= 0.0;
+        let a = if speeding_up { acc } else { dec } * dt;
+        self.vel += dv.clamp(-a, a);
+    }
+}
+
+fn libm_floor(x: f32) -> f32 {
+    let t = x as i32 as f32;
+    if t > x {
+        t - 1.0
+    } else {
+        t
+    }
+}
+
+/// Square root for `no_std` (Newton iterations from the bit-level estimate).
+fn sqrtf(x: f32) -> f32 {
+    if x <= 0.0 {
+        return 0.0;
+    }
+    let mut y = f32::from_bits((x.to_bits() >> 1) + 0x1FBD_1DF5);
+    for _ in 0..3 {
+        y = 0.5 * (y + x / y);
+    }
+    y
+}
+
+/// Homing phases.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Homing {
+    /// Not started (or interrupted).
+    Idle,
+    /// Method 3: moving positive to find the home switch.
+    SeekSwitch,
+    /// Method 3: moving negative until the switch releases.
+    LeaveSwitch,
+    /// Method 3: moving negative to the first index pulse.
+    SeekIndex,
+    /// Home found; coming to rest.
+    Stopping,
+    /// Homing attained.
+    Done,
+    /// Homing error (unsupported method).
+    Error,
+}
+
+/// The CiA402 joint drive application.
+pub struct Cia402Drive<H: JointHw> {
+    /// The hardware.
+    pub hw: H,
+    /// Hardware constants.
+    pub params: DriveParams,
+    fsm: Fsm,
+    io: Option<Io>,
+    // Current loop (timer context).
+    power: bool,
+    iq_ref: f32,
+    iq_int: f32,
+    iq_meas: f32,
+    kp_i: f32,
+    ki_i: f32,
+    // Position / velocity (cycle context).
+    zero: i32,
+    last_raw: Option<i32>,
+    vel: f32,
+    vel_int: f32,
+    prof: Profile,
+    torque_dem: f32,
+    active_mode: i8,
+    fault: Option<u16>,
+    fault_new: bool,
+    fe_time: f32,
+    in_window_time: f32,
+    last_cw: u16,
+    pp_target: i32,
+    pp_buffered: Option<i32>,
+    pp_done: bool,
+    ack: bool,
+    homing: Homing,
+    limit_active: bool,
+    emcy: [Option<(u16, u8)>; 4],
+    transitions: u32,
+    last_transition: Option<u8>,
+}
+
+impl<H: JointHw> Cia402Drive<H> {
+    /// A drive on `hw`.
+    pub fn new(hw: H, params: DriveParams) -> Self {
+        Self {
+            hw,
+            params,
+            fsm: Fsm::new(),
+            io: None,
+            power: false,
+            iq_ref: 0.0,
+            iq_int: 0.0,
+            iq_meas: 0.0,
+            kp_i: super::device::gains::CURRENT_KP,
+            ki_i: super::device::gains::CURRENT_KI,
+            zero: 0,
+            last_raw: None,
+            vel: 0.0,
+            vel_int: 0.0,
+            prof: Profile::default(),
+            torque_dem: 0.0,
+            active_mode: 0,
+            fault: None,
+            fault_new: false,
+            fe_time: 0.0,
+            in_window_time: 0.0,
+            last_cw: 0,
+            pp_target: 0,
+            pp_buffered: None,
+            pp_done: true,
+            ack: false,
+            homing: Homing::Idle,
+            limit_active: false,
+            emcy: [None; 4],
+            transitions: 0,
+            last_transition: None,
+        }
+    }
+
+    /// The state of the drive.
+    pub fn state(&self) -> State {
+        self.fsm.state()
+    }
+
+    /// The last state-machine transition taken.
+    pub fn last_transition(&self) -> Option<u8> {
+        self.last_transition
+    }
+
+    /// The pending fault code.
+    pub fn fault(&self) -> Option<u16> {
+        self.fault
+    }
+
+    /// The current reference of the current loop \[A\].
+    pub fn current_reference(&self) -> f32 {
+        self.iq_ref
+    }
+
+    /// Takes the next queued emergency `(error code, error register)`; the host passes it
+    /// to `Slave::emergency`.
+    pub fn take_emergency(&mut self) -> Option<(u16, u8)> {
+        let e = self.emcy[0].take();
+        self.emcy.rotate_left(1);
+        e
+    }
+
+    fn queue_emergency(&mut self, code: u16, reg: u8) {
+        if let Some(slot) = self.emcy.iter_mut().find(|e| e.is_none()) {
+            *slot = Some((code, reg));
+        }
+    }
+
+    /// Raises a fault (0x603F, emergency; the state machine takes transition 13 on the
+    /// next cycle). A latched fault is kept until a fault reset (transition 15) clears it.
+    pub fn raise_fault(&mut self, code: u16) {
+        if self.fault.is_none() {
+            self.fault = Some(code);
+            self.fault_new = true;
+            let reg = if code & 0xF000 == 0x2000 { 0x03 } else { 0x01 };
+            self.queue_emergency(code, reg);
+        }
+    }
+
+    fn cycle_s<const N: usize>(&self, od: &Od<N>) -> f32 {
+        match od.get::<u32>(0x1C32, 2) {
+            Ok(ns) if ns > 0 => ns as f32 * 1e-9,
+            _ => self.params.cycle_s,
+        }
+    }
+
+    fn rad_per_count(&self) -> f32 {
+        core::f32::consts::TAU / self.params.counts_per_rev as f32
+    }
+
+    fn rated_torque_nm<const N: usize>(od: &Od<N>) -> f32 {
+        od.get::<u32>(0x6076, 0).unwrap_or(200) as f32 * 1e-3
+    }
+
+    fn shift_zero(&mut self, new_zero: i32) {
+        let d = new_zero.wrapping_sub(self.zero);
+        self.zero = new_zero;
+        self.prof.shift(d);
+        self.pp_target = self.pp_target.wrapping_sub(d);
+    }
+
+    fn limits<const N: usize>(od: &Od<N>) -> Option<(i32, i32)> {
+        let lo = od.get::<i32>(0x607D, 1).unwrap_or(0);
+        let hi = od.get::<i32>(0x607D, 2).unwrap_or(0);
+        (lo < hi).then_some((lo, hi))
+    }
+
+    fn clamp_limits<const N: usize>(&mut self, od: &Od<N>, p: i32) -> i32 {
+        match Self::limits(od) {
+            Some((lo, hi)) if p < lo || p > hi => {
+                self.limit_active = true;
+                p.clamp(lo, hi)
+            }
+            _ => p,
+        }
+    }
+
+    /// One application cycle (SYNC0 / free run): see the module table.
+    pub fn run_cycle<const N: usize>(&mut self, od: &mut Od<N>) {
+        if self.io.is_none() {
+            self.io = Io::resolve(od);
+        }
+        let Some(io) = self.io else {
+            return;
+        };
+        let dt = self.cycle_s(od);
+        let u32o = |i: u16, s: u8, d: u32| od.get::<u32>(i, s).unwrap_or(d) as f32;
+        let i16o = |i: u16, d: i16| od.get::<i16>(i, 0).unwrap_or(d);
+        let f32o = |s: u8, d: f32| od.get::<f32>(0x2000, s).unwrap_or(d);
+        let pp_vmax = u32o(0x6081, 0, 200_000);
+        let pp_win = u32o(0x6067, 0, 200);
+        let pp_wtime = u32o(0x6068, 0, 5) * 1e-3;
+        let t_slope = u32o(0x6087, 0, 10_000);
+        let rated_i = u32o(0x6075, 0, 4000) * 1e-3;
+        let opt = Options {
+            quick_stop: i16o(0x605A, 2),
+            shutdown: i16o(0x605B, 0),
+            disable_operation: i16o(0x605C, 1),
+            halt: i16o(0x605D, 1),
+            fault_reaction: i16o(0x605E, 2),
+        };
+        let acc = u32o(0x6083, 0, 2_000_000).max(1.0);
+        let dec = u32o(0x6084, 0, 2_000_000).max(1.0);
+        let qdec = u32o(0x6085, 0, 8_000_000).max(1.0);
+        let vmax_motor = u32o(0x6080, 0, 1_000_000);
+        let rated = Self::rated_torque_nm(od);
+        let max_torque = u32o(0x6072, 0, 3000) * 1e-3 * rated;
+        let vel_window = u32o(0x606D, 0, 2000);
+        let kp_v = f32o(3, super::device::gains::VELOCITY_KP);
+        let ki_v = f32o(4, super::device::gains::VELOCITY_KI);
+        let kp_p = f32o(5, super::device::gains::POSITION_KP);
+        self.kp_i = f32o(1, super::device::gains::CURRENT_KP);
+        self.ki_i = f32o(2, super::device::gains::CURRENT_KI);
+
+        // Feedback.
+        let raw = self.hw.encoder();
+        let pos = raw.wrapping_sub(self.zero);
+        let v_now = match self.last_raw {
+            Some(l) => raw.wrapping_sub(l) as f32 / dt,
+            None => 0.0,
+        };
+        self.last_raw = Some(raw);
+        // First-order filter (≈ 160 Hz at 1 kHz).
+        self.vel += 0.5 * (v_now - self.vel);
+        let home_switch = self.hw.home_switch();
+
+        // Following error monitor (position modes, drive powered, not coasting).
+        let fe = self.prof.pos.wrapping_sub(pos);
+        let position_mode = matches!(self.active_mode, mode::PP | mode::HM | mode::CSP);
+        let fe_window = od.get::<u32>(0x6065, 0).unwrap_or(u32::MAX);
+        let fe_timeout = od.get::<u16>(0x6066, 0).unwrap_or(0) as f32 * 1e-3;
+        let fe_over = self.power
+            && position_mode
+            && fe_window != u32::MAX
+            && fe.unsigned_abs() > fe_window
+            && self.fsm.state() == State::OperationEnabled;
+        if fe_over {
+            self.fe_time += dt;
+            if self.fe_time > fe_timeout {
+                self.raise_fault(error::FOLLOWING_ERROR);
+            }
+        } else {
+            self.fe_time = 0.0;
+        }
+
+        // State machine.
+        let cwv = od.load(io.controlword);
+        let ramp_done = self.prof.vel == 0.0 && self.vel.abs() <= vel_window;
+        let ev = Events {
+            fault: core::mem::take(&mut self.fault_new),
+            stopped: ramp_done,
+        };
+        let before = self.fsm.state();
+        let t = self.fsm.step(cwv, ev, &opt);
+        if let Some(t) = t {
+            self.transitions += 1;
+            self.last_transition = Some(t);
+            if t == 15 {
+                self.fault = None;
+                self.queue_emergency(0x0000, 0x00);
+            }
+        }
+        let state = self.fsm.state();
+        let entering = state.powered() && !before.powered();
+        if entering || (state == State::OperationEnabled && t == Some(16)) {
+            self.prof = Profile::at(pos);
+            self.vel_int = 0.0;
+            self.pp_target = pos;
+            self.pp_buffered = None;
+            self.pp_done = true;
+        }
+
+        // Mode switch (takes effect at once; unsupported values are ignored).
+        let want = od.load(io.mode);
+        if want != self.active_mode
+            && matches!(
+                want,
+                mode::PP | mode::PV | mode::PT | mode::HM | mode::CSP | mode::CSV | mode::CST
+            )
+        {
+            self.active_mode = want;
+            self.pp_target = self.prof.pos;
+            self.pp_buffered = None;
+            self.pp_done = true;
+            self.homing = Homing::Idle;
+            self.torque_dem = od.load(io.torque_actual) as f32;
+        }
+
+        let rising4 = cwv & cw::NEW_SET_POINT != 0 && self.last_cw & cw::NEW_SET_POINT == 0;
+        let halt = cwv & cw::HALT != 0;
+        self.last_cw = cwv;
+        self.limit_active = false;
+
+        // Set-points: None = velocity control only.
+        let mut pos_control = true;
+        let mut vel_dem = 0.0f32;
+        let mut vff = 0.0f32;
+        let mut tff = 0.0f32;
+        let mut torque_only: Option<f32> = None;
+        let mut torque_limit = max_torque;
+        let mut target_reached = false;
+        let mut oms12 = false;
+        let mut oms13 = false;
+
+        if !state.powered() || self.fault_coasting() {
+            self.power = false;
+            self.prof = Profile::at(pos);
+            self.vel_int = 0.0;
+            self.iq_ref = 0.0;
+        } else if let Some(stop) = self.fsm.stopping() {
+            self.stop_ramp(
+                stop.ramp,
+                dec,
+                qdec,
+                dt,
+                pos,
+                &mut pos_control,
+                &mut torque_limit,
+                max_torque,
+            );
+        } else {
+            let m = self.active_mode;
+            if halt && matches!(m, mode::PP | mode::PV | mode::HM) {
+                let r = Options::halt_ramp(opt.halt);
+                self.stop_ramp(
+                    r,
+                    dec,
+                    qdec,
+                    dt,
+                    pos,
+                    &mut pos_control,
+                    &mut torque_limit,
+                    max_torque,
+                );
+                target_reached = self.prof.vel == 0.0;
+                if m == mode::HM && self.homing != Homing::Done {
+                    self.homing = Homing::Idle;
+                }
+            } else {
+                match m {
+                    mode::PP => {
+                        if rising4 {
+                            let mut t = od.load(io.target_position);
+                            if cwv & cw::RELATIVE != 0 {
+                                t = self.pp_target.wrapping_add(t);
+                            }
+                            let t = self.clamp_limits(od, t);
+                            if cwv & cw::CHANGE_SET_IMMEDIATELY != 0 || self.pp_done {
+                                self.pp_target = t;
+                                self.pp_buffered = None;
+                                self.pp_done = false;
+                            } else {
+                                self.pp_buffered = Some(t);
+                            }
+                            self.ack = true;
+                        } else if cwv & cw::NEW_SET_POINT == 0 {
+                            self.ack = false;
+                        }
+                        let vmax = pp_vmax.min(vmax_motor);
+                        if !self.pp_done {
+                            self.pp_done =
+                                self.prof.move_to(self.pp_target, vmax, acc, dec, dt);
+                        }
+                        if self.pp_done {
+                            if let Some(b) = self.pp_buffered.take() {
+                                self.pp_target = b;
+                                self.pp_done = false;
+                            }
+                        }
+                        vff = self.prof.vel;
+                        let win = pp_win;
+                        let wtime = pp_wtime;
+                        if self.pp_done
+                            && (self.pp_target.wrapping_sub(pos).unsigned_abs() as f32) <= win
+                        {
+                            self.in_window_time += dt;
+                        } else {
+                            self.in_window_time = 0.0;
+                        }
+                        target_reached = self.pp_done && self.in_window_time >= wtime;
+                        oms12 = self.ack;
+                        oms13 = self.fe_time > 0.0;
+                    }
+                    mode::PV => {
+                        pos_control = false;
+                        let target =
+                            (od.load(io.target_velocity) as f32).clamp(-vmax_motor, vmax_motor);
+                        self.prof.ramp_to(target, acc, dec, dt);
+                        vel_dem = self.prof.vel;
+                        self.prof.pos = pos;
+                        self.prof.frac = 0.0;
+                        target_reached = (self.vel - target).abs() <= vel_window;
+                        oms12 = self.vel.abs() <= vel_window;
+                    }
+                    mode::PT => {
+                        let target = od.load(io.target_torque) as f32;
+                        let slope = t_slope * dt;
+                        self.torque_dem += (target - self.torque_dem).clamp(-slope, slope);
+                        torque_only = Some(self.torque_dem * 1e-3 * rated);
+                        target_reached = self.torque_dem == target;
+                    }
+                    mode::HM => {
+                        self.homing_step(od, rising4, home_switch, raw, acc, dec, dt);
+                        vff = self.prof.vel;
+                        oms12 = self.homing == Homing::Done;
+                        oms13 = self.homing == Homing::Error;
+                        target_reached =
+                            matches!(self.homing, Homing::Done | Homing::Error | Homing::Idle)
+                                && self.prof.vel == 0.0;
+                    }
+                    mode::CSP => {
+                        let t = od
+                            .load(io.target_position)
+                            .wrapping_add(od.load(io.position_offset));
+                        let t = self.clamp_limits(od, t);
+                        let v = t.wrapping_sub(self.prof.pos) as f32 / dt;
+                        self.prof = Profile {
+                            pos: t,
+                            frac: 0.0,
+                            vel: v,
+                        };
+                        vff = od.load(io.velocity_offset) as f32;
+                        tff = od.load(io.torque_offset) as f32 * 1e-3 * rated;
+                        oms12 = true;
+                        oms13 = self.fe_time > 0.0;
+                    }
+                    mode::CSV => {
+                        pos_control = false;
+                        vel_dem = (od
+                            .load(io.target_velocity)
+                            .wrapping_add(od.load(io.velocity_offset))
+                            as f32)
+                            .clamp(-vmax_motor, vmax_motor);
+                        tff = od.load(io.torque_offset) as f32 * 1e-3 * rated;
+                        self.prof = Profile {
+                            pos,
+                            frac: 0.0,
+                            vel: vel_dem,
+                        };
+                        oms12 = true;
+                    }
+                    mode::CST => {
+                        let t = od.load(io.target_torque) as f32 + od.load(io.torque_offset) as f32;
+                        torque_only = Some(t * 1e-3 * rated);
+                        self.prof = Profile {
+                            pos,
+                            frac: 0.0,
+                            vel: self.vel,
+                        };
+                        oms12 = true;
+                    }
+                    _ => {
+                        // No mode: hold position.
+                    }
+                }
+            }
+            self.power = true;
+        }
+
+        // Cascade.
+        if self.power {
+            let torque = match torque_only {
+                Some(t) => {
+                    self.vel_int = 0.0;
+                    t
+                }
+                None => {
+                    if pos_control {
+                        let e = self.prof.pos.wrapping_sub(pos) as f32 + self.prof.frac;
+                        vel_dem = kp_p * e + vff;
+                    }
+                    let vel_dem = vel_dem.clamp(-vmax_motor, vmax_motor);
+                    let ev = (vel_dem - self.vel) * self.rad_per_count();
+                    self.vel_int =
+                        (self.vel_int + ki_v * ev * dt).clamp(-torque_limit, torque_limit);
+                    kp_v * ev + self.vel_int + tff
+                }
+            };
+            let torque = torque.clamp(-torque_limit, torque_limit);
+            if (torque - torque_limit).abs() < 1e-9 || (torque + torque_limit).abs() < 1e-9 {
+                self.limit_active = true;
+            }
+            self.iq_ref = torque / self.params.kt;
+        }
+
+        // Actual values and statusword.
+        let fe_now = self.prof.pos.wrapping_sub(pos);
+        od.store(io.position_actual, pos);
+        od.store(io.position_demand, self.prof.pos);
+        od.store(io.velocity_actual, self.vel as i32);
+        od.store(io.following_error, fe_now);
+        let t_act = self.iq_meas * self.params.kt;
+        od.store(io.torque_actual, (t_act / rated * 1000.0) as i16);
+        od.store(io.current_actual, (self.iq_meas / rated_i * 1000.0) as i16);
+        od.store(io.joint_torque, (self.hw.joint_torque() * 1000.0) as i32);
+        od.store(io.digital_inputs, if home_switch { 1 << 2 } else { 0 });
+        od.store(io.mode_display, self.active_mode);
+        od.store(io.error_code, self.fault.unwrap_or(0));
+        let mut s = state.statusword_bits() | sw::REMOTE;
+        if state == State::OperationEnabled {
+            if target_reached {
+                s |= sw::TARGET_REACHED;
+            }
+            if oms12 {
+                s |= sw::OMS12;
+            }
+            if oms13 {
+                s |= sw::OMS13;
+            }
+            if self.limit_active {
+                s |= sw::INTERNAL_LIMIT;
+            }
+        }
+        od.store(io.statusword, s);
+    }
+
+    fn fault_coasting(&self) -> bool {
+        matches!(
+            self.fsm.stopping(),
+            Some(super::fsm::Stop {
+                ramp: Ramp::Coast,
+                ..
+            })
+        )
+    }
+
+    #[allow(clippy::too_many_arguments)]
+    fn stop_ramp(
+        &mut self,
+        ramp: Ramp,
+        dec: f32,
+        qdec: f32,
+        dt: f32,
+        pos: i32,
+        pos_control: &mut bool,
+        torque_limit: &mut f32,
+        max_torque: f32,
+    ) {
+        match ramp {
+            Ramp::SlowDown | Ramp::QuickStop => {
+                let d = if ramp == Ramp::SlowDown { dec } else { qdec };
+                self.prof.ramp_to(0.0, d, d, dt);
+                self.prof.advance(dt);
+            }
+            Ramp::CurrentLimit | Ramp::VoltageLimit => {
+                *pos_control = false;
+                self.prof = Profile::at(pos);
+                *torque_limit = if ramp == Ramp::VoltageLimit {
+                    3.0 * max_torque
+                } else {
+                    max_torque
+                };
+            }
+            Ramp::Coast => {}
+        }
+        self.power = true;
+    }
+
+    #[allow(clippy::too_many_arguments)]
+    fn homing_step<const N: usize>(
+        &mut self,
+        od: &Od<N>,
+        start: bool,
+        switch: bool,
+        raw: i32,
+        _acc: f32,
+        _dec: f32,
+        dt: f32,
+    ) {
+        let method = od.get::<i8>(0x6098, 0).unwrap_or(37);
+        let offset = od.get::<i32>(0x607C, 0).unwrap_or(0);
+        let v_switch = od.get::<u32>(0x6099, 1).unwrap_or(100_000) as f32;
+        let v_zero = od.get::<u32>(0x6099, 2).unwrap_or(20_000) as f32;
+        let hacc = od.get::<u32>(0x609A, 0).unwrap_or(1_000_000).max(1) as f32;
+        if start {
+            self.homing = match method {
+                35 | 37 => {
+                    // Current position is the home position: actual = home offset.
+                    self.shift_zero(raw.wrapping_sub(offset));
+                    Homing::Done
+                }
+                3 => {
+                    if switch {
+                        Homing::LeaveSwitch
+                    } else {
+                        Homing::SeekSwitch
+                    }
+                }
+                _ => Homing::Error,
+            };
+            let _ = self.hw.index_latch();
+        }
+        let v_goal = match self.homing {
+            Homing::SeekSwitch => {
+                if switch {
+                    self.homing = Homing::LeaveSwitch;
+                }
+                v_switch
+            }
+            Homing::LeaveSwitch => {
+                if !switch {
+                    self.homing = Homing::SeekIndex;
+                    let _ = self.hw.index_latch();
+                }
+                -v_zero
+            }
+            Homing::SeekIndex => {
+                if let Some(l) = self.hw.index_latch() {
+                    self.shift_zero(l.wrapping_sub(offset));
+                    self.homing = Homing::Stopping;
+                    0.0
+                } else {
+                    -v_zero
+                }
+            }
+            _ => 0.0,
+        };
+        self.prof.ramp_to(v_goal, hacc, hacc, dt);
+        self.prof.advance(dt);
+        if self.homing == Homing::Stopping && self.prof.vel == 0.0 {
+            self.homing = Homing::Done;
+        }
+    }
+
+    /// The 20 kHz current loop.
+    pub fn run_current_loop(&mut self) {
+        let dt = 1.0 / CURRENT_LOOP_HZ as f32;
+        let i = self.hw.current();
+        self.iq_meas = i;
+        if i.abs() > self.params.max_current {
+            self.raise_fault(error::OVERCURRENT);
+        }
+        if !self.power {
+            self.iq_int = 0.0;
+            self.hw.set_voltage(false, 0.0);
+            return;
+        }
+        let vb = self.params.bus_voltage;
+        let e = self.iq_ref - i;
+        self.iq_int = (self.iq_int + self.ki_i * e * dt).clamp(-vb, vb);
+        let v = (self.kp_i * e + self.iq_int).clamp(-vb, vb);
+        self.hw.set_voltage(true, v);
+    }
+}
+
+impl<const N: usize, H: JointHw> Application<N> for Cia402Drive<H> {
+    fn state_change(
+        &mut self,
+        _from: AlState,
+        to: AlState,
+        od: &mut Od<N>,
+    ) -> Result<(), AlStatusCode> {
+        if to == AlState::SafeOp && self.io.is_none() {
+            self.io = Io::resolve(od);
+        }
+        if matches!(to, AlState::Init | AlState::PreOp) {
+            // No cycle runs below SAFEOP: the drive cannot control, so it lets go.
+            self.power = false;
+            self.iq_ref = 0.0;
+            self.hw.set_voltage(false, 0.0);
+            let _ = od.set(0x6040, 0, 0u16);
+        }
+        Ok(())
+    }
+
+    /// Leaving OP (or the SM watchdog): the controlword goes to Quick stop (0x0002), so
+    /// an enabled drive stops on its quick-stop ramp (0x605A) while SAFEOP cycles run.
+    fn safe_outputs(&mut self, od: &mut Od<N>) {
+        let _ = od.set(0x6040, 0, cw::QUICK_STOP_CMD);
+    }
+
+    fn cycle(&mut self, od: &mut Od<N>) {
+        self.run_cycle(od);
+    }
+
+    fn timer(&mut self, id: u8, _od: &mut Od<N>) {
+        if id == CURRENT_LOOP_TIMER {
+            self.run_current_loop();
+        }
+    }
+}

@@ -1,0 +1,24 @@
+//! A CiA402 (IEC 61800-7-201/-301, ETG.6010) modular joint drive: the drive profile the
+//! Shenyang joint controller (Liu et al., "EtherCAT Based Robot Modular Joint Controller")
+//! describes only as 0x6040/0x6041, done completely.
+//!
+//! - [`fsm`]: the state machine (transitions 0–16, command masks, statusword decoding,
+//!   option codes 0x605A–0x605E);
+//! - [`device`]: the object dictionary, 0x1000 = 0x00020192, default and configurable PDOs;
+//! - [`drive`]: modes PP/PV/PT/HM/CSP/CSV/CST and the cascaded loops on [`JointHw`]
+//!   (current at 20 kHz on a local timer, velocity and position each DC cycle).
+//!
+//! The joint torque sensor is reported in manufacturer object 0x2002 (mN·m).
+
+pub mod device;
+pub mod drive;
+pub mod fsm;
+
+#[cfg(test)]
+mod tests;
+
+pub use device::DEF;
+pub use drive::{
+    error, mode, Cia402Drive, DriveParams, JointHw, CURRENT_LOOP_HZ, CURRENT_LOOP_TIMER,
+};
+pub use fsm::{Command, Events, Fsm, Options, Ramp, State};
