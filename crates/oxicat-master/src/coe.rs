@@ -101,6 +101,39 @@ fn mbx_err(position: usize, what: impl Into<String>) -> MasterError {
 
 impl Master {
     async fn mailbox(&self, position: usize) -> Result<Mbx, MasterError> {
+        // A slave in INIT has no mailbox service (its SMs may still look configured).
+        let st = self.al_status_async(position).await?;
+        if matches!(st.state(), Some(crate::AlState::Init) | None) {
+            return Err(mbx_err(
+                position,
+                format!(
+                    "the slave is in {st}; its mailbox works from PREOP on (`oxicat states preop`)"
+                ),
+            ));
+        }
+        match self.mailbox_as_is(position).await {
+            Err(MasterError::NoCoe(_)) => {}
+            r => return r,
+        }
+        // SM0/SM1 not configured (another master cleared them): configure them from the
+        // SII, leaving the AL state as it is.
+        self.configure_mailbox(position, false).await?;
+        match self.mailbox_as_is(position).await {
+            Err(MasterError::NoCoe(_)) => {
+                let b = self.fprd(position, 0x0800, 16).await?;
+                Err(mbx_err(
+                    position,
+                    format!(
+                        "SM0/SM1 are not set up for a mailbox (0x0800..0x080F: {})",
+                        crate::value::hex(&b)
+                    ),
+                ))
+            }
+            r => r,
+        }
+    }
+
+    async fn mailbox_as_is(&self, position: usize) -> Result<Mbx, MasterError> {
         let b = self.fprd(position, 0x0800, 16).await?;
         let u = |i: usize| u16::from_le_bytes([b[i], b[i + 1]]);
         let m = Mbx {

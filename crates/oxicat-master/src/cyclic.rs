@@ -98,7 +98,9 @@ impl Master {
         names: &[String],
         layouts: &[SlavePdos],
     ) -> Result<Vec<Vec<Variable>>, MasterError> {
-        let slave_names: Vec<String> = self.found.iter().map(|f| f.name.clone()).collect();
+        let slave_names = (0..self.len())
+            .map(|p| self.name(p))
+            .collect::<Result<Vec<String>, _>>()?;
         names
             .iter()
             .map(|n| crate::pdo::resolve(n, layouts, &slave_names))
@@ -116,7 +118,18 @@ impl Master {
         if period == 0 {
             return Err(MasterError::Usage("the cycle time must be above 0".into()));
         }
+        // ethercrab's group (a reset of every slave to INIT, then PRE-OP).
+        self.ensure_group()?;
         let mut dc = opts.dc;
+        if !dc {
+            // Free run: a DC recording left 0x1C32:01 = 2 (DC SYNC0), with which the slave
+            // would wait for SYNC0 pulses that never come and not reach OP.
+            for p in 0..n {
+                if let Err(e) = futures_lite::future::block_on(self.set_free_run(p)) {
+                    log::warn!("slave {p}: sync mode not checked ({e})");
+                }
+            }
+        }
         if dc {
             // DC-synchronous slaves: SYNC0 on, and (CoE) sync mode 0x1C32:01 = 2 (DC SYNC0).
             let supports: Vec<bool> = match &self.slot {
@@ -166,7 +179,8 @@ impl Master {
             working_counter: 0,
         };
         let mut stats = CycleStats::default();
-        futures_lite::future::block_on(async {
+        // On the heap: ethercrab's cyclic futures are large (debug builds).
+        futures_lite::future::block_on(Box::pin(async {
             if dc {
                 let group = group
                     .configure_dc_sync(
@@ -256,7 +270,7 @@ impl Master {
                 }
             }
             Ok(stats)
-        })
+        }))
     }
 
     /// `write`: cycles in OP, sets every variable in `vars` to `value` in one cycle and keeps

@@ -10,6 +10,7 @@
 #![warn(missing_docs)]
 
 pub mod al;
+mod bringup;
 pub mod coe;
 pub mod cyclic;
 mod error;
@@ -55,19 +56,19 @@ pub(crate) type PdiGroup = SubDeviceGroup<
 
 /// Where ethercrab's group is.
 pub(crate) enum Slot {
-    /// PRE-OP (after discovery).
+    /// PRE-OP (after ethercrab's discovery).
     PreOp(Group),
     /// PRE-OP with FMMUs and process-data SyncManagers configured.
     Pdi(PdiGroup),
 }
 
-/// What discovery found about one slave (does not change while the master runs).
+/// What discovery found about one slave.
 #[derive(Debug, Clone)]
 pub(crate) struct Found {
-    pub(crate) address: u16,
     pub(crate) alias: u16,
-    pub(crate) name: String,
-    pub(crate) identity: ethercrab::SubDeviceIdentity,
+    /// Vendor, product, revision, serial (SII words 0x08..0x0F).
+    pub(crate) identity: (u32, u32, u32, u32),
+    /// System time delay (0x0928) as the last DC configuration left it.
     pub(crate) delay_ns: u32,
 }
 
@@ -199,7 +200,7 @@ impl MasterOptions {
             Link::Iface(_) => Self {
                 timeouts: Timeouts {
                     state_transition: Duration::from_secs(10),
-                    pdu: Duration::from_millis(100),
+                    pdu: Duration::from_millis(250),
                     mailbox_response: Duration::from_secs(2),
                     wait_loop_delay: Duration::from_micros(500),
                     eeprom: Duration::from_millis(500),
@@ -211,10 +212,22 @@ impl MasterOptions {
     }
 }
 
-/// A master on one link: the slaves were discovered and are in PRE-OP.
+/// A master on one link.
+///
+/// Opening it does not disturb the segment: slaves keep their AL state, SyncManagers and
+/// station addresses (as the IgH master keeps them between `ethercat` invocations). Only
+/// slaves no master has touched since power-on (station address 0) get an address and are
+/// brought from INIT to PRE-OP, as the IgH master's bus scan does. ethercrab's own
+/// initialisation, which resets every slave to INIT, runs only for the cyclic verbs
+/// (`watch`, `write`, `record`).
 pub struct Master {
     pub(crate) md: MainDevice<'static>,
+    /// ethercrab's group, created by the first cyclic use.
     pub(crate) slot: Option<Slot>,
+    /// ethercrab's group was created and handed to a cyclic run.
+    pub(crate) group_used: bool,
+    /// SII images (up to the end of the categories) read so far, per position.
+    pub(crate) sii_cache: std::cell::RefCell<Vec<Option<Vec<u8>>>>,
     pub(crate) time: Time,
     pub(crate) found: Vec<Found>,
     pub(crate) addresses: Vec<u16>,
@@ -294,6 +307,8 @@ impl Master {
         let mut m = Master {
             md,
             slot: None,
+            group_used: false,
+            sii_cache: Default::default(),
             time,
             found: Vec::new(),
             addresses: Vec::new(),
@@ -301,20 +316,111 @@ impl Master {
             mbx_counter: Cell::new(1),
             link_name,
         };
-        let group = futures_lite::future::block_on(m.init())?;
-        m.found = group
-            .iter(&m.md)
-            .map(|s| Found {
-                address: s.configured_address(),
-                alias: s.alias_address(),
-                name: s.name().to_string(),
-                identity: s.identity(),
-                delay_ns: s.propagation_delay(),
-            })
-            .collect();
-        m.addresses = m.found.iter().map(|f| f.address).collect();
-        m.slot = Some(Slot::PreOp(group));
+        futures_lite::future::block_on(m.discover())?;
         Ok(m)
+    }
+
+    /// Finds the slaves without changing them: count (BRD), station addresses (APRD
+    /// 0x0010; assigned with APWR only where 0), alias, identity (SII), DC delay; slaves
+    /// that had no address are brought from INIT to PRE-OP.
+    async fn discover(&mut self) -> Result<(), MasterError> {
+        let n = self.count_slaves().await? as usize;
+        if n == 0 {
+            return Err(MasterError::NoSlaves(self.link_name.clone()));
+        }
+        if n > MAX_SLAVES {
+            return Err(MasterError::Usage(format!(
+                "{n} slaves answered; this master handles at most {MAX_SLAVES}"
+            )));
+        }
+        let mut addresses = Vec::with_capacity(n);
+        for i in 0..n {
+            let b = Command::aprd(i as u16, 0x0010)
+                .receive_slice(&self.md, 2)
+                .await
+                .map_err(|e| Self::not_answering(i, "APRD 0x0010 (station address)".into(), e))?;
+            addresses.push(u16::from_le_bytes([b[0], b[1]]));
+        }
+        let mut fresh = vec![false; n];
+        let mut seen = std::collections::HashSet::new();
+        let duplicates = addresses.iter().any(|&a| a != 0 && !seen.insert(a));
+        for i in 0..n {
+            if addresses[i] == 0 || duplicates {
+                fresh[i] = addresses[i] == 0;
+                let a = 0x1000 + i as u16;
+                Command::apwr(i as u16, 0x0010)
+                    .send_receive_slice(&self.md, &a.to_le_bytes()[..])
+                    .await
+                    .map_err(|e| {
+                        Self::not_answering(i, "APWR 0x0010 (station address)".into(), e)
+                    })?;
+                addresses[i] = a;
+            }
+        }
+        self.addresses = addresses;
+        *self.sii_cache.borrow_mut() = vec![None; n];
+        let mut found = Vec::with_capacity(n);
+        for p in 0..n {
+            let alias = self.read_u16(p, 0x0012).await?;
+            let w = self.sii_read_at(p, 0x0008, 16).await?;
+            let u = |k: usize| u32::from_le_bytes([w[k], w[k + 1], w[k + 2], w[k + 3]]);
+            let d = self.fprd(p, 0x0928, 4).await?;
+            found.push(Found {
+                alias,
+                identity: (u(0), u(4), u(8), u(12)),
+                delay_ns: u32::from_le_bytes([d[0], d[1], d[2], d[3]]),
+            });
+        }
+        self.found = found;
+        // Untouched slaves (no address before): INIT -> PRE-OP, as a master's bus scan does.
+        let mut asked = Vec::new();
+        for p in (0..n).filter(|&p| fresh[p]) {
+            let st = self.al_status_async(p).await?;
+            if st.state() == Some(AlState::Init) && !st.error() {
+                match self.configure_mailbox(p, true).await {
+                    Ok(()) => {
+                        self.fpwr(p, 0x0120, &[AlState::PreOp.code(), 0]).await?;
+                        asked.push(p);
+                    }
+                    Err(e) => log::warn!("slave {p}: left in INIT: {e}"),
+                }
+            }
+        }
+        for p in asked {
+            if let Err(e) = self.wait_state(p, AlState::PreOp).await {
+                log::warn!("slave {p}: did not reach PRE-OP: {e}");
+            }
+        }
+        Ok(())
+    }
+
+    /// Creates ethercrab's group (ethercrab resets every slave to INIT and brings them to
+    /// PRE-OP), once; for the cyclic verbs.
+    pub(crate) fn ensure_group(&mut self) -> Result<(), MasterError> {
+        if self.slot.is_some() {
+            return Ok(());
+        }
+        if self.group_used {
+            return Err(MasterError::Usage(
+                "the slaves already left PRE-OP for cyclic operation".into(),
+            ));
+        }
+        // On the heap: ethercrab's initialisation is a large future (debug builds).
+        let group = futures_lite::future::block_on(Box::pin(self.init()))?;
+        let addresses: Vec<u16> = group.iter(&self.md).map(|s| s.configured_address()).collect();
+        if addresses.len() != self.addresses.len() {
+            return Err(MasterError::Usage(format!(
+                "{} slaves at the start, {} after ethercrab's initialisation",
+                self.addresses.len(),
+                addresses.len()
+            )));
+        }
+        for (f, s) in self.found.iter_mut().zip(group.iter(&self.md)) {
+            f.delay_ns = s.propagation_delay();
+        }
+        self.addresses = addresses;
+        self.slot = Some(Slot::PreOp(group));
+        Ok(())
     }
 
     /// Counts the slaves with a BRD of 0x0000 (its working counter); `Ok(0)` when the frame
@@ -402,10 +508,11 @@ impl Master {
 
     fn not_answering(position: usize, what: String, e: ethercrab::error::Error) -> MasterError {
         match e {
-            ethercrab::error::Error::Timeout(_)
-            | ethercrab::error::Error::WorkingCounter { .. } => {
-                MasterError::NotAnswering { position, what }
-            }
+            e @ (ethercrab::error::Error::Timeout(_)
+            | ethercrab::error::Error::WorkingCounter { .. }) => MasterError::NotAnswering {
+                position,
+                what: format!("{what}: {e}"),
+            },
             e => MasterError::Ethercrab(format!("slave {position}: {what}"), e),
         }
     }
@@ -488,26 +595,26 @@ impl Master {
         })
     }
 
-    /// Scans the slaves: addresses, alias, state, name, identity, ports.
+    /// Scans the slaves: addresses, alias, state, name, identity, ports (reads only).
     pub fn scan(&self) -> Result<Vec<SlaveInfo>, MasterError> {
         futures_lite::future::block_on(async {
             let mut out = Vec::new();
             for (position, sd) in self.found.iter().enumerate() {
-                let id = sd.identity;
+                let (vendor_id, product_code, revision, serial) = sd.identity;
                 let status = self.al_status_async(position).await?;
                 let dl = self.read_u16(position, 0x0110).await?;
                 let links = std::array::from_fn(|p| dl & (1 << (4 + p)) != 0);
                 let open = std::array::from_fn(|p| dl & (1 << (9 + 2 * p)) != 0);
                 out.push(SlaveInfo {
                     position,
-                    address: sd.address,
+                    address: self.addresses[position],
                     alias: sd.alias,
                     status,
-                    name: sd.name.clone(),
-                    vendor_id: id.vendor_id,
-                    product_code: id.product_id,
-                    revision: id.revision,
-                    serial: id.serial,
+                    name: self.name_async(position).await?,
+                    vendor_id,
+                    product_code,
+                    revision,
+                    serial,
                     links,
                     open,
                     delay_ns: sd.delay_ns,
@@ -517,19 +624,21 @@ impl Master {
         })
     }
 
-    /// Requests `state` from the slaves at `positions` through AL control (0x0120) and waits
-    /// until each reaches it or reports an error; returns the final status of each.
+    /// Requests `state` from the slaves at `positions` through AL control (0x0120), one
+    /// step at a time, and waits until each reaches it or reports an error; returns the
+    /// final status of each. The slaves stay there when the master is gone.
     ///
-    /// Requesting SAFEOP or OP first lets ethercrab configure the process data FMMUs and
-    /// SyncManagers (as `ethercat states` relies on the master's configuration).
+    /// The master configures what each step needs itself, without resetting anything:
+    /// the mailbox SyncManagers (SM0/SM1, or the bootstrap mailbox for BOOT) from the SII
+    /// before PRE-OP; before SAFE-OP free run (0x1C32:01 = 0, where the slave has the
+    /// object), SM2/SM3 sized from the PDO mapping, one output and one input FMMU, and the
+    /// process-data watchdog off (0x0420 = 0: no cyclic master keeps it fed after the
+    /// command).
     pub fn request_state(
         &mut self,
         positions: &[usize],
         state: AlState,
     ) -> Result<Vec<(usize, AlStatus)>, MasterError> {
-        if matches!(state, AlState::SafeOp | AlState::Op) {
-            self.configure_process_data()?;
-        }
         futures_lite::future::block_on(async {
             let mut out = Vec::new();
             for &p in positions {
@@ -547,7 +656,24 @@ impl Master {
             for &p in positions {
                 let cur = self.al_status_async(p).await?;
                 let from = cur.state().unwrap_or(AlState::Init);
-                let steps: Vec<AlState> = if state == AlState::Boot {
+                if from == state && !cur.error() {
+                    out.push((p, cur));
+                    continue;
+                }
+                // Back to SAFE-OP/OP from SAFE-OP (or OP with an error) with a sync mode other
+                // than free run (a DC recording left it): through PRE-OP, where it can change.
+                let via_preop = matches!(state, AlState::SafeOp | AlState::Op)
+                    && matches!(from, AlState::SafeOp | AlState::Op)
+                    && (rank(state) > rank(from) || cur.error())
+                    && self
+                        .sync_mode_async(p)
+                        .await?
+                        .is_some_and(|m| m != bringup::FREE_RUN);
+                let steps: Vec<AlState> = if via_preop {
+                    let mut v = vec![AlState::PreOp];
+                    v.extend(ladder[2..=rank(state)].iter().copied());
+                    v
+                } else if state == AlState::Boot {
                     if from == AlState::Init || from == AlState::Boot {
                         vec![AlState::Boot]
                     } else {
@@ -562,19 +688,44 @@ impl Master {
                 } else {
                     vec![state]
                 };
-                let mut ack = cur.error();
+                if cur.error() {
+                    self.acknowledge(p, from).await?;
+                }
                 let mut last = cur;
                 for s in steps {
-                    // Acknowledge a pending error together with the request.
-                    let a = if ack { 0x10 } else { 0 };
-                    self.fpwr(p, 0x0120, &[s.code() | a, 0]).await?;
+                    match s {
+                        AlState::PreOp if rank(from) == 0 || from == AlState::Boot => {
+                            self.configure_mailbox(p, true).await?
+                        }
+                        AlState::Boot => self.configure_boot_mailbox(p).await?,
+                        AlState::SafeOp => {
+                            self.set_free_run(p).await?;
+                            self.configure_pd(p).await?;
+                        }
+                        _ => {}
+                    }
+                    self.fpwr(p, 0x0120, &[s.code(), 0]).await?;
                     last = self.wait_state(p, s).await?;
-                    ack = false;
                 }
                 out.push((p, last));
             }
             Ok(out)
         })
+    }
+
+    /// Acknowledges a pending AL error (0x0120 = current state | 0x10) and waits until the
+    /// slave clears it (a slave whose error stays keeps the flag: the next request says so).
+    async fn acknowledge(&self, position: usize, state: AlState) -> Result<(), MasterError> {
+        self.fpwr(position, 0x0120, &[state.code() | 0x10, 0])
+            .await?;
+        let deadline = std::time::Instant::now() + self.options.timeouts.state_transition;
+        while self.al_status_async(position).await?.error() {
+            if std::time::Instant::now() > deadline {
+                break;
+            }
+            self.pause().await;
+        }
+        Ok(())
     }
 
     async fn wait_state(&self, position: usize, state: AlState) -> Result<AlStatus, MasterError> {
@@ -611,8 +762,9 @@ impl Master {
     }
 
     /// Lets ethercrab configure the process-data SyncManagers and FMMUs (slaves stay in
-    /// PRE-OP), once.
+    /// PRE-OP), once; creates ethercrab's group first (a reset of every slave).
     pub(crate) fn configure_process_data(&mut self) -> Result<(), MasterError> {
+        self.ensure_group()?;
         match self.slot.take() {
             Some(Slot::PreOp(g)) => {
                 let g =
@@ -626,9 +778,7 @@ impl Master {
                 self.slot = Some(s);
                 Ok(())
             }
-            None => Err(MasterError::Usage(
-                "the slaves already left PRE-OP for cyclic operation".into(),
-            )),
+            None => Err(MasterError::Usage("no process data group".into())),
         }
     }
 
@@ -636,21 +786,56 @@ impl Master {
     pub(crate) fn take_pdi_group(&mut self) -> Result<PdiGroup, MasterError> {
         self.configure_process_data()?;
         match self.slot.take() {
-            Some(Slot::Pdi(g)) => Ok(g),
+            Some(Slot::Pdi(g)) => {
+                self.group_used = true;
+                Ok(g)
+            }
             _ => Err(MasterError::Usage("no process data group".into())),
         }
     }
 
-    /// Name (SII) of the slave at `position`.
-    pub fn name(&self, position: usize) -> Result<&str, MasterError> {
+    /// The SII image of the slave at `position` up to the end of its categories (read once
+    /// per master).
+    pub(crate) async fn sii_image(&self, position: usize) -> Result<Vec<u8>, MasterError> {
         self.address(position)?;
-        Ok(&self.found[position].name)
+        if let Some(img) = self
+            .sii_cache
+            .borrow()
+            .get(position)
+            .and_then(|c| c.clone())
+        {
+            return Ok(img);
+        }
+        let img = self.sii_read_async(position, false).await?;
+        if let Some(c) = self.sii_cache.borrow_mut().get_mut(position) {
+            *c = Some(img.clone());
+        }
+        Ok(img)
+    }
+
+    pub(crate) async fn name_async(&self, position: usize) -> Result<String, MasterError> {
+        let img = self.sii_image(position).await?;
+        Ok(oxicat_device::sii::parse(&img)
+            .ok()
+            // The order string (general category), as ethercrab and IgH name a slave.
+            .and_then(|m| m.order_code.or(m.name))
+            .unwrap_or_default())
+    }
+
+    /// Name (SII) of the slave at `position`.
+    pub fn name(&self, position: usize) -> Result<String, MasterError> {
+        futures_lite::future::block_on(self.name_async(position))
+    }
+
+    /// The sync mode of the slave at `position` (0x1C32:01: 0 free run, 1 SM2
+    /// synchronous, 2 DC SYNC0, 3 DC SYNC1), `None` when it has no such object.
+    pub fn sync_mode(&self, position: usize) -> Result<Option<u16>, MasterError> {
+        futures_lite::future::block_on(self.sync_mode_async(position))
     }
 
     /// Identity (vendor, product, revision, serial) of the slave at `position`.
     pub fn identity(&self, position: usize) -> Result<(u32, u32, u32, u32), MasterError> {
         self.address(position)?;
-        let i = self.found[position].identity;
-        Ok((i.vendor_id, i.product_id, i.revision, i.serial))
+        Ok(self.found[position].identity)
     }
 }

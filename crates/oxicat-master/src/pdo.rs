@@ -158,7 +158,7 @@ fn entry(index: u16, sub: u8, bits: u16, name: Option<String>, code: Option<u16>
 impl Master {
     /// The SII of the slave decoded into the comparable model (names, PDOs, CoE details).
     pub fn sii_model(&self, position: usize) -> Result<DeviceModel, MasterError> {
-        let img = self.sii_read(position, false)?;
+        let img = futures_lite::future::block_on(self.sii_image(position))?;
         oxicat_device::sii::parse(&img).map_err(|e| MasterError::SiiImage(e.to_string()))
     }
 

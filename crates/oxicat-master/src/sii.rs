@@ -125,7 +125,34 @@ impl Master {
     /// Reads the SII of the slave at `position`: up to and including the end-of-categories
     /// marker, or the whole EEPROM with `full`.
     pub fn sii_read(&self, position: usize, full: bool) -> Result<Vec<u8>, MasterError> {
-        futures_lite::future::block_on(async {
+        futures_lite::future::block_on(self.sii_read_async(position, full))
+    }
+
+    /// `len` bytes of the SII from word `word` on.
+    pub(crate) async fn sii_read_at(
+        &self,
+        position: usize,
+        word: u16,
+        len: usize,
+    ) -> Result<Vec<u8>, MasterError> {
+        self.sii_take(position).await?;
+        let mut b = Vec::new();
+        while b.len() < len {
+            let d = self
+                .sii_read_chunk(position, word + (b.len() / 2) as u16)
+                .await?;
+            b.extend_from_slice(&d);
+        }
+        b.truncate(len);
+        Ok(b)
+    }
+
+    pub(crate) async fn sii_read_async(
+        &self,
+        position: usize,
+        full: bool,
+    ) -> Result<Vec<u8>, MasterError> {
+        {
             self.sii_take(position).await?;
             let mut b = Vec::new();
             self.sii_read_words(position, &mut b, 0x80).await?;
@@ -154,7 +181,7 @@ impl Master {
             self.sii_read_words(position, &mut b, end).await?;
             b.truncate(end);
             Ok(b)
-        })
+        }
     }
 
     /// Writes `img` into the SII of the slave at `position` word by word and verifies it;
@@ -175,6 +202,9 @@ impl Master {
                 image,
                 slave: (v, p, r),
             });
+        }
+        if let Some(c) = self.sii_cache.borrow_mut().get_mut(position) {
+            *c = None;
         }
         futures_lite::future::block_on(async {
             self.sii_take(position).await?;

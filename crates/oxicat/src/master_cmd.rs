@@ -412,8 +412,19 @@ pub fn run(cmd: MasterCommand, out: &mut dyn Write) -> Result<(), MasterError> {
             })?;
             let mut m = open(&link)?;
             let ps = m.positions(pos.position)?;
+            // SAFEOP/OP: free run (0x1C32:01 = 0, SYNC0 off); say what each slave runs.
+            let sync = matches!(st, AlState::SafeOp | AlState::Op);
             for (p, s) in m.request_state(&ps, st)? {
-                w(out, &format!("{p}: {s}\n"))?;
+                let mode = match (sync, m.sync_mode(p)?) {
+                    (false, _) => String::new(),
+                    (true, Some(0)) => ", free run (0x1C32:01 = 0)".into(),
+                    (true, Some(1)) => ", SM2 synchronous (0x1C32:01 = 1)".into(),
+                    (true, Some(2)) => ", DC SYNC0 (0x1C32:01 = 2)".into(),
+                    (true, Some(3)) => ", DC SYNC1 (0x1C32:01 = 3)".into(),
+                    (true, Some(v)) => format!(", sync mode 0x1C32:01 = {v}"),
+                    (true, None) => ", free run (no 0x1C32)".into(),
+                };
+                w(out, &format!("{p}: {s}{mode}\n"))?;
             }
             Ok(())
         }

@@ -37,7 +37,10 @@ fn slaves_states_upload_download() {
         "{out}"
     );
     let out = ok(&["states", "op", "--sim", "demo:2"]);
-    assert_eq!(out, "0: OP\n1: OP\n");
+    assert_eq!(
+        out,
+        "0: OP, free run (0x1C32:01 = 0)\n1: OP, free run (0x1C32:01 = 0)\n"
+    );
     let out = ok(&["upload", "-p", "0", "0x1018", "1", "--sim", "demo:2"]);
     assert!(out.starts_with("3758096384 (0xe0000000)"), "{out}");
     ok(&["download", "-p", "1", "0x10f1", "2", "9", "--sim", "demo:2"]);
