@@ -164,9 +164,36 @@ const TAU_PER_UNIT_NS: u64 = 24_414;
 /// Largest accepted oscillator error, in parts per 10^12 (±1 %).
 const MAX_DRIFT_PPT: i64 = 10_000_000_000;
 
+/// The registers this unit maintains in its shadow (inclusive absolute address ranges).
+const OWNED: [(usize, usize); 3] = [(0x0900, 0x0935), (0x0980, 0x0981), (0x0984, 0x09CF)];
+
 /// Is `a` (absolute address) a register this unit maintains in its shadow?
+#[cfg(test)]
 fn owned(a: usize) -> bool {
-    matches!(a, 0x0900..=0x0935 | 0x0980..=0x0981 | 0x0984..=0x09CF)
+    OWNED.iter().any(|&(lo, hi)| (lo..=hi).contains(&a))
+}
+
+/// What the global → system time mapping depends on: anchor time, oscillator and
+/// accumulator at the anchor, correction rate, offset.
+type ClockKey = (u64, i128, i128, i64, u64);
+
+/// `floor(t · drift_ppt / 10^12)`, exactly, without a 128-bit division (this runs for every
+/// evaluation of the local clock). With `t = a·10^12 + b` and `drift = h·10^6 + l`
+/// (`0 ≤ b < 10^12`, `0 ≤ l < 10^6`, |h| ≤ 10^4 since |drift| ≤ 10^10):
+/// `t·drift / 10^12 = a·drift + (b·h·10^6 + b·l) / 10^12`, and by nested flooring
+/// `floor((x·10^6 + y) / 10^12) = floor((x + floor(y / 10^6)) / 10^6)` for integer `x`.
+/// Every product fits in 64 bits.
+#[inline]
+fn drift_ns(t: u64, drift_ppt: i64) -> i64 {
+    const E6: i64 = 1_000_000;
+    const E12: u64 = 1_000_000_000_000;
+    debug_assert!(drift_ppt.abs() <= MAX_DRIFT_PPT);
+    let a = (t / E12) as i64;
+    let b = (t % E12) as i64;
+    let h = drift_ppt.div_euclid(E6);
+    let l = drift_ppt.rem_euclid(E6);
+    let y = ((b as u64 * l as u64) / E6 as u64) as i64;
+    a * drift_ppt + (b * h + y).div_euclid(E6)
 }
 
 /// Write mask of a DC register byte for a side, or `None` if that side may not write it.
@@ -270,6 +297,9 @@ pub struct Dc {
     pending: DcEvents,
     /// Cached `next_event`.
     next_cache: Option<u64>,
+    /// Memo of the last [`Dc::global_at_sys`] answer that was the earliest global time of
+    /// its target: `(clock mapping, target, global time)`.
+    edge_memo: Option<(ClockKey, u64, u64)>,
     /// Width of the start-time comparison (32 for ET1100, 64 for 64-bit compare).
     compare_bits: u32,
     inited: bool,
@@ -302,6 +332,7 @@ impl Dc {
             t_done: 0,
             pending: DcEvents::default(),
             next_cache: None,
+            edge_memo: None,
             compare_bits: 32,
             inited: false,
         };
@@ -357,10 +388,7 @@ impl Dc {
 
     /// Oscillator value (ns) at global time `t`.
     fn osc(&self, t: u64) -> i128 {
-        let t = t as i128;
-        self.cfg.start_offset_ns as i128
-            + t
-            + (t * self.drift_ppt as i128).div_euclid(1_000_000_000_000)
+        self.cfg.start_offset_ns as i128 + t as i128 + drift_ns(t, self.drift_ppt) as i128
     }
 
     fn acc_at(&self, t: u64) -> i128 {
@@ -387,6 +415,37 @@ impl Dc {
         self.anchor_osc = self.osc(t);
         self.anchor_t = t;
         self.rate_q = rate_q.clamp(-MAX_RATE_Q, MAX_RATE_Q);
+    }
+
+    /// Everything the global → system time mapping depends on.
+    fn clock_key(&self) -> ClockKey {
+        (
+            self.anchor_t,
+            self.anchor_osc,
+            self.anchor_acc,
+            self.rate_q,
+            self.offset,
+        )
+    }
+
+    /// [`global_at_sys`](Self::global_at_sys), memoised: the system time is a
+    /// non-decreasing function of global time for a given mapping (anchor, rate, offset),
+    /// so if `g` is the earliest global time at which it reaches `target`, the answer for
+    /// any `from` is `max(g, from)`. The SYNC unit asks for the same edge several times
+    /// (finding it, then the next one, then `next_event`), each a bisection.
+    fn global_at(&mut self, target: u64, from: u64) -> Option<u64> {
+        let key = self.clock_key();
+        if let Some((k, x, g)) = self.edge_memo {
+            if k == key && x == target {
+                return Some(g.max(from));
+            }
+        }
+        let g = self.global_at_sys(target, from)?;
+        // `g > from`: the target was not reached at `from`, so `g` is its earliest time.
+        if g > from {
+            self.edge_memo = Some((key, target, g));
+        }
+        Some(g)
     }
 
     /// Earliest global time ≥ `from` at which the system time reaches `target`.
@@ -656,6 +715,24 @@ impl Dc {
 
     /// Advance to global time `t`.
     pub fn advance(&mut self, regs: &mut [u8], t: u64) -> DcEvents {
+        // Fast path (the common case: no SYNC edge in (t_done, t], nothing pending): the
+        // shadow and the register file are already in step (every change since the last
+        // publication was published), so catching up, refreshing the status and
+        // republishing would change nothing. `next_cache` is the exact global time of the
+        // next edge (system time is monotonic and only re-anchored by writes, which
+        // refresh it), or it is stale-early after `before_read`/`after_read` processed an
+        // edge, in which case the slow path below runs.
+        if self.inited
+            && self.pending.sync0.is_none()
+            && self.pending.sync1.is_none()
+            && match self.next_cache {
+                Some(n) => t < n,
+                None => !self.sync.active,
+            }
+        {
+            self.t_done = self.t_done.max(t);
+            return DcEvents::default();
+        }
         self.ensure_init(regs);
         self.catch_up(t);
         self.update_status();
@@ -843,7 +920,7 @@ impl Dc {
         let t = t.max(self.t_done);
         let mut guard = 0u32;
         while let Some((x, kind)) = self.next_edge() {
-            let Some(g) = self.global_at_sys(x, self.t_done) else {
+            let Some(g) = self.global_at(x, self.t_done) else {
                 break;
             };
             if g > t {
@@ -925,9 +1002,10 @@ impl Dc {
     }
 
     fn refresh_next(&mut self) {
-        self.next_cache = self
-            .next_edge()
-            .and_then(|(x, _)| self.global_at_sys(x, self.t_done));
+        self.next_cache = match self.next_edge() {
+            Some((x, _)) => self.global_at(x, self.t_done),
+            None => None,
+        };
     }
 
     // -------------------------------------------------------- register file
@@ -937,11 +1015,12 @@ impl Dc {
     }
 
     fn publish_range(&self, regs: &mut [u8], from: usize, to: usize) {
-        for a in from..to {
-            if owned(a) {
-                if let Some(r) = regs.get_mut(a) {
-                    *r = self.shadow[a - BASE];
-                }
+        // The owned ranges (see `owned`), copied as whole slices.
+        for (lo, hi) in OWNED {
+            let a = from.max(lo);
+            let b = to.min(hi + 1).min(regs.len());
+            if a < b {
+                regs[a..b].copy_from_slice(&self.shadow[a - BASE..b - BASE]);
             }
         }
     }
@@ -992,5 +1071,56 @@ fn rd32(regs: &[u8], a: usize) -> u32 {
     match regs.get(a..a + 4) {
         Some(b) => u32::from_le_bytes([b[0], b[1], b[2], b[3]]),
         None => 0,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn drift_matches_128_bit_formula() {
+        let mut x = 0x9E37_79B9_7F4A_7C15u64;
+        let mut next = || {
+            x ^= x << 13;
+            x ^= x >> 7;
+            x ^= x << 17;
+            x
+        };
+        let drifts = [
+            0,
+            1,
+            -1,
+            999_999,
+            -999_999,
+            1_000_000,
+            -1_000_000,
+            100_000_000,
+            -100_000_000,
+            MAX_DRIFT_PPT,
+            -MAX_DRIFT_PPT,
+        ];
+        for k in 0..200_000 {
+            let d = if k < drifts.len() * 100 {
+                drifts[k % drifts.len()]
+            } else {
+                (next() % (2 * MAX_DRIFT_PPT as u64 + 1)) as i64 - MAX_DRIFT_PPT
+            };
+            let t = match k % 4 {
+                0 => next(),
+                1 => next() % 1_000_000_000_000_000,
+                2 => next() % 100_000_000_000,
+                _ => (next() % 1000) * 1_000_000_000_000 + next() % 3,
+            };
+            let want = (t as i128 * d as i128).div_euclid(1_000_000_000_000);
+            assert_eq!(drift_ns(t, d) as i128, want, "t {t} drift {d}");
+        }
+    }
+
+    #[test]
+    fn owned_ranges() {
+        assert!(owned(0x0900) && owned(0x0935) && !owned(0x0936));
+        assert!(!owned(0x097F) && owned(0x0980) && owned(0x0981) && !owned(0x0982));
+        assert!(!owned(0x0983) && owned(0x0984) && owned(0x09CF) && !owned(0x09D0));
     }
 }

@@ -1777,15 +1777,17 @@ impl Esc {
     }
 
     /// Global time of the next SYNC edge or watchdog expiry.
+    #[inline]
     pub fn next_event(&self) -> Option<u64> {
-        [
-            self.dc.next_event(),
-            self.pd_wd_deadline(),
-            self.pdi_wd_deadline(),
-        ]
-        .into_iter()
-        .flatten()
-        .min()
+        // The scheduler asks after every event: keep it a few loads and compares.
+        let mut n = self.dc.next_event();
+        if let Some(d) = self.pd_wd_deadline() {
+            n = Some(n.map_or(d, |x| x.min(d)));
+        }
+        if let Some(d) = self.pdi_wd_deadline() {
+            n = Some(n.map_or(d, |x| x.min(d)));
+        }
+        n
     }
 
     fn pdi_range(&self, addr: u16, len: usize) -> Result<(), PdiError> {
@@ -1832,7 +1834,7 @@ impl Esc {
             self.mem[0x0206],
             self.mem[0x0207],
         ]);
-        self.al_event_request() & m != 0
+        m != 0 && self.al_event_request() & m != 0
     }
 
     /// SYNC0 and SYNC1 output levels now.

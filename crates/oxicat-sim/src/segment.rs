@@ -126,6 +126,16 @@ struct Slot<E> {
     last_sync1: Option<u64>,
     /// Time of the node's last wakeup (its next one must be later).
     last_wake: Option<u64>,
+    /// The ESC's `next_event()` and the node's [`wakeup`](Slot::wakeup) as last asked
+    /// (valid inside one [`Segment::run_events_until`] pass; see there).
+    due: Due,
+}
+
+/// A slot's next times as the scheduler last read them.
+#[derive(Debug, Clone, Copy, Default)]
+struct Due {
+    esc: Option<u64>,
+    wake: Option<u64>,
 }
 
 impl<E: SegmentEsc> Slot<E> {
@@ -137,7 +147,26 @@ impl<E: SegmentEsc> Slot<E> {
 
     /// The earliest of the ESC's next event and the node's next wakeup.
     fn next_due(&self) -> Option<u64> {
-        match (self.esc.next_event(), self.wakeup()) {
+        let d = Due {
+            esc: self.esc.next_event(),
+            wake: self.wakeup(),
+        };
+        d.min()
+    }
+
+    /// Reads the ESC's next event and the node's next wakeup into `due`.
+    fn read_due(&mut self) {
+        self.due = Due {
+            esc: self.esc.next_event(),
+            wake: self.wakeup(),
+        };
+    }
+}
+
+impl Due {
+    /// The earliest of both.
+    fn min(self) -> Option<u64> {
+        match (self.esc, self.wake) {
             (Some(a), Some(b)) => Some(a.min(b)),
             (a, b) => a.or(b),
         }
@@ -250,6 +279,7 @@ impl<E: SegmentEsc> Segment<E> {
             last_sync0: None,
             last_sync1: None,
             last_wake: None,
+            due: Due::default(),
         });
         self.refresh_horizon();
         id
@@ -527,32 +557,54 @@ impl<E: SegmentEsc> Segment<E> {
 
     /// Delivers all events and node wakeups due up to `t`, earliest first across ESCs (at
     /// equal times ESC events come before wakeups).
+    ///
+    /// Each slot's next times are read once on entry (nodes' handles may have changed them
+    /// since the last pass) and then only for the slot that just ran: handling an event or
+    /// a wakeup touches that slot's ESC and node only, so the others' answers still hold.
+    /// The earliest is then picked from those cached values — with 4–8 slots a linear pass
+    /// over a few integers beats a heap — with the same tie-break as always: earliest
+    /// time, then ESC event before wakeup, then lowest slot index.
     fn run_events_until(&mut self, t: u64) {
         if t < self.horizon {
             return;
+        }
+        for s in &mut self.slots {
+            s.read_due();
         }
         loop {
             // (time, is a wakeup, slot)
             let mut best: Option<(u64, bool, usize)> = None;
             for (i, s) in self.slots.iter().enumerate() {
-                if let Some(ne) = s.esc.next_event() {
+                if let Some(ne) = s.due.esc {
                     if ne <= t && ne > s.advanced && best.is_none_or(|b| (ne, false) < (b.0, b.1)) {
                         best = Some((ne, false, i));
                     }
                 }
-                if let Some(w) = s.wakeup() {
+                if let Some(w) = s.due.wake {
                     if w <= t && best.is_none_or(|b| (w, true) < (b.0, b.1)) {
                         best = Some((w, true, i));
                     }
                 }
             }
-            match best {
-                Some((ne, false, i)) => self.advance_slot(i, ne),
-                Some((w, true, i)) => self.wake(i, w),
+            let i = match best {
+                Some((ne, false, i)) => {
+                    self.advance_slot(i, ne);
+                    i
+                }
+                Some((w, true, i)) => {
+                    self.wake(i, w);
+                    i
+                }
                 None => break,
-            }
+            };
+            self.slots[i].read_due();
         }
-        self.refresh_horizon();
+        self.horizon = self
+            .slots
+            .iter()
+            .filter_map(|s| s.due.min())
+            .min()
+            .unwrap_or(u64::MAX);
     }
 
     /// Runs node `i`'s wakeup at `w` (the ESC first brought to `w`, unless it is already
@@ -605,14 +657,14 @@ impl<E: SegmentEsc> Segment<E> {
         }
         let slot = &mut self.slots[i];
         if let Some(node) = slot.node.as_mut() {
+            // The horizon is brought up to date by every caller: `run_events_until` and
+            // `advance_to` recompute it, `walk` folds in the slot's next times.
             node.on_event(&mut slot.esc, ev, t);
-            if let Some(ne) = slot.next_due() {
-                self.horizon = self.horizon.min(ne);
-            }
         }
     }
 
-    fn check_irq(&mut self, i: usize, t: u64) {
+    /// Delivers an IRQ if the line rose; returns whether it did.
+    fn check_irq(&mut self, i: usize, t: u64) -> bool {
         let level = self.slots[i].esc.irq_line();
         let rising = level && !self.slots[i].irq;
         self.slots[i].irq = level;
@@ -620,6 +672,7 @@ impl<E: SegmentEsc> Segment<E> {
             self.deliver(i, EscEvent::Irq, t);
             self.slots[i].irq = self.slots[i].esc.irq_line();
         }
+        rising
     }
 
     // ---------------------------------------------------------------- frames
@@ -705,7 +758,12 @@ impl<E: SegmentEsc> Segment<E> {
             if let Some(ne) = slot.esc.next_event() {
                 self.horizon = self.horizon.min(ne);
             }
-            self.check_irq(s, t);
+            if self.check_irq(s, t) {
+                // The node handled the interrupt: its next times may have moved.
+                if let Some(ne) = self.slots[s].next_due() {
+                    self.horizon = self.horizon.min(ne);
+                }
+            }
             let Some(out) = out else {
                 return (FrameFate::DroppedByEsc(s), t);
             };
