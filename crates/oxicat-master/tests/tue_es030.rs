@@ -141,13 +141,14 @@ fn line_voltage_above_the_kill_threshold_disables_all_motors_body() {
     let (link, _seg, h) = bench();
     let mut m = Master::open(link).unwrap();
     let rows = tue::run_normal(&mut m, 0, 120, |k, _| {
-        let mut o = NormalOut::default();
-        o.mcom = [1, 1, 1];
-        o.setpoint = [500, 500, 500];
         if k == 60 {
             h.lock().app.board.supply = 32.0;
         }
-        o
+        NormalOut {
+            mcom: [1, 1, 1],
+            setpoint: [500, 500, 500],
+            ..NormalOut::default()
+        }
     })
     .unwrap();
     let before = &rows[50].input;

@@ -190,7 +190,7 @@ impl Re30Drive {
     /// Advances `h` seconds with the bridge on `supply` volts.
     pub fn step(&mut self, h: f64, supply: f64) {
         let p = self.params;
-        let floating = !(self.bridge.enabled && !self.fault);
+        let floating = !self.bridge.enabled || self.fault;
         let u = self.bridge_voltage(supply);
         let emf = p.torque_constant * self.speed;
         let a = (-p.resistance * h / p.inductance).exp();

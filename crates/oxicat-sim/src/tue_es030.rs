@@ -230,7 +230,7 @@ impl TueBoard {
         // The duties written at the previous tick took effect at its counter bottom.
         let apply = t.saturating_sub(TICK_NS) + PWM_UPDATE_DELAY_NS;
         self.step_plant(t, apply);
-        if self.counters.ticks % TICKS_PER_SERVICE == 0 {
+        if self.counters.ticks.is_multiple_of(TICKS_PER_SERVICE) {
             self.slave.on_timer(SERVICE_TIMER, &mut self.app);
         }
         self.slave.on_timer(CURRENT_TIMER, &mut self.app);

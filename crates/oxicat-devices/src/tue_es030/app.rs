@@ -364,9 +364,8 @@ impl<B: Board> TuEs030<B> {
             Self::mstate_bits(di, DI_M23_FAULT, DI_M23_OTW),
             Self::mstate_bits(di, DI_M23_FAULT, DI_M23_OTW),
         ];
-        for k in 0..3 {
-            let m = &self.motors[k];
-            od.store(io.mstate[k], m.enabled as u8 | drv[k]);
+        for (k, (m, d)) in self.motors.iter().zip(drv).enumerate() {
+            od.store(io.mstate[k], m.enabled as u8 | d);
             od.store(io.count[k], m.position);
             od.store(io.ts[k], m.poscaptime);
             od.store(io.vel[k], m.velocity);
@@ -417,8 +416,8 @@ impl<B: Board> TuEs030<B> {
     /// `i_handler_pwm`: the 20 kHz current loop.
     pub fn current_loop(&mut self) {
         self.counters.current_loops += 1;
-        for k in 0..3 {
-            let raw = self.board.adc2(ADC2_CURRENT[k]) as i32;
+        for (k, &ch) in ADC2_CURRENT.iter().enumerate() {
+            let raw = self.board.adc2(ch) as i32;
             let m = &mut self.motors[k];
             let gain = if k == 0 { R2IGAINCH1_Q8 } else { R2IGAIN_Q8 };
             m.current = q8mul(raw - m.par.czero, gain as i32);

@@ -344,8 +344,9 @@ pub static DEF: DeviceDef = DeviceDef {
     tx_assign: &[0x1A00],
     assign_configurable: true,
     sync: SyncDef {
-        // The firmware handles outputs on the SM2 event (Listing 4.3): SM-synchronous.
-        supported: 0x0003,
+        // The firmware handles outputs on the SM2 event (Listing 4.3): SM-synchronous only
+        // (the FRF mode must see each RxPDO exactly once).
+        supported: 0x0002,
         default_mode: SyncMode::SmSync,
         min_cycle_ns: 1_000_000,
         calc_copy_ns: 0,
