@@ -14,7 +14,7 @@ use std::time::Duration;
 use clap::{Args, Subcommand};
 use oxicat_master::cyclic::CycleOptions;
 use oxicat_master::value::{parse_int, parse_u16, ValueType};
-use oxicat_master::{AlState, Link, Master, MasterError};
+use oxicat_master::{AlState, Link, Master, MasterError, MasterOptions};
 
 /// Where the slaves are.
 #[derive(Debug, Clone, Args)]
@@ -26,6 +26,11 @@ pub struct LinkArgs {
     /// comma-separated (e.g. `demo:2`).
     #[arg(long, conflicts_with = "iface")]
     pub sim: Option<String>,
+    /// How long to wait for a frame to come back on an interface, in ms (default 250, or
+    /// $OXICAT_TIMEOUT_MS). Raise it on a busy host or for a virtual segment on a loaded
+    /// machine; EEPROM and mailbox waits scale with it.
+    #[arg(long, value_name = "MS")]
+    pub timeout: Option<u64>,
 }
 
 /// Slave selection.
@@ -333,7 +338,30 @@ pub(crate) fn open(link: &LinkArgs) -> Result<Master, MasterError> {
                     .into(),
             )
         })?;
-    Master::open(Link::Iface(iface))
+    let timeout_ms = match link.timeout {
+        Some(ms) => Some(ms),
+        None => match std::env::var("OXICAT_TIMEOUT_MS") {
+            Ok(v) => Some(v.trim().parse::<u64>().map_err(|_| {
+                MasterError::Usage(format!(
+                    "OXICAT_TIMEOUT_MS={v:?} is not a number of milliseconds"
+                ))
+            })?),
+            Err(_) => None,
+        },
+    };
+    let link = Link::Iface(iface);
+    let mut options = MasterOptions::for_link(&link);
+    if let Some(ms) = timeout_ms {
+        if ms == 0 {
+            return Err(MasterError::Usage("--timeout must be at least 1 ms".into()));
+        }
+        let pdu = std::time::Duration::from_millis(ms);
+        options.timeouts.pdu = pdu;
+        options.timeouts.eeprom = options.timeouts.eeprom.max(pdu * 2);
+        options.timeouts.mailbox_response = options.timeouts.mailbox_response.max(pdu * 8);
+        options.mailbox_timeout = options.mailbox_timeout.max(pdu * 8);
+    }
+    Master::open_with(link, options)
 }
 
 fn one(m: &Master, pos: &PosArgs) -> Result<usize, MasterError> {
