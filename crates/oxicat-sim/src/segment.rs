@@ -13,7 +13,7 @@ use std::sync::atomic::{AtomicU64, Ordering};
 use oxicat_wire::EthernetHeader;
 
 use crate::capture::{CaptureSink, Direction};
-use crate::model::SegmentEsc;
+use crate::model::{AdvanceEvents, SegmentEsc};
 use crate::node::{EscEvent, Node};
 
 /// Ports an ESC can have.
@@ -627,6 +627,11 @@ impl<E: SegmentEsc> Segment<E> {
         }
         slot.advanced = t;
         let ev = slot.esc.advance(t);
+        if ev == AdvanceEvents::default() {
+            // Nothing happened on the ESC (the common case between SYNC edges).
+            self.check_irq(i, t);
+            return;
+        }
         let mut list: [(Option<u64>, EscEvent); 4] = [
             (ev.sync0, EscEvent::Sync0),
             (ev.sync1, EscEvent::Sync1),
@@ -794,7 +799,6 @@ impl<E: SegmentEsc> Segment<E> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::model::AdvanceEvents;
     use std::sync::{Arc, Mutex};
 
     /// A stand-in ESC: ET1100 port order, counts frames in byte 2 of the EtherCAT payload,
