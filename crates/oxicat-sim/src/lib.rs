@@ -8,6 +8,7 @@
 
 pub mod axis_hub;
 pub mod capture;
+pub mod cia402;
 pub mod firmware;
 pub mod laelaps;
 pub mod model;

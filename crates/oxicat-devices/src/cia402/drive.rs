@@ -439,7 +439,7 @@ impl<H: JointHw> Cia402Drive<H> {
 
         // Feedback.
         let raw = self.hw.encoder();
-        let pos = raw.wrapping_sub(self.zero);
+        let mut pos = raw.wrapping_sub(self.zero);
         let v_now = match self.last_raw {
             Some(l) => raw.wrapping_sub(l) as f32 / dt,
             None => 0.0,
@@ -558,6 +558,7 @@ impl<H: JointHw> Cia402Drive<H> {
                     max_torque,
                 );
                 target_reached = self.prof.vel == 0.0;
+                oms12 = m == mode::PV && self.vel.abs() <= vel_window;
                 if m == mode::HM && self.homing != Homing::Done {
                     self.homing = Homing::Idle;
                 }
@@ -583,8 +584,7 @@ impl<H: JointHw> Cia402Drive<H> {
                         }
                         let vmax = pp_vmax.min(vmax_motor);
                         if !self.pp_done {
-                            self.pp_done =
-                                self.prof.move_to(self.pp_target, vmax, acc, dec, dt);
+                            self.pp_done = self.prof.move_to(self.pp_target, vmax, acc, dec, dt);
                         }
                         if self.pp_done {
                             if let Some(b) = self.pp_buffered.take() {
@@ -626,6 +626,8 @@ impl<H: JointHw> Cia402Drive<H> {
                     }
                     mode::HM => {
                         self.homing_step(od, rising4, home_switch, raw, acc, dec, dt);
+                        // Homing may have moved the zero.
+                        pos = raw.wrapping_sub(self.zero);
                         vff = self.prof.vel;
                         oms12 = self.homing == Homing::Done;
                         oms13 = self.homing == Homing::Error;
@@ -802,6 +804,7 @@ impl<H: JointHw> Cia402Drive<H> {
                 35 | 37 => {
                     // Current position is the home position: actual = home offset.
                     self.shift_zero(raw.wrapping_sub(offset));
+                    self.prof = Profile::at(offset);
                     Homing::Done
                 }
                 3 => {

@@ -1,0 +1,249 @@
+//! The CiA402 joint drive on the virtual segment: one [`JointNode`] runs the drive firmware
+//! (`oxicat_devices::cia402`) on the slave stack behind its ESC and owns the joint it
+//! drives (`oxicat_plant::bldc_joint`: BLDC motor, compliant harmonic gear, link, torque
+//! sensor, encoder with index pulse, home switch).
+//!
+//! # What happens when, in virtual time
+//!
+//! | event | what runs |
+//! |---|---|
+//! | ESC SYNC0 | `Slave::on_sync0` → drive cycle (state machine, modes, position and velocity loops) |
+//! | ESC PDI IRQ | `Slave::on_pdi_irq` (SM-synchronous / free-run cycles) |
+//! | tick every 50 µs (20 kHz) | 1. the joint catches up to now (fixed substeps) with the voltage the current loop last set; 2. `Slave::on_timer(CURRENT_LOOP_TIMER)`: current loop → new voltage; 3. `Slave::poll` (ESM, mailbox); queued drive emergencies go to `Slave::emergency` |
+//!
+//! At equal times ESC events come first (the segment's rule), then the tick, so a run is a
+//! function of the frames and their virtual times only.
+//!
+//! [`JointBench`] is the same firmware and plant without an ESC, for tests of the drive
+//! itself at exactly 1 kHz.
+
+use std::sync::{Arc, Mutex, MutexGuard};
+
+use oxicat_devices::cia402::{device, Cia402Drive, DriveParams, JointHw, CURRENT_LOOP_TIMER};
+use oxicat_esc::{Esc, PdiError};
+use oxicat_plant::bldc_joint::{BldcJoint, BldcJointParams};
+use oxicat_slave::{Od, Slave};
+
+use crate::firmware::AttachError;
+use crate::node::{EscEvent, Node};
+use crate::segment::{Segment, SlaveId, TopologyError};
+
+/// Mailbox size of the drive (its definition: 128 bytes).
+pub const MBX: usize = 128;
+/// The drive's stack on a software ESC.
+pub type JointSlave = Slave<Esc, { device::IMAGE }, MBX>;
+/// The drive firmware on the joint.
+pub type JointApp = Cia402Drive<JointBoard>;
+
+/// Current-loop tick \[ns\] (20 kHz).
+pub const TICK_NS: u64 = 50_000;
+
+/// The joint as the drive's hardware traits see it.
+#[derive(Debug, Clone)]
+pub struct JointBoard {
+    /// The plant.
+    pub joint: BldcJoint,
+}
+
+impl JointHw for JointBoard {
+    fn encoder(&mut self) -> i32 {
+        self.joint.encoder_count()
+    }
+    fn index_latch(&mut self) -> Option<i32> {
+        self.joint.take_index_latch()
+    }
+    fn home_switch(&mut self) -> bool {
+        self.joint.home_switch()
+    }
+    fn current(&mut self) -> f32 {
+        self.joint.current as f32
+    }
+    fn joint_torque(&mut self) -> f32 {
+        self.joint.gear_torque() as f32
+    }
+    fn set_voltage(&mut self, enable: bool, volts: f32) {
+        self.joint.set_voltage(enable, volts as f64);
+    }
+}
+
+/// Drive parameters that match a plant.
+pub fn drive_params(p: &BldcJointParams) -> DriveParams {
+    DriveParams {
+        counts_per_rev: p.counts_per_rev,
+        kt: p.kt as f32,
+        ..DriveParams::default()
+    }
+}
+
+/// A new drive on a new joint.
+pub fn new_app(p: BldcJointParams) -> JointApp {
+    Cia402Drive::new(
+        JointBoard {
+            joint: BldcJoint::new(p),
+        },
+        drive_params(&p),
+    )
+}
+
+/// Counters of the node.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct JointCounters {
+    /// 20 kHz ticks.
+    pub ticks: u64,
+    /// PDI accesses the ESC refused.
+    pub pdi_errors: u64,
+    /// Emergencies sent.
+    pub emergencies: u64,
+}
+
+/// The drive: stack, firmware and plant.
+pub struct JointDrive {
+    /// The slave stack.
+    pub slave: JointSlave,
+    /// The firmware (its `hw.joint` is the plant).
+    pub app: JointApp,
+    /// What ran.
+    pub counters: JointCounters,
+    next_tick: u64,
+}
+
+impl JointDrive {
+    fn note(&mut self, r: Result<(), PdiError>) {
+        if r.is_err() {
+            self.counters.pdi_errors += 1;
+        }
+        while let Some((code, reg)) = self.app.take_emergency() {
+            if self.slave.emergency(code, reg, [0; 5]) {
+                self.counters.emergencies += 1;
+            }
+        }
+    }
+
+    fn tick(&mut self, esc: &mut Esc) {
+        self.app.hw.joint.step(TICK_NS as f64 * 1e-9);
+        self.slave.on_timer(CURRENT_LOOP_TIMER, &mut self.app);
+        self.counters.ticks += 1;
+        let r = self.slave.poll(esc, &mut self.app);
+        self.note(r);
+    }
+}
+
+/// Access to the drive from outside the segment.
+#[derive(Clone)]
+pub struct JointHandle(Arc<Mutex<JointDrive>>);
+
+impl JointHandle {
+    /// Locks the drive (do not hold it while the segment runs).
+    pub fn lock(&self) -> MutexGuard<'_, JointDrive> {
+        self.0.lock().unwrap_or_else(|e| e.into_inner())
+    }
+}
+
+/// The drive as a segment node.
+pub struct JointNode(Arc<Mutex<JointDrive>>);
+
+impl Node<Esc> for JointNode {
+    fn on_event(&mut self, esc: &mut Esc, ev: EscEvent, _t: u64) {
+        let mut b = self.0.lock().unwrap_or_else(|e| e.into_inner());
+        let JointDrive { slave, app, .. } = &mut *b;
+        let r = match ev {
+            EscEvent::Irq => slave.on_pdi_irq(esc, app),
+            EscEvent::Sync0 => slave.on_sync0(esc, app),
+            EscEvent::Sync1 => slave.on_sync1(esc, app),
+            EscEvent::PdWatchdog | EscEvent::PdiWatchdog => Ok(()),
+        };
+        b.note(r);
+    }
+
+    fn next_wakeup(&self) -> Option<u64> {
+        Some(self.0.lock().unwrap_or_else(|e| e.into_inner()).next_tick)
+    }
+
+    fn on_wakeup(&mut self, esc: &mut Esc, t: u64) {
+        let mut b = self.0.lock().unwrap_or_else(|e| e.into_inner());
+        while b.next_tick <= t {
+            b.tick(esc);
+            b.next_tick += TICK_NS;
+        }
+    }
+}
+
+/// Boots the drive firmware on ESC `id` of `segment` with a joint of `params`; the ticks
+/// start at the next multiple of 50 µs.
+pub fn attach(
+    segment: &mut Segment,
+    id: SlaveId,
+    params: BldcJointParams,
+) -> Result<JointHandle, AttachError> {
+    let now = segment.now();
+    let esc = segment
+        .esc_mut(id)
+        .ok_or(AttachError::Topology(TopologyError::NoSuchSlave(id)))?;
+    let slave = JointSlave::new(&device::DEF, esc).map_err(AttachError::Init)?;
+    let drive = JointDrive {
+        slave,
+        app: new_app(params),
+        counters: JointCounters::default(),
+        next_tick: now.div_ceil(TICK_NS) * TICK_NS,
+    };
+    let inner = Arc::new(Mutex::new(drive));
+    segment
+        .attach(id, Box::new(JointNode(inner.clone())))
+        .map_err(AttachError::Topology)?;
+    Ok(JointHandle(inner))
+}
+
+/// The drive and its joint without an ESC: the object dictionary stands in for the
+/// process data; [`JointBench::cycle`] is one 1 ms DC cycle (20 current-loop ticks, then
+/// the drive cycle).
+pub struct JointBench {
+    /// The drive (its `hw.joint` is the plant).
+    pub app: JointApp,
+    /// The dictionary the master would write through PDOs and SDOs.
+    pub od: Od<{ device::IMAGE }>,
+}
+
+impl JointBench {
+    /// A bench with a joint of `params`; one cycle has run (transition 1 taken).
+    pub fn new(params: BldcJointParams) -> Self {
+        let mut b = Self {
+            app: new_app(params),
+            od: Od::new(&device::DEF).expect("the drive's definition is valid"),
+        };
+        b.cycle();
+        b
+    }
+
+    /// One 1 ms cycle.
+    pub fn cycle(&mut self) {
+        for _ in 0..20 {
+            self.app.hw.joint.step(TICK_NS as f64 * 1e-9);
+            self.app.run_current_loop();
+        }
+        self.app.run_cycle(&mut self.od);
+    }
+
+    /// `n` cycles.
+    pub fn run(&mut self, n: usize) {
+        for _ in 0..n {
+            self.cycle();
+        }
+    }
+
+    /// Writes the controlword and runs one cycle; returns the statusword.
+    pub fn command(&mut self, cw: u16) -> u16 {
+        self.od.set(0x6040, 0, cw).expect("0x6040");
+        self.cycle();
+        self.statusword()
+    }
+
+    /// The statusword.
+    pub fn statusword(&self) -> u16 {
+        self.od.get::<u16>(0x6041, 0).unwrap_or(0)
+    }
+
+    /// Position actual value 0x6064.
+    pub fn position(&self) -> i32 {
+        self.od.get::<i32>(0x6064, 0).unwrap_or(0)
+    }
+}
