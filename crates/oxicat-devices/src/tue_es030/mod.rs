@@ -37,7 +37,7 @@
 //! let mut fw = TuEs030::new(Hw);
 //! fw.timer(tue_es030::SERVICE_TIMER, &mut od);
 //! fw.timer(tue_es030::CURRENT_TIMER, &mut od);
-//! assert_eq!(fw.linevoltage, 2394); // 24 V in 10 mV, through the ADC
+//! assert_eq!(fw.linevoltage, 2401); // 24 V in 10 mV, through the ADC
 //! ```
 
 pub mod app;
