@@ -113,11 +113,12 @@ impl Default for HubConfig {
     }
 }
 
-/// The ESC of a hub with the SII generated from `device::DEF` (`sii`). An ET1100 model: with
-/// the `EscConfig::lan9252` model ethercrab's PRE-OP request got working counter 0 (to be
-/// looked at in `oxicat-esc`); the firmware only sees the PDI, so it does not care.
+/// The ESC of a hub with the SII generated from `device::DEF` (`sii`): a LAN9252, as on the
+/// report's STM32F446 board. (Its AL control register is locked until the PDI has read the
+/// previous request, so the firmware must serve AL events promptly — from the PDI IRQ and
+/// the 1 ms idle poll — which is what an early 10 ms-only poll got wrong.)
 pub fn hub_esc(sii: Vec<u8>) -> Esc {
-    Esc::new(EscConfig::et1100(), sii)
+    Esc::new(EscConfig::lan9252(), sii)
 }
 
 /// One hub: firmware and plant.
