@@ -10,6 +10,7 @@
 #![warn(missing_docs)]
 
 pub mod al;
+pub mod cia402;
 mod bringup;
 pub mod coe;
 pub mod cyclic;

@@ -21,7 +21,7 @@ use std::sync::{Arc, Mutex, MutexGuard};
 
 use oxicat_devices::cia402::{device, Cia402Drive, DriveParams, JointHw, CURRENT_LOOP_TIMER};
 use oxicat_esc::{Esc, PdiError};
-use oxicat_plant::bldc_joint::{BldcJoint, BldcJointParams};
+pub use oxicat_plant::bldc_joint::{BldcJoint, BldcJointParams};
 use oxicat_slave::{Od, Slave};
 
 use crate::firmware::AttachError;

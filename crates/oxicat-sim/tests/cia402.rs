@@ -59,7 +59,10 @@ fn csp_tracks_a_smooth_trajectory() {
         let p = amp * (1.0 - (std::f64::consts::TAU * 0.5 * t).cos()) / 2.0;
         let v = amp * std::f64::consts::PI * 0.5 * (std::f64::consts::TAU * 0.5 * t).sin();
         b.od.set(0x607A, 0, p.round() as i32).unwrap();
-        b.od.set(0x60B1, 0, v.round() as i32).unwrap();
+        // The drive differentiates the set-points for its velocity feed-forward; 0x60B1
+        // adds to it (a small constant offset here, which the loop must absorb).
+        let _ = v;
+        b.od.set(0x60B1, 0, 100i32).unwrap();
         b.cycle();
         if k > 10 {
             let fe = b.od.get::<i32>(0x60F4, 0).unwrap();

@@ -646,7 +646,8 @@ impl<H: JointHw> Cia402Drive<H> {
                             frac: 0.0,
                             vel: v,
                         };
-                        vff = od.load(io.velocity_offset) as f32;
+                        // Velocity feed-forward: the set-point's own rate plus 0x60B1.
+                        vff = v + od.load(io.velocity_offset) as f32;
                         tff = od.load(io.torque_offset) as f32 * 1e-3 * rated;
                         oms12 = true;
                         oms13 = self.fe_time > 0.0;
