@@ -207,6 +207,8 @@ pub const STEP_TIMEOUT_CYCLES: u32 = 200;
 #[derive(Debug, Clone, Copy)]
 enum Step {
     Cw(u16, State),
+    /// As `Cw`, skipped when the drive is not in Operation enabled.
+    CwIfEnabled(u16, State),
     ClearIfFault,
     Mode(i8),
     Move {
@@ -228,7 +230,7 @@ fn expand(actions: &[Action], cycle: Duration) -> Vec<Step> {
                 v.push(Step::Cw(0x0F, State::OperationEnabled));
             }
             Action::Disable => {
-                v.push(Step::Cw(0x07, State::SwitchedOn));
+                v.push(Step::CwIfEnabled(0x07, State::SwitchedOn));
                 v.push(Step::Cw(0x00, State::SwitchOnDisabled));
             }
             Action::Mode(m) => v.push(Step::Mode(m)),
@@ -307,6 +309,16 @@ pub fn run(
                     continue;
                 };
                 let mut done = false;
+                let step = match step {
+                    Step::CwIfEnabled(cw, want) => {
+                        if s.waited == 0 && inp.state() != Some(State::OperationEnabled) {
+                            s.step += 1;
+                            continue;
+                        }
+                        Step::Cw(cw, want)
+                    }
+                    other => other,
+                };
                 match step {
                     Step::Cw(cw, want) => {
                         if s.waited == 0 {
@@ -408,6 +420,7 @@ pub fn run(
                             done = true;
                         }
                     }
+                    Step::CwIfEnabled(..) => {}
                     Step::Settle(n) => {
                         s.k += 1;
                         if s.k >= n {
@@ -455,4 +468,58 @@ pub fn run(
         Some(f) => Err(MasterError::Usage(f)),
         None => Ok(run),
     }
+}
+
+/// An SVG of the CSP following error (demand − actual, counts) of each drive over time
+/// during moves: one polyline per drive, axes with their extents as text.
+pub fn following_error_svg(run: &Cia402Run, drives: usize) -> String {
+    const W: f64 = 900.0;
+    const H: f64 = 400.0;
+    const M: f64 = 50.0;
+    let pts: Vec<Vec<(f64, f64)>> = (0..drives)
+        .map(|d| {
+            run.rows
+                .iter()
+                .filter(|r| r.drive == d && r.out.mode == mode::CSP && r.out.controlword == 0x0F)
+                .map(|r| (r.time, r.out.target_position as f64 - r.inp.position as f64))
+                .collect()
+        })
+        .collect();
+    let all = pts.iter().flatten();
+    let (t0, t1) = all
+        .clone()
+        .fold((f64::MAX, f64::MIN), |(a, b), p| (a.min(p.0), b.max(p.0)));
+    let emax = all.fold(1.0f64, |a, p| a.max(p.1.abs()));
+    let (t0, t1) = if t0 < t1 { (t0, t1) } else { (0.0, 1.0) };
+    let x = |t: f64| M + (t - t0) / (t1 - t0) * (W - 2.0 * M);
+    let y = |e: f64| H / 2.0 - e / emax * (H / 2.0 - M);
+    let colours = [
+        "#1f77b4", "#ff7f0e", "#2ca02c", "#d62728", "#9467bd", "#8c564b",
+    ];
+    let mut s = format!(
+        "<svg xmlns=\"http://www.w3.org/2000/svg\" width=\"{W}\" height=\"{H}\" viewBox=\"0 0 {W} {H}\">\n\
+         <rect width=\"100%\" height=\"100%\" fill=\"white\"/>\n\
+         <line x1=\"{M}\" y1=\"{h2}\" x2=\"{xr}\" y2=\"{h2}\" stroke=\"#888\"/>\n\
+         <line x1=\"{M}\" y1=\"{M}\" x2=\"{M}\" y2=\"{yb}\" stroke=\"#888\"/>\n\
+         <text x=\"{M}\" y=\"20\" font-family=\"sans-serif\" font-size=\"14\">CSP following error per joint [counts], ±{emax:.0}, t = {t0:.3} … {t1:.3} s</text>\n",
+        h2 = H / 2.0,
+        xr = W - M,
+        yb = H - M,
+    );
+    for (d, p) in pts.iter().enumerate() {
+        let line: Vec<String> = p
+            .iter()
+            .map(|&(t, e)| format!("{:.1},{:.1}", x(t), y(e)))
+            .collect();
+        s += &format!(
+            "<polyline fill=\"none\" stroke=\"{}\" stroke-width=\"1\" points=\"{}\"/>\n\
+             <text x=\"{}\" y=\"{}\" font-family=\"sans-serif\" font-size=\"12\" fill=\"{}\">joint {d}</text>\n",
+            colours[d % colours.len()],
+            line.join(" "),
+            W - M - 60.0,
+            M + 15.0 * d as f64,
+            colours[d % colours.len()],
+        );
+    }
+    s + "</svg>\n"
 }

@@ -9,6 +9,7 @@ use std::path::PathBuf;
 use clap::{Parser, Subcommand, ValueEnum};
 use oxicat_slave::DeviceDef;
 
+pub mod cia402_cmd;
 pub mod foe_cmd;
 pub mod hub_cmd;
 pub mod master_cmd;
@@ -35,6 +36,8 @@ pub struct Cli {
 pub enum Command {
     /// Device definitions: write a device's ESI XML, SII EEPROM image or object dictionary.
     Device(DeviceArgs),
+    /// CiA402 drives: `enable` (0x06/0x07/0x0F), `disable`, `mode`, `move` (CSP).
+    Cia402(cia402_cmd::Cia402Args),
     /// The axis communication hub scenario (overheat, sensor lost, cable open) on the
     /// virtual segment.
     HubDemo(hub_cmd::HubDemoArgs),
@@ -97,6 +100,11 @@ pub fn devices() -> Vec<(&'static str, &'static DeviceDef, &'static str)> {
             "demo-additions",
             &oxicat_devices::demo::additions::DEF,
             "demo + record Additions 0x7030 (thesis section 6.7, one edit)",
+        ),
+        (
+            "cia402-joint",
+            &oxicat_devices::cia402::DEF,
+            "CiA402 joint drive: BLDC, PP/PV/PT/HM/CSP/CSV/CST, 0x1000 = 0x00020192",
         ),
         (
             "tue-es030",
@@ -171,6 +179,9 @@ pub fn run(cli: Cli) -> Result<(), CliError> {
                 None => std::io::stdout().write_all(&bytes).map_err(CliError::Io),
             }
         }
+        Command::Cia402(a) => cia402_cmd::run(a)
+            .map(|text| print!("{text}"))
+            .map_err(CliError::Master),
         Command::Sim(a) => sim_cmd::run(a).map_err(CliError::Sim),
         Command::HubDemo(a) => hub_cmd::run(a),
         Command::Master(c) => {

@@ -70,6 +70,21 @@ pub fn sim_devices() -> Vec<SimDevice> {
             },
         },
         SimDevice {
+            name: "cia402-joint",
+            description: "CiA402 joint drive (ET1100) on a BLDC joint with a compliant harmonic \
+                          gear, joint torque sensor, encoder with index, home switch",
+            def: |_| &oxicat_devices::cia402::DEF,
+            esc: EscConfig::et1100,
+            attach: |segment, id, _k| {
+                oxicat_sim::cia402::attach(
+                    segment,
+                    id,
+                    oxicat_sim::cia402::BldcJointParams::default(),
+                )
+                .map(drop)
+            },
+        },
+        SimDevice {
             name: "laelaps-leg",
             description: "Laelaps II leg node (F28379D + FB1111) driving its leg on the treadmill \
                           (motors, gears, coupler, encoders); nodes in tower order HR HL FL FR, \

@@ -1,0 +1,172 @@
+//! `oxicat cia402 <enable|disable|mode|move>`: CiA402 drives driven from the master
+//! (`oxicat_master::cia402`), on a virtual segment of `--joints` CiA402 joint drives
+//! (firmware + BLDC joint plant) or on a network interface (`--iface`).
+//!
+//! - `enable`: fault reset if needed, then 0x06 → 0x07 → 0x0F, the statusword printed and
+//!   checked after each step;
+//! - `disable`: 0x07 (if enabled), then 0x00 → Switch on disabled;
+//! - `mode <m>`: 0x6060 until 0x6061 shows it;
+//! - `move <target>`: CSP, enable, a smooth move of every drive, then per joint RMS and
+//!   max following error; `cia402.csv` (every cycle) and `following-error.svg` in `--out`.
+//!
+//! A virtual segment starts fresh with each invocation, so `disable` and `mode` there
+//! first enable (to have something to disable / to show the mode in Operation enabled).
+
+use std::fmt::Write as _;
+use std::path::PathBuf;
+use std::sync::{Arc, Mutex};
+use std::time::Duration;
+
+use oxicat_master::cia402::{self, mode, Action};
+use oxicat_master::{Link, Master, MasterError};
+use oxicat_sim::cia402::{attach, BldcJointParams};
+use oxicat_sim::segment::Segment;
+
+/// Arguments of `oxicat cia402`.
+#[derive(Debug, clap::Args)]
+pub struct Cia402Args {
+    /// What to do.
+    #[command(subcommand)]
+    pub verb: Cia402Verb,
+    /// CiA402 joint drives on the virtual segment.
+    #[arg(long, default_value_t = 1)]
+    pub joints: usize,
+    /// A network interface instead of the virtual segment.
+    #[arg(long)]
+    pub iface: Option<String>,
+    /// Cycle time \[µs\].
+    #[arg(long, default_value_t = 1000)]
+    pub cycle_us: u64,
+    /// Free run instead of DC SYNC0.
+    #[arg(long)]
+    pub no_dc: bool,
+    /// Output directory (`move`).
+    #[arg(long, default_value = "out/cia402")]
+    pub out: PathBuf,
+}
+
+/// The verbs.
+#[derive(Debug, clap::Subcommand)]
+pub enum Cia402Verb {
+    /// 0x06 → 0x07 → 0x0F (fault reset first if needed).
+    Enable,
+    /// Disable operation, then disable voltage.
+    Disable,
+    /// Switch the mode of operation: pp, pv, pt, hm, csp, csv, cst or a number.
+    Mode {
+        /// The mode.
+        mode: String,
+    },
+    /// CSP move of every drive.
+    Move {
+        /// Target position \[increments\].
+        target: i32,
+        /// Relative to the position at the start of the move.
+        #[arg(long)]
+        relative: bool,
+        /// Duration of the move \[ms\].
+        #[arg(long, default_value_t = 1000)]
+        duration_ms: u64,
+    },
+}
+
+/// Parses a mode name or number.
+pub fn parse_mode(s: &str) -> Result<i8, MasterError> {
+    Ok(match s.to_ascii_lowercase().as_str() {
+        "pp" => mode::PP,
+        "pv" => mode::PV,
+        "pt" => mode::PT,
+        "hm" => mode::HM,
+        "csp" => mode::CSP,
+        "csv" => mode::CSV,
+        "cst" => mode::CST,
+        n => n
+            .parse()
+            .map_err(|_| MasterError::Usage(format!("unknown mode {s:?}")))?,
+    })
+}
+
+fn link(a: &Cia402Args) -> Result<Link, MasterError> {
+    if let Some(i) = &a.iface {
+        return Ok(Link::Iface(i.clone()));
+    }
+    let mut seg = Segment::new();
+    let sii = oxicat_device::sii::generate(&oxicat_devices::cia402::DEF)
+        .map_err(|e| MasterError::Usage(format!("SII of the CiA402 joint: {e}")))?;
+    for _ in 0..a.joints.max(1) {
+        let id = seg.add(oxicat_esc::Esc::new(
+            oxicat_esc::EscConfig::et1100(),
+            sii.clone(),
+        ));
+        attach(&mut seg, id, BldcJointParams::default())
+            .map_err(|e| MasterError::Usage(format!("CiA402 joint firmware: {e}")))?;
+    }
+    Ok(Link::Sim(Arc::new(Mutex::new(seg))))
+}
+
+/// Runs `oxicat cia402`; returns the text it printed.
+pub fn run(a: Cia402Args) -> Result<String, MasterError> {
+    let sim = a.iface.is_none();
+    let mut m = Master::open(link(&a)?)?;
+    let drives: Vec<usize> = (0..m.len()).collect();
+    let mut actions = vec![Action::ClearFault];
+    match &a.verb {
+        Cia402Verb::Enable => actions.push(Action::Enable),
+        Cia402Verb::Disable => {
+            if sim {
+                actions.push(Action::Enable);
+            }
+            actions.push(Action::Disable);
+        }
+        Cia402Verb::Mode { mode } => {
+            actions.push(Action::Mode(parse_mode(mode)?));
+            if sim {
+                actions.push(Action::Enable);
+            }
+        }
+        Cia402Verb::Move {
+            target,
+            relative,
+            duration_ms,
+        } => {
+            actions.push(Action::Mode(mode::CSP));
+            actions.push(Action::Enable);
+            actions.push(Action::Move {
+                target: *target,
+                relative: *relative,
+                duration: Duration::from_millis(*duration_ms),
+            });
+        }
+    }
+    let cycle = Duration::from_micros(a.cycle_us.max(1));
+    let r = cia402::run(&mut m, &drives, &actions, cycle, !a.no_dc)?;
+    let mut out = String::new();
+    for s in &r.steps {
+        let _ = writeln!(
+            out,
+            "drive {}: {:<34} statusword 0x{:04X} ({})",
+            s.drive,
+            s.what,
+            s.statusword,
+            s.state
+                .map_or("no state".to_string(), |st| format!("{st:?}"))
+        );
+    }
+    if let Cia402Verb::Move { .. } = a.verb {
+        std::fs::create_dir_all(&a.out)
+            .map_err(|e| MasterError::Io(a.out.display().to_string(), e))?;
+        let csv = a.out.join("cia402.csv");
+        std::fs::write(&csv, r.csv()).map_err(|e| MasterError::Io(csv.display().to_string(), e))?;
+        let svg = a.out.join("following-error.svg");
+        std::fs::write(&svg, cia402::following_error_svg(&r, drives.len()))
+            .map_err(|e| MasterError::Io(svg.display().to_string(), e))?;
+        for (d, (rms, max)) in r.following_error(drives.len()).iter().enumerate() {
+            let _ = writeln!(
+                out,
+                "joint {d}: CSP following error RMS {rms:.1} counts, max {max} counts"
+            );
+        }
+        let _ = writeln!(out, "wrote {} and {}", csv.display(), svg.display());
+    }
+    Ok(out)
+}
