@@ -102,3 +102,39 @@ fn enable_sequence_and_csp_move_through_ethercrab_at_1khz_dc() {
         assert!(run.csv().lines().count() > 800);
     });
 }
+
+/// The TxPDO is configurable in PREOP: appending the joint torque sensor 0x2002 and the
+/// following error 0x60F4 to 0x1A00 makes the inputs 23 bytes, the new entries live.
+#[test]
+fn txpdo_mapping_is_configurable_in_preop() {
+    big(|| {
+        let (link, _hs) = segment(1);
+        let m = Master::open(link.clone()).unwrap();
+        m.sdo_download(0, 0x1A00, 0, &[0]).unwrap();
+        m.sdo_download(0, 0x1A00, 7, &0x2002_0020u32.to_le_bytes())
+            .unwrap();
+        m.sdo_download(0, 0x1A00, 8, &0x60F4_0020u32.to_le_bytes())
+            .unwrap();
+        m.sdo_download(0, 0x1A00, 0, &[8]).unwrap();
+        assert_eq!(m.sdo_upload(0, 0x1A00, 0).unwrap(), vec![8]);
+        let l = m.pdos(0).unwrap();
+        let entries: Vec<u16> = l.tx[0].entries.iter().map(|e| e.index).collect();
+        assert_eq!(
+            entries,
+            vec![0x6041, 0x6061, 0x6064, 0x606C, 0x6077, 0x603F, 0x2002, 0x60F4]
+        );
+        drop(m);
+        let mut m = Master::open(link).unwrap();
+        let mut sizes = Vec::new();
+        m.run_cyclic(oxicat_master::cyclic::CycleOptions::default(), |io| {
+            sizes.push(io.inputs[0].len());
+            Ok(if io.cycle >= 5 {
+                oxicat_master::cyclic::Flow::Stop
+            } else {
+                oxicat_master::cyclic::Flow::Continue
+            })
+        })
+        .unwrap();
+        assert!(sizes.iter().all(|&n| n == 23), "{sizes:?}");
+    });
+}
