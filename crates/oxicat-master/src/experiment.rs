@@ -441,14 +441,19 @@ pub fn run_trot(s: &Scenario, progress: &mut dyn FnMut(Progress)) -> Result<Trot
     );
     let master = run_master(s, &phases, &md, &segment, &handles, progress);
     // async-io's executor: ethercrab's PDU timers live in its reactor, which then runs on
-    // this thread instead of waking a reactor thread for every frame.
-    let out = async_io::block_on(futures_lite::future::or(master, async {
-        let r = transport.await;
-        Err(MasterError::Usage(format!(
-            "the in-process transport stopped: {:?}",
-            r.err()
-        )))
-    }));
+    // this thread instead of waking a reactor thread for every frame. `SelfWoken` re-polls
+    // in place while the master and the transport wake each other (every frame), so the
+    // reactor (epoll) is only entered when the run really waits on a timer (bring-up).
+    let out = async_io::block_on(SelfWoken::new(Box::pin(futures_lite::future::or(
+        master,
+        async {
+            let r = transport.await;
+            Err(MasterError::Usage(format!(
+                "the in-process transport stopped: {:?}",
+                r.err()
+            )))
+        },
+    ))));
     let (rows, mut bus, wall_recorded) = out?;
     let end_ns = segment.lock().unwrap_or_else(|e| e.into_inner()).now();
     let mut final_clock_ns = [0u64; 4];
@@ -467,6 +472,77 @@ pub fn run_trot(s: &Scenario, progress: &mut dyn FnMut(Progress)) -> Result<Trot
         simulated_s: end_ns as f64 * 1e-9,
         final_clock_ns,
     })
+}
+
+/// Wraps a future for `async_io::block_on` and re-polls it in place as long as it woke
+/// itself during the last poll (the in-process transport completing a frame wakes the
+/// master in the same poll). `async_io::block_on` would instead run its reactor (a
+/// zero-timeout `epoll_wait`) before every such re-poll. Wakes are forwarded to the outer
+/// waker, so timers (bring-up wait loops) and wakes after a `Pending` work as before; the
+/// poll order is unchanged, so the run stays deterministic.
+struct SelfWoken<F> {
+    f: F,
+    waker: Option<(Arc<WakeFlag>, std::task::Waker)>,
+}
+
+struct WakeFlag {
+    woken: std::sync::atomic::AtomicBool,
+    outer: std::task::Waker,
+}
+
+impl std::task::Wake for WakeFlag {
+    fn wake(self: Arc<Self>) {
+        self.wake_by_ref()
+    }
+    fn wake_by_ref(self: &Arc<Self>) {
+        self.woken.store(true, std::sync::atomic::Ordering::Release);
+        self.outer.wake_by_ref();
+    }
+}
+
+impl<F> SelfWoken<F> {
+    fn new(f: F) -> Self {
+        Self { f, waker: None }
+    }
+}
+
+impl<F: std::future::Future + Unpin> std::future::Future for SelfWoken<F> {
+    type Output = F::Output;
+
+    fn poll(
+        mut self: std::pin::Pin<&mut Self>,
+        cx: &mut std::task::Context<'_>,
+    ) -> std::task::Poll<F::Output> {
+        use std::sync::atomic::Ordering;
+        let this = &mut *self;
+        let fresh = match &this.waker {
+            Some((w, _)) => !w.outer.will_wake(cx.waker()),
+            None => true,
+        };
+        if fresh {
+            let flag = Arc::new(WakeFlag {
+                woken: false.into(),
+                outer: cx.waker().clone(),
+            });
+            let waker = std::task::Waker::from(flag.clone());
+            this.waker = Some((flag, waker));
+        }
+        let Some((flag, waker)) = &this.waker else {
+            unreachable!()
+        };
+        let mut inner = std::task::Context::from_waker(waker);
+        // Bounded, so that a future that keeps waking itself still lets the reactor run.
+        for _ in 0..4096 {
+            flag.woken.store(false, Ordering::Release);
+            if let std::task::Poll::Ready(v) = std::pin::Pin::new(&mut this.f).poll(&mut inner) {
+                return std::task::Poll::Ready(v);
+            }
+            if !flag.woken.load(Ordering::Acquire) {
+                return std::task::Poll::Pending;
+            }
+        }
+        std::task::Poll::Pending
+    }
 }
 
 fn eth(what: &str) -> impl Fn(ethercrab::error::Error) -> MasterError + '_ {

@@ -18,7 +18,7 @@
 //! the knee then the hip: read the eQEP, update angle and speed, run the PIV with the
 //! current gains and filter, and drive the PWM — zero duty in the Configuration state.
 
-use super::device::{Command, Feedback};
+use super::device::{Command, Feedback, PdoVars};
 use super::encoder::{CaptureConfig, EncoderIn, JointEncoder, SpeedEstimator};
 use super::hw::{
     Joint, CONTROL_PERIOD_S, DEFAULT_CYCLE_NS, DEFAULT_FILTER_HZ, DEFAULT_TRANSITION_TIME_S,
@@ -136,6 +136,8 @@ pub struct LegNode<P: PwmOut, E: EncoderIn, L: Leds> {
     target: (f32, f32),
     knee: JointState,
     hip: JointState,
+    /// Process-data handles, resolved on the first cycle.
+    io: Option<PdoVars>,
 }
 
 impl<P: PwmOut, E: EncoderIn, L: Leds> LegNode<P, E, L> {
@@ -174,6 +176,7 @@ impl<P: PwmOut, E: EncoderIn, L: Leds> LegNode<P, E, L> {
             target: (0.0, 0.0),
             knee: JointState::new(k, capture),
             hip: JointState::new(h, capture),
+            io: None,
         }
     }
 
@@ -379,10 +382,20 @@ impl<const N: usize, P: PwmOut, E: EncoderIn, L: Leds> Application<N> for LegNod
     }
 
     fn cycle(&mut self, od: &mut Od<N>) {
-        let cmd = Command::read(od);
-        let cycle_ns = od.get::<u32>(0x1C32, 2).unwrap_or(0);
-        let fb = self.application(&cmd, cycle_ns);
-        fb.write(od);
+        if self.io.is_none() {
+            self.io = PdoVars::resolve(od);
+        }
+        if let Some(io) = self.io {
+            let cmd = Command::load(od, &io);
+            let cycle_ns = io.cycle_ns(od);
+            let fb = self.application(&cmd, cycle_ns);
+            fb.store(od, &io);
+        } else {
+            let cmd = Command::read(od);
+            let cycle_ns = od.get::<u32>(0x1C32, 2).unwrap_or(0);
+            let fb = self.application(&cmd, cycle_ns);
+            fb.write(od);
+        }
     }
 
     fn timer(&mut self, id: u8, _od: &mut Od<N>) {

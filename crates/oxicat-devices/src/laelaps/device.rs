@@ -37,7 +37,7 @@ use super::trajectory::Ellipse;
 use crate::laelaps::kinematics::Side;
 use core::f32::consts::PI;
 use oxicat_slave::device::{DcOpMode, DeviceInfo, Group};
-use oxicat_slave::{DeviceDef, Identity, MailboxDef, Od, SyncDef, SyncMode};
+use oxicat_slave::{DeviceDef, Identity, MailboxDef, Od, SyncDef, SyncMode, Var};
 
 crate::pd_table! {
     tx {
@@ -163,6 +163,61 @@ pub fn device(side: Side) -> &'static DeviceDef {
     }
 }
 
+/// Typed handles on every Laelaps process-data entry (and the SYNC0 cycle time
+/// 0x1C32:02), resolved once ([`PdoVars::resolve`]) so that the SYNC0 cycle reads and
+/// writes the image by offset instead of looking each entry up by index.
+#[derive(Debug, Clone, Copy)]
+pub struct PdoVars {
+    state_machine: Var<bool>,
+    blue_led: Var<bool>,
+    red_led: Var<bool>,
+    transition_time: Var<i8>,
+    filter_bandwidth: Var<u16>,
+    gains: [Var<i16>; 6],
+    traj: [Var<i16>; 7],
+    hip: [Var<i16>; 2],
+    time: Var<u16>,
+    knee: [Var<i16>; 2],
+    pwm: [Var<i16>; 2],
+    velocity: [Var<i32>; 2],
+    cycle_time: Var<u32>,
+}
+
+impl PdoVars {
+    /// Resolves all entries; `None` if the dictionary lacks one (not a Laelaps OD).
+    pub fn resolve<const N: usize>(od: &Od<N>) -> Option<Self> {
+        let v16 = |i: u16, s: u8| od.var::<i16>(i, s).ok();
+        let mut gains = [v16(0x7020, 1)?; 6];
+        for (k, g) in gains.iter_mut().enumerate() {
+            *g = v16(0x7020, k as u8 + 1)?;
+        }
+        let mut traj = [v16(0x7030, 1)?; 7];
+        for (k, g) in traj.iter_mut().enumerate() {
+            *g = v16(0x7030, k as u8 + 1)?;
+        }
+        Some(Self {
+            state_machine: od.var(0x7000, 1).ok()?,
+            blue_led: od.var(0x7000, 5).ok()?,
+            red_led: od.var(0x7000, 6).ok()?,
+            transition_time: od.var(0x7000, 9).ok()?,
+            filter_bandwidth: od.var(0x7012, 1).ok()?,
+            gains,
+            traj,
+            hip: [v16(0x6010, 1)?, v16(0x6010, 2)?],
+            time: od.var(0x6012, 1).ok()?,
+            knee: [v16(0x6014, 1)?, v16(0x6014, 2)?],
+            pwm: [v16(0x6020, 1)?, v16(0x6020, 2)?],
+            velocity: [od.var(0x6030, 1).ok()?, od.var(0x6030, 2).ok()?],
+            cycle_time: od.var(0x1C32, 2).ok()?,
+        })
+    }
+
+    /// The SYNC0 cycle time 0x1C32:02 \[ns\].
+    pub fn cycle_ns<const N: usize>(&self, od: &Od<N>) -> u32 {
+        od.load(self.cycle_time)
+    }
+}
+
 /// Everything the master commands, in SI units (decoded from Table 3-1).
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub struct Command {
@@ -214,6 +269,38 @@ impl Command {
                 freq: tr(5) / 100.0,
                 phase: tr(6) * (PI / 180.0),
                 flatness: tr(7) / 100.0,
+            },
+        }
+    }
+
+    /// As [`Command::read`] through resolved handles (the per-cycle path).
+    pub fn load<const N: usize>(od: &Od<N>, v: &PdoVars) -> Self {
+        let g = |k: usize| od.load(v.gains[k]) as f32;
+        let tr = |k: usize| od.load(v.traj[k]) as f32;
+        Self {
+            operational: od.load(v.state_machine),
+            blue_led: od.load(v.blue_led),
+            red_led: od.load(v.red_led),
+            transition_time_s: od.load(v.transition_time) as f32,
+            filter_hz: od.load(v.filter_bandwidth) as f32,
+            knee: Gains {
+                kp: g(0) / 100.0,
+                kd: g(1) / 1000.0,
+                ki: g(2) / 100.0,
+            },
+            hip: Gains {
+                kp: g(3) / 100.0,
+                kd: g(4) / 1000.0,
+                ki: g(5) / 100.0,
+            },
+            ellipse: Ellipse {
+                x_centre: tr(0) / 1000.0,
+                y_centre: tr(1) / 1000.0,
+                a: tr(2) / 100.0,
+                b: tr(3) / 100.0,
+                freq: tr(4) / 100.0,
+                phase: tr(5) * (PI / 180.0),
+                flatness: tr(6) / 100.0,
             },
         }
     }
@@ -291,6 +378,20 @@ impl Feedback {
         let _ = od.set(0x6020, 2, (self.u_hip * 10_000.0) as i16);
         let _ = od.set(0x6030, 1, (self.velocity_knee * 1000.0) as i32);
         let _ = od.set(0x6030, 2, (self.velocity_hip * 1000.0) as i32);
+    }
+
+    /// As [`Feedback::write`] through resolved handles (the per-cycle path).
+    pub fn store<const N: usize>(&self, od: &mut Od<N>, v: &PdoVars) {
+        let deg100 = |rad: f32| (rad * (18_000.0 / PI)) as i16;
+        od.store(v.hip[0], deg100(self.hip));
+        od.store(v.hip[1], deg100(self.hip_desired));
+        od.store(v.time, ((self.time_s * 100.0 + 0.5) as u32) as u16);
+        od.store(v.knee[0], deg100(self.knee));
+        od.store(v.knee[1], deg100(self.knee_desired));
+        od.store(v.pwm[0], (self.u_knee * 10_000.0) as i16);
+        od.store(v.pwm[1], (self.u_hip * 10_000.0) as i16);
+        od.store(v.velocity[0], (self.velocity_knee * 1000.0) as i32);
+        od.store(v.velocity[1], (self.velocity_hip * 1000.0) as i32);
     }
 
     /// Reads the inputs back into SI units (what a master decodes).
@@ -458,6 +559,7 @@ mod tests {
             od.set(0x7030, s, v).unwrap();
         }
         let c = Command::read(&od);
+        assert_eq!(Command::load(&od, &PdoVars::resolve(&od).unwrap()), c);
         assert!(c.operational);
         assert_eq!(c.transition_time_s, 3.0);
         assert_eq!(c.filter_hz, 20.0);
@@ -501,6 +603,10 @@ mod tests {
         assert_eq!(od.get::<i16>(0x6020, 2), Ok(4117));
         assert_eq!(od.get::<i32>(0x6030, 1), Ok(123_456));
         assert_eq!(od.get::<i32>(0x6030, 2), Ok(-7500));
+        let v = PdoVars::resolve(&od).unwrap();
+        let mut od2 = Od::<IMAGE>::new(&RIGHT).unwrap();
+        f.store(&mut od2, &v);
+        assert_eq!(Feedback::read(&od2), Feedback::read(&od));
         let b = Feedback::read(&od);
         assert!((b.hip - 0.5).abs() < 1e-3);
         assert!((b.u_hip - 0.4117).abs() < 1e-6);
