@@ -233,7 +233,7 @@ fn lan9252_al_event_and_irq_pin() {
     };
     f.truncate(n);
     h.with_esc(|e| e.forward(0, &mut f, 1000, true));
-    let want = h.with_esc(|e| e.al_event_request());
+    let want = h.with_esc(|e| Esc::al_event_request(e));
     assert_ne!(want & 1, 0);
     assert_eq!(d.al_event_request(), Ok(want));
     assert!(d.irq_lines().pdi_irq);
@@ -440,7 +440,7 @@ fn et1100_al_event_in_the_address_phase() {
     f.truncate(n);
     h.with_esc(|e| e.forward(0, &mut f, 1000, true));
     assert!(d.irq_lines().pdi_irq);
-    let want = h.with_esc(|e| e.al_event_request());
+    let want = h.with_esc(|e| Esc::al_event_request(e));
     // Any access brings the event bits along; the NOP costs three bytes.
     let mut b = [0u8; 2];
     d.read(0x0130, &mut b).unwrap();
