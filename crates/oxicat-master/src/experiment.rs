@@ -531,8 +531,12 @@ impl<F: std::future::Future + Unpin> std::future::Future for SelfWoken<F> {
             unreachable!()
         };
         let mut inner = std::task::Context::from_waker(waker);
-        // Bounded, so that a future that keeps waking itself still lets the reactor run.
-        for _ in 0..4096 {
+        // Bounded: every `REPOLLS` re-polls the (forwarded, hence pending) wake makes
+        // `async_io::block_on` run its reactor once with a zero timeout. That processes the
+        // timer queue ethercrab's per-PDU timeouts fill and keeps async-io's helper thread
+        // backing off instead of taking the reactor and being woken for every new timer.
+        const REPOLLS: usize = 64;
+        for _ in 0..REPOLLS {
             flag.woken.store(false, Ordering::Release);
             if let std::task::Poll::Ready(v) = std::pin::Pin::new(&mut this.f).poll(&mut inner) {
                 return std::task::Poll::Ready(v);
