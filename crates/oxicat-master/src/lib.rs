@@ -10,8 +10,8 @@
 #![warn(missing_docs)]
 
 pub mod al;
-pub mod cia402;
 mod bringup;
+pub mod cia402;
 pub mod coe;
 pub mod cyclic;
 mod error;
@@ -408,7 +408,10 @@ impl Master {
         }
         // On the heap: ethercrab's initialisation is a large future (debug builds).
         let group = futures_lite::future::block_on(Box::pin(self.init()))?;
-        let addresses: Vec<u16> = group.iter(&self.md).map(|s| s.configured_address()).collect();
+        let addresses: Vec<u16> = group
+            .iter(&self.md)
+            .map(|s| s.configured_address())
+            .collect();
         if addresses.len() != self.addresses.len() {
             return Err(MasterError::Usage(format!(
                 "{} slaves at the start, {} after ethercrab's initialisation",

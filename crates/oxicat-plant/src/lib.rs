@@ -30,8 +30,8 @@ pub mod bldc_joint;
 pub mod encoder;
 pub mod gear;
 pub mod motor;
-pub mod re30;
 pub mod onewire;
+pub mod re30;
 pub mod thermal;
 pub mod ws2812;
 

@@ -15,8 +15,8 @@ pub mod hub_cmd;
 pub mod master_cmd;
 pub mod sim_cmd;
 pub mod sim_devices;
-pub mod tue_cmd;
 pub mod trot_cmd;
+pub mod tue_cmd;
 
 /// The command line.
 #[derive(Debug, Parser)]
