@@ -260,6 +260,8 @@ struct Seq {
     sub: u8,
     start: i32,
     k: u64,
+    /// Scale of this drive's move targets (see [`run_scaled`]).
+    amp: f64,
 }
 
 /// Runs `actions` on the drives at `drives` (segment positions) in one cyclic session,
@@ -272,11 +274,33 @@ pub fn run(
     cycle: Duration,
     dc: bool,
 ) -> Result<Cia402Run, MasterError> {
+    run_scaled(m, drives, actions, cycle, dc, &[])
+}
+
+/// Relative joint motions of a six-axis arm for one CSP move (base, shoulder, elbow, three
+/// wrist axes): each joint moves its own share of the commanded target, signs alternating,
+/// so the joints follow different trajectories in the same cycles. Repeats after six.
+pub fn arm_amplitudes(joints: usize) -> Vec<f64> {
+    const ARM: [f64; 6] = [1.0, -0.75, 0.5, -1.0, 0.6, -0.3];
+    (0..joints).map(|j| ARM[j % ARM.len()]).collect()
+}
+
+/// [`run`] with the move targets of drive `i` scaled by `amplitude[i]` (1 where missing),
+/// e.g. [`arm_amplitudes`] for an arm whose joints move differently.
+pub fn run_scaled(
+    m: &mut Master,
+    drives: &[usize],
+    actions: &[Action],
+    cycle: Duration,
+    dc: bool,
+    amplitude: &[f64],
+) -> Result<Cia402Run, MasterError> {
     let steps = expand(actions, cycle);
     let mut run = Cia402Run::default();
     let mut seq: Vec<Seq> = drives
         .iter()
-        .map(|_| Seq {
+        .enumerate()
+        .map(|(i, _)| Seq {
             step: 0,
             waited: 0,
             out: DriveOut {
@@ -286,6 +310,7 @@ pub fn run(
             sub: 0,
             start: 0,
             k: 0,
+            amp: amplitude.get(i).copied().unwrap_or(1.0),
         })
         .collect();
     let mut failure: Option<String> = None;
@@ -399,6 +424,7 @@ pub fn run(
                         if s.k == 0 {
                             s.start = s.out.target_position;
                         }
+                        let target = (f64::from(target) * s.amp).round() as i32;
                         let goal = if relative {
                             s.start.wrapping_add(target)
                         } else {
@@ -470,13 +496,16 @@ pub fn run(
     }
 }
 
-/// An SVG of the CSP following error (demand − actual, counts) of each drive over time
-/// during moves: one polyline per drive, axes with their extents as text.
-pub fn following_error_svg(run: &Cia402Run, drives: usize) -> String {
-    const W: f64 = 900.0;
-    const H: f64 = 400.0;
-    const M: f64 = 50.0;
-    let pts: Vec<Vec<(f64, f64)>> = (0..drives)
+/// The CSP following error (demand − actual, counts) of each drive over time during moves,
+/// one line per drive, as `following-error.png` and `following-error.svg` in `dir`.
+pub fn write_following_error_plots(
+    run: &Cia402Run,
+    drives: usize,
+    dir: &std::path::Path,
+) -> Result<Vec<std::path::PathBuf>, MasterError> {
+    use plotters::prelude::*;
+    crate::plot::font_ready()?;
+    let series: Vec<Vec<(f64, f64)>> = (0..drives)
         .map(|d| {
             run.rows
                 .iter()
@@ -485,41 +514,62 @@ pub fn following_error_svg(run: &Cia402Run, drives: usize) -> String {
                 .collect()
         })
         .collect();
-    let all = pts.iter().flatten();
+    let all = series.iter().flatten();
     let (t0, t1) = all
         .clone()
         .fold((f64::MAX, f64::MIN), |(a, b), p| (a.min(p.0), b.max(p.0)));
-    let emax = all.fold(1.0f64, |a, p| a.max(p.1.abs()));
     let (t0, t1) = if t0 < t1 { (t0, t1) } else { (0.0, 1.0) };
-    let x = |t: f64| M + (t - t0) / (t1 - t0) * (W - 2.0 * M);
-    let y = |e: f64| H / 2.0 - e / emax * (H / 2.0 - M);
-    let colours = [
-        "#1f77b4", "#ff7f0e", "#2ca02c", "#d62728", "#9467bd", "#8c564b",
-    ];
-    let mut s = format!(
-        "<svg xmlns=\"http://www.w3.org/2000/svg\" width=\"{W}\" height=\"{H}\" viewBox=\"0 0 {W} {H}\">\n\
-         <rect width=\"100%\" height=\"100%\" fill=\"white\"/>\n\
-         <line x1=\"{M}\" y1=\"{h2}\" x2=\"{xr}\" y2=\"{h2}\" stroke=\"#888\"/>\n\
-         <line x1=\"{M}\" y1=\"{M}\" x2=\"{M}\" y2=\"{yb}\" stroke=\"#888\"/>\n\
-         <text x=\"{M}\" y=\"20\" font-family=\"sans-serif\" font-size=\"14\">CSP following error per joint [counts], ±{emax:.0}, t = {t0:.3} … {t1:.3} s</text>\n",
-        h2 = H / 2.0,
-        xr = W - M,
-        yb = H - M,
-    );
-    for (d, p) in pts.iter().enumerate() {
-        let line: Vec<String> = p
-            .iter()
-            .map(|&(t, e)| format!("{:.1},{:.1}", x(t), y(e)))
-            .collect();
-        s += &format!(
-            "<polyline fill=\"none\" stroke=\"{}\" stroke-width=\"1\" points=\"{}\"/>\n\
-             <text x=\"{}\" y=\"{}\" font-family=\"sans-serif\" font-size=\"12\" fill=\"{}\">joint {d}</text>\n",
-            colours[d % colours.len()],
-            line.join(" "),
-            W - M - 60.0,
-            M + 15.0 * d as f64,
-            colours[d % colours.len()],
-        );
+    let emax = all.fold(1.0f64, |a, p| a.max(p.1.abs())) * 1.1;
+    fn draw<DB: DrawingBackend>(
+        root: DrawingArea<DB, plotters::coord::Shift>,
+        series: &[Vec<(f64, f64)>],
+        (t0, t1, emax): (f64, f64, f64),
+    ) -> Result<(), DrawingAreaErrorKind<DB::ErrorType>>
+    where
+        DB::ErrorType: 'static,
+    {
+        root.fill(&WHITE)?;
+        let mut chart = ChartBuilder::on(&root)
+            .caption("CSP following error per joint", ("sans-serif", 22))
+            .margin(12)
+            .x_label_area_size(40)
+            .y_label_area_size(70)
+            .build_cartesian_2d(t0..t1, -emax..emax)?;
+        chart
+            .configure_mesh()
+            .x_desc("time [s]")
+            .y_desc("demand - actual [counts]")
+            .draw()?;
+        for (d, pts) in series.iter().enumerate() {
+            let colour = Palette99::pick(d).to_rgba();
+            chart
+                .draw_series(LineSeries::new(pts.iter().copied(), colour))?
+                .label(format!("joint {d}"))
+                .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 18, y)], colour));
+        }
+        chart
+            .configure_series_labels()
+            .background_style(WHITE.mix(0.8))
+            .border_style(BLACK)
+            .draw()?;
+        root.present()
     }
-    s + "</svg>\n"
+    let png = dir.join("following-error.png");
+    let svg = dir.join("following-error.svg");
+    let fail = |p: &std::path::Path, e: String| {
+        MasterError::Io(p.display().to_string(), std::io::Error::other(e))
+    };
+    draw(
+        BitMapBackend::new(&png, (1000, 500)).into_drawing_area(),
+        &series,
+        (t0, t1, emax),
+    )
+    .map_err(|e| fail(&png, e.to_string()))?;
+    draw(
+        SVGBackend::new(&svg, (1000, 500)).into_drawing_area(),
+        &series,
+        (t0, t1, emax),
+    )
+    .map_err(|e| fail(&svg, e.to_string()))?;
+    Ok(vec![png, svg])
 }

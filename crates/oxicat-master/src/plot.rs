@@ -30,7 +30,8 @@ pub const FIGURE_ORDER: [LegId; 4] = [
     LegId::HindLeft,
 ];
 
-fn font_ready() -> Result<(), MasterError> {
+/// Registers the built-in font as plotters' "sans-serif" family (once per process).
+pub(crate) fn font_ready() -> Result<(), MasterError> {
     use std::sync::OnceLock;
     static OK: OnceLock<bool> = OnceLock::new();
     let ok = *OK.get_or_init(|| {

@@ -625,21 +625,6 @@ pub fn margins(pts: &[FrfPoint]) -> Margins {
     out
 }
 
-fn font_ready() -> Result<(), MasterError> {
-    use plotters::style::FontStyle;
-    use std::sync::OnceLock;
-    static FONT: &[u8] = include_bytes!("../../../assets/fonts/DejaVuSans.ttf");
-    static OK: OnceLock<bool> = OnceLock::new();
-    let ok = *OK.get_or_init(|| {
-        plotters::style::register_font("sans-serif", FontStyle::Normal, FONT).is_ok()
-    });
-    if ok {
-        Ok(())
-    } else {
-        Err(MasterError::Usage("the built-in font did not load".into()))
-    }
-}
-
 /// Writes the Bode plot of T (and L dashed) as PNG and SVG: `<stem>.png`, `<stem>.svg`.
 pub fn plot_bode(
     curves: &[(&str, &[FrfPoint])],
@@ -647,7 +632,7 @@ pub fn plot_bode(
     stem: &str,
     title: &str,
 ) -> Result<Vec<PathBuf>, MasterError> {
-    font_ready()?;
+    crate::plot::font_ready()?;
     let png = dir.join(format!("{stem}.png"));
     let svg = dir.join(format!("{stem}.svg"));
     let err = |e: Box<dyn std::error::Error>| MasterError::Usage(format!("plot {stem}: {e}"));

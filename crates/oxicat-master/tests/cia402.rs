@@ -103,6 +103,51 @@ fn enable_sequence_and_csp_move_through_ethercrab_at_1khz_dc() {
     });
 }
 
+/// A six-joint arm on one segment at 1 kHz DC follows one CSP trajectory with each joint
+/// moving its own share (signs alternating); per-joint RMS and max following error stay in
+/// the same bound as the two-drive test, and every link ends at its own target.
+#[test]
+fn six_joint_arm_follows_a_csp_trajectory_at_1khz_dc() {
+    big(|| {
+        let (link, hs) = segment(6);
+        let mut m = Master::open(link).unwrap();
+        let amp = cia402::arm_amplitudes(6);
+        let run = cia402::run_scaled(
+            &mut m,
+            &[0, 1, 2, 3, 4, 5],
+            &[
+                Action::ClearFault,
+                Action::Mode(cia402::mode::CSP),
+                Action::Enable,
+                Action::Move {
+                    target: 40_000,
+                    relative: true,
+                    duration: Duration::from_millis(800),
+                },
+            ],
+            Duration::from_millis(1),
+            true,
+            &amp,
+        )
+        .unwrap();
+        let fe = run.following_error(6);
+        eprintln!("six-joint arm: CSP following error per joint (RMS, max) [counts]: {fe:?}");
+        for (d, (rms, max)) in fe.iter().enumerate() {
+            assert!(*max < 400, "joint {d}: max following error {max} counts");
+            assert!(*rms < 200.0, "joint {d}: RMS {rms}");
+            assert!(*max > 0, "joint {d} moved under CSP");
+        }
+        for (j, h) in hs.iter().enumerate() {
+            let link = h.lock().app.hw.joint.link_angle;
+            let want = amp[j] * 40_000.0 / 16_384.0 * std::f64::consts::TAU / 100.0;
+            assert!(
+                (link - want).abs() < 0.005,
+                "joint {j}: link {link} rad, want {want}"
+            );
+        }
+    });
+}
+
 /// The TxPDO is configurable in PREOP: appending the joint torque sensor 0x2002 and the
 /// following error 0x60F4 to 0x1A00 makes the inputs 23 bytes, the new entries live.
 #[test]

@@ -7,7 +7,7 @@
 //! - `disable`: 0x07 (if enabled), then 0x00 → Switch on disabled;
 //! - `mode <m>`: 0x6060 until 0x6061 shows it;
 //! - `move <target>`: CSP, enable, a smooth move of every drive, then per joint RMS and
-//!   max following error; `cia402.csv` (every cycle) and `following-error.svg` in `--out`.
+//!   max following error; `cia402.csv` (every cycle) and `following-error.png`/`.svg` in `--out`.
 //!
 //! A virtual segment starts fresh with each invocation, so `disable` and `mode` there
 //! first enable (to have something to disable / to show the mode in Operation enabled).
@@ -67,6 +67,10 @@ pub enum Cia402Verb {
         /// Duration of the move \[ms\].
         #[arg(long, default_value_t = 1000)]
         duration_ms: u64,
+        /// Move the joints as a six-axis arm: each joint its own share of the target, signs
+        /// alternating (base 1, shoulder −0.75, elbow 0.5, wrist −1, 0.6, −0.3).
+        #[arg(long)]
+        arm: bool,
     },
 }
 
@@ -128,6 +132,7 @@ pub fn run(a: Cia402Args) -> Result<String, MasterError> {
             target,
             relative,
             duration_ms,
+            ..
         } => {
             actions.push(Action::Mode(mode::CSP));
             actions.push(Action::Enable);
@@ -139,7 +144,11 @@ pub fn run(a: Cia402Args) -> Result<String, MasterError> {
         }
     }
     let cycle = Duration::from_micros(a.cycle_us.max(1));
-    let r = cia402::run(&mut m, &drives, &actions, cycle, !a.no_dc)?;
+    let amplitude = match a.verb {
+        Cia402Verb::Move { arm: true, .. } => cia402::arm_amplitudes(drives.len()),
+        _ => Vec::new(),
+    };
+    let r = cia402::run_scaled(&mut m, &drives, &actions, cycle, !a.no_dc, &amplitude)?;
     let mut out = String::new();
     for s in &r.steps {
         let _ = writeln!(
@@ -157,16 +166,20 @@ pub fn run(a: Cia402Args) -> Result<String, MasterError> {
             .map_err(|e| MasterError::Io(a.out.display().to_string(), e))?;
         let csv = a.out.join("cia402.csv");
         std::fs::write(&csv, r.csv()).map_err(|e| MasterError::Io(csv.display().to_string(), e))?;
-        let svg = a.out.join("following-error.svg");
-        std::fs::write(&svg, cia402::following_error_svg(&r, drives.len()))
-            .map_err(|e| MasterError::Io(svg.display().to_string(), e))?;
+        let figures = cia402::write_following_error_plots(&r, drives.len(), &a.out)?;
         for (d, (rms, max)) in r.following_error(drives.len()).iter().enumerate() {
             let _ = writeln!(
                 out,
                 "joint {d}: CSP following error RMS {rms:.1} counts, max {max} counts"
             );
         }
-        let _ = writeln!(out, "wrote {} and {}", csv.display(), svg.display());
+        let _ = writeln!(
+            out,
+            "wrote {}, {} and {}",
+            csv.display(),
+            figures[0].display(),
+            figures[1].display()
+        );
     }
     Ok(out)
 }

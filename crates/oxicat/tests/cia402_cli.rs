@@ -23,26 +23,40 @@ fn args(verb: Cia402Verb, joints: usize, out: std::path::PathBuf) -> Cia402Args 
 }
 
 #[test]
-fn enable_prints_each_step_and_move_writes_csv_and_svg() {
+fn enable_prints_each_step_and_arm_move_writes_csv_png_and_svg() {
     big(|| {
         let dir = std::env::temp_dir().join(format!("oxicat-cia402-{}", std::process::id()));
         let text = run(args(Cia402Verb::Enable, 1, dir.clone())).unwrap();
         assert!(text.contains("controlword 0x0006") && text.contains("(ReadyToSwitchOn)"));
         assert!(text.contains("controlword 0x000F") && text.contains("(OperationEnabled)"));
+        // The six-joint arm: one segment, 1 kHz DC, each joint its own CSP move.
         let text = run(args(
             Cia402Verb::Move {
                 target: 20_000,
                 relative: true,
                 duration_ms: 500,
+                arm: true,
             },
-            3,
+            6,
             dir.clone(),
         ))
         .unwrap();
-        assert_eq!(text.matches("CSP following error RMS").count(), 3, "{text}");
-        assert!(dir.join("cia402.csv").exists());
+        assert_eq!(text.matches("CSP following error RMS").count(), 6, "{text}");
+        let csv = std::fs::read_to_string(dir.join("cia402.csv")).unwrap();
+        for j in 0..6 {
+            assert!(
+                csv.lines()
+                    .skip(1)
+                    .filter(|l| l.split(',').nth(2) == Some(&j.to_string()))
+                    .count()
+                    > 500,
+                "joint {j} recorded every cycle"
+            );
+        }
+        let png = std::fs::read(dir.join("following-error.png")).unwrap();
+        assert_eq!(&png[..8], b"\x89PNG\r\n\x1a\n");
         let svg = std::fs::read_to_string(dir.join("following-error.svg")).unwrap();
-        assert_eq!(svg.matches("<polyline").count(), 3);
+        assert!(svg.contains("<svg") && svg.contains("joint 0") && svg.contains("joint 5"));
         let text = run(args(Cia402Verb::Mode { mode: "pv".into() }, 1, dir.clone())).unwrap();
         assert!(text.contains("mode of operation 3"));
         let text = run(args(Cia402Verb::Disable, 1, dir.clone())).unwrap();
