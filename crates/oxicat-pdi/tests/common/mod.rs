@@ -3,6 +3,8 @@
 //! simulated SPI peripheral in front of that ESC.
 #![allow(dead_code)]
 
+/// The slave stack's own test device, one file for both test benches.
+#[path = "../../../oxicat-slave/tests/common/device.rs"]
 pub mod device;
 pub mod laelaps;
 

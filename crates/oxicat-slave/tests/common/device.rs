@@ -1,5 +1,5 @@
-//! The slave-stack test device (object dictionary, SII image, application), as in
-//! oxicat-slave's own test bench.
+//! The slave-stack test device (object dictionary, SII image, application). Shared with
+//! oxicat-pdi's driver tests, which include this file by path.
 #![allow(dead_code)]
 
 use oxicat_slave::*;
