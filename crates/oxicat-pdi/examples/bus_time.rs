@@ -6,16 +6,14 @@
 //!
 //! `cargo run -p oxicat-pdi --features sim --example bus_time`
 
-#[path = "../tests/common/mod.rs"]
-mod common;
-
-use common::{laelaps, Chip};
 use oxicat_devices::laelaps::device::{self, INPUT_BYTES, OUTPUT_BYTES};
 use oxicat_devices::laelaps::hw::JOINT_LOOP_TIMER;
 use oxicat_devices::laelaps::kinematics::Side;
-use oxicat_esc::EscConfig;
 use oxicat_pdi::sim::{BusConfig, BusStats};
 use oxicat_slave::Pdi;
+use oxicat_testkit::laelaps::{self, trot_outputs};
+use oxicat_testkit::ports::{Et2, Et3, EtPause, Lan, LanFast};
+use oxicat_testkit::Port;
 
 /// The thesis' application time per cycle on the F28379D (Table 2-3).
 const APP_US: f64 = 1.0;
@@ -30,28 +28,28 @@ struct Row {
     poll: BusStats,
 }
 
-fn measure<C: Chip>(esc: EscConfig, mhz: u32) -> Row {
+fn measure<P: Port>(mhz: u32) -> Row {
     let def = device::device(Side::Right);
-    let mut b = laelaps::leg_to_op::<C>(esc, BusConfig::mhz(mhz), CYCLE_NS);
-    let out = laelaps::outputs();
+    let mut b = laelaps::leg_to_op::<P>(Side::Right, BusConfig::mhz(mhz), CYCLE_NS);
+    let out = trot_outputs();
     b.wr(def.sm2_start, &out);
     for _ in 0..20 {
-        b.advance(CYCLE_NS as u64, 1, Some(JOINT_LOOP_TIMER));
+        b.advance_steps(CYCLE_NS as u64, 1, Some(JOINT_LOOP_TIMER));
         b.wr(def.sm2_start, &out);
     }
     let n = 100;
-    b.h.reset_stats();
+    b.port.reset_bus_stats();
     let s0 = b.sync0;
     for _ in 0..n {
-        b.advance(CYCLE_NS as u64, 1, Some(JOINT_LOOP_TIMER));
+        b.advance_steps(CYCLE_NS as u64, 1, Some(JOINT_LOOP_TIMER));
         // The master's frame: new outputs (not on the SPI bus).
-        let st = b.h.stats();
+        let st = b.bus_stats().unwrap();
         b.wr(def.sm2_start, &out);
-        assert_eq!(b.h.stats(), st);
+        assert_eq!(b.bus_stats().unwrap(), st);
     }
     let cycles = b.sync0 - s0;
     assert!(cycles >= n as u64);
-    let t = b.h.stats();
+    let t = b.bus_stats().unwrap();
     let per = |x: u64| x / cycles;
     let cycle = BusStats {
         transactions: per(t.transactions),
@@ -60,16 +58,16 @@ fn measure<C: Chip>(esc: EscConfig, mhz: u32) -> Row {
         protocol_errors: t.protocol_errors,
     };
     // The two mappings alone, as the stack does them.
-    b.h.reset_stats();
+    b.port.reset_bus_stats();
     let mut o = [0u8; OUTPUT_BYTES];
     b.drv.read(def.sm2_start, &mut o).unwrap();
-    let out = b.h.stats();
-    b.h.reset_stats();
+    let out = b.bus_stats().unwrap();
+    b.port.reset_bus_stats();
     b.drv.write(def.sm3_start, &[0u8; INPUT_BYTES]).unwrap();
-    let inp = b.h.stats();
-    b.h.reset_stats();
+    let inp = b.bus_stats().unwrap();
+    b.port.reset_bus_stats();
     b.s.poll(&mut b.drv, &mut b.app).unwrap();
-    let poll = b.h.stats();
+    let poll = b.bus_stats().unwrap();
     Row {
         cycle,
         out,
@@ -78,13 +76,13 @@ fn measure<C: Chip>(esc: EscConfig, mhz: u32) -> Row {
     }
 }
 
-fn table<C: Chip>(esc: EscConfig) {
+fn table<P: Port>() {
     for mhz in [10, 20, 30] {
-        let r = measure::<C>(esc.clone(), mhz);
+        let r = measure::<P>(mhz);
         let min = r.cycle.us() + APP_US;
         println!(
             "| {:<38} | {:>2} | {:>3} / {:>4} | {:>6.1} | {:>6.1} | {:>6.1} | {:>6.1} | {:>6.1} | {} |",
-            C::NAME,
+            P::NAME,
             mhz,
             r.cycle.transactions,
             r.cycle.bytes,
@@ -105,9 +103,9 @@ fn main() {
     println!();
     println!("| driver                                 | MHz | transactions / bytes per cycle | output mapping us | input mapping us | bus us per cycle | min cycle us | main-loop poll us | 100 us cycle |");
     println!("|---|---|---|---|---|---|---|---|---|");
-    table::<common::Lan>(EscConfig::lan9252());
-    table::<common::LanFast>(EscConfig::lan9252());
-    table::<common::Et2>(EscConfig::et1100());
-    table::<common::Et3>(EscConfig::et1100());
-    table::<common::EtDelay>(EscConfig::et1100());
+    table::<Lan>();
+    table::<LanFast>();
+    table::<Et2>();
+    table::<Et3>();
+    table::<EtPause>();
 }

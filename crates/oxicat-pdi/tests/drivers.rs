@@ -1,9 +1,6 @@
 //! Driver tests against the simulated chips: every command byte-exact, malformed replies
 //! and dead chips end in errors (bounded retries), never in a hang.
 
-mod common;
-
-use common::device::{eeprom, DEF};
 use embedded_hal::spi::{ErrorType, Operation, SpiDevice};
 use oxicat_esc::{Esc, EscConfig};
 use oxicat_pdi::et1100::{address_phase, cmd as ecmd};
@@ -15,6 +12,7 @@ use oxicat_pdi::{
     AddressMode, Error, Et1100Config, Et1100Spi, Lan9252, Lan9252Config, NoLines, Pins, ReadMode,
 };
 use oxicat_slave::Pdi;
+use oxicat_testkit::device::{eeprom, DEF};
 use std::cell::RefCell;
 use std::rc::Rc;
 

@@ -1,9 +1,8 @@
-mod common;
-use common::*;
+use oxicat_testkit::device::*;
+use oxicat_testkit::{Bench, Port};
 
-#[test]
-fn walk_up_and_down() {
-    let mut b = Bench::new();
+fn walk_up_and_down<P: Port>() {
+    let mut b = Bench::<P>::new();
     assert_eq!(b.al_status(), (1, 0));
     b.enter_op();
     assert_eq!(b.request(4), (4, 0));
@@ -18,9 +17,8 @@ fn walk_up_and_down() {
     assert_eq!(b.request(1), (1, 0));
 }
 
-#[test]
-fn invalid_and_unknown_requests() {
-    let mut b = Bench::new();
+fn invalid_and_unknown_requests<P: Port>() {
+    let mut b = Bench::<P>::new();
     b.config_mailbox();
     // INIT -> SAFEOP / OP are invalid.
     assert_eq!(b.request(4), (0x11, 0x0011));
@@ -42,9 +40,8 @@ fn invalid_and_unknown_requests() {
     assert_eq!(b.request(0x11), (1, 0));
 }
 
-#[test]
-fn mailbox_config_checked() {
-    let mut b = Bench::new();
+fn mailbox_config_checked<P: Port>() {
+    let mut b = Bench::<P>::new();
     b.config_sm(0, SM0, 64, 0x26); // wrong length
     b.config_sm(1, SM1, MBX as u16, 0x22);
     assert_eq!(b.request(2), (0x11, 0x0016));
@@ -52,9 +49,8 @@ fn mailbox_config_checked() {
     assert_eq!(b.request(0x12), (2, 0));
 }
 
-#[test]
-fn process_data_config_checked() {
-    let mut b = Bench::new();
+fn process_data_config_checked<P: Port>() {
+    let mut b = Bench::<P>::new();
     b.enter_preop();
     let (o, i) = (b.expected_out(), b.expected_in());
     assert_eq!((o, i), (4, 7));
@@ -68,9 +64,8 @@ fn process_data_config_checked() {
     assert_eq!(b.request(0x14), (4, 0));
 }
 
-#[test]
-fn application_may_refuse() {
-    let mut b = Bench::new();
+fn application_may_refuse<P: Port>() {
+    let mut b = Bench::<P>::new();
     b.enter_safeop();
     b.download(0x2000, 0, false, &999u32.to_le_bytes()).unwrap();
     assert_eq!(b.request(8), (0x14, 0x8001));
@@ -78,9 +73,8 @@ fn application_may_refuse() {
     assert_eq!(b.request(0x18), (8, 0));
 }
 
-#[test]
-fn sync_config_checked() {
-    let mut b = Bench::new();
+fn sync_config_checked<P: Port>() {
+    let mut b = Bench::<P>::new();
     b.enter_preop();
     b.config_pd();
     // DC sync requested in 0x1C32 but DC not activated.
@@ -95,9 +89,8 @@ fn sync_config_checked() {
     assert_eq!(b.request(0x14), (4, 0));
 }
 
-#[test]
-fn process_data_free_run() {
-    let mut b = Bench::new();
+fn process_data_free_run<P: Port>() {
+    let mut b = Bench::<P>::new();
     b.enter_op();
     // Outputs: LED bit 0, Setpoint at byte 1..2, Mode at byte 3.
     assert_eq!(b.wr(SM2, &[0x01, 0x34, 0x12, 0x07]), 1);
@@ -113,18 +106,16 @@ fn process_data_free_run() {
     assert!(u32::from_le_bytes([d[3], d[4], d[5], d[6]]) > 0);
 }
 
-#[test]
-fn outputs_ignored_in_safeop() {
-    let mut b = Bench::new();
+fn outputs_ignored_in_safeop<P: Port>() {
+    let mut b = Bench::<P>::new();
     b.enter_safeop();
     assert_eq!(b.wr(SM2, &[0x01, 0x34, 0x12, 0x07]), 1);
     b.poll();
     assert_eq!(b.s.od().get::<i16>(0x7000, 2), Ok(0));
 }
 
-#[test]
-fn sm_watchdog_drops_to_safeop() {
-    let mut b = Bench::new();
+fn sm_watchdog_drops_to_safeop<P: Port>() {
+    let mut b = Bench::<P>::new();
     b.enter_preop();
     b.config_pd();
     // 100 ms watchdog at the default divider (100 us units).
@@ -153,9 +144,8 @@ fn sm_watchdog_drops_to_safeop() {
 /// SM change AL event outside a state change: SM2/SM3 re-checked against the running
 /// mapping in SAFEOP/OP (PREOP + 0x001D / 0x001E), the mailbox SMs against the definition
 /// (INIT + 0x0016), as SOES does.
-#[test]
-fn sm_change_rechecked() {
-    let mut b = Bench::new();
+fn sm_change_rechecked<P: Port>() {
+    let mut b = Bench::<P>::new();
     b.enter_op();
     let (o, i) = (b.expected_out(), b.expected_in());
     // The same configuration written again (deactivated and re-activated before the
@@ -194,3 +184,16 @@ fn sm_change_rechecked() {
     // Mailbox still serves.
     assert_eq!(b.upload(0x1018, 1, false).unwrap(), 0x0A5Cu32.to_le_bytes());
 }
+
+oxicat_testkit::every_pdi!(
+    walk_up_and_down,
+    invalid_and_unknown_requests,
+    mailbox_config_checked,
+    process_data_config_checked,
+    application_may_refuse,
+    sync_config_checked,
+    process_data_free_run,
+    outputs_ignored_in_safeop,
+    sm_watchdog_drops_to_safeop,
+    sm_change_rechecked,
+);

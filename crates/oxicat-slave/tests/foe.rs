@@ -2,14 +2,13 @@
 //! packet numbers, password, and the update outcomes (good, truncated, corrupted, wrong
 //! device, interrupted) with the bootable firmware checked after each.
 
-mod common;
-
-use common::*;
 use oxicat_slave::foe::{
     FirmwareStore, FirmwareUpdate, FoeErrorCode, ImageHeader, RamStore, UpdateConfig, UpdateResult,
     WithFoe, IMAGE_HEADER_LEN,
 };
 use oxicat_slave::Identity;
+use oxicat_testkit::device::*;
+use oxicat_testkit::{Bench, Port};
 use oxicat_wire::foe::{FoeHeader, FoeRef};
 use oxicat_wire::mailbox::MailboxType;
 
@@ -43,7 +42,7 @@ fn new_identity() -> Identity {
     }
 }
 
-fn bench_with(cfg: UpdateConfig, store: Store) -> Bench<FwApp> {
+fn bench_with<P: Port>(cfg: UpdateConfig, store: Store) -> Bench<P, FwApp> {
     Bench::with_app(WithFoe {
         app: App::default(),
         files: FirmwareUpdate::new(store, cfg),
@@ -59,17 +58,17 @@ fn cfg() -> UpdateConfig {
     }
 }
 
-fn bench() -> Bench<FwApp> {
+fn bench<P: Port>() -> Bench<P, FwApp> {
     bench_with(cfg(), Store::with_image(&factory()).unwrap())
 }
 
-fn enter_boot(b: &mut Bench<FwApp>) {
+fn enter_boot<P: Port>(b: &mut Bench<P, FwApp>) {
     b.config_mailbox();
     assert_eq!(b.request(3), (3, 0));
 }
 
 /// Sends one FoE message, returns the FoE reply.
-fn foe(b: &mut Bench<FwApp>, h: FoeHeader, data: &[u8]) -> (FoeHeader, Vec<u8>) {
+fn foe<P: Port>(b: &mut Bench<P, FwApp>, h: FoeHeader, data: &[u8]) -> (FoeHeader, Vec<u8>) {
     let mut p = vec![0u8; MBX];
     let n = FoeRef::write(&h, data, &mut p).unwrap();
     assert_eq!(b.mbx_write(MailboxType::Foe, &p[..n]), 1);
@@ -91,8 +90,8 @@ fn refused(h: FoeHeader, text: &[u8]) -> Refused {
 
 /// Writes a file like SOEM: packets of SEG bytes, a short (possibly empty) last one,
 /// BUSY → the same packet again. Returns the number of BUSY replies.
-fn write_file(
-    b: &mut Bench<FwApp>,
+fn write_file<P: Port>(
+    b: &mut Bench<P, FwApp>,
     name: &str,
     password: u32,
     data: &[u8],
@@ -124,7 +123,11 @@ fn write_file(
     }
 }
 
-fn read_file(b: &mut Bench<FwApp>, name: &str, password: u32) -> Result<Vec<u8>, Refused> {
+fn read_file<P: Port>(
+    b: &mut Bench<P, FwApp>,
+    name: &str,
+    password: u32,
+) -> Result<Vec<u8>, Refused> {
     let mut out = Vec::new();
     let (mut h, mut t) = foe(b, FoeHeader::Read { password }, name.as_bytes());
     let mut expect = 1;
@@ -149,7 +152,7 @@ fn read_file(b: &mut Bench<FwApp>, name: &str, password: u32) -> Result<Vec<u8>,
     }
 }
 
-fn bootable_is_factory(b: &mut Bench<FwApp>) {
+fn bootable_is_factory<P: Port>(b: &mut Bench<P, FwApp>) {
     let f = factory();
     let store = &mut b.app.files.store;
     assert_eq!(store.bootable(), Some(0));
@@ -157,9 +160,8 @@ fn bootable_is_factory(b: &mut Bench<FwApp>) {
     assert_eq!(b.app.files.current(), Some(ImageHeader::parse(&f).unwrap()));
 }
 
-#[test]
-fn good_image_installs_and_reports_its_identity() {
-    let mut b = bench();
+fn good_image_installs_and_reports_its_identity<P: Port>() {
+    let mut b = bench::<P>();
     enter_boot(&mut b);
     let img = image(&new_identity(), &payload(500, 7));
     assert_eq!(write_file(&mut b, FILE, 0, &img), Ok(0));
@@ -183,9 +185,8 @@ fn good_image_installs_and_reports_its_identity() {
     assert_eq!(v, v2);
 }
 
-#[test]
-fn image_of_exactly_whole_segments_ends_with_an_empty_packet() {
-    let mut b = bench();
+fn image_of_exactly_whole_segments_ends_with_an_empty_packet<P: Port>() {
+    let mut b = bench::<P>();
     enter_boot(&mut b);
     let img = image(&new_identity(), &payload(3 * SEG - IMAGE_HEADER_LEN, 3));
     assert_eq!(img.len() % SEG, 0);
@@ -194,9 +195,8 @@ fn image_of_exactly_whole_segments_ends_with_an_empty_packet() {
     assert_eq!(read_file(&mut b, FILE, 0).unwrap(), img);
 }
 
-#[test]
-fn truncated_image_is_rejected_and_old_firmware_stays() {
-    let mut b = bench();
+fn truncated_image_is_rejected_and_old_firmware_stays<P: Port>() {
+    let mut b = bench::<P>();
     enter_boot(&mut b);
     let img = image(&new_identity(), &payload(500, 7));
     let r = write_file(&mut b, FILE, 0, &img[..300]).unwrap_err();
@@ -219,9 +219,8 @@ fn truncated_image_is_rejected_and_old_firmware_stays() {
     bootable_is_factory(&mut b);
 }
 
-#[test]
-fn corrupted_image_fails_the_crc_and_old_firmware_stays() {
-    let mut b = bench();
+fn corrupted_image_fails_the_crc_and_old_firmware_stays<P: Port>() {
+    let mut b = bench::<P>();
     enter_boot(&mut b);
     let mut img = image(&new_identity(), &payload(500, 7));
     img[IMAGE_HEADER_LEN + 250] ^= 0x10;
@@ -235,9 +234,8 @@ fn corrupted_image_fails_the_crc_and_old_firmware_stays() {
     assert_eq!(b.app.files.store.bootable(), Some(1));
 }
 
-#[test]
-fn wrong_device_image_is_rejected_at_its_first_packet() {
-    let mut b = bench();
+fn wrong_device_image_is_rejected_at_its_first_packet<P: Port>() {
+    let mut b = bench::<P>();
     enter_boot(&mut b);
     for id in [
         Identity {
@@ -274,9 +272,8 @@ fn wrong_device_image_is_rejected_at_its_first_packet() {
     bootable_is_factory(&mut b);
 }
 
-#[test]
-fn interrupted_download_boot_to_init_keeps_old_firmware() {
-    let mut b = bench();
+fn interrupted_download_boot_to_init_keeps_old_firmware<P: Port>() {
+    let mut b = bench::<P>();
     enter_boot(&mut b);
     let img = image(&new_identity(), &payload(600, 7));
     assert_eq!(
@@ -323,9 +320,8 @@ fn interrupted_download_boot_to_init_keeps_old_firmware() {
     bootable_is_factory(&mut b);
 }
 
-#[test]
-fn firmware_write_outside_boot_is_refused() {
-    let mut b = bench();
+fn firmware_write_outside_boot_is_refused<P: Port>() {
+    let mut b = bench::<P>();
     b.enter_preop();
     let img = image(&new_identity(), &payload(100, 7));
     assert_eq!(
@@ -354,9 +350,8 @@ fn firmware_write_outside_boot_is_refused() {
     bootable_is_factory(&mut b);
 }
 
-#[test]
-fn file_errors_in_boot() {
-    let mut b = bench();
+fn file_errors_in_boot<P: Port>() {
+    let mut b = bench::<P>();
     enter_boot(&mut b);
     // Other files are not served by the bootstrap mailbox.
     assert_eq!(
@@ -384,9 +379,8 @@ fn file_errors_in_boot() {
     bootable_is_factory(&mut b);
 }
 
-#[test]
-fn read_back_can_be_denied_and_an_empty_store_has_no_image() {
-    let mut b = bench_with(
+fn read_back_can_be_denied_and_an_empty_store_has_no_image<P: Port>() {
+    let mut b = bench_with::<P>(
         UpdateConfig {
             read_back: false,
             ..cfg()
@@ -405,7 +399,7 @@ fn read_back_can_be_denied_and_an_empty_store_has_no_image() {
     assert_eq!(write_file(&mut b, FILE, 0, &img), Ok(0));
     assert_eq!(b.app.files.store.bootable(), Some(0));
 
-    let mut b = bench_with(cfg(), Store::new());
+    let mut b = bench_with::<P>(cfg(), Store::new());
     enter_boot(&mut b);
     assert_eq!(
         read_file(&mut b, FILE, 0).unwrap_err().0,
@@ -413,9 +407,8 @@ fn read_back_can_be_denied_and_an_empty_store_has_no_image() {
     );
 }
 
-#[test]
-fn password_no_user_and_no_rights() {
-    let mut b = bench_with(
+fn password_no_user_and_no_rights<P: Port>() {
+    let mut b = bench_with::<P>(
         UpdateConfig {
             password: 0x1234_5678,
             ..cfg()
@@ -443,11 +436,10 @@ fn password_no_user_and_no_rights() {
     assert!(read_file(&mut b, "version.txt", 0).is_ok());
 }
 
-#[test]
-fn busy_while_the_flash_erases_then_the_same_packet_again() {
+fn busy_while_the_flash_erases_then_the_same_packet_again<P: Port>() {
     let mut store = Store::with_image(&factory()).unwrap();
     store.erase_busy = 3;
-    let mut b = bench_with(cfg(), store);
+    let mut b = bench_with::<P>(cfg(), store);
     enter_boot(&mut b);
     let img = image(&new_identity(), &payload(400, 5));
     assert_eq!(
@@ -477,11 +469,10 @@ fn busy_while_the_flash_erases_then_the_same_packet_again() {
     );
 }
 
-#[test]
-fn flash_failure_is_a_program_error() {
+fn flash_failure_is_a_program_error<P: Port>() {
     let mut store = Store::with_image(&factory()).unwrap();
     store.fail_writes = true;
-    let mut b = bench_with(cfg(), store);
+    let mut b = bench_with::<P>(cfg(), store);
     enter_boot(&mut b);
     let img = image(&new_identity(), &payload(300, 5));
     let r = write_file(&mut b, FILE, 0, &img).unwrap_err();
@@ -490,9 +481,8 @@ fn flash_failure_is_a_program_error() {
     bootable_is_factory(&mut b);
 }
 
-#[test]
-fn packet_number_wrong_and_the_repeated_last_packet() {
-    let mut b = bench();
+fn packet_number_wrong_and_the_repeated_last_packet<P: Port>() {
+    let mut b = bench::<P>();
     enter_boot(&mut b);
     let img = image(&new_identity(), &payload(500, 7));
     // Skipping a packet.
@@ -520,9 +510,8 @@ fn packet_number_wrong_and_the_repeated_last_packet() {
     assert_eq!(refused(h, &t).0, FoeErrorCode::PacketNumberWrong);
 }
 
-#[test]
-fn client_busy_on_read_sends_the_last_packet_again() {
-    let mut b = bench();
+fn client_busy_on_read_sends_the_last_packet_again<P: Port>() {
+    let mut b = bench::<P>();
     enter_boot(&mut b);
     let f = factory();
     let (h, d1) = foe(&mut b, FoeHeader::Read { password: 0 }, FILE.as_bytes());
@@ -536,9 +525,8 @@ fn client_busy_on_read_sends_the_last_packet_again() {
     assert_eq!(d2, f[SEG..]);
 }
 
-#[test]
-fn illegal_requests_and_unknown_opcode() {
-    let mut b = bench();
+fn illegal_requests_and_unknown_opcode<P: Port>() {
+    let mut b = bench::<P>();
     enter_boot(&mut b);
     let (h, t) = foe(&mut b, FoeHeader::Data { packet: 1 }, b"abc");
     assert_eq!(
@@ -574,9 +562,8 @@ fn illegal_requests_and_unknown_opcode() {
     bootable_is_factory(&mut b);
 }
 
-#[test]
-fn a_device_without_foe_answers_unsupported_protocol() {
-    let mut b = Bench::new();
+fn a_device_without_foe_answers_unsupported_protocol<P: Port>() {
+    let mut b = Bench::<P>::new();
     b.enter_preop();
     let mut p = vec![0u8; 32];
     let n = FoeRef::write(&FoeHeader::Read { password: 0 }, b"version.txt", &mut p).unwrap();
@@ -586,3 +573,22 @@ fn a_device_without_foe_answers_unsupported_protocol() {
     // Detail 0x0002: unsupported protocol.
     assert_eq!(u16::from_le_bytes([r[2], r[3]]), 0x0002);
 }
+
+oxicat_testkit::every_pdi!(
+    good_image_installs_and_reports_its_identity,
+    image_of_exactly_whole_segments_ends_with_an_empty_packet,
+    truncated_image_is_rejected_and_old_firmware_stays,
+    corrupted_image_fails_the_crc_and_old_firmware_stays,
+    wrong_device_image_is_rejected_at_its_first_packet,
+    interrupted_download_boot_to_init_keeps_old_firmware,
+    firmware_write_outside_boot_is_refused,
+    file_errors_in_boot,
+    read_back_can_be_denied_and_an_empty_store_has_no_image,
+    password_no_user_and_no_rights,
+    busy_while_the_flash_erases_then_the_same_packet_again,
+    flash_failure_is_a_program_error,
+    packet_number_wrong_and_the_repeated_last_packet,
+    client_busy_on_read_sends_the_last_packet_again,
+    illegal_requests_and_unknown_opcode,
+    a_device_without_foe_answers_unsupported_protocol,
+);

@@ -1,5 +1,5 @@
-mod common;
-use common::*;
+use oxicat_testkit::device::*;
+use oxicat_testkit::{Bench, Port};
 use oxicat_wire::coe::{write_sdo, CoeService, SdoHeader, SdoInfoRef, SdoInfoService};
 use oxicat_wire::mailbox::{MailboxErrorReply, MailboxType};
 
@@ -10,9 +10,8 @@ fn abort_of(r: Result<impl Sized, u32>) -> u32 {
     }
 }
 
-#[test]
-fn every_data_type_round_trips() {
-    let mut b = Bench::new();
+fn every_data_type_round_trips<P: Port>() {
+    let mut b = Bench::<P>::new();
     b.enter_preop();
     let vals: &[(u8, Vec<u8>)] = &[
         (1, vec![1]),
@@ -56,9 +55,8 @@ fn every_data_type_round_trips() {
     assert_eq!(b.upload(0x10F1, 2, false).unwrap(), 4u16.to_le_bytes());
 }
 
-#[test]
-fn segmented_1k_both_directions() {
-    let mut b = Bench::new();
+fn segmented_1k_both_directions<P: Port>() {
+    let mut b = Bench::<P>::new();
     b.enter_preop();
     let data: Vec<u8> = (0..1100u32).map(|i| (i * 7 + 3) as u8).collect();
     b.download(0x2001, 0, false, &data).unwrap();
@@ -67,9 +65,8 @@ fn segmented_1k_both_directions() {
     assert!(b.app.written.contains(&(0x2001, 0)));
 }
 
-#[test]
-fn complete_access() {
-    let mut b = Bench::new();
+fn complete_access<P: Port>() {
+    let mut b = Bench::<P>::new();
     b.enter_preop();
     // 0x1018: sub0 padded to 16 bits, then four u32.
     let id = b.upload(0x1018, 0, true).unwrap();
@@ -99,9 +96,8 @@ fn complete_access() {
     assert_eq!(abort_of(b.upload(0x1018, 2, true)), 0x0601_0000);
 }
 
-#[test]
-fn dynamic_pdo_assignment() {
-    let mut b = Bench::new();
+fn dynamic_pdo_assignment<P: Port>() {
+    let mut b = Bench::<P>::new();
     b.enter_preop();
     // Subindex-0 protocol: writing an entry while sub0 != 0 is refused.
     assert_eq!(
@@ -134,9 +130,8 @@ fn dynamic_pdo_assignment() {
     assert_eq!(i16::from_le_bytes([d[3], d[4]]), 100);
 }
 
-#[test]
-fn abort_codes_table() {
-    let mut b = Bench::new();
+fn abort_codes_table<P: Port>() {
+    let mut b = Bench::<P>::new();
     b.enter_preop();
     type Case = (&'static str, u16, u8, bool, Option<Vec<u8>>, u32);
     let cases: Vec<Case> = vec![
@@ -303,7 +298,7 @@ fn abort_codes_table() {
     assert_eq!(abort_of(b.download(0x7000, 3, false, &[1])), 0);
 }
 
-fn raw_sdo(b: &mut Bench, cmd: u8, index: u16, sub: u8, d: [u8; 4]) -> Vec<u8> {
+fn raw_sdo<P: Port>(b: &mut Bench<P>, cmd: u8, index: u16, sub: u8, d: [u8; 4]) -> Vec<u8> {
     let mut p = [0u8; 10];
     let h = SdoHeader {
         command: cmd,
@@ -319,9 +314,8 @@ fn abort_in(r: &[u8]) -> u32 {
     u32::from_le_bytes([r[6], r[7], r[8], r[9]])
 }
 
-#[test]
-fn protocol_aborts() {
-    let mut b = Bench::new();
+fn protocol_aborts<P: Port>() {
+    let mut b = Bench::<P>::new();
     b.enter_preop();
     // Unknown command specifier (block download 6).
     assert_eq!(
@@ -348,11 +342,10 @@ fn protocol_aborts() {
     assert_eq!(abort_in(&r), 0x0503_0000);
 }
 
-#[test]
-fn mailbox_errors_and_counters() {
-    let mut b = Bench::new();
+fn mailbox_errors_and_counters<P: Port>() {
+    let mut b = Bench::<P>::new();
     b.enter_preop();
-    let err = |b: &mut Bench| {
+    let err = |b: &mut Bench<P>| {
         let (h, p) = b.mbx_read().expect("reply");
         assert_eq!(h.mailbox_type, MailboxType::Error);
         MailboxErrorReply::parse(&p).unwrap().detail.code()
@@ -401,9 +394,8 @@ fn mailbox_errors_and_counters() {
     assert!(seen.iter().all(|&c| (1..=7).contains(&c)));
 }
 
-#[test]
-fn repeat_request_resends_last_reply() {
-    let mut b = Bench::new();
+fn repeat_request_resends_last_reply<P: Port>() {
+    let mut b = Bench::<P>::new();
     b.enter_preop();
     let v = b.upload(0x1018, 2, false).unwrap();
     assert_eq!(v, 1u32.to_le_bytes());
@@ -423,9 +415,8 @@ fn repeat_request_resends_last_reply() {
     assert_eq!(b.s.stats().mbx_repeats, 1);
 }
 
-#[test]
-fn sdo_information() {
-    let mut b = Bench::new();
+fn sdo_information<P: Port>() {
+    let mut b = Bench::<P>::new();
     b.enter_preop();
     // List all objects (fragmented: 128-byte mailbox).
     b.mbx_write(MailboxType::Coe, &[0x00, 0x80, 0x01, 0, 0, 0, 0x01, 0x00]);
@@ -498,9 +489,8 @@ fn sdo_information() {
     }
 }
 
-#[test]
-fn emergency_is_sent() {
-    let mut b = Bench::new();
+fn emergency_is_sent<P: Port>() {
+    let mut b = Bench::<P>::new();
     b.enter_preop();
     assert!(b.s.emergency(0x5000, 0x81, [1, 2, 3, 4, 5]));
     let (h, p) = b.mbx_read().unwrap();
@@ -513,9 +503,8 @@ fn emergency_is_sent() {
     assert_eq!(b.upload(0x1001, 0, false).unwrap(), [0x81]);
 }
 
-#[test]
-fn garbage_mailboxes_never_panic() {
-    let mut b = Bench::new();
+fn garbage_mailboxes_never_panic<P: Port>() {
+    let mut b = Bench::<P>::new();
     b.enter_preop();
     let mut x: u32 = 0x1234_5678;
     for _ in 0..300 {
@@ -540,7 +529,7 @@ fn garbage_mailboxes_never_panic() {
 
 /// Entry description with value info (ETG.1000.6: 0x08 unit, 0x10 default, 0x20 minimum,
 /// 0x40 maximum): the reply says which fields it carries, values from the definition.
-fn entry_desc(b: &mut Bench, index: u16, sub: u8, vi: u8) -> (u8, Vec<u8>) {
+fn entry_desc<P: Port>(b: &mut Bench<P>, index: u16, sub: u8, vi: u8) -> (u8, Vec<u8>) {
     let i = index.to_le_bytes();
     b.mbx_write(
         MailboxType::Coe,
@@ -562,9 +551,8 @@ fn entry_desc(b: &mut Bench, index: u16, sub: u8, vi: u8) -> (u8, Vec<u8>) {
     }
 }
 
-#[test]
-fn entry_description_value_info() {
-    let mut b = Bench::new();
+fn entry_description_value_info<P: Port>() {
+    let mut b = Bench::<P>::new();
     b.enter_preop();
     // UNSIGNED32 with unit (mA), default 7, range 0..=1000.
     let (vi, d) = entry_desc(&mut b, 0x2000, 0, 0x78);
@@ -619,3 +607,18 @@ fn entry_description_value_info() {
     let (_, d) = entry_desc(&mut b, 0x1C13, 0, 0x10);
     assert_eq!(d[0], 1);
 }
+
+oxicat_testkit::every_pdi!(
+    every_data_type_round_trips,
+    segmented_1k_both_directions,
+    complete_access,
+    dynamic_pdo_assignment,
+    abort_codes_table,
+    protocol_aborts,
+    mailbox_errors_and_counters,
+    repeat_request_resends_last_reply,
+    sdo_information,
+    emergency_is_sent,
+    garbage_mailboxes_never_panic,
+    entry_description_value_info,
+);

@@ -1,10 +1,9 @@
-mod common;
-use common::*;
 use oxicat_slave::SyncMode;
+use oxicat_testkit::device::*;
+use oxicat_testkit::{Bench, Port};
 
-#[test]
-fn sm_synchronous() {
-    let mut b = Bench::new();
+fn sm_synchronous<P: Port>() {
+    let mut b = Bench::<P>::new();
     b.enter_preop();
     b.download(0x1C32, 1, false, &1u16.to_le_bytes()).unwrap();
     b.config_pd();
@@ -18,18 +17,18 @@ fn sm_synchronous() {
         "poll does not run the cycle in SM-sync mode"
     );
     b.wr(SM2, &[0, 5, 0, 0]);
-    assert!(oxicat_slave::Pdi::irq_lines(&mut b.esc).pdi_irq);
-    b.s.on_pdi_irq(&mut b.esc, &mut b.app).unwrap();
+    assert!(oxicat_slave::Pdi::irq_lines(&mut b.drv).pdi_irq);
+    b.s.on_pdi_irq(&mut b.drv, &mut b.app).unwrap();
     assert_eq!(b.app.cycles, c0 + 1);
     assert_eq!(b.s.od().get::<i16>(0x7000, 2), Ok(5));
     // No new outputs: no cycle.
-    b.s.on_pdi_irq(&mut b.esc, &mut b.app).unwrap();
+    b.s.on_pdi_irq(&mut b.drv, &mut b.app).unwrap();
     assert_eq!(b.app.cycles, c0 + 1);
     let (d, _) = b.rd(SM3, 7);
     assert_eq!(i16::from_le_bytes([d[1], d[2]]), 10);
 }
 
-fn activate_dc(b: &mut Bench, cycle: u32, sync1: bool) {
+fn activate_dc<P: Port>(b: &mut Bench<P>, cycle: u32, sync1: bool) {
     let (st, _) = b.rd(0x0910, 8);
     let now = u64::from_le_bytes(st.try_into().unwrap());
     b.wr(0x09A0, &cycle.to_le_bytes());
@@ -37,9 +36,8 @@ fn activate_dc(b: &mut Bench, cycle: u32, sync1: bool) {
     b.wr(0x0981, &[if sync1 { 0x07 } else { 0x03 }]);
 }
 
-#[test]
-fn dc_sync0() {
-    let mut b = Bench::new();
+fn dc_sync0<P: Port>() {
+    let mut b = Bench::<P>::new();
     b.enter_preop();
     b.config_pd();
     activate_dc(&mut b, 200_000, false);
@@ -62,18 +60,16 @@ fn dc_sync0() {
     assert_eq!(b.s.od().get::<i16>(0x7000, 2), Ok(19));
 }
 
-#[test]
-fn dc_cycle_too_small() {
-    let mut b = Bench::new();
+fn dc_cycle_too_small<P: Port>() {
+    let mut b = Bench::<P>::new();
     b.enter_preop();
     b.config_pd();
     activate_dc(&mut b, 50_000, false);
     assert_eq!(b.request(4), (0x12, 0x002E));
 }
 
-#[test]
-fn dc_sync1_mode_needs_sync1() {
-    let mut b = Bench::new();
+fn dc_sync1_mode_needs_sync1<P: Port>() {
+    let mut b = Bench::<P>::new();
     b.enter_preop();
     b.config_pd();
     b.download(0x1C32, 1, false, &3u16.to_le_bytes()).unwrap();
@@ -84,16 +80,15 @@ fn dc_sync1_mode_needs_sync1() {
     assert_eq!(b.s.sync_mode(), SyncMode::DcSync1);
 }
 
-fn up_u16(b: &mut Bench, index: u16, sub: u8) -> u16 {
+fn up_u16<P: Port>(b: &mut Bench<P>, index: u16, sub: u8) -> u16 {
     let v = b.upload(index, sub, false).unwrap();
     u16::from_le_bytes([v[0], v[1]])
 }
 
 /// ETG.1020 diagnostics of 0x1C32/0x1C33 after a DC run in which the master skips cycles:
 /// +3 per SYNC0 without new outputs, -1 per SYNC0 with, sync error while above 0x10F1:02.
-#[test]
-fn dc_sm_event_missed_counter() {
-    let mut b = Bench::new();
+fn dc_sm_event_missed_counter<P: Port>() {
+    let mut b = Bench::<P>::new();
     b.enter_preop();
     assert_eq!(up_u16(&mut b, 0x10F1, 2), 4, "sync error counter limit");
     b.config_pd();
@@ -108,7 +103,7 @@ fn dc_sm_event_missed_counter() {
     assert_eq!(b.upload(0x1C32, 6, false).unwrap(), 10_000u32.to_le_bytes());
     assert_eq!(b.upload(0x1C33, 6, false).unwrap(), 10_000u32.to_le_bytes());
     let mut k = 0i16;
-    let mut good = |b: &mut Bench, n: usize| {
+    let mut good = |b: &mut Bench<P>, n: usize| {
         for _ in 0..n {
             k += 1;
             let v = k.to_le_bytes();
@@ -150,3 +145,11 @@ fn dc_sm_event_missed_counter() {
     assert_eq!(b.request(4), (4, 0));
     assert_eq!(up_u16(&mut b, 0x1C32, 0x0B), 0);
 }
+
+oxicat_testkit::every_pdi!(
+    sm_synchronous,
+    dc_sync0,
+    dc_cycle_too_small,
+    dc_sync1_mode_needs_sync1,
+    dc_sm_event_missed_counter,
+);

@@ -51,6 +51,4 @@ pub use piv::{Gains, PwmCommand};
 pub use trajectory::Ellipse;
 
 #[cfg(test)]
-mod stack_tests;
-#[cfg(test)]
 mod tests;

@@ -1,6 +1,5 @@
-//! The slave-stack test device (object dictionary, SII image, application). Shared with
-//! oxicat-pdi's driver tests, which include this file by path.
-#![allow(dead_code)]
+//! The slave-stack test device: object dictionary, process data, SII image and an
+//! application that records what the stack hands it.
 
 use oxicat_slave::*;
 use oxicat_wire::sii::{MailboxArea, SiiConfig, SiiIdentity, SiiMailboxConfig};
