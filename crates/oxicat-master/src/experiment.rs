@@ -19,6 +19,12 @@
 //!    the firmware's linear transitions), steady trot (`trot_s`), a back to 0, b back to 0,
 //!    stand, `State_Machine = 0`, `stop_s` more.
 //!
+//! Each leg node's firmware reaches its ESC directly (the software ESC is its `Pdi`) or, with
+//! the scenario's `[pdi] route` (`oxicat trot --pdi`), through the LAN9252 or ET1100 driver
+//! over the simulated SPI ([`oxicat_sim::pdi_path`]); [`TrotRun::pdi`] then holds each node's
+//! SPI traffic over the recorded cycles. The firmware runs in zero virtual time either way,
+//! so the CSV does not depend on the route.
+//!
 //! The recorded data depend only on the scenario: the master's outputs are a function of
 //! the cycle number since step 3, each leg's physics of the time since its release, and no
 //! wall-clock time, hash order or platform formatting enters the CSV.
@@ -31,8 +37,9 @@ use ethercrab::{DcSync, MainDevice, MainDeviceConfig, PduStorage};
 use oxicat_devices::laelaps::device;
 use oxicat_esc::{Esc, EscConfig};
 use oxicat_sim::laelaps::{
-    attach_leg, chain_legs, BeltProfile, LegId, LegRigHandle, RigConfig, TOWER_CHAIN,
+    attach_leg_routed, chain_legs, AnyLegRigHandle, BeltProfile, LegId, RigConfig, TOWER_CHAIN,
 };
+use oxicat_sim::pdi_path::{BusStats as SpiStats, PdiRoute};
 use oxicat_sim::segment::Segment;
 use oxicat_sim::transport::{inprocess_task, InProcessConfig};
 use oxicat_slave::DeviceDef;
@@ -346,6 +353,31 @@ pub struct BusStats {
     pub bringup_ns: u64,
 }
 
+/// How one leg node reached its ESC during the recorded cycles.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct NodePdi {
+    /// PDI accesses that failed (driver or ESC errors), whole run.
+    pub pdi_errors: u64,
+    /// The node's SPI traffic over the recorded cycles (`None` on the direct route).
+    pub spi: Option<SpiStats>,
+}
+
+impl NodePdi {
+    /// SPI bus time per recorded cycle \[µs\] (`None` on the direct route).
+    pub fn spi_us_per_cycle(&self, cycles: u64) -> Option<f64> {
+        self.spi.map(|b| b.us() / cycles.max(1) as f64)
+    }
+}
+
+/// The PDI route of a run and what it carried.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct PdiReport {
+    /// The route every leg node used.
+    pub route: PdiRoute,
+    /// Per leg, Table 4-1 order (FL, FR, HL, HR).
+    pub nodes: [NodePdi; 4],
+}
+
 /// Everything a run produced.
 #[derive(Debug, Clone)]
 pub struct TrotRun {
@@ -365,6 +397,8 @@ pub struct TrotRun {
     pub simulated_s: f64,
     /// Trajectory clock of each leg's firmware at the end, ns (Table 4-1 order).
     pub final_clock_ns: [u64; 4],
+    /// How the leg nodes reached their ESCs, PDI errors and SPI traffic.
+    pub pdi: PdiReport,
 }
 
 /// Progress of a run, for a progress bar.
@@ -403,16 +437,18 @@ pub fn run_trot(s: &Scenario, progress: &mut dyn FnMut(Progress)) -> Result<Trot
     let wall0 = Instant::now();
     let phases = Phases::of(s);
 
-    // The segment: four towers in chain order, each an ET1100-class ESC (the FB1111) with
-    // the SII generated from its build's definition, each driving the opposite leg.
+    // The segment: four towers in chain order, each an ET1100-class ESC (the FB1111; the
+    // LAN9252's own core when the nodes reach it through a LAN9252) with the SII generated
+    // from its build's definition, each driving the opposite leg.
+    let route = s.pdi_route();
     let mut seg = Segment::new();
-    let mut handles: Vec<(LegId, LegRigHandle)> = Vec::new();
+    let mut handles: Vec<(LegId, AnyLegRigHandle)> = Vec::new();
     for leg in chain_legs() {
         let def = device::device(leg.side());
         let sii = oxicat_device::sii::generate(def)
             .map_err(|e| MasterError::Usage(format!("SII of the leg node: {e}")))?;
-        let id = seg.add(Esc::new(EscConfig::et1100(), sii));
-        let h = attach_leg(&mut seg, id, leg, rig_config(s, leg, &phases))
+        let id = seg.add(Esc::new(route.esc_config(EscConfig::et1100()), sii));
+        let h = attach_leg_routed(&mut seg, id, leg, rig_config(s, leg, &phases), route)
             .map_err(|e| MasterError::Usage(format!("tower {id}: {e}")))?;
         handles.push((leg, h));
     }
@@ -457,10 +493,19 @@ pub fn run_trot(s: &Scenario, progress: &mut dyn FnMut(Progress)) -> Result<Trot
     let (rows, mut bus, wall_recorded) = out?;
     let end_ns = segment.lock().unwrap_or_else(|e| e.into_inner()).now();
     let mut final_clock_ns = [0u64; 4];
+    let mut pdi = PdiReport {
+        route,
+        ..PdiReport::default()
+    };
     for (leg, h) in &handles {
-        let r = h.lock();
-        final_clock_ns[table_index(*leg)] = r.app.clock().nanos();
-        bus.release_sync0[table_index(*leg)] = r.released_at_sync0.unwrap_or(0);
+        let r = h.report();
+        let ti = table_index(*leg);
+        final_clock_ns[ti] = r.clock_ns;
+        bus.release_sync0[ti] = r.released_at_sync0.unwrap_or(0);
+        pdi.nodes[ti] = NodePdi {
+            pdi_errors: r.counters.pdi_errors,
+            spi: r.bus,
+        };
     }
     Ok(TrotRun {
         scenario: s.clone(),
@@ -471,6 +516,7 @@ pub fn run_trot(s: &Scenario, progress: &mut dyn FnMut(Progress)) -> Result<Trot
         wall_recorded,
         simulated_s: end_ns as f64 * 1e-9,
         final_clock_ns,
+        pdi,
     })
 }
 
@@ -558,7 +604,7 @@ async fn run_master(
     phases: &Phases,
     md: &MainDevice<'static>,
     segment: &Arc<Mutex<Segment>>,
-    handles: &[(LegId, LegRigHandle)],
+    handles: &[(LegId, AnyLegRigHandle)],
     progress: &mut dyn FnMut(Progress),
 ) -> Result<(Vec<Row>, BusStats, Duration), MasterError> {
     let lock = || segment.lock().unwrap_or_else(|e| e.into_inner());
@@ -693,6 +739,10 @@ async fn run_master(
         let j = k.saturating_sub(settle);
         if k == settle {
             rec_start = Instant::now();
+            // SPI traffic is reported over the recorded cycles.
+            for (_, h) in handles {
+                h.reset_bus_stats();
+            }
         }
         // The master's outputs of this cycle.
         let (a_on, b_on) = if recording {

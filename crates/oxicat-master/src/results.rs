@@ -342,5 +342,43 @@ pub fn summary_markdown(run: &TrotRun, s: &Summary) -> String {
         b.release_sync0[2],
         b.release_sync0[3]
     );
+    pdi_markdown(&mut o, run);
     o
+}
+
+/// The SPI table of a run whose leg nodes reached their ESCs through a chip driver (nothing
+/// on the direct route).
+fn pdi_markdown(o: &mut String, run: &TrotRun) {
+    let p = &run.pdi;
+    if p.nodes.iter().all(|n| n.spi.is_none()) {
+        return;
+    }
+    let cycles = run.bus.cycles.max(1);
+    let cycle_us = f64::from(run.scenario.bus.cycle_us);
+    let _ = writeln!(
+        o,
+        "\nPDI: every leg node's firmware reaches its ESC through {} (the oxicat-pdi driver over \
+         the simulated chip; bus time = 8 bits per byte at SCLK + 100 ns CS per transaction, \
+         counted, not simulated: the firmware runs in zero virtual time). Per node and \
+         recorded cycle:\n",
+        p.route
+    );
+    let _ = writeln!(o, "| leg | SPI transactions | SPI bytes | SPI bus time [µs] | share of the {cycle_us:.0} µs cycle | PDI errors | SPI protocol errors |");
+    let _ = writeln!(o, "|---|---|---|---|---|---|---|");
+    for (li, leg) in LegId::TABLE.into_iter().enumerate() {
+        let n = &p.nodes[li];
+        let Some(spi) = n.spi else { continue };
+        let us = n.spi_us_per_cycle(cycles).unwrap_or(0.0);
+        let _ = writeln!(
+            o,
+            "| {} | {:.2} | {:.2} | {:.2} | {:.1} % | {} | {} |",
+            leg.code(),
+            spi.transactions as f64 / cycles as f64,
+            spi.bytes as f64 / cycles as f64,
+            us,
+            100.0 * us / cycle_us,
+            n.pdi_errors,
+            spi.protocol_errors
+        );
+    }
 }

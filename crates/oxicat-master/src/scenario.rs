@@ -5,6 +5,7 @@ use serde::Deserialize;
 
 use crate::MasterError;
 use oxicat_sim::laelaps::LegId;
+use oxicat_sim::pdi_path::{PdiRoute, DEFAULT_SPI_MHZ};
 
 /// The shipped scenario: Laelaps II trotting experiment 1 (thesis Table 4-1).
 pub const DEFAULT_TOML: &str = include_str!("../../../scenarios/laelaps-trot.toml");
@@ -26,6 +27,53 @@ pub struct Scenario {
     /// Table 4-1, one entry per leg.
     #[serde(rename = "leg")]
     pub legs: Vec<LegTable>,
+    /// How each leg node's firmware reaches its ESC (optional; default: directly).
+    #[serde(default)]
+    pub pdi: PdiSettings,
+}
+
+/// Which way the leg nodes' firmware reaches its ESC.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum PdiChip {
+    /// The software ESC is the firmware's `Pdi`.
+    #[default]
+    Direct,
+    /// The LAN9252 driver over a simulated SPI LAN9252 (ESC: the LAN9252 preset).
+    Lan9252,
+    /// The ET1100 SPI PDI driver over a simulated ET1100.
+    Et1100,
+}
+
+impl PdiChip {
+    /// Parses `direct`, `lan9252` or `et1100` (any case).
+    pub fn parse(s: &str) -> Option<Self> {
+        match s.to_ascii_lowercase().as_str() {
+            "direct" => Some(PdiChip::Direct),
+            "lan9252" => Some(PdiChip::Lan9252),
+            "et1100" => Some(PdiChip::Et1100),
+            _ => None,
+        }
+    }
+}
+
+/// The `[pdi]` table.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct PdiSettings {
+    /// `direct`, `lan9252` or `et1100`.
+    pub route: PdiChip,
+    /// SPI clock \[MHz\] (1 … 100) of the driver routes.
+    pub spi_mhz: u32,
+}
+
+impl Default for PdiSettings {
+    fn default() -> Self {
+        Self {
+            route: PdiChip::Direct,
+            spi_mhz: DEFAULT_SPI_MHZ,
+        }
+    }
 }
 
 /// DC cycle.
@@ -175,7 +223,29 @@ impl Scenario {
         if seen.len() != 4 {
             return bad("all four legs (FL, FR, HL, HR) need a [[leg]] entry".into());
         }
+        if !(1..=100).contains(&self.pdi.spi_mhz) {
+            return bad(format!(
+                "pdi.spi_mhz = {} is not in 1…100",
+                self.pdi.spi_mhz
+            ));
+        }
         Ok(())
+    }
+
+    /// How the leg nodes reach their ESCs (`[pdi]`; LAN9252 read 0x03, ET1100 two-byte
+    /// addresses with wait state).
+    pub fn pdi_route(&self) -> PdiRoute {
+        match self.pdi.route {
+            PdiChip::Direct => PdiRoute::Direct,
+            PdiChip::Lan9252 => PdiRoute::lan9252(self.pdi.spi_mhz),
+            PdiChip::Et1100 => PdiRoute::et1100(self.pdi.spi_mhz),
+        }
+    }
+
+    /// Sets the PDI route of every leg node (`--pdi`).
+    pub fn with_pdi(mut self, route: PdiChip) -> Self {
+        self.pdi.route = route;
+        self
     }
 
     /// The Table 4-1 column of `leg`.
@@ -235,5 +305,33 @@ mod tests {
         assert!(Scenario::parse(&s).is_err());
         let s = DEFAULT_TOML.replace("cycle_us = 400", "cycle_us = 400\nfoo = 1");
         assert!(Scenario::parse(&s).is_err());
+        let s = DEFAULT_TOML.replace("route = \"direct\"", "route = \"spi\"");
+        assert!(Scenario::parse(&s).is_err());
+        let s = DEFAULT_TOML.replace("spi_mhz = 20", "spi_mhz = 0");
+        assert!(Scenario::parse(&s).is_err());
+    }
+
+    #[test]
+    fn pdi_route_from_the_scenario() {
+        let s = Scenario::thesis();
+        assert_eq!(s.pdi, PdiSettings::default());
+        assert_eq!(s.pdi_route(), PdiRoute::Direct);
+        let s = Scenario::parse(&DEFAULT_TOML.replace("route = \"direct\"", "route = \"et1100\""))
+            .expect("et1100");
+        assert_eq!(s.pdi_route(), PdiRoute::et1100(20));
+        // Without a [pdi] table: direct.
+        let i = DEFAULT_TOML
+            .find("[pdi]")
+            .expect("[pdi] in the shipped file");
+        let j = DEFAULT_TOML[i..].find("[[leg]]").expect("legs after [pdi]") + i;
+        let text = format!("{}{}", &DEFAULT_TOML[..i], &DEFAULT_TOML[j..]);
+        let s = Scenario::parse(&text).expect("no [pdi]");
+        assert_eq!(s.pdi_route(), PdiRoute::Direct);
+        assert_eq!(
+            s.with_pdi(PdiChip::Lan9252).pdi_route(),
+            PdiRoute::lan9252(20)
+        );
+        assert_eq!(PdiChip::parse("LAN9252"), Some(PdiChip::Lan9252));
+        assert_eq!(PdiChip::parse("x"), None);
     }
 }

@@ -9,16 +9,21 @@
 //! | timer ISRs | periodic wakeups per [`FirmwareConfig::timers`] → [`Slave::on_timer`] |
 //! | main loop | a wakeup every [`FirmwareConfig::poll_period_ns`] → [`Slave::poll`] |
 //!
-//! The segment owns the ESC; the firmware gets `&mut Esc` (its [`oxicat_slave::Pdi`]) only
-//! while it handles an event. The stack and the application live behind a mutex shared with
+//! The segment owns the ESC; the firmware gets `&mut Esc` only while it handles an event.
+//! How it reaches the ESC is the node's [`PdiPath`]: by default ([`Direct`]) the software
+//! ESC is its [`oxicat_slave::Pdi`]; [`attach_firmware_via`] puts an `oxicat-pdi` chip
+//! driver over the simulated SPI in between ([`SpiPath`]: LAN9252 or ET1100), so the
+//! firmware runs exactly as on hardware and its bus traffic is counted
+//! ([`Firmware::bus_stats`]). The stack and the application live behind a mutex shared with
 //! the [`FirmwareHandle`] a test or tool keeps to look at them between cycles.
 
 use std::sync::{Arc, Mutex, MutexGuard};
 
 use oxicat_esc::{Esc, PdiError};
-use oxicat_slave::{Application, DeviceDef, InitError, Slave};
+use oxicat_slave::{Application, DeviceDef, InitError, Pdi, Slave};
 
 use crate::node::{EscEvent, Node};
+use crate::pdi_path::{BusStats, Direct, PathInitError, PdiPath, PdiRoute, SpiPath};
 use crate::segment::{Segment, SlaveId, TopologyError};
 
 /// Default main-loop period: 50 µs of virtual time.
@@ -73,24 +78,44 @@ pub struct FirmwareCounters {
     pub pdi_errors: u64,
 }
 
-/// The firmware of one node: the stack, the application and the MCU's schedule.
-pub struct Firmware<A, const N: usize, const M: usize> {
+/// The firmware of one node: the stack, the application, the MCU's schedule and the way
+/// it reaches its ESC (`P`, [`Direct`] unless attached through a driver).
+pub struct Firmware<A, const N: usize, const M: usize, P: PdiPath = Direct> {
     /// The slave stack.
-    pub slave: Slave<Esc, N, M>,
+    pub slave: Slave<P::Pdi, N, M>,
     /// The application.
     pub app: A,
     /// What was delivered so far.
     pub counters: FirmwareCounters,
     /// The last PDI error, if any.
-    pub last_pdi_error: Option<PdiError>,
+    pub last_pdi_error: Option<<P::Pdi as Pdi>::Error>,
+    path: P,
     poll_period: u64,
     next_poll: u64,
     /// `(id, period, next due time)`.
     timers: Vec<(u8, u64, u64)>,
 }
 
-impl<A: Application<N>, const N: usize, const M: usize> Firmware<A, N, M> {
-    fn note(&mut self, r: Result<(), PdiError>) {
+impl<A, const N: usize, const M: usize, P: PdiPath> Firmware<A, N, M, P> {
+    /// How the firmware reaches its ESC.
+    pub fn path(&self) -> &P {
+        &self.path
+    }
+
+    /// What the SPI bus between MCU and ESC carried since the last reset (`None` on the
+    /// direct path).
+    pub fn bus_stats(&self) -> Option<BusStats> {
+        self.path.bus_stats()
+    }
+
+    /// Clears the bus counters.
+    pub fn reset_bus_stats(&self) {
+        self.path.reset_bus_stats()
+    }
+}
+
+impl<A: Application<N>, const N: usize, const M: usize, P: PdiPath> Firmware<A, N, M, P> {
+    fn note(&mut self, r: Result<(), <P::Pdi as Pdi>::Error>) {
         if let Err(e) = r {
             self.counters.pdi_errors += 1;
             self.last_pdi_error = Some(e);
@@ -105,18 +130,21 @@ impl<A: Application<N>, const N: usize, const M: usize> Firmware<A, N, M> {
     }
 
     fn event(&mut self, esc: &mut Esc, ev: EscEvent) {
+        let Self {
+            slave, app, path, ..
+        } = self;
         let r = match ev {
             EscEvent::Irq => {
                 self.counters.irqs += 1;
-                self.slave.on_pdi_irq(esc, &mut self.app)
+                path.with_pdi(esc, |pdi| slave.on_pdi_irq(pdi, app))
             }
             EscEvent::Sync0 => {
                 self.counters.sync0 += 1;
-                self.slave.on_sync0(esc, &mut self.app)
+                path.with_pdi(esc, |pdi| slave.on_sync0(pdi, app))
             }
             EscEvent::Sync1 => {
                 self.counters.sync1 += 1;
-                self.slave.on_sync1(esc, &mut self.app)
+                path.with_pdi(esc, |pdi| slave.on_sync1(pdi, app))
             }
             // The watchdogs raise AL events the main loop handles.
             EscEvent::PdWatchdog | EscEvent::PdiWatchdog => Ok(()),
@@ -135,7 +163,10 @@ impl<A: Application<N>, const N: usize, const M: usize> Firmware<A, N, M> {
         }
         if self.next_poll <= t {
             self.counters.polls += 1;
-            let r = self.slave.poll(esc, &mut self.app);
+            let Self {
+                slave, app, path, ..
+            } = self;
+            let r = path.with_pdi(esc, |pdi| slave.poll(pdi, app));
             self.note(r);
             self.next_poll = next_after(self.next_poll, self.poll_period, t);
         }
@@ -153,24 +184,39 @@ fn next_after(due: u64, period: u64, t: u64) -> u64 {
     }
 }
 
-/// Access to a node's [`Firmware`] from outside the segment (tests, tools).
-pub struct FirmwareHandle<A, const N: usize, const M: usize>(Arc<Mutex<Firmware<A, N, M>>>);
+/// The PDI error type of path `P`.
+pub type PathPdiError<P> = <<P as PdiPath>::Pdi as Pdi>::Error;
 
-impl<A, const N: usize, const M: usize> Clone for FirmwareHandle<A, N, M> {
+/// A new node and its handle, or why the stack did not start on path `P`.
+pub type NodeResult<N, H, P> = Result<(N, H), InitError<PathPdiError<P>>>;
+
+/// Access to a node's [`Firmware`] from outside the segment (tests, tools).
+pub struct FirmwareHandle<A, const N: usize, const M: usize, P: PdiPath = Direct>(
+    Arc<Mutex<Firmware<A, N, M, P>>>,
+);
+
+impl<A, const N: usize, const M: usize, P: PdiPath> Clone for FirmwareHandle<A, N, M, P> {
     fn clone(&self) -> Self {
         Self(self.0.clone())
     }
 }
 
-impl<A, const N: usize, const M: usize> FirmwareHandle<A, N, M> {
+impl<A, const N: usize, const M: usize, P: PdiPath> FirmwareHandle<A, N, M, P> {
     /// Locks the firmware (do not hold it while waiting for the segment).
-    pub fn lock(&self) -> MutexGuard<'_, Firmware<A, N, M>> {
+    pub fn lock(&self) -> MutexGuard<'_, Firmware<A, N, M, P>> {
         self.0.lock().unwrap_or_else(|e| e.into_inner())
+    }
+
+    /// What the node's SPI bus carried since the last reset (`None` on the direct path).
+    pub fn bus_stats(&self) -> Option<BusStats> {
+        self.lock().bus_stats()
     }
 }
 
 /// A [`Node`] running firmware on its ESC; see the module documentation.
-pub struct FirmwareNode<A, const N: usize, const M: usize>(Arc<Mutex<Firmware<A, N, M>>>);
+pub struct FirmwareNode<A, const N: usize, const M: usize, P: PdiPath = Direct>(
+    Arc<Mutex<Firmware<A, N, M, P>>>,
+);
 
 impl<A: Application<N> + Send + 'static, const N: usize, const M: usize> FirmwareNode<A, N, M> {
     /// Boots the firmware on `esc` (the stack initialises the ESC through its PDI); the
@@ -182,13 +228,31 @@ impl<A: Application<N> + Send + 'static, const N: usize, const M: usize> Firmwar
         config: &FirmwareConfig,
         start_ns: u64,
     ) -> Result<(Self, FirmwareHandle<A, N, M>), InitError<PdiError>> {
-        let slave = Slave::new(def, esc)?;
+        Self::with_path(def, esc, app, config, start_ns, Direct)
+    }
+}
+
+impl<A: Application<N> + Send + 'static, const N: usize, const M: usize, P: PdiPath>
+    FirmwareNode<A, N, M, P>
+{
+    /// [`FirmwareNode::new`] with the firmware reaching `esc` through `path` (its driver
+    /// already started).
+    pub fn with_path(
+        def: &'static DeviceDef,
+        esc: &mut Esc,
+        app: A,
+        config: &FirmwareConfig,
+        start_ns: u64,
+        mut path: P,
+    ) -> NodeResult<Self, FirmwareHandle<A, N, M, P>, P> {
+        let slave = path.with_pdi(esc, |pdi| Slave::new(def, pdi))?;
         let poll_period = config.poll_period_ns.max(1);
         let fw = Firmware {
             slave,
             app,
             counters: FirmwareCounters::default(),
             last_pdi_error: None,
+            path,
             poll_period,
             next_poll: start_ns,
             timers: config
@@ -201,13 +265,13 @@ impl<A: Application<N> + Send + 'static, const N: usize, const M: usize> Firmwar
         Ok((Self(inner.clone()), FirmwareHandle(inner)))
     }
 
-    fn lock(&self) -> MutexGuard<'_, Firmware<A, N, M>> {
+    fn lock(&self) -> MutexGuard<'_, Firmware<A, N, M, P>> {
         self.0.lock().unwrap_or_else(|e| e.into_inner())
     }
 }
 
-impl<A: Application<N> + Send + 'static, const N: usize, const M: usize> Node<Esc>
-    for FirmwareNode<A, N, M>
+impl<A: Application<N> + Send + 'static, const N: usize, const M: usize, P: PdiPath> Node<Esc>
+    for FirmwareNode<A, N, M, P>
 {
     fn on_event(&mut self, esc: &mut Esc, ev: EscEvent, _t: u64) {
         self.lock().event(esc, ev);
@@ -229,6 +293,17 @@ pub enum AttachError {
     Topology(TopologyError),
     /// The stack refused to start.
     Init(InitError<PdiError>),
+    /// The chip driver, or the stack through it, did not start.
+    Path(PathInitError),
+}
+
+impl From<PathInitError> for AttachError {
+    fn from(e: PathInitError) -> Self {
+        match e {
+            PathInitError::Direct(e) => AttachError::Init(e),
+            e => AttachError::Path(e),
+        }
+    }
 }
 
 impl core::fmt::Display for AttachError {
@@ -236,6 +311,7 @@ impl core::fmt::Display for AttachError {
         match self {
             Self::Topology(e) => write!(f, "{e}"),
             Self::Init(e) => write!(f, "the slave stack did not start: {e:?}"),
+            Self::Path(e) => write!(f, "{e}"),
         }
     }
 }
@@ -251,12 +327,47 @@ pub fn attach_firmware<A: Application<N> + Send + 'static, const N: usize, const
     app: A,
     config: &FirmwareConfig,
 ) -> Result<FirmwareHandle<A, N, M>, AttachError> {
+    attach_firmware_with(segment, id, def, app, config, |_| Ok(Direct))
+}
+
+/// [`attach_firmware`] with the firmware reaching its ESC through the chip driver of `route`
+/// ([`PdiRoute::Lan9252`] or [`PdiRoute::Et1100`]) over the simulated SPI; the driver starts
+/// (as on hardware) before the stack. [`PdiRoute::Direct`] is refused
+/// ([`PathInitError::NotSpi`]): use [`attach_firmware`].
+pub fn attach_firmware_via<A: Application<N> + Send + 'static, const N: usize, const M: usize>(
+    segment: &mut Segment,
+    id: SlaveId,
+    def: &'static DeviceDef,
+    app: A,
+    config: &FirmwareConfig,
+    route: PdiRoute,
+) -> Result<FirmwareHandle<A, N, M, SpiPath>, AttachError> {
+    attach_firmware_with(segment, id, def, app, config, |esc| {
+        SpiPath::new(route, esc)
+    })
+}
+
+/// [`attach_firmware`] on any [`PdiPath`]: `path` builds it in front of the ESC.
+pub fn attach_firmware_with<
+    A: Application<N> + Send + 'static,
+    const N: usize,
+    const M: usize,
+    P: PdiPath,
+>(
+    segment: &mut Segment,
+    id: SlaveId,
+    def: &'static DeviceDef,
+    app: A,
+    config: &FirmwareConfig,
+    path: impl FnOnce(&mut Esc) -> Result<P, PathInitError>,
+) -> Result<FirmwareHandle<A, N, M, P>, AttachError> {
     let now = segment.now();
     let esc = segment
         .esc_mut(id)
         .ok_or(AttachError::Topology(TopologyError::NoSuchSlave(id)))?;
-    let (node, handle) =
-        FirmwareNode::<A, N, M>::new(def, esc, app, config, now).map_err(AttachError::Init)?;
+    let path = path(esc)?;
+    let (node, handle) = FirmwareNode::<A, N, M, P>::with_path(def, esc, app, config, now, path)
+        .map_err(|e| AttachError::from(P::init_error(e)))?;
     segment
         .attach(id, Box::new(node))
         .map_err(AttachError::Topology)?;

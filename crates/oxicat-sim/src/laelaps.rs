@@ -39,6 +39,12 @@
 //! ([`LegId::driven_by_tower_at`]): the tower by Hind Right drives Hind Left, with the
 //! `LEFT_LEG` build. Both the firmware build and the plant's mirrored motors follow the
 //! driven leg, never the tower's location.
+//!
+//! # How the firmware reaches its ESC
+//!
+//! [`attach_leg`] gives the firmware the software ESC as its `Pdi`; [`attach_leg_routed`]
+//! can put a LAN9252 or ET1100 driver over the simulated SPI in between
+//! ([`crate::pdi_path`]), with the node's SPI traffic counted ([`LegRig::bus_stats`]).
 
 use std::sync::{Arc, Mutex, MutexGuard};
 
@@ -49,9 +55,10 @@ use oxicat_devices::laelaps::{
 };
 use oxicat_esc::{Esc, PdiError};
 use oxicat_plant::{Leg, LegParams, Treadmill};
-use oxicat_slave::{InitError, Slave};
+use oxicat_slave::{InitError, Pdi, Slave};
 
 use crate::node::{EscEvent, Node};
+use crate::pdi_path::{BusStats, Direct, PathInitError, PdiPath, PdiRoute, SpiPath};
 use crate::segment::{Segment, SlaveId, TopologyError};
 
 /// Mailbox size of the leg node (its device definition: 128 bytes).
@@ -288,12 +295,13 @@ pub struct RigCounters {
     pub pdi_errors: u64,
 }
 
-/// One tower: the leg-node firmware and the leg it drives.
-pub struct LegRig {
+/// One tower: the leg-node firmware and the leg it drives; `P` is how the firmware reaches
+/// its ESC ([`Direct`]: the software ESC is its `Pdi`).
+pub struct LegRig<P: PdiPath = Direct> {
     /// The leg this tower drives.
     pub leg_id: LegId,
     /// The slave stack.
-    pub slave: LegSlave,
+    pub slave: Slave<P::Pdi, { device::IMAGE }, MBX>,
     /// The application.
     pub app: LegApp,
     /// The leg.
@@ -309,9 +317,10 @@ pub struct LegRig {
     ticks: u64,
     /// Virtual time the plant has advanced since the release \[ns\].
     plant_ns: u64,
+    path: P,
 }
 
-impl LegRig {
+impl<P: PdiPath> LegRig<P> {
     fn sample_encoders(&mut self) {
         let tick = CaptureConfig::THESIS.tick_s() as f64;
         for (pj, fj) in [
@@ -362,7 +371,7 @@ impl LegRig {
         );
     }
 
-    fn note(&mut self, r: Result<(), PdiError>) {
+    fn note(&mut self, r: Result<(), <P::Pdi as Pdi>::Error>) {
         if r.is_err() {
             self.counters.pdi_errors += 1;
         }
@@ -377,7 +386,10 @@ impl LegRig {
             EscEvent::Sync0 => {
                 self.counters.sync0 += 1;
                 let before = self.app.mode();
-                let r = self.slave.on_sync0(esc, &mut self.app);
+                let Self {
+                    slave, app, path, ..
+                } = self;
+                let r = path.with_pdi(esc, |pdi| slave.on_sync0(pdi, app));
                 self.note(r);
                 if self.released_at.is_none()
                     && before == Mode::Configuration
@@ -390,7 +402,10 @@ impl LegRig {
                 }
             }
             EscEvent::Irq => {
-                let r = self.slave.on_pdi_irq(esc, &mut self.app);
+                let Self {
+                    slave, app, path, ..
+                } = self;
+                let r = path.with_pdi(esc, |pdi| slave.on_pdi_irq(pdi, app));
                 self.note(r);
             }
             EscEvent::Sync1 | EscEvent::PdWatchdog | EscEvent::PdiWatchdog => {}
@@ -425,7 +440,10 @@ impl LegRig {
         self.ticks += 1;
         if self.ticks.is_multiple_of(self.config.poll_every) {
             self.counters.polls += 1;
-            let r = self.slave.poll(esc, &mut self.app);
+            let Self {
+                slave, app, path, ..
+            } = self;
+            let r = path.with_pdi(esc, |pdi| slave.poll(pdi, app));
             self.note(r);
         }
         while self.next_tick <= t {
@@ -437,29 +455,102 @@ impl LegRig {
     pub fn config(&self) -> &RigConfig {
         &self.config
     }
+
+    /// How the firmware reaches its ESC.
+    pub fn path(&self) -> &P {
+        &self.path
+    }
+
+    /// What the node's SPI bus carried since the last reset (`None` on the direct path).
+    pub fn bus_stats(&self) -> Option<BusStats> {
+        self.path.bus_stats()
+    }
+
+    /// Clears the node's bus counters.
+    pub fn reset_bus_stats(&self) {
+        self.path.reset_bus_stats()
+    }
+
+    /// What a tool reports about the node.
+    pub fn report(&self) -> LegReport {
+        LegReport {
+            leg_id: self.leg_id,
+            clock_ns: self.app.clock().nanos(),
+            released_at_sync0: self.released_at_sync0,
+            counters: self.counters,
+            bus: self.bus_stats(),
+        }
+    }
+}
+
+/// A snapshot of one rig node (any path).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct LegReport {
+    /// The leg the tower drives.
+    pub leg_id: LegId,
+    /// The firmware's trajectory clock \[ns\].
+    pub clock_ns: u64,
+    /// SYNC0 count of the release, if released.
+    pub released_at_sync0: Option<u64>,
+    /// What ran so far (PDI errors included).
+    pub counters: RigCounters,
+    /// The SPI bus since the last reset (`None` on the direct path).
+    pub bus: Option<BusStats>,
 }
 
 /// Access to a rig node from outside the segment (tests, tools).
-#[derive(Clone)]
-pub struct LegRigHandle(Arc<Mutex<LegRig>>);
+pub struct LegRigHandle<P: PdiPath = Direct>(Arc<Mutex<LegRig<P>>>);
 
-impl LegRigHandle {
+impl<P: PdiPath> Clone for LegRigHandle<P> {
+    fn clone(&self) -> Self {
+        Self(self.0.clone())
+    }
+}
+
+impl<P: PdiPath> LegRigHandle<P> {
     /// Locks the rig (do not hold it while the segment runs).
-    pub fn lock(&self) -> MutexGuard<'_, LegRig> {
+    pub fn lock(&self) -> MutexGuard<'_, LegRig<P>> {
         self.0.lock().unwrap_or_else(|e| e.into_inner())
+    }
+}
+
+/// A rig node's handle whatever its path ([`attach_leg_routed`]).
+#[derive(Clone)]
+pub enum AnyLegRigHandle {
+    /// The software ESC is the firmware's `Pdi`.
+    Direct(LegRigHandle),
+    /// A chip driver over the simulated SPI.
+    Spi(LegRigHandle<SpiPath>),
+}
+
+impl AnyLegRigHandle {
+    /// A snapshot of the node.
+    pub fn report(&self) -> LegReport {
+        match self {
+            Self::Direct(h) => h.lock().report(),
+            Self::Spi(h) => h.lock().report(),
+        }
+    }
+
+    /// Clears the node's bus counters.
+    pub fn reset_bus_stats(&self) {
+        match self {
+            Self::Direct(h) => h.lock().reset_bus_stats(),
+            Self::Spi(h) => h.lock().reset_bus_stats(),
+        }
     }
 }
 
 /// The [`Node`] of one tower on its ESC; see the module documentation.
-pub struct LegRigNode(Arc<Mutex<LegRig>>);
+pub struct LegRigNode<P: PdiPath = Direct>(Arc<Mutex<LegRig<P>>>);
 
-impl LegRigNode {
-    fn lock(&self) -> MutexGuard<'_, LegRig> {
+impl<P: PdiPath> LegRigNode<P> {
+    fn lock(&self) -> MutexGuard<'_, LegRig<P>> {
         self.0.lock().unwrap_or_else(|e| e.into_inner())
     }
 }
 
-impl Node<Esc> for LegRigNode {
+impl<P: PdiPath> Node<Esc> for LegRigNode<P> {
     fn on_event(&mut self, esc: &mut Esc, ev: EscEvent, t: u64) {
         self.lock().event(esc, ev, t);
     }
@@ -480,6 +571,17 @@ pub enum RigError {
     Topology(TopologyError),
     /// The slave stack refused to start.
     Init(InitError<PdiError>),
+    /// The chip driver, or the stack through it, did not start.
+    Path(PathInitError),
+}
+
+impl From<PathInitError> for RigError {
+    fn from(e: PathInitError) -> Self {
+        match e {
+            PathInitError::Direct(e) => RigError::Init(e),
+            e => RigError::Path(e),
+        }
+    }
 }
 
 impl core::fmt::Display for RigError {
@@ -487,6 +589,7 @@ impl core::fmt::Display for RigError {
         match self {
             Self::Topology(e) => write!(f, "{e}"),
             Self::Init(e) => write!(f, "the leg node's stack did not start: {e:?}"),
+            Self::Path(e) => write!(f, "the leg node: {e}"),
         }
     }
 }
@@ -502,12 +605,45 @@ pub fn attach_leg(
     leg: LegId,
     config: RigConfig,
 ) -> Result<LegRigHandle, RigError> {
+    attach_leg_with(segment, id, leg, config, |_| Ok(Direct))
+}
+
+/// [`attach_leg`] with the firmware reaching its ESC the way `route` says: directly, or
+/// through the LAN9252 / ET1100 driver over the simulated SPI (the driver starts first, as
+/// on hardware). For a LAN9252 the ESC should be [`oxicat_esc::EscConfig::lan9252`]
+/// ([`PdiRoute::esc_config`]).
+pub fn attach_leg_routed(
+    segment: &mut Segment,
+    id: SlaveId,
+    leg: LegId,
+    config: RigConfig,
+    route: PdiRoute,
+) -> Result<AnyLegRigHandle, RigError> {
+    Ok(match route {
+        PdiRoute::Direct => AnyLegRigHandle::Direct(attach_leg(segment, id, leg, config)?),
+        _ => AnyLegRigHandle::Spi(attach_leg_with(segment, id, leg, config, |esc| {
+            SpiPath::new(route, esc)
+        })?),
+    })
+}
+
+/// [`attach_leg`] on any [`PdiPath`]: `path` builds it in front of the ESC.
+pub fn attach_leg_with<P: PdiPath>(
+    segment: &mut Segment,
+    id: SlaveId,
+    leg: LegId,
+    config: RigConfig,
+    path: impl FnOnce(&mut Esc) -> Result<P, PathInitError>,
+) -> Result<LegRigHandle<P>, RigError> {
     let now = segment.now();
     let esc = segment
         .esc_mut(id)
         .ok_or(RigError::Topology(TopologyError::NoSuchSlave(id)))?;
     let def = device::device(leg.side());
-    let slave = LegSlave::new(def, esc).map_err(RigError::Init)?;
+    let mut path = path(esc)?;
+    let slave = path
+        .with_pdi(esc, |pdi| Slave::new(def, pdi))
+        .map_err(|e| RigError::from(P::init_error(e)))?;
     let mut params = config.leg;
     params.substep = config.plant_period_ns.clamp(1_000, 100_000) as f64 * 1e-9;
     let plant = Leg::new(params);
@@ -529,6 +665,7 @@ pub fn attach_leg(
         ticks: 0,
         plant_ns: 0,
         config,
+        path,
     };
     let inner = Arc::new(Mutex::new(rig));
     segment

@@ -15,6 +15,7 @@ pub mod model;
 pub mod net;
 pub mod node;
 pub mod pcapng;
+pub mod pdi_path;
 pub mod realtime;
 pub mod segment;
 pub mod transport;

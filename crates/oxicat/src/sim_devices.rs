@@ -149,6 +149,7 @@ fn attach_laelaps_leg(segment: &mut Segment, id: SlaveId, k: usize) -> Result<()
         .map_err(|e| match e {
             RigError::Topology(t) => AttachError::Topology(t),
             RigError::Init(i) => AttachError::Init(i),
+            RigError::Path(p) => AttachError::Path(p),
         })
 }
 

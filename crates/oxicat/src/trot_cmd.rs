@@ -8,7 +8,7 @@ use std::time::Instant;
 use indicatif::{ProgressBar, ProgressStyle};
 use oxicat_master::experiment::run_trot;
 use oxicat_master::results::{csv, summarize, summary_markdown};
-use oxicat_master::scenario::Scenario;
+use oxicat_master::scenario::{PdiChip, Scenario};
 use oxicat_master::{plot, MasterError};
 
 /// Arguments of `oxicat trot`.
@@ -21,6 +21,14 @@ pub struct TrotArgs {
     /// Length of the steady trot in seconds (the ramps and stands around it stay).
     #[arg(long)]
     pub duration: Option<f64>,
+    /// How each leg node's firmware reaches its ESC: `direct` (the software ESC is its PDI),
+    /// `lan9252` or `et1100` (the chip driver over the simulated SPI); default: the
+    /// scenario's `[pdi] route`.
+    #[arg(long, value_name = "direct|lan9252|et1100")]
+    pub pdi: Option<String>,
+    /// SPI clock in MHz for `--pdi lan9252|et1100` (default: the scenario's `[pdi] spi_mhz`).
+    #[arg(long, value_name = "MHZ")]
+    pub spi_mhz: Option<u32>,
     /// Output directory.
     #[arg(long, default_value = "out/trot")]
     pub out: PathBuf,
@@ -43,6 +51,17 @@ pub fn run(a: TrotArgs) -> Result<String, MasterError> {
             return Err(MasterError::Usage(format!("--duration {d}: 0…3600 s")));
         }
         s = s.with_trot(d);
+    }
+    if let Some(p) = &a.pdi {
+        let chip = PdiChip::parse(p)
+            .ok_or_else(|| MasterError::Usage(format!("--pdi {p}: direct, lan9252 or et1100")))?;
+        s = s.with_pdi(chip);
+    }
+    if let Some(m) = a.spi_mhz {
+        if !(1..=100).contains(&m) {
+            return Err(MasterError::Usage(format!("--spi-mhz {m}: 1…100")));
+        }
+        s.pdi.spi_mhz = m;
     }
     std::fs::create_dir_all(&a.out).map_err(|e| MasterError::Io(a.out.display().to_string(), e))?;
     let bar = if a.quiet {
@@ -89,6 +108,9 @@ pub fn run(a: TrotArgs) -> Result<String, MasterError> {
         files.extend(plot::write_figures(&run, &a.out)?);
     }
     md.push_str(&speed);
+    if let Some(line) = spi_line(&run) {
+        md.push_str(&line);
+    }
     md.push_str(&format!(
         "Wrote {} files to {} in {:.2} s.\n",
         files.len(),
@@ -96,4 +118,30 @@ pub fn run(a: TrotArgs) -> Result<String, MasterError> {
         t_out.elapsed().as_secs_f64()
     ));
     Ok(md)
+}
+
+/// One line on the SPI bus time per cycle per node, when the nodes used a driver.
+fn spi_line(run: &oxicat_master::experiment::TrotRun) -> Option<String> {
+    let cycles = run.bus.cycles;
+    let per: Vec<f64> = run
+        .pdi
+        .nodes
+        .iter()
+        .filter_map(|n| n.spi_us_per_cycle(cycles))
+        .collect();
+    if per.is_empty() {
+        return None;
+    }
+    let lo = per.iter().copied().fold(f64::MAX, f64::min);
+    let hi = per.iter().copied().fold(f64::MIN, f64::max);
+    let errors: u64 = run.pdi.nodes.iter().map(|n| n.pdi_errors).sum();
+    let range = if hi - lo < 0.005 {
+        format!("{lo:.2}")
+    } else {
+        format!("{lo:.2}–{hi:.2}")
+    };
+    Some(format!(
+        "PDI {}: {range} µs of SPI bus time per {} µs cycle per node; {errors} PDI errors.\n",
+        run.pdi.route, run.scenario.bus.cycle_us
+    ))
 }

@@ -3,7 +3,10 @@
 //! time counted at a configured SCLK.
 //!
 //! A peripheral and its pins share the chip through a [`Handle`]; the ECAT side of the
-//! ESC (master frames, time) is reached with [`Handle::with_esc`].
+//! ESC (master frames, time) is reached with [`Handle::with_esc`]. The handle is `Send`
+//! (an `Arc<Mutex<_>>`), so a driver over a simulated chip can live inside firmware that a
+//! virtual segment runs on another thread. When the ESC belongs to someone else (the
+//! segment), [`Handle::swap_esc`] lends it to the chip for the duration of an access.
 
 mod et1100;
 mod lan9252;
@@ -11,17 +14,16 @@ mod lan9252;
 pub use et1100::Et1100Model;
 pub use lan9252::Lan9252Model;
 
-use core::cell::RefCell;
 use core::convert::Infallible;
 use embedded_hal::digital::{self, InputPin};
 use embedded_hal::spi::{self, Operation, SpiDevice};
 use oxicat_esc::Esc;
-use std::rc::Rc;
+use std::sync::{Arc, Mutex, MutexGuard};
 use std::vec;
 use std::vec::Vec;
 
 /// Bus timing model.
-#[derive(Debug, Clone, Copy)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct BusConfig {
     /// SPI clock in Hz.
     pub sclk_hz: u32,
@@ -117,8 +119,8 @@ pub trait Model {
     fn pin(&mut self, pin: PinKind) -> bool;
 }
 
-/// Shared access to a chip model.
-pub struct Handle<M>(Rc<RefCell<M>>);
+/// Shared access to a chip model (`Send` when the model is).
+pub struct Handle<M>(Arc<Mutex<M>>);
 
 impl<M> Clone for Handle<M> {
     fn clone(&self) -> Self {
@@ -129,31 +131,43 @@ impl<M> Clone for Handle<M> {
 impl<M: Model> Handle<M> {
     /// Wraps a model.
     pub fn new(m: M) -> Self {
-        Handle(Rc::new(RefCell::new(m)))
+        Handle(Arc::new(Mutex::new(m)))
+    }
+    /// The model, locked. A panic while it was locked (only a test's own assertion can do
+    /// that) does not make the chip unusable: the poison is ignored.
+    fn lock(&self) -> MutexGuard<'_, M> {
+        self.0.lock().unwrap_or_else(|e| e.into_inner())
     }
     /// Runs `f` on the ESC (ECAT side: frames, time).
     pub fn with_esc<T>(&self, f: impl FnOnce(&mut Esc) -> T) -> T {
-        f(&mut self.0.borrow_mut().core().esc)
+        f(&mut self.lock().core().esc)
     }
     /// Runs `f` on the model.
     pub fn with<T>(&self, f: impl FnOnce(&mut M) -> T) -> T {
-        f(&mut self.0.borrow_mut())
+        f(&mut self.lock())
+    }
+    /// Exchanges the chip's ESC with `esc` (cheap: `Esc` is about 1.4 KB, its register file,
+    /// process RAM and EEPROM are on the heap). A virtual segment that owns the ESC swaps it in before the firmware runs an
+    /// event through the driver and swaps it back afterwards; in between, the chip holds
+    /// whatever stand-in it was built with.
+    pub fn swap_esc(&self, esc: &mut Esc) {
+        core::mem::swap(&mut self.lock().core().esc, esc);
     }
     /// Counters since the last reset.
     pub fn stats(&self) -> BusStats {
-        self.0.borrow_mut().core().stats
+        self.lock().core().stats
     }
     /// Clears the counters.
     pub fn reset_stats(&self) {
-        self.0.borrow_mut().core().stats = BusStats::default();
+        self.lock().core().stats = BusStats::default();
     }
     /// Injects a fault.
     pub fn set_fault(&self, f: Fault) {
-        self.0.borrow_mut().core().fault = f;
+        self.lock().core().fault = f;
     }
     /// Changes the bus timing.
     pub fn set_bus(&self, b: BusConfig) {
-        self.0.borrow_mut().core().bus = b;
+        self.lock().core().bus = b;
     }
     /// The SPI device.
     pub fn spi(&self) -> SimSpi<M> {
@@ -197,7 +211,7 @@ impl<M: Model> SpiDevice for SimSpi<M> {
                 }
             }
         }
-        let mut m = self.0 .0.borrow_mut();
+        let mut m = self.0.lock();
         let fault = m.core().fault;
         let miso = match fault {
             Fault::MisoStuckHigh => vec![0xFF; mosi.len()],
@@ -239,7 +253,7 @@ impl<M> digital::ErrorType for SimPin<M> {
 
 impl<M: Model> InputPin for SimPin<M> {
     fn is_high(&mut self) -> Result<bool, Infallible> {
-        Ok(self.0 .0.borrow_mut().pin(self.1))
+        Ok(self.0.lock().pin(self.1))
     }
     fn is_low(&mut self) -> Result<bool, Infallible> {
         self.is_high().map(|h| !h)

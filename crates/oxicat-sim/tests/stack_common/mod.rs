@@ -11,7 +11,9 @@ use std::sync::{Arc, Mutex};
 
 use ethercrab::{MainDeviceConfig, Timeouts};
 use oxicat_esc::{Esc, EscConfig};
-use oxicat_sim::firmware::{attach_firmware, FirmwareConfig, FirmwareHandle};
+use oxicat_sim::firmware::{attach_firmware, attach_firmware_with, FirmwareConfig, FirmwareHandle};
+#[allow(unused_imports)]
+pub use oxicat_sim::pdi_path::{Direct, PathInitError, PdiPath, PdiRoute, SpiPath};
 use oxicat_sim::segment::Segment;
 use oxicat_slave::*;
 use oxicat_wire::sii::{
@@ -612,16 +614,31 @@ impl<const N: usize, A: Application<N>> Application<N> for Probe<A> {
 pub type DemoFw = Probe<Demo<NoLeds, FixedButtons>>;
 /// Application image of the demo device.
 pub const DEMO_IMG: usize = demo::IMAGE;
-/// Handle on one demo node.
-pub type DemoHandle = FirmwareHandle<DemoFw, DEMO_IMG, MBX>;
+/// Handle on one demo node (`P`: how its firmware reaches the ESC).
+pub type DemoHandle<P = Direct> = FirmwareHandle<DemoFw, DEMO_IMG, MBX, P>;
 
 /// A line of [`NODES`] ET1100 ESCs with the demo device's SII, each running its firmware.
 pub fn demo_segment() -> (Arc<Mutex<Segment>>, Vec<DemoHandle>) {
+    demo_segment_with(EscConfig::et1100(), |_| Ok(Direct))
+}
+
+/// [`demo_segment`] with each firmware reaching its ESC through the chip driver of `route`
+/// over the simulated SPI (a LAN9252 node's ESC is the LAN9252 preset).
+pub fn demo_segment_via(route: PdiRoute) -> (Arc<Mutex<Segment>>, Vec<DemoHandle<SpiPath>>) {
+    demo_segment_with(route.esc_config(EscConfig::et1100()), |esc| {
+        SpiPath::new(route, esc)
+    })
+}
+
+fn demo_segment_with<P: PdiPath>(
+    esc: EscConfig,
+    path: impl Fn(&mut Esc) -> Result<P, PathInitError>,
+) -> (Arc<Mutex<Segment>>, Vec<DemoHandle<P>>) {
     let sii = oxicat_device::sii::generate(&demo::DEF).expect("demo SII");
     let mut seg = Segment::new();
     let mut fws = Vec::new();
     for node in 0..NODES {
-        let id = seg.add(Esc::new(EscConfig::et1100(), sii.clone()));
+        let id = seg.add(Esc::new(esc.clone(), sii.clone()));
         let app = Probe {
             inner: Demo::new(NoLeds, FixedButtons(buttons_of(node))),
             seen: 0,
@@ -629,12 +646,13 @@ pub fn demo_segment() -> (Arc<Mutex<Segment>>, Vec<DemoHandle>) {
             last: 0,
         };
         fws.push(
-            attach_firmware::<_, DEMO_IMG, MBX>(
+            attach_firmware_with::<_, DEMO_IMG, MBX, P>(
                 &mut seg,
                 id,
                 &demo::DEF,
                 app,
                 &FirmwareConfig::default(),
+                &path,
             )
             .expect("firmware boots"),
         );
