@@ -5,8 +5,10 @@
 mod stack_common;
 
 use ethercrab::{MainDevice, PduStorage};
+use oxicat_sim::segment::Segment;
 use oxicat_sim::transport::{spawn_inprocess_with, InProcessConfig};
 use stack_common::*;
+use std::sync::{Arc, Mutex};
 
 const NEW_RX: &[u16] = &[0x1602, 0x1600];
 const NEW_TX: &[u16] = &[0x1A02, 0x1A00];
@@ -21,12 +23,29 @@ fn mapped(o: Outputs) -> Outputs {
     }
 }
 
+type Pdu = PduStorage<16, { PduStorage::element_size(1100) }>;
+
 #[test]
 fn reassigned_pdos_in_preop_change_the_process_data_layout() {
-    static PDU: PduStorage<16, { PduStorage::element_size(1100) }> = PduStorage::new();
+    static PDU: Pdu = PduStorage::new();
+    reassign(&PDU, flex_segment());
+}
+
+#[test]
+fn lan9252_reassigned_pdos_in_preop_change_the_process_data_layout() {
+    static PDU: Pdu = PduStorage::new();
+    reassign(&PDU, flex_segment_via(PdiRoute::lan9252(20)));
+}
+
+#[test]
+fn et1100_reassigned_pdos_in_preop_change_the_process_data_layout() {
+    static PDU: Pdu = PduStorage::new();
+    reassign(&PDU, flex_segment_via(PdiRoute::et1100(20)));
+}
+
+fn reassign<P: PdiPath>(pdu: &'static Pdu, (segment, fws): (Arc<Mutex<Segment>>, Vec<Fw<P>>)) {
     let _ = env_logger::builder().is_test(true).try_init();
-    let (segment, fws) = flex_segment();
-    let (tx, rx, pdu_loop) = PDU.try_split().expect("split once");
+    let (tx, rx, pdu_loop) = pdu.try_split().expect("split once");
     let _transport = spawn_inprocess_with(
         segment.clone(),
         tx,

@@ -6,15 +6,37 @@
 mod stack_common;
 
 use ethercrab::{MainDevice, PduStorage};
+use oxicat_sim::segment::Segment;
 use oxicat_sim::transport::{spawn_inprocess_with, InProcessConfig};
 use stack_common::*;
+use std::sync::{Arc, Mutex};
+
+type Pdu = PduStorage<16, { PduStorage::element_size(1100) }>;
 
 #[test]
 fn watchdog_safe_outputs_safeop_0x001b_then_acknowledge_back_to_op() {
-    static PDU: PduStorage<16, { PduStorage::element_size(1100) }> = PduStorage::new();
+    static PDU: Pdu = PduStorage::new();
+    watchdog(&PDU, demo_segment());
+}
+
+#[test]
+fn lan9252_watchdog_safe_outputs_safeop_0x001b_then_acknowledge_back_to_op() {
+    static PDU: Pdu = PduStorage::new();
+    watchdog(&PDU, demo_segment_via(PdiRoute::lan9252(20)));
+}
+
+#[test]
+fn et1100_watchdog_safe_outputs_safeop_0x001b_then_acknowledge_back_to_op() {
+    static PDU: Pdu = PduStorage::new();
+    watchdog(&PDU, demo_segment_via(PdiRoute::et1100(20)));
+}
+
+fn watchdog<P: PdiPath>(
+    pdu: &'static Pdu,
+    (segment, fws): (Arc<Mutex<Segment>>, Vec<DemoHandle<P>>),
+) {
     let _ = env_logger::builder().is_test(true).try_init();
-    let (segment, fws) = demo_segment();
-    let (tx, rx, pdu_loop) = PDU.try_split().expect("split once");
+    let (tx, rx, pdu_loop) = pdu.try_split().expect("split once");
     let _transport = spawn_inprocess_with(
         segment.clone(),
         tx,

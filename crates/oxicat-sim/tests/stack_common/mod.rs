@@ -11,7 +11,7 @@ use std::sync::{Arc, Mutex};
 
 use ethercrab::{MainDeviceConfig, Timeouts};
 use oxicat_esc::{Esc, EscConfig};
-use oxicat_sim::firmware::{attach_firmware, attach_firmware_with, FirmwareConfig, FirmwareHandle};
+use oxicat_sim::firmware::{attach_firmware_with, FirmwareConfig, FirmwareHandle};
 #[allow(unused_imports)]
 pub use oxicat_sim::pdi_path::{Direct, PathInitError, PdiPath, PdiRoute, SpiPath};
 use oxicat_sim::segment::Segment;
@@ -505,22 +505,43 @@ impl Outputs {
     }
 }
 
-/// Handle on one node's firmware.
-pub type Fw = FirmwareHandle<DemoApp, IMG, MBX>;
+/// Handle on one node's firmware (`P`: how it reaches its ESC).
+pub type Fw<P = Direct> = FirmwareHandle<DemoApp, IMG, MBX, P>;
 
 /// A line of [`NODES`] ET1100 ESCs, each running [`FLEX`] with [`DemoApp`].
 pub fn flex_segment() -> (Arc<Mutex<Segment>>, Vec<Fw>) {
+    flex_segment_with(EscConfig::et1100(), |_| Ok(Direct))
+}
+
+/// [`flex_segment`] with each firmware reaching its ESC through the chip driver of `route`.
+pub fn flex_segment_via(route: PdiRoute) -> (Arc<Mutex<Segment>>, Vec<Fw<SpiPath>>) {
+    flex_segment_with(route.esc_config(EscConfig::et1100()), |esc| {
+        SpiPath::new(route, esc)
+    })
+}
+
+fn flex_segment_with<P: PdiPath>(
+    esc: EscConfig,
+    path: impl Fn(&mut Esc) -> Result<P, PathInitError>,
+) -> (Arc<Mutex<Segment>>, Vec<Fw<P>>) {
     let mut seg = Segment::new();
     let mut fws = Vec::new();
     for node in 0..NODES {
-        let id = seg.add(Esc::new(EscConfig::et1100(), eeprom(&FLEX)));
+        let id = seg.add(Esc::new(esc.clone(), eeprom(&FLEX)));
         let app = DemoApp {
             node,
             ..DemoApp::default()
         };
         fws.push(
-            attach_firmware::<_, IMG, MBX>(&mut seg, id, &FLEX, app, &FirmwareConfig::default())
-                .expect("firmware boots"),
+            attach_firmware_with::<_, IMG, MBX, P>(
+                &mut seg,
+                id,
+                &FLEX,
+                app,
+                &FirmwareConfig::default(),
+                &path,
+            )
+            .expect("firmware boots"),
         );
     }
     (Arc::new(Mutex::new(seg)), fws)
