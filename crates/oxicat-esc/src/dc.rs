@@ -459,26 +459,36 @@ impl Dc {
         }
         let mut lo = from;
         let mut hi = from.checked_add(d0 as u64)?;
-        loop {
+        let over = loop {
             let d = sdiff(target, self.system_time(hi));
             if d <= 0 {
-                break;
+                break d.unsigned_abs();
             }
             lo = hi;
             hi = hi.checked_add(d as u64)?;
-        }
-        // Tighten the lower bound using a slope close to one.
-        let over = (-sdiff(target, self.system_time(hi))) as u64;
-        let cand = hi.saturating_sub(over + over / 64 + 3);
-        if cand > lo && sdiff(target, self.system_time(cand)) > 0 {
-            lo = cand;
-        }
+        };
+        // Now the system time is before `target` at `lo` and has reached it at `hi`; it is
+        // non-decreasing, so the answer is the one step in (lo, hi]. The slope is one
+        // within ±1 % (drift) and ±0.08 % (correction), so a probe `d` ns away from the
+        // target puts the step about `d` ns away: probe there (Newton with slope one),
+        // keeping the bracket (a guess outside it is moved to its nearest inner point), and
+        // halve the bracket when that does not settle within a few probes.
+        let mut guess = hi.saturating_sub(over.max(1));
+        let mut newton = 0u32;
         while hi - lo > 1 {
-            let mid = lo + (hi - lo) / 2;
-            if sdiff(target, self.system_time(mid)) <= 0 {
-                hi = mid;
+            let x = if newton < 8 {
+                newton += 1;
+                guess.clamp(lo + 1, hi - 1)
             } else {
-                lo = mid;
+                lo + (hi - lo) / 2
+            };
+            let d = sdiff(target, self.system_time(x));
+            if d <= 0 {
+                hi = x;
+                guess = x.saturating_sub(d.unsigned_abs().max(1));
+            } else {
+                lo = x;
+                guess = x.saturating_add(d as u64);
             }
         }
         Some(hi)
@@ -715,13 +725,23 @@ impl Dc {
 
     /// Advance to global time `t`.
     pub fn advance(&mut self, regs: &mut [u8], t: u64) -> DcEvents {
-        // Fast path (the common case: no SYNC edge in (t_done, t], nothing pending): the
-        // shadow and the register file are already in step (every change since the last
-        // publication was published), so catching up, refreshing the status and
-        // republishing would change nothing. `next_cache` is the exact global time of the
-        // next edge (system time is monotonic and only re-anchored by writes, which
-        // refresh it), or it is stale-early after `before_read`/`after_read` processed an
-        // edge, in which case the slow path below runs.
+        if self.advance_quiet(t) {
+            return DcEvents::default();
+        }
+        self.advance_slow(regs, t)
+    }
+
+    /// The fast path of [`advance`](Self::advance): `true` when it moved to `t` with no
+    /// SYNC edge to process and nothing pending (then nothing but the time changed).
+    ///
+    /// This is the common case: no SYNC edge in (t_done, t], nothing pending. The shadow
+    /// and the register file are already in step (every change since the last publication
+    /// was published), so catching up, refreshing the status and republishing would change
+    /// nothing. `next_cache` is the exact global time of the next edge (system time is
+    /// monotonic and only re-anchored by writes, which refresh it), or it is stale-early
+    /// after `before_read`/`after_read` processed an edge, in which case the slow path runs.
+    #[inline(always)]
+    pub(crate) fn advance_quiet(&mut self, t: u64) -> bool {
         if self.inited
             && self.pending.sync0.is_none()
             && self.pending.sync1.is_none()
@@ -731,12 +751,26 @@ impl Dc {
             }
         {
             self.t_done = self.t_done.max(t);
-            return DcEvents::default();
+            return true;
         }
+        false
+    }
+
+    /// The rest of [`advance`](Self::advance) (after [`advance_quiet`](Self::advance_quiet)
+    /// said no).
+    pub(crate) fn advance_slow(&mut self, regs: &mut [u8], t: u64) -> DcEvents {
+        let was_inited = self.inited;
         self.ensure_init(regs);
         self.catch_up(t);
         self.update_status();
-        self.publish(regs);
+        if was_inited {
+            // Shadow and register file were in step (every change is published when it is
+            // made); catching up changes only the SYNC unit, which `update_status` shows in
+            // 0x0984..0x099F.
+            self.publish_range(regs, 0x0984, 0x09A0);
+        } else {
+            self.publish(regs);
+        }
         self.refresh_next();
         core::mem::take(&mut self.pending)
     }
@@ -779,6 +813,21 @@ impl Dc {
             }
         }
         v
+    }
+
+    /// `(ecat_event_bits(), al_event_bits())` in one pass (the ESC core asks for both).
+    #[inline]
+    pub(crate) fn event_bits(&self) -> (u16, u32) {
+        let ctrl = self.shadow[0x80];
+        let latched0 = self.shadow[0xAE] & 0x03 != 0;
+        let latched1 = self.shadow[0xAF] & 0x03 != 0;
+        let pdi0 = ctrl & 0x10 != 0;
+        let pdi1 = ctrl & 0x20 != 0;
+        let al = (((latched0 && pdi0) || (latched1 && pdi1)) as u32) << 1
+            | ((self.shadow[0x8E] & 1) as u32) << 2
+            | ((self.shadow[0x8F] & 1) as u32) << 3;
+        let ecat = ((latched0 && !pdi0) || (latched1 && !pdi1)) as u16;
+        (ecat, al)
     }
 
     /// LATCH input `n` (0 or 1) changes to `level` at global time `t`.
@@ -918,6 +967,13 @@ impl Dc {
     /// Process all SYNC edges up to global time `t`.
     fn catch_up(&mut self, t: u64) {
         let t = t.max(self.t_done);
+        // `next_cache` is the global time of the next edge, or stale-early (at or before
+        // `t_done`) after an edge was processed here; either way an edge in (t_done, t]
+        // means `t >= next_cache`.
+        if self.pending_free_until(t) {
+            self.t_done = t;
+            return;
+        }
         let mut guard = 0u32;
         while let Some((x, kind)) = self.next_edge() {
             let Some(g) = self.global_at(x, self.t_done) else {
@@ -1001,6 +1057,16 @@ impl Dc {
         }
     }
 
+    /// No SYNC edge can fall in (t_done, t]: `t` is before the cached next edge, or the
+    /// unit is off and has none.
+    #[inline(always)]
+    fn pending_free_until(&self, t: u64) -> bool {
+        match self.next_cache {
+            Some(n) => t < n,
+            None => !self.sync.active,
+        }
+    }
+
     fn refresh_next(&mut self) {
         self.next_cache = match self.next_edge() {
             Some((x, _)) => self.global_at(x, self.t_done),
@@ -1077,6 +1143,91 @@ fn rd32(regs: &[u8], a: usize) -> u32 {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn event_bits_match_the_separate_queries() {
+        let mut dc = Dc::new(ClockConfig::default());
+        for v in 0..=u16::MAX {
+            dc.shadow[0x80] = (v as u8 & 0x03) << 4;
+            dc.shadow[0xAE] = (v >> 2) as u8 & 0x07;
+            dc.shadow[0xAF] = (v >> 5) as u8 & 0x07;
+            dc.shadow[0x8E] = (v >> 8) as u8 & 0x03;
+            dc.shadow[0x8F] = (v >> 10) as u8 & 0x03;
+            assert_eq!(dc.event_bits(), (dc.ecat_event_bits(), dc.al_event_bits()));
+        }
+    }
+
+    /// The former pure bisection of `global_at_sys`, kept as the reference.
+    fn global_at_sys_bisect(dc: &Dc, target: u64, from: u64) -> Option<u64> {
+        let d0 = sdiff(target, dc.system_time(from));
+        if d0 <= 0 {
+            return Some(from);
+        }
+        if d0 > (1i64 << 62) {
+            return None;
+        }
+        let mut lo = from;
+        let mut hi = from.checked_add(d0 as u64)?;
+        loop {
+            let d = sdiff(target, dc.system_time(hi));
+            if d <= 0 {
+                break;
+            }
+            lo = hi;
+            hi = hi.checked_add(d as u64)?;
+        }
+        while hi - lo > 1 {
+            let mid = lo + (hi - lo) / 2;
+            if sdiff(target, dc.system_time(mid)) <= 0 {
+                hi = mid;
+            } else {
+                lo = mid;
+            }
+        }
+        Some(hi)
+    }
+
+    #[test]
+    fn global_at_sys_matches_bisection() {
+        let mut x = 0x9E37_79B9_7F4A_7C15u64;
+        let mut rnd = move || {
+            x ^= x << 13;
+            x ^= x >> 7;
+            x ^= x << 17;
+            x
+        };
+        for _ in 0..20_000 {
+            let drift_ppm = match rnd() % 4 {
+                0 => 0.0,
+                1 => (rnd() % 201) as f64 - 100.0,
+                2 => ((rnd() % 20_001) as f64 - 10_000.0) / 1.0,
+                _ => ((rnd() % 2_000_001) as f64 - 1_000_000.0) / 1000.0,
+            };
+            let mut dc = Dc::new(ClockConfig {
+                drift_ppm,
+                start_offset_ns: rnd() % (1 << 40),
+            });
+            let t0 = rnd() % (1 << 36);
+            let rate = (rnd() % (2 * MAX_RATE_Q as u64 + 1)) as i64 - MAX_RATE_Q;
+            dc.set_rate(t0, rate);
+            dc.offset = rnd();
+            let from = t0 + rnd() % 1_000_000;
+            let span = match rnd() % 3 {
+                0 => rnd() % 100,
+                1 => rnd() % 1_000_000,
+                _ => rnd() % (1 << 34),
+            };
+            let target = dc
+                .system_time(from)
+                .wrapping_add(span)
+                .wrapping_sub(rnd() % 8);
+            assert_eq!(
+                dc.global_at_sys(target, from),
+                global_at_sys_bisect(&dc, target, from),
+                "drift {drift_ppm} rate {rate} from {from} span {span}"
+            );
+        }
+    }
 
     #[test]
     fn drift_matches_128_bit_formula() {

@@ -16,6 +16,7 @@
 use alloc::vec;
 use alloc::vec::Vec;
 use core::mem::take;
+use core::sync::atomic::{AtomicU64, AtomicU8, Ordering};
 
 use oxicat_wire::{Command, DatagramMut};
 
@@ -173,9 +174,77 @@ pub(crate) fn copy_small(d: &mut [u8], s: &[u8]) {
     }
 }
 
+/// Memo of the `&self` queries the segment makes after every time step: the event
+/// requests ([`Esc::compute_events`], for `irq_line`, `al_event_request`,
+/// `ecat_event_request`) and [`Esc::next_event`]. Between two state changes their answers
+/// cannot change. Cleared on entry to every `&mut self` entry point (only `advance` keeps
+/// it when neither the DC unit nor a watchdog changed anything). Atomics (relaxed: plain
+/// loads and stores) rather than `Cell` so that `Esc` stays `Sync`.
+#[derive(Debug, Default)]
+struct QueryMemo {
+    /// Bit 48 set = valid; bits 0..32 AL event request, 32..48 ECAT event request.
+    events: AtomicU64,
+    /// `next_event()`: 0 unknown, 1 `None`, 2 `Some(next)`.
+    next_state: AtomicU8,
+    next: AtomicU64,
+}
+
+impl QueryMemo {
+    const VALID: u64 = 1 << 48;
+
+    #[inline(always)]
+    fn events(&self) -> Option<(u16, u32)> {
+        let v = self.events.load(Ordering::Relaxed);
+        (v & Self::VALID != 0).then_some(((v >> 32) as u16, v as u32))
+    }
+
+    #[inline(always)]
+    fn set_events(&self, e: u16, a: u32) {
+        self.events
+            .store(Self::VALID | (e as u64) << 32 | a as u64, Ordering::Relaxed);
+    }
+
+    #[inline(always)]
+    fn next_event(&self) -> Option<Option<u64>> {
+        match self.next_state.load(Ordering::Relaxed) {
+            0 => None,
+            1 => Some(None),
+            _ => Some(Some(self.next.load(Ordering::Relaxed))),
+        }
+    }
+
+    #[inline(always)]
+    fn set_next_event(&self, n: Option<u64>) {
+        if let Some(n) = n {
+            self.next.store(n, Ordering::Relaxed);
+            self.next_state.store(2, Ordering::Relaxed);
+        } else {
+            self.next_state.store(1, Ordering::Relaxed);
+        }
+    }
+
+    #[inline(always)]
+    fn clear(&mut self) {
+        *self.events.get_mut() = 0;
+        *self.next_state.get_mut() = 0;
+    }
+}
+
+impl Clone for QueryMemo {
+    fn clone(&self) -> Self {
+        Self {
+            events: AtomicU64::new(self.events.load(Ordering::Relaxed)),
+            next_state: AtomicU8::new(self.next_state.load(Ordering::Relaxed)),
+            next: AtomicU64::new(self.next.load(Ordering::Relaxed)),
+        }
+    }
+}
+
 /// A software EtherCAT Slave Controller.
 #[derive(Debug, Clone)]
 pub struct Esc {
+    /// See [`QueryMemo`].
+    memo: QueryMemo,
     /// Hot state of the fused LRW path.
     fused: Fused,
     /// Test switch: never take the fused path (differential tests).
@@ -277,6 +346,7 @@ impl Esc {
         let mut dc = Dc::new(cfg.clock);
         dc.reset(&mut mem[..REG_END]);
         let mut esc = Self {
+            memo: QueryMemo::default(),
             fused: Fused::default(),
             fused_disabled: false,
             #[cfg(test)]
@@ -387,6 +457,7 @@ impl Esc {
     /// Physical link state of a port (set by the simulator's topology / fault hooks).
     /// Power-on default: port 0 up, the others down.
     pub fn set_link(&mut self, port: u8, up: bool) {
+        self.memo.clear();
         if port > 3 {
             return;
         }
@@ -404,6 +475,7 @@ impl Esc {
     /// port the frame leaves through or `Dropped` (circulating frame rule).
     #[inline]
     pub fn forward(&mut self, port: u8, frame: &mut [u8], t: u64, frame_ok: bool) -> Forward {
+        self.memo.clear();
         if port == 0 && frame_ok && self.fused.ok {
             self.now = t;
             self.dc.frame_arrival_port0(&mut self.mem[..REG_END], t);
@@ -1218,8 +1290,12 @@ impl Esc {
             Side::Pdi => sii::pdi_owns(&self.mem),
         };
         let old_al_ctl = self.reg16(regs::AL_CONTROL);
-        let old_activate: [u8; 16] =
-            core::array::from_fn(|i| self.mem.get(0x0806 + 8 * i).copied().unwrap_or_default());
+        // Only `write_side_effects` of a write to the SM registers looks at these.
+        let old_activate: [u8; 16] = if c < 0x0880 && e > 0x0800 {
+            core::array::from_fn(|i| self.mem.get(0x0806 + 8 * i).copied().unwrap_or_default())
+        } else {
+            [0; 16]
+        };
         let dc_ctrl = self.mem[0x0980];
         for (k, a) in (c..e).enumerate() {
             let p = self.perm[a];
@@ -1628,6 +1704,7 @@ impl Esc {
     /// Test switch: `false` forces every frame through the generic path.
     #[cfg(test)]
     pub(crate) fn set_fused_enabled(&mut self, on: bool) {
+        self.memo.clear();
         self.fused_disabled = !on;
         self.rebuild_fused();
     }
@@ -1687,7 +1764,7 @@ impl Esc {
             }
         }
         // DC: latch events, SYNC0/SYNC1 status gated by PDI config 0x0151 bits 3/7.
-        let mut dca = self.dc.al_event_bits();
+        let (dce, mut dca) = self.dc.event_bits();
         let gate = self.mem[0x0151];
         if gate & 0x08 == 0 {
             dca &= !(1 << 2);
@@ -1696,7 +1773,7 @@ impl Esc {
             dca &= !(1 << 3);
         }
         a |= dca;
-        e |= self.dc.ecat_event_bits();
+        e |= dce;
         (e, a)
     }
 
@@ -1745,7 +1822,13 @@ impl Esc {
         if t > self.now {
             self.now = t;
         }
-        let dce = self.dc.advance(&mut self.mem[..REG_END], t);
+        let dce = if self.dc.advance_quiet(t) {
+            crate::dc::DcEvents::default()
+        } else {
+            // The DC unit may change its status bits (AL event request bits 2/3).
+            self.memo.clear();
+            self.dc.advance_slow(&mut self.mem[..REG_END], t)
+        };
         let mut ev = EscEvents {
             sync0: dce.sync0,
             sync1: dce.sync1,
@@ -1760,6 +1843,7 @@ impl Esc {
                 self.al_ev |= AL_EV_WD;
                 self.dout = 0;
                 ev.pd_watchdog_expired = true;
+                self.memo.clear();
             }
         }
         if let Some(d) = self.pdi_wd_deadline() {
@@ -1770,6 +1854,7 @@ impl Esc {
                 self.mem[a] = self.mem[a].saturating_add(1);
                 self.ecat_ev |= ECAT_EV_DL;
                 ev.pdi_watchdog_expired = true;
+                self.memo.clear();
             }
         }
         self.events_dirty = true;
@@ -1779,7 +1864,16 @@ impl Esc {
     /// Global time of the next SYNC edge or watchdog expiry.
     #[inline]
     pub fn next_event(&self) -> Option<u64> {
-        // The scheduler asks after every event: keep it a few loads and compares.
+        // The scheduler asks after every event and wakeup.
+        if let Some(n) = self.memo.next_event() {
+            return n;
+        }
+        let n = self.compute_next_event();
+        self.memo.set_next_event(n);
+        n
+    }
+
+    fn compute_next_event(&self) -> Option<u64> {
         let mut n = self.dc.next_event();
         if let Some(d) = self.pd_wd_deadline() {
             n = Some(n.map_or(d, |x| x.min(d)));
@@ -1801,6 +1895,7 @@ impl Esc {
     /// PDI read of `buf.len()` bytes at `addr` (SyncManager rules apply; reading AL
     /// control clears its event; reading a buffer's last byte frees it).
     pub fn pdi_read(&mut self, addr: u16, buf: &mut [u8]) -> Result<(), PdiError> {
+        self.memo.clear();
         self.pdi_range(addr, buf.len())?;
         self.pdi_access();
         self.phys_read(Side::Pdi, addr as u32, buf, false);
@@ -1810,20 +1905,32 @@ impl Esc {
     /// PDI write of `data` at `addr` (bytes the PDI may not write are ignored, as in
     /// silicon; SyncManager rules apply).
     pub fn pdi_write(&mut self, addr: u16, data: &[u8]) -> Result<(), PdiError> {
+        self.memo.clear();
         self.pdi_range(addr, data.len())?;
         self.pdi_access();
         self.phys_write(Side::Pdi, addr as u32, data, None);
         Ok(())
     }
 
+    /// [`compute_events`](Self::compute_events) through [`QueryMemo`].
+    #[inline]
+    fn events_now(&self) -> (u16, u32) {
+        if let Some(v) = self.memo.events() {
+            return v;
+        }
+        let (e, a) = self.compute_events();
+        self.memo.set_events(e, a);
+        (e, a)
+    }
+
     /// AL event request 0x0220..0x0223.
     pub fn al_event_request(&self) -> u32 {
-        self.compute_events().1
+        self.events_now().1
     }
 
     /// ECAT event request 0x0210 (what is ORed into datagram IRQ fields, before the mask).
     pub fn ecat_event_request(&self) -> u16 {
-        self.compute_events().0
+        self.events_now().0
     }
 
     /// The PDI interrupt line: AL event request & AL event mask (0x0204) != 0.
@@ -1845,6 +1952,7 @@ impl Esc {
     /// Sets the level of latch input `n` (0 or 1) from the current time on (the time of
     /// the last `advance`/`forward`).
     pub fn set_latch_input(&mut self, n: u8, level: bool) {
+        self.memo.clear();
         if let Some(l) = self.latch_inputs.get_mut(n as usize) {
             *l = level;
         }
@@ -1861,6 +1969,7 @@ impl Esc {
 
     /// Digital inputs sampled into 0x1000..0x1003 (through the SM covering 0x1000, if any).
     pub fn set_digital_inputs(&mut self, v: u32) {
+        self.memo.clear();
         let bytes = v.to_le_bytes();
         let n = self
             .active_sms

@@ -32,6 +32,22 @@ pub struct Encoder {
     edges_total: u64,
 }
 
+/// `x.floor() as i64`, bit for bit (NaN → 0, saturating outside the `i64` range), without
+/// the call to libm's `floor` that the baseline x86-64 target makes (no SSE4.1 `roundsd`):
+/// the encoder runs it twice per plant substep.
+#[inline(always)]
+fn floor_i64(x: f64) -> i64 {
+    let i = x as i64;
+    // Truncation rounds towards zero; below zero a fractional part makes it one too high.
+    // Saturated above or NaN: `i as f64 > x` is false; saturated below it is true and
+    // the subtraction saturates too.
+    if (i as f64) > x {
+        i.saturating_sub(1)
+    } else {
+        i
+    }
+}
+
 impl Encoder {
     /// Encoder zeroed at motor angle `zero_angle` [rad], unit event every `upps` edges.
     pub fn new(zero_angle: f64, upps: u32) -> Self {
@@ -96,7 +112,7 @@ impl Encoder {
     #[inline]
     fn count_at(&self, angle: f64) -> i64 {
         // Edges half a count either side of the reset angle.
-        ((angle - self.zero_angle) * (COUNTS_PER_REV / (2.0 * PI)) + 0.5).floor() as i64
+        floor_i64((angle - self.zero_angle) * (COUNTS_PER_REV / (2.0 * PI)) + 0.5)
     }
 
     /// Move the shaft from `a0` at `t0` to `a1` at `t0 + h`; records every edge crossed.
@@ -140,5 +156,51 @@ impl Encoder {
             }
         }
         self.count = c1;
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::floor_i64;
+
+    #[test]
+    fn floor_i64_matches_floor_cast() {
+        let specials = [
+            0.0,
+            -0.0,
+            0.5,
+            -0.5,
+            1.0,
+            -1.0,
+            -1.5,
+            1e300,
+            -1e300,
+            f64::NAN,
+            f64::INFINITY,
+            f64::NEG_INFINITY,
+            9.2e18,
+            -9.2e18,
+            9.3e18,
+            -9.3e18,
+            i64::MAX as f64,
+            i64::MIN as f64,
+            -4503599627370495.5,
+            4503599627370495.5,
+        ];
+        for x in specials {
+            assert_eq!(floor_i64(x), x.floor() as i64, "{x}");
+        }
+        let mut s = 0x2545_F491_4F6C_DD1Du64;
+        for _ in 0..200_000 {
+            s ^= s << 13;
+            s ^= s >> 7;
+            s ^= s << 17;
+            let x = f64::from_bits(s);
+            assert_eq!(floor_i64(x), x.floor() as i64, "{x}");
+            let y = (s as i64 as f64) * 1e-6;
+            assert_eq!(floor_i64(y), y.floor() as i64, "{y}");
+            let z = y.fract() * 1e4;
+            assert_eq!(floor_i64(z), z.floor() as i64, "{z}");
+        }
     }
 }
