@@ -1315,6 +1315,14 @@ impl Esc {
                 self.mem[a] = 0;
                 continue;
             }
+            if (0x0800..0x0880).contains(&a)
+                && (a - 0x0800) % 8 < 5
+                && old_activate[(a - 0x0800) / 8] & 1 != 0
+            {
+                // SM start, length and control: "r/(w)", written only while the
+                // SyncManager is disabled (+0x6.0 = 0) when the datagram arrives.
+                continue;
+            }
             let mut bm = bit_mask(a) & m.map_or(0xFF, |m| m[k]);
             if let Some(owner_ecat) = dc_unit_owner(a, dc_ctrl) {
                 // SYNC/latch unit registers: writable only by the side 0x0980 assigns.

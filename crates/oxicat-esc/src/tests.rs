@@ -622,3 +622,63 @@ fn copy_small_equals_copy_from_slice() {
         assert_eq!(d, s, "length {n}");
     }
 }
+
+/// (start, length, control, activate) of SM `n` as the master reads them.
+fn sm_regs(e: &mut Esc, n: u16) -> (u16, u16, u8, u8) {
+    let r = fprd(e, 0x0800 + 8 * n, 8).0;
+    (
+        u16::from_le_bytes([r[0], r[1]]),
+        u16::from_le_bytes([r[2], r[3]]),
+        r[4],
+        r[6],
+    )
+}
+
+/// SM block (start, length, control, activate) as one 8-byte register write.
+fn sm_block(start: u16, len: u16, ctrl: u8, act: u8) -> [u8; 8] {
+    let mut r = [0u8; 8];
+    r[0..2].copy_from_slice(&start.to_le_bytes());
+    r[2..4].copy_from_slice(&len.to_le_bytes());
+    r[4] = ctrl;
+    r[6] = act;
+    r
+}
+
+/// Start, length and control are "r/(w)": the master writes them only while the
+/// SyncManager is disabled (+0x6.0 = 0 when the datagram arrives). Found by the
+/// slave_stack fuzz target: a master laid an active SM3 over the AL registers.
+#[test]
+fn an_active_syncmanager_keeps_its_area() {
+    let mut e = esc();
+    sm(&mut e, 3, 0x1180, 7, 0x20, 1);
+    // The datagram still counts (the registers exist); the area stays.
+    assert_eq!(fpwr(&mut e, 0x0818, &sm_block(0x0130, 0x5B, 0x67, 1)), 1);
+    assert_eq!(sm_regs(&mut e, 3), (0x1180, 7, 0x20, 1));
+    assert_eq!(fpwr(&mut e, 0x081A, &[9]), 1);
+    assert_eq!(sm_regs(&mut e, 3), (0x1180, 7, 0x20, 1));
+    // Still SM3's buffer: the PDI writes inputs, the master reads them.
+    e.pdi_write(0x1180, &[1, 2, 3, 4, 5, 6, 7]).unwrap();
+    assert_eq!(fprd(&mut e, 0x1180, 7).0, vec![1, 2, 3, 4, 5, 6, 7]);
+}
+
+#[test]
+fn a_disabled_syncmanager_takes_a_new_area() {
+    let mut e = esc();
+    sm(&mut e, 3, 0x1180, 7, 0x20, 1);
+    // Deactivate first (as masters do), then reconfigure and activate in one write.
+    assert_eq!(fpwr(&mut e, 0x081E, &[0]), 1);
+    assert_eq!(sm_regs(&mut e, 3).3, 0);
+    assert_eq!(fpwr(&mut e, 0x0818, &sm_block(0x1200, 12, 0x20, 1)), 1);
+    assert_eq!(sm_regs(&mut e, 3), (0x1200, 12, 0x20, 1));
+    // Deactivating and moving in one write takes only the deactivation.
+    assert_eq!(fpwr(&mut e, 0x0818, &sm_block(0x1400, 4, 0x24, 0)), 1);
+    assert_eq!(sm_regs(&mut e, 3), (0x1200, 12, 0x20, 0));
+}
+
+#[test]
+fn the_pdi_cannot_move_a_syncmanager() {
+    let mut e = esc();
+    sm(&mut e, 2, 0x1100, 4, 0x64, 0);
+    let _ = e.pdi_write(0x0810, &sm_block(0x0130, 8, 0x20, 0));
+    assert_eq!(sm_regs(&mut e, 2), (0x1100, 4, 0x64, 0));
+}

@@ -177,8 +177,11 @@ impl<P: Port, A: Application<N>, const N: usize> Bench<P, A, N> {
         self.al_status()
     }
 
-    /// Configures SyncManager `n` (activated when `len` > 0).
+    /// Configures SyncManager `n` (activated when `len` > 0). As a master must, it first
+    /// deactivates the SyncManager: an ESC takes start, length and control only while the
+    /// SyncManager is disabled.
     pub fn config_sm(&mut self, n: u16, start: u16, len: u16, ctrl: u8) {
+        self.wr(0x0806 + 8 * n, &[0]);
         let mut r = [0u8; 8];
         r[0..2].copy_from_slice(&start.to_le_bytes());
         r[2..4].copy_from_slice(&len.to_le_bytes());
