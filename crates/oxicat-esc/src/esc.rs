@@ -1900,6 +1900,13 @@ impl Esc {
         }
     }
 
+    /// Whether a PDI access of `len` bytes at `addr` lies inside the implemented memory
+    /// ([`pdi_read`](Self::pdi_read) / [`pdi_write`](Self::pdi_write) refuse it otherwise);
+    /// no side effects, for a PDI that holds a write back to commit it later.
+    pub fn pdi_check(&self, addr: u16, len: usize) -> Result<(), PdiError> {
+        self.pdi_range(addr, len)
+    }
+
     /// PDI read of `buf.len()` bytes at `addr` (SyncManager rules apply; reading AL
     /// control clears its event; reading a buffer's last byte frees it).
     pub fn pdi_read(&mut self, addr: u16, buf: &mut [u8]) -> Result<(), PdiError> {

@@ -16,12 +16,18 @@
 //! firmware runs exactly as on hardware and its bus traffic is counted
 //! ([`Firmware::bus_stats`]). The stack and the application live behind a mutex shared with
 //! the [`FirmwareHandle`] a test or tool keeps to look at them between cycles.
+//!
+//! By default every handler runs in zero virtual time. [`FirmwareConfig::timing`] turns on
+//! the execution-time model of [`crate::exec_time`]: a handler takes its SPI bus time plus
+//! a configured CPU time, its ESC writes land when it ends, and events that arrive while
+//! the MCU is busy wait (or are lost) — counted in [`FirmwareHandle::timing`].
 
 use std::sync::{Arc, Mutex, MutexGuard};
 
 use oxicat_esc::{Esc, PdiError};
 use oxicat_slave::{Application, DeviceDef, InitError, Pdi, Slave};
 
+use crate::exec_time::{Cpu, ExecTiming, TimingStats, Work};
 use crate::node::{EscEvent, Node};
 use crate::pdi_path::{BusStats, Direct, PathInitError, PdiPath, PdiRoute, SpiPath};
 use crate::segment::{Segment, SlaveId, TopologyError};
@@ -36,6 +42,9 @@ pub struct FirmwareConfig {
     pub poll_period_ns: u64,
     /// Periodic timers: `(id, period in ns)`, each delivered as [`Slave::on_timer`]`(id)`.
     pub timers: Vec<(u8, u64)>,
+    /// The execution-time model ([`crate::exec_time`]); `None` (the default): handlers
+    /// run in zero virtual time.
+    pub timing: Option<ExecTiming>,
 }
 
 impl Default for FirmwareConfig {
@@ -43,6 +52,7 @@ impl Default for FirmwareConfig {
         Self {
             poll_period_ns: DEFAULT_POLL_PERIOD_NS,
             timers: Vec::new(),
+            timing: None,
         }
     }
 }
@@ -57,6 +67,12 @@ impl FirmwareConfig {
     /// Sets the main-loop period (builder style).
     pub fn poll_every(mut self, period_ns: u64) -> Self {
         self.poll_period_ns = period_ns;
+        self
+    }
+
+    /// Turns the execution-time model on (builder style).
+    pub fn timing(mut self, timing: ExecTiming) -> Self {
+        self.timing = Some(timing);
         self
     }
 }
@@ -94,6 +110,8 @@ pub struct Firmware<A, const N: usize, const M: usize, P: PdiPath = Direct> {
     next_poll: u64,
     /// `(id, period, next due time)`.
     timers: Vec<(u8, u64, u64)>,
+    /// The MCU under the execution-time model, if on.
+    cpu: Option<Cpu>,
 }
 
 impl<A, const N: usize, const M: usize, P: PdiPath> Firmware<A, N, M, P> {
@@ -112,6 +130,11 @@ impl<A, const N: usize, const M: usize, P: PdiPath> Firmware<A, N, M, P> {
     pub fn reset_bus_stats(&self) {
         self.path.reset_bus_stats()
     }
+
+    /// What the execution-time model saw (`None` when it is off).
+    pub fn timing(&self) -> Option<TimingStats> {
+        self.cpu.as_ref().map(Cpu::stats)
+    }
 }
 
 impl<A: Application<N>, const N: usize, const M: usize, P: PdiPath> Firmware<A, N, M, P> {
@@ -123,13 +146,105 @@ impl<A: Application<N>, const N: usize, const M: usize, P: PdiPath> Firmware<A, 
     }
 
     fn next_wakeup(&self) -> u64 {
-        self.timers
-            .iter()
-            .map(|t| t.2)
-            .fold(self.next_poll, u64::min)
+        let first_timer = self.timers.iter().map(|t| t.2).min();
+        match &self.cpu {
+            None => first_timer.map_or(self.next_poll, |t| t.min(self.next_poll)),
+            Some(cpu) => {
+                let mut w = cpu.next_end().unwrap_or(u64::MAX);
+                if cpu.isr_free() {
+                    w = w.min(first_timer.unwrap_or(u64::MAX));
+                }
+                if cpu.idle() {
+                    w = w.min(self.next_poll);
+                }
+                w
+            }
+        }
     }
 
-    fn event(&mut self, esc: &mut Esc, ev: EscEvent) {
+    /// Under the execution-time model: an ESC event at `t`.
+    fn timed_event(&mut self, esc: &mut Esc, ev: EscEvent, t: u64) {
+        let work = match ev {
+            EscEvent::Irq => Work::Irq,
+            EscEvent::Sync0 => Work::Sync0,
+            EscEvent::Sync1 => Work::Sync1,
+            EscEvent::PdWatchdog | EscEvent::PdiWatchdog => return,
+        };
+        if let Some(cpu) = self.cpu.as_mut() {
+            cpu.retire(esc, t);
+            cpu.raise(work, t);
+        }
+        self.dispatch(esc, t);
+    }
+
+    /// Under the execution-time model: lands finished handlers' writes and starts whatever
+    /// may run at `t` (pending interrupts, due timers, then the main loop).
+    fn dispatch(&mut self, esc: &mut Esc, t: u64) {
+        loop {
+            let Self {
+                slave,
+                app,
+                path,
+                cpu,
+                counters,
+                timers,
+                ..
+            } = self;
+            let Some(cpu) = cpu.as_mut() else {
+                return;
+            };
+            cpu.retire(esc, t);
+            if cpu.isr_free() {
+                if let Some((work, arrival)) = cpu.take_pending() {
+                    let r = cpu.run(path, esc, work, arrival, t, |path, esc| match work {
+                        Work::Sync0 => {
+                            counters.sync0 += 1;
+                            path.with_pdi(esc, |pdi| slave.on_sync0(pdi, app))
+                        }
+                        Work::Sync1 => {
+                            counters.sync1 += 1;
+                            path.with_pdi(esc, |pdi| slave.on_sync1(pdi, app))
+                        }
+                        _ => {
+                            counters.irqs += 1;
+                            path.with_pdi(esc, |pdi| slave.on_pdi_irq(pdi, app))
+                        }
+                    });
+                    self.note(r);
+                    continue;
+                }
+                let due = (0..timers.len())
+                    .filter(|&k| timers[k].2 <= t)
+                    .min_by_key(|&k| timers[k].2);
+                if let Some(k) = due {
+                    let (id, period, at) = timers[k];
+                    counters.timers += 1;
+                    cpu.run(path, esc, Work::Timer, at, t, |_, _| {
+                        slave.on_timer(id, app)
+                    });
+                    cpu.lose(Work::Timer, (t - at) / period);
+                    timers[k].2 = next_after(at, period, t);
+                    continue;
+                }
+            }
+            if cpu.idle() && self.next_poll <= t {
+                let at = self.next_poll;
+                counters.polls += 1;
+                let r = cpu.run(path, esc, Work::Poll, at, t, |path, esc| {
+                    path.with_pdi(esc, |pdi| slave.poll(pdi, app))
+                });
+                self.next_poll = next_after(at, self.poll_period, t);
+                self.note(r);
+                continue;
+            }
+            return;
+        }
+    }
+
+    fn event(&mut self, esc: &mut Esc, ev: EscEvent, t: u64) {
+        if self.cpu.is_some() {
+            return self.timed_event(esc, ev, t);
+        }
         let Self {
             slave, app, path, ..
         } = self;
@@ -153,6 +268,9 @@ impl<A: Application<N>, const N: usize, const M: usize, P: PdiPath> Firmware<A, 
     }
 
     fn wakeup(&mut self, esc: &mut Esc, t: u64) {
+        if self.cpu.is_some() {
+            return self.dispatch(esc, t);
+        }
         for k in 0..self.timers.len() {
             let (id, period, due) = self.timers[k];
             if due <= t {
@@ -211,6 +329,12 @@ impl<A, const N: usize, const M: usize, P: PdiPath> FirmwareHandle<A, N, M, P> {
     pub fn bus_stats(&self) -> Option<BusStats> {
         self.lock().bus_stats()
     }
+
+    /// What the execution-time model saw (`None` when it is off): events delayed and lost,
+    /// busy and response times per kind of work.
+    pub fn timing(&self) -> Option<TimingStats> {
+        self.lock().timing()
+    }
 }
 
 /// A [`Node`] running firmware on its ESC; see the module documentation.
@@ -260,6 +384,7 @@ impl<A: Application<N> + Send + 'static, const N: usize, const M: usize, P: PdiP
                 .iter()
                 .map(|&(id, p)| (id, p.max(1), start_ns.saturating_add(p.max(1))))
                 .collect(),
+            cpu: config.timing.map(Cpu::new),
         };
         let inner = Arc::new(Mutex::new(fw));
         Ok((Self(inner.clone()), FirmwareHandle(inner)))
@@ -273,8 +398,8 @@ impl<A: Application<N> + Send + 'static, const N: usize, const M: usize, P: PdiP
 impl<A: Application<N> + Send + 'static, const N: usize, const M: usize, P: PdiPath> Node<Esc>
     for FirmwareNode<A, N, M, P>
 {
-    fn on_event(&mut self, esc: &mut Esc, ev: EscEvent, _t: u64) {
-        self.lock().event(esc, ev);
+    fn on_event(&mut self, esc: &mut Esc, ev: EscEvent, t: u64) {
+        self.lock().event(esc, ev, t);
     }
 
     fn next_wakeup(&self) -> Option<u64> {

@@ -45,6 +45,17 @@
 //! [`attach_leg`] gives the firmware the software ESC as its `Pdi`; [`attach_leg_routed`]
 //! can put a LAN9252 or ET1100 driver over the simulated SPI in between
 //! ([`crate::pdi_path`]), with the node's SPI traffic counted ([`LegRig::bus_stats`]).
+//!
+//! # Execution time (opt-in)
+//!
+//! With [`RigConfig::timing`] set, the node runs under the execution-time model of
+//! [`crate::exec_time`]: the SYNC0 handler takes its SPI bus time (+ CPU time), its writes
+//! (the inputs in SM3) land when it ends, and an interrupt arriving while the MCU is busy
+//! waits or is lost ([`LegRig::timing`]). The joint-loop tick is a timer interrupt: it
+//! waits for a running interrupt handler and then runs (plant catch-up, encoders, PIV,
+//! PWM) at the time it actually runs; the main loop is a thread-level pass interrupts
+//! preempt. The release instant `T0` is the SYNC0 edge. Off (the default), everything
+//! above holds unchanged.
 
 use std::sync::{Arc, Mutex, MutexGuard};
 
@@ -57,6 +68,7 @@ use oxicat_esc::{Esc, PdiError};
 use oxicat_plant::{Leg, LegParams, Treadmill};
 use oxicat_slave::{InitError, Pdi, Slave};
 
+use crate::exec_time::{Cpu, ExecTiming, TimingStats, Work};
 use crate::node::{EscEvent, Node};
 use crate::pdi_path::{BusStats, Direct, PathInitError, PdiPath, PdiRoute, SpiPath};
 use crate::segment::{Segment, SlaveId, TopologyError};
@@ -199,6 +211,9 @@ pub struct RigConfig {
     pub poll_every: u64,
     /// Belt speed after release.
     pub belt: BeltProfile,
+    /// The execution-time model ([`crate::exec_time`]); `None` (the default): the firmware
+    /// runs in zero virtual time.
+    pub timing: Option<ExecTiming>,
 }
 
 impl RigConfig {
@@ -212,7 +227,14 @@ impl RigConfig {
             plant_period_ns: 50_000,
             poll_every: 4,
             belt: BeltProfile::default(),
+            timing: None,
         }
+    }
+
+    /// Turns the execution-time model on (builder style).
+    pub fn timing(mut self, timing: ExecTiming) -> Self {
+        self.timing = Some(timing);
+        self
     }
 
     /// Sets the belt surface depth below the hip axis \[m\] (builder style).
@@ -318,6 +340,10 @@ pub struct LegRig<P: PdiPath = Direct> {
     /// Virtual time the plant has advanced since the release \[ns\].
     plant_ns: u64,
     path: P,
+    /// The MCU under the execution-time model, if on.
+    cpu: Option<Cpu>,
+    /// Under the model: the tick at which a main-loop pass fell due, if it has not run.
+    poll_due: Option<u64>,
 }
 
 impl<P: PdiPath> LegRig<P> {
@@ -378,10 +404,150 @@ impl<P: PdiPath> LegRig<P> {
     }
 
     fn next_wakeup(&self) -> u64 {
-        self.next_tick
+        match &self.cpu {
+            None => self.next_tick,
+            Some(cpu) => {
+                let mut w = cpu.next_end().unwrap_or(u64::MAX);
+                if cpu.isr_free() {
+                    w = w.min(self.next_tick);
+                }
+                if cpu.idle() {
+                    if let Some(p) = self.poll_due {
+                        w = w.min(p);
+                    }
+                }
+                w
+            }
+        }
+    }
+
+    /// Lets the leg go at the SYNC0 edge `t` if this SYNC0's cycle entered Operational.
+    fn maybe_release(&mut self, before: Mode, t: u64) {
+        if self.released_at.is_none()
+            && before == Mode::Configuration
+            && self.app.mode() == Mode::Operational
+        {
+            self.released_at = Some(t);
+            self.released_at_sync0 = Some(self.counters.sync0);
+            self.plant_ns = 0;
+            self.next_tick = t + JOINT_LOOP_PHASE_NS;
+        }
+    }
+
+    /// The plant catches up to `t` (in substeps of the plant period) if released.
+    fn catch_up(&mut self, t: u64) {
+        if let Some(t0) = self.released_at {
+            let since = t - t0;
+            if since > self.plant_ns {
+                let belt = self.config.belt.at(self.plant_ns as f64 * 1e-9);
+                if belt != self.plant.params().treadmill.speed {
+                    self.plant.set_belt_speed(belt);
+                }
+                self.plant.advance((since - self.plant_ns) as f64 * 1e-9);
+                self.counters.plant_ticks +=
+                    (since - self.plant_ns).div_ceil(self.config.plant_period_ns);
+                self.plant_ns = since;
+            }
+        }
+    }
+
+    /// Under the execution-time model: lands finished handlers' writes and starts whatever
+    /// may run at `t` (pending interrupts, the joint-loop tick, then the main loop).
+    fn dispatch(&mut self, esc: &mut Esc, t: u64) {
+        loop {
+            let Self {
+                slave,
+                app,
+                path,
+                cpu,
+                counters,
+                ..
+            } = self;
+            let Some(cpu) = cpu.as_mut() else {
+                return;
+            };
+            cpu.retire(esc, t);
+            if cpu.isr_free() {
+                if let Some((work, arrival)) = cpu.take_pending() {
+                    if work == Work::Sync0 {
+                        counters.sync0 += 1;
+                        let before = app.mode();
+                        let r = cpu.run(path, esc, work, arrival, t, |path, esc| {
+                            path.with_pdi(esc, |pdi| slave.on_sync0(pdi, app))
+                        });
+                        self.note(r);
+                        self.maybe_release(before, arrival);
+                    } else {
+                        let r = cpu.run(path, esc, work, arrival, t, |path, esc| {
+                            path.with_pdi(esc, |pdi| slave.on_pdi_irq(pdi, app))
+                        });
+                        self.note(r);
+                    }
+                    continue;
+                }
+                if self.next_tick <= t {
+                    let at = self.next_tick;
+                    self.catch_up(t);
+                    self.sample_encoders();
+                    let Self {
+                        slave, app, path, ..
+                    } = self;
+                    if let Some(cpu) = self.cpu.as_mut() {
+                        cpu.run(path, esc, Work::Timer, at, t, |_, _| {
+                            slave.on_timer(JOINT_LOOP_TIMER, app)
+                        });
+                        cpu.lose(Work::Timer, (t - at) / JOINT_LOOP_NS);
+                    }
+                    self.counters.joint_loops += 1;
+                    if self.released_at.is_some() {
+                        self.apply_pwm();
+                    }
+                    self.ticks += 1;
+                    if self.ticks.is_multiple_of(self.config.poll_every) && self.poll_due.is_none()
+                    {
+                        self.poll_due = Some(at);
+                    }
+                    while self.next_tick <= t {
+                        self.next_tick += JOINT_LOOP_NS;
+                    }
+                    continue;
+                }
+            }
+            let Self {
+                slave,
+                app,
+                path,
+                cpu,
+                counters,
+                ..
+            } = self;
+            let Some(cpu) = cpu.as_mut() else {
+                return;
+            };
+            if let Some(at) = self.poll_due.filter(|&p| p <= t && cpu.idle()) {
+                self.poll_due = None;
+                counters.polls += 1;
+                let r = cpu.run(path, esc, Work::Poll, at, t, |path, esc| {
+                    path.with_pdi(esc, |pdi| slave.poll(pdi, app))
+                });
+                self.note(r);
+                continue;
+            }
+            return;
+        }
     }
 
     fn event(&mut self, esc: &mut Esc, ev: EscEvent, t: u64) {
+        if let Some(cpu) = self.cpu.as_mut() {
+            let work = match ev {
+                EscEvent::Sync0 => Work::Sync0,
+                EscEvent::Irq => Work::Irq,
+                EscEvent::Sync1 | EscEvent::PdWatchdog | EscEvent::PdiWatchdog => return,
+            };
+            cpu.retire(esc, t);
+            cpu.raise(work, t);
+            return self.dispatch(esc, t);
+        }
         match ev {
             EscEvent::Sync0 => {
                 self.counters.sync0 += 1;
@@ -415,6 +581,9 @@ impl<P: PdiPath> LegRig<P> {
     /// One tick at `t`: the plant catches up to `t` (in substeps of the plant period), then
     /// the joint loop, then (every `poll_every` ticks) the main loop.
     fn wakeup(&mut self, esc: &mut Esc, t: u64) {
+        if self.cpu.is_some() {
+            return self.dispatch(esc, t);
+        }
         if t < self.next_tick {
             return;
         }
@@ -471,6 +640,11 @@ impl<P: PdiPath> LegRig<P> {
         self.path.reset_bus_stats()
     }
 
+    /// What the execution-time model saw (`None` when it is off).
+    pub fn timing(&self) -> Option<TimingStats> {
+        self.cpu.as_ref().map(Cpu::stats)
+    }
+
     /// What a tool reports about the node.
     pub fn report(&self) -> LegReport {
         LegReport {
@@ -479,6 +653,7 @@ impl<P: PdiPath> LegRig<P> {
             released_at_sync0: self.released_at_sync0,
             counters: self.counters,
             bus: self.bus_stats(),
+            timing: self.timing(),
         }
     }
 }
@@ -496,6 +671,8 @@ pub struct LegReport {
     pub counters: RigCounters,
     /// The SPI bus since the last reset (`None` on the direct path).
     pub bus: Option<BusStats>,
+    /// The execution-time model's figures (`None` when it is off).
+    pub timing: Option<TimingStats>,
 }
 
 /// Access to a rig node from outside the segment (tests, tools).
@@ -664,6 +841,8 @@ pub fn attach_leg_with<P: PdiPath>(
         next_tick: now + JOINT_LOOP_NS,
         ticks: 0,
         plant_ns: 0,
+        cpu: config.timing.map(Cpu::new),
+        poll_due: None,
         config,
         path,
     };

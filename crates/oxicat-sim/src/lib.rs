@@ -9,6 +9,7 @@
 pub mod axis_hub;
 pub mod capture;
 pub mod cia402;
+pub mod exec_time;
 pub mod firmware;
 pub mod laelaps;
 pub mod model;
@@ -18,5 +19,6 @@ pub mod pcapng;
 pub mod pdi_path;
 pub mod realtime;
 pub mod segment;
+pub mod timing_probe;
 pub mod transport;
 pub mod tue_es030;

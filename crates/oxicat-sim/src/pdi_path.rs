@@ -12,9 +12,11 @@
 //!   ([`oxicat_pdi::Lan9252`] or [`oxicat_pdi::Et1100Spi`]) as its `Pdi`, and the ESC is
 //!   swapped back. Between events the chip holds a small stand-in ESC that nobody reads.
 //!
-//! The firmware runs in zero virtual time either way: the SPI bus time is counted
-//! ([`SpiPath::bus_stats`]), not simulated, so a driver that does its job is transparent
-//! to the master.
+//! By default the firmware runs in zero virtual time either way: the SPI bus time is
+//! counted ([`SpiPath::bus_stats`]), not simulated, so a driver that does its job is
+//! transparent to the master. The opt-in execution-time model ([`crate::exec_time`])
+//! turns the bus time into virtual time; it needs a path that can hold the firmware's ESC
+//! writes back ([`PdiPath::hold_writes`]: the SPI paths can, the direct path cannot).
 
 use core::convert::Infallible;
 
@@ -23,7 +25,7 @@ use oxicat_pdi::sim::{Et1100Model, Handle, Lan9252Model, PinKind, SimPin, SimSpi
 use oxicat_pdi::{Et1100Config, Et1100Spi, Lan9252, Lan9252Config, Pins};
 use oxicat_slave::{InitError, IrqLines, Pdi};
 
-pub use oxicat_pdi::sim::{BusConfig, BusStats};
+pub use oxicat_pdi::sim::{BusConfig, BusStats, HeldWrite};
 pub use oxicat_pdi::{AddressMode, ReadMode};
 
 /// What a driver over the simulated SPI reports (the simulated bus itself never fails).
@@ -188,6 +190,23 @@ pub trait PdiPath: Send + 'static {
 
     /// Clears the bus counters.
     fn reset_bus_stats(&self) {}
+
+    /// Whether this path can hold the firmware's ESC writes back
+    /// ([`hold_writes`](Self::hold_writes)); the execution-time model
+    /// ([`crate::exec_time`]) needs it.
+    fn can_hold_writes(&self) -> bool {
+        false
+    }
+
+    /// Starts (`true`) or stops holding the firmware's ESC writes back: while held they
+    /// are accepted (and read back by the firmware) but reach the ESC only when someone
+    /// takes them ([`take_held_writes`](Self::take_held_writes)) and commits them.
+    fn hold_writes(&mut self, _on: bool) {}
+
+    /// The writes held back so far, in order.
+    fn take_held_writes(&mut self) -> Vec<HeldWrite> {
+        Vec::new()
+    }
 
     /// A start-up error of the stack on this path, as a [`PathInitError`].
     fn init_error(e: InitError<<Self::Pdi as Pdi>::Error>) -> PathInitError;
@@ -382,6 +401,24 @@ impl PdiPath for SpiPath {
         match &self.chip {
             Chip::Lan9252(h) => h.reset_stats(),
             Chip::Et1100(h) => h.reset_stats(),
+        }
+    }
+
+    fn can_hold_writes(&self) -> bool {
+        true
+    }
+
+    fn hold_writes(&mut self, on: bool) {
+        match &self.chip {
+            Chip::Lan9252(h) => h.hold_writes(on),
+            Chip::Et1100(h) => h.hold_writes(on),
+        }
+    }
+
+    fn take_held_writes(&mut self) -> Vec<HeldWrite> {
+        match &self.chip {
+            Chip::Lan9252(h) => h.take_held_writes(),
+            Chip::Et1100(h) => h.take_held_writes(),
         }
     }
 

@@ -17,12 +17,7 @@ impl Et1100Model {
     /// A chip in front of `esc` on `bus`.
     pub fn new(esc: Esc, bus: BusConfig) -> Self {
         Et1100Model {
-            core: Core {
-                esc,
-                bus,
-                stats: Default::default(),
-                fault: Fault::None,
-            },
+            core: Core::new(esc, bus),
             read_delay_ns: 240,
         }
     }
@@ -101,14 +96,14 @@ impl Model for Et1100Model {
                     self.proto_err();
                 }
                 let mut buf = vec![0u8; fetch];
-                if self.core.esc.pdi_read(addr, &mut buf).is_err() {
+                if self.core.pdi_read(addr, &mut buf).is_err() {
                     self.proto_err();
                     return miso;
                 }
                 miso[start..start + len].copy_from_slice(&buf[..len]);
             }
             cmd::WRITE => {
-                if self.core.esc.pdi_write(addr, &mosi[hdr..]).is_err() {
+                if self.core.pdi_write(addr, &mosi[hdr..]).is_err() {
                     self.proto_err();
                 }
             }

@@ -39,12 +39,7 @@ impl Lan9252Model {
     /// A chip in front of `esc` on `bus`.
     pub fn new(esc: Esc, bus: BusConfig) -> Self {
         Lan9252Model {
-            core: Core {
-                esc,
-                bus,
-                stats: Default::default(),
-                fault: Fault::None,
-            },
+            core: Core::new(esc, bus),
             irq_cfg: 0,
             int_en: 0,
             csr_data: 0,
@@ -192,13 +187,13 @@ impl Lan9252Model {
         }
         if v & reg::CSR_READ != 0 {
             let mut b = [0u8; 4];
-            if self.core.esc.pdi_read(addr, &mut b[..size]).is_err() {
+            if self.core.pdi_read(addr, &mut b[..size]).is_err() {
                 self.proto_err();
             }
             self.csr_data = u32::from_le_bytes(b);
         } else {
             let b = self.csr_data.to_le_bytes();
-            if self.core.esc.pdi_write(addr, &b[..size]).is_err() {
+            if self.core.pdi_write(addr, &b[..size]).is_err() {
                 self.proto_err();
             }
         }
@@ -209,12 +204,7 @@ impl Lan9252Model {
         let len = (self.rd_addr_len >> 16) as usize;
         let lead = (addr & 3) as usize;
         let mut b = vec![0u8; (lead + len).div_ceil(4) * 4];
-        if self
-            .core
-            .esc
-            .pdi_read(addr, &mut b[lead..lead + len])
-            .is_err()
-        {
+        if self.core.pdi_read(addr, &mut b[lead..lead + len]).is_err() {
             self.proto_err();
         }
         self.rd_fifo = b.into();
@@ -232,12 +222,7 @@ impl Lan9252Model {
             let len = (self.wr_addr_len >> 16) as usize;
             let lead = (addr & 3) as usize;
             let data = core::mem::take(&mut self.wr_buf);
-            if self
-                .core
-                .esc
-                .pdi_write(addr, &data[lead..lead + len])
-                .is_err()
-            {
+            if self.core.pdi_write(addr, &data[lead..lead + len]).is_err() {
                 self.proto_err();
             }
             self.wr_active = false;

@@ -96,6 +96,15 @@ pub enum PinKind {
     EepromLoaded,
 }
 
+/// A PDI write the chip accepted but holds back (see [`Handle::hold_writes`]).
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct HeldWrite {
+    /// ESC address.
+    pub addr: u16,
+    /// The bytes.
+    pub data: Vec<u8>,
+}
+
 /// State common to both chip models.
 pub struct Core {
     /// The software ESC behind the chip.
@@ -106,6 +115,51 @@ pub struct Core {
     pub stats: BusStats,
     /// Injected fault.
     pub fault: Fault,
+    /// While `Some`, PDI writes are held here instead of reaching the ESC.
+    pub held: Option<Vec<HeldWrite>>,
+}
+
+impl Core {
+    /// A chip core in front of `esc`.
+    pub fn new(esc: Esc, bus: BusConfig) -> Self {
+        Core {
+            esc,
+            bus,
+            stats: BusStats::default(),
+            fault: Fault::None,
+            held: None,
+        }
+    }
+
+    /// The chip reads the ESC: what the ESC answers, overlaid with the writes held back
+    /// so far (the firmware reads what it wrote).
+    pub fn pdi_read(&mut self, addr: u16, buf: &mut [u8]) -> Result<(), oxicat_esc::PdiError> {
+        self.esc.pdi_read(addr, buf)?;
+        for w in self.held.iter().flatten() {
+            let (a, b) = (usize::from(addr), usize::from(w.addr));
+            let lo = a.max(b);
+            let hi = (a + buf.len()).min(b + w.data.len());
+            if lo < hi {
+                buf[lo - a..hi - a].copy_from_slice(&w.data[lo - b..hi - b]);
+            }
+        }
+        Ok(())
+    }
+
+    /// The chip writes the ESC, or holds the write back (range-checked all the same).
+    pub fn pdi_write(&mut self, addr: u16, data: &[u8]) -> Result<(), oxicat_esc::PdiError> {
+        match self.held.as_mut() {
+            Some(h) => {
+                self.esc.pdi_check(addr, data.len())?;
+                h.push(HeldWrite {
+                    addr,
+                    data: data.to_vec(),
+                });
+                Ok(())
+            }
+            None => self.esc.pdi_write(addr, data),
+        }
+    }
 }
 
 /// A chip model: one CS-low frame in, MISO bytes out.
@@ -152,6 +206,29 @@ impl<M: Model> Handle<M> {
     /// whatever stand-in it was built with.
     pub fn swap_esc(&self, esc: &mut Esc) {
         core::mem::swap(&mut self.lock().core().esc, esc);
+    }
+    /// Starts (`true`) or stops holding the chip's PDI writes back: while held, a write
+    /// is range-checked and kept (reads see it overlaid) but does not reach the ESC until
+    /// someone takes it ([`take_held_writes`](Self::take_held_writes)) and commits it —
+    /// how a simulator makes a handler's writes land when its bus time has passed.
+    /// Stopping drops nothing: take the writes first.
+    pub fn hold_writes(&self, on: bool) {
+        let mut m = self.lock();
+        let c = m.core();
+        match (on, c.held.is_some()) {
+            (true, false) => c.held = Some(Vec::new()),
+            (false, true) => c.held = None,
+            _ => {}
+        }
+    }
+    /// The writes held back so far, in the order the chip accepted them.
+    pub fn take_held_writes(&self) -> Vec<HeldWrite> {
+        self.lock()
+            .core()
+            .held
+            .as_mut()
+            .map(core::mem::take)
+            .unwrap_or_default()
     }
     /// Counters since the last reset.
     pub fn stats(&self) -> BusStats {
