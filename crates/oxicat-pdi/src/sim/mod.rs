@@ -336,3 +336,44 @@ impl<M: Model> InputPin for SimPin<M> {
         self.is_high().map(|h| !h)
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use oxicat_esc::EscConfig;
+
+    #[test]
+    fn held_writes_are_read_back_but_reach_the_esc_only_when_committed() {
+        let h = Lan9252Model::handle(
+            Esc::new(EscConfig::lan9252(), Vec::new()),
+            BusConfig::mhz(20),
+        );
+        h.hold_writes(true);
+        h.with(|m| {
+            let c = m.core();
+            c.pdi_write(0x1400, &[1, 2, 3]).unwrap();
+            c.pdi_write(0x1401, &[9]).unwrap();
+            assert!(c.pdi_write(0xFFFF, &[0, 0]).is_err(), "range-checked");
+            let mut b = [0u8; 4];
+            c.pdi_read(0x13FF, &mut b).unwrap();
+            assert_eq!(b, [0, 1, 9, 3]);
+        });
+        let mut b = [0u8; 3];
+        h.with_esc(|e| e.pdi_read(0x1400, &mut b)).unwrap();
+        assert_eq!(b, [0, 0, 0], "not in the ESC yet");
+        let w = h.take_held_writes();
+        h.hold_writes(false);
+        assert_eq!(w.len(), 2);
+        h.with_esc(|e| {
+            for x in &w {
+                e.pdi_write(x.addr, &x.data).unwrap();
+            }
+            e.pdi_read(0x1400, &mut b).unwrap();
+        });
+        assert_eq!(b, [1, 9, 3]);
+        // Not holding: writes go straight through.
+        h.with(|m| m.core().pdi_write(0x1400, &[7]).unwrap());
+        h.with_esc(|e| e.pdi_read(0x1400, &mut b)).unwrap();
+        assert_eq!(b[0], 7);
+    }
+}
