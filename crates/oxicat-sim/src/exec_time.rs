@@ -12,7 +12,8 @@
 //!   simulated chip (the [`BusStats::ps`](crate::pdi_path::BusStats) delta over the
 //!   handler, rounded up to whole ns), `cpu` the configured CPU time of that kind of work
 //!   ([`ExecTiming::cpu`], e.g. the thesis' 1 µs application on SYNC0). On the direct path
-//!   there is no bus: only the CPU time counts.
+//!   there is no bus and no chip to hold writes back: only the CPU time counts (busy time,
+//!   pending and lost events), and the handler's writes land at its start.
 //! - **When effects land.** The handler's logic runs at its start `t`, so it reads what
 //!   the ESC holds at `t` (outputs, AL control, mailbox); its **writes are held back** by
 //!   the simulated chip ([`PdiPath::hold_writes`]; the firmware reads its own held writes
