@@ -587,19 +587,7 @@ impl<P: PdiPath> LegRig<P> {
         if t < self.next_tick {
             return;
         }
-        if let Some(t0) = self.released_at {
-            let since = t - t0;
-            if since > self.plant_ns {
-                let belt = self.config.belt.at(self.plant_ns as f64 * 1e-9);
-                if belt != self.plant.params().treadmill.speed {
-                    self.plant.set_belt_speed(belt);
-                }
-                self.plant.advance((since - self.plant_ns) as f64 * 1e-9);
-                self.counters.plant_ticks +=
-                    (since - self.plant_ns).div_ceil(self.config.plant_period_ns);
-                self.plant_ns = since;
-            }
-        }
+        self.catch_up(t);
         self.sample_encoders();
         self.slave.on_timer(JOINT_LOOP_TIMER, &mut self.app);
         self.counters.joint_loops += 1;
