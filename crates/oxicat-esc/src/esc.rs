@@ -16,7 +16,7 @@
 use alloc::vec;
 use alloc::vec::Vec;
 use core::mem::take;
-use core::sync::atomic::{AtomicU64, AtomicU8, Ordering};
+use core::sync::atomic::{AtomicU32, AtomicU8, Ordering};
 
 use oxicat_wire::{Command, DatagramMut};
 
@@ -178,64 +178,80 @@ pub(crate) fn copy_small(d: &mut [u8], s: &[u8]) {
 /// requests ([`Esc::compute_events`], for `irq_line`, `al_event_request`,
 /// `ecat_event_request`) and [`Esc::next_event`]. Between two state changes their answers
 /// cannot change. Cleared on entry to every `&mut self` entry point (only `advance` keeps
-/// it when neither the DC unit nor a watchdog changed anything). Atomics (relaxed: plain
-/// loads and stores) rather than `Cell` so that `Esc` stays `Sync`.
+/// it when neither the DC unit nor a watchdog changed anything). Atomics rather than
+/// `Cell` so that `Esc` stays `Sync`; 32-bit ones, because Cortex-M (thumbv7em) has no
+/// 64-bit atomics. Each value is published by a release store of its valid flag after its
+/// parts; concurrent `&self` writers can only store the same answer.
 #[derive(Debug, Default)]
 struct QueryMemo {
-    /// Bit 48 set = valid; bits 0..32 AL event request, 32..48 ECAT event request.
-    events: AtomicU64,
+    /// AL event request (meaningful when `ecat` has [`Self::VALID`]).
+    al: AtomicU32,
+    /// Bits 0..16 ECAT event request, bit 16 valid.
+    ecat: AtomicU32,
     /// `next_event()`: 0 unknown, 1 `None`, 2 `Some(next)`.
     next_state: AtomicU8,
-    next: AtomicU64,
+    next_lo: AtomicU32,
+    next_hi: AtomicU32,
 }
 
 impl QueryMemo {
-    const VALID: u64 = 1 << 48;
+    const VALID: u32 = 1 << 16;
 
     #[inline(always)]
     fn events(&self) -> Option<(u16, u32)> {
-        let v = self.events.load(Ordering::Relaxed);
-        (v & Self::VALID != 0).then_some(((v >> 32) as u16, v as u32))
+        let v = self.ecat.load(Ordering::Acquire);
+        (v & Self::VALID != 0).then(|| (v as u16, self.al.load(Ordering::Relaxed)))
     }
 
     #[inline(always)]
     fn set_events(&self, e: u16, a: u32) {
-        self.events
-            .store(Self::VALID | (e as u64) << 32 | a as u64, Ordering::Relaxed);
+        self.al.store(a, Ordering::Relaxed);
+        self.ecat.store(Self::VALID | e as u32, Ordering::Release);
     }
 
     #[inline(always)]
     fn next_event(&self) -> Option<Option<u64>> {
-        match self.next_state.load(Ordering::Relaxed) {
+        match self.next_state.load(Ordering::Acquire) {
             0 => None,
             1 => Some(None),
-            _ => Some(Some(self.next.load(Ordering::Relaxed))),
+            _ => {
+                let lo = self.next_lo.load(Ordering::Relaxed) as u64;
+                let hi = self.next_hi.load(Ordering::Relaxed) as u64;
+                Some(Some(hi << 32 | lo))
+            }
         }
     }
 
     #[inline(always)]
     fn set_next_event(&self, n: Option<u64>) {
         if let Some(n) = n {
-            self.next.store(n, Ordering::Relaxed);
-            self.next_state.store(2, Ordering::Relaxed);
+            self.next_lo.store(n as u32, Ordering::Relaxed);
+            self.next_hi.store((n >> 32) as u32, Ordering::Relaxed);
+            self.next_state.store(2, Ordering::Release);
         } else {
-            self.next_state.store(1, Ordering::Relaxed);
+            self.next_state.store(1, Ordering::Release);
         }
     }
 
     #[inline(always)]
     fn clear(&mut self) {
-        *self.events.get_mut() = 0;
+        *self.ecat.get_mut() = 0;
         *self.next_state.get_mut() = 0;
     }
 }
 
 impl Clone for QueryMemo {
     fn clone(&self) -> Self {
+        // Valid flags first (acquire), then the parts they publish.
+        let ecat = AtomicU32::new(self.ecat.load(Ordering::Acquire));
+        let next_state = AtomicU8::new(self.next_state.load(Ordering::Acquire));
+        let copy = |a: &AtomicU32| AtomicU32::new(a.load(Ordering::Relaxed));
         Self {
-            events: AtomicU64::new(self.events.load(Ordering::Relaxed)),
-            next_state: AtomicU8::new(self.next_state.load(Ordering::Relaxed)),
-            next: AtomicU64::new(self.next.load(Ordering::Relaxed)),
+            al: copy(&self.al),
+            ecat,
+            next_state,
+            next_lo: copy(&self.next_lo),
+            next_hi: copy(&self.next_hi),
         }
     }
 }
