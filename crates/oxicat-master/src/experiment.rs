@@ -25,6 +25,13 @@
 //! SPI traffic over the recorded cycles. The firmware runs in zero virtual time either way,
 //! so the CSV does not depend on the route.
 //!
+//! With `[pdi] exec_time` (`oxicat trot --bus-time`) the leg nodes run under the
+//! execution-time model ([`oxicat_sim::exec_time`]): a handler keeps the MCU busy for its
+//! SPI bus time + CPU time and its writes (the inputs in SM3) land at its end, and the
+//! joint-loop timer waits for a running interrupt handler. [`NodePdi::timing`] then holds
+//! what the model saw per node (SYNC0 busy and response times, delayed and lost events,
+//! whole run: bring-up included).
+//!
 //! The recorded data depend only on the scenario: the master's outputs are a function of
 //! the cycle number since step 3, each leg's physics of the time since its release, and no
 //! wall-clock time, hash order or platform formatting enters the CSV.
@@ -36,6 +43,7 @@ use ethercrab::subdevice_group::DcConfiguration;
 use ethercrab::{DcSync, MainDevice, MainDeviceConfig, PduStorage};
 use oxicat_devices::laelaps::device;
 use oxicat_esc::{Esc, EscConfig};
+use oxicat_sim::exec_time::TimingStats;
 use oxicat_sim::laelaps::{
     attach_leg_routed, chain_legs, AnyLegRigHandle, BeltProfile, LegId, RigConfig, TOWER_CHAIN,
 };
@@ -360,6 +368,8 @@ pub struct NodePdi {
     pub pdi_errors: u64,
     /// The node's SPI traffic over the recorded cycles (`None` on the direct route).
     pub spi: Option<SpiStats>,
+    /// What the execution-time model saw, whole run (`None` when it is off).
+    pub timing: Option<TimingStats>,
 }
 
 impl NodePdi {
@@ -429,7 +439,10 @@ pub fn rig_config(s: &Scenario, leg: LegId, phases: &Phases) -> RigConfig {
     c.belt = BeltProfile {
         points: vec![(a0, 0.0), (a0 + tr, v), (a1, v), (a1 + tr, 0.0)],
     };
-    c
+    match s.pdi.exec_time.timing() {
+        Some(t) => c.timing(t),
+        None => c,
+    }
 }
 
 /// Runs scenario `s`; `progress` is called every 250 recorded cycles.
@@ -505,6 +518,7 @@ pub fn run_trot(s: &Scenario, progress: &mut dyn FnMut(Progress)) -> Result<Trot
         pdi.nodes[ti] = NodePdi {
             pdi_errors: r.counters.pdi_errors,
             spi: r.bus,
+            timing: r.timing,
         };
     }
     Ok(TrotRun {

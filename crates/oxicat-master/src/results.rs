@@ -10,6 +10,7 @@ use std::fmt::Write as _;
 use oxicat_devices::laelaps::hw::{
     JOINT_RATIO_HIP, JOINT_RATIO_KNEE, L1, L2, U_MAX_HIP, U_MAX_KNEE,
 };
+use oxicat_sim::exec_time::Work;
 use oxicat_sim::laelaps::LegId;
 
 use crate::experiment::{var, TrotRun, INPUTS};
@@ -343,7 +344,55 @@ pub fn summary_markdown(run: &TrotRun, s: &Summary) -> String {
         b.release_sync0[3]
     );
     pdi_markdown(&mut o, run);
+    timing_markdown(&mut o, run);
     o
+}
+
+/// The execution-time model's figures per node (nothing when it is off).
+fn timing_markdown(o: &mut String, run: &TrotRun) {
+    let p = &run.pdi;
+    if p.nodes.iter().all(|n| n.timing.is_none()) {
+        return;
+    }
+    let cpu = run
+        .scenario
+        .pdi
+        .exec_time
+        .timing()
+        .map_or(0, |t| t.cpu_ns(Work::Sync0));
+    let _ = writeln!(
+        o,
+        "\nExecution time (`oxicat_sim::exec_time`, `{}`: SYNC0 handler = SPI bus time + {} ns \
+         CPU; its inputs land in SM3 when it ends; whole run, bring-up included). Busy = bus + \
+         CPU time of the SYNC0 handler, response = SYNC0 edge to its writes in the ESC \
+         (the input latency); the master's frame leaves {} µs after SYNC0:\n",
+        run.scenario.pdi.exec_time.name(),
+        cpu,
+        run.scenario.bus.sync0_shift_us
+    );
+    let _ = writeln!(o, "| leg | SYNC0 handlers | SYNC0 busy min / max [µs] | SYNC0 response max [µs] | SYNC0 delayed | SYNC0 lost | joint-loop ticks delayed / lost | joint-loop tick wait max [µs] |");
+    let _ = writeln!(o, "|---|---|---|---|---|---|---|---|");
+    for (li, leg) in LegId::TABLE.into_iter().enumerate() {
+        let Some(t) = p.nodes[li].timing else {
+            continue;
+        };
+        let s0 = t.get(Work::Sync0);
+        let tm = t.get(Work::Timer);
+        let _ = writeln!(
+            o,
+            "| {} | {} | {:.3} / {:.3} | {:.3} | {} | {} | {} / {} | {:.3} |",
+            leg.code(),
+            s0.runs,
+            s0.min_busy_ns as f64 / 1e3,
+            s0.max_busy_ns as f64 / 1e3,
+            s0.max_response_ns as f64 / 1e3,
+            s0.delayed,
+            s0.lost,
+            tm.delayed,
+            tm.lost,
+            tm.max_wait_ns as f64 / 1e3
+        );
+    }
 }
 
 /// The SPI table of a run whose leg nodes reached their ESCs through a chip driver (nothing
@@ -355,12 +404,16 @@ fn pdi_markdown(o: &mut String, run: &TrotRun) {
     }
     let cycles = run.bus.cycles.max(1);
     let cycle_us = f64::from(run.scenario.bus.cycle_us);
+    let how = if p.nodes.iter().any(|n| n.timing.is_some()) {
+        "simulated: under the execution-time model each handler keeps the MCU busy that long"
+    } else {
+        "counted, not simulated: the firmware runs in zero virtual time"
+    };
     let _ = writeln!(
         o,
         "\nPDI: every leg node's firmware reaches its ESC through {} (the oxicat-pdi driver over \
          the simulated chip; bus time = 8 bits per byte at SCLK + 100 ns CS per transaction, \
-         counted, not simulated: the firmware runs in zero virtual time). Per node and \
-         recorded cycle:\n",
+         {how}). Per node and recorded cycle:\n",
         p.route
     );
     let _ = writeln!(o, "| leg | SPI transactions | SPI bytes | SPI bus time [µs] | share of the {cycle_us:.0} µs cycle | PDI errors | SPI protocol errors |");

@@ -4,6 +4,7 @@
 use serde::Deserialize;
 
 use crate::MasterError;
+use oxicat_sim::exec_time::ExecTiming;
 use oxicat_sim::laelaps::LegId;
 use oxicat_sim::pdi_path::{PdiRoute, DEFAULT_SPI_MHZ};
 
@@ -57,6 +58,50 @@ impl PdiChip {
     }
 }
 
+/// Whether the leg nodes' firmware runs under the execution-time model
+/// ([`oxicat_sim::exec_time`]) — `[pdi] exec_time`, `oxicat trot --bus-time`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum ExecTime {
+    /// Firmware in zero virtual time (the default).
+    #[default]
+    Off,
+    /// A handler takes its SPI bus time, nothing for the CPU.
+    Bus,
+    /// The thesis' application: SPI bus time + 1 µs CPU per SYNC0 ([`ExecTiming::thesis`]).
+    Thesis,
+}
+
+impl ExecTime {
+    /// Parses `off`, `bus` or `thesis` (any case).
+    pub fn parse(s: &str) -> Option<Self> {
+        match s.to_ascii_lowercase().as_str() {
+            "off" => Some(ExecTime::Off),
+            "bus" => Some(ExecTime::Bus),
+            "thesis" => Some(ExecTime::Thesis),
+            _ => None,
+        }
+    }
+
+    /// `off`, `bus` or `thesis`.
+    pub fn name(self) -> &'static str {
+        match self {
+            ExecTime::Off => "off",
+            ExecTime::Bus => "bus",
+            ExecTime::Thesis => "thesis",
+        }
+    }
+
+    /// The model's settings (`None`: off).
+    pub fn timing(self) -> Option<ExecTiming> {
+        match self {
+            ExecTime::Off => None,
+            ExecTime::Bus => Some(ExecTiming::bus_only()),
+            ExecTime::Thesis => Some(ExecTiming::thesis()),
+        }
+    }
+}
+
 /// The `[pdi]` table.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize)]
 #[serde(deny_unknown_fields, default)]
@@ -65,6 +110,8 @@ pub struct PdiSettings {
     pub route: PdiChip,
     /// SPI clock \[MHz\] (1 … 100) of the driver routes.
     pub spi_mhz: u32,
+    /// Execution-time model of the leg nodes' firmware: `off` (default), `bus` or `thesis`.
+    pub exec_time: ExecTime,
 }
 
 impl Default for PdiSettings {
@@ -72,6 +119,7 @@ impl Default for PdiSettings {
         Self {
             route: PdiChip::Direct,
             spi_mhz: DEFAULT_SPI_MHZ,
+            exec_time: ExecTime::Off,
         }
     }
 }
@@ -248,6 +296,12 @@ impl Scenario {
         self
     }
 
+    /// Sets the execution-time model of every leg node (`--bus-time`).
+    pub fn with_exec_time(mut self, e: ExecTime) -> Self {
+        self.pdi.exec_time = e;
+        self
+    }
+
     /// The Table 4-1 column of `leg`.
     pub fn leg(&self, leg: LegId) -> &LegTable {
         self.legs
@@ -333,5 +387,28 @@ mod tests {
         );
         assert_eq!(PdiChip::parse("LAN9252"), Some(PdiChip::Lan9252));
         assert_eq!(PdiChip::parse("x"), None);
+    }
+
+    #[test]
+    fn exec_time_from_the_scenario() {
+        let s = Scenario::thesis();
+        assert_eq!(s.pdi.exec_time, ExecTime::Off);
+        assert_eq!(s.pdi.exec_time.timing(), None);
+        let s =
+            Scenario::parse(&DEFAULT_TOML.replace("exec_time = \"off\"", "exec_time = \"thesis\""))
+                .expect("thesis");
+        assert_eq!(s.pdi.exec_time.timing(), Some(ExecTiming::thesis()));
+        let s = DEFAULT_TOML.replace("exec_time = \"off\"", "exec_time = \"fast\"");
+        assert!(Scenario::parse(&s).is_err());
+        assert_eq!(ExecTime::parse("Bus"), Some(ExecTime::Bus));
+        assert_eq!(ExecTime::parse("on"), None);
+        assert_eq!(
+            Scenario::thesis()
+                .with_exec_time(ExecTime::Bus)
+                .pdi
+                .exec_time
+                .timing(),
+            Some(ExecTiming::bus_only())
+        );
     }
 }

@@ -3,7 +3,9 @@
 //! knee and hip track within the bound the PV loop allows; diagonal legs move in phase,
 //! the others in antiphase. The same holds with every leg node's firmware reaching its ESC
 //! through the LAN9252 or the ET1100 driver over the simulated SPI, and the CSV is the same
-//! bytes as with the software ESC as the firmware's PDI.
+//! bytes as with the software ESC as the firmware's PDI. With the execution-time model on
+//! (`[pdi] exec_time`), the trot through the LAN9252 still tracks within the same bound and
+//! loses no SYNC0, the SYNC0 handler taking the same bus + CPU time on every node.
 //!
 //! The runs are shortened (Transition_time 1 s, short stands, two trot periods) so the
 //! tests stay fast in a debug build; gains, ellipses, phases, filter and bus are Table 4-1's.
@@ -11,7 +13,8 @@
 use oxicat_devices::laelaps::hw::{U_MAX_HIP, U_MAX_KNEE};
 use oxicat_master::experiment::{run_trot, var, TrotRun};
 use oxicat_master::results::{csv, sample, steady_window, summarize, summary_markdown};
-use oxicat_master::scenario::{PdiChip, Scenario, DEFAULT_TOML};
+use oxicat_master::scenario::{ExecTime, PdiChip, Scenario, DEFAULT_TOML};
+use oxicat_sim::exec_time::{ExecTiming, Work};
 use oxicat_sim::laelaps::LegId;
 use oxicat_sim::pdi_path::PdiRoute;
 
@@ -119,6 +122,59 @@ fn lan9252_trot_is_the_direct_trot() {
 #[test]
 fn et1100_trot_is_the_direct_trot() {
     through(PdiChip::Et1100);
+}
+
+/// The trot through the LAN9252 at 20 MHz under the execution-time model (thesis: SPI bus
+/// time + 1 µs CPU per SYNC0): OP reached, no WKC or PDI errors, no SYNC0 lost on any node,
+/// the SYNC0 handler as long on every node (bus time > 0 plus the CPU time), its inputs in
+/// SM3 before the master's frame, and tracking and gait within the zero-time run's bounds.
+#[test]
+fn lan9252_trot_with_bus_time() {
+    let s = short(1.0)
+        .with_pdi(PdiChip::Lan9252)
+        .with_exec_time(ExecTime::Thesis);
+    assert_eq!(s.pdi.spi_mhz, 20);
+    assert_eq!(s.pdi.exec_time.timing(), Some(ExecTiming::thesis()));
+    let r = run(&s);
+    assert_eq!(r.pdi.route, PdiRoute::lan9252(20));
+    // OP reached: the trajectory clocks were released and ran; no WKC errors (in the helper).
+    tracks_and_keeps_the_gait(&s, &r);
+
+    let cycles = r.bus.cycles;
+    let first = r.pdi.nodes[0].timing.expect("timing statistics");
+    let busy = first.get(Work::Sync0).max_busy_ns;
+    let cpu = ExecTiming::thesis().cpu_ns(Work::Sync0);
+    for (li, n) in r.pdi.nodes.iter().enumerate() {
+        assert_eq!(n.pdi_errors, 0, "leg {li}");
+        assert_eq!(n.spi.expect("SPI statistics").protocol_errors, 0);
+        let t = n.timing.expect("timing statistics");
+        let s0 = t.get(Work::Sync0);
+        eprintln!("leg {li}: SYNC0 {s0:?}");
+        assert!(s0.runs >= cycles, "leg {li}: {s0:?}");
+        assert_eq!(s0.lost, 0, "leg {li}: {s0:?}");
+        assert_eq!(s0.delayed, 0, "leg {li}: {s0:?}");
+        // Same handler, same chip, same clock: the same busy time on every node, bus time
+        // plus the CPU time.
+        assert_eq!(s0.max_busy_ns, busy, "leg {li}");
+        assert_eq!(
+            s0.min_busy_ns,
+            first.get(Work::Sync0).min_busy_ns,
+            "leg {li}"
+        );
+        assert!(s0.max_busy_ns > cpu, "leg {li}: {s0:?}");
+        // Not delayed: the response is the busy time, and the inputs are in SM3 before the
+        // master's frame reads them.
+        assert_eq!(s0.max_response_ns, s0.max_busy_ns, "leg {li}");
+        assert!(
+            s0.max_response_ns < u64::from(s.bus.sync0_shift_us) * 1000,
+            "leg {li}: {s0:?}"
+        );
+    }
+    let md = summary_markdown(&r, &summarize(&r));
+    assert!(md.contains("SYNC0 busy min / max"), "{md}");
+    let off = run(&short(0.2).with_pdi(PdiChip::Lan9252));
+    assert!(off.pdi.nodes.iter().all(|n| n.timing.is_none()));
+    assert!(!summary_markdown(&off, &summarize(&off)).contains("SYNC0 busy"));
 }
 
 /// WKC, SYNC0, release, tracking bound and gait of a run.

@@ -8,8 +8,9 @@ use std::time::Instant;
 use indicatif::{ProgressBar, ProgressStyle};
 use oxicat_master::experiment::run_trot;
 use oxicat_master::results::{csv, summarize, summary_markdown};
-use oxicat_master::scenario::{PdiChip, Scenario};
+use oxicat_master::scenario::{ExecTime, PdiChip, Scenario};
 use oxicat_master::{plot, MasterError};
+use oxicat_sim::exec_time::Work;
 
 /// Arguments of `oxicat trot`.
 #[derive(Debug, clap::Args)]
@@ -29,6 +30,12 @@ pub struct TrotArgs {
     /// SPI clock in MHz for `--pdi lan9252|et1100` (default: the scenario's `[pdi] spi_mhz`).
     #[arg(long, value_name = "MHZ")]
     pub spi_mhz: Option<u32>,
+    /// Run the leg nodes' firmware under the execution-time model (`exec_time = "thesis"`):
+    /// each handler keeps the MCU busy for its SPI bus time + 1 µs CPU per SYNC0, and its
+    /// writes (the inputs) land when it ends; reports SYNC0 busy/response time and
+    /// delayed/lost SYNC0s per node (default: the scenario's `[pdi] exec_time`, off).
+    #[arg(long)]
+    pub bus_time: bool,
     /// Output directory.
     #[arg(long, default_value = "out/trot")]
     pub out: PathBuf,
@@ -62,6 +69,9 @@ pub fn run(a: TrotArgs) -> Result<String, MasterError> {
             return Err(MasterError::Usage(format!("--spi-mhz {m}: 1…100")));
         }
         s.pdi.spi_mhz = m;
+    }
+    if a.bus_time {
+        s = s.with_exec_time(ExecTime::Thesis);
     }
     std::fs::create_dir_all(&a.out).map_err(|e| MasterError::Io(a.out.display().to_string(), e))?;
     let bar = if a.quiet {
@@ -111,6 +121,7 @@ pub fn run(a: TrotArgs) -> Result<String, MasterError> {
     if let Some(line) = spi_line(&run) {
         md.push_str(&line);
     }
+    md.push_str(&timing_lines(&run));
     md.push_str(&format!(
         "Wrote {} files to {} in {:.2} s.\n",
         files.len(),
@@ -144,4 +155,51 @@ fn spi_line(run: &oxicat_master::experiment::TrotRun) -> Option<String> {
         "PDI {}: {range} µs of SPI bus time per {} µs cycle per node; {errors} PDI errors.\n",
         run.pdi.route, run.scenario.bus.cycle_us
     ))
+}
+
+/// One line per node on the SYNC0 handler under the execution-time model (nothing when it is
+/// off).
+fn timing_lines(run: &oxicat_master::experiment::TrotRun) -> String {
+    let mut out = String::new();
+    for (leg, n) in oxicat_sim::laelaps::LegId::TABLE.iter().zip(&run.pdi.nodes) {
+        let Some(t) = n.timing else { continue };
+        let s0 = t.get(Work::Sync0);
+        out.push_str(&format!(
+            "Exec time {} ({}): SYNC0 busy max {:.3} µs, response max {:.3} µs, {} SYNC0s: {} \
+             delayed, {} lost.\n",
+            leg.code(),
+            run.scenario.pdi.exec_time.name(),
+            s0.max_busy_ns as f64 / 1e3,
+            s0.max_response_ns as f64 / 1e3,
+            s0.runs,
+            s0.delayed,
+            s0.lost
+        ));
+    }
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use clap::Parser;
+
+    use crate::{Cli, Command};
+
+    fn trot(args: &[&str]) -> super::TrotArgs {
+        let mut v = vec!["oxicat", "trot"];
+        v.extend_from_slice(args);
+        match Cli::try_parse_from(v).expect("parses").command {
+            Command::Trot(a) => a,
+            c => panic!("{c:?}"),
+        }
+    }
+
+    #[test]
+    fn bus_time_is_opt_in() {
+        assert!(!trot(&[]).bus_time);
+        assert!(!trot(&["--pdi", "lan9252"]).bus_time);
+        let a = trot(&["--pdi", "lan9252", "--bus-time"]);
+        assert!(a.bus_time);
+        assert_eq!(a.pdi.as_deref(), Some("lan9252"));
+    }
 }
