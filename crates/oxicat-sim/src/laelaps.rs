@@ -64,9 +64,9 @@ use oxicat_devices::laelaps::{
     self, device, CaptureConfig, EncoderIn, Joint, LegNode, Mode, PwmCommand, PwmOut, QepSample,
     Side, JOINT_LOOP_TIMER,
 };
-use oxicat_esc::{Esc, PdiError};
+use oxicat_esc::Esc;
 use oxicat_plant::{Leg, LegParams, Treadmill};
-use oxicat_slave::{InitError, Pdi, Slave};
+use oxicat_slave::{Pdi, Slave};
 
 use crate::exec_time::{Cpu, ExecTiming, TimingStats, Work};
 use crate::node::{EscEvent, Node};
@@ -729,37 +729,9 @@ impl<P: PdiPath> Node<Esc> for LegRigNode<P> {
     }
 }
 
-/// Why a tower could not be put on the segment.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum RigError {
-    /// No such ESC.
-    Topology(TopologyError),
-    /// The slave stack refused to start.
-    Init(InitError<PdiError>),
-    /// The chip driver, or the stack through it, did not start.
-    Path(PathInitError),
-}
-
-impl From<PathInitError> for RigError {
-    fn from(e: PathInitError) -> Self {
-        match e {
-            PathInitError::Direct(e) => RigError::Init(e),
-            e => RigError::Path(e),
-        }
-    }
-}
-
-impl core::fmt::Display for RigError {
-    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
-        match self {
-            Self::Topology(e) => write!(f, "{e}"),
-            Self::Init(e) => write!(f, "the leg node's stack did not start: {e:?}"),
-            Self::Path(e) => write!(f, "the leg node: {e}"),
-        }
-    }
-}
-
-impl std::error::Error for RigError {}
+/// Why a tower could not be put on the segment: the same reasons as for any hosted
+/// firmware.
+pub type RigError = crate::firmware::AttachError;
 
 /// Boots the leg-node firmware for `leg` (its side's build) on ESC `id` and attaches it with
 /// the leg's plant; the leg is held at its reset pose (encoders zeroed there) until the node

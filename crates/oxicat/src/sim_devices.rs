@@ -142,15 +142,9 @@ fn leg_of(k: usize) -> oxicat_sim::laelaps::LegId {
 }
 
 fn attach_laelaps_leg(segment: &mut Segment, id: SlaveId, k: usize) -> Result<(), AttachError> {
-    use oxicat_sim::laelaps::{attach_leg, RigConfig, RigError};
+    use oxicat_sim::laelaps::{attach_leg, RigConfig};
     let leg = leg_of(k);
-    attach_leg(segment, id, leg, RigConfig::laelaps(leg))
-        .map(drop)
-        .map_err(|e| match e {
-            RigError::Topology(t) => AttachError::Topology(t),
-            RigError::Init(i) => AttachError::Init(i),
-            RigError::Path(p) => AttachError::Path(p),
-        })
+    attach_leg(segment, id, leg, RigConfig::laelaps(leg)).map(drop)
 }
 
 mod demo {
