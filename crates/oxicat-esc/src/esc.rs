@@ -22,7 +22,7 @@ use oxicat_wire::{Command, DatagramMut};
 
 use crate::config::{DcSupport, EscConfig};
 use crate::dc::Dc;
-use crate::fmmu::{get_bit, set_bit, Fmmu};
+use crate::fmmu::{get_bit, set_bit, Fmmu, Overlap};
 use crate::regs::{self, PERMISSIONS, P_CLEAR, P_ECAT, P_IMPL, P_PDI};
 use crate::sii;
 use crate::sm::{Side, Sm, CTRL_WD_TRIGGER};
@@ -969,37 +969,22 @@ impl Esc {
     }
 
     fn fmmu_read(&mut self, f: &Fmmu, addr: u32, data: &mut [u8]) -> bool {
-        let ds = addr as u64;
-        let de = ds + data.len() as u64;
-        if f.aligned {
-            let x0 = ds.max(f.log_start as u64);
-            let x1 = de.min(f.log_end);
-            if x0 >= x1 {
-                return false;
+        let (n, dbit, p0) = match f.overlap(addr, data.len()) {
+            Overlap::None => return false,
+            Overlap::WholeSm { sm, at } => {
+                return self.sm_read_whole(sm, &mut data[at..at + f.len as usize])
             }
-            if let (Some(i), true) = (f.sm, x0 == f.log_start as u64 && x1 == f.log_end) {
-                let o = (x0 - ds) as usize;
-                return self.sm_read_whole(i as usize, &mut data[o..o + f.len as usize]);
+            Overlap::Bytes { phys, d0, d1 } => {
+                return self.phys_read(Side::Ecat, phys, &mut data[d0..d1], false)
             }
-            let phys = f.phys_start as u32 + (x0 - f.log_start as u64) as u32;
-            let out = &mut data[(x0 - ds) as usize..(x1 - ds) as usize];
-            return self.phys_read(Side::Ecat, phys, out, false);
-        }
-        let b0 = f.log_bit_start.max(ds * 8);
-        let b1 = f.log_bit_end.min(de * 8);
-        if b0 >= b1 {
-            return false;
-        }
-        let n = (b1 - b0) as usize;
-        let p0 = f.phys_bit_start as usize + (b0 - f.log_bit_start) as usize;
-        let pb0 = p0 / 8;
-        let pb1 = (p0 + n - 1) / 8;
+            Overlap::Bits { n, dbit, pbit0 } => (n, dbit, pbit0),
+        };
+        let (pb0, pb1) = (p0 / 8, (p0 + n - 1) / 8);
         let mut tmp = take(&mut self.scratch_bits);
         tmp.clear();
         tmp.resize(pb1 - pb0 + 1, 0);
         let ok = self.phys_read(Side::Ecat, pb0 as u32, &mut tmp, false);
         if ok {
-            let dbit = (b0 - ds * 8) as usize;
             let pbit = p0 % 8;
             for i in 0..n {
                 set_bit(data, dbit + i, get_bit(&tmp, pbit + i));
@@ -1010,38 +995,23 @@ impl Esc {
     }
 
     fn fmmu_write(&mut self, f: &Fmmu, addr: u32, src: &[u8]) -> bool {
-        let ds = addr as u64;
-        let de = ds + src.len() as u64;
-        if f.aligned {
-            let x0 = ds.max(f.log_start as u64);
-            let x1 = de.min(f.log_end);
-            if x0 >= x1 {
-                return false;
+        let (n, dbit, p0) = match f.overlap(addr, src.len()) {
+            Overlap::None => return false,
+            Overlap::WholeSm { sm, at } => {
+                return self.sm_write_whole(sm, &src[at..at + f.len as usize])
             }
-            if let (Some(i), true) = (f.sm, x0 == f.log_start as u64 && x1 == f.log_end) {
-                let o = (x0 - ds) as usize;
-                return self.sm_write_whole(i as usize, &src[o..o + f.len as usize]);
+            Overlap::Bytes { phys, d0, d1 } => {
+                return self.phys_write(Side::Ecat, phys, &src[d0..d1], None)
             }
-            let phys = f.phys_start as u32 + (x0 - f.log_start as u64) as u32;
-            let inp = &src[(x0 - ds) as usize..(x1 - ds) as usize];
-            return self.phys_write(Side::Ecat, phys, inp, None);
-        }
-        let b0 = f.log_bit_start.max(ds * 8);
-        let b1 = f.log_bit_end.min(de * 8);
-        if b0 >= b1 {
-            return false;
-        }
-        let n = (b1 - b0) as usize;
-        let p0 = f.phys_bit_start as usize + (b0 - f.log_bit_start) as usize;
-        let pb0 = p0 / 8;
-        let pb1 = (p0 + n - 1) / 8;
+            Overlap::Bits { n, dbit, pbit0 } => (n, dbit, pbit0),
+        };
+        let (pb0, pb1) = (p0 / 8, (p0 + n - 1) / 8);
         let mut tmp = take(&mut self.scratch_bits);
         let mut mask = take(&mut self.scratch_mask);
         tmp.clear();
         tmp.resize(pb1 - pb0 + 1, 0);
         mask.clear();
         mask.resize(pb1 - pb0 + 1, 0);
-        let dbit = (b0 - ds * 8) as usize;
         let pbit = p0 % 8;
         for i in 0..n {
             set_bit(&mut tmp, pbit + i, get_bit(src, dbit + i));

@@ -91,3 +91,74 @@ pub fn set_bit(buf: &mut [u8], i: usize, v: bool) {
         }
     }
 }
+
+/// Where a logical datagram meets one FMMU ([`Fmmu::overlap`]); offsets into the datagram.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(crate) enum Overlap {
+    /// No byte or bit in common.
+    None,
+    /// The datagram covers the FMMU's whole logical range and the FMMU maps exactly the
+    /// buffer of SyncManager `sm`: datagram bytes `at..at + len` are that buffer.
+    WholeSm {
+        /// SyncManager index.
+        sm: usize,
+        /// First datagram byte.
+        at: usize,
+    },
+    /// Byte-aligned: datagram bytes `d0..d1` are physical bytes from `phys` on.
+    Bytes {
+        /// First physical byte.
+        phys: u32,
+        /// First datagram byte.
+        d0: usize,
+        /// One past the last datagram byte.
+        d1: usize,
+    },
+    /// Bit-granular: `n` bits from datagram bit `dbit` are physical bits from `pbit0`
+    /// (absolute bit address) on.
+    Bits {
+        /// Number of bits.
+        n: usize,
+        /// First datagram bit.
+        dbit: usize,
+        /// First physical bit (byte address × 8 + bit).
+        pbit0: usize,
+    },
+}
+
+impl Fmmu {
+    /// How the logical datagram `[addr, addr + len)` meets this FMMU, the same for reads
+    /// and writes.
+    pub(crate) fn overlap(&self, addr: u32, len: usize) -> Overlap {
+        let ds = addr as u64;
+        let de = ds + len as u64;
+        if self.aligned {
+            let x0 = ds.max(self.log_start as u64);
+            let x1 = de.min(self.log_end);
+            if x0 >= x1 {
+                return Overlap::None;
+            }
+            if let (Some(sm), true) = (self.sm, x0 == self.log_start as u64 && x1 == self.log_end) {
+                return Overlap::WholeSm {
+                    sm: sm as usize,
+                    at: (x0 - ds) as usize,
+                };
+            }
+            return Overlap::Bytes {
+                phys: self.phys_start as u32 + (x0 - self.log_start as u64) as u32,
+                d0: (x0 - ds) as usize,
+                d1: (x1 - ds) as usize,
+            };
+        }
+        let b0 = self.log_bit_start.max(ds * 8);
+        let b1 = self.log_bit_end.min(de * 8);
+        if b0 >= b1 {
+            return Overlap::None;
+        }
+        Overlap::Bits {
+            n: (b1 - b0) as usize,
+            dbit: (b0 - ds * 8) as usize,
+            pbit0: self.phys_bit_start as usize + (b0 - self.log_bit_start) as usize,
+        }
+    }
+}
