@@ -810,12 +810,11 @@ async fn run_master(
         let mut seg = lock();
         seg.advance_to(t + r.extra.next_cycle_wait.as_nanos() as u64);
         // SYNC0 of the four nodes: one pulse per cycle each, and how far apart.
-        let now: Vec<Option<u64>> = (0..4).map(|i| seg.last_sync(i).0).collect();
+        let now: [Option<u64>; 4] = core::array::from_fn(|i| seg.last_sync(i).0);
         drop(seg);
         if recording {
-            let times: Vec<u64> = now.iter().flatten().copied().collect();
-            if times.len() == 4 {
-                let spread = times.iter().max().unwrap_or(&0) - times.iter().min().unwrap_or(&0);
+            if let [Some(a), Some(b), Some(c), Some(d)] = now {
+                let spread = a.max(b).max(c).max(d) - a.min(b).min(c).min(d);
                 bus.sync0_spread_max_ns = bus.sync0_spread_max_ns.max(spread);
             }
             for i in 0..4 {
@@ -829,7 +828,7 @@ async fn run_master(
                 }
             }
         }
-        last_sync.copy_from_slice(&now);
+        last_sync = now;
     }
     bus.cycles = rows.len() as u64;
     Ok((rows, bus, rec_start.elapsed()))
