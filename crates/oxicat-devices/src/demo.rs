@@ -84,19 +84,9 @@ macro_rules! demo_device {
             name: $name,
             hw_version: "LAUNCHXL-F28379D + FB1111-0141",
             sw_version: env!("CARGO_PKG_VERSION"),
-            mailbox: $crate::__slave::MailboxDef {
-                rx_start: 0x1000,
-                rx_len: 128,
-                tx_start: 0x1080,
-                tx_len: 128,
-            },
+            mailbox: $crate::__slave::MailboxDef::STANDARD,
             // Bootstrap mailbox (FoE firmware download) on the standard mailbox's memory.
-            boot_mailbox: Some($crate::__slave::MailboxDef {
-                rx_start: 0x1000,
-                rx_len: 128,
-                tx_start: 0x1080,
-                tx_len: 128,
-            }),
+            boot_mailbox: Some($crate::__slave::MailboxDef::STANDARD),
             sm2_start: 0x1100,
             sm3_start: 0x1400,
             objects: OBJECTS,

@@ -31,6 +31,16 @@ pub struct MailboxDef {
     pub tx_len: u16,
 }
 
+impl MailboxDef {
+    /// The usual layout: 128-byte mailboxes at 0x1000 (SM0) and 0x1080 (SM1).
+    pub const STANDARD: MailboxDef = MailboxDef {
+        rx_start: 0x1000,
+        rx_len: 128,
+        tx_start: 0x1080,
+        tx_len: 128,
+    };
+}
+
 /// One entry of a PDO mapping: object index, subindex and bit length (index 0 = gap).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct PdoEntry {
@@ -189,12 +199,7 @@ impl DeviceDef {
         name: "",
         hw_version: "",
         sw_version: "",
-        mailbox: MailboxDef {
-            rx_start: 0x1000,
-            rx_len: 128,
-            tx_start: 0x1080,
-            tx_len: 128,
-        },
+        mailbox: MailboxDef::STANDARD,
         boot_mailbox: None,
         sm2_start: 0x1100,
         sm3_start: 0x1180,

@@ -358,12 +358,7 @@ pub static DEF: DeviceDef = DeviceDef {
     name: "CiA402 joint drive",
     hw_version: "BLDC joint, 20 kHz current loop",
     sw_version: env!("CARGO_PKG_VERSION"),
-    mailbox: MailboxDef {
-        rx_start: 0x1000,
-        rx_len: 128,
-        tx_start: 0x1080,
-        tx_len: 128,
-    },
+    mailbox: MailboxDef::STANDARD,
     boot_mailbox: None,
     sm2_start: 0x1100,
     sm3_start: 0x1180,

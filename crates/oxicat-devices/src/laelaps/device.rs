@@ -121,12 +121,7 @@ const fn def(name: &'static str) -> DeviceDef {
         name,
         hw_version: "LAUNCHXL-F28379D + FB1111-0141",
         sw_version: env!("CARGO_PKG_VERSION"),
-        mailbox: MailboxDef {
-            rx_start: 0x1000,
-            rx_len: 128,
-            tx_start: 0x1080,
-            tx_len: 128,
-        },
+        mailbox: MailboxDef::STANDARD,
         boot_mailbox: None,
         sm2_start: 0x1100,
         sm3_start: 0x1400,

@@ -328,12 +328,7 @@ pub static DEF: DeviceDef = DeviceDef {
     name: "TUeES030",
     hw_version: "TUeES030 (Spartan-6 soft core, ET1200)",
     sw_version: env!("CARGO_PKG_VERSION"),
-    mailbox: MailboxDef {
-        rx_start: 0x1000,
-        rx_len: 128,
-        tx_start: 0x1080,
-        tx_len: 128,
-    },
+    mailbox: MailboxDef::STANDARD,
     boot_mailbox: None,
     sm2_start: 0x1100,
     sm3_start: 0x1180,
