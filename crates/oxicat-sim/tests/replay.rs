@@ -183,12 +183,6 @@ fn replay_basic(name: &str) -> Replay<'_> {
     }
 }
 
-fn run(r: &Replay<'_>, bench: &mut Bench, ex: &[Exchange]) -> Stats {
-    let st = r.run(bench, ex);
-    report(r.name, &st);
-    st
-}
-
 fn assert_all_match(name: &str, st: &Stats) {
     assert!(st.total > 0, "{name}: nothing compared");
     assert_eq!(
@@ -198,84 +192,91 @@ fn assert_all_match(name: &str, st: &Stats) {
     );
 }
 
+/// Replays capture `name` against the line `slaves` builds (given the capture's exchanges,
+/// for SII images reconstructed from its EEPROM reads) and asserts that every datagram
+/// matches. `set_up` brings the bench to the capture's starting point and adds the
+/// capture's masks beyond [`std_masks`].
+fn check_capture(
+    name: &str,
+    slaves: impl FnOnce(&[Exchange]) -> Vec<SlaveSpec>,
+    set_up: impl FnOnce(&mut Bench, &mut Replay<'_>),
+) {
+    let ex = pair(&load_capture(name));
+    let mut bench = Bench::new(slaves(&ex));
+    let mut r = replay_basic(name);
+    set_up(&mut bench, &mut r);
+    let st = r.run(&mut bench, &ex);
+    report(r.name, &st);
+    assert_all_match(name, &st);
+}
+
+/// No pre-roll and no masks beyond [`std_masks`].
+fn bare(_: &mut Bench, _: &mut Replay<'_>) {}
+
 // ---------------------------------------------------------------- bare-ESC captures
+
+fn ek1100_el1004(_: &[Exchange]) -> Vec<SlaveSpec> {
+    vec![
+        spec("EK1100", et1100_ek1100(), sii("ek1100.hex"), false),
+        spec("EL1004", et1200_terminal(), el1004_sii(), false),
+    ]
+}
+
+fn ek1100_el2828_el2889(_: &[Exchange]) -> Vec<SlaveSpec> {
+    vec![
+        spec("EK1100", et1100_ek1100(), sii("ek1100.hex"), false),
+        spec("EL2828", et1200_terminal(), sii("el2828.hex"), false),
+        spec("EL2889", et1100_terminal(), sii("el2889.hex"), false),
+    ]
+}
 
 /// ethercrab's detect-slaves example: one BRD of DL status over EK1100 + EL1004.
 #[test]
 fn rs_detect_slaves_ek1100_el1004() {
-    let name = "rs-detect-slaves-ek1100-el1004.pcapng";
-    let ex = pair(&load_capture(name));
-    let mut bench = Bench::new(vec![
-        spec("EK1100", et1100_ek1100(), sii("ek1100.hex"), false),
-        spec("EL1004", et1200_terminal(), el1004_sii(), false),
-    ]);
-    let st = run(&replay_basic(name), &mut bench, &ex);
-    assert_all_match(name, &st);
+    check_capture("rs-detect-slaves-ek1100-el1004.pcapng", ek1100_el1004, bare);
 }
 
 /// ethercrab's SII example: EK1100 + 2 × EL2004, SII reads.
 #[test]
 fn rs_example_sii_el2004() {
-    let name = "rs-example-sii-el2004.pcapng";
-    let ex = pair(&load_capture(name));
-    let mut bench = Bench::new(vec![
-        spec("EK1100", et1100_ek1100(), sii("ek1100.hex"), false),
+    let el2004 = || {
         spec(
             "EL2004",
             et1200_el2004(),
             sii("el2004-eeprom-dump.bin"),
             false,
-        ),
-        spec(
-            "EL2004",
-            et1200_el2004(),
-            sii("el2004-eeprom-dump.bin"),
-            false,
-        ),
-    ]);
-    let st = run(&replay_basic(name), &mut bench, &ex);
-    assert_all_match(name, &st);
+        )
+    };
+    let slaves = |_: &[Exchange]| {
+        vec![
+            spec("EK1100", et1100_ek1100(), sii("ek1100.hex"), false),
+            el2004(),
+            el2004(),
+        ]
+    };
+    check_capture("rs-example-sii-el2004.pcapng", slaves, bare);
 }
 
 /// ethercrab bring-up to OP and cyclic LRW with EK1100 + EL2828 + EL2889.
 #[test]
 fn replay_ek1100_el2828_el2889() {
-    let name = "replay-ek1100-el2828-el2889.pcapng";
-    let ex = pair(&load_capture(name));
-    let mut bench = Bench::new(vec![
-        spec("EK1100", et1100_ek1100(), sii("ek1100.hex"), false),
-        spec("EL2828", et1200_terminal(), sii("el2828.hex"), false),
-        spec("EL2889", et1100_terminal(), sii("el2889.hex"), false),
-    ]);
-    let st = run(&replay_basic(name), &mut bench, &ex);
-    assert_all_match(name, &st);
+    check_capture(
+        "replay-ek1100-el2828-el2889.pcapng",
+        ek1100_el2828_el2889,
+        bare,
+    );
 }
 
 /// ethercrab with DC start-up on EK1100 + EL2828 + EL2889.
 #[test]
 fn replay_dc() {
-    let name = "replay-dc.pcapng";
-    let ex = pair(&load_capture(name));
-    let mut bench = Bench::new(vec![
-        spec("EK1100", et1100_ek1100(), sii("ek1100.hex"), false),
-        spec("EL2828", et1200_terminal(), sii("el2828.hex"), false),
-        spec("EL2889", et1100_terminal(), sii("el2889.hex"), false),
-    ]);
-    let st = run(&replay_basic(name), &mut bench, &ex);
-    assert_all_match(name, &st);
+    check_capture("replay-dc.pcapng", ek1100_el2828_el2889, bare);
 }
 
 /// SOEM slaveinfo-style scan of EK1100 + EL1004.
 #[test]
 fn soem_sdinfo_ek1100_el1004() {
-    let name = "soem-sdinfo-ek1100-el1004.pcapng";
-    let ex = pair(&load_capture(name));
-    let mut bench = Bench::new(vec![
-        spec("EK1100", et1100_ek1100(), sii("ek1100.hex"), false),
-        spec("EL1004", et1200_terminal(), el1004_sii(), false),
-    ]);
-    let mut r = replay_basic(name);
-    r.masks.push(Mask {
+    let bit4 = Mask {
         start: 0x0502,
         end: 0x0502,
         bits: 0x10,
@@ -283,9 +284,10 @@ fn soem_sdinfo_ek1100_el1004() {
         reason: "ET1200 SII control bit 4 (undocumented, reserved): reads 1 until frame 437, \
                  0 from frame 537 on (after SAFEOP, SM/FMMU set-up and EEPROM re-assignment); \
                  the trigger is not identified, the emulation keeps its power-on 1",
+    };
+    check_capture("soem-sdinfo-ek1100-el1004.pcapng", ek1100_el1004, |_, r| {
+        r.masks.push(bit4)
     });
-    let st = run(&r, &mut bench, &ex);
-    assert_all_match(name, &st);
 }
 
 /// TwinCAT run-time traffic (DL status, AL status, error counters) of EK1100 + EL1004.
@@ -294,22 +296,20 @@ fn soem_sdinfo_ek1100_el1004() {
 /// APWR and one BWR (not compared) brings the emulated segment to that point.
 #[test]
 fn twincat_run_ek1100_el1004() {
-    let name = "twincat-run-ek1100-el1004.pcapng";
-    let ex = pair(&load_capture(name));
-    let mut bench = Bench::new(vec![
-        spec("EK1100", et1100_ek1100(), sii("ek1100.hex"), false),
-        spec("EL1004", et1200_terminal(), el1004_sii(), false),
-    ]);
-    preroll(
-        &mut bench,
-        &[
-            (2, 0x0000, 0x0010, &[0xE9, 0x03]),
-            (2, 0xFFFF, 0x0010, &[0xEA, 0x03]),
-            (8, 0x0000, 0x0120, &[0x02, 0x00]),
-        ],
+    check_capture(
+        "twincat-run-ek1100-el1004.pcapng",
+        ek1100_el1004,
+        |bench, _| {
+            preroll(
+                bench,
+                &[
+                    (2, 0x0000, 0x0010, &[0xE9, 0x03]),
+                    (2, 0xFFFF, 0x0010, &[0xEA, 0x03]),
+                    (8, 0x0000, 0x0120, &[0x02, 0x00]),
+                ],
+            )
+        },
     );
-    let st = run(&replay_basic(name), &mut bench, &ex);
-    assert_all_match(name, &st);
 }
 
 /// Sends configuration datagrams (cmd, adp, ado, data) through the bench at t = 0.
@@ -389,54 +389,51 @@ fn replay_ek1914_segmented_upload() {
 }
 
 fn mcu_ek1914(name: &str) {
-    let ex = pair(&load_capture(name));
-    let words = sii_from_capture(&ex);
-    let mut bench = Bench::new(vec![
-        spec(
-            "EK1914",
-            et1100_ek1914(),
-            sii_image(&words[&0], &MCU_CONFIG, 2048),
-            true,
-        ),
-        spec(
-            "EL3004",
-            et1200_terminal(),
-            sii_image(&words[&1], &MCU_CONFIG, 2048),
-            true,
-        ),
-    ]);
-    let mut r = replay_basic(name);
-    firmware_masks(&mut r);
-    let st = run(&r, &mut bench, &ex);
-    assert_all_match(name, &st);
+    let slaves = |ex: &[Exchange]| {
+        let words = sii_from_capture(ex);
+        vec![
+            spec(
+                "EK1914",
+                et1100_ek1914(),
+                sii_image(&words[&0], &MCU_CONFIG, 2048),
+                true,
+            ),
+            spec(
+                "EL3004",
+                et1200_terminal(),
+                sii_image(&words[&1], &MCU_CONFIG, 2048),
+                true,
+            ),
+        ]
+    };
+    check_capture(name, slaves, |_, r| firmware_masks(r));
 }
 
 /// SOEM with one LAN9252 board running SOES.
 #[test]
 fn soem_single_lan9252() {
-    let name = "soem-single-lan9252.pcapng";
-    let ex = pair(&load_capture(name));
-    let words = sii_from_capture(&ex);
-    // 0x0140 = 0x0E89 (APRD frame 35): PDI type 0x89, ESC configuration 0x0E.
-    let mut cfg = MCU_CONFIG;
-    cfg[0] = 0x89;
-    cfg[1] = 0x0E;
-    let mut bench = Bench::new(vec![spec(
-        "LAN9252",
-        lan9252(),
-        sii_image(&words[&0], &cfg, 4096),
-        true,
-    )]);
-    // State the board kept from SOEM's previous run (it was not power-cycled): ECAT event
-    // mask 0x0200 = 0x0004, so the DL-status-change event shows in the IRQ field from
-    // frame 1 on, before this run writes 0x0200 (frame 11).
-    preroll(&mut bench, &[(8, 0x0000, 0x0200, &[0x04, 0x00])]);
-    // The SOES application had not read AL control at 8.1 ms (frames 5 and 29: the AL
-    // control "mailbox" refuses BWR 0x0120 with WKC 0) but had by 81 ms (frame 275 is
-    // accepted): its ESC polling starts in between (capture time + 1 ms offset).
-    bench.firmware_from = 1_000_000 + 20_000_000;
-    let mut r = replay_basic(name);
-    firmware_masks(&mut r);
-    let st = run(&r, &mut bench, &ex);
-    assert_all_match(name, &st);
+    let slaves = |ex: &[Exchange]| {
+        let words = sii_from_capture(ex);
+        // 0x0140 = 0x0E89 (APRD frame 35): PDI type 0x89, ESC configuration 0x0E.
+        let mut cfg = MCU_CONFIG;
+        cfg[0] = 0x89;
+        cfg[1] = 0x0E;
+        vec![spec(
+            "LAN9252",
+            lan9252(),
+            sii_image(&words[&0], &cfg, 4096),
+            true,
+        )]
+    };
+    check_capture("soem-single-lan9252.pcapng", slaves, |bench, r| {
+        // State the board kept from SOEM's previous run (it was not power-cycled): ECAT event
+        // mask 0x0200 = 0x0004, so the DL-status-change event shows in the IRQ field from
+        // frame 1 on, before this run writes 0x0200 (frame 11).
+        preroll(bench, &[(8, 0x0000, 0x0200, &[0x04, 0x00])]);
+        // The SOES application had not read AL control at 8.1 ms (frames 5 and 29: the AL
+        // control "mailbox" refuses BWR 0x0120 with WKC 0) but had by 81 ms (frame 275 is
+        // accepted): its ESC polling starts in between (capture time + 1 ms offset).
+        bench.firmware_from = 1_000_000 + 20_000_000;
+        firmware_masks(r);
+    });
 }
