@@ -15,12 +15,11 @@ mod stack_common;
 
 use std::sync::{Arc, Mutex};
 
-use ethercrab::{MainDevice, PduStorage};
+use ethercrab::PduStorage;
 use oxicat_devices::demo;
 use oxicat_esc::{Esc, EscConfig};
 use oxicat_sim::firmware::{attach_firmware, FirmwareConfig};
 use oxicat_sim::segment::Segment;
-use oxicat_sim::transport::{spawn_inprocess_with, InProcessConfig};
 use oxicat_slave::AlState;
 use stack_common::*;
 
@@ -73,18 +72,7 @@ fn run(sii: Vec<u8>, pdu: &'static Pdu) -> Seen {
     )
     .expect("firmware boots");
     let segment = Arc::new(Mutex::new(seg));
-    let (tx, rx, pdu_loop) = pdu.try_split().expect("split once");
-    let _transport = spawn_inprocess_with(
-        segment.clone(),
-        tx,
-        rx,
-        InProcessConfig {
-            frame_gap_ns: FRAME_GAP_NS,
-        },
-    )
-    .expect("transport thread");
-    let md = MainDevice::new(pdu_loop, timeouts(), config());
-    let clock = segment.lock().unwrap().clock();
+    let (md, _transport, clock) = start_master(pdu, &segment);
 
     futures_lite::future::block_on(async {
         let group = md

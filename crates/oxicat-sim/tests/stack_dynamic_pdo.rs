@@ -4,9 +4,8 @@
 
 mod stack_common;
 
-use ethercrab::{MainDevice, PduStorage};
+use ethercrab::PduStorage;
 use oxicat_sim::segment::Segment;
-use oxicat_sim::transport::{spawn_inprocess_with, InProcessConfig};
 use stack_common::*;
 use std::sync::{Arc, Mutex};
 
@@ -45,18 +44,7 @@ fn et1100_reassigned_pdos_in_preop_change_the_process_data_layout() {
 
 fn reassign<P: PdiPath>(pdu: &'static Pdu, (segment, fws): (Arc<Mutex<Segment>>, Vec<Fw<P>>)) {
     let _ = env_logger::builder().is_test(true).try_init();
-    let (tx, rx, pdu_loop) = pdu.try_split().expect("split once");
-    let _transport = spawn_inprocess_with(
-        segment.clone(),
-        tx,
-        rx,
-        InProcessConfig {
-            frame_gap_ns: FRAME_GAP_NS,
-        },
-    )
-    .expect("transport thread");
-    let md = MainDevice::new(pdu_loop, timeouts(), config());
-    let clock = segment.lock().unwrap().clock();
+    let (md, _transport, clock) = start_master(pdu, &segment);
 
     futures_lite::future::block_on(async {
         let group = md

@@ -24,9 +24,8 @@ use std::sync::{Arc, Mutex};
 use std::time::Duration;
 
 use ethercrab::subdevice_group::{CycleInfo, DcConfiguration, TxRxResponse};
-use ethercrab::{DcSync, MainDevice, PduStorage};
+use ethercrab::{DcSync, PduStorage};
 use oxicat_sim::segment::Segment;
-use oxicat_sim::transport::{spawn_inprocess_with, InProcessConfig};
 use oxicat_slave::SyncMode;
 use stack_common::*;
 
@@ -107,18 +106,7 @@ fn run_on<P: PdiPath>(
     (segment, fws): (Arc<Mutex<Segment>>, Vec<DemoHandle<P>>),
 ) {
     let _ = env_logger::builder().is_test(true).try_init();
-    let (tx, rx, pdu_loop) = pdu.try_split().expect("split once");
-    let _transport = spawn_inprocess_with(
-        segment.clone(),
-        tx,
-        rx,
-        InProcessConfig {
-            frame_gap_ns: FRAME_GAP_NS,
-        },
-    )
-    .expect("transport thread");
-    let md = MainDevice::new(pdu_loop, timeouts(), config());
-    let clock = segment.lock().unwrap().clock();
+    let (md, _transport, clock) = start_master(pdu, &segment);
     let advance_to = |t: u64| segment.lock().unwrap().advance_to(t);
 
     futures_lite::future::block_on(async {

@@ -5,9 +5,8 @@
 
 mod stack_common;
 
-use ethercrab::{MainDevice, PduStorage};
+use ethercrab::PduStorage;
 use oxicat_sim::segment::Segment;
-use oxicat_sim::transport::{spawn_inprocess_with, InProcessConfig};
 use stack_common::*;
 use std::sync::{Arc, Mutex};
 
@@ -36,18 +35,7 @@ fn watchdog<P: PdiPath>(
     (segment, fws): (Arc<Mutex<Segment>>, Vec<DemoHandle<P>>),
 ) {
     let _ = env_logger::builder().is_test(true).try_init();
-    let (tx, rx, pdu_loop) = pdu.try_split().expect("split once");
-    let _transport = spawn_inprocess_with(
-        segment.clone(),
-        tx,
-        rx,
-        InProcessConfig {
-            frame_gap_ns: FRAME_GAP_NS,
-        },
-    )
-    .expect("transport thread");
-    let md = MainDevice::new(pdu_loop, timeouts(), config());
-    let clock = segment.lock().unwrap().clock();
+    let (md, _transport, clock) = start_master(pdu, &segment);
     let al = |i: usize| {
         let mut seg = segment.lock().unwrap();
         let esc = seg.esc_mut(i).unwrap();

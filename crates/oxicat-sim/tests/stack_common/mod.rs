@@ -8,13 +8,15 @@
 #![allow(dead_code)]
 
 use std::sync::{Arc, Mutex};
+use std::thread::JoinHandle;
 
-use ethercrab::{MainDeviceConfig, Timeouts};
+use ethercrab::{MainDevice, MainDeviceConfig, PduStorage, Timeouts};
 use oxicat_esc::{Esc, EscConfig};
 use oxicat_sim::firmware::{attach_firmware_with, FirmwareConfig, FirmwareHandle};
 #[allow(unused_imports)]
 pub use oxicat_sim::pdi_path::{Direct, PathInitError, PdiPath, PdiRoute, SpiPath};
-use oxicat_sim::segment::Segment;
+use oxicat_sim::segment::{Segment, SimClock};
+use oxicat_sim::transport::{spawn_inprocess_with, InProcessConfig, Released, TransportError};
 use oxicat_slave::*;
 use oxicat_wire::sii::{
     coe_details, write_category, write_strings, CategoryType, MailboxArea, SiiConfig, SiiGeneral,
@@ -520,24 +522,25 @@ pub fn flex_segment_via(route: PdiRoute) -> (Arc<Mutex<Segment>>, Vec<Fw<SpiPath
     })
 }
 
-fn flex_segment_with<P: PdiPath>(
+/// A line of [`NODES`] ESCs configured as `esc`, each with the SII image `sii` and running
+/// `def` with the application `app(node)`, its firmware reaching the ESC through `path`.
+fn segment_with<A: Application<N> + Send + 'static, const N: usize, P: PdiPath>(
     esc: EscConfig,
+    sii: &[u8],
+    def: &'static DeviceDef,
+    app: impl Fn(usize) -> A,
     path: impl Fn(&mut Esc) -> Result<P, PathInitError>,
-) -> (Arc<Mutex<Segment>>, Vec<Fw<P>>) {
+) -> (Arc<Mutex<Segment>>, Vec<FirmwareHandle<A, N, MBX, P>>) {
     let mut seg = Segment::new();
     let mut fws = Vec::new();
     for node in 0..NODES {
-        let id = seg.add(Esc::new(esc.clone(), eeprom(&FLEX)));
-        let app = DemoApp {
-            node,
-            ..DemoApp::default()
-        };
+        let id = seg.add(Esc::new(esc.clone(), sii.to_vec()));
         fws.push(
-            attach_firmware_with::<_, IMG, MBX, P>(
+            attach_firmware_with::<_, N, MBX, P>(
                 &mut seg,
                 id,
-                &FLEX,
-                app,
+                def,
+                app(node),
                 &FirmwareConfig::default(),
                 &path,
             )
@@ -545,6 +548,17 @@ fn flex_segment_with<P: PdiPath>(
         );
     }
     (Arc::new(Mutex::new(seg)), fws)
+}
+
+fn flex_segment_with<P: PdiPath>(
+    esc: EscConfig,
+    path: impl Fn(&mut Esc) -> Result<P, PathInitError>,
+) -> (Arc<Mutex<Segment>>, Vec<Fw<P>>) {
+    let app = |node| DemoApp {
+        node,
+        ..DemoApp::default()
+    };
+    segment_with(esc, &eeprom(&FLEX), &FLEX, app, path)
 }
 
 /// ethercrab timeouts for the virtual segment (ethercrab waits in real time).
@@ -562,6 +576,32 @@ pub fn config() -> MainDeviceConfig {
 
 /// Virtual time between frames the master sends (its own processing time).
 pub const FRAME_GAP_NS: u64 = 10_000;
+
+/// The thread that carries the master's frames through the segment (dropping the handle
+/// detaches it, it does not stop it).
+pub type Transport = JoinHandle<Result<Released, TransportError>>;
+
+/// An ethercrab master on `segment`: splits `pdu`, starts the in-process transport with
+/// [`FRAME_GAP_NS`] between frames, and gives the master, the transport thread and the
+/// segment's clock.
+pub fn start_master<const N: usize, const DATA: usize>(
+    pdu: &'static PduStorage<N, DATA>,
+    segment: &Arc<Mutex<Segment>>,
+) -> (MainDevice<'static>, Transport, SimClock) {
+    let (tx, rx, pdu_loop) = pdu.try_split().expect("split once");
+    let transport = spawn_inprocess_with(
+        segment.clone(),
+        tx,
+        rx,
+        InProcessConfig {
+            frame_gap_ns: FRAME_GAP_NS,
+        },
+    )
+    .expect("transport thread");
+    let md = MainDevice::new(pdu_loop, timeouts(), config());
+    let clock = segment.lock().unwrap().clock();
+    (md, transport, clock)
+}
 
 // ------------------------------------------------------------------ the real demo device
 
@@ -656,29 +696,13 @@ fn demo_segment_with<P: PdiPath>(
     path: impl Fn(&mut Esc) -> Result<P, PathInitError>,
 ) -> (Arc<Mutex<Segment>>, Vec<DemoHandle<P>>) {
     let sii = oxicat_device::sii::generate(&demo::DEF).expect("demo SII");
-    let mut seg = Segment::new();
-    let mut fws = Vec::new();
-    for node in 0..NODES {
-        let id = seg.add(Esc::new(esc.clone(), sii.clone()));
-        let app = Probe {
-            inner: Demo::new(NoLeds, FixedButtons(buttons_of(node))),
-            seen: 0,
-            gaps: 0,
-            last: 0,
-        };
-        fws.push(
-            attach_firmware_with::<_, DEMO_IMG, MBX, P>(
-                &mut seg,
-                id,
-                &demo::DEF,
-                app,
-                &FirmwareConfig::default(),
-                &path,
-            )
-            .expect("firmware boots"),
-        );
-    }
-    (Arc::new(Mutex::new(seg)), fws)
+    let app = |node| Probe {
+        inner: Demo::new(NoLeds, FixedButtons(buttons_of(node))),
+        seen: 0,
+        gaps: 0,
+        last: 0,
+    };
+    segment_with(esc, &sii, &demo::DEF, app, path)
 }
 
 /// The demo device's RxPDO assignment.
