@@ -1,74 +1,21 @@
 //! EtherCAT state machine states and the AL status codes of ETG.1000.6 (Table 11).
 
-/// An ESM state as written to AL control (0x0120) and read from AL status (0x0130).
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum AlState {
-    /// INIT (1).
-    Init,
-    /// PRE-OPERATIONAL (2).
-    PreOp,
-    /// BOOTSTRAP (3).
-    Boot,
-    /// SAFE-OPERATIONAL (4).
-    SafeOp,
-    /// OPERATIONAL (8).
-    Op,
-}
+/// An ESM state as written to AL control (0x0120) and read from AL status (0x0130):
+/// the slave stack's type, so master and slave agree on codes and names.
+pub use oxicat_slave::AlState;
 
-impl AlState {
-    /// The 4-bit state code.
-    pub const fn code(self) -> u8 {
-        match self {
-            Self::Init => 1,
-            Self::PreOp => 2,
-            Self::Boot => 3,
-            Self::SafeOp => 4,
-            Self::Op => 8,
-        }
-    }
-
-    /// Decodes the low 4 bits of AL status.
-    pub const fn from_code(c: u8) -> Option<Self> {
-        Some(match c & 0x0F {
-            1 => Self::Init,
-            2 => Self::PreOp,
-            3 => Self::Boot,
-            4 => Self::SafeOp,
-            8 => Self::Op,
+/// Parses `INIT`, `PREOP`, `PRE-OP`, `SAFEOP`, `OP`, `BOOT` (any case) into an [`AlState`].
+pub fn parse_state(s: &str) -> Option<AlState> {
+    Some(
+        match s.to_ascii_uppercase().replace(['-', '_'], "").as_str() {
+            "INIT" | "I" => AlState::Init,
+            "PREOP" | "P" => AlState::PreOp,
+            "BOOT" | "BOOTSTRAP" | "B" => AlState::Boot,
+            "SAFEOP" | "S" => AlState::SafeOp,
+            "OP" | "O" => AlState::Op,
             _ => return None,
-        })
-    }
-
-    /// Parses `INIT`, `PREOP`, `PRE-OP`, `SAFEOP`, `OP`, `BOOT` (any case).
-    pub fn parse(s: &str) -> Option<Self> {
-        Some(
-            match s.to_ascii_uppercase().replace(['-', '_'], "").as_str() {
-                "INIT" | "I" => Self::Init,
-                "PREOP" | "P" => Self::PreOp,
-                "BOOT" | "BOOTSTRAP" | "B" => Self::Boot,
-                "SAFEOP" | "S" => Self::SafeOp,
-                "OP" | "O" => Self::Op,
-                _ => return None,
-            },
-        )
-    }
-
-    /// The IgH-style name.
-    pub const fn name(self) -> &'static str {
-        match self {
-            Self::Init => "INIT",
-            Self::PreOp => "PREOP",
-            Self::Boot => "BOOT",
-            Self::SafeOp => "SAFEOP",
-            Self::Op => "OP",
-        }
-    }
-}
-
-impl std::fmt::Display for AlState {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.write_str(self.name())
-    }
+        },
+    )
 }
 
 /// The AL status register (0x0130) and code (0x0134) of one slave.

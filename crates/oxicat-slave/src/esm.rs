@@ -43,6 +43,23 @@ impl AlState {
     pub const fn mailbox(self) -> bool {
         !matches!(self, Self::Init)
     }
+
+    /// The IgH-style name (`INIT`, `PREOP`, `BOOT`, `SAFEOP`, `OP`).
+    pub const fn name(self) -> &'static str {
+        match self {
+            Self::Init => "INIT",
+            Self::PreOp => "PREOP",
+            Self::Boot => "BOOT",
+            Self::SafeOp => "SAFEOP",
+            Self::Op => "OP",
+        }
+    }
+}
+
+impl core::fmt::Display for AlState {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        f.write_str(self.name())
+    }
 }
 
 /// An AL status code (register 0x0134), ETG.1000.6 table 11.

@@ -433,7 +433,7 @@ pub fn run(cmd: MasterCommand, out: &mut dyn Write) -> Result<(), MasterError> {
             Ok(())
         }
         MasterCommand::States { state, link, pos } => {
-            let st = AlState::parse(&state).ok_or_else(|| {
+            let st = oxicat_master::al::parse_state(&state).ok_or_else(|| {
                 MasterError::Usage(format!(
                     "unknown state {state:?}; one of INIT, PREOP, SAFEOP, OP, BOOT"
                 ))
