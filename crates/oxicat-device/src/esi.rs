@@ -35,14 +35,21 @@ pub fn escape(s: &str) -> String {
     o
 }
 
-/// A minimal indenting XML writer.
-struct Xml {
+/// A minimal indenting XML writer; also used by `oxicat-master`'s ESI of a live slave.
+pub struct Xml {
     out: String,
     stack: Vec<&'static str>,
 }
 
+impl Default for Xml {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
 impl Xml {
-    fn new() -> Self {
+    /// A document holding only the XML declaration.
+    pub fn new() -> Self {
         Self {
             out: String::from("<?xml version=\"1.0\" encoding=\"UTF-8\"?>\n"),
             stack: Vec::new(),
@@ -58,7 +65,8 @@ impl Xml {
             let _ = write!(self.out, " {k}=\"{}\"", escape(v));
         }
     }
-    fn open(&mut self, name: &'static str, attrs: &[(&str, String)]) {
+    /// Writes `<name attrs>` and indents what follows until [`close`](Self::close).
+    pub fn open(&mut self, name: &'static str, attrs: &[(&str, String)]) {
         self.indent();
         self.out.push('<');
         self.out.push_str(name);
@@ -66,36 +74,49 @@ impl Xml {
         self.out.push_str(">\n");
         self.stack.push(name);
     }
-    fn close(&mut self) {
+    /// Closes the innermost open element.
+    pub fn close(&mut self) {
         if let Some(n) = self.stack.pop() {
             self.indent();
             let _ = writeln!(self.out, "</{n}>");
         }
     }
-    fn leaf(&mut self, name: &str, attrs: &[(&str, String)], text: &str) {
+    /// Writes `<name attrs>text</name>` on one line.
+    pub fn leaf(&mut self, name: &str, attrs: &[(&str, String)], text: &str) {
         self.indent();
         self.out.push('<');
         self.out.push_str(name);
         self.attrs(attrs);
         let _ = writeln!(self.out, ">{}</{name}>", escape(text));
     }
-    fn empty(&mut self, name: &str, attrs: &[(&str, String)]) {
+    /// Writes `<name attrs/>`.
+    pub fn empty(&mut self, name: &str, attrs: &[(&str, String)]) {
         self.indent();
         self.out.push('<');
         self.out.push_str(name);
         self.attrs(attrs);
         self.out.push_str("/>\n");
     }
-    fn text(&mut self, name: &str, text: &str) {
+    /// Writes `<name>text</name>`.
+    pub fn text(&mut self, name: &str, text: &str) {
         self.leaf(name, &[], text);
+    }
+    /// Closes every open element and returns the document.
+    pub fn finish(mut self) -> String {
+        while !self.stack.is_empty() {
+            self.close();
+        }
+        self.out
     }
 }
 
-fn hx(v: u32, digits: usize) -> String {
+/// An ESI hex number: `#x` and `digits` upper-case hex digits.
+pub fn hx(v: u32, digits: usize) -> String {
     format!("#x{v:0digits$X}")
 }
 
-fn b(v: bool) -> String {
+/// An ESI boolean attribute value: `true` or `false`.
+pub fn bool_attr(v: bool) -> String {
     if v { "true" } else { "false" }.to_string()
 }
 
@@ -131,6 +152,66 @@ fn access_flags(x: &mut Xml, a: Access, pdo: PdoMapping) {
         PdoMapping::RxTx => x.text("PdoMapping", "RT"),
     }
     x.close();
+}
+
+/// What the head of an ESI names: the vendor, the device's group and its identity.
+pub struct Head<'a> {
+    /// Vendor ID.
+    pub vendor_id: u32,
+    /// Vendor name.
+    pub vendor_name: &'a str,
+    /// Group `Type` (also the device's `GroupType`).
+    pub group_type: &'a str,
+    /// Group name.
+    pub group_name: &'a str,
+    /// The device's `Physics` attribute (`YY` for two EBUS/MII ports).
+    pub physics: &'a str,
+    /// Product code.
+    pub product_code: u32,
+    /// Revision number.
+    pub revision: u32,
+    /// The device `Type` text (the order code).
+    pub order_code: &'a str,
+    /// The device name.
+    pub name: &'a str,
+}
+
+/// Opens `EtherCATInfo`, writes `Vendor` and `Descriptions/Groups`, opens `Devices/Device`
+/// and writes its `Type` and `Name`; [`Xml::finish`] closes what is left open.
+pub fn head(x: &mut Xml, h: &Head) {
+    x.open(
+        "EtherCATInfo",
+        &[
+            (
+                "xmlns:xsi",
+                "http://www.w3.org/2001/XMLSchema-instance".into(),
+            ),
+            ("xsi:noNamespaceSchemaLocation", "EtherCATInfo.xsd".into()),
+            ("Version", "1.6".into()),
+        ],
+    );
+    x.open("Vendor", &[]);
+    x.text("Id", &hx(h.vendor_id, 8));
+    x.leaf("Name", &[("LcId", "1033".into())], h.vendor_name);
+    x.close();
+    x.open("Descriptions", &[]);
+    x.open("Groups", &[]);
+    x.open("Group", &[]);
+    x.text("Type", h.group_type);
+    x.leaf("Name", &[("LcId", "1033".into())], h.group_name);
+    x.close();
+    x.close();
+    x.open("Devices", &[]);
+    x.open("Device", &[("Physics", h.physics.into())]);
+    x.leaf(
+        "Type",
+        &[
+            ("ProductCode", hx(h.product_code, 8)),
+            ("RevisionNo", hx(h.revision, 8)),
+        ],
+        h.order_code,
+    );
+    x.leaf("Name", &[("LcId", "1033".into())], h.name);
 }
 
 /// Bit offset layout of a record/array as SSC and TwinCAT lay it out: subindex 0 at 0,
@@ -342,39 +423,20 @@ pub fn generate(def: &'static DeviceDef) -> Result<String, Error> {
     let objs = objects(&od);
     let i = &def.info;
     let mut x = Xml::new();
-    x.open(
-        "EtherCATInfo",
-        &[
-            (
-                "xmlns:xsi",
-                "http://www.w3.org/2001/XMLSchema-instance".into(),
-            ),
-            ("xsi:noNamespaceSchemaLocation", "EtherCATInfo.xsd".into()),
-            ("Version", "1.6".into()),
-        ],
+    head(
+        &mut x,
+        &Head {
+            vendor_id: def.identity.vendor_id,
+            vendor_name: i.vendor_name,
+            group_type: i.group.type_name,
+            group_name: i.group.name,
+            physics: i.physics,
+            product_code: def.identity.product_code,
+            revision: def.identity.revision,
+            order_code: i.order_code,
+            name: def.name,
+        },
     );
-    x.open("Vendor", &[]);
-    x.text("Id", &hx(def.identity.vendor_id, 8));
-    x.leaf("Name", &[("LcId", "1033".into())], i.vendor_name);
-    x.close();
-    x.open("Descriptions", &[]);
-    x.open("Groups", &[]);
-    x.open("Group", &[]);
-    x.text("Type", i.group.type_name);
-    x.leaf("Name", &[("LcId", "1033".into())], i.group.name);
-    x.close();
-    x.close();
-    x.open("Devices", &[]);
-    x.open("Device", &[("Physics", i.physics.into())]);
-    x.leaf(
-        "Type",
-        &[
-            ("ProductCode", hx(def.identity.product_code, 8)),
-            ("RevisionNo", hx(def.identity.revision, 8)),
-        ],
-        i.order_code,
-    );
-    x.leaf("Name", &[("LcId", "1033".into())], def.name);
     if let Some(c) = i.description {
         x.text("Comment", c);
     }
@@ -448,12 +510,12 @@ pub fn generate(def: &'static DeviceDef) -> Result<String, Error> {
         x.empty(
             "CoE",
             &[
-                ("SdoInfo", b(cd & 0x02 != 0)),
-                ("PdoAssign", b(cd & 0x04 != 0)),
-                ("PdoConfig", b(cd & 0x08 != 0)),
-                ("PdoUpload", b(cd & 0x10 != 0)),
-                ("CompleteAccess", b(cd & 0x20 != 0)),
-                ("SegmentedSdo", b(i.coe.segmented_sdo)),
+                ("SdoInfo", bool_attr(cd & 0x02 != 0)),
+                ("PdoAssign", bool_attr(cd & 0x04 != 0)),
+                ("PdoConfig", bool_attr(cd & 0x08 != 0)),
+                ("PdoUpload", bool_attr(cd & 0x10 != 0)),
+                ("CompleteAccess", bool_attr(cd & 0x20 != 0)),
+                ("SegmentedSdo", bool_attr(i.coe.segmented_sdo)),
             ],
         );
     }
@@ -502,10 +564,7 @@ pub fn generate(def: &'static DeviceDef) -> Result<String, Error> {
         x.text("BootStrap", &hex(&v));
     }
     x.close();
-    while !x.stack.is_empty() {
-        x.close();
-    }
-    Ok(x.out)
+    Ok(x.finish())
 }
 
 // ------------------------------------------------------------------------------ parser

@@ -570,7 +570,8 @@ fn pdos(f: &mut Vec<Finding>, a: &[PdoModel], b: &[PdoModel]) {
 }
 
 /// Upper-case hex of bytes.
-pub(crate) fn hex(b: &[u8]) -> String {
+/// Bytes as upper-case hex digits without separators, as ESI `ConfigData` writes them.
+pub fn hex(b: &[u8]) -> String {
     b.iter().map(|x| format!("{x:02X}")).collect()
 }
 
