@@ -22,24 +22,24 @@ use criterion::{black_box, criterion_group, criterion_main, BenchmarkId, Criteri
 
 #[path = "common/lrw.rs"]
 mod lrw;
-use lrw::{lrw_frame, make_esc};
-use oxicat_esc::Esc;
+use lrw::{lrw_frame, Line};
 
 fn bench(c: &mut Criterion) {
     let mut g = c.benchmark_group("lrw_chain");
     for n in [1usize, 16, 256] {
-        let mut chain: Vec<Esc> = (0..n).map(|_| make_esc()).collect();
+        let mut line = Line::new(n);
         let mut frame = lrw_frame();
-        let mut t = 0u64;
+        line.check(&mut frame, 1000);
+        let mut t = 1000u64;
         g.throughput(Throughput::Elements(n as u64));
         g.bench_with_input(BenchmarkId::from_parameter(n), &n, |b, _| {
             b.iter(|| {
                 t += 1000;
-                for esc in chain.iter_mut() {
-                    black_box(esc.forward(0, black_box(&mut frame), t, true));
-                }
+                black_box(line.cycle(black_box(&mut frame), t))
             })
         });
+        // The line still answers as it should after the measured cycles.
+        line.check(&mut frame, t + 1000);
     }
     g.finish();
 }

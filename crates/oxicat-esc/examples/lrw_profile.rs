@@ -3,21 +3,23 @@
 
 #[path = "../benches/common/lrw.rs"]
 mod lrw;
-use lrw::{lrw_frame, make_esc};
-use oxicat_esc::Esc;
+use lrw::{lrw_frame, Line};
 
 fn main() {
     let mut args = std::env::args().skip(1);
     let n: usize = args.next().and_then(|a| a.parse().ok()).unwrap_or(256);
     let iters: u64 = args.next().and_then(|a| a.parse().ok()).unwrap_or(1000);
-    let mut chain: Vec<Esc> = (0..n).map(|_| make_esc()).collect();
+    let mut line = Line::new(n.max(1));
     let mut frame = lrw_frame();
-    let mut t = 0u64;
+    line.check(&mut frame, 1000);
+    let mut t = 1000u64;
     for _ in 0..iters {
         t += 1000;
-        for esc in chain.iter_mut() {
-            std::hint::black_box(esc.forward(0, std::hint::black_box(&mut frame), t, true));
-        }
+        std::hint::black_box(line.cycle(std::hint::black_box(&mut frame), t));
     }
-    println!("wkc byte {}", frame[frame.len() - 2]);
+    line.check(&mut frame, t + 1000);
+    println!(
+        "wkc {}",
+        u16::from_le_bytes([frame[frame.len() - 2], frame[frame.len() - 1]])
+    );
 }
