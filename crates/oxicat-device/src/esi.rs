@@ -417,6 +417,11 @@ fn pdo_xml(x: &mut Xml, def: &DeviceDef, tag: &'static str, p: &oxicat_slave::Pd
     x.close();
 }
 
+/// The CoE profile number of a definition: the low word of its device type 0x1000.
+pub fn profile_no(def: &DeviceDef) -> Option<u32> {
+    Some(def.device_type & 0xFFFF).filter(|p| *p != 0)
+}
+
 /// Generates the ESI XML of a definition.
 pub fn generate(def: &'static DeviceDef) -> Result<String, Error> {
     let od = OdSnapshot::new(def)?;
@@ -449,7 +454,11 @@ pub fn generate(def: &'static DeviceDef) -> Result<String, Error> {
     }
     x.text("GroupType", i.group.type_name);
     x.open("Profile", &[]);
-    x.text("ProfileNo", &i.profile_no.to_string());
+    // One source: the profile number is the low word of 0x1000 (402 for a CiA402 drive,
+    // 5001 for a modular device); a device without a profile (0) has no ProfileNo.
+    if let Some(p) = profile_no(def) {
+        x.text("ProfileNo", &p.to_string());
+    }
     x.text("AddInfo", "0");
     x.open("Dictionary", &[]);
     data_types(&mut x, &objs);
@@ -799,6 +808,9 @@ fn device(vendor_id: u32, vendor_name: Option<String>, d: Node) -> Result<Device
             config_data: parse_hex_bytes(&cd).ok_or_else(|| bad("ConfigData", cd.clone()))?,
             bootstrap,
         });
+    }
+    if let Some(p) = child(d, "Profile").and_then(|p| text_of(child(p, "ProfileNo"))) {
+        m.profile_no = Some(num_u32("Profile/ProfileNo", &p)?);
     }
     if let Some(dict) = child(d, "Profile").and_then(|p| child(p, "Dictionary")) {
         if let Some(objs) = child(dict, "Objects") {

@@ -191,6 +191,9 @@ pub struct DeviceModel {
     /// carries them: the definition all three, an ESI the `DefaultString` of its objects
     /// (what the OD serves), an SII only the name (0x1008 = its general name string).
     pub id_strings: Vec<(u16, String)>,
+    /// CoE profile number: the low word of 0x1000 for a definition, `Profile/ProfileNo` in
+    /// an ESI (SII images carry none).
+    pub profile_no: Option<u32>,
 }
 
 /// A difference between two descriptions of a device (left vs right).
@@ -198,7 +201,7 @@ pub struct DeviceModel {
 pub enum Finding {
     /// Vendor ID, product code or revision differ.
     Identity {
-        /// `vendor_id`, `product_code` or `revision`.
+        /// `vendor_id`, `product_code`, `revision` or `profile_no`.
         field: &'static str,
         /// Left value.
         left: u32,
@@ -332,6 +335,15 @@ pub fn compare(a: &DeviceModel, b: &DeviceModel) -> Vec<Finding> {
         ("group_type", &a.group_type, &b.group_type),
     ] {
         text(&mut f, field, l, r);
+    }
+    if let (Some(l), Some(r)) = (a.profile_no, b.profile_no) {
+        if l != r {
+            f.push(Finding::Identity {
+                field: "profile_no",
+                left: l,
+                right: r,
+            });
+        }
     }
     for (index, l) in &a.id_strings {
         if let Some((_, r)) = b.id_strings.iter().find(|(i, _)| i == index) {
@@ -677,6 +689,7 @@ pub fn from_def(def: &DeviceDef) -> DeviceModel {
         product_code: def.identity.product_code,
         revision: def.identity.revision,
         name: Some(def.name.to_string()),
+        profile_no: crate::esi::profile_no(def),
         id_strings: vec![
             (0x1008, def.name.to_string()),
             (0x1009, def.hw_version.to_string()),

@@ -29,3 +29,28 @@ fn cia402_definition_esi_and_sii_agree() {
         8 * device::INPUT_BYTES as u32
     );
 }
+
+#[test]
+fn esi_profile_number_is_the_low_word_of_0x1000_and_check_compares_it() {
+    let def = &oxicat_devices::cia402::DEF;
+    let xml = oxicat_device::esi::generate(def).unwrap();
+    let esi = &oxicat_device::esi::parse(&xml).unwrap()[0];
+    assert_eq!(def.device_type & 0xFFFF, 402);
+    assert_eq!(esi.profile_no, Some(402));
+    // An ESI that says 5001 for a drive whose 0x1000 says 402 is a finding.
+    let wrong = xml.replace("<ProfileNo>402</ProfileNo>", "<ProfileNo>5001</ProfileNo>");
+    assert_ne!(wrong, xml);
+    let esi = &oxicat_device::esi::parse(&wrong).unwrap()[0];
+    let f = oxicat_device::model::compare(&oxicat_device::model::from_def(def), esi);
+    assert!(
+        f.iter().any(|f| matches!(
+            f,
+            oxicat_device::model::Finding::Identity {
+                field: "profile_no",
+                left: 402,
+                right: 5001
+            }
+        )),
+        "{f:#?}"
+    );
+}

@@ -446,8 +446,6 @@ pub struct DeviceInfo {
     pub image: Option<&'static str>,
     /// Port physics, one letter per port (`Y`: MII/100BASE-TX, `K`: E-bus).
     pub physics: &'static str,
-    /// CoE profile number (ESI `Profile/ProfileNo`; 5001 generic modular device).
-    pub profile_no: u32,
     /// ESC configuration area.
     pub esc: EscConfigArea,
     /// EEPROM size in bytes (power of two, at least 256).
@@ -485,7 +483,6 @@ impl DeviceInfo {
         description: None,
         image: None,
         physics: "YY",
-        profile_no: 5001,
         esc: EscConfigArea::SPI,
         eeprom_bytes: 2048,
         sii_version: 1,
