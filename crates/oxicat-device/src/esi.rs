@@ -817,8 +817,16 @@ fn device(vendor_id: u32, vendor_name: Option<String>, d: Node) -> Result<Device
                             .collect()
                     })
                     .unwrap_or_default();
+                let index = num("Object/Index", &idx)?;
+                if (0x1008..=0x100A).contains(&index) {
+                    if let Some(v) =
+                        child(o, "Info").and_then(|i| text_of(child(i, "DefaultString")))
+                    {
+                        m.id_strings.push((index, v));
+                    }
+                }
                 m.objects.push(ObjectModel {
-                    index: num("Object/Index", &idx)?,
+                    index,
                     name: text_of(child(o, "Name")).unwrap_or_default(),
                     type_name,
                     bit_size: match text_of(child(o, "BitSize")) {

@@ -186,6 +186,11 @@ pub struct DeviceModel {
     pub eeprom: Option<EepromModel>,
     /// Dictionary objects (ESI only; empty otherwise).
     pub objects: Vec<ObjectModel>,
+    /// The identity strings a master reads over CoE, `(index, text)` for 0x1008 (name),
+    /// 0x1009 (hardware version) and 0x100A (software version), as far as the description
+    /// carries them: the definition all three, an ESI the `DefaultString` of its objects
+    /// (what the OD serves), an SII only the name (0x1008 = its general name string).
+    pub id_strings: Vec<(u16, String)>,
 }
 
 /// A difference between two descriptions of a device (left vs right).
@@ -327,6 +332,16 @@ pub fn compare(a: &DeviceModel, b: &DeviceModel) -> Vec<Finding> {
         ("group_type", &a.group_type, &b.group_type),
     ] {
         text(&mut f, field, l, r);
+    }
+    for (index, l) in &a.id_strings {
+        if let Some((_, r)) = b.id_strings.iter().find(|(i, _)| i == index) {
+            let field = match index {
+                0x1008 => "0x1008",
+                0x1009 => "0x1009",
+                _ => "0x100A",
+            };
+            text(&mut f, field, &Some(l.clone()), &Some(r.clone()));
+        }
     }
     if trim_fmmus(&a.fmmus) != trim_fmmus(&b.fmmus) {
         f.push(Finding::Fmmus {
@@ -662,6 +677,11 @@ pub fn from_def(def: &DeviceDef) -> DeviceModel {
         product_code: def.identity.product_code,
         revision: def.identity.revision,
         name: Some(def.name.to_string()),
+        id_strings: vec![
+            (0x1008, def.name.to_string()),
+            (0x1009, def.hw_version.to_string()),
+            (0x100A, def.sw_version.to_string()),
+        ],
         order_code: Some(i.order_code.to_string()),
         group_type: Some(i.group.type_name.to_string()),
         fmmus: i.fmmus.iter().map(|u| fmmu_kind(u.code())).collect(),

@@ -20,7 +20,7 @@ pub struct OdSnapshot {
 impl OdSnapshot {
     /// Builds the stack's OD for `def` (rejected definitions are an error).
     pub fn new(def: &'static DeviceDef) -> Result<Self, Error> {
-        let od = Od::<MAX_IMAGE>::new(def).map_err(|e| Error::Definition(format!("{e:?}")))?;
+        let od = Od::<MAX_IMAGE>::new(def).map_err(|e| Error::Definition(e.to_string()))?;
         Ok(Self { od: Box::new(od) })
     }
 

@@ -100,9 +100,12 @@ pub fn generate(def: &DeviceDef) -> Result<Vec<u8>, Error> {
 
     let mut st = Strings::default();
     // Category bodies first (they allocate strings), then strings go first in the image.
+    // String order as in Beckhoff's images: 1 the type (order code), then group, image and
+    // the device name. SOEM names a slave by string 1 whatever the general category says;
+    // IgH and TwinCAT by the name index.
+    let order = st.idx(info.order_code)?;
     let group = st.idx(info.group.type_name)?;
     let image = st.idx(info.image.unwrap_or(""))?;
-    let order = st.idx(info.order_code)?;
     let name = st.idx(def.name)?;
     let mut physical_port = 0u16;
     for (i, c) in info.physics.chars().take(4).enumerate() {
@@ -282,6 +285,9 @@ pub fn parse(bytes: &[u8]) -> Result<DeviceModel, Error> {
             CategoryType::General => {
                 let g = c.general()?;
                 m.name = s(g.name_idx);
+                if let Some(n) = &m.name {
+                    m.id_strings.push((0x1008, n.clone()));
+                }
                 m.order_code = s(g.order_idx);
                 m.group_type = s(g.group_idx);
                 general = Some(g);

@@ -150,7 +150,7 @@ impl<P: Pdi, const N: usize, const M: usize> Slave<P, N, M> {
     fn abort(&mut self, index: u16, sub: u8, code: Abort) {
         self.sdo = SdoState::Idle;
         let mut b = [0u8; 10];
-        if write_sdo_abort(&mut b, CoeService::SdoResponse, index, sub, code).is_ok() {
+        if write_sdo_abort(&mut b, index, sub, code).is_ok() {
             self.queue_reply(MailboxType::Coe, &b);
         }
     }

@@ -22,8 +22,8 @@ pub mod slave;
 pub use device::{DeviceDef, Identity, MailboxDef, PdoDef, PdoEntry, SyncDef, SyncMode};
 pub use esm::{AlState, AlStatusCode};
 pub use od::{
-    image_size, Access, DataType, DefaultValue, EntryDef, EntryRef, ObjectCode, ObjectDef, Od,
-    OdError, OdType, PdoMapping, Var,
+    image_size, Access, DataType, DefError, DefaultValue, EntryDef, EntryRef, ObjectCode,
+    ObjectDef, Od, OdError, OdType, PdoMapping, Var,
 };
 pub use pdi::{IrqLines, Pdi};
 pub use slave::{Application, InitError, Slave, Stats};

@@ -377,8 +377,10 @@ pub const MAX_PDOS: usize = 8;
 pub const MAX_PDO_ENTRIES: usize = 31;
 /// Maximum PDOs in one assignment object.
 pub const MAX_ASSIGN: usize = 8;
-/// Maximum length of the 0x1008/0x1009/0x100A strings.
-pub const STR_MAX: u16 = 32;
+/// Maximum length in bytes of the 0x1008/0x1009/0x100A strings (the definition's name,
+/// hardware and software version). [`Od::new`] refuses a longer one rather than serving it
+/// cut, since ESI and SII carry the whole name.
+pub const STR_MAX: u16 = 64;
 
 const U8: DataType = DataType::Unsigned8;
 const U16: DataType = DataType::Unsigned16;
@@ -749,6 +751,35 @@ pub enum DefError {
     BadEntries(u16),
     /// Too many PDOs, PDO entries or assigned PDOs, or a PDO index in the wrong range.
     BadPdo(u16),
+    /// The string of 0x1008/0x1009/0x100A (name, hardware or software version) is longer
+    /// than [`STR_MAX`] bytes.
+    StringTooLong(u16),
+}
+
+impl core::fmt::Display for DefError {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        match self {
+            Self::ImageTooSmall { needed } => {
+                write!(f, "the object image is too small: the definition needs {needed} bytes")
+            }
+            Self::BadObjectOrder(i) => write!(
+                f,
+                "object 0x{i:04X}: application objects must be at 0x2000 or above, sorted and unique"
+            ),
+            Self::BadEntries(i) => write!(
+                f,
+                "object 0x{i:04X}: entries must be in ascending subindex order"
+            ),
+            Self::BadPdo(i) => write!(
+                f,
+                "PDO 0x{i:04X}: too many PDOs, entries or assigned PDOs, or an index outside 0x1600-0x17FF / 0x1A00-0x1BFF"
+            ),
+            Self::StringTooLong(i) => write!(
+                f,
+                "the string of 0x{i:04X} is longer than the {STR_MAX} bytes the object dictionary holds"
+            ),
+        }
+    }
 }
 
 /// The object dictionary of one device: definition plus value images.
@@ -764,6 +795,15 @@ impl<const N: usize> Od<N> {
         let needed = image_size(def.objects);
         if needed > N {
             return Err(DefError::ImageTooSmall { needed });
+        }
+        for (index, text) in [
+            (0x1008, def.name),
+            (0x1009, def.hw_version),
+            (0x100A, def.sw_version),
+        ] {
+            if text.len() > STR_MAX as usize {
+                return Err(DefError::StringTooLong(index));
+            }
         }
         let mut prev: Option<u16> = None;
         for o in def.objects {

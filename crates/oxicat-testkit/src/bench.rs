@@ -309,9 +309,11 @@ impl<P: Port, A: Application<N>, const N: usize> Bench<P, A, N> {
         };
         write_sdo(&mut b, CoeService::SdoRequest, &h, [0; 4], &[]).unwrap();
         let r = self.coe(&b);
+        if let Some(code) = abort_of(&r) {
+            return Err(code);
+        }
         let s = SdoRef::parse(&r).unwrap();
         match SdoResponseCommand::from_u8(s.command).unwrap() {
-            SdoResponseCommand::Abort => Err(s.abort_code().unwrap().code()),
             SdoResponseCommand::InitiateUpload {
                 expedited: true, ..
             } => Ok(s.expedited_data().unwrap().to_vec()),
@@ -324,9 +326,11 @@ impl<P: Port, A: Application<N>, const N: usize> Bench<P, A, N> {
                     let cmd = 0x60 | if toggle { 0x10 } else { 0 };
                     write_sdo_segment(&mut b, CoeService::SdoRequest, cmd, &[]).unwrap();
                     let r = self.coe(&b);
+                    if let Some(code) = abort_of(&r) {
+                        return Err(code);
+                    }
                     let s = SdoRef::parse(&r).unwrap();
                     match SdoResponseCommand::from_u8(s.command).unwrap() {
-                        SdoResponseCommand::Abort => return Err(s.abort_code().unwrap().code()),
                         SdoResponseCommand::UploadSegment {
                             toggle: t, last, ..
                         } => {
@@ -384,9 +388,8 @@ impl<P: Port, A: Application<N>, const N: usize> Bench<P, A, N> {
             let mut toggle = false;
             let mut r = r;
             while sent < data.len() {
-                let s = SdoRef::parse(&r).unwrap();
-                if s.command == 0x80 {
-                    return Err(s.abort_code().unwrap().code());
+                if let Some(code) = abort_of(&r) {
+                    return Err(code);
                 }
                 let cap = MBX - 6 - 3;
                 let n = (data.len() - sent).min(cap);
@@ -397,8 +400,8 @@ impl<P: Port, A: Application<N>, const N: usize> Bench<P, A, N> {
                     write_sdo_segment(&mut b, CoeService::SdoRequest, cmd, &data[sent..sent + n])
                         .unwrap();
                 r = self.coe(&b[..len]);
-                let s = SdoRef::parse(&r).unwrap();
-                if s.command != 0x80 {
+                if abort_of(&r).is_none() {
+                    let s = SdoRef::parse(&r).unwrap();
                     assert_eq!(s.command, 0x20 | if toggle { 0x10 } else { 0 });
                 }
                 sent += n;
@@ -406,11 +409,31 @@ impl<P: Port, A: Application<N>, const N: usize> Bench<P, A, N> {
             }
             r
         };
+        if let Some(code) = abort_of(&resp) {
+            return Err(code);
+        }
         let s = SdoRef::parse(&resp).unwrap();
         match s.command {
-            0x80 => Err(s.abort_code().unwrap().code()),
             0x60 | 0x20 | 0x30 => Ok(()),
             c => panic!("unexpected response {c:#x}"),
         }
     }
+}
+
+/// The abort code of an SDO abort transfer, recognised as SOEM and the ETG.1000.6 state
+/// machine do: command 0x80 under CoE service 2 (SDO request), whichever side aborts. An
+/// abort sent as an SDO response (service 3) is a protocol error that SOEM reads as a
+/// successful transfer or a packet error, so the bench fails on it.
+pub fn abort_of(coe: &[u8]) -> Option<u32> {
+    let s = SdoRef::parse(coe).ok()?;
+    if s.command >> 5 != 4 {
+        return None;
+    }
+    assert!(
+        s.is_request(),
+        "SDO abort {:08x?} sent under CoE service {:?}; ETG.1000.6 sends aborts as SDO requests (service 2)",
+        s.abort_code().map(|c| c.code()),
+        s.coe.service
+    );
+    Some(s.abort_code().unwrap().code())
 }

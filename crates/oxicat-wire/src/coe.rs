@@ -509,17 +509,21 @@ pub fn write_sdo_segment(
     Ok(total)
 }
 
-/// Writes an SDO abort (request or response) for `index:subindex`; returns the length.
+/// Writes an SDO abort transfer for `index:subindex`; returns the length.
+///
+/// Client and server abort alike under CoE service 2 (SDO request): ETG.1000.6 defines
+/// the abort as a request in either direction, and SOEM, SSC and SOES recognise it only
+/// there (an abort under service 3 reads to SOEM as a successful transfer), so the service
+/// is not a parameter.
 pub fn write_sdo_abort(
     buf: &mut [u8],
-    service: CoeService,
     index: u16,
     subindex: u8,
     code: SdoAbortCode,
 ) -> Result<usize, WireError> {
     write_sdo(
         buf,
-        service,
+        CoeService::SdoRequest,
         &SdoHeader {
             command: 0x80,
             index,
@@ -1088,14 +1092,7 @@ mod tests {
     #[test]
     fn abort_round_trip() {
         let mut b = [0u8; 10];
-        let n = write_sdo_abort(
-            &mut b,
-            CoeService::SdoRequest,
-            0x6040,
-            0,
-            SdoAbortCode::ReadOnly,
-        )
-        .unwrap();
+        let n = write_sdo_abort(&mut b, 0x6040, 0, SdoAbortCode::ReadOnly).unwrap();
         let s = SdoRef::parse(&b[..n]).unwrap();
         assert_eq!(s.abort_code().unwrap(), SdoAbortCode::ReadOnly);
         assert_eq!(s.abort_code().unwrap().code(), 0x0601_0002);

@@ -246,9 +246,12 @@ proptest! {
         let mut b = [0u8; 10];
         let c = SdoAbortCode::from_u32(code);
         prop_assert_eq!(c.code(), code);
-        let n = write_sdo_abort(&mut b, CoeService::SdoResponse, index, subindex, c).unwrap();
+        let n = write_sdo_abort(&mut b, index, subindex, c).unwrap();
         let s = SdoRef::parse(&b[..n]).unwrap();
-        prop_assert_eq!(SdoResponseCommand::from_u8(s.command).unwrap(), SdoResponseCommand::Abort);
+        // ETG.1000.6: an abort is an SDO request (CoE service 2) from either side.
+        prop_assert_eq!(s.coe.service, CoeService::SdoRequest);
+        prop_assert!(s.is_request());
+        prop_assert_eq!(SdoRequestCommand::from_u8(s.command).unwrap(), SdoRequestCommand::Abort);
         prop_assert_eq!(s.index().unwrap(), (index, subindex));
         prop_assert_eq!(s.abort_code().unwrap(), c);
     }
