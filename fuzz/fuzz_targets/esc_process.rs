@@ -1,9 +1,10 @@
 //! Arbitrary frames through a line of 3 software ESCs built from a small SII image made in
 //! this target (identity, mailbox, strings, general, SMs, FMMU usage): the ESCs must never
 //! panic, whatever the frames and PDI accesses, and no datagram's working counter may grow
-//! by more than its addressing allows (ETG.1000.4 table 12: 1 for a single-addressed read
-//! or write, 3 for a single-addressed read-write; per ESC the same for broadcast and
-//! logical commands; nothing for NOP or an unknown command).
+//! by more than its addressing allows (ETG.1000.4 table 12: 1 for an auto-increment read
+//! or write, 3 for an auto-increment read-write; per ESC the same for configured-address
+//! (ESCs may share a station address), broadcast and logical commands; nothing for NOP or
+//! an unknown command).
 //!
 //! Input: byte 0 selects the chip model and fault options; then a sequence of
 //! `[len_lo len_hi frame[len]]` records, each frame starting at the EtherCAT header.
@@ -99,8 +100,13 @@ static EEPROM: OnceLock<Vec<u8>> = OnceLock::new();
 fn max_wkc_increment(command: u8, n: u16) -> u16 {
     match Command::from_u8(command) {
         None | Some(Command::Nop) => 0,
-        Some(Command::Aprd | Command::Apwr | Command::Fprd | Command::Fpwr) => 1,
-        Some(Command::Aprw | Command::Fprw) => 3,
+        // Auto-increment: only the ESC that sees position 0.
+        Some(Command::Aprd | Command::Apwr) => 1,
+        Some(Command::Aprw) => 3,
+        // Configured address: every ESC with that station address answers (before the
+        // master sets them, all have 0), as real ESCs do.
+        Some(Command::Fprd | Command::Fpwr) => n,
+        Some(Command::Fprw) => 3 * n,
         Some(
             Command::Brd
             | Command::Bwr
