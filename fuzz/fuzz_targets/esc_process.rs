@@ -1,6 +1,10 @@
 //! Arbitrary frames through a line of 3 software ESCs built from a small SII image made in
 //! this target (identity, mailbox, strings, general, SMs, FMMU usage): the ESCs must never
-//! panic, whatever the frames and PDI accesses.
+//! panic, whatever the frames and PDI accesses, and no datagram's working counter may grow
+//! by more than its addressing allows (ETG.1000.4 table 12: 1 for an auto-increment read
+//! or write, 3 for an auto-increment read-write; per ESC the same for configured-address
+//! (ESCs may share a station address), broadcast and logical commands; nothing for NOP or
+//! an unknown command).
 //!
 //! Input: byte 0 selects the chip model and fault options; then a sequence of
 //! `[len_lo len_hi frame[len]]` records, each frame starting at the EtherCAT header.
@@ -10,9 +14,10 @@ use libfuzzer_sys::fuzz_target;
 use oxicat_esc::{Esc, EscConfig, Forward};
 use oxicat_wire::mailbox::protocols;
 use oxicat_wire::sii::{
-    write_category, write_strings, CategoryType, MailboxArea, SiiConfig, SiiGeneral,
-    SiiIdentity, SiiMailboxConfig, SiiSyncManager, SmType, FIXED_AREA_LEN, GENERAL_LEN,
+    write_category, write_strings, CategoryType, MailboxArea, SiiConfig, SiiGeneral, SiiIdentity,
+    SiiMailboxConfig, SiiSyncManager, SmType, FIXED_AREA_LEN, GENERAL_LEN,
 };
+use oxicat_wire::{Command, EcatFrame};
 use std::sync::OnceLock;
 
 /// A 1 KiB EEPROM of a CoE device with 4 SMs, built with the oxicat-wire SII writers.
@@ -72,10 +77,18 @@ fn eeprom() -> Vec<u8> {
         enable: 1,
         sm_type,
     };
-    sm(0x1000, 128, 0x26, SmType::MailboxOut).write(&mut sms[0..]).unwrap();
-    sm(0x1080, 128, 0x22, SmType::MailboxIn).write(&mut sms[8..]).unwrap();
-    sm(0x1100, 8, 0x64, SmType::Outputs).write(&mut sms[16..]).unwrap();
-    sm(0x1180, 8, 0x20, SmType::Inputs).write(&mut sms[24..]).unwrap();
+    sm(0x1000, 128, 0x26, SmType::MailboxOut)
+        .write(&mut sms[0..])
+        .unwrap();
+    sm(0x1080, 128, 0x22, SmType::MailboxIn)
+        .write(&mut sms[8..])
+        .unwrap();
+    sm(0x1100, 8, 0x64, SmType::Outputs)
+        .write(&mut sms[16..])
+        .unwrap();
+    sm(0x1180, 8, 0x20, SmType::Inputs)
+        .write(&mut sms[24..])
+        .unwrap();
     o = write_category(&mut img, o, CategoryType::SyncManager, &sms).unwrap();
     img[o..o + 2].copy_from_slice(&0xFFFFu16.to_le_bytes());
     img
@@ -83,15 +96,50 @@ fn eeprom() -> Vec<u8> {
 
 static EEPROM: OnceLock<Vec<u8>> = OnceLock::new();
 
+/// The most a datagram's working counter may grow on its way through `n` ESCs.
+fn max_wkc_increment(command: u8, n: u16) -> u16 {
+    match Command::from_u8(command) {
+        None | Some(Command::Nop) => 0,
+        // Auto-increment: only the ESC that sees position 0.
+        Some(Command::Aprd | Command::Apwr) => 1,
+        Some(Command::Aprw) => 3,
+        // Configured address: every ESC with that station address answers (before the
+        // master sets them, all have 0), as real ESCs do.
+        Some(Command::Fprd | Command::Fpwr) => n,
+        Some(Command::Fprw) => 3 * n,
+        Some(
+            Command::Brd
+            | Command::Bwr
+            | Command::Lrd
+            | Command::Lwr
+            | Command::Armw
+            | Command::Frmw,
+        ) => n,
+        Some(Command::Brw | Command::Lrw) => 3 * n,
+    }
+}
+
+/// (command, working counter) of every datagram of a well-formed frame.
+fn datagrams(frame: &[u8]) -> Option<Vec<(u8, u16)>> {
+    let f = EcatFrame::parse(frame).ok()?;
+    f.datagrams()
+        .map(|d| d.ok().map(|d| (d.header.command, d.wkc)))
+        .collect()
+}
+
 fuzz_target!(|data: &[u8]| {
-    let Some((&flags, mut rest)) = data.split_first() else { return };
+    let Some((&flags, mut rest)) = data.split_first() else {
+        return;
+    };
     let cfg = match flags & 3 {
         0 => EscConfig::et1100(),
         1 => EscConfig::et1200(),
         _ => EscConfig::lan9252(),
     };
     let eeprom = EEPROM.get_or_init(eeprom);
-    let mut escs: Vec<Esc> = (0..3).map(|_| Esc::new(cfg.clone(), eeprom.clone())).collect();
+    let mut escs: Vec<Esc> = (0..3)
+        .map(|_| Esc::new(cfg.clone(), eeprom.clone()))
+        .collect();
     for (i, e) in escs.iter_mut().enumerate() {
         e.set_link(0, true);
         e.set_link(1, i < 2);
@@ -99,18 +147,40 @@ fuzz_target!(|data: &[u8]| {
     let mut t: u64 = 1_000;
     let mut frame_no = 0u32;
     while rest.len() >= 2 && frame_no < 64 {
-        let len = (u16::from_le_bytes([rest[0], rest[1]]) as usize).min(1514).min(rest.len() - 2);
+        let len = (u16::from_le_bytes([rest[0], rest[1]]) as usize)
+            .min(1514)
+            .min(rest.len() - 2);
         let mut frame = rest[2..2 + len].to_vec();
         rest = &rest[2 + len..];
         frame_no += 1;
+        let before = datagrams(&frame);
         // Outbound: processed by each ESC entering port 0.
+        let mut dropped = false;
         for (i, e) in escs.iter_mut().enumerate() {
             let ok = !(flags & 4 != 0 && i == 1 && frame_no % 3 == 0);
             match e.forward(0, &mut frame, t, ok) {
-                Forward::Dropped => break,
+                Forward::Dropped => {
+                    dropped = true;
+                    break;
+                }
                 Forward::Port(_) => {}
             }
             t += 500;
+        }
+        if let (false, Some(before), Some(after)) = (dropped, &before, datagrams(&frame)) {
+            assert_eq!(
+                before.len(),
+                after.len(),
+                "the ESCs changed the datagram count"
+            );
+            for (k, (&(cmd, w0), &(cmd1, w1))) in before.iter().zip(&after).enumerate() {
+                assert_eq!(cmd, cmd1, "datagram {k}: command changed");
+                let grew = w1.wrapping_sub(w0);
+                assert!(
+                    grew <= max_wkc_increment(cmd, escs.len() as u16),
+                    "datagram {k} (command {cmd}): working counter {w0} -> {w1}"
+                );
+            }
         }
         // Return path: through port 1 of ESC 1 and 0 (DC receive-time latching only).
         for e in escs.iter_mut().take(2).rev() {

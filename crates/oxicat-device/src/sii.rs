@@ -411,7 +411,8 @@ pub fn intel_hex(text: &[u8]) -> Result<Vec<u8>, Error> {
     let mut base = 0usize;
     for line in text.lines().map(str::trim).filter(|l| !l.is_empty()) {
         let hexpart = line.strip_prefix(':').ok_or_else(|| bad(line))?;
-        if hexpart.len() & 1 != 0 || hexpart.len() < 10 {
+        // Hex digits are ASCII; anything else would also split a character below.
+        if !hexpart.is_ascii() || hexpart.len() & 1 != 0 || hexpart.len() < 10 {
             return Err(bad(line));
         }
         let b: Vec<u8> = (0..hexpart.len() / 2)

@@ -191,7 +191,12 @@ pub fn parse_specs(specs: &[String]) -> Result<SegmentFile, SimError> {
 /// Reads a TOML segment file.
 pub fn read_segment_file(path: &Path) -> Result<SegmentFile, SimError> {
     let text = std::fs::read_to_string(path).map_err(|e| SimError::SegmentFile(path.into(), e))?;
-    toml::from_str(&text).map_err(|e| SimError::SegmentToml(path.into(), e.to_string()))
+    parse_segment(&text, path)
+}
+
+/// Parses the text of a TOML segment file (`path` is named in errors).
+pub fn parse_segment(text: &str, path: &Path) -> Result<SegmentFile, SimError> {
+    toml::from_str(text).map_err(|e| SimError::SegmentToml(path.into(), e.to_string()))
 }
 
 /// Builds the segment (firmware booted at virtual time 0); returns it with the device name

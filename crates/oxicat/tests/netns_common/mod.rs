@@ -90,7 +90,7 @@ fn is_root() -> bool {
         .unwrap_or(false)
 }
 
-fn in_ci() -> bool {
+pub fn in_ci() -> bool {
     std::env::var_os("CI").is_some_and(|v| !v.is_empty() && v != "false" && v != "0")
 }
 

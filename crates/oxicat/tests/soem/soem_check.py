@@ -1,0 +1,332 @@
+#!/usr/bin/env python3
+"""SOEM (through pysoem) against a segment served by `oxicat sim --iface`.
+
+Run by crates/oxicat/tests/soem_netns.rs, which serves the segment on one end of a veth
+pair and writes what every slave should show (from the device's definition and ESI) to a
+JSON file:
+
+    python soem_check.py <interface> <spec.json>
+
+Every check prints one line
+
+    CHECK <check> <slave position> PASS|FAIL <detail>
+
+so that the Rust test reports each check separately; `INFO` lines say what happened.
+The exit code is 0 when the script got through (failed checks included) and non-zero
+only when it could not run at all (no pysoem, no interface, no slaves).
+"""
+
+import json
+import struct
+import sys
+import time
+
+import pysoem
+
+# SDO abort codes (ETG.1000.6 table 41).
+ABORT_NO_OBJECT = 0x06020000
+ABORT_READ_ONLY = 0x06010002
+# AL status code of the SM watchdog (ETG.1000.6 table 11).
+AL_SM_WATCHDOG = 0x001B
+# ESC registers (ET1100 datasheet section II).
+REG_DC_ACTIVATION = 0x0980
+REG_DC_NEXT_SYNC0 = 0x0990
+REG_DC_SYNC0_CYCLE = 0x09A0
+# Receive timeout for one process-data frame (µs): generous, the simulator is a debug
+# build on a loaded machine and can stall for tens of ms; a frame not back by then counts
+# as a working-counter error.
+RECV_TIMEOUT_US = 500_000
+# SM watchdog time set by the master (0x0420): 100 ms is the ESC's default, but a
+# debug-build simulator on a loaded machine can stall that long between two frames; the
+# watchdog path is the same with 500 ms.
+WATCHDOG_MS = 500
+# Waiting for a state (µs).
+STATE_TIMEOUT_US = 5_000_000
+
+
+def check(name, pos, ok, detail=""):
+    """Prints one check result."""
+    print(f"CHECK {name} {pos} {'PASS' if ok else 'FAIL'} {detail}".rstrip(), flush=True)
+
+
+def info(text):
+    print(f"INFO {text}", flush=True)
+
+
+def state_name(s):
+    names = {
+        pysoem.NONE_STATE: "NONE",
+        pysoem.INIT_STATE: "INIT",
+        pysoem.PREOP_STATE: "PREOP",
+        pysoem.BOOT_STATE: "BOOT",
+        pysoem.SAFEOP_STATE: "SAFEOP",
+        pysoem.OP_STATE: "OP",
+    }
+    base = names.get(s & 0x0F, f"0x{s & 0x0F:02X}")
+    return base + ("+ERR" if s & pysoem.STATE_ERROR else "")
+
+
+def sdo_abort(slave, fn):
+    """Runs an SDO transfer that must be refused; returns (abort code or None, what
+    happened instead)."""
+    try:
+        result = fn()
+    except pysoem.SdoError as e:
+        return e.abort_code, f"SdoError 0x{e.abort_code:08X} ({e.desc})"
+    except Exception as e:  # noqa: BLE001 - any other outcome is reported as is
+        return None, f"{type(e).__name__}: {e}"
+    return None, f"no abort, transfer succeeded ({result!r})"
+
+
+def sdo_checks(pos, slave, spec):
+    """Identity, device name, abort codes and a write/read-back in PREOP."""
+    try:
+        got = [struct.unpack("<I", slave.sdo_read(0x1018, sub))[0] for sub in (1, 2, 3)]
+        want = [spec["vendor_id"], spec["product_code"], spec["revision"]]
+        check("sdo_read_identity", pos, got == want,
+              f"0x1018:01..03 = {[hex(v) for v in got]}, want {[hex(v) for v in want]}")
+    except Exception as e:  # noqa: BLE001
+        check("sdo_read_identity", pos, False, f"{type(e).__name__}: {e}")
+
+    for index, key in ((0x1008, "device_name"), (0x1009, "hw_version"), (0x100A, "sw_version")):
+        want = spec[key]
+        try:
+            got = slave.sdo_read(index, 0, 1024).rstrip(b"\0").decode("latin-1")
+            check("sdo_read_strings", pos, got == want,
+                  f"0x{index:04X} = {got!r}, want {want!r}")
+        except Exception as e:  # noqa: BLE001
+            check("sdo_read_strings", pos, False, f"0x{index:04X}: {type(e).__name__}: {e}")
+
+    missing = spec["missing_index"]
+    code, what = sdo_abort(slave, lambda: slave.sdo_read(missing, 0))
+    check("sdo_abort_missing_object", pos, code == ABORT_NO_OBJECT,
+          f"read 0x{missing:04X}:00: {what}, want SdoError 0x{ABORT_NO_OBJECT:08X}")
+
+    code, what = sdo_abort(slave, lambda: slave.sdo_write(0x1018, 1, struct.pack("<I", 0x12345678)))
+    after = None
+    try:
+        after = struct.unpack("<I", slave.sdo_read(0x1018, 1))[0]
+    except Exception as e:  # noqa: BLE001
+        what += f"; read back failed: {type(e).__name__}: {e}"
+    check("sdo_abort_read_only", pos, code == ABORT_READ_ONLY and after == spec["vendor_id"],
+          f"write 0x1018:01: {what}, want SdoError 0x{ABORT_READ_ONLY:08X}; "
+          f"0x1018:01 afterwards = {after if after is None else hex(after)}")
+
+    rw = spec.get("rw")
+    if rw is None:
+        check("sdo_write_read_back", pos, True, "skipped: the definition has no writable "
+              "integer entry in PREOP")
+        return
+    idx, sub, size, value = rw["index"], rw["sub"], rw["size"], rw["value"]
+    fmt = {1: "<B", 2: "<H", 4: "<I"}[size]
+    where = f"0x{idx:04X}:{sub:02X}"
+    try:
+        old = slave.sdo_read(idx, sub)
+        slave.sdo_write(idx, sub, struct.pack(fmt, value))
+        got = struct.unpack(fmt, slave.sdo_read(idx, sub)[:size])[0]
+        slave.sdo_write(idx, sub, old)
+        restored = slave.sdo_read(idx, sub) == old
+        check("sdo_write_read_back", pos, got == value and restored,
+              f"{where}: wrote {value}, read {got}; old value restored: {restored}")
+    except Exception as e:  # noqa: BLE001
+        check("sdo_write_read_back", pos, False, f"{where}: {type(e).__name__}: {e}")
+
+
+class Cycler:
+    """Process-data cycles at a fixed period, counting working-counter errors."""
+
+    def __init__(self, master, period_s):
+        self.master = master
+        self.period = period_s
+        self.next = time.monotonic()
+        self.cycles = 0
+        self.wkc_errors = 0
+        self.first_error = None
+
+    def cycle(self):
+        self.master.send_processdata()
+        wkc = self.master.receive_processdata(RECV_TIMEOUT_US)
+        self.cycles += 1
+        if wkc != self.master.expected_wkc:
+            self.wkc_errors += 1
+            if self.first_error is None:
+                self.first_error = f"cycle {self.cycles}: wkc {wkc}, expected {self.master.expected_wkc}"
+        self.next += self.period
+        delay = self.next - time.monotonic()
+        if delay > 0:
+            time.sleep(delay)
+        else:
+            # Behind (a loaded machine): restart the schedule instead of bursting.
+            self.next = time.monotonic()
+
+    def reset_counts(self):
+        self.cycles = 0
+        self.wkc_errors = 0
+        self.first_error = None
+
+
+def all_in(master, want):
+    """Reads every slave's AL status; whether all are in `want` (error flag included)."""
+    master.read_state()
+    return all(s.state == want for s in master.slaves)
+
+
+def reach(master, cycler, want, timeout_s):
+    """Requests `want` for all slaves (again every 100 ms, as masters do), cycling process
+    data while waiting; returns whether all got there."""
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        master.state = want
+        master.write_state()
+        for _ in range(100):
+            cycler.cycle()
+            if all_in(master, want):
+                return True
+    return all_in(master, want)
+
+
+def dc_checks(pos, slave, cycle_ns):
+    """SYNC0 on: 0x1C32:01 = DC SYNC0, 0x1C32:02 = the SYNC0 cycle, the ESC's SYNC0 unit
+    activated with our cycle and its next-pulse time advancing by whole cycles."""
+    try:
+        mode = struct.unpack("<H", slave.sdo_read(0x1C32, 1))[0]
+        cyc = struct.unpack("<I", slave.sdo_read(0x1C32, 2))[0]
+        act = slave._fprd(REG_DC_ACTIVATION, 2)
+        sync0_cycle = struct.unpack("<I", slave._fprd(REG_DC_SYNC0_CYCLE, 4))[0]
+        t0 = struct.unpack("<Q", slave._fprd(REG_DC_NEXT_SYNC0, 8))[0]
+        time.sleep(0.02)
+        t1 = struct.unpack("<Q", slave._fprd(REG_DC_NEXT_SYNC0, 8))[0]
+        adv = t1 - t0
+        ok = (mode == 2 and cyc == cycle_ns and act[1] & 0x03 == 0x03
+              and sync0_cycle == cycle_ns and adv > 0 and adv % cycle_ns == 0)
+        check("dc_sync0", pos, ok,
+              f"0x1C32:01 = {mode} (want 2), 0x1C32:02 = {cyc} (want {cycle_ns}), "
+              f"0x0981 = 0x{act[1]:02X}, 0x09A0 = {sync0_cycle}, next SYNC0 advanced {adv} ns "
+              f"in 20 ms")
+    except Exception as e:  # noqa: BLE001
+        check("dc_sync0", pos, False, f"{type(e).__name__}: {e}")
+
+
+def main():
+    iface, spec_path = sys.argv[1], sys.argv[2]
+    with open(spec_path, encoding="utf-8") as f:
+        spec = json.load(f)
+    want = spec["slaves"]
+    cycles = spec["cycles"]
+    cycle_ns = spec["cycle_ns"]
+
+    master = pysoem.Master()
+    master.open(iface)
+    try:
+        # A real master scans again when nothing answered in time (SOEM waits 20 ms for
+        # the first broadcast read; a debug-build simulator on a loaded machine may be late).
+        for attempt in range(1, 6):
+            n = master.config_init()
+            info(f"config_init (attempt {attempt}) found {n} slaves")
+            if n > 0:
+                break
+            time.sleep(1)
+        check("scan_count", 0, n == len(want), f"found {n}, want {len(want)}")
+        if n != len(want):
+            return
+        for pos, (slave, s) in enumerate(zip(master.slaves, want)):
+            got = (slave.man, slave.id, slave.rev)
+            exp = (s["vendor_id"], s["product_code"], s["revision"])
+            check("scan_identity", pos, got == exp,
+                  f"vendor/product/revision {tuple(hex(v) for v in got)}, "
+                  f"want {tuple(hex(v) for v in exp)}")
+            # SOEM names a slave by SII string 1 (cut at EC_MAXNAME = 40 characters).
+            name = slave.name
+            ok = name == s["order_code"][:40]
+            check("scan_name", pos, ok, f"SOEM name {name!r}, want the ESI Type "
+                  f"(order code) {s['order_code']!r}")
+
+        for pos, (slave, s) in enumerate(zip(master.slaves, want)):
+            sdo_checks(pos, slave, s)
+
+        dc_slaves = [pos for pos, s in enumerate(want) if s["dc"]]
+        if dc_slaves:
+            found = master.config_dc()
+            info(f"config_dc: DC slaves found: {found}")
+            for pos in dc_slaves:
+                master.slaves[pos].dc_sync(True, cycle_ns)
+        for slave in master.slaves:
+            slave.set_watchdog("processdata", WATCHDOG_MS)
+        size = master.config_map()
+        info(f"config_map: {size} bytes of process data, expected wkc {master.expected_wkc}")
+        state = master.state_check(pysoem.SAFEOP_STATE, STATE_TIMEOUT_US)
+        master.read_state()
+        for pos, slave in enumerate(master.slaves):
+            check("to_safeop", pos, slave.state == pysoem.SAFEOP_STATE,
+                  f"{state_name(slave.state)}, AL status 0x{slave.al_status:04X}")
+        if state != pysoem.SAFEOP_STATE:
+            return
+
+        cycler = Cycler(master, cycle_ns / 1e9)
+        reach(master, cycler, pysoem.OP_STATE, 10.0)
+        for pos, slave in enumerate(master.slaves):
+            check("to_op", pos, slave.state == pysoem.OP_STATE,
+                  f"{state_name(slave.state)}, AL status 0x{slave.al_status:04X}")
+
+        cycler.reset_counts()
+        start = time.monotonic()
+        for _ in range(cycles):
+            cycler.cycle()
+        took = time.monotonic() - start
+        master.read_state()
+        for pos, slave in enumerate(master.slaves):
+            ok = (cycler.cycles == cycles and cycler.wkc_errors == 0
+                  and slave.state == pysoem.OP_STATE)
+            check("pdo_exchange", pos, ok,
+                  f"{cycler.cycles} cycles in {took:.1f} s, {cycler.wkc_errors} wkc errors "
+                  f"({cycler.first_error or 'none'}), state {state_name(slave.state)} "
+                  f"AL status 0x{slave.al_status:04X}")
+
+        for pos in dc_slaves:
+            dc_checks(pos, master.slaves[pos], cycle_ns)
+            for _ in range(20):
+                cycler.cycle()
+
+        # The SM watchdog: no process data for three times its time, and longer (up to
+        # 10 s) while the simulator, late on a loaded machine, has not got there yet.
+        stopped = time.monotonic()
+        time.sleep(3 * WATCHDOG_MS / 1000)
+        while (not all_in(master, pysoem.SAFEOP_STATE | pysoem.STATE_ERROR)
+               and time.monotonic() - stopped < 10):
+            time.sleep(0.1)
+        waited_ms = round((time.monotonic() - stopped) * 1000)
+        for pos, slave in enumerate(master.slaves):
+            ok = (slave.state == pysoem.SAFEOP_STATE | pysoem.STATE_ERROR
+                  and slave.al_status == AL_SM_WATCHDOG)
+            check("watchdog_safeop_err", pos, ok,
+                  f"after {waited_ms} ms without process data: {state_name(slave.state)}, "
+                  f"AL status 0x{slave.al_status:04X} (want SAFEOP+ERR 0x{AL_SM_WATCHDOG:04X})")
+        # Acknowledge (SAFEOP + ack bit) until the error flag is gone (SOEM's state_check
+        # ignores the flag, so read the states).
+        deadline = time.monotonic() + STATE_TIMEOUT_US / 1e6
+        while time.monotonic() < deadline:
+            for slave in master.slaves:
+                slave.state = pysoem.SAFEOP_STATE | pysoem.STATE_ACK
+                slave.write_state()
+            time.sleep(0.01)
+            if all_in(master, pysoem.SAFEOP_STATE):
+                break
+        acked = [(s.state, s.al_status) for s in master.slaves]
+        cycler.reset_counts()
+        reach(master, cycler, pysoem.OP_STATE, 10.0)
+        for pos, slave in enumerate(master.slaves):
+            ok = acked[pos][0] == pysoem.SAFEOP_STATE and slave.state == pysoem.OP_STATE
+            check("watchdog_ack_to_op", pos, ok,
+                  f"after the ack: {state_name(acked[pos][0])} (AL status "
+                  f"0x{acked[pos][1]:04X}), then {state_name(slave.state)}")
+
+        master.state = pysoem.INIT_STATE
+        master.write_state()
+        master.state_check(pysoem.INIT_STATE, STATE_TIMEOUT_US)
+    finally:
+        master.close()
+    info("done")
+
+
+if __name__ == "__main__":
+    main()
