@@ -53,7 +53,7 @@ pub fn check_image(img: &[u8]) -> Result<(), MasterError> {
 
 /// Identity (vendor, product, revision) of an image.
 pub fn image_identity(img: &[u8]) -> Result<(u32, u32, u32), MasterError> {
-    let im = SiiImage::new(img).map_err(|e| MasterError::SiiImage(format!("{e:?}")))?;
+    let im = SiiImage::new(img).map_err(|e| MasterError::SiiImage(format!("{e}")))?;
     let id = im.identity();
     Ok((id.vendor_id, id.product_code, id.revision))
 }
@@ -269,7 +269,7 @@ pub fn hex_dump(img: &[u8]) -> String {
 /// The decoded categories of an image, as text.
 pub fn decode(img: &[u8]) -> Result<String, MasterError> {
     use std::fmt::Write;
-    let im = SiiImage::new(img).map_err(|e| MasterError::SiiImage(format!("{e:?}")))?;
+    let im = SiiImage::new(img).map_err(|e| MasterError::SiiImage(format!("{e}")))?;
     let m = oxicat_device::sii::parse(img).map_err(|e| MasterError::SiiImage(e.to_string()))?;
     let cfg = im.config();
     let id = im.identity();

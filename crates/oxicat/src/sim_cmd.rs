@@ -416,6 +416,9 @@ pub fn serve_until(args: &SimArgs, stop: Arc<AtomicBool>) -> Result<(), SimError
         Some(p) => read_segment_file(p)?,
         None => parse_specs(&args.devices)?,
     };
+    check_segment(&desc)?;
+    let total: usize = desc.devices.iter().map(|d| d.count).sum();
+    eprintln!("oxicat sim: booting {total} slave(s); Ctrl-C to stop");
     let (seg, names) = build_segment_until(&desc, &stop)?;
     let n = seg.len();
     let segment = Arc::new(Mutex::new(seg));
@@ -563,6 +566,110 @@ mod tests {
         assert_eq!(seg.esc(2).unwrap().config().clock.drift_ppm, 0.0);
         let bad: Result<SegmentFile, _> = toml::from_str("[[device]]\nnmae = \"demo\"\n");
         assert!(bad.is_err(), "unknown keys are refused");
+    }
+
+    /// Every number of a full segment file (walked from the TOML, so a key added later and
+    /// not checked fails here) is refused as NaN, ±inf or far out of range, naming its key.
+    #[test]
+    fn every_number_of_a_segment_file_is_range_checked() {
+        const FULL: &str = r#"
+            master_link_delay_ns = 70
+            esc_delay_ns = 500
+            link_delay_ns = 60
+            [[device]]
+            name = "demo"
+            count = 2
+            drift_ppm = 25.0
+            esc_delay_ns = 600
+            link_delay_ns = 120
+        "#;
+        let base: toml::Value = toml::from_str(FULL).unwrap();
+        let desc: SegmentFile = toml::from_str(FULL).unwrap();
+        check_segment(&desc).expect("the full file is fine");
+        let mut keys = Vec::new();
+        for (k, v) in base.as_table().unwrap() {
+            match v {
+                toml::Value::Array(a) => {
+                    for (k2, v2) in a[0].as_table().unwrap() {
+                        if v2.is_integer() || v2.is_float() {
+                            keys.push((Some(k.clone()), k2.clone(), v2.is_float()));
+                        }
+                    }
+                }
+                v if v.is_integer() || v.is_float() => keys.push((None, k.clone(), v.is_float())),
+                _ => {}
+            }
+        }
+        assert_eq!(keys.len(), 7, "{keys:?}");
+        for (table, key, float) in keys {
+            let values: Vec<toml::Value> = if float {
+                [f64::NAN, f64::INFINITY, f64::NEG_INFINITY, 1e9, -1e9]
+                    .into_iter()
+                    .map(toml::Value::Float)
+                    .collect()
+            } else {
+                [-1i64, 1_000_000_000_000]
+                    .into_iter()
+                    .map(toml::Value::Integer)
+                    .collect()
+            };
+            for x in values {
+                let mut v = base.clone();
+                match &table {
+                    Some(t) => v[t.as_str()][0][key.as_str()] = x.clone(),
+                    None => v[key.as_str()] = x.clone(),
+                }
+                let text = toml::to_string(&v).unwrap();
+                let e = match toml::from_str::<SegmentFile>(&text) {
+                    Err(e) => e.to_string(),
+                    Ok(d) => match check_segment(&d) {
+                        Err(e) => {
+                            let m = e.to_string();
+                            assert!(m.contains(" … "), "{key} = {x}: no range in {m}");
+                            m
+                        }
+                        Ok(()) => panic!("{key} = {x} was accepted"),
+                    },
+                };
+                assert!(e.contains(&key), "{key} = {x}: {e}");
+            }
+        }
+        // The issue's values, through the file reader (the path in the message).
+        let dir = std::env::temp_dir().join(format!("oxicat-seg-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let f = dir.join("seg.toml");
+        std::fs::write(&f, "[[device]]\nname = \"demo\"\ndrift_ppm = nan\n").unwrap();
+        let e = read_segment_file(&f).unwrap_err().to_string();
+        assert!(
+            e.contains("seg.toml")
+                && e.contains("device[0].drift_ppm = NaN is not in -1000 … 1000 ppm"),
+            "{e}"
+        );
+        std::fs::write(
+            &f,
+            "[[device]]\nname = \"demo\"\nesc_delay_ns = 10000000000\n",
+        )
+        .unwrap();
+        let e = read_segment_file(&f).unwrap_err().to_string();
+        assert!(
+            e.contains("device[0].esc_delay_ns = 10000000000 is not in 0 … 1000000 ns"),
+            "{e}"
+        );
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+
+    #[test]
+    fn counts_beyond_the_limit_are_refused_before_building() {
+        let e = parse_specs(&["demo:100000".into()])
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("100000") && e.contains("1 … 1000"), "{e}");
+        let desc = parse_specs(&["demo:600".into(), "demo:600".into()]).unwrap();
+        let e = build_segment(&desc).unwrap_err().to_string();
+        assert!(
+            e.contains("device[1].count") && e.contains("1 … 1000"),
+            "{e}"
+        );
     }
 
     #[test]
