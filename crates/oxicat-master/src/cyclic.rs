@@ -161,10 +161,10 @@ impl Master {
 
     /// The error for slaves that did not reach OP, or left it for `lost` cycles: every
     /// slave's AL status.
-    async fn left_op(&self, lost: u64) -> MasterError {
+    fn left_op(&self, lost: u64) -> MasterError {
         let mut states = Vec::new();
         for p in 0..self.len() {
-            match self.al_status_async(p).await {
+            match self.al_status(p) {
                 Ok(s) => states.push(format!("slave {p}: {s}")),
                 Err(e) => states.push(format!("slave {p}: {e}")),
             }
@@ -268,6 +268,7 @@ impl Master {
             working_counter: 0,
         };
         let mut stats = CycleStats::default();
+        let mut left = None;
         // On the heap: ethercrab's cyclic futures are large (debug builds).
         futures_lite::future::block_on(Box::pin(async {
             if dc {
@@ -323,10 +324,14 @@ impl Master {
                         // cycling on forever.
                         lost += 1;
                         if lost > LOST_OP_CYCLES {
-                            return Err(self.left_op(lost).await);
+                            // The AL status is read after the cyclic future (kept small:
+                            // it is built on the stack).
+                            left = Some(lost);
+                            break;
                         }
                     } else if std::time::Instant::now() > deadline {
-                        return Err(self.left_op(0).await);
+                        left = Some(0);
+                        break;
                     }
                     if all_op {
                         lost = 0;
@@ -366,7 +371,11 @@ impl Master {
                 }
             }
             Ok(stats)
-        }))
+        }))?;
+        match left {
+            Some(lost) => Err(self.left_op(lost)),
+            None => Ok(stats),
+        }
     }
 
     /// `write`: cycles in OP, sets every variable in `vars` to `value` in one cycle and keeps
