@@ -588,6 +588,16 @@ pub fn run(cmd: MasterCommand, out: &mut dyn Write) -> Result<(), MasterError> {
                     img.len()
                 )));
             }
+            // An image for another device is refused before anything (the backup too).
+            let image = oxicat_master::sii::image_identity(&img)?;
+            let (v, pc, r, _) = m.identity(p)?;
+            if image != (v, pc, r) && !force {
+                return Err(MasterError::SiiOtherDevice {
+                    position: p,
+                    image,
+                    slave: (v, pc, r),
+                });
+            }
             // The old image first, so a write that stops half-way can be undone.
             let old = m.sii_read(p, true)?;
             let backup = backup_path(p);

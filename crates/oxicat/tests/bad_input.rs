@@ -235,6 +235,16 @@ fn sii_write_of_an_image_larger_than_the_eeprom_writes_nothing() {
         !d.join("sii-backup-0.bin").exists(),
         "refused before the backup"
     );
+    // An image for another device: refused before the backup too.
+    let mut other = img.clone();
+    other[0x10] ^= 0x55;
+    std::fs::write(d.join("other.bin"), &other).expect("write");
+    let err = error_in(&d, &["sii-write", "other.bin", "--sim", "demo:1"]);
+    assert!(err.contains("--force"), "{err}");
+    assert!(
+        !d.join("sii-backup-0.bin").exists(),
+        "no backup for a refused image"
+    );
 }
 
 #[test]
