@@ -50,7 +50,7 @@ impl core::fmt::Display for Error {
             Error::Xml(e) => write!(f, "XML not well-formed: {e}"),
             Error::Missing(w) => write!(f, "missing ESI element/attribute {w}"),
             Error::BadValue { what, text } => write!(f, "bad value {text:?} for {what}"),
-            Error::Sii(e) => write!(f, "malformed SII: {e:?}"),
+            Error::Sii(e) => write!(f, "malformed SII: {e}"),
             Error::DoesNotFit(w) => write!(f, "definition does not fit the SII: {w}"),
             Error::Definition(e) => write!(f, "definition rejected: {e}"),
         }

@@ -420,8 +420,18 @@ pub fn intel_hex(text: &[u8]) -> Result<Vec<u8>, Error> {
             .collect::<Result<_, _>>()
             .map_err(|_| bad(line))?;
         let n = b[0] as usize;
-        if b.len() != n + 5 || b.iter().fold(0u8, |a, x| a.wrapping_add(*x)) != 0 {
-            return Err(bad(line));
+        if b.len() != n + 5 {
+            return Err(Error::BadValue {
+                what: "Intel HEX record (its length byte does not match the record)",
+                text: line.to_string(),
+            });
+        }
+        let sum = b.iter().fold(0u8, |a, x| a.wrapping_add(*x));
+        if sum != 0 {
+            return Err(Error::BadValue {
+                what: "Intel HEX record (checksum wrong: the bytes do not sum to 0 mod 256)",
+                text: line.to_string(),
+            });
         }
         let addr = u16::from_be_bytes([b[1], b[2]]) as usize;
         match b[3] {

@@ -557,7 +557,7 @@ pub fn write_following_error_plots(
     let png = dir.join("following-error.png");
     let svg = dir.join("following-error.svg");
     let fail = |p: &std::path::Path, e: String| {
-        MasterError::Io(p.display().to_string(), std::io::Error::other(e))
+        MasterError::File(p.to_path_buf(), std::io::Error::other(e))
     };
     draw(
         BitMapBackend::new(&png, (1000, 500)).into_drawing_area(),

@@ -229,7 +229,7 @@ impl Master {
         let mut buf = vec![0u8; m.out_len as usize];
         let h = MailboxHeader::new(payload.len() as u16, 0, t, counter);
         h.write(&mut buf)
-            .map_err(|e| mbx_err(position, format!("{e:?}")))?;
+            .map_err(|e| mbx_err(position, format!("{e}")))?;
         buf[MAILBOX_HEADER_LEN..MAILBOX_HEADER_LEN + payload.len()].copy_from_slice(payload);
         self.fpwr(position, m.out_start, &buf).await
     }
@@ -249,14 +249,14 @@ impl Master {
             if st[0] & 0x08 != 0 {
                 let b = self.fprd(position, m.in_start, m.in_len).await?;
                 let r = MailboxRef::parse(&b)
-                    .map_err(|e| mbx_err(position, format!("bad mailbox header: {e:?}")))?;
+                    .map_err(|e| mbx_err(position, format!("bad mailbox header: {e}")))?;
                 match r.header.mailbox_type {
                     x if x == t && t != MailboxType::Coe => {
                         return Ok(Some(r.payload.to_vec()));
                     }
                     MailboxType::Coe if t == MailboxType::Coe => {
                         let coe = CoeHeader::parse(r.payload)
-                            .map_err(|e| mbx_err(position, format!("bad CoE header: {e:?}")))?;
+                            .map_err(|e| mbx_err(position, format!("bad CoE header: {e}")))?;
                         if coe.service == CoeService::Emergency {
                             log::warn!("slave {position}: emergency {:02x?}", r.payload);
                             continue;
@@ -325,7 +325,7 @@ impl Master {
             ));
         }
         let cmd = SdoResponseCommand::from_u8(r.command)
-            .map_err(|e| mbx_err(position, format!("bad SDO command: {e:?}")))?;
+            .map_err(|e| mbx_err(position, format!("bad SDO command: {e}")))?;
         if cmd == SdoResponseCommand::Abort {
             let code = r.abort_code().unwrap_or(SdoAbortCode::GeneralError);
             return Err(MasterError::SdoAbort {
@@ -356,12 +356,12 @@ impl Master {
             [0; 4],
             &[],
         )
-        .map_err(|e| mbx_err(position, format!("{e:?}")))?;
+        .map_err(|e| mbx_err(position, format!("{e}")))?;
         let reply = self.coe_exchange(position, &req[..n]).await?;
-        let r = SdoRef::parse(&reply)
-            .map_err(|e| mbx_err(position, format!("bad SDO reply: {e:?}")))?;
+        let r =
+            SdoRef::parse(&reply).map_err(|e| mbx_err(position, format!("bad SDO reply: {e}")))?;
         let cmd = Self::check_abort(position, index, sub, &r)?;
-        let bad = |e| mbx_err(position, format!("bad SDO reply: {e:?}"));
+        let bad = |e| mbx_err(position, format!("bad SDO reply: {e}"));
         match cmd {
             SdoResponseCommand::InitiateUpload {
                 expedited: true, ..
@@ -420,7 +420,7 @@ impl Master {
         sub: u8,
         data: &[u8],
     ) -> Result<(), MasterError> {
-        let bad = |e| mbx_err(position, format!("SDO: {e:?}"));
+        let bad = |e| mbx_err(position, format!("SDO: {e}"));
         let hdr = |command| SdoHeader {
             command,
             index,
@@ -522,7 +522,7 @@ impl Master {
         index: u16,
         sub: u8,
     ) -> Result<(SdoInfoOpcode, Vec<u8>), MasterError> {
-        let bad = |e| mbx_err(position, format!("SDO information: {e:?}"));
+        let bad = |e| mbx_err(position, format!("SDO information: {e}"));
         let mut req = [0u8; 32];
         CoeHeader::new(CoeService::SdoInformation)
             .write(&mut req)

@@ -20,6 +20,27 @@ pub struct CycleOptions {
     pub dc: bool,
 }
 
+/// Longest DC cycle: the SYNC0 cycle time (0x09A0) and the start time, four cycles ahead,
+/// are 32-bit ns in the ESC's DC unit and in ethercrab's configuration.
+pub const MAX_DC_CYCLE: Duration = Duration::from_secs(1);
+
+impl CycleOptions {
+    /// Refuses a cycle that cannot work: 0, or a DC cycle above [`MAX_DC_CYCLE`].
+    pub fn check(&self) -> Result<(), MasterError> {
+        if self.cycle.is_zero() {
+            return Err(MasterError::Usage("the cycle time must be above 0".into()));
+        }
+        if self.dc && self.cycle > MAX_DC_CYCLE {
+            return Err(MasterError::Usage(format!(
+                "a DC cycle of {:?} does not fit: the SYNC0 cycle and start time are 32-bit ns, \
+                 at most {:?} (use --free-run for slower cycles)",
+                self.cycle, MAX_DC_CYCLE
+            )));
+        }
+        Ok(())
+    }
+}
+
 impl Default for CycleOptions {
     fn default() -> Self {
         Self {
@@ -86,7 +107,76 @@ pub struct CycleStats {
     pub wkc_errors: u64,
 }
 
+/// Cycles without OP, after the slaves were in OP, before a cyclic run gives up.
+pub const LOST_OP_CYCLES: u64 = 1000;
+
 impl Master {
+    /// The process-data watchdog of the slave at `position` (0x0400 divider, 0x0420 time:
+    /// `(divider + 2) × 40 ns × time`), when its output SM triggers it (SII SM control bit
+    /// 6) and it is on (time ≠ 0).
+    pub fn pd_watchdog(&self, position: usize) -> Result<Option<Duration>, MasterError> {
+        let triggers = self.sii_model(position).ok().is_some_and(|m| {
+            m.sms.iter().any(|sm| {
+                sm.kind == oxicat_device::model::SmKind::Outputs && sm.control & 0x40 != 0
+            })
+        });
+        if !triggers {
+            return Ok(None);
+        }
+        let div = self.reg_read(position, 0x0400, 2)?;
+        let time = self.reg_read(position, 0x0420, 2)?;
+        let div = u64::from(u16::from_le_bytes([div[0], div[1]]));
+        let time = u64::from(u16::from_le_bytes([time[0], time[1]]));
+        Ok((time != 0).then(|| Duration::from_nanos((div + 2) * 40 * time)))
+    }
+
+    /// Refuses a cycle at or above a slave's process-data watchdog (the slave would clear
+    /// its outputs and leave OP, AL status 0x001B, between two frames) or below its minimum
+    /// cycle time 0x1C32:05 (it would refuse SAFE-OP and the transition time out).
+    fn check_watchdogs(&self, cycle: Duration) -> Result<(), MasterError> {
+        for p in 0..self.len() {
+            if let Ok(b) = self.sdo_upload(p, 0x1C32, 5) {
+                if let Ok(b) = <[u8; 4]>::try_from(b.as_slice()) {
+                    let min = Duration::from_nanos(u64::from(u32::from_le_bytes(b)));
+                    if cycle < min {
+                        return Err(MasterError::Usage(format!(
+                            "a cycle of {cycle:?} is below slave {p}'s minimum cycle time of \
+                             {min:?} (0x1C32:05); use {min:?} or more"
+                        )));
+                    }
+                }
+            }
+            if let Some(wd) = self.pd_watchdog(p)? {
+                if cycle >= wd {
+                    return Err(MasterError::Usage(format!(
+                        "a cycle of {cycle:?} is not below slave {p}'s process-data watchdog of \
+                         {wd:?} (0x0400/0x0420): it would drop its outputs and leave OP (AL \
+                         status 0x001B) between two frames; use a cycle below {wd:?}"
+                    )));
+                }
+            }
+        }
+        Ok(())
+    }
+
+    /// The error for slaves that did not reach OP, or left it for `lost` cycles: every
+    /// slave's AL status.
+    fn left_op(&self, lost: u64) -> MasterError {
+        let mut states = Vec::new();
+        for p in 0..self.len() {
+            match self.al_status(p) {
+                Ok(s) => states.push(format!("slave {p}: {s}")),
+                Err(e) => states.push(format!("slave {p}: {e}")),
+            }
+        }
+        let what = if lost == 0 {
+            "the slaves did not reach OP".to_string()
+        } else {
+            format!("the slaves left OP and were not back after {lost} cycles")
+        };
+        MasterError::Usage(format!("{what}: {}", states.join("; ")))
+    }
+
     /// The PDO layouts of all slaves.
     pub fn layouts(&self) -> Result<Vec<SlavePdos>, MasterError> {
         (0..self.len()).map(|p| self.pdos(p)).collect()
@@ -114,12 +204,11 @@ impl Master {
         mut step: impl FnMut(&mut CycleIo) -> Result<Flow, MasterError>,
     ) -> Result<CycleStats, MasterError> {
         let n = self.len();
+        opts.check()?;
         let period = opts.cycle.as_nanos() as u64;
-        if period == 0 {
-            return Err(MasterError::Usage("the cycle time must be above 0".into()));
-        }
         // ethercrab's group (a reset of every slave to INIT, then PRE-OP).
         self.ensure_group()?;
+        self.check_watchdogs(opts.cycle)?;
         let mut dc = opts.dc;
         if !dc {
             // Free run: a DC recording left 0x1C32:01 = 2 (DC SYNC0), with which the slave
@@ -179,6 +268,7 @@ impl Master {
             working_counter: 0,
         };
         let mut stats = CycleStats::default();
+        let mut left = None;
         // On the heap: ethercrab's cyclic futures are large (debug builds).
         futures_lite::future::block_on(Box::pin(async {
             if dc {
@@ -203,6 +293,7 @@ impl Master {
                 }
                 let deadline = std::time::Instant::now() + self.options.timeouts.state_transition;
                 let mut t0 = None;
+                let mut lost = 0u64;
                 loop {
                     for (p, sd) in group.iter(md).enumerate() {
                         let mut o = sd.outputs_raw_mut();
@@ -229,11 +320,21 @@ impl Master {
                         }
                     } else if t0.is_some() {
                         stats.wkc_errors += 1;
+                        // Slaves that left OP and do not come back: say so instead of
+                        // cycling on forever.
+                        lost += 1;
+                        if lost > LOST_OP_CYCLES {
+                            // The AL status is read after the cyclic future (kept small:
+                            // it is built on the stack).
+                            left = Some(lost);
+                            break;
+                        }
                     } else if std::time::Instant::now() > deadline {
-                        return Err(MasterError::Usage(format!(
-                            "the slaves did not reach OP: {:?}",
-                            r.subdevice_states
-                        )));
+                        left = Some(0);
+                        break;
+                    }
+                    if all_op {
+                        lost = 0;
                     }
                     time.wait_until(t + r.extra.next_cycle_wait.as_nanos() as u64);
                 }
@@ -270,7 +371,11 @@ impl Master {
                 }
             }
             Ok(stats)
-        }))
+        }))?;
+        match left {
+            Some(lost) => Err(self.left_op(lost)),
+            None => Ok(stats),
+        }
     }
 
     /// `write`: cycles in OP, sets every variable in `vars` to `value` in one cycle and keeps
@@ -309,6 +414,20 @@ impl Master {
         out: &mut dyn Write,
         progress: &mut dyn FnMut(u64, u64),
     ) -> Result<CycleStats, MasterError> {
+        let stop = std::sync::atomic::AtomicBool::new(false);
+        self.record_until(opts, vars, cycles, out, progress, &stop)
+    }
+
+    /// [`Master::record`] that ends early, with the rows so far, when `stop` is set (Ctrl-C).
+    pub fn record_until(
+        &mut self,
+        opts: CycleOptions,
+        vars: &[Variable],
+        cycles: u64,
+        out: &mut dyn Write,
+        progress: &mut dyn FnMut(u64, u64),
+        stop: &std::sync::atomic::AtomicBool,
+    ) -> Result<CycleStats, MasterError> {
         let mut header = vec!["cycle".to_string(), "time [s]".to_string()];
         header.extend(vars.iter().map(|v| format!("{} [{}]", v.name, v.unit)));
         writeln!(out, "{}", header.join(",")).map_err(MasterError::Output)?;
@@ -324,7 +443,8 @@ impl Master {
                 return Ok(Flow::Stop);
             }
             progress(io.cycle + 1, cycles);
-            Ok(if io.cycle + 1 >= cycles {
+            let stopped = stop.load(std::sync::atomic::Ordering::Relaxed);
+            Ok(if stopped || io.cycle + 1 >= cycles {
                 Flow::Stop
             } else {
                 Flow::Continue

@@ -129,6 +129,8 @@ pub enum MasterError {
     Usage(String),
     /// Writing an output file failed.
     Output(std::io::Error),
+    /// Reading or writing a file failed (the path says which).
+    File(std::path::PathBuf, std::io::Error),
 }
 
 impl std::fmt::Display for MasterError {
@@ -231,6 +233,7 @@ impl std::fmt::Display for MasterError {
             Ethercrab(what, e) => write!(f, "{what}: {e}"),
             Usage(w) => f.write_str(w),
             Output(e) => write!(f, "writing the output failed: {e}"),
+            File(p, e) => write!(f, "{}: {e}", p.display()),
         }
     }
 }

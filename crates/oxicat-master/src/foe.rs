@@ -47,7 +47,7 @@ impl Master {
         reply: bool,
     ) -> Result<Option<(FoeHeader, Vec<u8>)>, MasterError> {
         let mut p = vec![0u8; FOE_HEADER_LEN + data.len()];
-        FoeRef::write(&h, data, &mut p).map_err(|e| protocol(position, format!("{e:?}")))?;
+        FoeRef::write(&h, data, &mut p).map_err(|e| protocol(position, format!("{e}")))?;
         let counter = self.next_counter();
         self.mbx_send(position, m, MailboxType::Foe, &p, counter)
             .await?;
@@ -61,8 +61,7 @@ impl Master {
                 position,
                 what: "no FoE reply".into(),
             })?;
-        let f =
-            FoeRef::parse(&r).map_err(|e| protocol(position, format!("bad FoE reply: {e:?}")))?;
+        let f = FoeRef::parse(&r).map_err(|e| protocol(position, format!("bad FoE reply: {e}")))?;
         Ok(Some((f.header, f.data.to_vec())))
     }
 

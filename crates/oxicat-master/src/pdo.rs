@@ -318,6 +318,9 @@ pub fn resolve(
             .collect(),
     };
     let mut found = Vec::new();
+    // A device name that links several slaves: each variable gets its slave's position
+    // (`0.Button1`, `1.Button1`), so CSV columns and watch lines have unique names.
+    let several = positions.len() > 1;
     for p in positions {
         let Some(layout) = layouts.iter().find(|l| l.position == p) else {
             continue;
@@ -351,7 +354,11 @@ pub fn resolve(
         });
         if let Some(v) = hit {
             let mut v = v.clone();
-            v.name = name.to_string();
+            v.name = if several {
+                format!("{p}.{tail}")
+            } else {
+                name.to_string()
+            };
             found.push(v);
         }
     }

@@ -208,6 +208,80 @@ pub struct LegTable {
     pub flatness: f64,
 }
 
+/// The range of every number of a scenario: key (a leg's keys as `leg.<key>`), lowest,
+/// highest, unit, and why. Where a value goes into an INT16 of the leg's PDO with a scale
+/// (gains ×100 or ×1000, centre ×10, frequency ×100, flatness ×100), the range keeps it
+/// inside the INT16 and inside what the rig can do.
+pub const LIMITS: &[(&str, f64, f64, &str, &str)] = &[
+    ("bus.cycle_us", 100.0, 10_000.0, " µs", "DC SYNC0 period"),
+    ("bus.sync0_shift_us", 0.0, 9_999.0, " µs", "below cycle_us"),
+    ("procedure.settle_s", 0.0, 3600.0, " s", "phase length"),
+    ("procedure.stand_s", 0.0, 3600.0, " s", "phase length"),
+    (
+        "procedure.transition_time_s",
+        1.0,
+        127.0,
+        " s",
+        "INT8 Transition_time",
+    ),
+    ("procedure.trot_s", 0.0, 3600.0, " s", "phase length"),
+    ("procedure.stop_s", 0.0, 3600.0, " s", "phase length"),
+    ("control.knee.kp", 0.0, 327.0, "", "Kp100 is an INT16"),
+    ("control.knee.kd", 0.0, 32.0, "", "Kd1000 is an INT16"),
+    ("control.knee.ki", 0.0, 327.0, "", "Ki100 is an INT16"),
+    ("control.hip.kp", 0.0, 327.0, "", "Kp100 is an INT16"),
+    ("control.hip.kd", 0.0, 32.0, "", "Kd1000 is an INT16"),
+    ("control.hip.ki", 0.0, 327.0, "", "Ki100 is an INT16"),
+    (
+        "control.filter_hz",
+        1.0,
+        5000.0,
+        " Hz",
+        "below half the 10 kHz joint loop",
+    ),
+    (
+        "rig.belt_depth_m",
+        0.1,
+        1.5,
+        " m",
+        "the treadmill below the hip axis",
+    ),
+    ("rig.belt_speed_m_s", 0.0, 5.0, " m/s", "treadmill belt"),
+    (
+        "rig.plant_rate_hz",
+        10_000.0,
+        1_000_000.0,
+        " Hz",
+        "plant integration rate",
+    ),
+    ("pdi.spi_mhz", 1.0, 100.0, " MHz", "SPI clock"),
+    (
+        "leg.x_centre_cm",
+        -50.0,
+        50.0,
+        " cm",
+        "ellipse centre ahead of the hip",
+    ),
+    (
+        "leg.y_centre_cm",
+        0.0,
+        100.0,
+        " cm",
+        "ellipse centre below the hip",
+    ),
+    ("leg.a_cm", 0.0, 30.0, " cm", "step length semi-axis"),
+    ("leg.b_cm", 0.0, 30.0, " cm", "ground clearance semi-axis"),
+    ("leg.freq_hz", 0.01, 10.0, " Hz", "stepping frequency"),
+    ("leg.phase_deg", -360.0, 360.0, "°", "initial phase"),
+    (
+        "leg.flatness",
+        0.0,
+        100.0,
+        "",
+        "flatness parameter, ×100 an INT16",
+    ),
+];
+
 impl Scenario {
     /// The shipped Table 4-1 scenario.
     pub fn thesis() -> Self {
@@ -224,36 +298,82 @@ impl Scenario {
 
     /// Reads a scenario file.
     pub fn load(path: &std::path::Path) -> Result<Self, MasterError> {
-        let text = std::fs::read_to_string(path)
-            .map_err(|e| MasterError::Io(path.display().to_string(), e))?;
+        let text =
+            std::fs::read_to_string(path).map_err(|e| MasterError::File(path.to_path_buf(), e))?;
         Self::parse(&text)
+    }
+
+    /// Every number of the scenario with its key (`leg FL.a_cm` for a leg's column).
+    fn numbers(&self) -> Vec<(String, f64)> {
+        let (b, p, c, r) = (&self.bus, &self.procedure, &self.control, &self.rig);
+        let mut v: Vec<(String, f64)> = vec![
+            ("bus.cycle_us".into(), f64::from(b.cycle_us)),
+            ("bus.sync0_shift_us".into(), f64::from(b.sync0_shift_us)),
+            ("procedure.settle_s".into(), p.settle_s),
+            ("procedure.stand_s".into(), p.stand_s),
+            (
+                "procedure.transition_time_s".into(),
+                f64::from(p.transition_time_s),
+            ),
+            ("procedure.trot_s".into(), p.trot_s),
+            ("procedure.stop_s".into(), p.stop_s),
+            ("control.filter_hz".into(), f64::from(c.filter_hz)),
+            ("rig.belt_depth_m".into(), r.belt_depth_m),
+            ("rig.belt_speed_m_s".into(), r.belt_speed_m_s),
+            ("rig.plant_rate_hz".into(), f64::from(r.plant_rate_hz)),
+            ("pdi.spi_mhz".into(), f64::from(self.pdi.spi_mhz)),
+        ];
+        for (joint, g) in [("knee", &c.knee), ("hip", &c.hip)] {
+            for (k, x) in [("kp", g.kp), ("kd", g.kd), ("ki", g.ki)] {
+                v.push((format!("control.{joint}.{k}"), x));
+            }
+        }
+        for l in &self.legs {
+            for (k, x) in [
+                ("x_centre_cm", l.x_centre_cm),
+                ("y_centre_cm", l.y_centre_cm),
+                ("a_cm", l.a_cm),
+                ("b_cm", l.b_cm),
+                ("freq_hz", l.freq_hz),
+                ("phase_deg", l.phase_deg),
+                ("flatness", l.flatness),
+            ] {
+                v.push((format!("leg {}.{k}", l.leg), x));
+            }
+        }
+        v
     }
 
     fn check(&self) -> Result<(), MasterError> {
         let bad = |m: String| Err(MasterError::Usage(format!("scenario: {m}")));
-        if self.bus.cycle_us < 100 || self.bus.sync0_shift_us >= self.bus.cycle_us {
-            return bad("bus.cycle_us ≥ 100 and sync0_shift_us < cycle_us".into());
-        }
-        let p = &self.procedure;
-        for (n, v) in [
-            ("settle_s", p.settle_s),
-            ("stand_s", p.stand_s),
-            ("trot_s", p.trot_s),
-            ("stop_s", p.stop_s),
-        ] {
-            if !(0.0..=3600.0).contains(&v) {
-                return bad(format!("procedure.{n} = {v} is not in 0…3600 s"));
+        for (key, v) in self.numbers() {
+            // `leg FL.a_cm` is checked as `leg.a_cm`.
+            let class = match key.strip_prefix("leg ") {
+                Some(rest) => format!("leg.{}", rest.split_once('.').map_or(rest, |x| x.1)),
+                None => key.clone(),
+            };
+            let Some(&(_, lo, hi, unit, why)) = LIMITS.iter().find(|l| l.0 == class) else {
+                return bad(format!("{key} has no range (internal: add it to LIMITS)"));
+            };
+            if !(v.is_finite() && (lo..=hi).contains(&v)) {
+                return bad(format!("{key} = {v} is not in {lo} … {hi}{unit} ({why})"));
             }
         }
-        if p.transition_time_s <= 0 {
-            return bad("procedure.transition_time_s must be ≥ 1 s".into());
+        if self.bus.sync0_shift_us >= self.bus.cycle_us {
+            return bad(format!(
+                "bus.sync0_shift_us = {} must be below bus.cycle_us = {}",
+                self.bus.sync0_shift_us, self.bus.cycle_us
+            ));
         }
+        let p = &self.procedure;
         if p.settle_s < f64::from(p.transition_time_s) {
             return bad("procedure.settle_s must be ≥ transition_time_s (gains ramp)".into());
         }
         let r = self.rig.plant_rate_hz;
-        if !(10_000..=1_000_000).contains(&r) || 1_000_000_000 % r != 0 {
-            return bad(format!("rig.plant_rate_hz = {r}"));
+        if 1_000_000_000 % r != 0 {
+            return bad(format!(
+                "rig.plant_rate_hz = {r} does not divide 1 s in whole ns"
+            ));
         }
         let mut seen = Vec::new();
         for l in &self.legs {
@@ -265,17 +385,11 @@ impl Scenario {
             }
             seen.push(id);
             if l.freq_hz <= 0.0 {
-                return bad(format!("leg {}: freq_hz must be > 0", l.leg));
+                return bad(format!("leg {}.freq_hz must be > 0", l.leg));
             }
         }
         if seen.len() != 4 {
             return bad("all four legs (FL, FR, HL, HR) need a [[leg]] entry".into());
-        }
-        if !(1..=100).contains(&self.pdi.spi_mhz) {
-            return bad(format!(
-                "pdi.spi_mhz = {} is not in 1…100",
-                self.pdi.spi_mhz
-            ));
         }
         Ok(())
     }
@@ -363,6 +477,123 @@ mod tests {
         assert!(Scenario::parse(&s).is_err());
         let s = DEFAULT_TOML.replace("spi_mhz = 20", "spi_mhz = 0");
         assert!(Scenario::parse(&s).is_err());
+    }
+
+    /// Every number in the shipped file (walked from the TOML, so a key added to the file
+    /// and not to the checks fails here) is refused as NaN, ±inf and far out of range, with
+    /// its key in the message (and the range where the value has the right type).
+    #[test]
+    fn every_number_is_range_checked_with_key_and_range() {
+        fn leaves(v: &toml::Value, path: &str, out: &mut Vec<(String, bool)>) {
+            match v {
+                toml::Value::Table(t) => {
+                    for (k, x) in t {
+                        let p = if path.is_empty() {
+                            k.clone()
+                        } else {
+                            format!("{path}.{k}")
+                        };
+                        leaves(x, &p, out);
+                    }
+                }
+                toml::Value::Array(a) => {
+                    for (i, x) in a.iter().enumerate() {
+                        leaves(x, &format!("{path}[{i}]"), out);
+                    }
+                }
+                toml::Value::Integer(_) => out.push((path.to_string(), false)),
+                toml::Value::Float(_) => out.push((path.to_string(), true)),
+                _ => {}
+            }
+        }
+        fn set(v: &mut toml::Value, path: &[&str], new: toml::Value) {
+            let (head, rest) = path.split_first().expect("a path");
+            let next = match head.split_once('[') {
+                Some((k, i)) => {
+                    let i: usize = i.trim_end_matches(']').parse().expect("index");
+                    &mut v[k][i]
+                }
+                None => &mut v[*head],
+            };
+            if rest.is_empty() {
+                *next = new;
+            } else {
+                set(next, rest, new);
+            }
+        }
+        let base: toml::Value = toml::from_str(DEFAULT_TOML).expect("shipped file");
+        let mut keys = Vec::new();
+        leaves(&base, "", &mut keys);
+        assert!(keys.len() > 40, "{keys:?}");
+        for (key, float) in &keys {
+            let leaf = key.rsplit('.').next().expect("a key");
+            let mut values = vec![
+                toml::Value::Integer(-1_000_000_000),
+                toml::Value::Integer(1_000_000_000),
+            ];
+            if *float {
+                values = vec![
+                    toml::Value::Float(f64::NAN),
+                    toml::Value::Float(f64::INFINITY),
+                    toml::Value::Float(f64::NEG_INFINITY),
+                    toml::Value::Float(-1e9),
+                    toml::Value::Float(1e9),
+                ];
+            }
+            for x in values {
+                let mut v = base.clone();
+                let path: Vec<&str> = key.split('.').collect();
+                set(&mut v, &path, x.clone());
+                let text = toml::to_string(&v).expect("serialise");
+                let e = match Scenario::parse(&text) {
+                    Ok(_) => panic!("{key} = {x} was accepted"),
+                    Err(e) => e.to_string(),
+                };
+                assert!(e.contains(leaf), "{key} = {x}: {e}");
+                if *float {
+                    assert!(e.contains(" … "), "{key} = {x}: no range in {e}");
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn the_issue_s_values_are_refused_with_key_and_range() {
+        for (from, to, want) in [
+            (
+                "belt_speed_m_s = 0.2",
+                "belt_speed_m_s = nan",
+                "rig.belt_speed_m_s = NaN is not in 0 … 5 m/s",
+            ),
+            (
+                "belt_speed_m_s = 0.2",
+                "belt_speed_m_s = inf",
+                "rig.belt_speed_m_s = inf is not in 0 … 5 m/s",
+            ),
+            (
+                "knee = { kp = 80.0",
+                "knee = { kp = nan",
+                "control.knee.kp = NaN is not in 0 … 327",
+            ),
+            (
+                "a_cm = 5.0",
+                "a_cm = nan",
+                "leg FL.a_cm = NaN is not in 0 … 30 cm",
+            ),
+            (
+                "freq_hz = 1.0",
+                "freq_hz = nan",
+                "leg FL.freq_hz = NaN is not in 0.01 … 10 Hz",
+            ),
+            (
+                "cycle_us = 400",
+                "cycle_us = 50",
+                "bus.cycle_us = 50 is not in 100 … 10000 µs",
+            ),
+        ] {
+            let e = Scenario::parse(&DEFAULT_TOML.replacen(from, to, 1)).expect_err(to);
+            assert!(e.to_string().contains(want), "{to}: {e}");
+        }
     }
 
     #[test]

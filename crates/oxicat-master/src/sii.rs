@@ -53,7 +53,7 @@ pub fn check_image(img: &[u8]) -> Result<(), MasterError> {
 
 /// Identity (vendor, product, revision) of an image.
 pub fn image_identity(img: &[u8]) -> Result<(u32, u32, u32), MasterError> {
-    let im = SiiImage::new(img).map_err(|e| MasterError::SiiImage(format!("{e:?}")))?;
+    let im = SiiImage::new(img).map_err(|e| MasterError::SiiImage(format!("{e}")))?;
     let id = im.identity();
     Ok((id.vendor_id, id.product_code, id.revision))
 }
@@ -184,6 +184,18 @@ impl Master {
         }
     }
 
+    /// The size of the slave's EEPROM in bytes: the SII's own size word 0x3E (`(n + 1)` ×
+    /// 1 Kbit), bounded by what the ESC's address width (0x0502 bit 7) reaches — 2 KiB
+    /// (16 Kbit) with one address byte, 512 KiB (4 Mbit) with two — so a blank EEPROM
+    /// (0xFFFF) does not claim more than the chip can hold.
+    pub fn eeprom_bytes(&self, position: usize) -> Result<usize, MasterError> {
+        let ctl = futures_lite::future::block_on(self.read_u16(position, CTL))?;
+        let chip = if ctl & 0x0080 != 0 { 512 * 1024 } else { 2048 };
+        let w = futures_lite::future::block_on(self.sii_read_at(position, 0x3E, 2))?;
+        let sii = (usize::from(u16::from_le_bytes([w[0], w[1]])) + 1) * 128;
+        Ok(sii.min(chip))
+    }
+
     /// Writes `img` into the SII of the slave at `position` word by word and verifies it;
     /// `progress(done, total)` is called after each word.
     pub fn sii_write(
@@ -257,7 +269,7 @@ pub fn hex_dump(img: &[u8]) -> String {
 /// The decoded categories of an image, as text.
 pub fn decode(img: &[u8]) -> Result<String, MasterError> {
     use std::fmt::Write;
-    let im = SiiImage::new(img).map_err(|e| MasterError::SiiImage(format!("{e:?}")))?;
+    let im = SiiImage::new(img).map_err(|e| MasterError::SiiImage(format!("{e}")))?;
     let m = oxicat_device::sii::parse(img).map_err(|e| MasterError::SiiImage(e.to_string()))?;
     let cfg = im.config();
     let id = im.identity();

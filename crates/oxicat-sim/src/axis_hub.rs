@@ -652,9 +652,18 @@ where
             h.fw.slave().map(|s| (s.state(), s.status_code())),
         )
     };
+    let phase_text = match phase {
+        axis_hub::EcatPhase::Fault => "ESC fault",
+        axis_hub::EcatPhase::Connected => "connected",
+        axis_hub::EcatPhase::CommLost => "communication lost",
+    };
+    let state = match state {
+        Some((s, c)) => format!("{s}, AL status 0x{:04X}", c.0),
+        None => "not running".to_string(),
+    };
     run.note(
         &format!(
-            "cable open 2 s: node reports communication lost ({phase:?}, stack {state:?}), \
+            "cable open 2 s: node reports communication lost (phase: {phase_text}; stack: {state}), \
              keeps running ({} task releases), LEDs red, no frame came back",
             releases - releases_before
         ),
@@ -681,8 +690,9 @@ where
     })
     .await?;
     let st = run.hub.lock().fw.slave().map(|s| s.state());
+    let st_text = st.map_or("stack not running".to_string(), |s| s.to_string());
     run.note(
-        &format!("back in OP without a reset ({st:?}), error cleared, LEDs normal"),
+        &format!("back in OP without a reset ({st_text}), error cleared, LEDs normal"),
         ok && st == Some(oxicat_slave::AlState::Op),
     );
     Ok(())

@@ -28,13 +28,13 @@ pub struct Cia402Args {
     /// What to do.
     #[command(subcommand)]
     pub verb: Cia402Verb,
-    /// CiA402 joint drives on the virtual segment.
+    /// CiA402 joint drives on the virtual segment (1 … 64).
     #[arg(long, default_value_t = 1)]
     pub joints: usize,
     /// A network interface instead of the virtual segment.
     #[arg(long)]
     pub iface: Option<String>,
-    /// Cycle time \[µs\].
+    /// Cycle time in µs (100 … 50000).
     #[arg(long, default_value_t = 1000)]
     pub cycle_us: u64,
     /// Free run instead of DC SYNC0.
@@ -59,12 +59,12 @@ pub enum Cia402Verb {
     },
     /// CSP move of every drive.
     Move {
-        /// Target position \[increments\].
+        /// Target position in increments.
         target: i32,
         /// Relative to the position at the start of the move.
         #[arg(long)]
         relative: bool,
-        /// Duration of the move \[ms\].
+        /// Duration of the move in ms (1 … 3600000).
         #[arg(long, default_value_t = 1000)]
         duration_ms: u64,
         /// Move the joints as a six-axis arm: each joint its own share of the target, signs
@@ -90,6 +90,38 @@ pub fn parse_mode(s: &str) -> Result<i8, MasterError> {
     })
 }
 
+/// Shortest cycle: below 100 µs the master's user-space loop cannot keep the cycle (a
+/// frame of a few drives alone takes tens of µs), and on the virtual segment such a run
+/// does not end.
+pub const MIN_CYCLE_US: u64 = 100;
+/// Longest cycle: half the drive's 100 ms process-data watchdog.
+pub const MAX_CYCLE_US: u64 = 50_000;
+
+/// Refuses arguments that cannot work, before a segment is built.
+fn check_args(a: &Cia402Args) -> Result<(), MasterError> {
+    let max = oxicat_master::MAX_SLAVES;
+    if a.iface.is_none() && !(1..=max).contains(&a.joints) {
+        return Err(MasterError::Usage(format!(
+            "--joints {}: 1 … {max} drives (the master's group holds {max})",
+            a.joints
+        )));
+    }
+    if !(MIN_CYCLE_US..=MAX_CYCLE_US).contains(&a.cycle_us) {
+        return Err(MasterError::Usage(format!(
+            "--cycle-us {}: {MIN_CYCLE_US} … {MAX_CYCLE_US} µs (below {MIN_CYCLE_US} µs the master cannot keep the cycle; above {MAX_CYCLE_US} µs the drive's 100 ms process-data watchdog comes close)",
+            a.cycle_us
+        )));
+    }
+    if let Cia402Verb::Move { duration_ms, .. } = a.verb {
+        if !(1..=3_600_000).contains(&duration_ms) {
+            return Err(MasterError::Usage(format!(
+                "--duration-ms {duration_ms}: 1 … 3600000 ms"
+            )));
+        }
+    }
+    Ok(())
+}
+
 fn link(a: &Cia402Args) -> Result<Link, MasterError> {
     if let Some(i) = &a.iface {
         return Ok(Link::Iface(i.clone()));
@@ -97,7 +129,7 @@ fn link(a: &Cia402Args) -> Result<Link, MasterError> {
     let mut seg = Segment::new();
     let sii = oxicat_device::sii::generate(&oxicat_devices::cia402::DEF)
         .map_err(|e| MasterError::Usage(format!("SII of the CiA402 joint: {e}")))?;
-    for _ in 0..a.joints.max(1) {
+    for _ in 0..a.joints {
         let id = seg.add(oxicat_esc::Esc::new(
             oxicat_esc::EscConfig::et1100(),
             sii.clone(),
@@ -110,6 +142,7 @@ fn link(a: &Cia402Args) -> Result<Link, MasterError> {
 
 /// Runs `oxicat cia402`; returns the text it printed.
 pub fn run(a: Cia402Args) -> Result<String, MasterError> {
+    check_args(&a)?;
     let sim = a.iface.is_none();
     let mut m = Master::open(link(&a)?)?;
     let drives: Vec<usize> = (0..m.len()).collect();
@@ -143,7 +176,7 @@ pub fn run(a: Cia402Args) -> Result<String, MasterError> {
             });
         }
     }
-    let cycle = Duration::from_micros(a.cycle_us.max(1));
+    let cycle = Duration::from_micros(a.cycle_us);
     let amplitude = match a.verb {
         Cia402Verb::Move { arm: true, .. } => cia402::arm_amplitudes(drives.len()),
         _ => Vec::new(),
@@ -162,10 +195,9 @@ pub fn run(a: Cia402Args) -> Result<String, MasterError> {
         );
     }
     if let Cia402Verb::Move { .. } = a.verb {
-        std::fs::create_dir_all(&a.out)
-            .map_err(|e| MasterError::Io(a.out.display().to_string(), e))?;
+        std::fs::create_dir_all(&a.out).map_err(|e| MasterError::File(a.out.clone(), e))?;
         let csv = a.out.join("cia402.csv");
-        std::fs::write(&csv, r.csv()).map_err(|e| MasterError::Io(csv.display().to_string(), e))?;
+        crate::output::write_file(&csv, r.csv().as_bytes())?;
         let figures = cia402::write_following_error_plots(&r, drives.len(), &a.out)?;
         for (d, (rms, max)) in r.following_error(drives.len()).iter().enumerate() {
             let _ = writeln!(

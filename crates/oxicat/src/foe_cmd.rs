@@ -97,7 +97,34 @@ fn bar(total: u64, what: &str) -> indicatif::ProgressBar {
 }
 
 fn io(e: std::io::Error) -> MasterError {
-    MasterError::Usage(format!("output: {e}"))
+    MasterError::Output(e)
+}
+
+/// FoE 0x8009 ("not bootstrap": in BOOT, the slave takes no file of that name, as in
+/// Beckhoff's SSC) and 0x8001 ("not found") on a write say that the name is wrong; the
+/// message says so, and where the name came from.
+fn explain_write_error(e: MasterError, name: &str, from_file: bool) -> MasterError {
+    match e {
+        MasterError::Foe {
+            position,
+            code: code @ (0x8009 | 0x8001),
+            text,
+        } => MasterError::Foe {
+            position,
+            code,
+            text: format!(
+                "{text}: the slave takes no file named {name:?}{} — give the name it expects \
+                 with --name (the demo devices take {:?})",
+                if from_file {
+                    " (the name defaulted to the file's name)"
+                } else {
+                    ""
+                },
+                DEMO_FIRMWARE_FILE
+            ),
+        },
+        e => e,
+    }
 }
 
 /// Runs an FoE verb, writing its report to `out`.
@@ -111,8 +138,8 @@ pub fn run(cmd: FoeCommand, out: &mut dyn Write) -> Result<(), MasterError> {
             password: pw,
             no_boot,
         } => {
-            let data = std::fs::read(&file)
-                .map_err(|e| MasterError::Usage(format!("{}: {e}", file.display())))?;
+            let data = std::fs::read(&file).map_err(|e| MasterError::File(file.clone(), e))?;
+            let name_from_file = name.is_none();
             let name = match name {
                 Some(n) => n,
                 None => file
@@ -141,7 +168,7 @@ pub fn run(cmd: FoeCommand, out: &mut dyn Write) -> Result<(), MasterError> {
                 let back = m.leave_boot(p);
                 back?;
             }
-            r?;
+            r.map_err(|e| explain_write_error(e, &name, name_from_file))?;
             writeln!(
                 out,
                 "slave {p}: wrote {} bytes as {name:?}{}",
@@ -170,9 +197,9 @@ pub fn run(cmd: FoeCommand, out: &mut dyn Write) -> Result<(), MasterError> {
             let p = pos.position.unwrap_or(0);
             m.address(p)?;
             let data = m.foe_read(p, &name, pw, &mut |_, _| {})?;
-            match output {
+            match output.filter(|f| !crate::output::is_stdout(f)) {
                 Some(f) => {
-                    std::fs::write(&f, &data).map_err(io)?;
+                    crate::output::write_file(&f, &data)?;
                     writeln!(
                         out,
                         "slave {p}: read {} bytes of {name:?} into {}",

@@ -43,9 +43,16 @@ pub fn run(a: HubDemoArgs) -> Result<(), CliError> {
     };
     let r = run_scenario(sii, &cfg, &mut |l| println!("{l}"))
         .map_err(|e| CliError::Io(std::io::Error::other(e)))?;
+    let errors: Vec<String> = r.errors_seen.iter().map(|e| e.to_string()).collect();
     println!(
-        "{} cycles, {} sensors, errors seen at the master: {:?}",
-        r.cycles, r.sensors_found, r.errors_seen
+        "{} cycles, {} sensors, errors seen at the master: {}",
+        r.cycles,
+        r.sensors_found,
+        if errors.is_empty() {
+            "none".to_string()
+        } else {
+            errors.join(", ")
+        }
     );
     if r.ok() {
         println!("all steps reached");

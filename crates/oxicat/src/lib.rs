@@ -12,7 +12,9 @@ use oxicat_slave::DeviceDef;
 pub mod cia402_cmd;
 pub mod foe_cmd;
 pub mod hub_cmd;
+pub mod interrupt;
 pub mod master_cmd;
+pub mod output;
 pub mod sim_cmd;
 pub mod sim_devices;
 pub mod trot_cmd;
@@ -137,7 +139,7 @@ impl std::fmt::Display for CliError {
                 write!(f, "unknown device {n:?}; known: {}", names.join(", "))
             }
             CliError::Device(e) => write!(f, "{e}"),
-            CliError::Io(e) => write!(f, "{e}"),
+            CliError::Io(e) => write!(f, "writing the output failed: {e}"),
             CliError::Sim(e) => write!(f, "{e}"),
             CliError::Master(e) => write!(f, "{e}"),
         }
@@ -145,6 +147,26 @@ impl std::fmt::Display for CliError {
 }
 
 impl std::error::Error for CliError {}
+
+impl CliError {
+    /// Whether the error is standard output closed by its reader (`oxicat sdos | head -1`):
+    /// the command then ends quietly with success, as other Unix tools do.
+    pub fn is_broken_pipe(&self) -> bool {
+        let io = match self {
+            CliError::Io(e) | CliError::Master(oxicat_master::MasterError::Output(e)) => e,
+            _ => return false,
+        };
+        io.kind() == std::io::ErrorKind::BrokenPipe
+    }
+}
+
+/// Prints a verb's text on standard output (an error, not a panic, when it is closed).
+fn print_text(text: &str) -> Result<(), CliError> {
+    let mut out = std::io::stdout().lock();
+    out.write_all(text.as_bytes())
+        .and_then(|()| out.flush())
+        .map_err(CliError::Io)
+}
 
 /// The bytes `oxicat device <name> <what>` writes.
 pub fn device_output(name: &str, what: DeviceOutput) -> Result<Vec<u8>, CliError> {
@@ -174,25 +196,17 @@ pub fn run(cli: Cli) -> Result<(), CliError> {
     match cli.command {
         Command::Device(a) => {
             let bytes = device_output(&a.name, a.what)?;
-            match a.output {
-                Some(p) => std::fs::write(p, bytes).map_err(CliError::Io),
-                None => std::io::stdout().write_all(&bytes).map_err(CliError::Io),
-            }
+            output::write_output(a.output.as_deref(), &bytes, &mut std::io::stdout().lock())
+                .map_err(CliError::Master)
         }
-        Command::Cia402(a) => cia402_cmd::run(a)
-            .map(|text| print!("{text}"))
-            .map_err(CliError::Master),
+        Command::Cia402(a) => print_text(&cia402_cmd::run(a).map_err(CliError::Master)?),
         Command::Sim(a) => sim_cmd::run(a).map_err(CliError::Sim),
         Command::HubDemo(a) => hub_cmd::run(a),
         Command::Master(c) => {
             master_cmd::run(c, &mut std::io::stdout().lock()).map_err(CliError::Master)
         }
         Command::Foe(c) => foe_cmd::run(c, &mut std::io::stdout().lock()).map_err(CliError::Master),
-        Command::Trot(a) => trot_cmd::run(a)
-            .map(|text| print!("{text}"))
-            .map_err(CliError::Master),
-        Command::TueEs030(a) => tue_cmd::run(a)
-            .map(|text| print!("{text}"))
-            .map_err(CliError::Master),
+        Command::Trot(a) => print_text(&trot_cmd::run(a).map_err(CliError::Master)?),
+        Command::TueEs030(a) => print_text(&tue_cmd::run(a).map_err(CliError::Master)?),
     }
 }

@@ -262,20 +262,47 @@ pub fn parse_duration(s: &str) -> Result<Duration, MasterError> {
     Ok(Duration::from_nanos(ns.round() as u64))
 }
 
+/// The `--sim` devices: `(name, count)` of every `NAME[:COUNT]`, counts checked (1 …
+/// [`oxicat_master::MAX_SLAVES`] in all: what the master's group holds) before anything is
+/// built.
+fn sim_parts(spec: &str) -> Result<Vec<(&str, usize)>, MasterError> {
+    let max = oxicat_master::MAX_SLAVES;
+    let mut parts = Vec::new();
+    let mut total = 0usize;
+    for part in spec.split(',').map(str::trim).filter(|p| !p.is_empty()) {
+        let (name, count) = match part.split_once(':') {
+            Some((n, c)) => (
+                n,
+                c.parse::<usize>().map_err(|_| {
+                    MasterError::Usage(format!(
+                        "bad count in --sim {part:?}: NAME:COUNT with COUNT 1 … {max}"
+                    ))
+                })?,
+            ),
+            None => (part, 1),
+        };
+        total = total.saturating_add(count);
+        if count == 0 || total > max {
+            return Err(MasterError::Usage(format!(
+                "--sim {spec:?}: {count} slaves of {name} are out of range: 1 … {max} slaves in all (the master's group holds {max})"
+            )));
+        }
+        parts.push((name, count));
+    }
+    if parts.is_empty() {
+        return Err(MasterError::Usage(format!(
+            "--sim {spec:?} names no devices: give NAME:COUNT, e.g. demo:2"
+        )));
+    }
+    Ok(parts)
+}
+
 fn build_sim(spec: &str) -> Result<Arc<Mutex<oxicat_sim::segment::Segment>>, MasterError> {
     use oxicat_esc::{Esc, EscConfig};
     use oxicat_sim::firmware::{attach_firmware, FirmwareConfig};
     let mut seg = oxicat_sim::segment::Segment::new();
     let mut k = 0usize;
-    for part in spec.split(',').map(str::trim).filter(|p| !p.is_empty()) {
-        let (name, count) = match part.split_once(':') {
-            Some((n, c)) => (
-                n,
-                c.parse::<usize>()
-                    .map_err(|_| MasterError::Usage(format!("bad count in {part:?}")))?,
-            ),
-            None => (part, 1),
-        };
+    for (name, count) in sim_parts(spec)? {
         let def: &'static oxicat_slave::DeviceDef = match name {
             "demo" => &oxicat_devices::demo::DEF,
             "demo-additions" => &oxicat_devices::demo::additions::DEF,
@@ -380,6 +407,52 @@ fn sub(s: &str) -> Result<u8, MasterError> {
         .ok_or_else(|| MasterError::Usage(format!("not a subindex: {s:?}")))
 }
 
+/// The bit length of `index:sub` from SDO information, if the slave tells.
+fn sdo_bits(m: &Master, p: usize, index: u16, s: u8) -> Option<u16> {
+    let o = m.sdo_describe(p, index).ok()?;
+    o.entries.iter().find(|e| e.sub == s).map(|e| e.bits)
+}
+
+/// A fixed-size type must be the object's size (as in the IgH tool): `-t u8` of a 32-bit
+/// object would show a quarter of it, `-t f64` of 4 bytes nothing but hex.
+fn check_type_fits(t: ValueType, index: u16, sub: u8, len: usize) -> Result<(), MasterError> {
+    match t.size() {
+        Some(size) if size != len => Err(MasterError::Usage(format!(
+            "0x{index:04X}:{sub:02X} holds {len} byte(s), type {t} is {size}: give the object's type (or none)"
+        ))),
+        _ => Ok(()),
+    }
+}
+
+/// ESC registers and process RAM end at 0xFFFF: `address + length` past it is refused (a
+/// slave cannot answer it), and so is length 0.
+fn check_register_range(address: u16, len: usize) -> Result<(), MasterError> {
+    if len == 0 {
+        return Err(MasterError::Usage("length 0: give 1 … 65536 bytes".into()));
+    }
+    let end = usize::from(address) + len;
+    if end > 0x1_0000 {
+        return Err(MasterError::Usage(format!(
+            "0x{address:04X} + {len} bytes ends at 0x{end:05X}, beyond the ESC's address space (registers and process RAM end at 0xFFFF)"
+        )));
+    }
+    Ok(())
+}
+
+/// Where `sii-write` keeps the old image of slave `p`: `sii-backup-<p>.bin` in the current
+/// directory, or `sii-backup-<p>-<k>.bin` when that exists (an earlier backup, maybe of the
+/// original image, is never overwritten).
+fn backup_path(p: usize) -> PathBuf {
+    let first = PathBuf::from(format!("sii-backup-{p}.bin"));
+    if !first.exists() {
+        return first;
+    }
+    (1..)
+        .map(|k| PathBuf::from(format!("sii-backup-{p}-{k}.bin")))
+        .find(|f| !f.exists())
+        .unwrap_or(first)
+}
+
 /// The type of `index:sub` from SDO information, if the slave tells.
 fn sdo_type(m: &Master, p: usize, index: u16, s: u8) -> Option<ValueType> {
     let o = m.sdo_describe(p, index).ok()?;
@@ -475,10 +548,7 @@ pub fn run(cmd: MasterCommand, out: &mut dyn Write) -> Result<(), MasterError> {
             } else {
                 oxicat_master::sii::decode(&img)?.into_bytes()
             };
-            match output {
-                Some(f) => std::fs::write(f, bytes).map_err(MasterError::Output),
-                None => out.write_all(&bytes).map_err(MasterError::Output),
-            }
+            crate::output::write_output(output.as_deref(), &bytes, out)
         }
         MasterCommand::SiiWrite {
             link,
@@ -510,18 +580,62 @@ pub fn run(cmd: MasterCommand, out: &mut dyn Write) -> Result<(), MasterError> {
             oxicat_master::sii::check_image(&img)?;
             let m = open(&link)?;
             let p = one(&m, &pos)?;
+            // Refused before a word is written: an image the EEPROM cannot hold.
+            let size = m.eeprom_bytes(p)?;
+            if img.len() > size {
+                return Err(MasterError::SiiImage(format!(
+                    "{} bytes do not fit slave {p}'s EEPROM of {size} bytes (SII word 0x3E, ESC 0x0502 bit 7); nothing was written",
+                    img.len()
+                )));
+            }
+            // An image for another device is refused before anything (the backup too).
+            let image = oxicat_master::sii::image_identity(&img)?;
+            let (v, pc, r, _) = m.identity(p)?;
+            if image != (v, pc, r) && !force {
+                return Err(MasterError::SiiOtherDevice {
+                    position: p,
+                    image,
+                    slave: (v, pc, r),
+                });
+            }
+            // The old image first, so a write that stops half-way can be undone.
+            let old = m.sii_read(p, true)?;
+            let backup = backup_path(p);
+            crate::output::write_file(&backup, &old)?;
+            let restore = format!(
+                "the EEPROM of slave {p} is half written; the old image is in {b}: restore it with `oxicat sii-write -p {p} --force {b}` (and the same --iface/--sim)",
+                b = backup.display()
+            );
+            let ctrl_c = crate::interrupt::say_on_ctrl_c(restore.clone());
             let pb = progress_bar((img.len() / 2) as u64, "writing SII");
+            let mut written = 0usize;
             let r = m.sii_write(
                 p,
                 &img,
                 oxicat_master::sii::WriteOptions { force },
-                &mut |d, _| pb.set_position(d as u64),
+                &mut |d, _| {
+                    written = d;
+                    pb.set_position(d as u64)
+                },
             );
             pb.finish_and_clear();
-            r?;
+            drop(ctrl_c);
+            match r {
+                Err(e) if written > 0 => {
+                    return Err(MasterError::Usage(format!(
+                        "{e}\n{restore} ({written} of {} words were written)",
+                        img.len() / 2
+                    )))
+                }
+                r => r?,
+            }
             w(
                 out,
-                &format!("slave {p}: wrote and verified {} bytes of SII\n", img.len()),
+                &format!(
+                    "slave {p}: wrote and verified {} bytes of SII (the old image is in {})\n",
+                    img.len(),
+                    backup.display()
+                ),
             )
         }
         MasterCommand::Upload {
@@ -536,7 +650,11 @@ pub fn run(cmd: MasterCommand, out: &mut dyn Write) -> Result<(), MasterError> {
             let p = one(&m, &pos)?;
             let data = m.sdo_upload(p, i, s)?;
             let ty = match r#type {
-                Some(t) => ValueType::parse(&t)?,
+                Some(t) => {
+                    let t = ValueType::parse(&t)?;
+                    check_type_fits(t, i, s, data.len())?;
+                    t
+                }
                 None => sdo_type(&m, p, i, s).unwrap_or(match data.len() {
                     1 => ValueType::U8,
                     2 => ValueType::U16,
@@ -564,7 +682,12 @@ pub fn run(cmd: MasterCommand, out: &mut dyn Write) -> Result<(), MasterError> {
             let m = open(&link)?;
             let p = one(&m, &pos)?;
             let ty = match given {
-                Some(t) => t,
+                Some(t) => {
+                    if let Some(bits) = sdo_bits(&m, p, i, s) {
+                        check_type_fits(t, i, s, usize::from(bits).div_ceil(8))?;
+                    }
+                    t
+                }
                 None => sdo_type(&m, p, i, s).ok_or_else(|| {
                     MasterError::Usage(format!(
                         "the type of 0x{i:04X}:{s:02X} is not known from the slave; give --type ({})",
@@ -640,10 +763,7 @@ pub fn run(cmd: MasterCommand, out: &mut dyn Write) -> Result<(), MasterError> {
             let m = open(&link)?;
             let p = one(&m, &pos)?;
             let xml = m.esi(p)?;
-            match output {
-                Some(f) => std::fs::write(f, xml).map_err(MasterError::Output),
-                None => w(out, &xml),
-            }
+            crate::output::write_output(output.as_deref(), xml.as_bytes(), out)
         }
         MasterCommand::RegRead {
             link,
@@ -659,6 +779,14 @@ pub fn run(cmd: MasterCommand, out: &mut dyn Write) -> Result<(), MasterError> {
                 (None, Some(s)) => s as u16,
                 (None, None) => 1,
             };
+            check_register_range(a, usize::from(len))?;
+            if let (Some(t), Some(size)) = (ty, ty.and_then(|t| t.size())) {
+                if usize::from(len) != size {
+                    return Err(MasterError::Usage(format!(
+                        "type {t} is {size} byte(s), the length given is {len}: give one of them, or both alike"
+                    )));
+                }
+            }
             let m = open(&link)?;
             let p = one(&m, &pos)?;
             let b = m.reg_read(p, a, len)?;
@@ -680,6 +808,7 @@ pub fn run(cmd: MasterCommand, out: &mut dyn Write) -> Result<(), MasterError> {
                 None => ValueType::U8,
             };
             let data = ty.encode(&value)?;
+            check_register_range(a, data.len())?;
             let m = open(&link)?;
             let p = one(&m, &pos)?;
             m.reg_write(p, a, &data)
@@ -756,42 +885,75 @@ pub fn run(cmd: MasterCommand, out: &mut dyn Write) -> Result<(), MasterError> {
             output,
             free_run,
         } => {
+            // Every argument is checked before the output is touched; the CSV goes to a
+            // temporary file renamed over `output` at the end, so a failure leaves it as it was.
             let cycle = parse_duration(&cycle)?;
             let duration = parse_duration(&duration)?;
-            let cycles = (duration.as_nanos() / cycle.as_nanos().max(1)).max(1) as u64;
+            let opts = CycleOptions {
+                cycle,
+                dc: !free_run,
+            };
+            opts.check()?;
+            if duration < cycle {
+                return Err(MasterError::Usage(format!(
+                    "--duration {duration:?} is shorter than one --cycle {cycle:?}"
+                )));
+            }
+            let cycles = (duration.as_nanos() / cycle.as_nanos()) as u64;
             let mut m = open(&link)?;
             let layouts = m.layouts()?;
             let vars: Vec<_> = m.resolve(&vars, &layouts)?.into_iter().flatten().collect();
-            let f = std::fs::File::create(&output).map_err(MasterError::Output)?;
-            let mut f = std::io::BufWriter::new(f);
+            let to_stdout = crate::output::is_stdout(&output);
+            let mut file = match to_stdout {
+                true => None,
+                false => Some(crate::output::AtomicFile::create(&output)?),
+            };
+            let sink: &mut dyn Write = match &mut file {
+                Some(f) => f,
+                None => &mut *out,
+            };
+            let stop = Arc::new(std::sync::atomic::AtomicBool::new(false));
+            let ctrl_c = crate::interrupt::stop_on_ctrl_c(stop.clone());
             let pb = progress_bar(cycles, "recording");
-            let r = m.record(
-                CycleOptions {
-                    cycle,
-                    dc: !free_run,
-                },
+            let r = m.record_until(
+                opts,
                 &vars,
                 cycles,
-                &mut f,
+                sink,
                 &mut |k, _| {
                     if k % 64 == 0 || k == cycles {
                         pb.set_position(k)
                     }
                 },
+                &stop,
             );
             pb.finish_and_clear();
+            drop(ctrl_c);
             let stats = r?;
-            f.flush().map_err(MasterError::Output)?;
-            w(
-                out,
-                &format!(
-                    "{} cycles of {} variables to {} ({} working-counter errors)\n",
-                    stats.cycles,
-                    vars.len(),
-                    output.display(),
-                    stats.wkc_errors
-                ),
-            )
+            let place = match file {
+                Some(f) => {
+                    f.commit()?;
+                    output.display().to_string()
+                }
+                None => "standard output".to_string(),
+            };
+            let line = format!(
+                "{} cycles of {} variables to {place} ({} working-counter errors){}\n",
+                stats.cycles,
+                vars.len(),
+                stats.wkc_errors,
+                if stats.cycles < cycles {
+                    "; stopped by Ctrl-C"
+                } else {
+                    ""
+                }
+            );
+            if to_stdout {
+                eprint!("{line}");
+                Ok(())
+            } else {
+                w(out, &line)
+            }
         }
     }
 }

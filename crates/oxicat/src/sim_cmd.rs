@@ -18,6 +18,10 @@
 //! ```
 //!
 //! The nodes form a line in the order given (port 1 of one to port 0 of the next).
+//!
+//! Limits (checked before anything is built, with the key and the range in the message):
+//! at most [`MAX_SIM_SLAVES`] nodes in all; delays 0 … [`MAX_DELAY_NS`] ns; drift
+//! −[`MAX_DRIFT_PPM`] … [`MAX_DRIFT_PPM`] ppm.
 
 use std::io::{IsTerminal, Write};
 use std::path::{Path, PathBuf};
@@ -31,6 +35,20 @@ use oxicat_sim::segment::{Segment, TopologyError};
 use serde::Deserialize;
 
 use crate::sim_devices::{add_node, find_sim_device, sim_devices, NodeError};
+
+/// Most nodes on a served segment: a frame passes every ESC twice (processing on the way
+/// out, forwarding on the way back), about 1 µs per node with an ESC's ~0.5 µs delay, so
+/// 1000 nodes take the whole of a 1 kHz cycle; each node also holds its 64 KiB ESC memory
+/// and firmware (about 80 MB for 1000).
+pub const MAX_SIM_SLAVES: usize = 1000;
+
+/// Largest ESC or cable delay of a segment file, ns (1 ms: a whole 1 kHz cycle; a real ESC
+/// forwards in ~0.5 µs, a 100 m cable takes ~0.5 µs).
+pub const MAX_DELAY_NS: u64 = 1_000_000;
+
+/// Largest oscillator error of a segment file, ppm (crystals are within ±100 ppm; the DC
+/// model is exact up to ±10 000).
+pub const MAX_DRIFT_PPM: f64 = 1000.0;
 
 /// Arguments of `oxicat sim`.
 #[derive(Debug, clap::Args)]
@@ -85,8 +103,17 @@ pub enum SimError {
     Topology(TopologyError),
     /// The network transport failed.
     Net(NetError),
-    /// The Ctrl-C handler could not be installed.
-    Signal(String),
+    /// A number of the segment description is out of its range.
+    Range {
+        /// The key (`device[1].drift_ppm`, or `demo:100000` for a command-line count).
+        key: String,
+        /// The value given.
+        value: String,
+        /// The allowed range and why.
+        range: String,
+    },
+    /// Ctrl-C while the segment was being built.
+    Interrupted,
 }
 
 impl std::fmt::Display for SimError {
@@ -116,7 +143,10 @@ impl std::fmt::Display for SimError {
             } => write!(f, "node {position} ({device}): {error}"),
             Self::Topology(e) => write!(f, "{e}"),
             Self::Net(e) => write!(f, "{e}"),
-            Self::Signal(e) => write!(f, "cannot catch Ctrl-C: {e}"),
+            Self::Range { key, value, range } => {
+                write!(f, "{key} = {value} is not in {range}")
+            }
+            Self::Interrupted => write!(f, "interrupted while building the segment"),
         }
     }
 }
@@ -164,6 +194,15 @@ fn one() -> usize {
 pub fn parse_specs(specs: &[String]) -> Result<SegmentFile, SimError> {
     let mut seg = SegmentFile::default();
     for s in specs {
+        if let Some((_, c)) = s.split_once(':') {
+            if c.parse::<u128>().is_ok_and(|c| c > MAX_SIM_SLAVES as u128) {
+                return Err(SimError::Range {
+                    key: format!("the count of {s}"),
+                    value: c.to_string(),
+                    range: count_range(),
+                });
+            }
+        }
         let (name, count) = match s.split_once(':') {
             Some((n, c)) => (
                 n,
@@ -188,29 +227,87 @@ pub fn parse_specs(specs: &[String]) -> Result<SegmentFile, SimError> {
     Ok(seg)
 }
 
-/// Reads a TOML segment file.
+fn count_range() -> String {
+    format!("1 … {MAX_SIM_SLAVES} slaves in all (a frame through {MAX_SIM_SLAVES} ESCs takes a whole 1 kHz cycle)")
+}
+
+/// Reads a TOML segment file and checks its numbers.
 pub fn read_segment_file(path: &Path) -> Result<SegmentFile, SimError> {
     let text = std::fs::read_to_string(path).map_err(|e| SimError::SegmentFile(path.into(), e))?;
     parse_segment(&text, path)
 }
 
-/// Parses the text of a TOML segment file (`path` is named in errors).
+/// Parses the text of a TOML segment file and checks its numbers (`path` is named in
+/// errors).
 pub fn parse_segment(text: &str, path: &Path) -> Result<SegmentFile, SimError> {
-    toml::from_str(text).map_err(|e| SimError::SegmentToml(path.into(), e.to_string()))
+    let desc: SegmentFile =
+        toml::from_str(text).map_err(|e| SimError::SegmentToml(path.into(), e.to_string()))?;
+    check_segment(&desc).map_err(|e| SimError::SegmentToml(path.into(), e.to_string()))?;
+    Ok(desc)
+}
+
+/// Checks every number of a segment description against its range (delays, drift, counts
+/// and their total), naming the key.
+pub fn check_segment(desc: &SegmentFile) -> Result<(), SimError> {
+    let delay = |key: String, v: Option<u64>| match v {
+        Some(v) if v > MAX_DELAY_NS => Err(SimError::Range {
+            key,
+            value: v.to_string(),
+            range: format!("0 … {MAX_DELAY_NS} ns (a whole 1 kHz cycle)"),
+        }),
+        _ => Ok(()),
+    };
+    delay("master_link_delay_ns".into(), desc.master_link_delay_ns)?;
+    delay("esc_delay_ns".into(), desc.esc_delay_ns)?;
+    delay("link_delay_ns".into(), desc.link_delay_ns)?;
+    let mut total = 0usize;
+    for (k, d) in desc.devices.iter().enumerate() {
+        delay(format!("device[{k}].esc_delay_ns"), d.esc_delay_ns)?;
+        delay(format!("device[{k}].link_delay_ns"), d.link_delay_ns)?;
+        if !(d.drift_ppm.is_finite() && d.drift_ppm.abs() <= MAX_DRIFT_PPM) {
+            return Err(SimError::Range {
+                key: format!("device[{k}].drift_ppm"),
+                value: d.drift_ppm.to_string(),
+                range: format!("-{MAX_DRIFT_PPM} … {MAX_DRIFT_PPM} ppm"),
+            });
+        }
+        total = total.saturating_add(d.count);
+        if d.count == 0 || total > MAX_SIM_SLAVES {
+            return Err(SimError::Range {
+                key: format!("device[{k}].count"),
+                value: d.count.to_string(),
+                range: count_range(),
+            });
+        }
+    }
+    Ok(())
 }
 
 /// Builds the segment (firmware booted at virtual time 0); returns it with the device name
 /// of every node.
 pub fn build_segment(desc: &SegmentFile) -> Result<(Segment, Vec<String>), SimError> {
+    build_segment_until(desc, &AtomicBool::new(false))
+}
+
+/// [`build_segment`] that gives up with [`SimError::Interrupted`] when `stop` is set (Ctrl-C
+/// while a long segment boots).
+pub fn build_segment_until(
+    desc: &SegmentFile,
+    stop: &AtomicBool,
+) -> Result<(Segment, Vec<String>), SimError> {
     if desc.devices.iter().all(|d| d.count == 0) {
         return Err(SimError::NoDevices);
     }
+    check_segment(desc)?;
     let mut seg = Segment::new();
     let mut names = Vec::new();
     for entry in &desc.devices {
         let dev = find_sim_device(&entry.name)
             .ok_or_else(|| SimError::UnknownDevice(entry.name.clone()))?;
         for k in 0..entry.count {
+            if stop.load(Ordering::Relaxed) {
+                return Err(SimError::Interrupted);
+            }
             let position = seg.len();
             let id =
                 add_node(&mut seg, &dev, k, entry.drift_ppm).map_err(|error| SimError::Node {
@@ -252,13 +349,10 @@ pub fn al_state_name(al_status: u16) -> String {
     }
 }
 
-/// Text of an AL status code (ETG.1000.6 table 11).
+/// Text of an AL status code (ETG.1000.6 table 11), the code once: `0x001E Invalid input
+/// configuration`.
 pub fn al_code_text(code: u16) -> String {
-    use ethercrab::EtherCrabWireRead;
-    match ethercrab::AlStatusCode::unpack_from_slice(&code.to_le_bytes()) {
-        Ok(c) => format!("0x{code:04X} {c}"),
-        Err(_) => format!("0x{code:04X}"),
-    }
+    format!("0x{code:04X} {}", oxicat_master::al::al_status_text(code))
 }
 
 /// One status line: frames/s and every node's AL state (and AL status code if in error).
@@ -328,7 +422,10 @@ pub fn serve_until(args: &SimArgs, stop: Arc<AtomicBool>) -> Result<(), SimError
         Some(p) => read_segment_file(p)?,
         None => parse_specs(&args.devices)?,
     };
-    let (seg, names) = build_segment(&desc)?;
+    check_segment(&desc)?;
+    let total: usize = desc.devices.iter().map(|d| d.count).sum();
+    eprintln!("oxicat sim: booting {total} slave(s); Ctrl-C to stop");
+    let (seg, names) = build_segment_until(&desc, &stop)?;
     let n = seg.len();
     let segment = Arc::new(Mutex::new(seg));
     let config = RealtimeConfig {
@@ -416,9 +513,8 @@ pub fn run(args: SimArgs) -> Result<(), SimError> {
     let _ = env_logger::Builder::from_env(env_logger::Env::default().default_filter_or("warn"))
         .try_init();
     let stop = Arc::new(AtomicBool::new(false));
-    let s = stop.clone();
-    ctrlc::set_handler(move || s.store(true, Ordering::Relaxed))
-        .map_err(|e| SimError::Signal(e.to_string()))?;
+    // Ctrl-C also while the segment is being built.
+    let _ctrl_c = crate::interrupt::stop_on_ctrl_c(stop.clone());
     serve_until(&args, stop)
 }
 
@@ -478,6 +574,110 @@ mod tests {
         assert!(bad.is_err(), "unknown keys are refused");
     }
 
+    /// Every number of a full segment file (walked from the TOML, so a key added later and
+    /// not checked fails here) is refused as NaN, ±inf or far out of range, naming its key.
+    #[test]
+    fn every_number_of_a_segment_file_is_range_checked() {
+        const FULL: &str = r#"
+            master_link_delay_ns = 70
+            esc_delay_ns = 500
+            link_delay_ns = 60
+            [[device]]
+            name = "demo"
+            count = 2
+            drift_ppm = 25.0
+            esc_delay_ns = 600
+            link_delay_ns = 120
+        "#;
+        let base: toml::Value = toml::from_str(FULL).unwrap();
+        let desc: SegmentFile = toml::from_str(FULL).unwrap();
+        check_segment(&desc).expect("the full file is fine");
+        let mut keys = Vec::new();
+        for (k, v) in base.as_table().unwrap() {
+            match v {
+                toml::Value::Array(a) => {
+                    for (k2, v2) in a[0].as_table().unwrap() {
+                        if v2.is_integer() || v2.is_float() {
+                            keys.push((Some(k.clone()), k2.clone(), v2.is_float()));
+                        }
+                    }
+                }
+                v if v.is_integer() || v.is_float() => keys.push((None, k.clone(), v.is_float())),
+                _ => {}
+            }
+        }
+        assert_eq!(keys.len(), 7, "{keys:?}");
+        for (table, key, float) in keys {
+            let values: Vec<toml::Value> = if float {
+                [f64::NAN, f64::INFINITY, f64::NEG_INFINITY, 1e9, -1e9]
+                    .into_iter()
+                    .map(toml::Value::Float)
+                    .collect()
+            } else {
+                [-1i64, 1_000_000_000_000]
+                    .into_iter()
+                    .map(toml::Value::Integer)
+                    .collect()
+            };
+            for x in values {
+                let mut v = base.clone();
+                match &table {
+                    Some(t) => v[t.as_str()][0][key.as_str()] = x.clone(),
+                    None => v[key.as_str()] = x.clone(),
+                }
+                let text = toml::to_string(&v).unwrap();
+                let e = match toml::from_str::<SegmentFile>(&text) {
+                    Err(e) => e.to_string(),
+                    Ok(d) => match check_segment(&d) {
+                        Err(e) => {
+                            let m = e.to_string();
+                            assert!(m.contains(" … "), "{key} = {x}: no range in {m}");
+                            m
+                        }
+                        Ok(()) => panic!("{key} = {x} was accepted"),
+                    },
+                };
+                assert!(e.contains(&key), "{key} = {x}: {e}");
+            }
+        }
+        // The issue's values, through the file reader (the path in the message).
+        let dir = std::env::temp_dir().join(format!("oxicat-seg-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let f = dir.join("seg.toml");
+        std::fs::write(&f, "[[device]]\nname = \"demo\"\ndrift_ppm = nan\n").unwrap();
+        let e = read_segment_file(&f).unwrap_err().to_string();
+        assert!(
+            e.contains("seg.toml")
+                && e.contains("device[0].drift_ppm = NaN is not in -1000 … 1000 ppm"),
+            "{e}"
+        );
+        std::fs::write(
+            &f,
+            "[[device]]\nname = \"demo\"\nesc_delay_ns = 10000000000\n",
+        )
+        .unwrap();
+        let e = read_segment_file(&f).unwrap_err().to_string();
+        assert!(
+            e.contains("device[0].esc_delay_ns = 10000000000 is not in 0 … 1000000 ns"),
+            "{e}"
+        );
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+
+    #[test]
+    fn counts_beyond_the_limit_are_refused_before_building() {
+        let e = parse_specs(&["demo:100000".into()])
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("100000") && e.contains("1 … 1000"), "{e}");
+        let desc = parse_specs(&["demo:600".into(), "demo:600".into()]).unwrap();
+        let e = build_segment(&desc).unwrap_err().to_string();
+        assert!(
+            e.contains("device[1].count") && e.contains("1 … 1000"),
+            "{e}"
+        );
+    }
+
     #[test]
     fn laelaps_legs_boot_in_chain_order() {
         let (seg, names) = build_segment(&parse_specs(&["laelaps-leg:4".into()]).unwrap()).unwrap();
@@ -495,5 +695,7 @@ mod tests {
         assert!(l.contains("0:INIT") && l.contains("1:INIT"), "{l}");
         assert_eq!(al_state_name(0x14), "SAFEOP+ERR");
         assert!(al_code_text(0x001B).starts_with("0x001B "));
+        // The code once, then its text (ethercrab's Display repeats the code).
+        assert_eq!(al_code_text(0x001E), "0x001E Invalid input configuration");
     }
 }

@@ -73,7 +73,7 @@ pub fn run(a: TrotArgs) -> Result<String, MasterError> {
     if a.bus_time {
         s = s.with_exec_time(ExecTime::Thesis);
     }
-    std::fs::create_dir_all(&a.out).map_err(|e| MasterError::Io(a.out.display().to_string(), e))?;
+    std::fs::create_dir_all(&a.out).map_err(|e| MasterError::File(a.out.clone(), e))?;
     let bar = if a.quiet {
         ProgressBar::hidden()
     } else {
@@ -95,8 +95,7 @@ pub fn run(a: TrotArgs) -> Result<String, MasterError> {
     bar.finish_and_clear();
     let t_out = Instant::now();
     let csv_path = a.out.join("trot.csv");
-    std::fs::write(&csv_path, csv(&run))
-        .map_err(|e| MasterError::Io(csv_path.display().to_string(), e))?;
+    crate::output::write_file(&csv_path, csv(&run).as_bytes())?;
     let sum = summarize(&run);
     let mut md = summary_markdown(&run, &sum);
     let rec_s = run.rows.len() as f64 * s.cycle_ns() as f64 * 1e-9;
@@ -111,8 +110,7 @@ pub fn run(a: TrotArgs) -> Result<String, MasterError> {
         (run.wall - run.wall_recorded).as_secs_f64(),
     );
     let sum_path = a.out.join("summary.md");
-    std::fs::write(&sum_path, &md)
-        .map_err(|e| MasterError::Io(sum_path.display().to_string(), e))?;
+    crate::output::write_file(&sum_path, md.as_bytes())?;
     let mut files = vec![csv_path, sum_path];
     if !a.no_plots {
         files.extend(plot::write_figures(&run, &a.out)?);

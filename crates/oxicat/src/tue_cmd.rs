@@ -42,7 +42,7 @@ pub struct TueArgs {
     /// FRF: I gain.
     #[arg(long, default_value_t = 4.0)]
     pub i: f32,
-    /// FRF: integrator limit \[A s\].
+    /// FRF: integrator limit in A s.
     #[arg(long, default_value_t = 1.0)]
     pub limit: f32,
     /// FRF: multisine periods (of 100 ms, 10 Hz resolution); the first is discarded.
@@ -89,13 +89,43 @@ pub fn bench_params() -> TueParams {
 }
 
 fn write(path: PathBuf, text: &str) -> Result<PathBuf, MasterError> {
-    std::fs::write(&path, text).map_err(|e| MasterError::Io(path.display().to_string(), e))?;
+    crate::output::write_file(&path, text.as_bytes())?;
     Ok(path)
+}
+
+/// Refuses a number that cannot work (NaN, infinite, out of range), naming the option and
+/// its range, before anything runs.
+pub fn check_args(a: &TueArgs) -> Result<(), MasterError> {
+    let range = |key: &str, v: f32, lo: f32, hi: f32, why: &str| {
+        if v.is_finite() && (lo..=hi).contains(&v) {
+            Ok(())
+        } else {
+            Err(MasterError::Usage(format!(
+                "{key} {v} is not in {lo} … {hi} ({why})"
+            )))
+        }
+    };
+    if a.p.is_empty() {
+        return Err(MasterError::Usage("--p: give at least one P gain".into()));
+    }
+    for &p in &a.p {
+        range("--p", p, 0.01, 1000.0, "current-loop P gain, V/A")?;
+    }
+    range("--i", a.i, 0.0, 1000.0, "current-loop I gain")?;
+    range("--limit", a.limit, 0.0, 100.0, "integrator limit, A s")?;
+    if !(2..=1000).contains(&a.periods) {
+        return Err(MasterError::Usage(format!(
+            "--periods {} is not in 2 … 1000 (the first period is discarded; 1000 are 100 s)",
+            a.periods
+        )));
+    }
+    Ok(())
 }
 
 /// Runs `oxicat tue-es030`; returns the text it printed.
 pub fn run(a: TueArgs) -> Result<String, MasterError> {
-    std::fs::create_dir_all(&a.out).map_err(|e| MasterError::Io(a.out.display().to_string(), e))?;
+    check_args(&a)?;
+    std::fs::create_dir_all(&a.out).map_err(|e| MasterError::File(a.out.clone(), e))?;
     match a.experiment {
         TueExperiment::Normal => normal(&a),
         TueExperiment::Frf => frf(&a),
@@ -194,7 +224,7 @@ fn describe(p: f32, mg: &Margins, share: f64, complete: bool) -> String {
 
 fn frf(a: &TueArgs) -> Result<String, MasterError> {
     let period = 2000;
-    let periods = a.periods.max(2);
+    let periods = a.periods;
     let (sp, bins) = tue::multisine(period, periods, 10.0, 9900.0, 60, 400.0);
     let mut out = String::new();
     let _ = writeln!(

@@ -4,8 +4,12 @@
 use std::process::Command;
 
 fn oxicat(args: &[&str]) -> (bool, String, String) {
+    // In a directory of its own: `sii-write` leaves its backup of the old image there.
+    let cwd = std::env::temp_dir().join(format!("oxicat-master-cli-cwd-{}", std::process::id()));
+    std::fs::create_dir_all(&cwd).expect("work dir");
     let o = Command::new(env!("CARGO_BIN_EXE_oxicat"))
         .args(args)
+        .current_dir(&cwd)
         .env_remove("OXICAT_IFACE")
         .output()
         .expect("oxicat runs");

@@ -11,8 +11,12 @@ use std::process::Command;
 use netns_common::{oxicat_bin, NetnsSim};
 
 fn oxicat(args: &[&str]) -> (bool, String, String) {
+    // In a directory of its own: `sii-write` leaves its backup of the old image there.
+    let cwd = std::env::temp_dir().join(format!("oxicat-master-netns-cwd-{}", std::process::id()));
+    std::fs::create_dir_all(&cwd).expect("work dir");
     let o = Command::new(oxicat_bin())
         .args(args)
+        .current_dir(&cwd)
         .env_remove("OXICAT_IFACE")
         // The sim and every master run as processes on a small, possibly loaded CI box: a
         // frame may wait for a CPU far longer than on a real NIC, so allow 2 s per frame.
