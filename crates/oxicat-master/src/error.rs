@@ -13,6 +13,13 @@ pub enum MasterError {
     NoPermission(String),
     /// Another I/O error on the interface.
     Io(String, std::io::Error),
+    /// A UDP socket to a segment served with EtherCAT over UDP could not be opened.
+    Udp {
+        /// The address given (`host:port`).
+        addr: String,
+        /// The cause.
+        source: std::io::Error,
+    },
     /// Nothing answered on the segment.
     NoSlaves(String),
     /// No slave at that position.
@@ -144,6 +151,10 @@ impl std::fmt::Display for MasterError {
                 "no permission to open a raw socket on {i:?}: EtherCAT needs CAP_NET_RAW (run as root, or `sudo setcap cap_net_raw,cap_net_admin+ep $(which oxicat)`)"
             ),
             Io(i, e) => write!(f, "interface {i:?}: {e}"),
+            Udp { addr, source } => write!(
+                f,
+                "EtherCAT over UDP to {addr}: {source} (give host:port of `oxicat sim --udp`, e.g. 127.0.0.1:34980)"
+            ),
             NoSlaves(w) => write!(
                 f,
                 "no slaves found on {w}: check the cable/link, that the slaves are powered, or that `oxicat sim` runs on the peer interface"

@@ -3,8 +3,8 @@
 //! assignment/mapping, an ESI from a live slave, register access, and cyclic process data
 //! (watch, online write, DC-synchronous recording).
 //!
-//! A [`Master`] runs on a network interface ([`Link::Iface`], ethercrab's raw socket) or on
-//! an in-process [`oxicat_sim::segment::Segment`] ([`Link::Sim`]); the functions do not
+//! A [`Master`] runs on a network interface ([`Link::Iface`], ethercrab's raw socket), on a
+//! segment served with EtherCAT over UDP ([`Link::Udp`]) or on an in-process [`oxicat_sim::segment::Segment`] ([`Link::Sim`]); the functions do not
 //! know how frames travel.
 #![forbid(unsafe_code)]
 #![warn(missing_docs)]
@@ -24,9 +24,9 @@ pub mod results;
 pub mod scenario;
 pub mod sii;
 pub mod tue_es030;
+mod udp;
 pub mod value;
 
-use std::cell::Cell;
 use std::sync::{Arc, Mutex};
 use std::time::Duration;
 
@@ -80,6 +80,8 @@ pub enum Link {
     Iface(String),
     /// A virtual segment in this process (virtual time advances with every frame).
     Sim(Arc<Mutex<Segment>>),
+    /// A segment served with EtherCAT over UDP (`host:port`, e.g. `oxicat sim --udp`).
+    Udp(String),
 }
 
 impl Link {
@@ -87,6 +89,7 @@ impl Link {
         match self {
             Link::Iface(i) => format!("interface {i}"),
             Link::Sim(_) => "the virtual segment".to_string(),
+            Link::Udp(a) => format!("EtherCAT over UDP to {a}"),
         }
     }
 }
@@ -198,7 +201,7 @@ impl MasterOptions {
                 timeouts: oxicat_sim::transport::virtual_timeouts(),
                 mailbox_timeout: Duration::from_secs(5),
             },
-            Link::Iface(_) => Self {
+            Link::Iface(_) | Link::Udp(_) => Self {
                 timeouts: Timeouts {
                     state_transition: Duration::from_secs(10),
                     pdu: Duration::from_millis(250),
@@ -233,7 +236,8 @@ pub struct Master {
     pub(crate) found: Vec<Found>,
     pub(crate) addresses: Vec<u16>,
     pub(crate) options: MasterOptions,
-    pub(crate) mbx_counter: Cell<u8>,
+    /// Per slave, the counter of this master's last mailbox message (`None`: none yet).
+    pub(crate) mbx_counter: std::cell::RefCell<Vec<Option<u8>>>,
     pub(crate) link_name: String,
 }
 
@@ -283,6 +287,10 @@ impl Master {
                     .map_err(|e| MasterError::Io(iface.clone(), e))?;
                 Time::Real
             }
+            Link::Udp(addr) => {
+                udp::spawn(udp::connect(addr)?, tx, rx, addr)?;
+                Time::Real
+            }
             Link::Sim(seg) => {
                 spawn_inprocess_with(
                     seg.clone(),
@@ -314,7 +322,7 @@ impl Master {
             found: Vec::new(),
             addresses: Vec::new(),
             options,
-            mbx_counter: Cell::new(1),
+            mbx_counter: Default::default(),
             link_name,
         };
         futures_lite::future::block_on(m.discover())?;

@@ -3,8 +3,7 @@
 //! `reg-write`, `watch`, `write`, `record`. Each runs on `--iface <if>` (or `OXICAT_IFACE`)
 //! or, for tests and trying things out, on an in-process virtual segment `--sim demo:2`.
 //!
-//! The `--sim` device registry here is small (demo devices); `oxicat sim`'s registry
-//! (`sim_devices`) is the one to grow.
+//! `--sim` knows the devices of `oxicat sim --list` (one registry, `sim_devices`).
 
 use std::io::Write;
 use std::path::PathBuf;
@@ -22,10 +21,15 @@ pub struct LinkArgs {
     /// Network interface with the EtherCAT segment (default: $OXICAT_IFACE).
     #[arg(long, short = 'i')]
     pub iface: Option<String>,
-    /// Run against an in-process virtual segment instead: devices by name with a count,
-    /// comma-separated (e.g. `demo:2`).
-    #[arg(long, conflicts_with = "iface")]
+    /// Run against an in-process virtual segment instead: devices of `oxicat sim --list` by
+    /// name with a count, separated by commas or spaces (e.g. `demo:2,tue-es030:1`). The
+    /// segment lives for this one command.
+    #[arg(long, conflicts_with_all = ["iface", "udp"])]
     pub sim: Option<String>,
+    /// Reach a segment served with EtherCAT over UDP (`oxicat sim --udp <host:port>`), e.g.
+    /// 127.0.0.1:34980.
+    #[arg(long, conflicts_with = "iface", value_name = "HOST:PORT")]
+    pub udp: Option<String>,
     /// How long to wait for a frame to come back on an interface, in ms (default 250, or
     /// $OXICAT_TIMEOUT_MS). Raise it on a busy host or for a virtual segment on a loaded
     /// machine; EEPROM and mailbox waits scale with it.
@@ -262,65 +266,14 @@ pub fn parse_duration(s: &str) -> Result<Duration, MasterError> {
     Ok(Duration::from_nanos(ns.round() as u64))
 }
 
-fn build_sim(spec: &str) -> Result<Arc<Mutex<oxicat_sim::segment::Segment>>, MasterError> {
-    use oxicat_esc::{Esc, EscConfig};
-    use oxicat_sim::firmware::{attach_firmware, FirmwareConfig};
-    let mut seg = oxicat_sim::segment::Segment::new();
-    let mut k = 0usize;
-    for part in spec.split(',').map(str::trim).filter(|p| !p.is_empty()) {
-        let (name, count) = match part.split_once(':') {
-            Some((n, c)) => (
-                n,
-                c.parse::<usize>()
-                    .map_err(|_| MasterError::Usage(format!("bad count in {part:?}")))?,
-            ),
-            None => (part, 1),
-        };
-        let def: &'static oxicat_slave::DeviceDef = match name {
-            "demo" => &oxicat_devices::demo::DEF,
-            "demo-additions" => &oxicat_devices::demo::additions::DEF,
-            _ => {
-                return Err(MasterError::Usage(format!(
-                    "unknown --sim device {name:?}; known: demo, demo-additions"
-                )))
-            }
-        };
-        let sii =
-            oxicat_device::sii::generate(def).map_err(|e| MasterError::SiiImage(e.to_string()))?;
-        for _ in 0..count {
-            let id = seg.add(Esc::new(EscConfig::et1100(), sii.clone()));
-            let app = oxicat_slave::foe::WithFoe {
-                app: oxicat_devices::demo::Demo::new(NoLeds, FixedButtons(0xA0 | k as u8)),
-                files: crate::foe_cmd::demo_files(def),
-            };
-            let cfg = FirmwareConfig::default();
-            let r = if name == "demo" {
-                attach_firmware::<_, { oxicat_devices::demo::IMAGE }, 128>(
-                    &mut seg, id, def, app, &cfg,
-                )
-                .map(|_| ())
-            } else {
-                attach_firmware::<_, { oxicat_devices::demo::additions::IMAGE }, 128>(
-                    &mut seg, id, def, app, &cfg,
-                )
-                .map(|_| ())
-            };
-            r.map_err(|e| MasterError::Usage(format!("firmware of {name} did not boot: {e}")))?;
-            k += 1;
-        }
-    }
+/// The in-process segment of `--sim`: the devices of `oxicat sim --list`, in the same syntax
+/// (`demo:2,tue-es030:1` or `"demo:2 tue-es030:1"`).
+pub fn build_sim(spec: &str) -> Result<Arc<Mutex<oxicat_sim::segment::Segment>>, MasterError> {
+    let desc = crate::sim_cmd::parse_specs(&[spec.to_string()])
+        .map_err(|e| MasterError::Usage(format!("--sim: {e}")))?;
+    let (seg, _) = crate::sim_cmd::build_segment(&desc)
+        .map_err(|e| MasterError::Usage(format!("--sim: {e}")))?;
     Ok(Arc::new(Mutex::new(seg)))
-}
-
-struct NoLeds;
-impl oxicat_devices::demo::Leds for NoLeds {
-    fn set(&mut self, _blue: bool, _red: bool) {}
-}
-struct FixedButtons(u8);
-impl oxicat_devices::demo::Buttons for FixedButtons {
-    fn read(&mut self) -> u8 {
-        self.0
-    }
 }
 
 /// Opens the master on `link` (an interface or an in-process `--sim` segment).
@@ -328,16 +281,19 @@ pub(crate) fn open(link: &LinkArgs) -> Result<Master, MasterError> {
     if let Some(spec) = &link.sim {
         return Master::open(Link::Sim(build_sim(spec)?));
     }
-    let iface = link
+    let target = match &link.udp {
+        Some(addr) => Link::Udp(addr.clone()),
+        None => Link::Iface(link
         .iface
         .clone()
         .or_else(|| std::env::var("OXICAT_IFACE").ok())
         .ok_or_else(|| {
             MasterError::Usage(
-                "no network interface: give --iface <if> (or set OXICAT_IFACE), or --sim demo:2 for a virtual segment"
+                "no network interface: give --iface <if> (or set OXICAT_IFACE), --udp <host:port> for a segment served with `oxicat sim --udp`, or --sim demo:2 for a virtual segment"
                     .into(),
             )
-        })?;
+        })?),
+    };
     let timeout_ms = match link.timeout {
         Some(ms) => Some(ms),
         None => match std::env::var("OXICAT_TIMEOUT_MS") {
@@ -349,7 +305,7 @@ pub(crate) fn open(link: &LinkArgs) -> Result<Master, MasterError> {
             Err(_) => None,
         },
     };
-    let link = Link::Iface(iface);
+    let link = target;
     let mut options = MasterOptions::for_link(&link);
     if let Some(ms) = timeout_ms {
         if ms == 0 {
@@ -443,7 +399,8 @@ pub fn run(cmd: MasterCommand, out: &mut dyn Write) -> Result<(), MasterError> {
             // SAFEOP/OP: free run (0x1C32:01 = 0, SYNC0 off); say what each slave runs.
             let sync = matches!(st, AlState::SafeOp | AlState::Op);
             for (p, s) in m.request_state(&ps, st)? {
-                let mode = match (sync, m.sync_mode(p)?) {
+                // Read 0x1C32 only where it matters (each read is mailbox traffic).
+                let mode = match (sync, if sync { m.sync_mode(p)? } else { None }) {
                     (false, _) => String::new(),
                     (true, Some(0)) => ", free run (0x1C32:01 = 0)".into(),
                     (true, Some(1)) => ", SM2 synchronous (0x1C32:01 = 1)".into(),

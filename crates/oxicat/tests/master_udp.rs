@@ -1,0 +1,63 @@
+//! Master verbs on a segment served with EtherCAT over UDP (`--udp host:port`, as
+//! `oxicat sim --udp` serves it), each verb its own master as each `oxicat` invocation is:
+//! state sequences, mailbox after state changes, two masters on one segment.
+
+mod served_common;
+
+use served_common::{cli, fails, ok, serve};
+
+#[test]
+fn udp_reaches_a_served_segment() {
+    let s = serve(&["demo:2"]);
+    let out = ok(&s, &["slaves"]);
+    assert_eq!(out.lines().count(), 3, "{out}");
+    assert!(out.contains("0xe0000000"), "{out}");
+    let out = ok(&s, &["upload", "-p", "1", "0x1018", "1"]);
+    assert!(out.starts_with("3758096384 (0xe0000000)"), "{out}");
+    let out = ok(&s, &["states", "op"]);
+    assert!(out.contains("0: OP") && out.contains("1: OP"), "{out}");
+    // The segment keeps the state between masters.
+    let out = ok(&s, &["slaves"]);
+    assert_eq!(out.matches(" OP ").count(), 2, "{out}");
+    drop(s);
+    let err = served_common::cli(&["slaves", "--udp", "no.such.host.invalid:34980"]).unwrap_err();
+    assert!(err.contains("no.such.host.invalid:34980"), "{err}");
+}
+
+/// Each command is a new master; the slave drops a mailbox message that repeats the counter
+/// of the one before (ETG.1000.4), so a new master must not start where the last one ended.
+#[test]
+fn foe_read_right_after_init_and_preop() {
+    let s = serve(&["demo:1"]);
+    ok(&s, &["states", "init"]);
+    ok(&s, &["states", "preop"]);
+    let out = ok(&s, &["foe-read", "version.txt"]);
+    assert!(out.contains("vendor_id=0xE0000000"), "{out}");
+    // After an SDO exchange of another master, and after an FoE read of another master.
+    ok(&s, &["upload", "0x1018", "1"]);
+    let out = ok(&s, &["foe-read", "version.txt"]);
+    assert!(out.contains("vendor_id=0xE0000000"), "{out}");
+    let out = ok(&s, &["foe-read", "version.txt"]);
+    assert!(out.contains("vendor_id=0xE0000000"), "{out}");
+}
+
+/// `--sim` and `oxicat sim` take the same devices (one registry) in the same syntaxes:
+/// `dev:n,dev:n` and `dev:n dev:n`.
+#[test]
+fn sim_and_served_take_both_syntaxes_and_every_device() {
+    for spec in [
+        "demo:1,tue-es030:1",
+        "demo:1 tue-es030:1",
+        " demo , tue-es030:1 ",
+    ] {
+        let out = cli(&["slaves", "--sim", spec]).unwrap_or_else(|e| panic!("{spec:?}: {e}"));
+        assert_eq!(out.lines().count(), 3, "{spec:?}: {out}");
+        assert!(out.contains("0x0000e030"), "{out}");
+    }
+    let err = cli(&["slaves", "--sim", "demo:1,nosuch:2"]).unwrap_err();
+    assert!(err.contains("nosuch") && err.contains("tue-es030"), "{err}");
+    let s = serve(&["demo:1,demo-additions:1", "tue-es030"]);
+    let out = ok(&s, &["slaves"]);
+    assert_eq!(out.lines().count(), 4, "{out}");
+    let _ = fails;
+}
