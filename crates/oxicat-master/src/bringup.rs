@@ -147,7 +147,8 @@ impl Master {
         }
     }
 
-    /// Whether the slave's SII names CoE and its mailbox is set up.
+    /// Whether the slave's SII names CoE and it is in a state with CoE (PREOP, SAFEOP, OP:
+    /// INIT has no mailbox, BOOT only FoE, ETG.1000.6).
     async fn has_coe(&self, position: usize) -> bool {
         let Ok(img) = self.sii_image(position).await else {
             return false;
@@ -161,7 +162,7 @@ impl Master {
                 .await
                 .ok()
                 .and_then(|s| s.state())
-                != Some(AlState::Init)
+                .is_some_and(|s| matches!(s, AlState::PreOp | AlState::SafeOp | AlState::Op))
     }
 
     /// Configures SM2/SM3 (sized from the PDO mapping, start and control from the SII) and

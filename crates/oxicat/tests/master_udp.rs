@@ -61,3 +61,17 @@ fn sim_and_served_take_both_syntaxes_and_every_device() {
     assert_eq!(out.lines().count(), 4, "{out}");
     let _ = fails;
 }
+
+/// BOOT has no CoE: `states boot` must not ask the slave for anything over CoE.
+#[test]
+fn states_boot_and_back() {
+    let s = serve(&["demo:1"]);
+    let out = ok(&s, &["states", "boot"]);
+    assert_eq!(out, "0: BOOT\n");
+    let out = ok(&s, &["slaves"]);
+    assert!(out.contains(" BOOT "), "{out}");
+    let out = ok(&s, &["states", "preop"]);
+    assert_eq!(out, "0: PREOP\n");
+    let out = ok(&s, &["upload", "0x1018", "1"]);
+    assert!(out.starts_with("3758096384"), "{out}");
+}
