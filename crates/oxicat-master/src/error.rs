@@ -85,6 +85,16 @@ pub enum MasterError {
         /// The AL status seen.
         status: crate::al::AlStatus,
     },
+    /// A slave supports neither free run nor SM-synchronous operation (0x1C32:04), which
+    /// is all `states` can leave running without a master that cycles.
+    SyncUnsupported {
+        /// Position of the slave.
+        position: usize,
+        /// Its name (SII).
+        name: String,
+        /// 0x1C32:04 (sync modes supported).
+        supported: u16,
+    },
     /// An SII image is for another device than the slave.
     SiiOtherDevice {
         /// Position of the slave.
@@ -151,6 +161,16 @@ impl std::fmt::Display for MasterError {
                 "no permission to open a raw socket on {i:?}: EtherCAT needs CAP_NET_RAW (run as root, or `sudo setcap cap_net_raw,cap_net_admin+ep $(which oxicat)`)"
             ),
             Io(i, e) => write!(f, "interface {i:?}: {e}"),
+            SyncUnsupported {
+                position,
+                name,
+                supported,
+            } => write!(
+                f,
+                "slave {position} ({name}) runs only DC-synchronous (0x1C32:04 = 0x{supported:04X}: no free run, no SM-synchronous), \
+                 which needs a master that keeps cycling: use `oxicat record` (DC SYNC0) or your \
+                 cyclic master; no slave was changed"
+            ),
             Udp { addr, source } => write!(
                 f,
                 "EtherCAT over UDP to {addr}: {source} (give host:port of `oxicat sim --udp`, e.g. 127.0.0.1:34980)"

@@ -643,7 +643,8 @@ impl Master {
     /// The master configures what each step needs itself, without resetting anything:
     /// the mailbox SyncManagers (SM0/SM1, or the bootstrap mailbox for BOOT) from the SII
     /// before PRE-OP; before SAFE-OP free run (0x1C32:01 = 0, where the slave has the
-    /// object), SM2/SM3 sized from the PDO mapping, one output and one input FMMU, and the
+    /// object; SM2-synchronous, 1, where 0x1C32:04 says it does not run free; a slave that
+    /// runs only DC-synchronous stops the request before any slave changed), SM2/SM3 sized from the PDO mapping, one output and one input FMMU, and the
     /// process-data watchdog off (0x0420 = 0: no cyclic master keeps it fed after the
     /// command).
     pub fn request_state(
@@ -665,6 +666,17 @@ impl Master {
                 AlState::Op => 3,
             };
             let ladder = [AlState::Init, AlState::PreOp, AlState::SafeOp, AlState::Op];
+            // SAFE-OP/OP: the sync mode of every slave that can tell (PRE-OP and up) first, so
+            // that a slave needing DC stops the request before any slave changed.
+            let mut plan = std::collections::HashMap::new();
+            if matches!(state, AlState::SafeOp | AlState::Op) {
+                for &p in positions {
+                    let st = self.al_status_async(p).await?.state();
+                    if matches!(st, Some(AlState::PreOp | AlState::SafeOp | AlState::Op)) {
+                        plan.insert(p, self.plain_sync_mode(p).await?);
+                    }
+                }
+            }
             for &p in positions {
                 let cur = self.al_status_async(p).await?;
                 let from = cur.state().unwrap_or(AlState::Init);
@@ -673,14 +685,13 @@ impl Master {
                     continue;
                 }
                 // Back to SAFE-OP/OP from SAFE-OP (or OP with an error) with a sync mode other
-                // than free run (a DC recording left it): through PRE-OP, where it can change.
+                // than the planned one (a DC recording left it): through PRE-OP, where it can
+                // change.
+                let planned = plan.get(&p).copied().flatten().unwrap_or(bringup::FREE_RUN);
                 let via_preop = matches!(state, AlState::SafeOp | AlState::Op)
                     && matches!(from, AlState::SafeOp | AlState::Op)
                     && (rank(state) > rank(from) || cur.error())
-                    && self
-                        .sync_mode_async(p)
-                        .await?
-                        .is_some_and(|m| m != bringup::FREE_RUN);
+                    && self.sync_mode_async(p).await?.is_some_and(|m| m != planned);
                 let steps: Vec<AlState> = if via_preop {
                     let mut v = vec![AlState::PreOp];
                     v.extend(ladder[2..=rank(state)].iter().copied());
@@ -711,7 +722,12 @@ impl Master {
                         }
                         AlState::Boot => self.configure_boot_mailbox(p).await?,
                         AlState::SafeOp => {
-                            self.set_free_run(p).await?;
+                            let mode = match plan.get(&p) {
+                                Some(m) => *m,
+                                None => self.plain_sync_mode(p).await?,
+                            };
+                            self.set_sync_mode(p, mode.unwrap_or(bringup::FREE_RUN))
+                                .await?;
                             self.configure_pd(p).await?;
                         }
                         _ => {}
@@ -843,6 +859,21 @@ impl Master {
     /// synchronous, 2 DC SYNC0, 3 DC SYNC1), `None` when it has no such object.
     pub fn sync_mode(&self, position: usize) -> Result<Option<u16>, MasterError> {
         futures_lite::future::block_on(self.sync_mode_async(position))
+    }
+
+    /// 0x1C32:04 (sync modes supported: bit 0 free run, 1 SM-synchronous, 2/3 DC) of the
+    /// slave at `position`, `None` when it has no such object or no CoE now.
+    pub fn sync_modes_supported(&self, position: usize) -> Result<Option<u16>, MasterError> {
+        futures_lite::future::block_on(async {
+            if !self.has_coe(position).await {
+                return Ok(None);
+            }
+            match self.sdo_upload_async(position, 0x1C32, 4).await {
+                Ok(b) if b.len() >= 2 => Ok(Some(u16::from_le_bytes([b[0], b[1]]))),
+                Ok(_) | Err(MasterError::SdoAbort { .. }) => Ok(None),
+                Err(e) => Err(e),
+            }
+        })
     }
 
     /// Identity (vendor, product, revision, serial) of the slave at `position`.

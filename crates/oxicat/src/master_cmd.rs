@@ -403,7 +403,12 @@ pub fn run(cmd: MasterCommand, out: &mut dyn Write) -> Result<(), MasterError> {
                 let mode = match (sync, if sync { m.sync_mode(p)? } else { None }) {
                     (false, _) => String::new(),
                     (true, Some(0)) => ", free run (0x1C32:01 = 0)".into(),
-                    (true, Some(1)) => ", SM2 synchronous (0x1C32:01 = 1)".into(),
+                    (true, Some(1)) => match m.sync_modes_supported(p)? {
+                        Some(s) if s & 1 == 0 => format!(
+                            ", SM2 synchronous (0x1C32:01 = 1): the slave does not run free (0x1C32:04 = 0x{s:04X})"
+                        ),
+                        _ => ", SM2 synchronous (0x1C32:01 = 1)".into(),
+                    },
                     (true, Some(2)) => ", DC SYNC0 (0x1C32:01 = 2)".into(),
                     (true, Some(3)) => ", DC SYNC1 (0x1C32:01 = 3)".into(),
                     (true, Some(v)) => format!(", sync mode 0x1C32:01 = {v}"),

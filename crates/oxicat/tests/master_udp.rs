@@ -75,3 +75,27 @@ fn states_boot_and_back() {
     let out = ok(&s, &["upload", "0x1018", "1"]);
     assert!(out.starts_with("3758096384"), "{out}");
 }
+
+/// TUeES030 refuses free run (0x1C32:01 range, 0x1C32:04 = SM-synchronous only): `states op`
+/// gives it SM2-synchronous, says so, and takes every slave to OP.
+#[test]
+fn states_op_with_a_slave_that_does_not_run_free() {
+    let s = serve(&["demo:1,tue-es030:1,demo:1"]);
+    let out = ok(&s, &["states", "op"]);
+    let lines: Vec<_> = out.lines().collect();
+    assert_eq!(lines.len(), 3, "{out}");
+    assert_eq!(lines[0], "0: OP, free run (0x1C32:01 = 0)");
+    assert!(
+        lines[1].starts_with("1: OP, SM2 synchronous (0x1C32:01 = 1)")
+            && lines[1].contains("does not run free (0x1C32:04 = 0x0002)"),
+        "{out}"
+    );
+    assert_eq!(lines[2], "2: OP, free run (0x1C32:01 = 0)");
+    let out = ok(&s, &["slaves"]);
+    assert_eq!(out.matches(" OP ").count(), 3, "{out}");
+    // And again from OP, and back down and up.
+    ok(&s, &["states", "op"]);
+    ok(&s, &["states", "preop"]);
+    let out = ok(&s, &["states", "safeop", "-p", "1"]);
+    assert!(out.starts_with("1: SAFEOP, SM2 synchronous"), "{out}");
+}
