@@ -107,8 +107,58 @@ impl Master {
             .collect()
     }
 
-    /// Brings the slaves to OP and calls `step` after every cycle until it says stop.
+    /// Lets ethercrab initialise the segment for cyclic use (every slave through INIT to
+    /// PRE-OP, whatever state it was in), so that the PDO layouts can be read from slaves
+    /// that were in INIT; [`Master::run_cyclic`] does it itself when not done before.
+    pub fn prepare_cyclic(&mut self) -> Result<(), MasterError> {
+        self.ensure_group()
+    }
+
+    /// Brings the slaves to OP, calls `step` after every cycle until it says stop, and
+    /// takes them back to PRE-OP (no master cycles afterwards: in SAFE-OP/OP the
+    /// process-data watchdog would leave them in SAFEOP+ERR 0x001B).
     pub fn run_cyclic(
+        &mut self,
+        opts: CycleOptions,
+        step: impl FnMut(&mut CycleIo) -> Result<Flow, MasterError>,
+    ) -> Result<CycleStats, MasterError> {
+        let r = self.run_cyclic_op(opts, step);
+        // Not when another master changed the segment: leave it to that master.
+        if !matches!(r, Err(MasterError::Disturbed { .. })) {
+            let all: Vec<usize> = (0..self.len()).collect();
+            if let Err(e) = self.request_state(&all, crate::AlState::PreOp) {
+                log::warn!("after cycling: the slaves did not all return to PRE-OP: {e}");
+            }
+        }
+        r
+    }
+
+    /// After a cycle that went wrong (working counter off, or no frame back): the slaves
+    /// that left OP under this master, as an error that says so; `None` when all are
+    /// still in OP without error (a lost frame: counted, cycling goes on).
+    async fn disturbed(&self, cycles: u64, cause: Option<String>) -> Option<MasterError> {
+        let mut seen = Vec::new();
+        for p in 0..self.len() {
+            match self.al_status_async(p).await {
+                Ok(st) if st.state() == Some(crate::AlState::Op) && !st.error() => {}
+                Ok(st) => seen.push(format!("slave {p} is in {st}")),
+                Err(e) => seen.push(format!("slave {p}: {e}")),
+            }
+        }
+        if seen.is_empty() && cause.is_none() {
+            return None;
+        }
+        let mut what = seen.join(", ");
+        if let Some(c) = cause {
+            if !what.is_empty() {
+                what.push_str("; ");
+            }
+            what.push_str(&c);
+        }
+        Some(MasterError::Disturbed { cycles, what })
+    }
+
+    fn run_cyclic_op(
         &mut self,
         opts: CycleOptions,
         mut step: impl FnMut(&mut CycleIo) -> Result<Flow, MasterError>,
@@ -210,7 +260,23 @@ impl Master {
                         o[..l].copy_from_slice(&io.outputs[p][..l]);
                     }
                     let t = time.now();
-                    let r = group.tx_rx_dc(md).await.map_err(e("cyclic exchange"))?;
+                    let r = match group.tx_rx_dc(md).await {
+                        Ok(r) => r,
+                        Err(err) if t0.is_some() => {
+                            let cause = format!(
+                                "cyclic exchange: {err} (frames did not come back: another master on the same interface takes them?)"
+                            );
+                            return Err(self
+                                .disturbed(stats.cycles, Some(cause))
+                                .await
+                                .unwrap_or_else(|| {
+                                    MasterError::Ethercrab("cyclic exchange".into(), err)
+                                }));
+                        }
+                        Err(err) => {
+                            return Err(MasterError::Ethercrab("cyclic exchange".into(), err))
+                        }
+                    };
                     let all_op = r.all_op();
                     if all_op {
                         // Row time: the DC system time of the cycle (the slaves' clock).
@@ -229,6 +295,9 @@ impl Master {
                         }
                     } else if t0.is_some() {
                         stats.wkc_errors += 1;
+                        if let Some(d) = self.disturbed(stats.cycles, None).await {
+                            return Err(d);
+                        }
                     } else if std::time::Instant::now() > deadline {
                         return Err(MasterError::Usage(format!(
                             "the slaves did not reach OP: {:?}",
@@ -252,13 +321,35 @@ impl Master {
                     }
                     let due = t0 + io.cycle * period;
                     time.wait_until(due);
-                    let r = group.tx_rx(md).await.map_err(e("cyclic exchange"))?;
+                    let r = match group.tx_rx(md).await {
+                        Ok(r) => r,
+                        Err(err) => {
+                            let cause = format!(
+                                "cyclic exchange: {err} (frames did not come back: another master on the same interface takes them?)"
+                            );
+                            return Err(self
+                                .disturbed(stats.cycles, Some(cause))
+                                .await
+                                .unwrap_or_else(|| {
+                                    MasterError::Ethercrab("cyclic exchange".into(), err)
+                                }));
+                        }
+                    };
                     for (p, sd) in group.iter(md).enumerate() {
                         io.inputs[p] = sd.inputs_raw().to_vec();
                     }
                     io.working_counter = r.working_counter;
-                    if *expected.get_or_insert(r.working_counter) != r.working_counter {
+                    // ethercrab reads every slave's AL status with each exchange; the
+                    // working counter alone does not show a slave that left OP (its ESC
+                    // still counts the FMMU access).
+                    let wkc_bad = *expected.get_or_insert(r.working_counter) != r.working_counter;
+                    if wkc_bad {
                         stats.wkc_errors += 1;
+                    }
+                    if wkc_bad || !r.all_op() {
+                        if let Some(d) = self.disturbed(stats.cycles, None).await {
+                            return Err(d);
+                        }
                     }
                     io.time_ns = time.now().saturating_sub(t0).max(io.cycle * period);
                     stats.cycles += 1;

@@ -95,6 +95,14 @@ pub enum MasterError {
         /// 0x1C32:04 (sync modes supported).
         supported: u16,
     },
+    /// The segment changed under a cyclic verb (slaves left OP, frames stopped coming back):
+    /// another master, or a cable/power fault.
+    Disturbed {
+        /// Cycles run before.
+        cycles: u64,
+        /// What the master saw.
+        what: String,
+    },
     /// An SII image is for another device than the slave.
     SiiOtherDevice {
         /// Position of the slave.
@@ -161,6 +169,10 @@ impl std::fmt::Display for MasterError {
                 "no permission to open a raw socket on {i:?}: EtherCAT needs CAP_NET_RAW (run as root, or `sudo setcap cap_net_raw,cap_net_admin+ep $(which oxicat)`)"
             ),
             Io(i, e) => write!(f, "interface {i:?}: {e}"),
+            Disturbed { cycles, what } => write!(
+                f,
+                "another master changed the segment (or a cable/power fault) after {cycles} cycles: {what}; stopped, the slaves are left as they are"
+            ),
             SyncUnsupported {
                 position,
                 name,

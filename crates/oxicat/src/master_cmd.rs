@@ -655,6 +655,7 @@ pub fn run(cmd: MasterCommand, out: &mut dyn Write) -> Result<(), MasterError> {
         } => {
             let cycle = parse_duration(&cycle)?;
             let mut m = open(&link)?;
+            m.prepare_cyclic()?;
             let layouts = m.layouts()?;
             let vars: Vec<_> = m.resolve(&vars, &layouts)?.into_iter().flatten().collect();
             let mut err = None;
@@ -685,6 +686,7 @@ pub fn run(cmd: MasterCommand, out: &mut dyn Write) -> Result<(), MasterError> {
         } => {
             let cycle = parse_duration(&cycle)?;
             let mut m = open(&link)?;
+            m.prepare_cyclic()?;
             let layouts = m.layouts()?;
             let vars = m.resolve(std::slice::from_ref(&var), &layouts)?.remove(0);
             let data = vars[0].ty.encode(&value)?;
@@ -722,6 +724,7 @@ pub fn run(cmd: MasterCommand, out: &mut dyn Write) -> Result<(), MasterError> {
             let duration = parse_duration(&duration)?;
             let cycles = (duration.as_nanos() / cycle.as_nanos().max(1)).max(1) as u64;
             let mut m = open(&link)?;
+            m.prepare_cyclic()?;
             let layouts = m.layouts()?;
             let vars: Vec<_> = m.resolve(&vars, &layouts)?.into_iter().flatten().collect();
             let f = std::fs::File::create(&output).map_err(MasterError::Output)?;

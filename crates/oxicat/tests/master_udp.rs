@@ -99,3 +99,24 @@ fn states_op_with_a_slave_that_does_not_run_free() {
     let out = ok(&s, &["states", "safeop", "-p", "1"]);
     assert!(out.starts_with("1: SAFEOP, SM2 synchronous"), "{out}");
 }
+
+/// The cyclic verbs start from any state (ethercrab takes every slave through INIT) and
+/// leave the segment in PREOP without an error when they end (no process-data watchdog
+/// left to expire).
+#[test]
+fn cyclic_verbs_start_from_init_and_leave_preop() {
+    let s = serve(&["demo:2"]);
+    ok(&s, &["states", "init"]);
+    let out = ok(
+        &s,
+        &["watch", "0.InINT32Var3", "--every", "1", "--count", "2"],
+    );
+    assert_eq!(out.lines().count(), 2, "{out}");
+    let out = ok(&s, &["write", "1.OutINT32Var1", "-5", "--settle", "3"]);
+    assert!(out.contains("1.OutINT32Var1 = -5"), "{out}");
+    // Longer than the demo's process-data watchdog (100 ms).
+    std::thread::sleep(std::time::Duration::from_millis(400));
+    let out = ok(&s, &["slaves"]);
+    assert_eq!(out.matches(" PREOP ").count(), 2, "{out}");
+    assert!(!out.contains("ERR"), "{out}");
+}

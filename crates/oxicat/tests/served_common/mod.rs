@@ -52,9 +52,23 @@ pub fn serve(devices: &[&str]) -> Served {
     }
 }
 
-/// Runs `oxicat <args>` (a master or FoE verb) in this process; its output, or its error
-/// message.
+/// Runs `oxicat <args>` (a master or FoE verb) in this process, on a thread with a stack
+/// as large as a program's main thread (ethercrab's futures are large in debug builds);
+/// its output, or its error message.
 pub fn cli(args: &[&str]) -> Result<String, String> {
+    let args: Vec<String> = args.iter().map(|s| s.to_string()).collect();
+    std::thread::Builder::new()
+        .stack_size(16 << 20)
+        .spawn(move || {
+            let a: Vec<&str> = args.iter().map(String::as_str).collect();
+            cli_here(&a)
+        })
+        .expect("spawn")
+        .join()
+        .expect("the verb does not panic")
+}
+
+fn cli_here(args: &[&str]) -> Result<String, String> {
     let c = oxicat::Cli::try_parse_from(std::iter::once("oxicat").chain(args.iter().copied()))
         .map_err(|e| e.to_string())?;
     let mut out = Vec::new();
