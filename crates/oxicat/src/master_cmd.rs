@@ -1,7 +1,8 @@
 //! The master verbs of `oxicat`, after the IgH `ethercat` tool: `slaves`, `states`,
 //! `sii-read`, `sii-write`, `upload`, `download`, `sdos`, `pdos`, `xml`, `reg-read`,
-//! `reg-write`, `watch`, `write`, `record`. Each runs on `--iface <if>` (or `OXICAT_IFACE`)
-//! or, for tests and trying things out, on an in-process virtual segment `--sim demo:2`.
+//! `reg-write`, `watch`, `write`, `record`. Each runs on `--iface <if>` (or `OXICAT_IFACE`),
+//! on a segment served with EtherCAT over UDP `--udp host:port`, or, for tests and trying
+//! things out, on an in-process virtual segment `--sim demo:2`.
 //!
 //! `--sim` knows the devices of `oxicat sim --list` (one registry, `sim_devices`).
 
@@ -55,6 +56,9 @@ pub enum MasterCommand {
         link: LinkArgs,
         #[command(flatten)]
         pos: PosArgs,
+        /// Verbose: a block per slave (identity, state, ports, DC delay), as `ethercat slaves -v`.
+        #[arg(long, short = 'v')]
+        verbose: bool,
     },
     /// Request an AL state (INIT, PREOP, SAFEOP, OP, BOOT) for all slaves or one.
     States {
@@ -66,6 +70,7 @@ pub enum MasterCommand {
         pos: PosArgs,
     },
     /// Read a slave's SII EEPROM (decoded by default).
+    #[command(alias = "sii_read")]
     SiiRead {
         #[command(flatten)]
         link: LinkArgs,
@@ -88,6 +93,7 @@ pub enum MasterCommand {
         output: Option<PathBuf>,
     },
     /// Write an SII image (a file, or one generated for a device) and verify it.
+    #[command(alias = "sii_write")]
     SiiWrite {
         #[command(flatten)]
         link: LinkArgs,
@@ -158,6 +164,7 @@ pub enum MasterCommand {
         output: Option<PathBuf>,
     },
     /// Read ESC registers (FPRD).
+    #[command(alias = "reg_read")]
     RegRead {
         #[command(flatten)]
         link: LinkArgs,
@@ -172,6 +179,7 @@ pub enum MasterCommand {
         r#type: Option<String>,
     },
     /// Write ESC registers (FPWR).
+    #[command(alias = "reg_write")]
     RegWrite {
         #[command(flatten)]
         link: LinkArgs,
@@ -358,9 +366,21 @@ fn progress_bar(total: u64, what: &str) -> indicatif::ProgressBar {
 pub fn run(cmd: MasterCommand, out: &mut dyn Write) -> Result<(), MasterError> {
     let w = |out: &mut dyn Write, s: &str| out.write_all(s.as_bytes()).map_err(MasterError::Output);
     match cmd {
-        MasterCommand::Slaves { link, pos } => {
+        MasterCommand::Slaves { link, pos, verbose } => {
             let m = open(&link)?;
             let list = m.scan()?;
+            if verbose {
+                for s in list
+                    .iter()
+                    .filter(|s| pos.position.is_none_or(|p| p == s.position))
+                {
+                    w(out, &crate::igh_cmd::slave_verbose(s))?;
+                }
+                if let Some(p) = pos.position {
+                    m.address(p)?;
+                }
+                return Ok(());
+            }
             w(out, "pos  addr    alias   state                 vendor      product     revision    serial      ports            name\n")?;
             for s in list
                 .iter()
@@ -659,16 +679,30 @@ pub fn run(cmd: MasterCommand, out: &mut dyn Write) -> Result<(), MasterError> {
             let layouts = m.layouts()?;
             let vars: Vec<_> = m.resolve(&vars, &layouts)?.into_iter().flatten().collect();
             let mut err = None;
+            // A virtual segment runs as fast as the host can: show its lines at the pace of
+            // the cycle (every × cycle per line) as on a real segment.
+            let pace = link.sim.is_some();
+            let started = std::time::Instant::now();
+            let mut lines = 0u32;
             m.watch(
                 CycleOptions { cycle, dc: false },
                 &vars,
                 every,
                 count,
-                &mut |line| match writeln!(out, "{line}") {
-                    Ok(()) => true,
-                    Err(e) => {
-                        err = Some(e);
-                        false
+                &mut |line| {
+                    lines += 1;
+                    if pace {
+                        let due = started + cycle * every.max(1) as u32 * lines;
+                        if let Some(d) = due.checked_duration_since(std::time::Instant::now()) {
+                            std::thread::sleep(d);
+                        }
+                    }
+                    match writeln!(out, "{line}") {
+                        Ok(()) => true,
+                        Err(e) => {
+                            err = Some(e);
+                            false
+                        }
                     }
                 },
             )?;
