@@ -107,6 +107,13 @@ impl Master {
             .collect()
     }
 
+    /// Cyclic runs end by just stopping, leaving the slaves in OP as a master that crashed
+    /// or lost its link would (to test what a slave's watchdog does then); by default they
+    /// take the slaves back to PRE-OP.
+    pub fn stop_cycling_as_if_gone(&mut self) {
+        self.preop_after_cycling = false;
+    }
+
     /// Lets ethercrab initialise the segment for cyclic use (every slave through INIT to
     /// PRE-OP, whatever state it was in), so that the PDO layouts can be read from slaves
     /// that were in INIT; [`Master::run_cyclic`] does it itself when not done before.
@@ -124,7 +131,7 @@ impl Master {
     ) -> Result<CycleStats, MasterError> {
         let r = self.run_cyclic_op(opts, step);
         // Not when another master changed the segment: leave it to that master.
-        if !matches!(r, Err(MasterError::Disturbed { .. })) {
+        if self.preop_after_cycling && !matches!(r, Err(MasterError::Disturbed { .. })) {
             let all: Vec<usize> = (0..self.len()).collect();
             if let Err(e) = self.request_state(&all, crate::AlState::PreOp) {
                 log::warn!("after cycling: the slaves did not all return to PRE-OP: {e}");

@@ -239,6 +239,9 @@ pub struct Master {
     /// Per slave, the counter of this master's last mailbox message (`None`: none yet).
     pub(crate) mbx_counter: std::cell::RefCell<Vec<Option<u8>>>,
     pub(crate) link_name: String,
+    /// Cyclic runs take the slaves back to PRE-OP at their end (see
+    /// [`Master::stop_cycling_as_if_gone`]).
+    pub(crate) preop_after_cycling: bool,
 }
 
 fn map_open_error(iface: &str, e: std::io::Error) -> MasterError {
@@ -324,6 +327,7 @@ impl Master {
             options,
             mbx_counter: Default::default(),
             link_name,
+            preop_after_cycling: true,
         };
         futures_lite::future::block_on(m.discover())?;
         Ok(m)
@@ -652,7 +656,8 @@ impl Master {
         positions: &[usize],
         state: AlState,
     ) -> Result<Vec<(usize, AlStatus)>, MasterError> {
-        futures_lite::future::block_on(async {
+        // On the heap: the walk is a large future in debug builds.
+        futures_lite::future::block_on(Box::pin(async {
             let mut out = Vec::new();
             for &p in positions {
                 self.address(p)?;
@@ -738,7 +743,7 @@ impl Master {
                 out.push((p, last));
             }
             Ok(out)
-        })
+        }))
     }
 
     /// Acknowledges a pending AL error (0x0120 = current state | 0x10) and waits until the
