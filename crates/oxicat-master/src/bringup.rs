@@ -20,6 +20,8 @@ pub const LOGICAL_PER_SLAVE: u32 = 0x0800;
 
 /// The sync mode a master's free-run verbs use: 0x1C32:01 = 0.
 pub const FREE_RUN: u16 = 0;
+/// SM2-synchronous (0x1C32:01 = 1): what `states` uses for a slave that does not run free.
+pub const SM_SYNC: u16 = 1;
 
 impl Master {
     async fn write_sm(
@@ -102,6 +104,50 @@ impl Master {
     /// SYNC0/SYNC1 generation (0x0981) is switched off as well: a slave takes DC mode
     /// whenever it sees it on.
     pub(crate) async fn set_free_run(&self, position: usize) -> Result<bool, MasterError> {
+        self.set_sync_mode(position, FREE_RUN).await
+    }
+
+    /// The sync mode `states` gives a slave for SAFE-OP/OP (no master cycles afterwards), from
+    /// 0x1C32:04 (sync modes supported, ETG.1020: bit 0 free run, bit 1 SM-synchronous, bits
+    /// 2/3 DC): free run where supported, else SM2-synchronous; `None` without CoE or 0x1C32.
+    /// A slave that supports neither (DC only) is [`MasterError::SyncUnsupported`].
+    pub(crate) async fn plain_sync_mode(
+        &self,
+        position: usize,
+    ) -> Result<Option<u16>, MasterError> {
+        if !self.has_coe(position).await {
+            return Ok(None);
+        }
+        let read = |sub| async move {
+            match self.sdo_upload_async(position, 0x1C32, sub).await {
+                Ok(b) if b.len() >= 2 => Ok(Some(u16::from_le_bytes([b[0], b[1]]))),
+                Ok(_) | Err(MasterError::SdoAbort { .. }) => Ok(None),
+                Err(e) => Err(e),
+            }
+        };
+        if read(1).await?.is_none() {
+            return Ok(None);
+        }
+        match read(4).await? {
+            // Not told (no 0x1C32:04, or 0): free run, as before.
+            None | Some(0) => Ok(Some(FREE_RUN)),
+            Some(s) if s & 0x0001 != 0 => Ok(Some(FREE_RUN)),
+            Some(s) if s & 0x0002 != 0 => Ok(Some(SM_SYNC)),
+            Some(s) => Err(MasterError::SyncUnsupported {
+                position,
+                name: self.name_async(position).await.unwrap_or_default(),
+                supported: s,
+            }),
+        }
+    }
+
+    /// Sets 0x1C32:01 (and 0x1C33:01 where it follows DC) to `mode` where it differs and
+    /// switches SYNC0/SYNC1 generation (0x0981) off; returns whether it changed the mode.
+    pub(crate) async fn set_sync_mode(
+        &self,
+        position: usize,
+        mode: u16,
+    ) -> Result<bool, MasterError> {
         if self.fprd(position, 0x0981, 1).await?[0] != 0 {
             self.fpwr(position, 0x0981, &[0]).await?;
         }
@@ -109,18 +155,18 @@ impl Master {
             return Ok(false);
         }
         match self.sdo_upload_async(position, 0x1C32, 1).await {
-            Ok(b) if b.len() >= 2 && u16::from_le_bytes([b[0], b[1]]) != FREE_RUN => {
+            Ok(b) if b.len() >= 2 && u16::from_le_bytes([b[0], b[1]]) != mode => {
                 log::info!(
-                    "slave {position}: sync mode 0x1C32:01 = {} -> 0 (free run)",
+                    "slave {position}: sync mode 0x1C32:01 = {} -> {mode}",
                     u16::from_le_bytes([b[0], b[1]])
                 );
-                self.sdo_download_async(position, 0x1C32, 1, &FREE_RUN.to_le_bytes())
+                self.sdo_download_async(position, 0x1C32, 1, &mode.to_le_bytes())
                     .await?;
                 // Outputs follow the inputs' sync mode where 0x1C33 exists.
                 if let Ok(b) = self.sdo_upload_async(position, 0x1C33, 1).await {
                     if b.len() >= 2 && u16::from_le_bytes([b[0], b[1]]) == 2 {
                         let _ = self
-                            .sdo_download_async(position, 0x1C33, 1, &FREE_RUN.to_le_bytes())
+                            .sdo_download_async(position, 0x1C33, 1, &mode.to_le_bytes())
                             .await;
                     }
                 }
@@ -147,8 +193,9 @@ impl Master {
         }
     }
 
-    /// Whether the slave's SII names CoE and its mailbox is set up.
-    async fn has_coe(&self, position: usize) -> bool {
+    /// Whether the slave's SII names CoE and it is in a state with CoE (PREOP, SAFEOP, OP:
+    /// INIT has no mailbox, BOOT only FoE, ETG.1000.6).
+    pub(crate) async fn has_coe(&self, position: usize) -> bool {
         let Ok(img) = self.sii_image(position).await else {
             return false;
         };
@@ -161,7 +208,7 @@ impl Master {
                 .await
                 .ok()
                 .and_then(|s| s.state())
-                != Some(AlState::Init)
+                .is_some_and(|s| matches!(s, AlState::PreOp | AlState::SafeOp | AlState::Op))
     }
 
     /// Configures SM2/SM3 (sized from the PDO mapping, start and control from the SII) and

@@ -149,12 +149,25 @@ impl Master {
         Ok(m)
     }
 
-    pub(crate) fn next_counter(&self) -> u8 {
-        // 2..=7: ethercrab's own mailbox traffic starts at counter 1, so its first message
-        // never repeats the last counter of ours.
-        let c = self.mbx_counter.get();
-        let n = if (2..7).contains(&c) { c + 1 } else { 2 };
-        self.mbx_counter.set(n);
+    /// The mailbox counter of this master's next message to the slave at `position`.
+    ///
+    /// ETG.1000.4 (mailbox header, `Cnt`): 0 is the start value, then 1..7 and after 7
+    /// again 1; a slave drops a message whose counter equals that of the message before
+    /// (a repeat), except 0. A master cannot know the counter another master (an earlier
+    /// `oxicat` command) used last, so its first message to a slave carries 0, which no
+    /// slave takes for a repeat; then 2..=7 (ethercrab's own mailbox traffic in the cyclic
+    /// verbs starts at 1, so its first message never repeats ours).
+    pub(crate) fn next_counter(&self, position: usize) -> u8 {
+        let mut all = self.mbx_counter.borrow_mut();
+        if all.len() <= position {
+            all.resize(position + 1, None);
+        }
+        let n = match all[position] {
+            None => 0,
+            Some(c) if (2..7).contains(&c) => c + 1,
+            Some(_) => 2,
+        };
+        all[position] = Some(n);
         n
     }
 
@@ -168,7 +181,7 @@ impl Master {
         }
         let mut first = true;
         loop {
-            let counter = self.next_counter();
+            let counter = self.next_counter(position);
             self.mbx_send(position, &m, MailboxType::Coe, payload, counter)
                 .await?;
             // The first try waits briefly: a message dropped as a repeat (same counter as the

@@ -107,9 +107,6 @@ pub struct CycleStats {
     pub wkc_errors: u64,
 }
 
-/// Cycles without OP, after the slaves were in OP, before a cyclic run gives up.
-pub const LOST_OP_CYCLES: u64 = 1000;
-
 impl Master {
     /// The process-data watchdog of the slave at `position` (0x0400 divider, 0x0420 time:
     /// `(divider + 2) × 40 ns × time`), when its output SM triggers it (SII SM control bit
@@ -159,9 +156,8 @@ impl Master {
         Ok(())
     }
 
-    /// The error for slaves that did not reach OP, or left it for `lost` cycles: every
-    /// slave's AL status.
-    fn left_op(&self, lost: u64) -> MasterError {
+    /// The error for slaves that did not reach OP: every slave's AL status.
+    fn left_op(&self) -> MasterError {
         let mut states = Vec::new();
         for p in 0..self.len() {
             match self.al_status(p) {
@@ -169,12 +165,10 @@ impl Master {
                 Err(e) => states.push(format!("slave {p}: {e}")),
             }
         }
-        let what = if lost == 0 {
-            "the slaves did not reach OP".to_string()
-        } else {
-            format!("the slaves left OP and were not back after {lost} cycles")
-        };
-        MasterError::Usage(format!("{what}: {}", states.join("; ")))
+        MasterError::Usage(format!(
+            "the slaves did not reach OP: {}",
+            states.join("; ")
+        ))
     }
 
     /// The PDO layouts of all slaves.
@@ -197,8 +191,65 @@ impl Master {
             .collect()
     }
 
-    /// Brings the slaves to OP and calls `step` after every cycle until it says stop.
+    /// Cyclic runs end by just stopping, leaving the slaves in OP as a master that crashed
+    /// or lost its link would (to test what a slave's watchdog does then); by default they
+    /// take the slaves back to PRE-OP.
+    pub fn stop_cycling_as_if_gone(&mut self) {
+        self.preop_after_cycling = false;
+    }
+
+    /// Lets ethercrab initialise the segment for cyclic use (every slave through INIT to
+    /// PRE-OP, whatever state it was in), so that the PDO layouts can be read from slaves
+    /// that were in INIT; [`Master::run_cyclic`] does it itself when not done before.
+    pub fn prepare_cyclic(&mut self) -> Result<(), MasterError> {
+        self.ensure_group()
+    }
+
+    /// Brings the slaves to OP, calls `step` after every cycle until it says stop, and
+    /// takes them back to PRE-OP (no master cycles afterwards: in SAFE-OP/OP the
+    /// process-data watchdog would leave them in SAFEOP+ERR 0x001B).
     pub fn run_cyclic(
+        &mut self,
+        opts: CycleOptions,
+        step: impl FnMut(&mut CycleIo) -> Result<Flow, MasterError>,
+    ) -> Result<CycleStats, MasterError> {
+        let r = self.run_cyclic_op(opts, step);
+        // Not when another master changed the segment: leave it to that master.
+        if self.preop_after_cycling && !matches!(r, Err(MasterError::Disturbed { .. })) {
+            let all: Vec<usize> = (0..self.len()).collect();
+            if let Err(e) = self.request_state(&all, crate::AlState::PreOp) {
+                log::warn!("after cycling: the slaves did not all return to PRE-OP: {e}");
+            }
+        }
+        r
+    }
+
+    /// After a cycle that went wrong (working counter off, or no frame back): the slaves
+    /// that left OP under this master, as an error that says so; `None` when all are
+    /// still in OP without error (a lost frame: counted, cycling goes on).
+    async fn disturbed(&self, cycles: u64, cause: Option<String>) -> Option<MasterError> {
+        let mut seen = Vec::new();
+        for p in 0..self.len() {
+            match self.al_status_async(p).await {
+                Ok(st) if st.state() == Some(crate::AlState::Op) && !st.error() => {}
+                Ok(st) => seen.push(format!("slave {p} is in {st}")),
+                Err(e) => seen.push(format!("slave {p}: {e}")),
+            }
+        }
+        if seen.is_empty() && cause.is_none() {
+            return None;
+        }
+        let mut what = seen.join(", ");
+        if let Some(c) = cause {
+            if !what.is_empty() {
+                what.push_str("; ");
+            }
+            what.push_str(&c);
+        }
+        Some(MasterError::Disturbed { cycles, what })
+    }
+
+    fn run_cyclic_op(
         &mut self,
         opts: CycleOptions,
         mut step: impl FnMut(&mut CycleIo) -> Result<Flow, MasterError>,
@@ -268,7 +319,7 @@ impl Master {
             working_counter: 0,
         };
         let mut stats = CycleStats::default();
-        let mut left = None;
+        let mut left = false;
         // On the heap: ethercrab's cyclic futures are large (debug builds).
         futures_lite::future::block_on(Box::pin(async {
             if dc {
@@ -293,7 +344,6 @@ impl Master {
                 }
                 let deadline = std::time::Instant::now() + self.options.timeouts.state_transition;
                 let mut t0 = None;
-                let mut lost = 0u64;
                 loop {
                     for (p, sd) in group.iter(md).enumerate() {
                         let mut o = sd.outputs_raw_mut();
@@ -301,7 +351,23 @@ impl Master {
                         o[..l].copy_from_slice(&io.outputs[p][..l]);
                     }
                     let t = time.now();
-                    let r = group.tx_rx_dc(md).await.map_err(e("cyclic exchange"))?;
+                    let r = match group.tx_rx_dc(md).await {
+                        Ok(r) => r,
+                        Err(err) if t0.is_some() => {
+                            let cause = format!(
+                                "cyclic exchange: {err} (frames did not come back: another master on the same interface takes them?)"
+                            );
+                            return Err(self
+                                .disturbed(stats.cycles, Some(cause))
+                                .await
+                                .unwrap_or_else(|| {
+                                    MasterError::Ethercrab("cyclic exchange".into(), err)
+                                }));
+                        }
+                        Err(err) => {
+                            return Err(MasterError::Ethercrab("cyclic exchange".into(), err))
+                        }
+                    };
                     let all_op = r.all_op();
                     if all_op {
                         // Row time: the DC system time of the cycle (the slaves' clock).
@@ -320,21 +386,14 @@ impl Master {
                         }
                     } else if t0.is_some() {
                         stats.wkc_errors += 1;
-                        // Slaves that left OP and do not come back: say so instead of
-                        // cycling on forever.
-                        lost += 1;
-                        if lost > LOST_OP_CYCLES {
-                            // The AL status is read after the cyclic future (kept small:
-                            // it is built on the stack).
-                            left = Some(lost);
-                            break;
+                        // A slave left OP under us: nothing in this run takes it back, so
+                        // say who changed what (another master, a watchdog) at once.
+                        if let Some(d) = self.disturbed(stats.cycles, None).await {
+                            return Err(d);
                         }
                     } else if std::time::Instant::now() > deadline {
-                        left = Some(0);
+                        left = true;
                         break;
-                    }
-                    if all_op {
-                        lost = 0;
                     }
                     time.wait_until(t + r.extra.next_cycle_wait.as_nanos() as u64);
                 }
@@ -353,13 +412,35 @@ impl Master {
                     }
                     let due = t0 + io.cycle * period;
                     time.wait_until(due);
-                    let r = group.tx_rx(md).await.map_err(e("cyclic exchange"))?;
+                    let r = match group.tx_rx(md).await {
+                        Ok(r) => r,
+                        Err(err) => {
+                            let cause = format!(
+                                "cyclic exchange: {err} (frames did not come back: another master on the same interface takes them?)"
+                            );
+                            return Err(self
+                                .disturbed(stats.cycles, Some(cause))
+                                .await
+                                .unwrap_or_else(|| {
+                                    MasterError::Ethercrab("cyclic exchange".into(), err)
+                                }));
+                        }
+                    };
                     for (p, sd) in group.iter(md).enumerate() {
                         io.inputs[p] = sd.inputs_raw().to_vec();
                     }
                     io.working_counter = r.working_counter;
-                    if *expected.get_or_insert(r.working_counter) != r.working_counter {
+                    // ethercrab reads every slave's AL status with each exchange; the
+                    // working counter alone does not show a slave that left OP (its ESC
+                    // still counts the FMMU access).
+                    let wkc_bad = *expected.get_or_insert(r.working_counter) != r.working_counter;
+                    if wkc_bad {
                         stats.wkc_errors += 1;
+                    }
+                    if wkc_bad || !r.all_op() {
+                        if let Some(d) = self.disturbed(stats.cycles, None).await {
+                            return Err(d);
+                        }
                     }
                     io.time_ns = time.now().saturating_sub(t0).max(io.cycle * period);
                     stats.cycles += 1;
@@ -372,10 +453,10 @@ impl Master {
             }
             Ok(stats)
         }))?;
-        match left {
-            Some(lost) => Err(self.left_op(lost)),
-            None => Ok(stats),
+        if left {
+            return Err(self.left_op());
         }
+        Ok(stats)
     }
 
     /// `write`: cycles in OP, sets every variable in `vars` to `value` in one cycle and keeps

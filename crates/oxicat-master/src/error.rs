@@ -13,6 +13,13 @@ pub enum MasterError {
     NoPermission(String),
     /// Another I/O error on the interface.
     Io(String, std::io::Error),
+    /// A UDP socket to a segment served with EtherCAT over UDP could not be opened.
+    Udp {
+        /// The address given (`host:port`).
+        addr: String,
+        /// The cause.
+        source: std::io::Error,
+    },
     /// Nothing answered on the segment.
     NoSlaves(String),
     /// No slave at that position.
@@ -77,6 +84,24 @@ pub enum MasterError {
         requested: crate::al::AlState,
         /// The AL status seen.
         status: crate::al::AlStatus,
+    },
+    /// A slave supports neither free run nor SM-synchronous operation (0x1C32:04), which
+    /// is all `states` can leave running without a master that cycles.
+    SyncUnsupported {
+        /// Position of the slave.
+        position: usize,
+        /// Its name (SII).
+        name: String,
+        /// 0x1C32:04 (sync modes supported).
+        supported: u16,
+    },
+    /// The segment changed under a cyclic verb (slaves left OP, frames stopped coming back):
+    /// another master, or a cable/power fault.
+    Disturbed {
+        /// Cycles run before.
+        cycles: u64,
+        /// What the master saw.
+        what: String,
     },
     /// An SII image is for another device than the slave.
     SiiOtherDevice {
@@ -146,6 +171,24 @@ impl std::fmt::Display for MasterError {
                 "no permission to open a raw socket on {i:?}: EtherCAT needs CAP_NET_RAW (run as root, or `sudo setcap cap_net_raw,cap_net_admin+ep $(which oxicat)`)"
             ),
             Io(i, e) => write!(f, "interface {i:?}: {e}"),
+            Disturbed { cycles, what } => write!(
+                f,
+                "another master changed the segment (or a cable/power fault) after {cycles} cycles: {what}; stopped, the slaves are left as they are"
+            ),
+            SyncUnsupported {
+                position,
+                name,
+                supported,
+            } => write!(
+                f,
+                "slave {position} ({name}) runs only DC-synchronous (0x1C32:04 = 0x{supported:04X}: no free run, no SM-synchronous), \
+                 which needs a master that keeps cycling: use `oxicat record` (DC SYNC0) or your \
+                 cyclic master; no slave was changed"
+            ),
+            Udp { addr, source } => write!(
+                f,
+                "EtherCAT over UDP to {addr}: {source} (give host:port of `oxicat sim --udp`, e.g. 127.0.0.1:34980)"
+            ),
             NoSlaves(w) => write!(
                 f,
                 "no slaves found on {w}: check the cable/link, that the slaves are powered, or that `oxicat sim` runs on the peer interface"

@@ -48,7 +48,7 @@ impl Master {
     ) -> Result<Option<(FoeHeader, Vec<u8>)>, MasterError> {
         let mut p = vec![0u8; FOE_HEADER_LEN + data.len()];
         FoeRef::write(&h, data, &mut p).map_err(|e| protocol(position, format!("{e}")))?;
-        let counter = self.next_counter();
+        let counter = self.next_counter(position);
         self.mbx_send(position, m, MailboxType::Foe, &p, counter)
             .await?;
         if !reply {

@@ -3,8 +3,8 @@
 //! assignment/mapping, an ESI from a live slave, register access, and cyclic process data
 //! (watch, online write, DC-synchronous recording).
 //!
-//! A [`Master`] runs on a network interface ([`Link::Iface`], ethercrab's raw socket) or on
-//! an in-process [`oxicat_sim::segment::Segment`] ([`Link::Sim`]); the functions do not
+//! A [`Master`] runs on a network interface ([`Link::Iface`], ethercrab's raw socket), on a
+//! segment served with EtherCAT over UDP ([`Link::Udp`]) or on an in-process [`oxicat_sim::segment::Segment`] ([`Link::Sim`]); the functions do not
 //! know how frames travel.
 #![forbid(unsafe_code)]
 #![warn(missing_docs)]
@@ -24,9 +24,9 @@ pub mod results;
 pub mod scenario;
 pub mod sii;
 pub mod tue_es030;
+mod udp;
 pub mod value;
 
-use std::cell::Cell;
 use std::sync::{Arc, Mutex};
 use std::time::Duration;
 
@@ -80,6 +80,8 @@ pub enum Link {
     Iface(String),
     /// A virtual segment in this process (virtual time advances with every frame).
     Sim(Arc<Mutex<Segment>>),
+    /// A segment served with EtherCAT over UDP (`host:port`, e.g. `oxicat sim --udp`).
+    Udp(String),
 }
 
 impl Link {
@@ -87,6 +89,7 @@ impl Link {
         match self {
             Link::Iface(i) => format!("interface {i}"),
             Link::Sim(_) => "the virtual segment".to_string(),
+            Link::Udp(a) => format!("EtherCAT over UDP to {a}"),
         }
     }
 }
@@ -198,7 +201,7 @@ impl MasterOptions {
                 timeouts: oxicat_sim::transport::virtual_timeouts(),
                 mailbox_timeout: Duration::from_secs(5),
             },
-            Link::Iface(_) => Self {
+            Link::Iface(_) | Link::Udp(_) => Self {
                 timeouts: Timeouts {
                     state_transition: Duration::from_secs(10),
                     pdu: Duration::from_millis(250),
@@ -233,8 +236,12 @@ pub struct Master {
     pub(crate) found: Vec<Found>,
     pub(crate) addresses: Vec<u16>,
     pub(crate) options: MasterOptions,
-    pub(crate) mbx_counter: Cell<u8>,
+    /// Per slave, the counter of this master's last mailbox message (`None`: none yet).
+    pub(crate) mbx_counter: std::cell::RefCell<Vec<Option<u8>>>,
     pub(crate) link_name: String,
+    /// Cyclic runs take the slaves back to PRE-OP at their end (see
+    /// [`Master::stop_cycling_as_if_gone`]).
+    pub(crate) preop_after_cycling: bool,
 }
 
 fn map_open_error(iface: &str, e: std::io::Error) -> MasterError {
@@ -283,6 +290,10 @@ impl Master {
                     .map_err(|e| MasterError::Io(iface.clone(), e))?;
                 Time::Real
             }
+            Link::Udp(addr) => {
+                udp::spawn(udp::connect(addr)?, tx, rx, addr)?;
+                Time::Real
+            }
             Link::Sim(seg) => {
                 spawn_inprocess_with(
                     seg.clone(),
@@ -314,8 +325,9 @@ impl Master {
             found: Vec::new(),
             addresses: Vec::new(),
             options,
-            mbx_counter: Cell::new(1),
+            mbx_counter: Default::default(),
             link_name,
+            preop_after_cycling: true,
         };
         futures_lite::future::block_on(m.discover())?;
         Ok(m)
@@ -635,7 +647,8 @@ impl Master {
     /// The master configures what each step needs itself, without resetting anything:
     /// the mailbox SyncManagers (SM0/SM1, or the bootstrap mailbox for BOOT) from the SII
     /// before PRE-OP; before SAFE-OP free run (0x1C32:01 = 0, where the slave has the
-    /// object), SM2/SM3 sized from the PDO mapping, one output and one input FMMU, and the
+    /// object; SM2-synchronous, 1, where 0x1C32:04 says it does not run free; a slave that
+    /// runs only DC-synchronous stops the request before any slave changed), SM2/SM3 sized from the PDO mapping, one output and one input FMMU, and the
     /// process-data watchdog off (0x0420 = 0: no cyclic master keeps it fed after the
     /// command).
     pub fn request_state(
@@ -643,7 +656,8 @@ impl Master {
         positions: &[usize],
         state: AlState,
     ) -> Result<Vec<(usize, AlStatus)>, MasterError> {
-        futures_lite::future::block_on(async {
+        // On the heap: the walk is a large future in debug builds.
+        futures_lite::future::block_on(Box::pin(async {
             let mut out = Vec::new();
             for &p in positions {
                 self.address(p)?;
@@ -657,6 +671,17 @@ impl Master {
                 AlState::Op => 3,
             };
             let ladder = [AlState::Init, AlState::PreOp, AlState::SafeOp, AlState::Op];
+            // SAFE-OP/OP: the sync mode of every slave that can tell (PRE-OP and up) first, so
+            // that a slave needing DC stops the request before any slave changed.
+            let mut plan = std::collections::HashMap::new();
+            if matches!(state, AlState::SafeOp | AlState::Op) {
+                for &p in positions {
+                    let st = self.al_status_async(p).await?.state();
+                    if matches!(st, Some(AlState::PreOp | AlState::SafeOp | AlState::Op)) {
+                        plan.insert(p, self.plain_sync_mode(p).await?);
+                    }
+                }
+            }
             for &p in positions {
                 let cur = self.al_status_async(p).await?;
                 let from = cur.state().unwrap_or(AlState::Init);
@@ -665,14 +690,13 @@ impl Master {
                     continue;
                 }
                 // Back to SAFE-OP/OP from SAFE-OP (or OP with an error) with a sync mode other
-                // than free run (a DC recording left it): through PRE-OP, where it can change.
+                // than the planned one (a DC recording left it): through PRE-OP, where it can
+                // change.
+                let planned = plan.get(&p).copied().flatten().unwrap_or(bringup::FREE_RUN);
                 let via_preop = matches!(state, AlState::SafeOp | AlState::Op)
                     && matches!(from, AlState::SafeOp | AlState::Op)
                     && (rank(state) > rank(from) || cur.error())
-                    && self
-                        .sync_mode_async(p)
-                        .await?
-                        .is_some_and(|m| m != bringup::FREE_RUN);
+                    && self.sync_mode_async(p).await?.is_some_and(|m| m != planned);
                 let steps: Vec<AlState> = if via_preop {
                     let mut v = vec![AlState::PreOp];
                     v.extend(ladder[2..=rank(state)].iter().copied());
@@ -703,7 +727,12 @@ impl Master {
                         }
                         AlState::Boot => self.configure_boot_mailbox(p).await?,
                         AlState::SafeOp => {
-                            self.set_free_run(p).await?;
+                            let mode = match plan.get(&p) {
+                                Some(m) => *m,
+                                None => self.plain_sync_mode(p).await?,
+                            };
+                            self.set_sync_mode(p, mode.unwrap_or(bringup::FREE_RUN))
+                                .await?;
                             self.configure_pd(p).await?;
                         }
                         _ => {}
@@ -714,7 +743,7 @@ impl Master {
                 out.push((p, last));
             }
             Ok(out)
-        })
+        }))
     }
 
     /// Acknowledges a pending AL error (0x0120 = current state | 0x10) and waits until the
@@ -835,6 +864,21 @@ impl Master {
     /// synchronous, 2 DC SYNC0, 3 DC SYNC1), `None` when it has no such object.
     pub fn sync_mode(&self, position: usize) -> Result<Option<u16>, MasterError> {
         futures_lite::future::block_on(self.sync_mode_async(position))
+    }
+
+    /// 0x1C32:04 (sync modes supported: bit 0 free run, 1 SM-synchronous, 2/3 DC) of the
+    /// slave at `position`, `None` when it has no such object or no CoE now.
+    pub fn sync_modes_supported(&self, position: usize) -> Result<Option<u16>, MasterError> {
+        futures_lite::future::block_on(async {
+            if !self.has_coe(position).await {
+                return Ok(None);
+            }
+            match self.sdo_upload_async(position, 0x1C32, 4).await {
+                Ok(b) if b.len() >= 2 => Ok(Some(u16::from_le_bytes([b[0], b[1]]))),
+                Ok(_) | Err(MasterError::SdoAbort { .. }) => Ok(None),
+                Err(e) => Err(e),
+            }
+        })
     }
 
     /// Identity (vendor, product, revision, serial) of the slave at `position`.

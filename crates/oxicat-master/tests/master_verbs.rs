@@ -132,13 +132,28 @@ fn write_changes_an_output_the_firmware_sees_on_all_linked_slaves() {
         .resolve(&["1.Blue_LED".into()], &layouts)
         .unwrap()
         .remove(0);
-    let back = m
-        .write_online(CycleOptions::default(), &vars, &1234i32.to_le_bytes(), 10)
-        .unwrap();
-    assert_eq!(back, vec!["1234", "1234"]);
-    for fw in &fws {
-        let v: i32 = fw.lock().slave.od().get(0x7010, 1).unwrap();
-        assert_eq!(v, 1234);
+    // What the firmware holds while the master cycles (the slaves leave OP at the end, and
+    // outputs go to their safe values outside OP).
+    let mut seen = Vec::new();
+    m.run_cyclic(CycleOptions::default(), |io| {
+        if io.cycle == 5 {
+            for v in &vars {
+                io.set(v, &1234i32.to_le_bytes())?;
+            }
+        }
+        if io.cycle == 15 {
+            seen = fws
+                .iter()
+                .map(|fw| fw.lock().slave.od().get::<i32>(0x7010, 1).unwrap())
+                .collect();
+            return Ok(oxicat_master::cyclic::Flow::Stop);
+        }
+        Ok(oxicat_master::cyclic::Flow::Continue)
+    })
+    .unwrap();
+    assert_eq!(seen, vec![1234, 1234]);
+    for p in 0..2 {
+        assert_eq!(m.al_status(p).unwrap().state(), Some(AlState::PreOp));
     }
     let _ = (led, leds);
 }

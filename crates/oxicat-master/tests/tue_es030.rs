@@ -96,6 +96,7 @@ fn watchdog_brakes_the_motors_and_drops_to_safeop_with_0x001b() {
 fn watchdog_brakes_the_motors_and_drops_to_safeop_with_0x001b_body() {
     let (link, seg, h) = bench();
     let mut m = Master::open(link).unwrap();
+    m.stop_cycling_as_if_gone();
     tue::run_normal(&mut m, 0, 100, |_, _| {
         let mut o = NormalOut::default();
         o.mcom[0] = 1;

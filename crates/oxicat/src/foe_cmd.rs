@@ -42,6 +42,7 @@ pub fn demo_files(def: &'static DeviceDef) -> FirmwareUpdate<RamStore<2, DEMO_SL
 #[derive(Debug, Subcommand)]
 pub enum FoeCommand {
     /// FoE write of a file (firmware download): INIT -> BOOT, write, back to INIT.
+    #[command(alias = "foe_write")]
     FoeWrite {
         #[command(flatten)]
         link: LinkArgs,
@@ -60,6 +61,7 @@ pub enum FoeCommand {
         no_boot: bool,
     },
     /// FoE read of a file.
+    #[command(alias = "foe_read")]
     FoeRead {
         #[command(flatten)]
         link: LinkArgs,

@@ -12,6 +12,7 @@ use oxicat_slave::DeviceDef;
 pub mod cia402_cmd;
 pub mod foe_cmd;
 pub mod hub_cmd;
+pub mod igh_cmd;
 pub mod interrupt;
 pub mod master_cmd;
 pub mod output;
@@ -57,12 +58,24 @@ pub enum Command {
     /// The TUeES030 motor I/O board (normal-mode position loop, FRF current-loop
     /// identification) on the virtual segment.
     TueEs030(tue_cmd::TueArgs),
+    /// The version of oxicat.
+    Version,
+    /// Build a firmware image for `foe-write`: the payload with the device's image header.
+    FwImage {
+        /// Device name (see `oxicat device list`).
+        device: String,
+        /// The payload (the application binary).
+        payload: PathBuf,
+        /// The image file to write.
+        #[arg(short, long)]
+        output: PathBuf,
+    },
 }
 
 /// Arguments of `oxicat device`.
 #[derive(Debug, clap::Args)]
 pub struct DeviceArgs {
-    /// Device name (see `oxicat device list`).
+    /// Device name (`oxicat device list` lists them).
     pub name: String,
     /// What to produce.
     #[arg(value_enum, default_value = "od")]
@@ -194,6 +207,22 @@ pub fn device_output(name: &str, what: DeviceOutput) -> Result<Vec<u8>, CliError
 /// Runs a parsed command line.
 pub fn run(cli: Cli) -> Result<(), CliError> {
     match cli.command {
+        Command::Device(a) if a.name == "list" => {
+            print!("{}", igh_cmd::device_list());
+            Ok(())
+        }
+        Command::Version => {
+            print!("{}", igh_cmd::version());
+            Ok(())
+        }
+        Command::FwImage {
+            device,
+            payload,
+            output,
+        } => {
+            print!("{}", igh_cmd::fw_image(&device, &payload, &output)?);
+            Ok(())
+        }
         Command::Device(a) => {
             let bytes = device_output(&a.name, a.what)?;
             output::write_output(a.output.as_deref(), &bytes, &mut std::io::stdout().lock())

@@ -1,10 +1,10 @@
 //! The master verbs of `oxicat`, after the IgH `ethercat` tool: `slaves`, `states`,
 //! `sii-read`, `sii-write`, `upload`, `download`, `sdos`, `pdos`, `xml`, `reg-read`,
-//! `reg-write`, `watch`, `write`, `record`. Each runs on `--iface <if>` (or `OXICAT_IFACE`)
-//! or, for tests and trying things out, on an in-process virtual segment `--sim demo:2`.
+//! `reg-write`, `watch`, `write`, `record`. Each runs on `--iface <if>` (or `OXICAT_IFACE`),
+//! on a segment served with EtherCAT over UDP `--udp host:port`, or, for tests and trying
+//! things out, on an in-process virtual segment `--sim demo:2`.
 //!
-//! The `--sim` device registry here is small (demo devices); `oxicat sim`'s registry
-//! (`sim_devices`) is the one to grow.
+//! `--sim` knows the devices of `oxicat sim --list` (one registry, `sim_devices`).
 
 use std::io::Write;
 use std::path::PathBuf;
@@ -22,10 +22,15 @@ pub struct LinkArgs {
     /// Network interface with the EtherCAT segment (default: $OXICAT_IFACE).
     #[arg(long, short = 'i')]
     pub iface: Option<String>,
-    /// Run against an in-process virtual segment instead: devices by name with a count,
-    /// comma-separated (e.g. `demo:2`).
-    #[arg(long, conflicts_with = "iface")]
+    /// Run against an in-process virtual segment instead: devices of `oxicat sim --list` by
+    /// name with a count, separated by commas or spaces (e.g. `demo:2,tue-es030:1`). The
+    /// segment lives for this one command.
+    #[arg(long, conflicts_with_all = ["iface", "udp"])]
     pub sim: Option<String>,
+    /// Reach a segment served with EtherCAT over UDP (`oxicat sim --udp <host:port>`), e.g.
+    /// 127.0.0.1:34980.
+    #[arg(long, conflicts_with = "iface", value_name = "HOST:PORT")]
+    pub udp: Option<String>,
     /// How long to wait for a frame to come back on an interface, in ms (default 250, or
     /// $OXICAT_TIMEOUT_MS). Raise it on a busy host or for a virtual segment on a loaded
     /// machine; EEPROM and mailbox waits scale with it.
@@ -51,6 +56,9 @@ pub enum MasterCommand {
         link: LinkArgs,
         #[command(flatten)]
         pos: PosArgs,
+        /// Verbose: a block per slave (identity, state, ports, DC delay), as `ethercat slaves -v`.
+        #[arg(long, short = 'v')]
+        verbose: bool,
     },
     /// Request an AL state (INIT, PREOP, SAFEOP, OP, BOOT) for all slaves or one.
     States {
@@ -62,6 +70,7 @@ pub enum MasterCommand {
         pos: PosArgs,
     },
     /// Read a slave's SII EEPROM (decoded by default).
+    #[command(alias = "sii_read")]
     SiiRead {
         #[command(flatten)]
         link: LinkArgs,
@@ -84,6 +93,7 @@ pub enum MasterCommand {
         output: Option<PathBuf>,
     },
     /// Write an SII image (a file, or one generated for a device) and verify it.
+    #[command(alias = "sii_write")]
     SiiWrite {
         #[command(flatten)]
         link: LinkArgs,
@@ -154,6 +164,7 @@ pub enum MasterCommand {
         output: Option<PathBuf>,
     },
     /// Read ESC registers (FPRD).
+    #[command(alias = "reg_read")]
     RegRead {
         #[command(flatten)]
         link: LinkArgs,
@@ -168,6 +179,7 @@ pub enum MasterCommand {
         r#type: Option<String>,
     },
     /// Write ESC registers (FPWR).
+    #[command(alias = "reg_write")]
     RegWrite {
         #[command(flatten)]
         link: LinkArgs,
@@ -262,92 +274,42 @@ pub fn parse_duration(s: &str) -> Result<Duration, MasterError> {
     Ok(Duration::from_nanos(ns.round() as u64))
 }
 
-/// The `--sim` devices: `(name, count)` of every `NAME[:COUNT]`, counts checked (1 …
-/// [`oxicat_master::MAX_SLAVES`] in all: what the master's group holds) before anything is
-/// built.
-fn sim_parts(spec: &str) -> Result<Vec<(&str, usize)>, MasterError> {
+/// The in-process segment of `--sim`: the devices of `oxicat sim --list`, in the same syntax
+/// (`demo:2,tue-es030:1` or `"demo:2 tue-es030:1"`), at most
+/// [`oxicat_master::MAX_SLAVES`] in all (what the master's group holds), checked before
+/// anything is built.
+pub fn build_sim(spec: &str) -> Result<Arc<Mutex<oxicat_sim::segment::Segment>>, MasterError> {
     let max = oxicat_master::MAX_SLAVES;
-    let mut parts = Vec::new();
-    let mut total = 0usize;
-    for part in spec.split(',').map(str::trim).filter(|p| !p.is_empty()) {
-        let (name, count) = match part.split_once(':') {
-            Some((n, c)) => (
-                n,
-                c.parse::<usize>().map_err(|_| {
-                    MasterError::Usage(format!(
-                        "bad count in --sim {part:?}: NAME:COUNT with COUNT 1 … {max}"
-                    ))
-                })?,
-            ),
-            None => (part, 1),
+    let mut total = 0u128;
+    for part in spec
+        .split(|c: char| c == ',' || c.is_whitespace())
+        .filter(|p| !p.is_empty())
+    {
+        let count = match part.split_once(':') {
+            Some((_, c)) => c.parse::<u128>().map_err(|_| {
+                MasterError::Usage(format!(
+                    "bad count in --sim {part:?}: NAME:COUNT with COUNT 1 … {max}"
+                ))
+            })?,
+            None => 1,
         };
         total = total.saturating_add(count);
-        if count == 0 || total > max {
+        if count == 0 || total > max as u128 {
             return Err(MasterError::Usage(format!(
-                "--sim {spec:?}: {count} slaves of {name} are out of range: 1 … {max} slaves in all (the master's group holds {max})"
+                "--sim {spec:?}: {count} slaves of {part} are out of range: 1 … {max} slaves in all (the master's group holds {max})"
             )));
         }
-        parts.push((name, count));
     }
-    if parts.is_empty() {
+    if total == 0 {
         return Err(MasterError::Usage(format!(
             "--sim {spec:?} names no devices: give NAME:COUNT, e.g. demo:2"
         )));
     }
-    Ok(parts)
-}
-
-fn build_sim(spec: &str) -> Result<Arc<Mutex<oxicat_sim::segment::Segment>>, MasterError> {
-    use oxicat_esc::{Esc, EscConfig};
-    use oxicat_sim::firmware::{attach_firmware, FirmwareConfig};
-    let mut seg = oxicat_sim::segment::Segment::new();
-    let mut k = 0usize;
-    for (name, count) in sim_parts(spec)? {
-        let def: &'static oxicat_slave::DeviceDef = match name {
-            "demo" => &oxicat_devices::demo::DEF,
-            "demo-additions" => &oxicat_devices::demo::additions::DEF,
-            _ => {
-                return Err(MasterError::Usage(format!(
-                    "unknown --sim device {name:?}; known: demo, demo-additions"
-                )))
-            }
-        };
-        let sii =
-            oxicat_device::sii::generate(def).map_err(|e| MasterError::SiiImage(e.to_string()))?;
-        for _ in 0..count {
-            let id = seg.add(Esc::new(EscConfig::et1100(), sii.clone()));
-            let app = oxicat_slave::foe::WithFoe {
-                app: oxicat_devices::demo::Demo::new(NoLeds, FixedButtons(0xA0 | k as u8)),
-                files: crate::foe_cmd::demo_files(def),
-            };
-            let cfg = FirmwareConfig::default();
-            let r = if name == "demo" {
-                attach_firmware::<_, { oxicat_devices::demo::IMAGE }, 128>(
-                    &mut seg, id, def, app, &cfg,
-                )
-                .map(|_| ())
-            } else {
-                attach_firmware::<_, { oxicat_devices::demo::additions::IMAGE }, 128>(
-                    &mut seg, id, def, app, &cfg,
-                )
-                .map(|_| ())
-            };
-            r.map_err(|e| MasterError::Usage(format!("firmware of {name} did not boot: {e}")))?;
-            k += 1;
-        }
-    }
+    let desc = crate::sim_cmd::parse_specs(&[spec.to_string()])
+        .map_err(|e| MasterError::Usage(format!("--sim: {e}")))?;
+    let (seg, _) = crate::sim_cmd::build_segment(&desc)
+        .map_err(|e| MasterError::Usage(format!("--sim: {e}")))?;
     Ok(Arc::new(Mutex::new(seg)))
-}
-
-struct NoLeds;
-impl oxicat_devices::demo::Leds for NoLeds {
-    fn set(&mut self, _blue: bool, _red: bool) {}
-}
-struct FixedButtons(u8);
-impl oxicat_devices::demo::Buttons for FixedButtons {
-    fn read(&mut self) -> u8 {
-        self.0
-    }
 }
 
 /// Opens the master on `link` (an interface or an in-process `--sim` segment).
@@ -355,16 +317,19 @@ pub(crate) fn open(link: &LinkArgs) -> Result<Master, MasterError> {
     if let Some(spec) = &link.sim {
         return Master::open(Link::Sim(build_sim(spec)?));
     }
-    let iface = link
+    let target = match &link.udp {
+        Some(addr) => Link::Udp(addr.clone()),
+        None => Link::Iface(link
         .iface
         .clone()
         .or_else(|| std::env::var("OXICAT_IFACE").ok())
         .ok_or_else(|| {
             MasterError::Usage(
-                "no network interface: give --iface <if> (or set OXICAT_IFACE), or --sim demo:2 for a virtual segment"
+                "no network interface: give --iface <if> (or set OXICAT_IFACE), --udp <host:port> for a segment served with `oxicat sim --udp`, or --sim demo:2 for a virtual segment"
                     .into(),
             )
-        })?;
+        })?),
+    };
     let timeout_ms = match link.timeout {
         Some(ms) => Some(ms),
         None => match std::env::var("OXICAT_TIMEOUT_MS") {
@@ -376,7 +341,7 @@ pub(crate) fn open(link: &LinkArgs) -> Result<Master, MasterError> {
             Err(_) => None,
         },
     };
-    let link = Link::Iface(iface);
+    let link = target;
     let mut options = MasterOptions::for_link(&link);
     if let Some(ms) = timeout_ms {
         if ms == 0 {
@@ -475,9 +440,21 @@ fn progress_bar(total: u64, what: &str) -> indicatif::ProgressBar {
 pub fn run(cmd: MasterCommand, out: &mut dyn Write) -> Result<(), MasterError> {
     let w = |out: &mut dyn Write, s: &str| out.write_all(s.as_bytes()).map_err(MasterError::Output);
     match cmd {
-        MasterCommand::Slaves { link, pos } => {
+        MasterCommand::Slaves { link, pos, verbose } => {
             let m = open(&link)?;
             let list = m.scan()?;
+            if verbose {
+                for s in list
+                    .iter()
+                    .filter(|s| pos.position.is_none_or(|p| p == s.position))
+                {
+                    w(out, &crate::igh_cmd::slave_verbose(s))?;
+                }
+                if let Some(p) = pos.position {
+                    m.address(p)?;
+                }
+                return Ok(());
+            }
             w(out, "pos  addr    alias   state                 vendor      product     revision    serial      ports            name\n")?;
             for s in list
                 .iter()
@@ -516,10 +493,16 @@ pub fn run(cmd: MasterCommand, out: &mut dyn Write) -> Result<(), MasterError> {
             // SAFEOP/OP: free run (0x1C32:01 = 0, SYNC0 off); say what each slave runs.
             let sync = matches!(st, AlState::SafeOp | AlState::Op);
             for (p, s) in m.request_state(&ps, st)? {
-                let mode = match (sync, m.sync_mode(p)?) {
+                // Read 0x1C32 only where it matters (each read is mailbox traffic).
+                let mode = match (sync, if sync { m.sync_mode(p)? } else { None }) {
                     (false, _) => String::new(),
                     (true, Some(0)) => ", free run (0x1C32:01 = 0)".into(),
-                    (true, Some(1)) => ", SM2 synchronous (0x1C32:01 = 1)".into(),
+                    (true, Some(1)) => match m.sync_modes_supported(p)? {
+                        Some(s) if s & 1 == 0 => format!(
+                            ", SM2 synchronous (0x1C32:01 = 1): the slave does not run free (0x1C32:04 = 0x{s:04X})"
+                        ),
+                        _ => ", SM2 synchronous (0x1C32:01 = 1)".into(),
+                    },
                     (true, Some(2)) => ", DC SYNC0 (0x1C32:01 = 2)".into(),
                     (true, Some(3)) => ", DC SYNC1 (0x1C32:01 = 3)".into(),
                     (true, Some(v)) => format!(", sync mode 0x1C32:01 = {v}"),
@@ -822,19 +805,34 @@ pub fn run(cmd: MasterCommand, out: &mut dyn Write) -> Result<(), MasterError> {
         } => {
             let cycle = parse_duration(&cycle)?;
             let mut m = open(&link)?;
+            m.prepare_cyclic()?;
             let layouts = m.layouts()?;
             let vars: Vec<_> = m.resolve(&vars, &layouts)?.into_iter().flatten().collect();
             let mut err = None;
+            // A virtual segment runs as fast as the host can: show its lines at the pace of
+            // the cycle (every × cycle per line) as on a real segment.
+            let pace = link.sim.is_some();
+            let started = std::time::Instant::now();
+            let mut lines = 0u32;
             m.watch(
                 CycleOptions { cycle, dc: false },
                 &vars,
                 every,
                 count,
-                &mut |line| match writeln!(out, "{line}") {
-                    Ok(()) => true,
-                    Err(e) => {
-                        err = Some(e);
-                        false
+                &mut |line| {
+                    lines += 1;
+                    if pace {
+                        let due = started + cycle * every.max(1) as u32 * lines;
+                        if let Some(d) = due.checked_duration_since(std::time::Instant::now()) {
+                            std::thread::sleep(d);
+                        }
+                    }
+                    match writeln!(out, "{line}") {
+                        Ok(()) => true,
+                        Err(e) => {
+                            err = Some(e);
+                            false
+                        }
                     }
                 },
             )?;
@@ -852,6 +850,7 @@ pub fn run(cmd: MasterCommand, out: &mut dyn Write) -> Result<(), MasterError> {
         } => {
             let cycle = parse_duration(&cycle)?;
             let mut m = open(&link)?;
+            m.prepare_cyclic()?;
             let layouts = m.layouts()?;
             let vars = m.resolve(std::slice::from_ref(&var), &layouts)?.remove(0);
             let data = vars[0].ty.encode(&value)?;
@@ -901,6 +900,7 @@ pub fn run(cmd: MasterCommand, out: &mut dyn Write) -> Result<(), MasterError> {
             }
             let cycles = (duration.as_nanos() / cycle.as_nanos()) as u64;
             let mut m = open(&link)?;
+            m.prepare_cyclic()?;
             let layouts = m.layouts()?;
             let vars: Vec<_> = m.resolve(&vars, &layouts)?.into_iter().flatten().collect();
             let to_stdout = crate::output::is_stdout(&output);

@@ -190,10 +190,16 @@ fn one() -> usize {
     1
 }
 
-/// Parses `NAME` or `NAME:COUNT` specs into a segment description.
+/// Parses `NAME` or `NAME:COUNT` specs into a segment description. Each argument may hold
+/// several specs separated by commas or spaces (`demo:2,tue-es030:1`, `"demo:2 tue-es030"`),
+/// so `oxicat sim` and the master verbs' `--sim` take the same syntax.
 pub fn parse_specs(specs: &[String]) -> Result<SegmentFile, SimError> {
     let mut seg = SegmentFile::default();
-    for s in specs {
+    for s in specs
+        .iter()
+        .flat_map(|a| a.split(|c: char| c == ',' || c.is_whitespace()))
+        .filter(|p| !p.is_empty())
+    {
         if let Some((_, c)) = s.split_once(':') {
             if c.parse::<u128>().is_ok_and(|c| c > MAX_SIM_SLAVES as u128) {
                 return Err(SimError::Range {
@@ -209,12 +215,12 @@ pub fn parse_specs(specs: &[String]) -> Result<SegmentFile, SimError> {
                 c.parse::<usize>()
                     .ok()
                     .filter(|&c| c > 0)
-                    .ok_or_else(|| SimError::BadSpec(s.clone()))?,
+                    .ok_or_else(|| SimError::BadSpec(s.to_string()))?,
             ),
-            None => (s.as_str(), 1),
+            None => (s, 1),
         };
         if name.is_empty() {
-            return Err(SimError::BadSpec(s.clone()));
+            return Err(SimError::BadSpec(s.to_string()));
         }
         seg.devices.push(DeviceEntry {
             name: name.to_string(),
@@ -454,6 +460,35 @@ pub fn serve_until(args: &SimArgs, stop: Arc<AtomicBool>) -> Result<(), SimError
         let port = oxicat_sim::net::udp::UdpPort::bind(addr).map_err(SimError::Net)?;
         run_port(port, segment, &config, stop, args.quiet, n, &summary)
     }
+}
+
+/// Serves the devices of `args` on an already bound UDP port until `stop` is set (for a
+/// program, or a test, that needs the address before serving starts).
+pub fn serve_udp_until(
+    args: &SimArgs,
+    port: oxicat_sim::net::udp::UdpPort,
+    stop: Arc<AtomicBool>,
+) -> Result<(), SimError> {
+    let desc = match &args.segment {
+        Some(p) => read_segment_file(p)?,
+        None => parse_specs(&args.devices)?,
+    };
+    let (seg, names) = build_segment(&desc)?;
+    let n = seg.len();
+    let config = RealtimeConfig {
+        spin: args.spin,
+        ..RealtimeConfig::default()
+    };
+    let summary = summarize(&names);
+    run_port(
+        port,
+        Arc::new(Mutex::new(seg)),
+        &config,
+        stop,
+        args.quiet,
+        n,
+        &summary,
+    )
 }
 
 fn summarize(names: &[String]) -> String {
