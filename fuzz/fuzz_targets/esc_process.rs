@@ -4,7 +4,8 @@
 //! by more than its addressing allows (ETG.1000.4 table 12: 1 for an auto-increment read
 //! or write, 3 for an auto-increment read-write; per ESC the same for configured-address
 //! (ESCs may share a station address), broadcast and logical commands; nothing for NOP or
-//! an unknown command).
+//! an unknown command), and a frame with a bad FCS commits no SyncManager buffer (see
+//! `check_bad_frame_left_sms`).
 //!
 //! Input: byte 0 selects the chip model and fault options; then a sequence of
 //! `[len_lo len_hi frame[len]]` records, each frame starting at the EtherCAT header.
@@ -119,6 +120,27 @@ fn max_wkc_increment(command: u8, n: u16) -> u16 {
     }
 }
 
+/// The SyncManager registers, 8 bytes per SM (start, length, control, status, activate,
+/// PDI control).
+const SM_REGS: std::ops::Range<usize> = 0x0800..0x0880;
+
+/// A frame with a bad FCS commits no SyncManager buffer (ET1100 datasheet: a buffer is
+/// written only by a frame that ends well; a mailbox counts as written or read only then):
+/// where the frame left an SM's configuration as it was, its status byte (mailbox full,
+/// last written buffer) must be as it was.
+fn check_bad_frame_left_sms(before: &[u8], after: &[u8]) {
+    for (k, (b, a)) in before.chunks(8).zip(after.chunks(8)).enumerate() {
+        let config_same = (0..8).filter(|&i| i != 5).all(|i| b[i] == a[i]);
+        if config_same {
+            assert_eq!(
+                b[5] & 0x38,
+                a[5] & 0x38,
+                "SM{k}: a frame with a bad FCS changed its buffer state"
+            );
+        }
+    }
+}
+
 /// (command, working counter) of every datagram of a well-formed frame.
 fn datagrams(frame: &[u8]) -> Option<Vec<(u8, u16)>> {
     let f = EcatFrame::parse(frame).ok()?;
@@ -158,7 +180,12 @@ fuzz_target!(|data: &[u8]| {
         let mut dropped = false;
         for (i, e) in escs.iter_mut().enumerate() {
             let ok = !(flags & 4 != 0 && i == 1 && frame_no % 3 == 0);
-            match e.forward(0, &mut frame, t, ok) {
+            let sms_before: Vec<u8> = e.memory()[SM_REGS].to_vec();
+            let out = e.forward(0, &mut frame, t, ok);
+            if !ok {
+                check_bad_frame_left_sms(&sms_before, &e.memory()[SM_REGS]);
+            }
+            match out {
                 Forward::Dropped => {
                     dropped = true;
                     break;

@@ -81,17 +81,23 @@ fn cli_here(args: &[&str]) -> Result<String, String> {
     Ok(String::from_utf8_lossy(&out).into_owned())
 }
 
+/// How long a frame may take to come back from the served segment, in ms (`--timeout`):
+/// the segment runs in this debug-built test process in real time and falls behind on a
+/// loaded CI machine (a TUeES030 node alone needs ~40 % of a core in a debug build), as the
+/// README tells users of a busy host to raise it.
+pub const TIMEOUT_MS: &str = "3000";
+
 /// [`cli`] with `--udp <addr>` appended; panics with the message on failure.
 pub fn ok(s: &Served, args: &[&str]) -> String {
     let mut a = args.to_vec();
-    a.extend(["--udp", &s.addr]);
+    a.extend(["--udp", &s.addr, "--timeout", TIMEOUT_MS]);
     cli(&a).unwrap_or_else(|e| panic!("oxicat {a:?} failed: {e}"))
 }
 
 /// [`cli`] with `--udp <addr>` appended; the error message (panics if it succeeds).
 pub fn fails(s: &Served, args: &[&str]) -> String {
     let mut a = args.to_vec();
-    a.extend(["--udp", &s.addr]);
+    a.extend(["--udp", &s.addr, "--timeout", TIMEOUT_MS]);
     match cli(&a) {
         Ok(out) => panic!("oxicat {a:?} should fail, printed {out}"),
         Err(e) => e,
