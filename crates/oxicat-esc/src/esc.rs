@@ -36,6 +36,10 @@ pub enum Forward {
     Dropped,
 }
 
+/// How long a temporary loop control setting (0x0100 bit 1) lasts: "about 1 second"
+/// (ETG.1000.4 table 33).
+pub const TEMPORARY_LOOP_NS: u64 = 1_000_000_000;
+
 /// Things that happened on the PDI side while time advanced.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub struct EscEvents {
@@ -317,6 +321,11 @@ pub struct Esc {
     pd_wd_last: Option<u64>,
     pdi_wd_last: Option<u64>,
     latch_inputs: [bool; 2],
+    /// Loop control (0x0101) as last written permanently (0x0100 bit 1 clear).
+    loop_permanent: u8,
+    /// When a temporary loop control setting (0x0100 bit 1) gives way to
+    /// [`Esc::loop_permanent`] again.
+    loop_revert_at: Option<u64>,
 }
 
 impl Esc {
@@ -405,6 +414,8 @@ impl Esc {
             pd_wd_last: None,
             pdi_wd_last: None,
             latch_inputs: [false; 2],
+            loop_permanent: 0,
+            loop_revert_at: None,
         };
         esc.update_dl_status(false);
         // Power-on is a DL status change (links come up, EEPROM loaded): the event is
@@ -1344,6 +1355,17 @@ impl Esc {
     ) {
         let over = |a: usize, b: usize| c < b && e > a;
         if over(0x0100, 0x0104) && side == Side::Ecat {
+            if over(0x0100, 0x0102) {
+                // 0x0100 bit 1 (ETG.1000.4 table 33): loop control used for about a
+                // second, then the permanent setting again; bit 1 clear makes it permanent.
+                if self.mem[regs::DL_CONTROL as usize] & 0x02 != 0 {
+                    self.loop_revert_at = Some(self.now + TEMPORARY_LOOP_NS);
+                } else {
+                    self.loop_permanent = self.mem[regs::DL_LOOP_CONTROL as usize];
+                    self.loop_revert_at = None;
+                }
+                self.memo.clear();
+            }
             self.update_dl_status(true);
         }
         if over(0x0120, 0x0122) && side == Side::Ecat {
@@ -1840,6 +1862,14 @@ impl Esc {
                 self.memo.clear();
             }
         }
+        if let Some(d) = self.loop_revert_at {
+            if t >= d {
+                self.loop_revert_at = None;
+                self.mem[regs::DL_LOOP_CONTROL as usize] = self.loop_permanent;
+                self.update_dl_status(true);
+                self.memo.clear();
+            }
+        }
         if let Some(d) = self.pdi_wd_deadline() {
             if t >= d {
                 self.pdi_wd_last = None;
@@ -1873,6 +1903,9 @@ impl Esc {
             n = Some(n.map_or(d, |x| x.min(d)));
         }
         if let Some(d) = self.pdi_wd_deadline() {
+            n = Some(n.map_or(d, |x| x.min(d)));
+        }
+        if let Some(d) = self.loop_revert_at {
             n = Some(n.map_or(d, |x| x.min(d)));
         }
         n

@@ -682,3 +682,35 @@ fn the_pdi_cannot_move_a_syncmanager() {
     let _ = e.pdi_write(0x0810, &sm_block(0x0130, 8, 0x20, 0));
     assert_eq!(sm_regs(&mut e, 2), (0x1100, 4, 0x64, 0));
 }
+
+#[test]
+fn temporary_loop_control_reverts_after_about_a_second() {
+    // ETG.1000.4 table 33 / ET1100 0x0100 bit 1: "temporary use of Loop Control settings
+    // for ~1 second", then the permanent settings apply again.
+    let mut e = esc();
+    e.set_link(1, true);
+    let mut f = frame(&[(phys(Command::Nop, 0, 0, &[0]), &[0])]);
+    // Port 1 forced closed (0x0101 bits 2..3 = 3), temporarily.
+    assert_eq!(fpwr(&mut e, 0x0100, &[0x02, 0x0C]), 1);
+    assert_eq!(e.forward(0, &mut f, 1_000, true), Forward::Port(0));
+    let due = e.next_event().expect("the revert is an event");
+    assert!((900_000_000..=1_100_000_000).contains(&due), "{due}");
+    e.advance(due - 1);
+    assert_eq!(e.forward(0, &mut f, due - 1, true), Forward::Port(0));
+    e.advance(due);
+    assert_eq!(e.memory()[0x0101], 0x00, "loop settings as before");
+    assert_eq!(e.forward(0, &mut f, due, true), Forward::Port(1));
+    assert_eq!(e.next_event(), None);
+    // The same settings written permanently stay.
+    assert_eq!(fpwr(&mut e, 0x0100, &[0x00, 0x0C]), 1);
+    e.advance(5_000_000_000);
+    assert_eq!(e.forward(0, &mut f, 5_000_000_000, true), Forward::Port(0));
+    assert_eq!(e.memory()[0x0101], 0x0C);
+    // A temporary setting on top of a permanent one returns to the permanent one.
+    assert_eq!(fpwr(&mut e, 0x0100, &[0x02, 0x08]), 1);
+    assert_eq!(e.forward(0, &mut f, 5_000_000_000, true), Forward::Port(1));
+    let due = e.next_event().expect("revert");
+    e.advance(due);
+    assert_eq!(e.memory()[0x0101], 0x0C);
+    assert_eq!(e.forward(0, &mut f, due, true), Forward::Port(0));
+}
