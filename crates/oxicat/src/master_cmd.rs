@@ -153,6 +153,21 @@ pub enum MasterCommand {
         #[command(flatten)]
         pos: PosArgs,
     },
+    /// The PDO configuration as C arrays for the IgH application interface (`ecrt.h`), as
+    /// `ethercat cstruct`; with --rust as structs for ethercrab's wire derive.
+    Cstruct {
+        #[command(flatten)]
+        link: LinkArgs,
+        #[command(flatten)]
+        pos: PosArgs,
+        /// Rust structs (`EtherCrabWireReadWrite`) for the output and input images instead.
+        #[arg(long)]
+        rust: bool,
+        /// From a device definition's default PDO assignment (see `oxicat device list`),
+        /// without a bus.
+        #[arg(long, conflicts_with_all = ["iface", "sim", "udp"])]
+        device: Option<String>,
+    },
     /// Write an ESI (EtherCATInfo XML) for a live slave.
     Xml {
         #[command(flatten)]
@@ -739,6 +754,65 @@ pub fn run(cmd: MasterCommand, out: &mut dyn Write) -> Result<(), MasterError> {
                         }
                     }
                 }
+            }
+            Ok(())
+        }
+        MasterCommand::Cstruct {
+            link,
+            pos,
+            rust,
+            device,
+        } => {
+            if let Some(d) = device {
+                let def = crate::devices()
+                    .into_iter()
+                    .find(|x| x.0 == d)
+                    .map(|x| x.1)
+                    .ok_or(MasterError::UnknownDevice(d.clone()))?;
+                let l = crate::igh_cmd::def_pdos(def);
+                let id = &def.identity;
+                let text = match rust {
+                    true => crate::igh_cmd::rust_struct(
+                        &d,
+                        &format!("{d} ({}), default PDO assignment", def.name),
+                        &l,
+                    ),
+                    false => crate::igh_cmd::c_struct(
+                        pos.position.unwrap_or(0),
+                        def.name,
+                        (id.vendor_id, id.product_code, id.revision),
+                        &l,
+                    ),
+                };
+                return w(out, &text);
+            }
+            let m = open(&link)?;
+            let infos = m.scan()?;
+            for p in m.positions(pos.position)? {
+                let l = m.pdos(p)?;
+                let s = &infos[p];
+                let text = match rust {
+                    true => crate::igh_cmd::rust_struct(
+                        &format!("slave{p}"),
+                        &format!(
+                            "slave {p}: {} (PDO mapping from {})",
+                            s.name,
+                            match l.source {
+                                oxicat_master::pdo::PdoSource::Coe => "CoE",
+                                oxicat_master::pdo::PdoSource::Sii => "the SII",
+                            }
+                        ),
+                        &l,
+                    ),
+                    false => crate::igh_cmd::c_struct(
+                        p,
+                        &s.name,
+                        (s.vendor_id, s.product_code, s.revision),
+                        &l,
+                    ),
+                };
+                w(out, &text)?;
+                w(out, "\n")?;
             }
             Ok(())
         }

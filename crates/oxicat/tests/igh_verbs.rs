@@ -98,3 +98,145 @@ fn igh_spellings_and_slaves_verbose() {
     let out = ok(&["foe_read", "version.txt", "--sim", "demo:1"]);
     assert!(out.contains("vendor_id=0xE0000000"), "{out}");
 }
+
+/// The `#[wire(...)]` bit widths (field bits and skips) of each generated struct, by name, and
+/// the struct's declared size in bits; every field name is checked to be a Rust identifier.
+fn wire_structs(rust: &str) -> Vec<(String, u32, u32)> {
+    let attr = |l: &str, key: &str| -> u32 {
+        l.trim_start_matches("#[wire(")
+            .trim_end_matches(")]")
+            .split(", ")
+            .filter_map(|kv| kv.split_once(" = "))
+            .filter(|(k, _)| *k == key)
+            .map(|(_, v)| v.parse::<u32>().unwrap())
+            .sum()
+    };
+    let lines: Vec<&str> = rust.lines().map(str::trim).collect();
+    let mut out: Vec<(String, u32, u32)> = Vec::new();
+    for (k, line) in lines.iter().enumerate() {
+        let next = lines.get(k + 1).copied().unwrap_or("");
+        if let Some(name) = next.strip_prefix("pub struct ") {
+            assert!(line.starts_with("#[wire("), "struct without a size: {next}");
+            let declared = attr(line, "bytes") * 8 + attr(line, "bits");
+            out.push((name.trim_end_matches(" {").to_string(), declared, 0));
+        } else if line.starts_with("#[wire(") {
+            let f = next.strip_prefix("pub ").expect("a field after #[wire]");
+            let name = f.split(':').next().unwrap();
+            assert!(
+                name.chars()
+                    .next()
+                    .is_some_and(|c| c.is_ascii_alphabetic() || c == '_')
+                    && name.chars().all(|c| c.is_ascii_alphanumeric() || c == '_'),
+                "not an identifier: {name:?}"
+            );
+            out.last_mut().expect("a field inside a struct").2 +=
+                attr(line, "bits") + attr(line, "pre_skip") + attr(line, "post_skip");
+        }
+    }
+    out
+}
+
+#[test]
+fn cstruct_rust_from_a_device_adds_up_to_its_sync_managers() {
+    for name in ["demo", "cia402-joint"] {
+        let def = oxicat::devices()
+            .into_iter()
+            .find(|d| d.0 == name)
+            .unwrap()
+            .1;
+        let rust = ok(&["cstruct", "--device", name, "--rust"]);
+        let structs = wire_structs(&rust);
+        assert_eq!(structs.len(), 2, "{rust}");
+        let (o, i) = (&structs[0], &structs[1]);
+        assert!(
+            o.0.ends_with("Outputs") && i.0.ends_with("Inputs"),
+            "{rust}"
+        );
+        assert_eq!(
+            o.1,
+            def.default_output_bits(),
+            "{name} outputs declared\n{rust}"
+        );
+        assert_eq!(
+            o.2,
+            def.default_output_bits(),
+            "{name} output fields\n{rust}"
+        );
+        assert_eq!(
+            i.1,
+            def.default_input_bits(),
+            "{name} inputs declared\n{rust}"
+        );
+        assert_eq!(i.2, def.default_input_bits(), "{name} input fields\n{rust}");
+        assert!(
+            rust.contains("ethercrab_wire::EtherCrabWireReadWrite"),
+            "{rust}"
+        );
+    }
+    let rust = ok(&["cstruct", "--device", "cia402-joint", "--rust"]);
+    assert!(
+        rust.contains("#[wire(bits = 16)]\n    pub controlword: u16,"),
+        "{rust}"
+    );
+    assert!(
+        rust.contains("#[wire(bits = 32)]\n    pub target_position: i32,"),
+        "{rust}"
+    );
+    let (s, _, err) = oxicat(&["cstruct", "--device", "nosuch"]);
+    assert!(!s && err.contains("nosuch"), "{err}");
+}
+
+#[test]
+fn cstruct_c_arrays_from_the_live_mapping() {
+    let c = ok(&["cstruct", "--sim", "demo:2", "-p", "1"]);
+    assert!(c.starts_with("/* Master 0, Slave 1, "), "{c}");
+    assert!(
+        c.contains("ec_pdo_entry_info_t slave_1_pdo_entries[] = {"),
+        "{c}"
+    );
+    assert!(c.contains("ec_sync_info_t slave_1_syncs[] = {"), "{c}");
+    // As many entry lines as the mapping has entries, each PDO pointing at its first.
+    let def = &oxicat_devices::demo::DEF;
+    let n: usize = def
+        .rx_assign
+        .iter()
+        .chain(def.tx_assign)
+        .map(|&i| def.pdo(i).unwrap().entries.len())
+        .sum();
+    assert_eq!(
+        c.lines()
+            .filter(|l| l.trim_start().starts_with("{0x") && l.trim() != "{0xff}")
+            .count()
+            - def.rx_assign.len()
+            - def.tx_assign.len(),
+        n,
+        "{c}"
+    );
+    assert!(
+        c.contains(&format!(
+            "{{0x{:04x}, {}, slave_1_pdo_entries + 0}}",
+            def.rx_assign[0],
+            def.pdo(def.rx_assign[0]).unwrap().entries.len()
+        )),
+        "{c}"
+    );
+    assert!(
+        c.contains(&format!(
+            "{{2, EC_DIR_OUTPUT, {}, slave_1_pdos + 0, EC_WD_ENABLE}}",
+            def.rx_assign.len()
+        )),
+        "{c}"
+    );
+    assert!(
+        c.contains(&format!(
+            "{{3, EC_DIR_INPUT, {}, slave_1_pdos + {}, EC_WD_DISABLE}}",
+            def.tx_assign.len(),
+            def.rx_assign.len()
+        )),
+        "{c}"
+    );
+    let rust = ok(&["cstruct", "--sim", "demo:1", "--rust"]);
+    let structs = wire_structs(&rust);
+    assert_eq!(structs[0].2, def.default_output_bits(), "{rust}");
+    assert_eq!(structs[1].2, def.default_input_bits(), "{rust}");
+}
