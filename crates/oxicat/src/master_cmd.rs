@@ -168,6 +168,18 @@ pub enum MasterCommand {
         #[arg(long, conflicts_with_all = ["iface", "sim", "udp"])]
         device: Option<String>,
     },
+    /// The process-data image, as `ethercat data`: the slaves are brought to OP, cycle a few
+    /// times, and the image of the last cycle is shown (slave by slave: outputs, then inputs).
+    Data {
+        #[command(flatten)]
+        link: LinkArgs,
+        /// Raw bytes instead of a hex dump.
+        #[arg(long)]
+        binary: bool,
+        /// Output file (default: standard output).
+        #[arg(long, short = 'o')]
+        output: Option<PathBuf>,
+    },
     /// Write an ESI (EtherCATInfo XML) for a live slave.
     Xml {
         #[command(flatten)]
@@ -815,6 +827,19 @@ pub fn run(cmd: MasterCommand, out: &mut dyn Write) -> Result<(), MasterError> {
                 w(out, "\n")?;
             }
             Ok(())
+        }
+        MasterCommand::Data {
+            link,
+            binary,
+            output,
+        } => {
+            let mut m = open(&link)?;
+            let (image, _) = crate::igh_cmd::process_image(&mut m)?;
+            let bytes = match binary {
+                true => image,
+                false => crate::igh_cmd::hex_lines(&image).into_bytes(),
+            };
+            crate::output::write_output(output.as_deref(), &bytes, out)
         }
         MasterCommand::Xml { link, pos, output } => {
             let m = open(&link)?;

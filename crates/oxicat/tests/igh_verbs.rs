@@ -240,3 +240,60 @@ fn cstruct_c_arrays_from_the_live_mapping() {
     assert_eq!(structs[0].2, def.default_output_bits(), "{rust}");
     assert_eq!(structs[1].2, def.default_input_bits(), "{rust}");
 }
+
+/// Bytes of a `data` hex dump (`0010: 01 02 …` lines), offsets checked.
+fn unhex(dump: &str) -> Vec<u8> {
+    let mut b = Vec::new();
+    for line in dump.lines() {
+        let (off, bytes) = line.split_once(": ").expect("offset: bytes");
+        assert_eq!(usize::from_str_radix(off, 16).unwrap(), b.len(), "{dump}");
+        b.extend(
+            bytes
+                .split_whitespace()
+                .map(|x| u8::from_str_radix(x, 16).unwrap()),
+        );
+    }
+    b
+}
+
+#[test]
+fn data_shows_the_process_image_of_every_slave() {
+    let def = oxicat::devices()
+        .into_iter()
+        .find(|d| d.0 == "demo")
+        .unwrap()
+        .1;
+    let (o, i) = (
+        def.default_output_bits().div_ceil(8) as usize,
+        def.default_input_bits().div_ceil(8) as usize,
+    );
+    let img = unhex(&ok(&["data", "--sim", "demo:2"]));
+    assert_eq!(img.len(), 2 * (o + i), "{img:02x?}");
+    // The demo's inputs: InINT32Var3 (offset 14) counts the slave's cycles, InINT32Var4
+    // (offset 18) holds the virtual board's buttons, 0xA0 + node; the outputs are zero.
+    for k in 0..2 {
+        let base = k * (o + i);
+        assert!(img[base..base + o].iter().all(|&b| b == 0), "{img:02x?}");
+        let inputs = &img[base + o..base + o + i];
+        assert!(
+            i32::from_le_bytes(inputs[14..18].try_into().unwrap()) > 0,
+            "{inputs:02x?}"
+        );
+        assert_eq!(inputs[18], 0xA0 + k as u8, "{inputs:02x?}");
+    }
+    let dir = std::env::temp_dir().join(format!("oxicat-data-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let f = dir.join("image.bin");
+    ok(&[
+        "data",
+        "--sim",
+        "demo:1",
+        "--binary",
+        "-o",
+        f.to_str().unwrap(),
+    ]);
+    let bin = std::fs::read(&f).unwrap();
+    assert_eq!(bin.len(), o + i);
+    assert_eq!(bin[o + 18], 0xA0);
+    let _ = std::fs::remove_dir_all(&dir);
+}
