@@ -359,6 +359,40 @@ pub fn rust_struct(prefix: &str, heading: &str, l: &oxicat_master::pdo::SlavePdo
     t
 }
 
+/// Cycles after which `data` takes the image: the slaves' inputs of the first OP cycle may
+/// still be those of SAFE-OP; by the third their application has run on this master's outputs.
+const DATA_CYCLES: u64 = 3;
+
+/// `oxicat data`: brings the slaves to OP (free run, 1 ms), runs [`DATA_CYCLES`] cycles and
+/// returns the process-data image of the last one, slave by slave its outputs (SM2, what
+/// the master sent: zeros) then its inputs (SM3).
+/// oxicat keeps no domain between commands, so the image is that of this one run; the
+/// slaves are back in PRE-OP afterwards, as after `watch`.
+pub fn process_image(m: &mut oxicat_master::Master) -> Result<Vec<u8>, oxicat_master::MasterError> {
+    use oxicat_master::cyclic::{CycleOptions, Flow};
+    m.prepare_cyclic()?;
+    let mut image = Vec::new();
+    m.run_cyclic(CycleOptions::default(), |io| {
+        if io.cycle + 1 < DATA_CYCLES {
+            return Ok(Flow::Continue);
+        }
+        for (o, i) in io.outputs.iter().zip(&io.inputs) {
+            image.extend_from_slice(o);
+            image.extend_from_slice(i);
+        }
+        Ok(Flow::Stop)
+    })?;
+    Ok(image)
+}
+
+/// A hex dump, 16 bytes a line with the byte offset: `0010: 01 02 …`.
+pub fn hex_lines(b: &[u8]) -> String {
+    b.chunks(16)
+        .enumerate()
+        .map(|(i, c)| format!("{:04x}: {}\n", i * 16, oxicat_master::value::hex(c)))
+        .collect()
+}
+
 #[cfg(test)]
 mod tests {
     use oxicat_master::pdo::{MappedEntry, Pdo};
@@ -405,42 +439,4 @@ mod tests {
             "{t}"
         );
     }
-}
-
-/// Cycles after which `data` takes the image: the slaves' inputs of the first OP cycle may
-/// still be those of SAFE-OP; by the third their application has run on this master's outputs.
-const DATA_CYCLES: u64 = 3;
-
-/// `oxicat data`: brings the slaves to OP (free run, 1 ms), runs [`DATA_CYCLES`] cycles and
-/// returns the process-data image of the last one, slave by slave its outputs (SM2, what
-/// the master sent: zeros) then its inputs (SM3), with each slave's (output, input) lengths.
-/// oxicat keeps no domain between commands, so the image is that of this one run; the
-/// slaves are back in PRE-OP afterwards, as after `watch`.
-pub fn process_image(
-    m: &mut oxicat_master::Master,
-) -> Result<(Vec<u8>, Vec<(usize, usize)>), oxicat_master::MasterError> {
-    use oxicat_master::cyclic::{CycleOptions, Flow};
-    m.prepare_cyclic()?;
-    let mut image = Vec::new();
-    let mut sizes = Vec::new();
-    m.run_cyclic(CycleOptions::default(), |io| {
-        if io.cycle + 1 < DATA_CYCLES {
-            return Ok(Flow::Continue);
-        }
-        for (o, i) in io.outputs.iter().zip(&io.inputs) {
-            image.extend_from_slice(o);
-            image.extend_from_slice(i);
-            sizes.push((o.len(), i.len()));
-        }
-        Ok(Flow::Stop)
-    })?;
-    Ok((image, sizes))
-}
-
-/// A hex dump, 16 bytes a line with the byte offset: `0010: 01 02 …`.
-pub fn hex_lines(b: &[u8]) -> String {
-    b.chunks(16)
-        .enumerate()
-        .map(|(i, c)| format!("{:04x}: {}\n", i * 16, oxicat_master::value::hex(c)))
-        .collect()
 }

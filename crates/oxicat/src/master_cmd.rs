@@ -834,7 +834,7 @@ pub fn run(cmd: MasterCommand, out: &mut dyn Write) -> Result<(), MasterError> {
             output,
         } => {
             let mut m = open(&link)?;
-            let (image, _) = crate::igh_cmd::process_image(&mut m)?;
+            let image = crate::igh_cmd::process_image(&mut m)?;
             let bytes = match binary {
                 true => image,
                 false => crate::igh_cmd::hex_lines(&image).into_bytes(),
