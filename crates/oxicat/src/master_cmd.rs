@@ -180,6 +180,16 @@ pub enum MasterCommand {
         #[arg(long, short = 'o')]
         output: Option<PathBuf>,
     },
+    /// Write the station alias into a slave's SII (word 4, with the configuration-area CRC),
+    /// as `ethercat alias`; the ESC reloads it into 0x0012.
+    Alias {
+        #[command(flatten)]
+        link: LinkArgs,
+        #[command(flatten)]
+        pos: PosArgs,
+        /// The alias, 0 … 0xFFFF (0: none).
+        alias: String,
+    },
     /// Write an ESI (EtherCATInfo XML) for a live slave.
     Xml {
         #[command(flatten)]
@@ -840,6 +850,26 @@ pub fn run(cmd: MasterCommand, out: &mut dyn Write) -> Result<(), MasterError> {
                 false => crate::igh_cmd::hex_lines(&image).into_bytes(),
             };
             crate::output::write_output(output.as_deref(), &bytes, out)
+        }
+        MasterCommand::Alias { link, pos, alias } => {
+            let a = parse_u16(&alias).ok_or_else(|| {
+                MasterError::Usage(format!("not an alias: {alias:?} (0 … 0xFFFF)"))
+            })?;
+            let m = open(&link)?;
+            let p = one(&m, &pos)?;
+            let now = m.sii_set_alias(p, a)?;
+            let when = match now == a {
+                true => "in effect (0x0012)".to_string(),
+                false => {
+                    format!("0x0012 still reads 0x{now:04x}: the ESC loads it at its next power-up")
+                }
+            };
+            w(
+                out,
+                &format!(
+                    "slave {p}: alias 0x{a:04x} written to the SII (word 4, CRC updated), {when}\n"
+                ),
+            )
         }
         MasterCommand::Xml { link, pos, output } => {
             let m = open(&link)?;

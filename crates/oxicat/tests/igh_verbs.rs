@@ -297,3 +297,19 @@ fn data_shows_the_process_image_of_every_slave() {
     assert_eq!(bin[o + 18], 0xA0);
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+#[test]
+fn alias_verb_writes_and_refuses_bad_input() {
+    let out = ok(&["alias", "-p", "1", "0x1234", "--sim", "demo:2"]);
+    assert!(
+        out.contains("alias 0x1234") && out.contains("in effect"),
+        "{out}"
+    );
+    let (s, _, err) = oxicat(&["alias", "0x12345", "--sim", "demo:1"]);
+    assert!(
+        !s && err.contains("0x12345") && err.contains("0xFFFF"),
+        "{err}"
+    );
+    let (s, _, err) = oxicat(&["alias", "-p", "3", "1", "--sim", "demo:1"]);
+    assert!(!s && err.contains('3'), "{err}");
+}
