@@ -190,6 +190,14 @@ pub enum MasterCommand {
         /// The alias, 0 … 0xFFFF (0: none).
         alias: String,
     },
+    /// The topology as Graphviz DOT (ports and links from the DL status), as `ethercat graph`.
+    Graph {
+        #[command(flatten)]
+        link: LinkArgs,
+        /// Output file (default: standard output).
+        #[arg(long, short = 'o')]
+        output: Option<PathBuf>,
+    },
     /// Write an ESI (EtherCATInfo XML) for a live slave.
     Xml {
         #[command(flatten)]
@@ -870,6 +878,11 @@ pub fn run(cmd: MasterCommand, out: &mut dyn Write) -> Result<(), MasterError> {
                     "slave {p}: alias 0x{a:04x} written to the SII (word 4, CRC updated), {when}\n"
                 ),
             )
+        }
+        MasterCommand::Graph { link, output } => {
+            let m = open(&link)?;
+            let dot = crate::igh_cmd::graph(&m.scan()?);
+            crate::output::write_output(output.as_deref(), dot.as_bytes(), out)
         }
         MasterCommand::Xml { link, pos, output } => {
             let m = open(&link)?;

@@ -313,3 +313,35 @@ fn alias_verb_writes_and_refuses_bad_input() {
     let (s, _, err) = oxicat(&["alias", "-p", "3", "1", "--sim", "demo:1"]);
     assert!(!s && err.contains('3'), "{err}");
 }
+
+#[test]
+fn graph_is_dot_of_the_line() {
+    let dot = ok(&["graph", "--sim", "demo:3"]);
+    assert!(
+        dot.contains("strict graph bus {") && dot.trim_end().ends_with('}'),
+        "{dot}"
+    );
+    let nodes: Vec<_> = dot
+        .lines()
+        .filter(|l| l.trim_start().starts_with("slave") && l.contains("shape=\"box\""))
+        .collect();
+    assert_eq!(nodes.len(), 3, "{dot}");
+    assert!(
+        nodes[2].contains("label=\"2\\nEtherCAT_Application_SPI\""),
+        "{dot}"
+    );
+    let edges: Vec<_> = dot
+        .lines()
+        .map(str::trim)
+        .filter(|l| l.contains(" -- "))
+        .collect();
+    assert_eq!(
+        edges,
+        [
+            "master -- slave0 [headlabel=\"0\"]",
+            "slave0 -- slave1 [taillabel=\"1\",headlabel=\"0\"]",
+            "slave1 -- slave2 [taillabel=\"1\",headlabel=\"0\"]",
+        ],
+        "{dot}"
+    );
+}
