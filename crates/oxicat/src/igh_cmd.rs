@@ -452,6 +452,57 @@ pub fn graph(slaves: &[SlaveInfo]) -> String {
     t
 }
 
+/// `pdos` as the IgH tool prints it: each sync manager of the SII
+/// (`SM2: PhysAddr 0x1100, DefaultSize    0, ControlRegister 0x64, Enable 1`), under the
+/// process-data ones their PDOs (`  RxPDO 0x1600 "…"`) and entries
+/// (`    PDO entry 0x7000:01,  1 bit, "…"`); a `=== Master 0, Slave <p> ===` heading when
+/// several slaves are listed.
+pub fn pdos_text(
+    p: usize,
+    heading: bool,
+    sms: &[oxicat_device::model::SmModel],
+    l: &oxicat_master::pdo::SlavePdos,
+) -> String {
+    use oxicat_device::model::SmKind;
+    let mut t = String::new();
+    if heading {
+        t.push_str(&format!("=== Master 0, Slave {p} ===\n"));
+    }
+    let sm_of = |k: SmKind, d: usize| sms.iter().position(|s| s.kind == k).unwrap_or(d);
+    let (out_sm, in_sm) = (sm_of(SmKind::Outputs, 2), sm_of(SmKind::Inputs, 3));
+    let pdo_lines = |t: &mut String, kind: &str, list: &[oxicat_master::pdo::Pdo]| {
+        for pdo in list {
+            t.push_str(&format!("  {kind} 0x{:04x} \"{}\"\n", pdo.index, pdo.name));
+            for e in &pdo.entries {
+                t.push_str(&format!(
+                    "    PDO entry 0x{:04x}:{:02x}, {:>2} bit, \"{}\"\n",
+                    e.index, e.sub, e.bits, e.name
+                ));
+            }
+        }
+    };
+    for i in 0..sms.len().max(out_sm + 1).max(in_sm + 1) {
+        match sms.get(i) {
+            Some(sm) => t.push_str(&format!(
+                "SM{i}: PhysAddr 0x{:04x}, DefaultSize {:>4}, ControlRegister 0x{:02x}, Enable {}\n",
+                sm.start,
+                sm.default_size.unwrap_or(0),
+                sm.control,
+                u8::from(sm.enable)
+            )),
+            None if i == out_sm || i == in_sm => t.push_str(&format!("SM{i}:\n")),
+            None => continue,
+        }
+        if i == out_sm {
+            pdo_lines(&mut t, "RxPDO", &l.rx);
+        }
+        if i == in_sm {
+            pdo_lines(&mut t, "TxPDO", &l.tx);
+        }
+    }
+    t
+}
+
 #[cfg(test)]
 mod tests {
     use oxicat_master::pdo::{MappedEntry, Pdo};

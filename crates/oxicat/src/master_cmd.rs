@@ -763,27 +763,12 @@ pub fn run(cmd: MasterCommand, out: &mut dyn Write) -> Result<(), MasterError> {
         }
         MasterCommand::Pdos { link, pos } => {
             let m = open(&link)?;
-            for p in m.positions(pos.position)? {
+            let ps = m.positions(pos.position)?;
+            for &p in &ps {
                 let l = m.pdos(p)?;
-                w(out, &format!("=== slave {p} ({:?}) ===\n", l.source))?;
-                for (sm, dir, list) in [(2, "Output", &l.rx), (3, "Input", &l.tx)] {
-                    w(out, &format!("SM{sm}: {dir}\n"))?;
-                    for pdo in list {
-                        w(
-                            out,
-                            &format!("  PDO 0x{:04x} \"{}\"\n", pdo.index, pdo.name),
-                        )?;
-                        for e in &pdo.entries {
-                            w(
-                                out,
-                                &format!(
-                                    "    PDO entry 0x{:04x}:{:02x}, {:>2} bit, \"{}\"\n",
-                                    e.index, e.sub, e.bits, e.name
-                                ),
-                            )?;
-                        }
-                    }
-                }
+                // The sync managers from the SII, as the IgH tool shows them.
+                let sms = m.sii_model(p).map(|d| d.sms).unwrap_or_default();
+                w(out, &crate::igh_cmd::pdos_text(p, ps.len() > 1, &sms, &l))?;
             }
             Ok(())
         }

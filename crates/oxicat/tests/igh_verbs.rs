@@ -345,3 +345,27 @@ fn graph_is_dot_of_the_line() {
         "{dot}"
     );
 }
+
+#[test]
+fn pdos_prints_as_the_igh_tool() {
+    let out = ok(&["pdos", "--sim", "demo:2"]);
+    assert_eq!(out.matches("=== Master 0, Slave ").count(), 2, "{out}");
+    assert!(
+        out.contains(
+            "SM2: PhysAddr 0x1100, DefaultSize   24, ControlRegister 0x64, Enable 1\n  RxPDO 0x1600 \"Buttons\"\n    PDO entry 0x7000:01,  1 bit, \"Button1\"\n"
+        ),
+        "{out}"
+    );
+    assert!(out.contains("SM3: PhysAddr "), "{out}");
+    assert!(
+        out.contains("  TxPDO 0x1a01 \"")
+            && out.contains("    PDO entry 0x6010:01, 32 bit, \"InINT32Var1\"\n"),
+        "{out}"
+    );
+    // One slave: no heading, as in the IgH tool.
+    let one = ok(&["pdos", "-p", "1", "--sim", "demo:2"]);
+    assert!(
+        one.starts_with("SM0: PhysAddr 0x1000, DefaultSize  128"),
+        "{one}"
+    );
+}
