@@ -1,6 +1,7 @@
 //! Verbs and output formats after the IgH `ethercat` tool that stand on their own:
-//! `slaves -v` blocks, `version`, `fw-image` (a firmware image for `foe-write`) and
-//! `device list`.
+//! `slaves -v` blocks, `version`, `fw-image` (a firmware image for `foe-write`),
+//! `device list`, `cstruct` (C arrays, and Rust structs for ethercrab-wire), `data`,
+//! `graph` and the IgH format of `pdos`.
 
 use std::path::Path;
 

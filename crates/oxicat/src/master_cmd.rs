@@ -1,6 +1,6 @@
 //! The master verbs of `oxicat`, after the IgH `ethercat` tool: `slaves`, `states`,
-//! `sii-read`, `sii-write`, `upload`, `download`, `sdos`, `pdos`, `xml`, `reg-read`,
-//! `reg-write`, `watch`, `write`, `record`. Each runs on `--iface <if>` (or `OXICAT_IFACE`),
+//! `sii-read`, `sii-write`, `alias`, `upload`, `download`, `sdos`, `pdos`, `cstruct`,
+//! `data`, `graph`, `xml`, `reg-read`, `reg-write`, `watch`, `write`, `record`. Each runs on `--iface <if>` (or `OXICAT_IFACE`),
 //! on a segment served with EtherCAT over UDP `--udp host:port`, or, for tests and trying
 //! things out, on an in-process virtual segment `--sim demo:2`.
 //!
