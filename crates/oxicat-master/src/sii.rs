@@ -196,6 +196,81 @@ impl Master {
         Ok(sii.min(chip))
     }
 
+    /// Writes one SII word (the EEPROM must be taken).
+    async fn sii_write_word(
+        &self,
+        position: usize,
+        w: u16,
+        val: [u8; 2],
+    ) -> Result<(), MasterError> {
+        self.sii_wait(position).await?;
+        self.fpwr(position, ADDR, &u32::from(w).to_le_bytes())
+            .await?;
+        self.fpwr(position, DATA, &val).await?;
+        // Write enable (bit 0) with the write command (0x02 in bits 8..10).
+        self.fpwr(position, CTL, &[0x01, 0x02]).await?;
+        let c = self.sii_wait(position).await?;
+        if c & (ERR_ACK | ERR_WE) != 0 {
+            return Err(sii_err(
+                position,
+                format!("write of word 0x{w:04X} refused (0x0502 = 0x{c:04X})"),
+            ));
+        }
+        Ok(())
+    }
+
+    /// `alias`: writes `alias` into SII word 4 (configured station alias) of the slave at
+    /// `position` with the configuration area's CRC (word 7 low byte, CRC-8 over words 0..6;
+    /// ESCs load nothing from an area whose CRC is wrong), verifies both words, and reloads
+    /// the configuration area (0x0502 command 0x04, as at power-up) so that the ESC's
+    /// 0x0012 holds the new alias at once. Returns 0x0012 after the reload (an ESC that does
+    /// not reload keeps the old value until its next power-up).
+    pub fn sii_set_alias(&self, position: usize, alias: u16) -> Result<u16, MasterError> {
+        self.address(position)?;
+        if let Some(c) = self.sii_cache.borrow_mut().get_mut(position) {
+            *c = None;
+        }
+        futures_lite::future::block_on(async {
+            let mut area = self.sii_read_at(position, 0, 16).await?;
+            if sii_crc8(&area[..14]) != area[14] {
+                return Err(sii_err(
+                    position,
+                    format!(
+                        "the configuration area's CRC is wrong (word 7 = 0x{:02X}, computed 0x{:02X}): the SII holds no valid image to set an alias in; write one with sii-write first",
+                        area[14],
+                        sii_crc8(&area[..14])
+                    ),
+                ));
+            }
+            area[8..10].copy_from_slice(&alias.to_le_bytes());
+            area[14] = sii_crc8(&area[..14]);
+            // The alias first, then the CRC: between the two the area is invalid, as
+            // in any word-by-word write of it.
+            self.sii_write_word(position, 4, [area[8], area[9]]).await?;
+            self.sii_write_word(position, 7, [area[14], area[15]])
+                .await?;
+            let back = self.sii_read_at(position, 0, 16).await?;
+            for w in [4usize, 7] {
+                let (a, b) = (
+                    u16::from_le_bytes([area[2 * w], area[2 * w + 1]]),
+                    u16::from_le_bytes([back[2 * w], back[2 * w + 1]]),
+                );
+                if a != b {
+                    return Err(MasterError::SiiVerify {
+                        position,
+                        word: w as u16,
+                        wrote: a,
+                        read: b,
+                    });
+                }
+            }
+            self.sii_wait(position).await?;
+            self.fpwr(position, CTL, &[0x00, 0x04]).await?;
+            self.sii_wait(position).await?;
+            self.read_u16(position, 0x0012).await
+        })
+    }
+
     /// Writes `img` into the SII of the slave at `position` word by word and verifies it;
     /// `progress(done, total)` is called after each word.
     pub fn sii_write(
@@ -222,19 +297,8 @@ impl Master {
             self.sii_take(position).await?;
             let words = img.len() / 2;
             for w in 0..words {
-                let val = [img[2 * w], img[2 * w + 1]];
-                self.sii_wait(position).await?;
-                self.fpwr(position, ADDR, &(w as u32).to_le_bytes()).await?;
-                self.fpwr(position, DATA, &val).await?;
-                // Write enable (bit 0) with the write command (0x02 in bits 8..10).
-                self.fpwr(position, CTL, &[0x01, 0x02]).await?;
-                let c = self.sii_wait(position).await?;
-                if c & (ERR_ACK | ERR_WE) != 0 {
-                    return Err(sii_err(
-                        position,
-                        format!("write of word 0x{w:04X} refused (0x0502 = 0x{c:04X})"),
-                    ));
-                }
+                self.sii_write_word(position, w as u16, [img[2 * w], img[2 * w + 1]])
+                    .await?;
                 progress(w + 1, words);
             }
             // Verify.

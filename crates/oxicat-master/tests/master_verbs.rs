@@ -281,3 +281,34 @@ fn errors_have_clear_messages() {
     let e = m.sdo_upload(3, 0x1018, 1).unwrap_err();
     assert!(e.to_string().contains("no slave at position 3"), "{e}");
 }
+
+#[test]
+fn alias_is_written_with_the_crc_and_reloaded_into_0x0012() {
+    let (m, seg, _fws, _) = common::demo_master(2);
+    assert_eq!(m.sii_set_alias(1, 0x1234).unwrap(), 0x1234);
+    // SII word 4 holds it, the configuration area still checks (what ESCs load at power-up).
+    let img = m.sii_read(1, false).unwrap();
+    assert_eq!(&img[8..10], &[0x34, 0x12]);
+    oxicat_master::sii::check_image(&img).unwrap();
+    assert!(
+        oxicat_master::sii::decode(&img)
+            .unwrap()
+            .contains("Station alias:   0x1234"),
+        "{}",
+        oxicat_master::sii::decode(&img).unwrap()
+    );
+    assert_eq!(
+        &seg.lock().unwrap().esc(1).unwrap().eeprom()[8..10],
+        &[0x34, 0x12]
+    );
+    // The other slave is untouched; a new master (the next command) lists the alias.
+    assert_eq!(&m.sii_read(0, false).unwrap()[8..10], &[0, 0]);
+    drop(m);
+    let m = oxicat_master::Master::open(oxicat_master::Link::Sim(seg.clone())).unwrap();
+    let list = m.scan().unwrap();
+    assert_eq!((list[0].alias, list[1].alias), (0, 0x1234));
+    assert!(matches!(
+        m.sii_set_alias(2, 1),
+        Err(MasterError::NoSuchSlave { .. })
+    ));
+}

@@ -1,6 +1,6 @@
 //! The master verbs of `oxicat`, after the IgH `ethercat` tool: `slaves`, `states`,
-//! `sii-read`, `sii-write`, `upload`, `download`, `sdos`, `pdos`, `xml`, `reg-read`,
-//! `reg-write`, `watch`, `write`, `record`. Each runs on `--iface <if>` (or `OXICAT_IFACE`),
+//! `sii-read`, `sii-write`, `alias`, `upload`, `download`, `sdos`, `pdos`, `cstruct`,
+//! `data`, `graph`, `xml`, `reg-read`, `reg-write`, `watch`, `write`, `record`. Each runs on `--iface <if>` (or `OXICAT_IFACE`),
 //! on a segment served with EtherCAT over UDP `--udp host:port`, or, for tests and trying
 //! things out, on an in-process virtual segment `--sim demo:2`.
 //!
@@ -152,6 +152,51 @@ pub enum MasterCommand {
         link: LinkArgs,
         #[command(flatten)]
         pos: PosArgs,
+    },
+    /// The PDO configuration as C arrays for the IgH application interface (`ecrt.h`), as
+    /// `ethercat cstruct`; with --rust as structs for ethercrab's wire derive.
+    Cstruct {
+        #[command(flatten)]
+        link: LinkArgs,
+        #[command(flatten)]
+        pos: PosArgs,
+        /// Rust structs (`EtherCrabWireReadWrite`) for the output and input images instead.
+        #[arg(long)]
+        rust: bool,
+        /// From a device definition's default PDO assignment (see `oxicat device list`),
+        /// without a bus.
+        #[arg(long, conflicts_with_all = ["iface", "sim", "udp"])]
+        device: Option<String>,
+    },
+    /// The process-data image, as `ethercat data`: the slaves are brought to OP, cycle a few
+    /// times, and the image of the last cycle is shown (slave by slave: outputs, then inputs).
+    Data {
+        #[command(flatten)]
+        link: LinkArgs,
+        /// Raw bytes instead of a hex dump.
+        #[arg(long)]
+        binary: bool,
+        /// Output file (default: standard output).
+        #[arg(long, short = 'o')]
+        output: Option<PathBuf>,
+    },
+    /// Write the station alias into a slave's SII (word 4, with the configuration-area CRC),
+    /// as `ethercat alias`; the ESC reloads it into 0x0012.
+    Alias {
+        #[command(flatten)]
+        link: LinkArgs,
+        #[command(flatten)]
+        pos: PosArgs,
+        /// The alias, 0 … 0xFFFF (0: none).
+        alias: String,
+    },
+    /// The topology as Graphviz DOT (ports and links from the DL status), as `ethercat graph`.
+    Graph {
+        #[command(flatten)]
+        link: LinkArgs,
+        /// Output file (default: standard output).
+        #[arg(long, short = 'o')]
+        output: Option<PathBuf>,
     },
     /// Write an ESI (EtherCATInfo XML) for a live slave.
     Xml {
@@ -718,29 +763,111 @@ pub fn run(cmd: MasterCommand, out: &mut dyn Write) -> Result<(), MasterError> {
         }
         MasterCommand::Pdos { link, pos } => {
             let m = open(&link)?;
-            for p in m.positions(pos.position)? {
+            let ps = m.positions(pos.position)?;
+            for &p in &ps {
                 let l = m.pdos(p)?;
-                w(out, &format!("=== slave {p} ({:?}) ===\n", l.source))?;
-                for (sm, dir, list) in [(2, "Output", &l.rx), (3, "Input", &l.tx)] {
-                    w(out, &format!("SM{sm}: {dir}\n"))?;
-                    for pdo in list {
-                        w(
-                            out,
-                            &format!("  PDO 0x{:04x} \"{}\"\n", pdo.index, pdo.name),
-                        )?;
-                        for e in &pdo.entries {
-                            w(
-                                out,
-                                &format!(
-                                    "    PDO entry 0x{:04x}:{:02x}, {:>2} bit, \"{}\"\n",
-                                    e.index, e.sub, e.bits, e.name
-                                ),
-                            )?;
-                        }
-                    }
-                }
+                // The sync managers from the SII, as the IgH tool shows them.
+                let sms = m.sii_model(p).map(|d| d.sms).unwrap_or_default();
+                w(out, &crate::igh_cmd::pdos_text(p, ps.len() > 1, &sms, &l))?;
             }
             Ok(())
+        }
+        MasterCommand::Cstruct {
+            link,
+            pos,
+            rust,
+            device,
+        } => {
+            if let Some(d) = device {
+                let def = crate::devices()
+                    .into_iter()
+                    .find(|x| x.0 == d)
+                    .map(|x| x.1)
+                    .ok_or(MasterError::UnknownDevice(d.clone()))?;
+                let l = crate::igh_cmd::def_pdos(def);
+                let id = &def.identity;
+                let text = match rust {
+                    true => crate::igh_cmd::rust_struct(
+                        &d,
+                        &format!("{d} ({}), default PDO assignment", def.name),
+                        &l,
+                    ),
+                    false => crate::igh_cmd::c_struct(
+                        pos.position.unwrap_or(0),
+                        def.name,
+                        (id.vendor_id, id.product_code, id.revision),
+                        &l,
+                    ),
+                };
+                return w(out, &text);
+            }
+            let m = open(&link)?;
+            let infos = m.scan()?;
+            for p in m.positions(pos.position)? {
+                let l = m.pdos(p)?;
+                let s = &infos[p];
+                let text = match rust {
+                    true => crate::igh_cmd::rust_struct(
+                        &format!("slave{p}"),
+                        &format!(
+                            "slave {p}: {} (PDO mapping from {})",
+                            s.name,
+                            match l.source {
+                                oxicat_master::pdo::PdoSource::Coe => "CoE",
+                                oxicat_master::pdo::PdoSource::Sii => "the SII",
+                            }
+                        ),
+                        &l,
+                    ),
+                    false => crate::igh_cmd::c_struct(
+                        p,
+                        &s.name,
+                        (s.vendor_id, s.product_code, s.revision),
+                        &l,
+                    ),
+                };
+                w(out, &text)?;
+                w(out, "\n")?;
+            }
+            Ok(())
+        }
+        MasterCommand::Data {
+            link,
+            binary,
+            output,
+        } => {
+            let mut m = open(&link)?;
+            let image = crate::igh_cmd::process_image(&mut m)?;
+            let bytes = match binary {
+                true => image,
+                false => crate::igh_cmd::hex_lines(&image).into_bytes(),
+            };
+            crate::output::write_output(output.as_deref(), &bytes, out)
+        }
+        MasterCommand::Alias { link, pos, alias } => {
+            let a = parse_u16(&alias).ok_or_else(|| {
+                MasterError::Usage(format!("not an alias: {alias:?} (0 … 0xFFFF)"))
+            })?;
+            let m = open(&link)?;
+            let p = one(&m, &pos)?;
+            let now = m.sii_set_alias(p, a)?;
+            let when = match now == a {
+                true => "in effect (0x0012)".to_string(),
+                false => {
+                    format!("0x0012 still reads 0x{now:04x}: the ESC loads it at its next power-up")
+                }
+            };
+            w(
+                out,
+                &format!(
+                    "slave {p}: alias 0x{a:04x} written to the SII (word 4, CRC updated), {when}\n"
+                ),
+            )
+        }
+        MasterCommand::Graph { link, output } => {
+            let m = open(&link)?;
+            let dot = crate::igh_cmd::graph(&m.scan()?);
+            crate::output::write_output(output.as_deref(), dot.as_bytes(), out)
         }
         MasterCommand::Xml { link, pos, output } => {
             let m = open(&link)?;

@@ -96,7 +96,8 @@ fn sii_read_write_pdos_sdos_xml_regs() {
 
     let out = ok(&["pdos", "--sim", "demo:1"]);
     assert!(
-        out.contains("PDO 0x1600 \"Buttons\"") && out.contains("\"Blue_LED\""),
+        out.contains("  RxPDO 0x1600 \"Buttons\"\n")
+            && out.contains("    PDO entry 0x7000:05,  1 bit, \"Blue_LED\"\n"),
         "{out}"
     );
     let out = ok(&["sdos", "--sim", "demo:1"]);
