@@ -56,6 +56,27 @@ pub struct EntryDesc {
 }
 
 impl EntryDesc {
+    /// The access as the IgH tool prints it: read and write for PREOP, SAFEOP and OP
+    /// (`rwr-r-`), from the SDO information access bits (0..2 read, 3..5 write).
+    pub fn igh_access(&self) -> String {
+        (0..3)
+            .flat_map(|state| {
+                [
+                    if self.access & (1 << state) != 0 {
+                        'r'
+                    } else {
+                        '-'
+                    },
+                    if self.access & (8 << state) != 0 {
+                        'w'
+                    } else {
+                        '-'
+                    },
+                ]
+            })
+            .collect()
+    }
+
     /// `rw`, `ro`, `wo` from the access flags (for PRE-OP … OP together).
     pub fn access_text(&self) -> &'static str {
         let r = self.access & 0x07 != 0;
@@ -67,6 +88,37 @@ impl EntryDesc {
             _ => "--",
         }
     }
+}
+
+/// A CoE data type code as the IgH tool names it in `sdos` (`uint32`, `string`, …;
+/// `type 0x0029` for one it has no name for).
+pub fn igh_type_name(code: u16) -> String {
+    let n = match code {
+        0x0001 => "bool",
+        0x0002 => "int8",
+        0x0003 => "int16",
+        0x0004 => "int32",
+        0x0005 => "uint8",
+        0x0006 => "uint16",
+        0x0007 => "uint32",
+        0x0008 => "float",
+        0x0009 => "string",
+        0x000A => "octet_string",
+        0x000B => "unicode_string",
+        0x0010 => "int24",
+        0x0011 => "double",
+        0x0012 => "int40",
+        0x0013 => "int48",
+        0x0014 => "int56",
+        0x0015 => "int64",
+        0x0016 => "uint24",
+        0x0018 => "uint40",
+        0x0019 => "uint48",
+        0x001A => "uint56",
+        0x001B => "uint64",
+        c => return format!("type 0x{c:04x}"),
+    };
+    n.to_string()
 }
 
 /// A CoE data type code as its ETG name.

@@ -276,6 +276,14 @@ pub fn hex(b: &[u8]) -> String {
         .join(" ")
 }
 
+/// Raw register bytes as the IgH tool's `reg_read` prints them: `0x02 0x00`.
+pub fn raw_bytes(b: &[u8]) -> String {
+    b.iter()
+        .map(|x| format!("0x{x:02x}"))
+        .collect::<Vec<_>>()
+        .join(" ")
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

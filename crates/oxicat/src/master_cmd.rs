@@ -727,22 +727,17 @@ pub fn run(cmd: MasterCommand, out: &mut dyn Write) -> Result<(), MasterError> {
             m.sdo_download(p, i, s, &data)
         }
         MasterCommand::Sdos { link, pos } => {
+            // The IgH tool's layout: `SDO 0x1018, "Identity"` and per entry
+            // `  0x1018:01, r-r-r-, uint32, 32 bit, "Vendor ID"` (read/write per PREOP,
+            // SAFEOP, OP), so a listing pastes from one tool into the other.
             let m = open(&link)?;
-            for p in m.positions(pos.position)? {
-                if pos.position.is_none() {
-                    w(out, &format!("=== slave {p} ===\n"))?;
+            let ps = m.positions(pos.position)?;
+            for &p in &ps {
+                if ps.len() > 1 {
+                    w(out, &format!("=== Master 0, Slave {p} ===\n"))?;
                 }
                 for o in m.dictionary(p)? {
-                    let kind = match o.object_code {
-                        7 => "VAR",
-                        8 => "ARRAY",
-                        9 => "RECORD",
-                        _ => "?",
-                    };
-                    w(
-                        out,
-                        &format!("SDO 0x{:04x}, \"{}\" ({kind})\n", o.index, o.name),
-                    )?;
+                    w(out, &format!("SDO 0x{:04x}, \"{}\"\n", o.index, o.name))?;
                     for e in &o.entries {
                         w(
                             out,
@@ -750,8 +745,8 @@ pub fn run(cmd: MasterCommand, out: &mut dyn Write) -> Result<(), MasterError> {
                                 "  0x{:04x}:{:02x}, {}, {}, {} bit, \"{}\"\n",
                                 o.index,
                                 e.sub,
-                                e.access_text(),
-                                oxicat_master::coe::type_name(e.data_type),
+                                e.igh_access(),
+                                oxicat_master::coe::igh_type_name(e.data_type),
                                 e.bits,
                                 e.name
                             ),
@@ -902,7 +897,7 @@ pub fn run(cmd: MasterCommand, out: &mut dyn Write) -> Result<(), MasterError> {
             let b = m.reg_read(p, a, len)?;
             match ty {
                 Some(t) => w(out, &format!("{}\n", t.format(&b))),
-                None => w(out, &format!("{}\n", oxicat_master::value::hex(&b))),
+                None => w(out, &format!("{}\n", oxicat_master::value::raw_bytes(&b))),
             }
         }
         MasterCommand::RegWrite {

@@ -101,7 +101,12 @@ fn sii_read_write_pdos_sdos_xml_regs() {
         "{out}"
     );
     let out = ok(&["sdos", "--sim", "demo:1"]);
-    assert!(out.contains("SDO 0x1018, \"Identity\""), "{out}");
+    // The IgH tool's layout: per-state access, its type names.
+    assert!(out.contains("SDO 0x1018, \"Identity\"\n"), "{out}");
+    assert!(
+        out.contains("  0x1018:01, r-r-r-, uint32, 32 bit, \"Vendor ID\"\n"),
+        "{out}"
+    );
     let xml = ok(&["xml", "--sim", "demo:1"]);
     let d = oxicat_device::esi::parse(&xml).expect("ESI parses");
     assert_eq!(
@@ -109,7 +114,8 @@ fn sii_read_write_pdos_sdos_xml_regs() {
         oxicat_devices::demo::DEF.identity.product_code
     );
     let out = ok(&["reg-read", "0x0130", "2", "--sim", "demo:1"]);
-    assert_eq!(out, "02 00\n");
+    // As the IgH tool prints raw register bytes.
+    assert_eq!(out, "0x02 0x00\n");
     ok(&[
         "reg-write",
         "0x0f80",
