@@ -4,8 +4,9 @@
 //! by more than its addressing allows (ETG.1000.4 table 12: 1 for an auto-increment read
 //! or write, 3 for an auto-increment read-write; per ESC the same for configured-address
 //! (ESCs may share a station address), broadcast and logical commands; nothing for NOP or
-//! an unknown command), and a frame with a bad FCS commits no SyncManager buffer (see
-//! `check_bad_frame_left_sms`).
+//! an unknown command), a frame with a bad FCS commits no SyncManager buffer (see
+//! `check_bad_frame_left_sms`), and logical datagrams write process RAM only through
+//! writing FMMUs (`check_logical_writes_stay_in_fmmus`).
 //!
 //! Input: byte 0 selects the chip model and fault options; then a sequence of
 //! `[len_lo len_hi frame[len]]` records, each frame starting at the EtherCAT header.
@@ -141,6 +142,41 @@ fn check_bad_frame_left_sms(before: &[u8], after: &[u8]) {
     }
 }
 
+/// Process RAM starts here (registers below).
+const RAM_START: usize = 0x1000;
+
+/// A frame of logical datagrams changes process RAM only where a writing FMMU maps it
+/// (its physical bytes) or where a SyncManager over those bytes keeps its other buffers
+/// (3-buffer mode: start .. start + 3 × length).
+fn check_logical_writes_stay_in_fmmus(before: &[u8], mem: &[u8]) {
+    let reg16 = |a: usize| u16::from_le_bytes([mem[a], mem[a + 1]]) as usize;
+    let mut allowed: Vec<(usize, usize)> = Vec::new();
+    for k in 0..16 {
+        let f = 0x0600 + 16 * k;
+        if mem[f + 12] & 1 == 0 || mem[f + 11] & 2 == 0 {
+            continue;
+        }
+        let (start, len) = (reg16(f + 8), reg16(f + 4));
+        allowed.push((start, start + len + 1));
+    }
+    for k in 0..16 {
+        let r = 0x0800 + 8 * k;
+        let (start, len) = (reg16(r), reg16(r + 2));
+        if mem[r + 6] & 1 != 0 && allowed.iter().any(|&(a, b)| a < start + 3 * len && start < b) {
+            allowed.push((start, start + 3 * len));
+        }
+    }
+    for (i, (b, a)) in before.iter().zip(&mem[RAM_START..]).enumerate() {
+        let addr = RAM_START + i;
+        if b != a {
+            assert!(
+                allowed.iter().any(|&(lo, hi)| (lo..hi).contains(&addr)),
+                "a logical frame wrote 0x{addr:04x}, which no writing FMMU maps ({allowed:x?})"
+            );
+        }
+    }
+}
+
 /// (command, working counter) of every datagram of a well-formed frame.
 fn datagrams(frame: &[u8]) -> Option<Vec<(u8, u16)>> {
     let f = EcatFrame::parse(frame).ok()?;
@@ -176,14 +212,28 @@ fuzz_target!(|data: &[u8]| {
         rest = &rest[2 + len..];
         frame_no += 1;
         let before = datagrams(&frame);
+        // Frames of logical datagrams only: their writes reach process RAM through FMMUs.
+        let logical_only = before.as_ref().is_some_and(|d| {
+            !d.is_empty()
+                && d.iter().all(|&(c, _)| {
+                    matches!(
+                        Command::from_u8(c),
+                        Some(Command::Lrd | Command::Lwr | Command::Lrw)
+                    )
+                })
+        });
         // Outbound: processed by each ESC entering port 0.
         let mut dropped = false;
         for (i, e) in escs.iter_mut().enumerate() {
             let ok = !(flags & 4 != 0 && i == 1 && frame_no % 3 == 0);
             let sms_before: Vec<u8> = e.memory()[SM_REGS].to_vec();
+            let ram_before = logical_only.then(|| e.memory()[RAM_START..].to_vec());
             let out = e.forward(0, &mut frame, t, ok);
             if !ok {
                 check_bad_frame_left_sms(&sms_before, &e.memory()[SM_REGS]);
+            }
+            if let Some(before) = ram_before {
+                check_logical_writes_stay_in_fmmus(&before, e.memory());
             }
             match out {
                 Forward::Dropped => {
