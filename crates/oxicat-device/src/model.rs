@@ -522,8 +522,11 @@ fn text(f: &mut Vec<Finding>, field: &'static str, l: &Option<String>, r: &Optio
 }
 
 fn pdos(f: &mut Vec<Finding>, a: &[PdoModel], b: &[PdoModel]) {
-    for p in a {
-        let Some(q) = b.iter().find(|q| q.index == p.index) else {
+    for (k, p) in a.iter().enumerate() {
+        // A PDO index that a (broken) image lists twice: the n-th on the left against the
+        // n-th on the right, so a model always equals itself.
+        let nth = a[..k].iter().filter(|x| x.index == p.index).count();
+        let Some(q) = b.iter().filter(|q| q.index == p.index).nth(nth) else {
             f.push(Finding::PdoMissing {
                 index: p.index,
                 on_right: true,
