@@ -249,6 +249,17 @@ impl Master {
         Some(MasterError::Disturbed { cycles, what })
     }
 
+    /// The error for a cyclic exchange whose frames did not come back after `cycles`
+    /// good cycles: what [`Master::disturbed`] sees, with the lost frames as the cause.
+    async fn frames_lost(&self, cycles: u64, err: ethercrab::error::Error) -> MasterError {
+        let cause = format!(
+            "cyclic exchange: {err} (frames did not come back: another master on the same interface takes them?)"
+        );
+        self.disturbed(cycles, Some(cause))
+            .await
+            .unwrap_or_else(|| MasterError::Ethercrab("cyclic exchange".into(), err))
+    }
+
     fn run_cyclic_op(
         &mut self,
         opts: CycleOptions,
@@ -354,15 +365,7 @@ impl Master {
                     let r = match group.tx_rx_dc(md).await {
                         Ok(r) => r,
                         Err(err) if t0.is_some() => {
-                            let cause = format!(
-                                "cyclic exchange: {err} (frames did not come back: another master on the same interface takes them?)"
-                            );
-                            return Err(self
-                                .disturbed(stats.cycles, Some(cause))
-                                .await
-                                .unwrap_or_else(|| {
-                                    MasterError::Ethercrab("cyclic exchange".into(), err)
-                                }));
+                            return Err(self.frames_lost(stats.cycles, err).await)
                         }
                         Err(err) => {
                             return Err(MasterError::Ethercrab("cyclic exchange".into(), err))
@@ -414,17 +417,7 @@ impl Master {
                     time.wait_until(due);
                     let r = match group.tx_rx(md).await {
                         Ok(r) => r,
-                        Err(err) => {
-                            let cause = format!(
-                                "cyclic exchange: {err} (frames did not come back: another master on the same interface takes them?)"
-                            );
-                            return Err(self
-                                .disturbed(stats.cycles, Some(cause))
-                                .await
-                                .unwrap_or_else(|| {
-                                    MasterError::Ethercrab("cyclic exchange".into(), err)
-                                }));
-                        }
+                        Err(err) => return Err(self.frames_lost(stats.cycles, err).await),
                     };
                     for (p, sd) in group.iter(md).enumerate() {
                         io.inputs[p] = sd.inputs_raw().to_vec();

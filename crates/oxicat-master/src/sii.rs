@@ -250,20 +250,7 @@ impl Master {
             self.sii_write_word(position, 7, [area[14], area[15]])
                 .await?;
             let back = self.sii_read_at(position, 0, 16).await?;
-            for w in [4usize, 7] {
-                let (a, b) = (
-                    u16::from_le_bytes([area[2 * w], area[2 * w + 1]]),
-                    u16::from_le_bytes([back[2 * w], back[2 * w + 1]]),
-                );
-                if a != b {
-                    return Err(MasterError::SiiVerify {
-                        position,
-                        word: w as u16,
-                        wrote: a,
-                        read: b,
-                    });
-                }
-            }
+            verify_words(position, &area, &back, [4, 7])?;
             self.sii_wait(position).await?;
             self.fpwr(position, CTL, &[0x00, 0x04]).await?;
             self.sii_wait(position).await?;
@@ -304,19 +291,7 @@ impl Master {
             // Verify.
             let mut back = Vec::new();
             self.sii_read_words(position, &mut back, img.len()).await?;
-            for w in 0..words {
-                let a = u16::from_le_bytes([img[2 * w], img[2 * w + 1]]);
-                let b = u16::from_le_bytes([back[2 * w], back[2 * w + 1]]);
-                if a != b {
-                    return Err(MasterError::SiiVerify {
-                        position,
-                        word: w as u16,
-                        wrote: a,
-                        read: b,
-                    });
-                }
-            }
-            Ok(())
+            verify_words(position, img, &back, 0..words)
         })
     }
 }
@@ -485,4 +460,30 @@ pub fn decode(img: &[u8]) -> Result<String, MasterError> {
         );
     }
     Ok(s)
+}
+
+/// Compares the `words` of what was written with what was read back; the first that
+/// differs is [`MasterError::SiiVerify`].
+fn verify_words(
+    position: usize,
+    wrote: &[u8],
+    read: &[u8],
+    words: impl IntoIterator<Item = usize>,
+) -> Result<(), MasterError> {
+    let word = |b: &[u8], w: usize| {
+        b.get(2 * w..2 * w + 2)
+            .map(|x| u16::from_le_bytes([x[0], x[1]]))
+    };
+    for w in words {
+        let (a, b) = (word(wrote, w), word(read, w));
+        if a != b {
+            return Err(MasterError::SiiVerify {
+                position,
+                word: w as u16,
+                wrote: a.unwrap_or(0),
+                read: b.unwrap_or(0),
+            });
+        }
+    }
+    Ok(())
 }
