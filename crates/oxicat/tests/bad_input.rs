@@ -5,6 +5,8 @@ use std::io::{BufRead, BufReader};
 use std::path::PathBuf;
 use std::process::{Command, Stdio};
 
+mod bin_common;
+
 fn work_dir(name: &str) -> PathBuf {
     let d = std::env::temp_dir().join(format!("oxicat-bad-input-{name}-{}", std::process::id()));
     let _ = std::fs::remove_dir_all(&d);
@@ -13,29 +15,19 @@ fn work_dir(name: &str) -> PathBuf {
 }
 
 /// Runs `oxicat args` in `dir`: (success, stdout, stderr).
-fn oxicat_in(dir: &PathBuf, args: &[&str]) -> (bool, String, String) {
-    let o = Command::new(env!("CARGO_BIN_EXE_oxicat"))
-        .args(args)
-        .current_dir(dir)
-        .env_remove("OXICAT_IFACE")
-        .output()
-        .expect("oxicat runs");
-    (
-        o.status.success(),
-        String::from_utf8_lossy(&o.stdout).into_owned(),
-        String::from_utf8_lossy(&o.stderr).into_owned(),
-    )
+fn oxicat_in(dir: &std::path::Path, args: &[&str]) -> (bool, String, String) {
+    bin_common::oxicat_in(Some(dir), args)
 }
 
 /// The error of a failing `oxicat args` (no panic).
-fn error_in(dir: &PathBuf, args: &[&str]) -> String {
+fn error_in(dir: &std::path::Path, args: &[&str]) -> String {
     let (ok, _, err) = oxicat_in(dir, args);
     assert!(!ok, "oxicat {args:?} should fail");
     assert!(!err.contains("panicked"), "oxicat {args:?} panicked: {err}");
     err
 }
 
-fn ok_in(dir: &PathBuf, args: &[&str]) -> String {
+fn ok_in(dir: &std::path::Path, args: &[&str]) -> String {
     let (ok, out, err) = oxicat_in(dir, args);
     assert!(ok, "oxicat {args:?} failed: {err}");
     out

@@ -3,21 +3,13 @@
 //! segment (`--sim demo:1`).
 
 use std::path::PathBuf;
-use std::process::Command;
 
 use oxicat_slave::{DeviceDef, Identity};
 
+mod bin_common;
+
 fn oxicat(args: &[&str]) -> (bool, String, String) {
-    let o = Command::new(env!("CARGO_BIN_EXE_oxicat"))
-        .args(args)
-        .env_remove("OXICAT_IFACE")
-        .output()
-        .expect("oxicat runs");
-    (
-        o.status.success(),
-        String::from_utf8_lossy(&o.stdout).into_owned(),
-        String::from_utf8_lossy(&o.stderr).into_owned(),
-    )
+    bin_common::oxicat_in(None, args)
 }
 
 fn tmp(name: &str) -> PathBuf {

@@ -1,19 +1,10 @@
 //! The verbs and spellings after the IgH `ethercat` tool, and the README's helper verbs:
 //! `version`, `device list`, `fw-image`, `slaves -v`, `sii_read`/`reg_read`/`foe_read`.
 
-use std::process::Command;
+mod bin_common;
 
 fn oxicat(args: &[&str]) -> (bool, String, String) {
-    let o = Command::new(env!("CARGO_BIN_EXE_oxicat"))
-        .args(args)
-        .env_remove("OXICAT_IFACE")
-        .output()
-        .expect("oxicat runs");
-    (
-        o.status.success(),
-        String::from_utf8_lossy(&o.stdout).into_owned(),
-        String::from_utf8_lossy(&o.stderr).into_owned(),
-    )
+    bin_common::oxicat_in(None, args)
 }
 
 fn ok(args: &[&str]) -> String {

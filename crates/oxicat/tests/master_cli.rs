@@ -1,23 +1,13 @@
 //! The master verbs of the `oxicat` binary against an in-process virtual segment of demo
 //! devices running their firmware (`--sim demo:2`).
 
-use std::process::Command;
+mod bin_common;
 
 fn oxicat(args: &[&str]) -> (bool, String, String) {
     // In a directory of its own: `sii-write` leaves its backup of the old image there.
     let cwd = std::env::temp_dir().join(format!("oxicat-master-cli-cwd-{}", std::process::id()));
     std::fs::create_dir_all(&cwd).expect("work dir");
-    let o = Command::new(env!("CARGO_BIN_EXE_oxicat"))
-        .args(args)
-        .current_dir(&cwd)
-        .env_remove("OXICAT_IFACE")
-        .output()
-        .expect("oxicat runs");
-    (
-        o.status.success(),
-        String::from_utf8_lossy(&o.stdout).into_owned(),
-        String::from_utf8_lossy(&o.stderr).into_owned(),
-    )
+    bin_common::oxicat_in(Some(&cwd), args)
 }
 
 fn ok(args: &[&str]) -> String {
