@@ -377,7 +377,8 @@ impl Master {
                         let dct = r.extra.dc_system_time;
                         let start = *t0.get_or_insert(dct);
                         for (p, sd) in group.iter(md).enumerate() {
-                            io.inputs[p] = sd.inputs_raw().to_vec();
+                            io.inputs[p].clear();
+                            io.inputs[p].extend_from_slice(&sd.inputs_raw());
                         }
                         io.working_counter = r.working_counter;
                         io.time_ns = dct.saturating_sub(start);
@@ -420,7 +421,8 @@ impl Master {
                         Err(err) => return Err(self.frames_lost(stats.cycles, err).await),
                     };
                     for (p, sd) in group.iter(md).enumerate() {
-                        io.inputs[p] = sd.inputs_raw().to_vec();
+                        io.inputs[p].clear();
+                        io.inputs[p].extend_from_slice(&sd.inputs_raw());
                     }
                     io.working_counter = r.working_counter;
                     // ethercrab reads every slave's AL status with each exchange; the
