@@ -281,6 +281,8 @@ pub struct Esc {
     /// register then behaves like a mailbox and refuses further ECAT writes).
     al_ctl_unread: bool,
     eeprom: Vec<u8>,
+    /// Words below this acknowledge writes ([`Esc::protect_eeprom_from`]).
+    eeprom_writable_words: usize,
     dc: Dc,
     link: [bool; 4],
     /// SyncManagers; the chip has the first `cfg.sm_count` (the others stay disabled).
@@ -381,6 +383,7 @@ impl Esc {
             perm,
             al_ctl_unread: false,
             eeprom,
+            eeprom_writable_words: usize::MAX,
             dc,
             link: [true, false, false, false],
             sms,
@@ -1404,7 +1407,13 @@ impl Esc {
             };
             if ok_owner {
                 let read8 = self.cfg.sii_read_8_bytes;
-                let out = sii::execute(&mut self.mem, &mut self.eeprom, written, read8);
+                let out = sii::execute(
+                    &mut self.mem,
+                    &mut self.eeprom,
+                    written,
+                    read8,
+                    self.eeprom_writable_words,
+                );
                 if let sii::SiiOutcome::Reloaded(_) = out {
                     self.update_dl_status(true);
                 }
@@ -2014,6 +2023,13 @@ impl Esc {
         if self.mem.len() >= 0x1004 {
             self.phys_write(Side::Pdi, regs::PROCESS_RAM as u32, &bytes[..n], None);
         }
+    }
+
+    /// A fault: the EEPROM acknowledges no write to word `word` or above (a part whose upper
+    /// area is write-protected, or worn out). A write command there ends with 0x0502 bit 13
+    /// (missing acknowledge), as on a chip whose EEPROM does not answer; reads still work.
+    pub fn protect_eeprom_from(&mut self, word: u16) {
+        self.eeprom_writable_words = usize::from(word);
     }
 
     /// Current SII EEPROM content.

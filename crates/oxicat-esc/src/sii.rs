@@ -123,8 +123,15 @@ pub enum SiiOutcome {
 
 /// Executes the command just written to 0x0502 (`written` = the value written, `we` =
 /// whether the write-enable bit was part of that write). Commands complete at once; the
-/// busy bit reads 0 afterwards.
-pub fn execute(regs: &mut [u8], eeprom: &mut [u8], written: u16, read8: bool) -> SiiOutcome {
+/// busy bit reads 0 afterwards. Words at or above `writable_words` do not acknowledge a
+/// write (a write-protected or worn part): the command ends with 0x0502 bit 13 set.
+pub fn execute(
+    regs: &mut [u8],
+    eeprom: &mut [u8],
+    written: u16,
+    read8: bool,
+    writable_words: usize,
+) -> SiiOutcome {
     let cmd = written & CTL_CMD_MASK;
     let mut ctl = read_ctl(regs) & !(CTL_CMD_MASK | CTL_BUSY | CTL_WRITE_ENABLE);
     if cmd == 0 {
@@ -155,7 +162,7 @@ pub fn execute(regs: &mut [u8], eeprom: &mut [u8], written: u16, read8: bool) ->
             if written & CTL_WRITE_ENABLE == 0 {
                 ctl |= CTL_WE_ERROR;
                 SiiOutcome::Error
-            } else if word * 2 + 1 >= eeprom.len() {
+            } else if word * 2 + 1 >= eeprom.len() || word >= writable_words {
                 ctl |= CTL_ACK_ERROR;
                 SiiOutcome::Error
             } else {

@@ -540,6 +540,29 @@ fn sii_read_write_reload_and_ownership() {
 }
 
 #[test]
+fn write_protected_eeprom_area_does_not_acknowledge() {
+    let mut e = esc();
+    e.protect_eeprom_from(0x20);
+    // Below the protected area a write lands.
+    fpwr(&mut e, 0x0504, &[0x1F, 0, 0, 0]);
+    fpwr(&mut e, 0x0508, &[0x11, 0x22]);
+    fpwr(&mut e, 0x0502, &[0x01, 0x02]);
+    assert_eq!(fprd(&mut e, 0x0503, 1).0[0] & 0x20, 0);
+    assert_eq!(&e.eeprom()[0x3E..0x40], &[0x11, 0x22]);
+    // From word 0x20 on: missing acknowledge (bit 13), the word keeps its value.
+    let before = [e.eeprom()[0x40], e.eeprom()[0x41]];
+    fpwr(&mut e, 0x0504, &[0x20, 0, 0, 0]);
+    fpwr(&mut e, 0x0508, &[0x33, 0x44]);
+    fpwr(&mut e, 0x0502, &[0x01, 0x02]);
+    assert_ne!(fprd(&mut e, 0x0503, 1).0[0] & 0x20, 0);
+    assert_eq!([e.eeprom()[0x40], e.eeprom()[0x41]], before);
+    // Reads of the protected area still work.
+    fpwr(&mut e, 0x0502, &[0x00, 0x01]);
+    assert_eq!(fprd(&mut e, 0x0503, 1).0[0] & 0x20, 0);
+    assert_eq!(&fprd(&mut e, 0x0508, 2).0[..2], &before);
+}
+
+#[test]
 fn eeprom_crc_error_on_power_up() {
     let mut ee = eeprom(0x0005, 0x1234);
     ee[14] ^= 1;

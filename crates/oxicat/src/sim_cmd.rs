@@ -184,6 +184,9 @@ pub struct DeviceEntry {
     pub esc_delay_ns: Option<u64>,
     /// Cable delay in front of each of these nodes, ns.
     pub link_delay_ns: Option<u64>,
+    /// A fault: the SII EEPROM of these nodes acknowledges no write to this word or above
+    /// (a write-protected or worn part; 0x0502 bit 13), so an `sii-write` stops half-way.
+    pub eeprom_protect_from_word: Option<u16>,
 }
 
 fn one() -> usize {
@@ -228,6 +231,7 @@ pub fn parse_specs(specs: &[String]) -> Result<SegmentFile, SimError> {
             drift_ppm: 0.0,
             esc_delay_ns: None,
             link_delay_ns: None,
+            eeprom_protect_from_word: None,
         });
     }
     Ok(seg)
@@ -321,6 +325,9 @@ pub fn build_segment_until(
                     device: entry.name.clone(),
                     error,
                 })?;
+            if let (Some(w), Some(esc)) = (entry.eeprom_protect_from_word, seg.esc_mut(id)) {
+                esc.protect_eeprom_from(w);
+            }
             if let Some(d) = entry.esc_delay_ns.or(desc.esc_delay_ns) {
                 seg.set_esc_delay(id, d).map_err(SimError::Topology)?;
             }

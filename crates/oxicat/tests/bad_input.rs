@@ -6,6 +6,7 @@ use std::path::PathBuf;
 use std::process::{Command, Stdio};
 
 mod bin_common;
+mod served_common;
 
 fn work_dir(name: &str) -> PathBuf {
     let d = std::env::temp_dir().join(format!("oxicat-bad-input-{name}-{}", std::process::id()));
@@ -253,6 +254,31 @@ fn sii_write_keeps_a_backup_of_the_old_image_and_names_it() {
     // A second write keeps the first backup.
     let out = ok_in(&d, &["sii-write", "--device", "demo", "--sim", "demo:1"]);
     assert!(out.contains("sii-backup-0-1.bin"), "{out}");
+}
+
+#[test]
+fn sii_write_that_stops_half_way_says_half_written_and_names_the_backup() {
+    let d = work_dir("sii-half");
+    // A demo node whose EEPROM acknowledges no write from word 0x40 on.
+    let seg = d.join("segment.toml");
+    std::fs::write(
+        &seg,
+        "[[device]]\nname = \"demo\"\neeprom_protect_from_word = 0x40\n",
+    )
+    .expect("write");
+    let served = served_common::serve_file(&seg);
+    let udp = served.addr.as_str();
+    let img = oxicat_device::sii::generate(&oxicat_devices::demo::DEF).expect("image");
+    let err = error_in(&d, &["sii-write", "--device", "demo", "--udp", udp]);
+    assert!(err.contains("write of word 0x0040 refused"), "{err}");
+    assert!(
+        err.contains("the EEPROM of slave 0 is half written; the old image is in sii-backup-0.bin")
+            && err.contains("oxicat sii-write -p 0 --force sii-backup-0.bin")
+            && err.contains(&format!("(64 of {} words were written)", img.len() / 2)),
+        "{err}"
+    );
+    let backup = std::fs::read(d.join("sii-backup-0.bin")).expect("backup");
+    assert_eq!(backup, img, "the backup is the whole old image");
 }
 
 // --- item 12: no silently wrong values ---

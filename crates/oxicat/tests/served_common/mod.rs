@@ -29,12 +29,21 @@ impl Drop for Served {
 
 /// Serves `devices` (e.g. `["demo:2"]`) on a free UDP port of 127.0.0.1.
 pub fn serve(devices: &[&str]) -> Served {
+    serve_with(None, devices)
+}
+
+/// Serves the segment described by the TOML file `segment`.
+pub fn serve_file(segment: &std::path::Path) -> Served {
+    serve_with(Some(segment.to_path_buf()), &[])
+}
+
+fn serve_with(segment: Option<std::path::PathBuf>, devices: &[&str]) -> Served {
     let port = oxicat_sim::net::udp::UdpPort::bind("127.0.0.1:0").expect("bind UDP");
     let addr = port.local_addr().to_string();
     let args = SimArgs {
         iface: None,
         udp: Some(addr.clone()),
-        segment: None,
+        segment,
         devices: devices.iter().map(|s| s.to_string()).collect(),
         list: false,
         spin: false,
