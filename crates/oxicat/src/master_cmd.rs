@@ -325,33 +325,14 @@ pub fn parse_duration(s: &str) -> Result<Duration, MasterError> {
 /// anything is built.
 pub fn build_sim(spec: &str) -> Result<Arc<Mutex<oxicat_sim::segment::Segment>>, MasterError> {
     let max = oxicat_master::MAX_SLAVES;
-    let mut total = 0u128;
-    for part in spec
-        .split(|c: char| c == ',' || c.is_whitespace())
-        .filter(|p| !p.is_empty())
-    {
-        let count = match part.split_once(':') {
-            Some((_, c)) => c.parse::<u128>().map_err(|_| {
-                MasterError::Usage(format!(
-                    "bad count in --sim {part:?}: NAME:COUNT with COUNT 1 … {max}"
-                ))
-            })?,
-            None => 1,
-        };
-        total = total.saturating_add(count);
-        if count == 0 || total > max as u128 {
-            return Err(MasterError::Usage(format!(
-                "--sim {spec:?}: {count} slaves of {part} are out of range: 1 … {max} slaves in all (the master's group holds {max})"
-            )));
-        }
-    }
-    if total == 0 {
+    let range = format!("1 … {max} slaves in all (the master's group holds {max})");
+    let desc = crate::sim_cmd::parse_specs_within(&[spec.to_string()], max, &range)
+        .map_err(|e| MasterError::Usage(format!("--sim: {e}")))?;
+    if desc.devices.is_empty() {
         return Err(MasterError::Usage(format!(
             "--sim {spec:?} names no devices: give NAME:COUNT, e.g. demo:2"
         )));
     }
-    let desc = crate::sim_cmd::parse_specs(&[spec.to_string()])
-        .map_err(|e| MasterError::Usage(format!("--sim: {e}")))?;
     let (seg, _) = crate::sim_cmd::build_segment(&desc)
         .map_err(|e| MasterError::Usage(format!("--sim: {e}")))?;
     Ok(Arc::new(Mutex::new(seg)))

@@ -197,37 +197,46 @@ fn one() -> usize {
 /// several specs separated by commas or spaces (`demo:2,tue-es030:1`, `"demo:2 tue-es030"`),
 /// so `oxicat sim` and the master verbs' `--sim` take the same syntax.
 pub fn parse_specs(specs: &[String]) -> Result<SegmentFile, SimError> {
+    parse_specs_within(specs, MAX_SIM_SLAVES, &count_range())
+}
+
+/// [`parse_specs`] with at most `max` slaves in all (`range` says so in the error).
+pub fn parse_specs_within(
+    specs: &[String],
+    max: usize,
+    range: &str,
+) -> Result<SegmentFile, SimError> {
     let mut seg = SegmentFile::default();
+    let mut total = 0u128;
     for s in specs
         .iter()
         .flat_map(|a| a.split(|c: char| c == ',' || c.is_whitespace()))
         .filter(|p| !p.is_empty())
     {
-        if let Some((_, c)) = s.split_once(':') {
-            if c.parse::<u128>().is_ok_and(|c| c > MAX_SIM_SLAVES as u128) {
-                return Err(SimError::Range {
-                    key: format!("the count of {s}"),
-                    value: c.to_string(),
-                    range: count_range(),
-                });
-            }
-        }
         let (name, count) = match s.split_once(':') {
             Some((n, c)) => (
                 n,
-                c.parse::<usize>()
+                c.parse::<u128>()
                     .ok()
                     .filter(|&c| c > 0)
                     .ok_or_else(|| SimError::BadSpec(s.to_string()))?,
             ),
             None => (s, 1),
         };
+        total = total.saturating_add(count);
+        if total > max as u128 {
+            return Err(SimError::Range {
+                key: format!("the count of {s}"),
+                value: count.to_string(),
+                range: range.to_string(),
+            });
+        }
         if name.is_empty() {
             return Err(SimError::BadSpec(s.to_string()));
         }
         seg.devices.push(DeviceEntry {
             name: name.to_string(),
-            count,
+            count: count as usize,
             drift_ppm: 0.0,
             esc_delay_ns: None,
             link_delay_ns: None,
@@ -712,7 +721,16 @@ mod tests {
             .unwrap_err()
             .to_string();
         assert!(e.contains("100000") && e.contains("1 … 1000"), "{e}");
-        let desc = parse_specs(&["demo:600".into(), "demo:600".into()]).unwrap();
+        // The total counts, on the command line and in a segment file.
+        let e = parse_specs(&["demo:600".into(), "demo:600".into()])
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("the count of demo:600") && e.contains("1 … 1000"),
+            "{e}"
+        );
+        let mut desc = parse_specs(&["demo:600".into()]).unwrap();
+        desc.devices.push(desc.devices[0].clone());
         let e = build_segment(&desc).unwrap_err().to_string();
         assert!(
             e.contains("device[1].count") && e.contains("1 … 1000"),
