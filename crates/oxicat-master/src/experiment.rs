@@ -49,7 +49,7 @@ use oxicat_sim::laelaps::{
 };
 use oxicat_sim::pdi_path::{BusStats as SpiStats, PdiRoute};
 use oxicat_sim::segment::Segment;
-use oxicat_sim::transport::{inprocess_task, InProcessConfig};
+use crate::inprocess::{inprocess_task, InProcessConfig};
 use oxicat_slave::DeviceDef;
 
 use crate::scenario::Scenario;
@@ -474,7 +474,7 @@ pub fn run_trot(s: &Scenario, progress: &mut dyn FnMut(Progress)) -> Result<Trot
         .map_err(|_| MasterError::Usage("PDU storage already in use".into()))?;
     let md = MainDevice::new(
         pdu_loop,
-        oxicat_sim::transport::virtual_timeouts(),
+        crate::inprocess::virtual_timeouts(),
         MainDeviceConfig {
             dc_static_sync_iterations: 1000,
             ..MainDeviceConfig::default()

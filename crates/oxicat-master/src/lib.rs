@@ -4,8 +4,9 @@
 //! (watch, online write, DC-synchronous recording).
 //!
 //! A [`Master`] runs on a network interface ([`Link::Iface`], ethercrab's raw socket), on a
-//! segment served with EtherCAT over UDP ([`Link::Udp`]) or on an in-process [`oxicat_sim::segment::Segment`] ([`Link::Sim`]); the functions do not
-//! know how frames travel.
+//! segment served with EtherCAT over UDP ([`Link::Udp`]) or on a segment in this process
+//! ([`Link::Sim`], any [`FramePipe`], e.g. `oxicat-sim`'s `Segment`); the functions do not
+//! know how frames travel, and the master knows no simulator and no device.
 #![forbid(unsafe_code)]
 #![warn(missing_docs)]
 
@@ -18,6 +19,7 @@ mod error;
 pub mod esi;
 pub mod experiment;
 pub mod foe;
+pub mod inprocess;
 pub mod pdo;
 pub mod plot;
 pub mod results;
@@ -32,8 +34,8 @@ use std::time::Duration;
 
 use ethercrab::subdevice_group::SubDeviceGroup;
 use ethercrab::{Command, MainDevice, MainDeviceConfig, PduStorage, Timeouts};
-use oxicat_sim::segment::Segment;
-use oxicat_sim::transport::{spawn_inprocess_with, InProcessConfig};
+use inprocess::{spawn_inprocess_with, InProcessConfig};
+pub use oxicat_wire::pipe::FramePipe;
 
 pub use al::{AlState, AlStatus};
 pub use error::MasterError;
@@ -79,7 +81,7 @@ pub enum Link {
     /// A network interface (raw Ethernet, EtherType 0x88A4).
     Iface(String),
     /// A virtual segment in this process (virtual time advances with every frame).
-    Sim(Arc<Mutex<Segment>>),
+    Sim(SharedPipe),
     /// A segment served with EtherCAT over UDP (`host:port`, e.g. `oxicat sim --udp`).
     Udp(String),
 }
@@ -94,13 +96,16 @@ impl Link {
     }
 }
 
+/// A segment in this process, shared between the master's PDU loop and its clock.
+pub type SharedPipe = Arc<Mutex<dyn FramePipe + Send>>;
+
 /// Virtual time between the frames the master sends on a virtual segment.
 pub const SIM_FRAME_GAP_NS: u64 = 10_000;
 
 /// Time as the master sees it: the segment's virtual clock or the host's clock.
 #[derive(Clone)]
 pub(crate) enum Time {
-    Sim(Arc<Mutex<Segment>>),
+    Sim(SharedPipe),
     Real,
 }
 
@@ -198,7 +203,7 @@ impl MasterOptions {
     pub fn for_link(link: &Link) -> Self {
         match link {
             Link::Sim(_) => Self {
-                timeouts: oxicat_sim::transport::virtual_timeouts(),
+                timeouts: inprocess::virtual_timeouts(),
                 mailbox_timeout: Duration::from_secs(5),
             },
             Link::Iface(_) | Link::Udp(_) => Self {

@@ -65,11 +65,22 @@ impl std::error::Error for TopologyError {}
 
 /// A copyable handle on a segment's virtual clock, e.g. for ethercrab's `now` function.
 #[derive(Debug, Clone, Copy)]
-pub struct SimClock(&'static AtomicU64);
+pub struct SimClock(&'static SimTime);
 
 impl SimClock {
     /// Virtual time in ns.
     pub fn now(&self) -> u64 {
+        oxicat_wire::pipe::VirtualClock::now(self.0)
+    }
+}
+
+/// A segment's virtual time, readable from any thread (one per segment, for its lifetime
+/// and beyond: handles on it are `'static` and `Copy`).
+#[derive(Debug)]
+pub struct SimTime(AtomicU64);
+
+impl oxicat_wire::pipe::VirtualClock for SimTime {
+    fn now(&self) -> u64 {
         self.0.load(Ordering::Acquire)
     }
 }
@@ -195,7 +206,7 @@ pub struct LoggedEvent {
 pub struct Segment<E: SegmentEsc = oxicat_esc::Esc> {
     slots: Vec<Slot<E>>,
     now: u64,
-    clock: &'static AtomicU64,
+    clock: &'static SimTime,
     master_link_delay_ns: u64,
     master_link_up: bool,
     horizon: u64,
@@ -205,6 +216,25 @@ pub struct Segment<E: SegmentEsc = oxicat_esc::Esc> {
     stats: SegmentStats,
     last_fate: Option<FrameFate>,
     event_log: Option<Vec<LoggedEvent>>,
+}
+
+/// The master's side of an in-process segment ([`oxicat_wire::pipe`]).
+impl<E: SegmentEsc> oxicat_wire::pipe::FramePipe for Segment<E> {
+    fn exchange_in_place(&mut self, frame: &mut [u8]) -> bool {
+        Segment::exchange_in_place(self, frame)
+    }
+
+    fn now(&self) -> u64 {
+        Segment::now(self)
+    }
+
+    fn advance_to(&mut self, t: u64) {
+        Segment::advance_to(self, t);
+    }
+
+    fn clock(&self) -> &'static dyn oxicat_wire::pipe::VirtualClock {
+        self.clock
+    }
 }
 
 impl<E: SegmentEsc> Default for Segment<E> {
@@ -229,7 +259,7 @@ impl<E: SegmentEsc> Segment<E> {
         Self {
             slots: Vec::new(),
             now: 0,
-            clock: Box::leak(Box::new(AtomicU64::new(0))),
+            clock: Box::leak(Box::new(SimTime(AtomicU64::new(0)))),
             master_link_delay_ns: DEFAULT_LINK_DELAY_NS,
             master_link_up: true,
             horizon: u64::MAX,
@@ -526,7 +556,7 @@ impl<E: SegmentEsc> Segment<E> {
     fn set_now(&mut self, t: u64) {
         if t > self.now {
             self.now = t;
-            self.clock.store(t, Ordering::Release);
+            self.clock.0.store(t, Ordering::Release);
         }
     }
 

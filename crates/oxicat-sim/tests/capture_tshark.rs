@@ -10,7 +10,7 @@ use std::sync::{Arc, Mutex};
 use ethercrab::{MainDevice, MainDeviceConfig, PduStorage};
 use oxicat_sim::capture::{Direction, MemoryCapture, PcapngCapture};
 use oxicat_sim::segment::Segment;
-use oxicat_sim::transport::spawn_inprocess;
+use oxicat_master::inprocess::spawn_inprocess;
 
 static PDU_STORAGE: PduStorage<16, { PduStorage::element_size(1100) }> = PduStorage::new();
 

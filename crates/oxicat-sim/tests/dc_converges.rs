@@ -17,7 +17,7 @@ use oxicat_esc::dc::ClockConfig;
 use oxicat_esc::Esc;
 use oxicat_sim::node::EscEvent;
 use oxicat_sim::segment::Segment;
-use oxicat_sim::transport::{spawn_inprocess_with, InProcessConfig};
+use oxicat_master::inprocess::{spawn_inprocess_with, InProcessConfig};
 
 static PDU_STORAGE: PduStorage<16, { PduStorage::element_size(1100) }> = PduStorage::new();
 

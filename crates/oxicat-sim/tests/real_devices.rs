@@ -8,7 +8,7 @@ use std::sync::{Arc, Mutex};
 
 use ethercrab::{MainDevice, MainDeviceConfig, PduStorage};
 use oxicat_sim::segment::Segment;
-use oxicat_sim::transport::spawn_inprocess;
+use oxicat_master::inprocess::spawn_inprocess;
 
 const MAX_SUBDEVICES: usize = 16;
 const PDI_LEN: usize = 64;

@@ -20,6 +20,7 @@ pub mod ethernet;
 pub mod foe;
 pub mod frame;
 pub mod mailbox;
+pub mod pipe;
 pub mod sii;
 pub mod soe;
 pub mod udp;

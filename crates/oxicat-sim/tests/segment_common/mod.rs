@@ -114,5 +114,5 @@ pub fn real_segment() -> Segment {
 /// ethercrab timeouts for a loaded test machine: the segment answers at once, but the
 /// host may be busy (real-time timeouts are not what these tests are about).
 pub fn timeouts() -> ethercrab::Timeouts {
-    oxicat_sim::transport::virtual_timeouts()
+    oxicat_master::inprocess::virtual_timeouts()
 }

@@ -16,7 +16,7 @@ use oxicat_sim::firmware::{attach_firmware_with, FirmwareConfig, FirmwareHandle}
 #[allow(unused_imports)]
 pub use oxicat_sim::pdi_path::{Direct, PathInitError, PdiPath, PdiRoute, SpiPath};
 use oxicat_sim::segment::{Segment, SimClock};
-use oxicat_sim::transport::{spawn_inprocess_with, InProcessConfig, Released, TransportError};
+use oxicat_master::inprocess::{spawn_inprocess_with, InProcessConfig, Released, TransportError};
 use oxicat_slave::*;
 use oxicat_wire::sii::{
     coe_details, write_category, write_strings, CategoryType, MailboxArea, SiiConfig, SiiGeneral,
@@ -563,7 +563,7 @@ fn flex_segment_with<P: PdiPath>(
 
 /// ethercrab timeouts for the virtual segment (ethercrab waits in real time).
 pub fn timeouts() -> Timeouts {
-    oxicat_sim::transport::virtual_timeouts()
+    oxicat_master::inprocess::virtual_timeouts()
 }
 
 /// ethercrab configuration: fewer static drift iterations than the default 10 000.

@@ -1,0 +1,163 @@
+//! ethercrab's PDU loop over an in-process segment: frames go through a
+//! [`FramePipe`] and back, exactly as they would through a NIC and a cable, and time is the
+//! segment's virtual clock.
+//!
+//! ```no_run
+//! # use std::sync::{Arc, Mutex};
+//! # use ethercrab::{MainDevice, MainDeviceConfig, PduStorage};
+//! # use oxicat_master::inprocess::{spawn_inprocess, virtual_timeouts};
+//! # fn segment() -> Arc<Mutex<dyn oxicat_wire::pipe::FramePipe + Send>> { unimplemented!() }
+//! static PDU_STORAGE: PduStorage<16, 1100> = PduStorage::new();
+//! let segment = segment(); // e.g. an `oxicat_sim::segment::Segment`
+//! let (tx, rx, pdu_loop) = PDU_STORAGE.try_split().expect("split once");
+//! let _thread = spawn_inprocess(segment.clone(), tx, rx);
+//! let maindevice = MainDevice::new(pdu_loop, virtual_timeouts(), MainDeviceConfig::default());
+//! ```
+
+use std::future::Future;
+use std::pin::Pin;
+use std::sync::{Arc, Mutex};
+use std::task::{Context, Poll};
+use std::thread::JoinHandle;
+
+use ethercrab::{PduRx, PduTx, Timeouts};
+use oxicat_wire::pipe::FramePipe;
+
+/// ethercrab timeouts for a master on a virtual segment.
+///
+/// ethercrab measures its timeouts in real time, while the segment answers in virtual
+/// time at once; on a busy host (a 2-core CI box compiling in parallel) its defaults —
+/// 10 ms for an EEPROM read — can expire although nothing is wrong. These are generous
+/// in every field, so only a real hang fails, and one definition serves every test and
+/// tool that drives a virtual segment.
+pub fn virtual_timeouts() -> Timeouts {
+    use std::time::Duration;
+    Timeouts {
+        wait_loop_delay: Duration::from_micros(200),
+        state_transition: Duration::from_secs(60),
+        pdu: Duration::from_secs(10),
+        eeprom: Duration::from_secs(10),
+        mailbox_echo: Duration::from_secs(10),
+        mailbox_response: Duration::from_secs(10),
+    }
+}
+
+/// Why the in-process transport stopped.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum TransportError {
+    /// ethercrab refused a frame hand-over.
+    Send(ethercrab::error::Error),
+}
+
+impl core::fmt::Display for TransportError {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        match self {
+            Self::Send(e) => write!(f, "sending a frame failed: {e}"),
+        }
+    }
+}
+
+impl std::error::Error for TransportError {}
+
+/// Options of the in-process transport.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct InProcessConfig {
+    /// Virtual time (ns) that passes before each frame is sent: the master's own time between
+    /// frames. 0 means frames follow each other back to back.
+    pub frame_gap_ns: u64,
+}
+
+/// The TX/RX adapters given back when ethercrab asks the loop to exit.
+pub type Released = (PduTx<'static>, PduRx<'static>);
+
+/// The future that moves frames between ethercrab's PDU loop and a segment; see
+/// [`inprocess_task`].
+pub struct InProcessTask<P: FramePipe + Send + ?Sized + 'static> {
+    segment: Arc<Mutex<P>>,
+    tx: Option<PduTx<'static>>,
+    rx: Option<PduRx<'static>>,
+    config: InProcessConfig,
+    /// The frame on its way through the segment (reused: no allocation per frame).
+    buf: Vec<u8>,
+}
+
+impl<P: FramePipe + Send + ?Sized + 'static> Future for InProcessTask<P> {
+    type Output = Result<Released, TransportError>;
+
+    fn poll(mut self: Pin<&mut Self>, cx: &mut Context<'_>) -> Poll<Self::Output> {
+        let this = &mut *self;
+        let (Some(tx), Some(rx)) = (this.tx.as_mut(), this.rx.as_mut()) else {
+            return Poll::Pending;
+        };
+        tx.replace_waker(cx.waker());
+        if tx.should_exit() {
+            let (Some(tx), Some(rx)) = (this.tx.take(), this.rx.take()) else {
+                return Poll::Pending;
+            };
+            return Poll::Ready(Ok((tx.release(), rx.release())));
+        }
+        while let Some(frame) = tx.next_sendable_frame() {
+            let mut back = false;
+            let segment = &this.segment;
+            let gap = this.config.frame_gap_ns;
+            let buf = &mut this.buf;
+            frame
+                .send_blocking(|bytes| {
+                    let mut seg = segment.lock().unwrap_or_else(|e| e.into_inner());
+                    if gap > 0 {
+                        seg.advance_by(gap);
+                    }
+                    buf.clear();
+                    buf.extend_from_slice(bytes);
+                    back = seg.exchange_in_place(buf);
+                    Ok(bytes.len())
+                })
+                .map_err(TransportError::Send)?;
+            if back {
+                if let Err(e) = rx.receive_frame(&this.buf) {
+                    log::warn!("ethercrab did not accept a returned frame: {e}");
+                }
+            }
+        }
+        Poll::Pending
+    }
+}
+
+/// A future that serves ethercrab's PDU loop through `segment` until ethercrab asks it to
+/// exit (`MainDevice::release_all`); run it on any executor.
+pub fn inprocess_task<P: FramePipe + Send + ?Sized + 'static>(
+    segment: Arc<Mutex<P>>,
+    tx: PduTx<'static>,
+    rx: PduRx<'static>,
+    config: InProcessConfig,
+) -> InProcessTask<P> {
+    InProcessTask {
+        segment,
+        tx: Some(tx),
+        rx: Some(rx),
+        config,
+        buf: Vec::with_capacity(1600),
+    }
+}
+
+/// Runs [`inprocess_task`] with default options on its own thread (error: the thread could
+/// not be spawned).
+pub fn spawn_inprocess<P: FramePipe + Send + ?Sized + 'static>(
+    segment: Arc<Mutex<P>>,
+    tx: PduTx<'static>,
+    rx: PduRx<'static>,
+) -> std::io::Result<JoinHandle<Result<Released, TransportError>>> {
+    spawn_inprocess_with(segment, tx, rx, InProcessConfig::default())
+}
+
+/// Runs [`inprocess_task`] with `config` on its own thread.
+pub fn spawn_inprocess_with<P: FramePipe + Send + ?Sized + 'static>(
+    segment: Arc<Mutex<P>>,
+    tx: PduTx<'static>,
+    rx: PduRx<'static>,
+    config: InProcessConfig,
+) -> std::io::Result<JoinHandle<Result<Released, TransportError>>> {
+    std::thread::Builder::new()
+        .name("oxicat-inprocess".into())
+        .spawn(move || futures_lite::future::block_on(inprocess_task(segment, tx, rx, config)))
+}
