@@ -4,7 +4,7 @@
 //!
 //! Devices: [`demo`] (the thesis' generic "EtherCAT Application", Table 2-2) and its
 //! variant [`demo::additions`] (the thesis' section 6.7 change, as one edit).
-#![no_std]
+#![cfg_attr(not(feature = "bench"), no_std)]
 #![forbid(unsafe_code)]
 #![warn(missing_docs)]
 

@@ -12,20 +12,14 @@
 
 pub mod al;
 mod bringup;
-pub mod cia402;
 pub mod coe;
 pub mod cyclic;
 mod error;
 pub mod esi;
-pub mod experiment;
 pub mod foe;
 pub mod inprocess;
 pub mod pdo;
-pub mod plot;
-pub mod results;
-pub mod scenario;
 pub mod sii;
-pub mod tue_es030;
 mod udp;
 pub mod value;
 

@@ -270,7 +270,9 @@ fn errors_have_clear_messages() {
         .err()
         .unwrap();
     assert!(e.to_string().contains("does not exist"), "{e}");
-    let seg = std::sync::Arc::new(std::sync::Mutex::new(oxicat_sim::segment::Segment::<oxicat_esc::Esc>::new()));
+    let seg = std::sync::Arc::new(std::sync::Mutex::new(oxicat_sim::segment::Segment::<
+        oxicat_esc::Esc,
+    >::new()));
     let e = oxicat_master::Master::open(oxicat_master::Link::Sim(seg))
         .err()
         .unwrap();

@@ -181,7 +181,7 @@ struct Run {
 }
 
 /// The MCU's state under the model (one per node).
-pub(crate) struct Cpu {
+pub struct Cpu {
     timing: ExecTiming,
     isr: Option<Run>,
     main: Option<Run>,
@@ -191,7 +191,8 @@ pub(crate) struct Cpu {
 }
 
 impl Cpu {
-    pub(crate) fn new(timing: ExecTiming) -> Self {
+    /// An idle MCU under `timing`.
+    pub fn new(timing: ExecTiming) -> Self {
         Self {
             timing,
             isr: None,
@@ -201,22 +202,23 @@ impl Cpu {
         }
     }
 
-    pub(crate) fn stats(&self) -> TimingStats {
+    /// What the model counted so far.
+    pub fn stats(&self) -> TimingStats {
         self.stats
     }
 
     /// No interrupt handler is running.
-    pub(crate) fn isr_free(&self) -> bool {
+    pub fn isr_free(&self) -> bool {
         self.isr.is_none()
     }
 
     /// Nothing is running.
-    pub(crate) fn idle(&self) -> bool {
+    pub fn idle(&self) -> bool {
         self.isr.is_none() && self.main.is_none()
     }
 
     /// The earliest end of a running handler.
-    pub(crate) fn next_end(&self) -> Option<u64> {
+    pub fn next_end(&self) -> Option<u64> {
         [self.isr.as_ref(), self.main.as_ref()]
             .into_iter()
             .flatten()
@@ -225,7 +227,7 @@ impl Cpu {
     }
 
     /// Commits the writes of every handler that ended by `t`, earliest end first.
-    pub(crate) fn retire(&mut self, esc: &mut Esc, t: u64) {
+    pub fn retire(&mut self, esc: &mut Esc, t: u64) {
         loop {
             let isr_end = self.isr.as_ref().map(|r| r.end).filter(|&e| e <= t);
             let main_end = self.main.as_ref().map(|r| r.end).filter(|&e| e <= t);
@@ -254,7 +256,7 @@ impl Cpu {
 
     /// An interrupt of kind `work` arrived at `t`: pending until it can run (lost if one of
     /// its kind already is).
-    pub(crate) fn raise(&mut self, work: Work, t: u64) {
+    pub fn raise(&mut self, work: Work, t: u64) {
         let k = match work {
             Work::Sync0 => 0,
             Work::Sync1 => 1,
@@ -269,20 +271,20 @@ impl Cpu {
     }
 
     /// The highest-priority pending interrupt and its arrival time, taken.
-    pub(crate) fn take_pending(&mut self) -> Option<(Work, u64)> {
+    pub fn take_pending(&mut self) -> Option<(Work, u64)> {
         let kinds = [Work::Sync0, Work::Sync1, Work::Irq];
         (0..3).find_map(|k| self.pending[k].take().map(|a| (kinds[k], a)))
     }
 
     /// Counts `n` lost events of `work` (skipped timer ticks).
-    pub(crate) fn lose(&mut self, work: Work, n: u64) {
+    pub fn lose(&mut self, work: Work, n: u64) {
         self.stats.at(work).lost += n;
     }
 
     /// Runs handler `f` of `work` (event at `arrival`) at `t` on `path`: measures its bus
     /// time, holds its writes back and keeps the CPU busy for bus + CPU time. An interrupt
     /// needs [`isr_free`](Self::isr_free), a main-loop pass [`idle`](Self::idle).
-    pub(crate) fn run<P: PdiPath, T>(
+    pub fn run<P: PdiPath, T>(
         &mut self,
         path: &mut P,
         esc: &mut Esc,

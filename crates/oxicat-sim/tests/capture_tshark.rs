@@ -8,9 +8,9 @@ use std::process::Command;
 use std::sync::{Arc, Mutex};
 
 use ethercrab::{MainDevice, MainDeviceConfig, PduStorage};
+use oxicat_master::inprocess::spawn_inprocess;
 use oxicat_sim::capture::{Direction, MemoryCapture, PcapngCapture};
 use oxicat_sim::segment::Segment;
-use oxicat_master::inprocess::spawn_inprocess;
 
 static PDU_STORAGE: PduStorage<16, { PduStorage::element_size(1100) }> = PduStorage::new();
 

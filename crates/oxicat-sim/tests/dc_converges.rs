@@ -15,9 +15,9 @@ use ethercrab::subdevice_group::DcConfiguration;
 use ethercrab::{DcSync, MainDevice, MainDeviceConfig, PduStorage, RegisterAddress};
 use oxicat_esc::dc::ClockConfig;
 use oxicat_esc::Esc;
+use oxicat_master::inprocess::{spawn_inprocess_with, InProcessConfig};
 use oxicat_sim::node::EscEvent;
 use oxicat_sim::segment::Segment;
-use oxicat_master::inprocess::{spawn_inprocess_with, InProcessConfig};
 
 static PDU_STORAGE: PduStorage<16, { PduStorage::element_size(1100) }> = PduStorage::new();
 

@@ -7,8 +7,8 @@ use segment_common as common;
 use std::sync::{Arc, Mutex};
 
 use ethercrab::{MainDevice, MainDeviceConfig, PduStorage};
-use oxicat_sim::segment::Segment;
 use oxicat_master::inprocess::spawn_inprocess;
+use oxicat_sim::segment::Segment;
 
 const MAX_SUBDEVICES: usize = 16;
 const PDI_LEN: usize = 64;

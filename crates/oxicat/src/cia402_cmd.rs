@@ -1,5 +1,5 @@
 //! `oxicat cia402 <enable|disable|mode|move>`: CiA402 drives driven from the master
-//! (`oxicat_master::cia402`), on a virtual segment of `--joints` CiA402 joint drives
+//! (`oxicat_devices::cia402::master`), on a virtual segment of `--joints` CiA402 joint drives
 //! (firmware + BLDC joint plant) or on a network interface (`--iface`).
 //!
 //! - `enable`: fault reset if needed, then 0x06 → 0x07 → 0x0F, the statusword printed and
@@ -17,9 +17,9 @@ use std::path::PathBuf;
 use std::sync::{Arc, Mutex};
 use std::time::Duration;
 
-use oxicat_master::cia402::{self, mode, Action};
+use oxicat_devices::cia402::master::{self as cia402, mode, Action};
+use oxicat_devices::cia402::rig::{attach, BldcJointParams};
 use oxicat_master::{Link, Master, MasterError};
-use oxicat_sim::cia402::{attach, BldcJointParams};
 use oxicat_sim::segment::Segment;
 
 /// Arguments of `oxicat cia402`.

@@ -2,7 +2,7 @@
 //! overheats and cools, a sensor is unplugged, a scratchpad fails its CRC, the master cable
 //! is open for 2 s — with an in-process ethercrab master at a 10 ms cycle.
 
-use oxicat_sim::axis_hub::{run_scenario, HubSync, ScenarioConfig};
+use oxicat_devices::axis_hub::rig::{run_scenario, HubSync, ScenarioConfig};
 
 use crate::CliError;
 

@@ -61,10 +61,10 @@ pub fn sim_devices() -> Vec<SimDevice> {
             def: |_| &oxicat_devices::tue_es030::device::DEF,
             esc: EscConfig::et1200,
             attach: |segment, id, _k| {
-                oxicat_sim::tue_es030::attach(
+                oxicat_devices::tue_es030::rig::attach(
                     segment,
                     id,
-                    &oxicat_sim::tue_es030::TueConfig::default(),
+                    &oxicat_devices::tue_es030::rig::TueConfig::default(),
                 )
                 .map(drop)
             },
@@ -76,10 +76,10 @@ pub fn sim_devices() -> Vec<SimDevice> {
             def: |_| &oxicat_devices::cia402::DEF,
             esc: EscConfig::et1100,
             attach: |segment, id, _k| {
-                oxicat_sim::cia402::attach(
+                oxicat_devices::cia402::rig::attach(
                     segment,
                     id,
-                    oxicat_sim::cia402::BldcJointParams::default(),
+                    oxicat_devices::cia402::rig::BldcJointParams::default(),
                 )
                 .map(drop)
             },
@@ -137,12 +137,12 @@ pub fn add_node(
 }
 
 /// The leg driven by `laelaps-leg` node `k` (the thesis' chain order, repeating).
-fn leg_of(k: usize) -> oxicat_sim::laelaps::LegId {
-    oxicat_sim::laelaps::chain_legs()[k % 4]
+fn leg_of(k: usize) -> oxicat_devices::laelaps::rig::LegId {
+    oxicat_devices::laelaps::rig::chain_legs()[k % 4]
 }
 
 fn attach_laelaps_leg(segment: &mut Segment, id: SlaveId, k: usize) -> Result<(), AttachError> {
-    use oxicat_sim::laelaps::{attach_leg, RigConfig};
+    use oxicat_devices::laelaps::rig::{attach_leg, RigConfig};
     let leg = leg_of(k);
     attach_leg(segment, id, leg, RigConfig::laelaps(leg)).map(drop)
 }

@@ -6,10 +6,11 @@ use std::path::PathBuf;
 use std::time::Instant;
 
 use indicatif::{ProgressBar, ProgressStyle};
-use oxicat_master::experiment::run_trot;
-use oxicat_master::results::{csv, summarize, summary_markdown};
-use oxicat_master::scenario::{ExecTime, PdiChip, Scenario};
-use oxicat_master::{plot, MasterError};
+use oxicat_devices::laelaps::experiment::run_trot;
+use oxicat_devices::laelaps::plot;
+use oxicat_devices::laelaps::results::{csv, summarize, summary_markdown};
+use oxicat_devices::laelaps::scenario::{ExecTime, PdiChip, Scenario};
+use oxicat_master::MasterError;
 use oxicat_sim::exec_time::Work;
 
 /// Arguments of `oxicat trot`.
@@ -130,7 +131,7 @@ pub fn run(a: TrotArgs) -> Result<String, MasterError> {
 }
 
 /// One line on the SPI bus time per cycle per node, when the nodes used a driver.
-fn spi_line(run: &oxicat_master::experiment::TrotRun) -> Option<String> {
+fn spi_line(run: &oxicat_devices::laelaps::experiment::TrotRun) -> Option<String> {
     let cycles = run.bus.cycles;
     let per: Vec<f64> = run
         .pdi
@@ -157,9 +158,12 @@ fn spi_line(run: &oxicat_master::experiment::TrotRun) -> Option<String> {
 
 /// One line per node on the SYNC0 handler under the execution-time model (nothing when it is
 /// off).
-fn timing_lines(run: &oxicat_master::experiment::TrotRun) -> String {
+fn timing_lines(run: &oxicat_devices::laelaps::experiment::TrotRun) -> String {
     let mut out = String::new();
-    for (leg, n) in oxicat_sim::laelaps::LegId::TABLE.iter().zip(&run.pdi.nodes) {
+    for (leg, n) in oxicat_devices::laelaps::rig::LegId::TABLE
+        .iter()
+        .zip(&run.pdi.nodes)
+    {
         let Some(t) = n.timing else { continue };
         let s0 = t.get(Work::Sync0);
         out.push_str(&format!(

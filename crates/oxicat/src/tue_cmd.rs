@@ -13,10 +13,12 @@ use std::path::PathBuf;
 use std::sync::{Arc, Mutex};
 
 use indicatif::{ProgressBar, ProgressStyle};
-use oxicat_master::tue_es030::{self as tue, FrfPoint, Margins, NormalOut, TueMode, TueParams};
+use oxicat_devices::tue_es030::experiment::{
+    self as tue, FrfPoint, Margins, NormalOut, TueMode, TueParams,
+};
+use oxicat_devices::tue_es030::rig::{attach, TueConfig};
 use oxicat_master::{Link, Master, MasterError};
 use oxicat_sim::segment::Segment;
-use oxicat_sim::tue_es030::{attach, TueConfig};
 
 /// Which experiment.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]

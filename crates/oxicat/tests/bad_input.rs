@@ -39,7 +39,7 @@ fn ok_in(dir: &std::path::Path, args: &[&str]) -> String {
 #[test]
 fn trot_scenario_with_nan_or_inf_is_refused_with_key_and_range() {
     let d = work_dir("trot-nan");
-    let text = oxicat_master::scenario::DEFAULT_TOML;
+    let text = oxicat_devices::laelaps::scenario::DEFAULT_TOML;
     for (bad, want) in [
         ("nan", "rig.belt_speed_m_s = NaN is not in 0 … 5 m/s"),
         ("inf", "rig.belt_speed_m_s = inf is not in 0 … 5 m/s"),

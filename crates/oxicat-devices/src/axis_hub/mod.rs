@@ -72,6 +72,9 @@ pub mod app;
 pub mod codes;
 pub mod device;
 pub mod onewire;
+/// The hub on the virtual segment with its plant (feature `bench`).
+#[cfg(feature = "bench")]
+pub mod rig;
 pub mod ws2812;
 
 pub use app::{

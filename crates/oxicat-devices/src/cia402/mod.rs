@@ -13,6 +13,12 @@
 pub mod device;
 pub mod drive;
 pub mod fsm;
+// The std side (feature `bench`): the master-side drive helper and the joint on the virtual
+// segment with its BLDC plant.
+#[cfg(feature = "bench")]
+pub mod master;
+#[cfg(feature = "bench")]
+pub mod rig;
 
 #[cfg(test)]
 mod tests;

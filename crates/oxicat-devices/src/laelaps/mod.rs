@@ -42,6 +42,20 @@ pub mod kinematics;
 pub mod piv;
 pub mod trajectory;
 pub mod transition;
+// The std side of the kit (feature `bench`): the node on the virtual segment with its leg,
+// the trot experiment and its results, scenario files and plots.
+#[cfg(feature = "bench")]
+pub mod experiment;
+#[cfg(feature = "bench")]
+pub mod plot;
+#[cfg(feature = "bench")]
+pub mod results;
+#[cfg(feature = "bench")]
+pub mod rig;
+#[cfg(feature = "bench")]
+pub mod scenario;
+#[cfg(feature = "bench")]
+pub mod timing_probe;
 
 pub use app::{LegNode, Mode, PwmOut};
 pub use encoder::{CaptureConfig, EncoderIn, QepSample};

@@ -43,6 +43,12 @@
 pub mod app;
 pub mod control;
 pub mod device;
+// The std side (feature `bench`): the board on the virtual segment with its motors, and the
+// master-side experiments.
+#[cfg(feature = "bench")]
+pub mod experiment;
+#[cfg(feature = "bench")]
+pub mod rig;
 pub mod ring;
 
 pub use app::{

@@ -12,11 +12,11 @@ use std::thread::JoinHandle;
 
 use ethercrab::{MainDevice, MainDeviceConfig, PduStorage, Timeouts};
 use oxicat_esc::{Esc, EscConfig};
+use oxicat_master::inprocess::{spawn_inprocess_with, InProcessConfig, Released, TransportError};
 use oxicat_sim::firmware::{attach_firmware_with, FirmwareConfig, FirmwareHandle};
 #[allow(unused_imports)]
 pub use oxicat_sim::pdi_path::{Direct, PathInitError, PdiPath, PdiRoute, SpiPath};
 use oxicat_sim::segment::{Segment, SimClock};
-use oxicat_master::inprocess::{spawn_inprocess_with, InProcessConfig, Released, TransportError};
 use oxicat_slave::*;
 use oxicat_wire::sii::{
     coe_details, write_category, write_strings, CategoryType, MailboxArea, SiiConfig, SiiGeneral,

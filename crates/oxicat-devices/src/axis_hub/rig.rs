@@ -1,5 +1,5 @@
 //! The axis communication hub on the virtual segment: one [`HubRigNode`] runs the hub
-//! firmware (`oxicat_devices::axis_hub`) behind its ESC **and** owns its plant — thermal
+//! firmware (`crate::axis_hub`) behind its ESC **and** owns its plant — thermal
 //! nodes (four motor housings in ambient air), fifteen DS18B20 on a bit-level 1-Wire bus
 //! (`oxicat_plant::onewire`), and the WS2812 rings whose bit stream is decoded back into
 //! colours (`oxicat_plant::ws2812`).
@@ -18,19 +18,19 @@
 use std::sync::{Arc, Mutex, MutexGuard};
 use std::time::Duration;
 
-use ethercrab::subdevice_group::DcConfiguration;
-use ethercrab::{DcSync, MainDevice, MainDeviceConfig, PduStorage, Timeouts};
-use oxicat_devices::axis_hub::{
+use crate::axis_hub::{
     self, codes, device, onewire, ws2812, HubFirmware, LedStrip, OneWireBus, TASKS,
 };
+use ethercrab::subdevice_group::DcConfiguration;
+use ethercrab::{DcSync, MainDevice, MainDeviceConfig, PduStorage, Timeouts};
 use oxicat_esc::{Esc, EscConfig};
 use oxicat_plant::onewire::{ds18b20_rom, Ds18b20, OneWireNet};
 use oxicat_plant::thermal::{Mount, TempSensor, ThermalNet, ThermalNode};
 use oxicat_plant::ws2812::{decode, Decoded};
 
-use crate::node::{EscEvent, Node};
-use crate::segment::{Segment, SlaveId, TopologyError};
-use crate::transport::{spawn_inprocess_with, InProcessConfig};
+use oxicat_master::inprocess::{spawn_inprocess_with, InProcessConfig};
+use oxicat_sim::node::{EscEvent, Node};
+use oxicat_sim::segment::{Segment, SlaveId, TopologyError};
 
 /// The firmware's 1-Wire bus on the plant's bus model (slots never fail here).
 #[derive(Debug, Clone, Default)]

@@ -1,5 +1,5 @@
 //! The Laelaps II trotting experiment (thesis §4, Table 4-1) on the virtual segment:
-//! four leg nodes (`oxicat_sim::laelaps`) in the thesis' chain order, ethercrab in this
+//! four leg nodes (`crate::laelaps::rig`) in the thesis' chain order, ethercrab in this
 //! process and on this thread, DC SYNC0 every 400 µs, the thesis' procedure, and every
 //! input variable recorded every cycle.
 //!
@@ -13,7 +13,7 @@
 //!    the legs at their reset pose.
 //! 3. Cycle 0 of the record: the one linked `State_Machine` variable is set to 1 in all four
 //!    nodes' outputs in the same frame. Each node enters Operational at the same SYNC0, the
-//!    rig lets its leg go there (see `oxicat_sim::laelaps`), and its trajectory clock
+//!    rig lets its leg go there (see `crate::laelaps::rig`), and its trajectory clock
 //!    starts. From here on every cycle is recorded.
 //! 4. Stand (`stand_s`), b ramps to its value, then a (each over `Transition_time`, done by
 //!    the firmware's linear transitions), steady trot (`trot_s`), a back to 0, b back to 0,
@@ -39,21 +39,21 @@
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
-use ethercrab::subdevice_group::DcConfiguration;
-use ethercrab::{DcSync, MainDevice, MainDeviceConfig, PduStorage};
-use oxicat_devices::laelaps::device;
-use oxicat_esc::{Esc, EscConfig};
-use oxicat_sim::exec_time::TimingStats;
-use oxicat_sim::laelaps::{
+use crate::laelaps::device;
+use crate::laelaps::rig::{
     attach_leg_routed, chain_legs, AnyLegRigHandle, BeltProfile, LegId, RigConfig, TOWER_CHAIN,
 };
+use ethercrab::subdevice_group::DcConfiguration;
+use ethercrab::{DcSync, MainDevice, MainDeviceConfig, PduStorage};
+use oxicat_esc::{Esc, EscConfig};
+use oxicat_master::inprocess::{inprocess_task, InProcessConfig};
+use oxicat_sim::exec_time::TimingStats;
 use oxicat_sim::pdi_path::{BusStats as SpiStats, PdiRoute};
 use oxicat_sim::segment::Segment;
-use crate::inprocess::{inprocess_task, InProcessConfig};
 use oxicat_slave::DeviceDef;
 
-use crate::scenario::Scenario;
-use crate::MasterError;
+use crate::laelaps::scenario::Scenario;
+use oxicat_master::MasterError;
 
 type Storage = PduStorage<16, { PduStorage::element_size(1100) }>;
 const MAX_SUBDEVICES: usize = 8;
@@ -474,7 +474,7 @@ pub fn run_trot(s: &Scenario, progress: &mut dyn FnMut(Progress)) -> Result<Trot
         .map_err(|_| MasterError::Usage("PDU storage already in use".into()))?;
     let md = MainDevice::new(
         pdu_loop,
-        crate::inprocess::virtual_timeouts(),
+        oxicat_master::inprocess::virtual_timeouts(),
         MainDeviceConfig {
             dc_static_sync_iterations: 1000,
             ..MainDeviceConfig::default()
@@ -485,7 +485,7 @@ pub fn run_trot(s: &Scenario, progress: &mut dyn FnMut(Progress)) -> Result<Trot
         tx,
         rx,
         InProcessConfig {
-            frame_gap_ns: crate::SIM_FRAME_GAP_NS,
+            frame_gap_ns: oxicat_master::SIM_FRAME_GAP_NS,
         },
     );
     let master = run_master(s, &phases, &md, &segment, &handles, progress);

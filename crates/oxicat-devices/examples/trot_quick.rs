@@ -1,8 +1,8 @@
 //! Runs the shipped trot scenario (optionally shortened: `trot_quick <trot_s>`) and prints
 //! the summary and the speed.
-use oxicat_master::experiment::run_trot;
-use oxicat_master::results::{summarize, summary_markdown};
-use oxicat_master::scenario::Scenario;
+use oxicat_devices::laelaps::experiment::run_trot;
+use oxicat_devices::laelaps::results::{summarize, summary_markdown};
+use oxicat_devices::laelaps::scenario::Scenario;
 
 fn main() {
     let mut s = Scenario::thesis();
@@ -11,7 +11,7 @@ fn main() {
     }
     let run = run_trot(&s, &mut |_| {}).expect("run");
     if let Ok(p) = std::env::var("TROT_CSV") {
-        std::fs::write(p, oxicat_master::results::csv(&run)).expect("csv");
+        std::fs::write(p, oxicat_devices::laelaps::results::csv(&run)).expect("csv");
     }
     let sum = summarize(&run);
     println!("{}", summary_markdown(&run, &sum));

@@ -1,14 +1,14 @@
 //! What SPI bus time does to a Laelaps leg's DC cycle, from simulated runs with the
-//! execution-time model on (`oxicat_sim::exec_time`, `oxicat_sim::timing_probe`): for the
+//! execution-time model on (`oxicat_sim::exec_time`, `oxicat_devices::laelaps::timing_probe`): for the
 //! LAN9252 and the ET1100 at 10/20/30 MHz and 100/200/400 µs cycles, SYNC0s lost and the
 //! input latency (SYNC0 edge to the inputs readable in SM3), with the thesis' 1 µs
 //! application as CPU time.
 //!
 //! `cargo run --release -p oxicat-sim --example bus_timing [cycles]`
 
+use oxicat_devices::laelaps::timing_probe::{self, ProbeConfig};
 use oxicat_devices::laelaps::{device, Side};
 use oxicat_sim::pdi_path::PdiRoute;
-use oxicat_sim::timing_probe::{self, ProbeConfig};
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let cycles: u32 = match std::env::args().nth(1) {

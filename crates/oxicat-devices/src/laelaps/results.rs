@@ -7,13 +7,11 @@
 
 use std::fmt::Write as _;
 
-use oxicat_devices::laelaps::hw::{
-    JOINT_RATIO_HIP, JOINT_RATIO_KNEE, L1, L2, U_MAX_HIP, U_MAX_KNEE,
-};
+use crate::laelaps::hw::{JOINT_RATIO_HIP, JOINT_RATIO_KNEE, L1, L2, U_MAX_HIP, U_MAX_KNEE};
+use crate::laelaps::rig::LegId;
 use oxicat_sim::exec_time::Work;
-use oxicat_sim::laelaps::LegId;
 
-use crate::experiment::{var, TrotRun, INPUTS};
+use crate::laelaps::experiment::{var, TrotRun, INPUTS};
 
 /// Hip joint speed limit \[rad/s\]: 75.83 rpm (the thesis' post-processing,
 /// `Hip_max_velocity`; the EC 45's maximum speed through 79.15).
@@ -29,8 +27,8 @@ pub const HIP_PWM_LIMIT: f64 = U_MAX_HIP as f64 * 100.0;
 /// negated, as the thesis' post-processing does.
 pub fn frame_sign(leg: LegId) -> f64 {
     match leg.side() {
-        oxicat_devices::laelaps::Side::Left => 1.0,
-        oxicat_devices::laelaps::Side::Right => -1.0,
+        crate::laelaps::Side::Left => 1.0,
+        crate::laelaps::Side::Right => -1.0,
     }
 }
 

@@ -1,5 +1,5 @@
 //! The CiA402 joint drive on the virtual segment: one [`JointNode`] runs the drive firmware
-//! (`oxicat_devices::cia402`) on the slave stack behind its ESC and owns the joint it
+//! (`crate::cia402`) on the slave stack behind its ESC and owns the joint it
 //! drives (`oxicat_plant::bldc_joint`: BLDC motor, compliant harmonic gear, link, torque
 //! sensor, encoder with index pulse, home switch).
 //!
@@ -19,14 +19,14 @@
 
 use std::sync::{Arc, Mutex, MutexGuard};
 
-use oxicat_devices::cia402::{device, Cia402Drive, DriveParams, JointHw, CURRENT_LOOP_TIMER};
+use crate::cia402::{device, Cia402Drive, DriveParams, JointHw, CURRENT_LOOP_TIMER};
 use oxicat_esc::{Esc, PdiError};
 pub use oxicat_plant::bldc_joint::{BldcJoint, BldcJointParams};
 use oxicat_slave::{Od, Slave};
 
-use crate::firmware::AttachError;
-use crate::node::{EscEvent, Node};
-use crate::segment::{Segment, SlaveId, TopologyError};
+use oxicat_sim::firmware::AttachError;
+use oxicat_sim::node::{EscEvent, Node};
+use oxicat_sim::segment::{Segment, SlaveId, TopologyError};
 
 /// Mailbox size of the drive (its definition: 128 bytes).
 pub const MBX: usize = 128;

@@ -10,12 +10,12 @@
 //! The runs are shortened (Transition_time 1 s, short stands, two trot periods) so the
 //! tests stay fast in a debug build; gains, ellipses, phases, filter and bus are Table 4-1's.
 
+use oxicat_devices::laelaps::experiment::{run_trot, var, TrotRun};
 use oxicat_devices::laelaps::hw::{U_MAX_HIP, U_MAX_KNEE};
-use oxicat_master::experiment::{run_trot, var, TrotRun};
-use oxicat_master::results::{csv, sample, steady_window, summarize, summary_markdown};
-use oxicat_master::scenario::{ExecTime, PdiChip, Scenario, DEFAULT_TOML};
+use oxicat_devices::laelaps::results::{csv, sample, steady_window, summarize, summary_markdown};
+use oxicat_devices::laelaps::rig::LegId;
+use oxicat_devices::laelaps::scenario::{ExecTime, PdiChip, Scenario, DEFAULT_TOML};
 use oxicat_sim::exec_time::{ExecTiming, Work};
-use oxicat_sim::laelaps::LegId;
 use oxicat_sim::pdi_path::PdiRoute;
 
 fn short(trot_s: f64) -> Scenario {

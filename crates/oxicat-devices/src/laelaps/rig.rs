@@ -1,5 +1,5 @@
 //! The Laelaps II rig on the virtual segment: one [`LegRigNode`] per EtherCAT Control Tower
-//! that runs the leg-node firmware (`oxicat_devices::laelaps`) on the slave stack behind
+//! that runs the leg-node firmware (`crate::laelaps`) on the slave stack behind
 //! its ESC **and** owns the leg it drives (`oxicat_plant::Leg`: amplifiers, motors,
 //! gearheads, coupler, pulley, encoders, two links, treadmill belt).
 //!
@@ -44,12 +44,12 @@
 //!
 //! [`attach_leg`] gives the firmware the software ESC as its `Pdi`; [`attach_leg_routed`]
 //! can put a LAN9252 or ET1100 driver over the simulated SPI in between
-//! ([`crate::pdi_path`]), with the node's SPI traffic counted ([`LegRig::bus_stats`]).
+//! ([`oxicat_sim::pdi_path`]), with the node's SPI traffic counted ([`LegRig::bus_stats`]).
 //!
 //! # Execution time (opt-in)
 //!
 //! With [`RigConfig::timing`] set, the node runs under the execution-time model of
-//! [`crate::exec_time`]: the SYNC0 handler takes its SPI bus time (+ CPU time), its writes
+//! [`oxicat_sim::exec_time`]: the SYNC0 handler takes its SPI bus time (+ CPU time), its writes
 //! (the inputs in SM3) land when it ends, and an interrupt arriving while the MCU is busy
 //! waits or is lost ([`LegRig::timing`]). The joint-loop tick is a timer interrupt: it
 //! waits for a running interrupt handler and then runs (plant catch-up, encoders, PIV,
@@ -59,8 +59,8 @@
 
 use std::sync::{Arc, Mutex, MutexGuard};
 
-use oxicat_devices::demo::Leds;
-use oxicat_devices::laelaps::{
+use crate::demo::Leds;
+use crate::laelaps::{
     self, device, CaptureConfig, EncoderIn, Joint, LegNode, Mode, PwmCommand, PwmOut, QepSample,
     Side, JOINT_LOOP_TIMER,
 };
@@ -68,10 +68,10 @@ use oxicat_esc::Esc;
 use oxicat_plant::{Leg, LegParams, Treadmill};
 use oxicat_slave::{Pdi, Slave};
 
-use crate::exec_time::{Cpu, ExecTiming, TimingStats, Work};
-use crate::node::{EscEvent, Node};
-use crate::pdi_path::{BusStats, Direct, PathInitError, PdiPath, PdiRoute, SpiPath};
-use crate::segment::{Segment, SlaveId, TopologyError};
+use oxicat_sim::exec_time::{Cpu, ExecTiming, TimingStats, Work};
+use oxicat_sim::node::{EscEvent, Node};
+use oxicat_sim::pdi_path::{BusStats, Direct, PathInitError, PdiPath, PdiRoute, SpiPath};
+use oxicat_sim::segment::{Segment, SlaveId, TopologyError};
 
 /// Mailbox size of the leg node (its device definition: 128 bytes).
 pub const MBX: usize = 128;
@@ -211,7 +211,7 @@ pub struct RigConfig {
     pub poll_every: u64,
     /// Belt speed after release.
     pub belt: BeltProfile,
-    /// The execution-time model ([`crate::exec_time`]); `None` (the default): the firmware
+    /// The execution-time model ([`oxicat_sim::exec_time`]); `None` (the default): the firmware
     /// runs in zero virtual time.
     pub timing: Option<ExecTiming>,
 }
@@ -731,7 +731,7 @@ impl<P: PdiPath> Node<Esc> for LegRigNode<P> {
 
 /// Why a tower could not be put on the segment: the same reasons as for any hosted
 /// firmware.
-pub type RigError = crate::firmware::AttachError;
+pub type RigError = oxicat_sim::firmware::AttachError;
 
 /// Boots the leg-node firmware for `leg` (its side's build) on ESC `id` and attaches it with
 /// the leg's plant; the leg is held at its reset pose (encoders zeroed there) until the node

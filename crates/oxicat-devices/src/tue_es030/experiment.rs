@@ -9,8 +9,8 @@
 
 use std::path::{Path, PathBuf};
 
-use crate::cyclic::{CycleOptions, Flow};
-use crate::{Link, Master, MasterError};
+use oxicat_master::cyclic::{CycleOptions, Flow};
+use oxicat_master::{Link, Master, MasterError};
 
 /// PDO mode of the board.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -224,7 +224,7 @@ pub fn set_mode(
         return Ok((m, false));
     }
     let all: Vec<usize> = (0..m.len()).collect();
-    m.request_state(&all, crate::AlState::PreOp)?;
+    m.request_state(&all, oxicat_master::AlState::PreOp)?;
     let (rx, tx) = target.pdos();
     m.sdo_download(position, 0x1C12, 0, &[0])?;
     m.sdo_download(position, 0x1C12, 1, &rx.to_le_bytes())?;
@@ -632,7 +632,7 @@ pub fn plot_bode(
     stem: &str,
     title: &str,
 ) -> Result<Vec<PathBuf>, MasterError> {
-    crate::plot::font_ready()?;
+    crate::laelaps::plot::font_ready()?;
     let png = dir.join(format!("{stem}.png"));
     let svg = dir.join(format!("{stem}.svg"));
     let err = |e: Box<dyn std::error::Error>| MasterError::Usage(format!("plot {stem}: {e}"));

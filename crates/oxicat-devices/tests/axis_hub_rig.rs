@@ -1,10 +1,10 @@
 //! The axis communication hub end to end: firmware (`oxicat-devices`), plant
 //! (`oxicat-plant`) and an ethercrab master on the virtual segment.
 
+use oxicat_devices::axis_hub::rig::{run_scenario, HubSync, ScenarioConfig, SimOneWire};
 use oxicat_devices::axis_hub::{codes, device, onewire, ws2812};
 use oxicat_plant::onewire::{ds18b20_rom, Ds18b20, OneWireNet};
 use oxicat_plant::ws2812::decode;
-use oxicat_sim::axis_hub::{run_scenario, HubSync, ScenarioConfig, SimOneWire};
 
 fn sii() -> Vec<u8> {
     oxicat_device::sii::generate(&device::DEF).expect("SII of the hub")

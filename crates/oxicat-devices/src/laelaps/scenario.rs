@@ -3,13 +3,13 @@
 
 use serde::Deserialize;
 
-use crate::MasterError;
+use crate::laelaps::rig::LegId;
+use oxicat_master::MasterError;
 use oxicat_sim::exec_time::ExecTiming;
-use oxicat_sim::laelaps::LegId;
 use oxicat_sim::pdi_path::{PdiRoute, DEFAULT_SPI_MHZ};
 
 /// The shipped scenario: Laelaps II trotting experiment 1 (thesis Table 4-1).
-pub const DEFAULT_TOML: &str = include_str!("../../../scenarios/laelaps-trot.toml");
+pub const DEFAULT_TOML: &str = include_str!("../../../../scenarios/laelaps-trot.toml");
 
 /// A trotting experiment.
 #[derive(Debug, Clone, PartialEq, Deserialize)]

@@ -5,18 +5,18 @@
 //!
 //! Everything runs in the cyclic exchange (the controlword is process data; drives run
 //! their state machine in their cycle), on the ETG.6010 default PDOs of
-//! `oxicat_devices::cia402` (RxPDO 0x1600: 0x6040, 0x6060, 0x607A, 0x60FF, 0x6071; TxPDO
+//! `crate::cia402` (RxPDO 0x1600: 0x6040, 0x6060, 0x607A, 0x60FF, 0x6071; TxPDO
 //! 0x1A00: 0x6041, 0x6061, 0x6064, 0x606C, 0x6077, 0x603F).
 
 use std::time::Duration;
 
-use crate::cyclic::{CycleOptions, Flow};
-use crate::{Master, MasterError};
+use oxicat_master::cyclic::{CycleOptions, Flow};
+use oxicat_master::{Master, MasterError};
 
-pub use oxicat_devices::cia402::fsm::State;
+pub use crate::cia402::fsm::State;
 
 /// Modes of operation.
-pub use oxicat_devices::cia402::mode;
+pub use crate::cia402::mode;
 
 /// Inputs of one drive (TxPDO 0x1A00).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
@@ -504,7 +504,7 @@ pub fn write_following_error_plots(
     dir: &std::path::Path,
 ) -> Result<Vec<std::path::PathBuf>, MasterError> {
     use plotters::prelude::*;
-    crate::plot::font_ready()?;
+    crate::laelaps::plot::font_ready()?;
     let series: Vec<Vec<(f64, f64)>> = (0..drives)
         .map(|d| {
             run.rows

@@ -5,9 +5,9 @@
 use std::sync::{Arc, Mutex};
 use std::time::Duration;
 
-use oxicat_master::cia402::{self, Action, State};
+use oxicat_devices::cia402::master::{self as cia402, Action, State};
+use oxicat_devices::cia402::rig::{attach, BldcJointParams, JointHandle};
 use oxicat_master::{Link, Master};
-use oxicat_sim::cia402::{attach, BldcJointParams, JointHandle};
 use oxicat_sim::segment::Segment;
 
 /// Runs a test body on a thread with a large stack (the ethercrab master is big).

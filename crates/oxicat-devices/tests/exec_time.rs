@@ -1,15 +1,15 @@
 //! The execution-time model (`oxicat_sim::exec_time`) on the Laelaps leg node at a 100 µs
 //! DC cycle (the goal: 100 µs on a 20 MHz SPI), driven by the frame-level master of
-//! `oxicat_sim::timing_probe`. Everything is virtual time: no wall-clock assertion.
+//! `oxicat_devices::laelaps::timing_probe`. Everything is virtual time: no wall-clock assertion.
 
 use oxicat_devices::demo::{self, Demo};
+use oxicat_devices::laelaps::timing_probe::{self, ProbeConfig, ProbeReport};
 use oxicat_devices::laelaps::{device, Side};
 use oxicat_esc::{Esc, EscConfig};
 use oxicat_sim::exec_time::{ExecTiming, Work};
 use oxicat_sim::firmware::{attach_firmware_via, FirmwareConfig};
 use oxicat_sim::pdi_path::PdiRoute;
 use oxicat_sim::segment::Segment;
-use oxicat_sim::timing_probe::{self, ProbeConfig, ProbeReport};
 
 fn leg_at(route: PdiRoute, cycle_ns: u32, cycles: u32) -> ProbeReport {
     let sii = oxicat_device::sii::generate(device::device(Side::Left)).expect("SII");

@@ -1,5 +1,5 @@
 //! The TUeES030 board on the virtual segment: one [`TueNode`] runs the board's firmware
-//! (`oxicat_devices::tue_es030`) on the slave stack behind its ESC and owns the three motor
+//! (`crate::tue_es030`) on the slave stack behind its ESC and owns the three motor
 //! channels it drives (`oxicat_plant::re30`: DRV8412 bridge, RE 30 motor, LT1999 sense
 //! with its RC filter, encoder), the supply and the other I/O.
 //!
@@ -15,16 +15,16 @@
 
 use std::sync::{Arc, Mutex, MutexGuard};
 
-use oxicat_devices::tue_es030::{
+use crate::tue_es030::{
     self, control, device, Adcs, Bridges, Encoders, Io, TuEs030, CURRENT_TIMER, SERVICE_TIMER,
 };
 use oxicat_esc::{Esc, PdiError};
 use oxicat_plant::re30::{BridgeCommand, Re30Drive, Re30Params};
 use oxicat_slave::Slave;
 
-use crate::firmware::AttachError;
-use crate::node::{EscEvent, Node};
-use crate::segment::{Segment, SlaveId, TopologyError};
+use oxicat_sim::firmware::AttachError;
+use oxicat_sim::node::{EscEvent, Node};
+use oxicat_sim::segment::{Segment, SlaveId, TopologyError};
 
 /// Mailbox size of the board (its definition: 128 bytes).
 pub const MBX: usize = 128;

@@ -1,6 +1,6 @@
 //! What SPI bus time does to a Laelaps leg's DC cycle, from a simulated run: one leg node
-//! ([`crate::laelaps`]) on a one-ESC segment, reaching its ESC through a chip driver
-//! over the simulated SPI with the execution-time model on ([`crate::exec_time`]), driven
+//! ([`crate::laelaps::rig`]) on a one-ESC segment, reaching its ESC through a chip driver
+//! over the simulated SPI with the execution-time model on ([`oxicat_sim::exec_time`]), driven
 //! by a minimal frame-level master (auto-increment addressing, no ethercrab: every frame
 //! at a virtual time this module chooses, so a run is deterministic and fast).
 //!
@@ -19,14 +19,14 @@
 //! The outputs stay zero (the leg node stays in its Configuration mode, the plant at
 //! rest); the SYNC0 handler still reads all 38 output and writes all 22 input bytes.
 
-use oxicat_devices::laelaps::device::{self, INPUT_BYTES, OUTPUT_BYTES};
+use crate::laelaps::device::{self, INPUT_BYTES, OUTPUT_BYTES};
 use oxicat_esc::{Esc, EscConfig};
 use oxicat_wire::{Command, DatagramHeader, EcatFrame, EthernetHeader, FrameBuilder};
 
-use crate::exec_time::{ExecTiming, TimingStats, Work};
-use crate::laelaps::{attach_leg_routed, AnyLegRigHandle, LegId, RigConfig, RigError};
-use crate::pdi_path::PdiRoute;
-use crate::segment::{Segment, DEFAULT_LINK_DELAY_NS};
+use crate::laelaps::rig::{attach_leg_routed, AnyLegRigHandle, LegId, RigConfig, RigError};
+use oxicat_sim::exec_time::{ExecTiming, TimingStats, Work};
+use oxicat_sim::pdi_path::PdiRoute;
+use oxicat_sim::segment::{Segment, DEFAULT_LINK_DELAY_NS};
 
 /// How long before the next SYNC0 the master's process-data frame leaves \[ns\].
 const IO_LEAD_NS: u64 = 14_000;

@@ -3,10 +3,10 @@
 
 use std::sync::{Arc, Mutex};
 
-use oxicat_master::tue_es030::{self as tue, NormalOut, TueMode, TueParams};
+use oxicat_devices::tue_es030::experiment::{self as tue, NormalOut, TueMode, TueParams};
+use oxicat_devices::tue_es030::rig::{attach, TueConfig, TueHandle};
 use oxicat_master::{Link, Master};
 use oxicat_sim::segment::Segment;
-use oxicat_sim::tue_es030::{attach, TueConfig, TueHandle};
 
 /// Runs a test body on a thread with a large stack (the ethercrab master is big).
 fn big<F: FnOnce() + Send + 'static>(f: F) {

@@ -12,15 +12,15 @@ use plotters::coord::Shift;
 use plotters::prelude::*;
 use plotters::style::FontStyle;
 
-use oxicat_sim::laelaps::LegId;
+use crate::laelaps::rig::LegId;
 
-use crate::experiment::{table_index, TrotRun};
-use crate::results::{
+use crate::laelaps::experiment::{table_index, TrotRun};
+use crate::laelaps::results::{
     sample, steady_window, LegSample, HIP_MAX_SPEED, HIP_PWM_LIMIT, KNEE_MAX_SPEED, KNEE_PWM_LIMIT,
 };
-use crate::MasterError;
+use oxicat_master::MasterError;
 
-static FONT: &[u8] = include_bytes!("../../../assets/fonts/DejaVuSans.ttf");
+static FONT: &[u8] = include_bytes!("../../../../assets/fonts/DejaVuSans.ttf");
 
 /// The thesis' figure order of the legs.
 pub const FIGURE_ORDER: [LegId; 4] = [

@@ -1,9 +1,9 @@
 //! The CiA402 joint drive on its joint (firmware + plant, 1 kHz cycles, 20 kHz current
 //! loop): the paper's experiment, the modes, the following-error fault and its reset.
 
+use oxicat_devices::cia402::rig::JointBench;
 use oxicat_devices::cia402::{error, fsm::sw, mode, State};
 use oxicat_plant::bldc_joint::BldcJointParams;
-use oxicat_sim::cia402::JointBench;
 
 fn bench() -> JointBench {
     JointBench::new(BldcJointParams::default())
