@@ -4,7 +4,7 @@
 //! input latency (SYNC0 edge to the inputs readable in SM3), with the thesis' 1 µs
 //! application as CPU time.
 //!
-//! `cargo run --release -p oxicat-sim --example bus_timing [cycles]`
+//! `cargo run --release -p oxicat-devices --example bus_timing [cycles]`
 
 use oxicat_devices::laelaps::timing_probe::{self, ProbeConfig};
 use oxicat_devices::laelaps::{device, Side};
