@@ -15,6 +15,10 @@ pub mod axis_hub;
 pub mod cia402;
 pub mod demo;
 pub mod laelaps;
+#[cfg(feature = "bench")]
+pub mod registry;
+#[cfg(feature = "toy")]
+pub mod toy;
 pub mod tue_es030;
 
 /// Declares process-data records and their PDOs in one table and generates, in the

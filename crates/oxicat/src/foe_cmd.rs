@@ -1,6 +1,6 @@
 //! The FoE verbs of `oxicat`: `foe-write` (firmware download: the slave is walked
-//! INIT → BOOT, the file written, and back to INIT, as TwinCAT does) and `foe-read`; and the
-//! FoE files of the demo devices on the virtual segment (firmware slots in RAM).
+//! INIT → BOOT, the file written, and back to INIT, as TwinCAT does) and `foe-read`. The
+//! demo devices' FoE files live in their kit (`oxicat_devices::demo::rig::files`).
 
 use std::io::Write;
 use std::path::PathBuf;
@@ -8,34 +8,8 @@ use std::path::PathBuf;
 use clap::Subcommand;
 use oxicat_master::value::parse_int;
 use oxicat_master::MasterError;
-use oxicat_slave::foe::{FirmwareUpdate, RamStore, UpdateConfig};
-use oxicat_slave::DeviceDef;
 
 use crate::master_cmd::{LinkArgs, PosArgs};
-
-/// Bytes per firmware slot of the simulated demo devices.
-pub const DEMO_SLOT_BYTES: usize = 16 * 1024;
-
-/// Name of the firmware file the demo devices take in BOOT.
-pub const DEMO_FIRMWARE_FILE: &str = "firmware.bin";
-
-/// The FoE files of a simulated demo device: two RAM slots, the factory image (payload
-/// `oxicat demo firmware <sw_version>`) bootable in slot 0, `firmware.bin` writable in BOOT,
-/// `version.txt` readable always.
-pub fn demo_files(def: &'static DeviceDef) -> FirmwareUpdate<RamStore<2, DEMO_SLOT_BYTES>> {
-    let payload = format!("oxicat demo firmware {}", def.sw_version);
-    let img = oxicat_device::fwimage::build(def, payload.as_bytes());
-    let store = RamStore::with_image(&img).unwrap_or_default();
-    FirmwareUpdate::new(
-        store,
-        UpdateConfig {
-            identity: def.identity,
-            file_name: DEMO_FIRMWARE_FILE,
-            password: 0,
-            read_back: true,
-        },
-    )
-}
 
 /// The FoE verbs.
 #[allow(missing_docs)]
@@ -122,7 +96,7 @@ fn explain_write_error(e: MasterError, name: &str, from_file: bool) -> MasterErr
                 } else {
                     ""
                 },
-                DEMO_FIRMWARE_FILE
+                oxicat_devices::demo::rig::FIRMWARE_FILE
             ),
         },
         e => e,

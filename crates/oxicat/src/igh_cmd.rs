@@ -43,20 +43,16 @@ pub fn version() -> String {
 
 /// `oxicat device list`: every device definition, one line each.
 pub fn device_list() -> String {
-    crate::devices()
+    oxicat_devices::registry::kits()
         .iter()
-        .map(|(n, _, d)| format!("{n:<16} {d}\n"))
+        .map(|k| format!("{:<16} {}\n", k.name, k.description))
         .collect()
 }
 
 /// `oxicat fw-image <device> <payload> -o <image>`: the payload wrapped in the firmware image
 /// header of `device` (identity, length, CRC-32), as `foe-write` sends it.
 pub fn fw_image(device: &str, payload: &Path, output: &Path) -> Result<String, crate::CliError> {
-    let def = crate::devices()
-        .into_iter()
-        .find(|d| d.0 == device)
-        .map(|d| d.1)
-        .ok_or_else(|| crate::CliError::UnknownDevice(device.to_string()))?;
+    let def = crate::device_def(device)?;
     let data = std::fs::read(payload).map_err(|e| {
         crate::CliError::Io(std::io::Error::new(
             e.kind(),

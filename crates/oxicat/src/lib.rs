@@ -17,7 +17,6 @@ pub mod interrupt;
 pub mod master_cmd;
 pub mod output;
 pub mod sim_cmd;
-pub mod sim_devices;
 pub mod trot_cmd;
 pub mod tue_cmd;
 
@@ -98,35 +97,12 @@ pub enum DeviceOutput {
     Check,
 }
 
-/// The devices the CLI knows: (name, definition, description).
-pub fn devices() -> Vec<(&'static str, &'static DeviceDef, &'static str)> {
-    vec![
-        (
-            "demo",
-            &oxicat_devices::demo::DEF,
-            "thesis Table 2-2 generic EtherCAT Application",
-        ),
-        (
-            "axis-hub",
-            &oxicat_devices::axis_hub::device::DEF,
-            "axis communication hub: 15 DS18B20, WS2812 rings, status/event/error",
-        ),
-        (
-            "demo-additions",
-            &oxicat_devices::demo::additions::DEF,
-            "demo + record Additions 0x7030 (thesis section 6.7, one edit)",
-        ),
-        (
-            "cia402-joint",
-            &oxicat_devices::cia402::DEF,
-            "CiA402 joint drive: BLDC, PP/PV/PT/HM/CSP/CSV/CST, 0x1000 = 0x00020192",
-        ),
-        (
-            "tue-es030",
-            &oxicat_devices::tue_es030::device::DEF,
-            "TUeES030 motor I/O board: 3 current-controlled DC motors, normal/FRF PDO modes",
-        ),
-    ]
+/// The definition of device `name` (node 0's) from the registry
+/// (`oxicat_devices::registry`), which every verb reads.
+pub fn device_def(name: &str) -> Result<&'static DeviceDef, CliError> {
+    oxicat_devices::registry::find(name)
+        .map(|k| (k.def)(0))
+        .ok_or_else(|| CliError::UnknownDevice(name.to_string()))
 }
 
 /// Errors of the CLI.
@@ -148,8 +124,11 @@ impl std::fmt::Display for CliError {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         match self {
             CliError::UnknownDevice(n) => {
-                let names: Vec<_> = devices().iter().map(|d| d.0).collect();
-                write!(f, "unknown device {n:?}; known: {}", names.join(", "))
+                write!(
+                    f,
+                    "unknown device {n:?}; known: {}",
+                    oxicat_devices::registry::names()
+                )
             }
             CliError::Device(e) => write!(f, "{e}"),
             CliError::Io(e) => write!(f, "writing the output failed: {e}"),
@@ -183,11 +162,7 @@ fn print_text(text: &str) -> Result<(), CliError> {
 
 /// The bytes `oxicat device <name> <what>` writes.
 pub fn device_output(name: &str, what: DeviceOutput) -> Result<Vec<u8>, CliError> {
-    let def = devices()
-        .into_iter()
-        .find(|d| d.0 == name)
-        .map(|d| d.1)
-        .ok_or_else(|| CliError::UnknownDevice(name.to_string()))?;
+    let def = device_def(name)?;
     let r = match what {
         DeviceOutput::Esi => oxicat_device::esi::generate(def).map(String::into_bytes),
         DeviceOutput::Sii => oxicat_device::sii::generate(def),

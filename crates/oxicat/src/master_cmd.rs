@@ -4,7 +4,7 @@
 //! on a segment served with EtherCAT over UDP `--udp host:port`, or, for tests and trying
 //! things out, on an in-process virtual segment `--sim demo:2`.
 //!
-//! `--sim` knows the devices of `oxicat sim --list` (one registry, `sim_devices`).
+//! `--sim` knows the devices of `oxicat sim --list` (one registry, `oxicat_devices::registry`).
 
 use std::io::Write;
 use std::path::PathBuf;
@@ -755,11 +755,8 @@ pub fn run(cmd: MasterCommand, out: &mut dyn Write) -> Result<(), MasterError> {
             device,
         } => {
             if let Some(d) = device {
-                let def = crate::devices()
-                    .into_iter()
-                    .find(|x| x.0 == d)
-                    .map(|x| x.1)
-                    .ok_or(MasterError::UnknownDevice(d.clone()))?;
+                let def =
+                    crate::device_def(&d).map_err(|_| MasterError::UnknownDevice(d.clone()))?;
                 let l = crate::igh_cmd::def_pdos(def);
                 let id = &def.identity;
                 let text = match rust {

@@ -34,7 +34,7 @@ use oxicat_sim::realtime::{serve, FramePort, RealtimeConfig, RealtimeStats};
 use oxicat_sim::segment::{Segment, TopologyError};
 use serde::Deserialize;
 
-use crate::sim_devices::{add_node, find_sim_device, sim_devices, NodeError};
+use oxicat_devices::registry::{add_node, NodeError};
 
 /// Most nodes on a served segment: a frame passes every ESC twice (processing on the way
 /// out, forwarding on the way back), about 1 µs per node with an ESC's ~0.5 µs delay, so
@@ -131,8 +131,11 @@ impl std::fmt::Display for SimError {
             ),
             Self::BadSpec(s) => write!(f, "{s:?} is not NAME or NAME:COUNT (e.g. demo:4)"),
             Self::UnknownDevice(n) => {
-                let names: Vec<_> = sim_devices().iter().map(|d| d.name).collect();
-                write!(f, "unknown device {n:?}; known: {}", names.join(", "))
+                write!(
+                    f,
+                    "unknown device {n:?}; known: {}",
+                    oxicat_devices::registry::names()
+                )
             }
             Self::SegmentFile(p, e) => write!(f, "cannot read {}: {e}", p.display()),
             Self::SegmentToml(p, e) => write!(f, "{}: {e}", p.display()),
@@ -321,7 +324,7 @@ pub fn build_segment_until(
     let mut seg = Segment::new();
     let mut names = Vec::new();
     for entry in &desc.devices {
-        let dev = find_sim_device(&entry.name)
+        let dev = oxicat_devices::registry::find(&entry.name)
             .ok_or_else(|| SimError::UnknownDevice(entry.name.clone()))?;
         for k in 0..entry.count {
             if stop.load(Ordering::Relaxed) {
@@ -329,7 +332,7 @@ pub fn build_segment_until(
             }
             let position = seg.len();
             let id =
-                add_node(&mut seg, &dev, k, entry.drift_ppm).map_err(|error| SimError::Node {
+                add_node(&mut seg, dev, k, entry.drift_ppm).map_err(|error| SimError::Node {
                     position,
                     device: entry.name.clone(),
                     error,
@@ -556,9 +559,7 @@ fn run_port<P: FramePort>(
 /// `oxicat sim`: lists devices, or serves until Ctrl-C.
 pub fn run(args: SimArgs) -> Result<(), SimError> {
     if args.list {
-        for d in sim_devices() {
-            println!("{:<16} {}", d.name, d.description);
-        }
+        print!("{}", crate::igh_cmd::device_list());
         return Ok(());
     }
     let _ = env_logger::Builder::from_env(env_logger::Env::default().default_filter_or("warn"))

@@ -130,11 +130,7 @@ fn wire_structs(rust: &str) -> Vec<(String, u32, u32)> {
 #[test]
 fn cstruct_rust_from_a_device_adds_up_to_its_sync_managers() {
     for name in ["demo", "cia402-joint"] {
-        let def = oxicat::devices()
-            .into_iter()
-            .find(|d| d.0 == name)
-            .unwrap()
-            .1;
+        let def = oxicat::device_def(name).unwrap();
         let rust = ok(&["cstruct", "--device", name, "--rust"]);
         let structs = wire_structs(&rust);
         assert_eq!(structs.len(), 2, "{rust}");
@@ -249,11 +245,7 @@ fn unhex(dump: &str) -> Vec<u8> {
 
 #[test]
 fn data_shows_the_process_image_of_every_slave() {
-    let def = oxicat::devices()
-        .into_iter()
-        .find(|d| d.0 == "demo")
-        .unwrap()
-        .1;
+    let def = oxicat::device_def("demo").unwrap();
     let (o, i) = (
         def.default_output_bits().div_ceil(8) as usize,
         def.default_input_bits().div_ceil(8) as usize,

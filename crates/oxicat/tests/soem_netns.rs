@@ -22,8 +22,8 @@ use std::process::Command;
 use std::sync::OnceLock;
 
 use netns_common::NetnsSim;
-use oxicat::sim_devices::{sim_devices, SimDevice};
 use oxicat_device::model::DeviceModel;
+use oxicat_devices::registry::{kits, Kit};
 use oxicat_slave::od::{DataType, DefaultValue, ObjectCode};
 use oxicat_slave::{AlState, DeviceDef, SyncMode};
 
@@ -38,11 +38,12 @@ const CYCLE_NS: u32 = 1_000_000;
 
 /// The devices to drive: every registry device, or those named (comma-separated) in
 /// `OXICAT_SOEM_DEVICES` (for looking at one device by hand).
-fn devices() -> Vec<SimDevice> {
+fn devices() -> Vec<Kit> {
     let only = std::env::var("OXICAT_SOEM_DEVICES").unwrap_or_default();
     let only: Vec<&str> = only.split(',').filter(|s| !s.is_empty()).collect();
-    sim_devices()
-        .into_iter()
+    kits()
+        .iter()
+        .copied()
         .filter(|d| only.is_empty() || only.contains(&d.name))
         .collect()
 }
@@ -157,7 +158,7 @@ fn has_dc(def: &'static DeviceDef) -> bool {
 }
 
 /// What SOEM should find on the segment `dev:NODES`, as the JSON soem_check.py reads.
-fn spec(dev: &SimDevice) -> (String, u32) {
+fn spec(dev: &Kit) -> (String, u32) {
     let mut cycle_ns = CYCLE_NS;
     let mut slaves = Vec::new();
     for k in 0..NODES {
@@ -192,7 +193,7 @@ fn spec(dev: &SimDevice) -> (String, u32) {
 }
 
 /// Serves `dev:NODES`, runs soem_check.py on it and collects its CHECK lines.
-fn drive(py: &Path, dev: &SimDevice, results: &mut Results) {
+fn drive(py: &Path, dev: &Kit, results: &mut Results) {
     let segment = format!("{}:{NODES}", dev.name);
     let bench = NetnsSim::start(&[&segment]).expect("root was checked before");
     let (spec, _) = spec(dev);

@@ -848,3 +848,17 @@ fn set_outputs(o: &mut [u8], v: [u16; 4]) {
 pub fn sensor_resolution(hub: &HubHandle, i: usize) -> Option<onewire::Resolution> {
     hub.lock().fw.app.temp.resolution(i)
 }
+
+/// The axis communication hub in the registry.
+pub const KIT: crate::registry::Kit = crate::registry::Kit {
+    name: "axis-hub",
+    description: "axis communication hub (LAN9252): 15 DS18B20 on 1-Wire in motor housings, \
+                  WS2812 LED rings, status/event/error objects",
+    def: |_| &crate::axis_hub::device::DEF,
+    esc: EscConfig::lan9252,
+    attach: |segment, id, _k| {
+        attach_hub(segment, id, &HubConfig::default())
+            .map(drop)
+            .map_err(oxicat_sim::firmware::AttachError::Topology)
+    },
+};

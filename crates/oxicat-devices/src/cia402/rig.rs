@@ -247,3 +247,14 @@ impl JointBench {
         self.od.get::<i32>(0x6064, 0).unwrap_or(0)
     }
 }
+
+/// The CiA402 joint drive in the registry.
+pub const KIT: crate::registry::Kit = crate::registry::Kit {
+    name: "cia402-joint",
+    description: "CiA402 joint drive (ET1100) on a BLDC joint with a compliant harmonic \
+                  gear, joint torque sensor, encoder with index, home switch \
+                  (PP/PV/PT/HM/CSP/CSV/CST)",
+    def: |_| &crate::cia402::DEF,
+    esc: oxicat_esc::EscConfig::et1100,
+    attach: |segment, id, _k| attach(segment, id, BldcJointParams::default()).map(drop),
+};

@@ -813,6 +813,27 @@ pub fn attach_leg_with<P: PdiPath>(
     Ok(LegRigHandle(inner))
 }
 
+/// The Laelaps II leg node in the registry.
+pub const KIT: crate::registry::Kit = crate::registry::Kit {
+    name: "laelaps-leg",
+    description: "Laelaps II leg node (F28379D + FB1111) driving its leg on the treadmill \
+                  (motors, gears, coupler, encoders); nodes in tower order HR HL FL FR, \
+                  each driving the opposite leg",
+    def: |k| crate::laelaps::device::device(kit_leg(k).side()),
+    esc: oxicat_esc::EscConfig::et1100,
+    attach: kit_attach,
+};
+
+/// The leg driven by registry node `k` (the thesis' chain order, repeating).
+fn kit_leg(k: usize) -> LegId {
+    chain_legs()[k % 4]
+}
+
+fn kit_attach(segment: &mut Segment, id: SlaveId, k: usize) -> Result<(), RigError> {
+    let leg = kit_leg(k);
+    attach_leg(segment, id, leg, RigConfig::laelaps(leg)).map(drop)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -322,3 +322,13 @@ pub fn attach(
         .map_err(AttachError::Topology)?;
     Ok(TueHandle(inner))
 }
+
+/// The TUeES030 board in the registry.
+pub const KIT: crate::registry::Kit = crate::registry::Kit {
+    name: "tue-es030",
+    description: "TUeES030 motor I/O board (ET1200) with three Maxon RE 30 motors on its \
+                  bridges (current loops, encoders, line voltage; normal/FRF PDO modes)",
+    def: |_| &crate::tue_es030::device::DEF,
+    esc: oxicat_esc::EscConfig::et1200,
+    attach: |segment, id, _k| attach(segment, id, &TueConfig::default()).map(drop),
+};

@@ -136,6 +136,10 @@ demo_device! {
     extra_rx: {}
 }
 
+/// The board on the virtual segment and its FoE files (feature `bench`).
+#[cfg(feature = "bench")]
+pub mod rig;
+
 /// The thesis' section 6.7 change: record "Additions" 0x7030 with two INT16 outputs
 /// (`Out1`, `Out2`) in RxPDO 0x1603. The whole change is the one `extra_rx` line below;
 /// OD, PDO assignment, SM2 size, ESI and SII all follow.

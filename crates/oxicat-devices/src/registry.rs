@@ -1,0 +1,104 @@
+//! The one registry of devices (feature `bench`): every verb of the CLI (`device`, `device
+//! list`, `sim`, `sim --list`, `--sim`, `sii-write --device`, `fw-image`, `cstruct
+//! --device`) and every test that walks "all devices" reads [`kits`].
+//!
+//! Adding a device: its kit folder (firmware, definition, `rig.rs` with a [`Kit`] constant)
+//! and one line in [`KITS`]. README section "Add a device" has the recipe.
+
+use oxicat_esc::{Esc, EscConfig};
+use oxicat_sim::firmware::AttachError;
+use oxicat_sim::segment::{Segment, SlaveId};
+use oxicat_slave::DeviceDef;
+
+/// Boots a device's firmware (and its plant) on ESC `id` of the segment; `k` is the node's
+/// number among the devices of its kind (0, 1, …) for per-node differences (button
+/// patterns, which leg a Laelaps node drives).
+pub type AttachFn = fn(segment: &mut Segment, id: SlaveId, k: usize) -> Result<(), AttachError>;
+
+/// One device as every verb sees it.
+#[derive(Clone, Copy)]
+pub struct Kit {
+    /// Name on the command line (`demo:4`, `oxicat device demo esi`).
+    pub name: &'static str,
+    /// One line for `oxicat device list` and `oxicat sim --list`.
+    pub description: &'static str,
+    /// The device definition of node `k` (ESI, SII and OD are generated from it; `device`
+    /// uses node 0's).
+    pub def: fn(k: usize) -> &'static DeviceDef,
+    /// The ESC chip the board carries.
+    pub esc: fn() -> EscConfig,
+    /// Boots the firmware with its plant.
+    pub attach: AttachFn,
+}
+
+impl core::fmt::Debug for Kit {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        f.debug_struct("Kit")
+            .field("name", &self.name)
+            .finish_non_exhaustive()
+    }
+}
+
+/// Every device, one line each.
+pub static KITS: &[Kit] = &[
+    crate::demo::rig::KIT,
+    crate::demo::rig::ADDITIONS_KIT,
+    crate::laelaps::rig::KIT,
+    crate::tue_es030::rig::KIT,
+    crate::axis_hub::rig::KIT,
+    crate::cia402::rig::KIT,
+    #[cfg(feature = "toy")]
+    crate::toy::rig::KIT,
+];
+
+/// Every device, in registry order.
+pub fn kits() -> &'static [Kit] {
+    KITS
+}
+
+/// The device called `name`.
+pub fn find(name: &str) -> Option<&'static Kit> {
+    KITS.iter().find(|k| k.name == name)
+}
+
+/// The names of every device, comma-separated (for "unknown device" messages).
+pub fn names() -> String {
+    KITS.iter().map(|k| k.name).collect::<Vec<_>>().join(", ")
+}
+
+/// Why a node could not be put on the segment.
+#[derive(Debug)]
+pub enum NodeError {
+    /// The SII image could not be generated from the definition.
+    Sii(oxicat_device::Error),
+    /// The firmware did not boot.
+    Attach(AttachError),
+}
+
+impl core::fmt::Display for NodeError {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        match self {
+            Self::Sii(e) => write!(f, "SII image: {e}"),
+            Self::Attach(e) => write!(f, "firmware: {e}"),
+        }
+    }
+}
+
+impl std::error::Error for NodeError {}
+
+/// Adds node `k` of `kit` at the end of the segment's line, with its oscillator off by
+/// `drift_ppm`, and boots its firmware; returns its index.
+pub fn add_node(
+    segment: &mut Segment,
+    kit: &Kit,
+    k: usize,
+    drift_ppm: f64,
+) -> Result<SlaveId, NodeError> {
+    let def = (kit.def)(k);
+    let sii = oxicat_device::sii::generate(def).map_err(NodeError::Sii)?;
+    let mut cfg = (kit.esc)();
+    cfg.clock.drift_ppm = drift_ppm;
+    let id = segment.add(Esc::new(cfg, sii));
+    (kit.attach)(segment, id, k).map_err(NodeError::Attach)?;
+    Ok(id)
+}

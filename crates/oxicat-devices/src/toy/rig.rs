@@ -1,0 +1,23 @@
+//! The toy on the virtual segment: an ET1100, no plant.
+
+use oxicat_sim::firmware::{attach_firmware, FirmwareConfig};
+
+use crate::registry::Kit;
+
+/// The toy in the registry.
+pub const KIT: Kit = Kit {
+    name: "toy",
+    description: "test-only toy device (README \"Add a device\"): Echo = Value + 1",
+    def: |_| &super::DEF,
+    esc: oxicat_esc::EscConfig::et1100,
+    attach: |segment, id, _k| {
+        attach_firmware::<_, { super::IMAGE }, 128>(
+            segment,
+            id,
+            &super::DEF,
+            super::Toy::default(),
+            &FirmwareConfig::default(),
+        )
+        .map(drop)
+    },
+};
