@@ -345,8 +345,12 @@ pub fn compare(a: &DeviceModel, b: &DeviceModel) -> Vec<Finding> {
             });
         }
     }
-    for (index, l) in &a.id_strings {
-        if let Some((_, r)) = b.id_strings.iter().find(|(i, _)| i == index) {
+    // The k-th string of an index on one side against the k-th of that index on the other
+    // (an image may list an index twice; matching each with the first on the other side
+    // made a model differ from itself).
+    for (k, (index, l)) in a.id_strings.iter().enumerate() {
+        let nth = a.id_strings[..k].iter().filter(|(i, _)| i == index).count();
+        if let Some((_, r)) = b.id_strings.iter().filter(|(i, _)| i == index).nth(nth) {
             let field = match index {
                 0x1008 => "0x1008",
                 0x1009 => "0x1009",
