@@ -7,13 +7,16 @@
 
 use oxicat_esc::{Esc, EscConfig};
 use oxicat_sim::firmware::AttachError;
+use oxicat_sim::pdi_path::PdiRoute;
 use oxicat_sim::segment::{Segment, SlaveId};
-use oxicat_slave::DeviceDef;
+use oxicat_slave::{DeviceDef, SyncMode};
 
 /// Boots a device's firmware (and its plant) on ESC `id` of the segment; `k` is the node's
 /// number among the devices of its kind (0, 1, …) for per-node differences (button
-/// patterns, which leg a Laelaps node drives).
-pub type AttachFn = fn(segment: &mut Segment, id: SlaveId, k: usize) -> Result<(), AttachError>;
+/// patterns, which leg a Laelaps node drives); `route` is how the firmware reaches its ESC
+/// (the software ESC directly, or a LAN9252 / ET1100 chip driver over the simulated SPI).
+pub type AttachFn =
+    fn(segment: &mut Segment, id: SlaveId, k: usize, route: PdiRoute) -> Result<(), AttachError>;
 
 /// One device as every verb sees it.
 #[derive(Clone, Copy)]
@@ -29,6 +32,10 @@ pub struct Kit {
     pub esc: fn() -> EscConfig,
     /// Boots the firmware with its plant.
     pub attach: AttachFn,
+    /// How the device's bench runs it: the sync mode (free run, SM-synchronous, DC) …
+    pub sync: SyncMode,
+    /// … and the cycle time in ns.
+    pub cycle_ns: u32,
 }
 
 impl core::fmt::Debug for Kit {
@@ -87,18 +94,29 @@ impl core::fmt::Display for NodeError {
 impl std::error::Error for NodeError {}
 
 /// Adds node `k` of `kit` at the end of the segment's line, with its oscillator off by
-/// `drift_ppm`, and boots its firmware; returns its index.
+/// `drift_ppm`, and boots its firmware on the software ESC directly; returns its index.
 pub fn add_node(
     segment: &mut Segment,
     kit: &Kit,
     k: usize,
     drift_ppm: f64,
 ) -> Result<SlaveId, NodeError> {
+    add_node_via(segment, kit, k, drift_ppm, PdiRoute::Direct)
+}
+
+/// [`add_node`] with the firmware reaching its ESC through `route`.
+pub fn add_node_via(
+    segment: &mut Segment,
+    kit: &Kit,
+    k: usize,
+    drift_ppm: f64,
+    route: PdiRoute,
+) -> Result<SlaveId, NodeError> {
     let def = (kit.def)(k);
     let sii = oxicat_device::sii::generate(def).map_err(NodeError::Sii)?;
     let mut cfg = (kit.esc)();
     cfg.clock.drift_ppm = drift_ppm;
     let id = segment.add(Esc::new(cfg, sii));
-    (kit.attach)(segment, id, k).map_err(NodeError::Attach)?;
+    (kit.attach)(segment, id, k, route).map_err(NodeError::Attach)?;
     Ok(id)
 }

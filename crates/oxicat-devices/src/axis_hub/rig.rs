@@ -29,7 +29,9 @@ use oxicat_plant::thermal::{Mount, TempSensor, ThermalNet, ThermalNode};
 use oxicat_plant::ws2812::{decode, Decoded};
 
 use oxicat_master::inprocess::{spawn_inprocess_with, InProcessConfig};
+use oxicat_sim::firmware::AttachError;
 use oxicat_sim::node::{EscEvent, Node};
+use oxicat_sim::pdi_path::{Direct, PdiPath, PdiRoute, SpiPath};
 use oxicat_sim::segment::{Segment, SlaveId, TopologyError};
 
 /// The firmware's 1-Wire bus on the plant's bus model (slots never fail here).
@@ -80,8 +82,9 @@ impl LedStrip for SimLeds {
     }
 }
 
-/// The hub firmware on a software ESC with the simulated hardware.
-pub type HubFw = HubFirmware<Esc, SimOneWire, SimLeds>;
+/// The hub firmware on the `Pdi` of path `P` (the software ESC by default) with the
+/// simulated hardware.
+pub type HubFw<P = Direct> = HubFirmware<<P as PdiPath>::Pdi, SimOneWire, SimLeds>;
 
 /// Plant set-up of a hub.
 #[derive(Debug, Clone, PartialEq)]
@@ -121,10 +124,12 @@ pub fn hub_esc(sii: Vec<u8>) -> Esc {
     Esc::new(EscConfig::lan9252(), sii)
 }
 
-/// One hub: firmware and plant.
-pub struct HubRig {
+/// One hub: firmware and plant, the firmware reaching its ESC through `P`.
+pub struct HubRig<P: PdiPath = Direct> {
+    /// How the firmware reaches its ESC.
+    pub path: P,
     /// The firmware.
-    pub fw: HubFw,
+    pub fw: HubFw<P>,
     /// Thermal nodes.
     pub thermal: ThermalNet,
     /// Sensor models, one per DS18B20 on the bus (same order).
@@ -139,7 +144,7 @@ pub struct HubRig {
 /// The MCU's idle loop: `HubFirmware::poll` (ESM, mailbox) every 1 ms between the tasks.
 pub const IDLE_POLL_NS: u64 = 1_000_000;
 
-impl HubRig {
+impl<P: PdiPath> HubRig<P> {
     fn catch_up(&mut self, t: u64) {
         if t > self.plant_ns {
             self.thermal.advance((t - self.plant_ns) as f64 * 1e-9);
@@ -156,7 +161,8 @@ impl HubRig {
 
     fn wakeup(&mut self, esc: &mut Esc, t: u64) {
         if self.next_idle <= t {
-            self.fw.poll(esc);
+            let Self { path, fw, .. } = self;
+            path.with_pdi(esc, |pdi| fw.poll(pdi));
             while self.next_idle <= t {
                 self.next_idle += IDLE_POLL_NS;
             }
@@ -167,7 +173,8 @@ impl HubRig {
         self.catch_up(t);
         for (k, task) in TASKS.iter().enumerate() {
             if self.next[k] <= t {
-                self.fw.on_timer(task.id, esc);
+                let Self { path, fw, .. } = self;
+                path.with_pdi(esc, |pdi| fw.on_timer(task.id, pdi));
                 self.releases += 1;
                 while self.next[k] <= t {
                     self.next[k] += task.period_ns;
@@ -177,10 +184,11 @@ impl HubRig {
     }
 
     fn event(&mut self, esc: &mut Esc, ev: EscEvent) {
+        let Self { path, fw, .. } = self;
         match ev {
-            EscEvent::Irq => self.fw.on_pdi_irq(esc),
-            EscEvent::Sync0 => self.fw.on_sync0(esc),
-            EscEvent::Sync1 => self.fw.on_sync1(esc),
+            EscEvent::Irq => path.with_pdi(esc, |pdi| fw.on_pdi_irq(pdi)),
+            EscEvent::Sync0 => path.with_pdi(esc, |pdi| fw.on_sync0(pdi)),
+            EscEvent::Sync1 => path.with_pdi(esc, |pdi| fw.on_sync1(pdi)),
             EscEvent::PdWatchdog | EscEvent::PdiWatchdog => {}
         }
     }
@@ -221,20 +229,25 @@ impl HubRig {
 }
 
 /// Access to a hub from outside the segment.
-#[derive(Clone)]
-pub struct HubHandle(Arc<Mutex<HubRig>>);
+pub struct HubHandle<P: PdiPath = Direct>(Arc<Mutex<HubRig<P>>>);
 
-impl HubHandle {
+impl<P: PdiPath> Clone for HubHandle<P> {
+    fn clone(&self) -> Self {
+        Self(self.0.clone())
+    }
+}
+
+impl<P: PdiPath> HubHandle<P> {
     /// Locks the hub (do not hold it while the segment runs).
-    pub fn lock(&self) -> MutexGuard<'_, HubRig> {
+    pub fn lock(&self) -> MutexGuard<'_, HubRig<P>> {
         self.0.lock().unwrap_or_else(|e| e.into_inner())
     }
 }
 
 /// The [`Node`] of a hub on its ESC.
-pub struct HubRigNode(Arc<Mutex<HubRig>>);
+pub struct HubRigNode<P: PdiPath = Direct>(Arc<Mutex<HubRig<P>>>);
 
-impl Node<Esc> for HubRigNode {
+impl<P: PdiPath> Node<Esc> for HubRigNode<P> {
     fn on_event(&mut self, esc: &mut Esc, ev: EscEvent, _t: u64) {
         self.0
             .lock()
@@ -261,8 +274,35 @@ pub fn attach_hub(
     id: SlaveId,
     config: &HubConfig,
 ) -> Result<HubHandle, TopologyError> {
+    attach_hub_with(segment, id, config, |_| Ok(Direct)).map_err(|e| match e {
+        AttachError::Topology(t) => t,
+        // The direct path cannot fail to start.
+        _ => TopologyError::NoSuchSlave(id),
+    })
+}
+
+/// [`attach_hub`] with the firmware reaching its ESC through the chip driver of `route`
+/// over the simulated SPI (`PdiRoute::Direct` is refused: use [`attach_hub`]).
+pub fn attach_hub_via(
+    segment: &mut Segment,
+    id: SlaveId,
+    config: &HubConfig,
+    route: PdiRoute,
+) -> Result<HubHandle<SpiPath>, AttachError> {
+    attach_hub_with(segment, id, config, |esc| SpiPath::new(route, esc))
+}
+
+fn attach_hub_with<P: PdiPath>(
+    segment: &mut Segment,
+    id: SlaveId,
+    config: &HubConfig,
+    path: impl FnOnce(&mut Esc) -> Result<P, oxicat_sim::pdi_path::PathInitError>,
+) -> Result<HubHandle<P>, AttachError> {
     let now = segment.now();
-    let esc = segment.esc_mut(id).ok_or(TopologyError::NoSuchSlave(id))?;
+    let esc = segment
+        .esc_mut(id)
+        .ok_or(AttachError::Topology(TopologyError::NoSuchSlave(id)))?;
+    let mut path = path(esc)?;
     let (r, rth, tau) = config.motor_params;
     let nodes = (0..config.motors)
         .map(|_| ThermalNode::motor(config.ambient, r, rth, tau))
@@ -289,12 +329,15 @@ pub fn attach_hub(
             ))
         })
         .collect();
-    let fw = HubFirmware::new(
-        esc,
-        SimOneWire(OneWireNet::new(devices)),
-        SimLeds::default(),
-    );
+    let fw = path.with_pdi(esc, |pdi| {
+        HubFirmware::new(
+            pdi,
+            SimOneWire(OneWireNet::new(devices)),
+            SimLeds::default(),
+        )
+    });
     let rig = HubRig {
+        path,
         fw,
         thermal,
         sensors,
@@ -304,7 +347,9 @@ pub fn attach_hub(
         plant_ns: now,
     };
     let inner = Arc::new(Mutex::new(rig));
-    segment.attach(id, Box::new(HubRigNode(inner.clone())))?;
+    segment
+        .attach(id, Box::new(HubRigNode(inner.clone())))
+        .map_err(AttachError::Topology)?;
     Ok(HubHandle(inner))
 }
 
@@ -856,9 +901,12 @@ pub const KIT: crate::registry::Kit = crate::registry::Kit {
                   WS2812 LED rings, status/event/error objects",
     def: |_| &crate::axis_hub::device::DEF,
     esc: EscConfig::lan9252,
-    attach: |segment, id, _k| {
-        attach_hub(segment, id, &HubConfig::default())
+    attach: |segment, id, _k, route| match route {
+        PdiRoute::Direct => attach_hub(segment, id, &HubConfig::default())
             .map(drop)
-            .map_err(oxicat_sim::firmware::AttachError::Topology)
+            .map_err(AttachError::Topology),
+        route => attach_hub_via(segment, id, &HubConfig::default(), route).map(drop),
     },
+    sync: oxicat_slave::SyncMode::DcSync0,
+    cycle_ns: 1_000_000,
 };

@@ -20,18 +20,19 @@
 use std::sync::{Arc, Mutex, MutexGuard};
 
 use crate::cia402::{device, Cia402Drive, DriveParams, JointHw, CURRENT_LOOP_TIMER};
-use oxicat_esc::{Esc, PdiError};
+use oxicat_esc::Esc;
 pub use oxicat_plant::bldc_joint::{BldcJoint, BldcJointParams};
 use oxicat_slave::{Od, Slave};
 
 use oxicat_sim::firmware::AttachError;
 use oxicat_sim::node::{EscEvent, Node};
+use oxicat_sim::pdi_path::{Direct, PdiPath, PdiRoute, SpiPath};
 use oxicat_sim::segment::{Segment, SlaveId, TopologyError};
 
 /// Mailbox size of the drive (its definition: 128 bytes).
 pub const MBX: usize = 128;
-/// The drive's stack on a software ESC.
-pub type JointSlave = Slave<Esc, { device::IMAGE }, MBX>;
+/// The drive's stack on the firmware's `Pdi` of path `P` (the software ESC by default).
+pub type JointSlave<P = Direct> = Slave<<P as PdiPath>::Pdi, { device::IMAGE }, MBX>;
 /// The drive firmware on the joint.
 pub type JointApp = Cia402Drive<JointBoard>;
 
@@ -96,10 +97,12 @@ pub struct JointCounters {
     pub emergencies: u64,
 }
 
-/// The drive: stack, firmware and plant.
-pub struct JointDrive {
+/// The drive: stack, firmware and plant, reaching its ESC through `P`.
+pub struct JointDrive<P: PdiPath = Direct> {
+    /// How the firmware reaches its ESC.
+    pub path: P,
     /// The slave stack.
-    pub slave: JointSlave,
+    pub slave: JointSlave<P>,
     /// The firmware (its `hw.joint` is the plant).
     pub app: JointApp,
     /// What ran.
@@ -107,8 +110,8 @@ pub struct JointDrive {
     next_tick: u64,
 }
 
-impl JointDrive {
-    fn note(&mut self, r: Result<(), PdiError>) {
+impl<P: PdiPath> JointDrive<P> {
+    fn note<E>(&mut self, r: Result<(), E>) {
         if r.is_err() {
             self.counters.pdi_errors += 1;
         }
@@ -123,33 +126,43 @@ impl JointDrive {
         self.app.hw.joint.step(TICK_NS as f64 * 1e-9);
         self.slave.on_timer(CURRENT_LOOP_TIMER, &mut self.app);
         self.counters.ticks += 1;
-        let r = self.slave.poll(esc, &mut self.app);
+        let Self {
+            path, slave, app, ..
+        } = self;
+        let r = path.with_pdi(esc, |pdi| slave.poll(pdi, app));
         self.note(r);
     }
 }
 
 /// Access to the drive from outside the segment.
-#[derive(Clone)]
-pub struct JointHandle(Arc<Mutex<JointDrive>>);
+pub struct JointHandle<P: PdiPath = Direct>(Arc<Mutex<JointDrive<P>>>);
 
-impl JointHandle {
+impl<P: PdiPath> Clone for JointHandle<P> {
+    fn clone(&self) -> Self {
+        Self(self.0.clone())
+    }
+}
+
+impl<P: PdiPath> JointHandle<P> {
     /// Locks the drive (do not hold it while the segment runs).
-    pub fn lock(&self) -> MutexGuard<'_, JointDrive> {
+    pub fn lock(&self) -> MutexGuard<'_, JointDrive<P>> {
         self.0.lock().unwrap_or_else(|e| e.into_inner())
     }
 }
 
 /// The drive as a segment node.
-pub struct JointNode(Arc<Mutex<JointDrive>>);
+pub struct JointNode<P: PdiPath = Direct>(Arc<Mutex<JointDrive<P>>>);
 
-impl Node<Esc> for JointNode {
+impl<P: PdiPath> Node<Esc> for JointNode<P> {
     fn on_event(&mut self, esc: &mut Esc, ev: EscEvent, _t: u64) {
         let mut b = self.0.lock().unwrap_or_else(|e| e.into_inner());
-        let JointDrive { slave, app, .. } = &mut *b;
+        let JointDrive {
+            path, slave, app, ..
+        } = &mut *b;
         let r = match ev {
-            EscEvent::Irq => slave.on_pdi_irq(esc, app),
-            EscEvent::Sync0 => slave.on_sync0(esc, app),
-            EscEvent::Sync1 => slave.on_sync1(esc, app),
+            EscEvent::Irq => path.with_pdi(esc, |pdi| slave.on_pdi_irq(pdi, app)),
+            EscEvent::Sync0 => path.with_pdi(esc, |pdi| slave.on_sync0(pdi, app)),
+            EscEvent::Sync1 => path.with_pdi(esc, |pdi| slave.on_sync1(pdi, app)),
             EscEvent::PdWatchdog | EscEvent::PdiWatchdog => Ok(()),
         };
         b.note(r);
@@ -175,12 +188,36 @@ pub fn attach(
     id: SlaveId,
     params: BldcJointParams,
 ) -> Result<JointHandle, AttachError> {
+    attach_with(segment, id, params, |_| Ok(Direct))
+}
+
+/// [`attach`] with the firmware reaching its ESC through the chip driver of `route` over
+/// the simulated SPI (`PdiRoute::Direct` is refused: use [`attach`]).
+pub fn attach_via(
+    segment: &mut Segment,
+    id: SlaveId,
+    params: BldcJointParams,
+    route: PdiRoute,
+) -> Result<JointHandle<SpiPath>, AttachError> {
+    attach_with(segment, id, params, |esc| SpiPath::new(route, esc))
+}
+
+fn attach_with<P: PdiPath>(
+    segment: &mut Segment,
+    id: SlaveId,
+    params: BldcJointParams,
+    path: impl FnOnce(&mut Esc) -> Result<P, oxicat_sim::pdi_path::PathInitError>,
+) -> Result<JointHandle<P>, AttachError> {
     let now = segment.now();
     let esc = segment
         .esc_mut(id)
         .ok_or(AttachError::Topology(TopologyError::NoSuchSlave(id)))?;
-    let slave = JointSlave::new(&device::DEF, esc).map_err(AttachError::Init)?;
+    let mut path = path(esc)?;
+    let slave = path
+        .with_pdi(esc, |pdi| JointSlave::<P>::new(&device::DEF, pdi))
+        .map_err(|e| AttachError::from(P::init_error(e)))?;
     let drive = JointDrive {
+        path,
         slave,
         app: new_app(params),
         counters: JointCounters::default(),
@@ -256,5 +293,10 @@ pub const KIT: crate::registry::Kit = crate::registry::Kit {
                   (PP/PV/PT/HM/CSP/CSV/CST)",
     def: |_| &crate::cia402::DEF,
     esc: oxicat_esc::EscConfig::et1100,
-    attach: |segment, id, _k| attach(segment, id, BldcJointParams::default()).map(drop),
+    attach: |segment, id, _k, route| match route {
+        PdiRoute::Direct => attach(segment, id, BldcJointParams::default()).map(drop),
+        route => attach_via(segment, id, BldcJointParams::default(), route).map(drop),
+    },
+    sync: oxicat_slave::SyncMode::DcSync0,
+    cycle_ns: 1_000_000,
 };

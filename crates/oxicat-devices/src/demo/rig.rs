@@ -3,7 +3,8 @@
 //! RAM, the factory image bootable, `firmware.bin` writable in BOOT, `version.txt` readable.
 
 use oxicat_esc::EscConfig;
-use oxicat_sim::firmware::{attach_firmware, AttachError, FirmwareConfig};
+use oxicat_sim::firmware::{attach_firmware, attach_firmware_via, AttachError, FirmwareConfig};
+use oxicat_sim::pdi_path::PdiRoute;
 use oxicat_sim::segment::{Segment, SlaveId};
 use oxicat_slave::foe::{FirmwareUpdate, RamStore, UpdateConfig, WithFoe};
 use oxicat_slave::DeviceDef;
@@ -19,6 +20,8 @@ pub const KIT: Kit = Kit {
     def: |_| &super::DEF,
     esc: EscConfig::et1100,
     attach,
+    sync: oxicat_slave::SyncMode::FreeRun,
+    cycle_ns: 1_000_000,
 };
 
 /// The demo with the thesis' section 6.7 change in the registry.
@@ -28,6 +31,8 @@ pub const ADDITIONS_KIT: Kit = Kit {
     def: |_| &super::additions::DEF,
     esc: EscConfig::et1100,
     attach: attach_additions,
+    sync: oxicat_slave::SyncMode::FreeRun,
+    cycle_ns: 1_000_000,
 };
 
 /// Mailbox size of the demo device.
@@ -82,32 +87,40 @@ fn app(k: usize) -> Demo<LogLeds, FixedButtons> {
     Demo::new(LogLeds(k, None), FixedButtons(0xA0 | (k as u8 & 0x0F)))
 }
 
-/// Boots demo node `k` on ESC `id`.
-pub fn attach(segment: &mut Segment, id: SlaveId, k: usize) -> Result<(), AttachError> {
-    attach_firmware::<_, { super::IMAGE }, MBX>(
-        segment,
-        id,
-        &super::DEF,
-        WithFoe {
-            app: app(k),
-            files: files(&super::DEF),
-        },
-        &FirmwareConfig::default(),
-    )
-    .map(drop)
+/// Boots demo node `k` on ESC `id`, the firmware reaching it through `route`.
+pub fn attach(
+    segment: &mut Segment,
+    id: SlaveId,
+    k: usize,
+    route: PdiRoute,
+) -> Result<(), AttachError> {
+    boot::<{ super::IMAGE }>(segment, id, &super::DEF, k, route)
 }
 
-/// Boots demo-additions node `k` on ESC `id`.
-pub fn attach_additions(segment: &mut Segment, id: SlaveId, k: usize) -> Result<(), AttachError> {
-    attach_firmware::<_, { super::additions::IMAGE }, MBX>(
-        segment,
-        id,
-        &super::additions::DEF,
-        WithFoe {
-            app: app(k),
-            files: files(&super::additions::DEF),
-        },
-        &FirmwareConfig::default(),
-    )
-    .map(drop)
+/// Boots demo-additions node `k` on ESC `id`, the firmware reaching it through `route`.
+pub fn attach_additions(
+    segment: &mut Segment,
+    id: SlaveId,
+    k: usize,
+    route: PdiRoute,
+) -> Result<(), AttachError> {
+    boot::<{ super::additions::IMAGE }>(segment, id, &super::additions::DEF, k, route)
+}
+
+fn boot<const N: usize>(
+    segment: &mut Segment,
+    id: SlaveId,
+    def: &'static DeviceDef,
+    k: usize,
+    route: PdiRoute,
+) -> Result<(), AttachError> {
+    let app = WithFoe {
+        app: app(k),
+        files: files(def),
+    };
+    let cfg = FirmwareConfig::default();
+    match route {
+        PdiRoute::Direct => attach_firmware::<_, N, MBX>(segment, id, def, app, &cfg).map(drop),
+        route => attach_firmware_via::<_, N, MBX>(segment, id, def, app, &cfg, route).map(drop),
+    }
 }

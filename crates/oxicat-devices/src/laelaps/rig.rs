@@ -822,6 +822,8 @@ pub const KIT: crate::registry::Kit = crate::registry::Kit {
     def: |k| crate::laelaps::device::device(kit_leg(k).side()),
     esc: oxicat_esc::EscConfig::et1100,
     attach: kit_attach,
+    sync: oxicat_slave::SyncMode::DcSync0,
+    cycle_ns: 400_000,
 };
 
 /// The leg driven by registry node `k` (the thesis' chain order, repeating).
@@ -829,9 +831,14 @@ fn kit_leg(k: usize) -> LegId {
     chain_legs()[k % 4]
 }
 
-fn kit_attach(segment: &mut Segment, id: SlaveId, k: usize) -> Result<(), RigError> {
+fn kit_attach(
+    segment: &mut Segment,
+    id: SlaveId,
+    k: usize,
+    route: PdiRoute,
+) -> Result<(), RigError> {
     let leg = kit_leg(k);
-    attach_leg(segment, id, leg, RigConfig::laelaps(leg)).map(drop)
+    attach_leg_routed(segment, id, leg, RigConfig::laelaps(leg), route).map(drop)
 }
 
 #[cfg(test)]

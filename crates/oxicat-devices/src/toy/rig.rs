@@ -1,6 +1,7 @@
 //! The toy on the virtual segment: an ET1100, no plant.
 
-use oxicat_sim::firmware::{attach_firmware, FirmwareConfig};
+use oxicat_sim::firmware::{attach_firmware, attach_firmware_via, FirmwareConfig};
+use oxicat_sim::pdi_path::PdiRoute;
 
 use crate::registry::Kit;
 
@@ -10,14 +11,25 @@ pub const KIT: Kit = Kit {
     description: "test-only toy device (README \"Add a device\"): Echo = Value + 1",
     def: |_| &super::DEF,
     esc: oxicat_esc::EscConfig::et1100,
-    attach: |segment, id, _k| {
-        attach_firmware::<_, { super::IMAGE }, 128>(
+    attach: |segment, id, _k, route| match route {
+        PdiRoute::Direct => attach_firmware::<_, { super::IMAGE }, 128>(
             segment,
             id,
             &super::DEF,
             super::Toy::default(),
             &FirmwareConfig::default(),
         )
-        .map(drop)
+        .map(drop),
+        route => attach_firmware_via::<_, { super::IMAGE }, 128>(
+            segment,
+            id,
+            &super::DEF,
+            super::Toy::default(),
+            &FirmwareConfig::default(),
+            route,
+        )
+        .map(drop),
     },
+    sync: oxicat_slave::SyncMode::FreeRun,
+    cycle_ns: 1_000_000,
 };

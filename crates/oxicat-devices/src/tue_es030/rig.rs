@@ -18,18 +18,19 @@ use std::sync::{Arc, Mutex, MutexGuard};
 use crate::tue_es030::{
     self, control, device, Adcs, Bridges, Encoders, Io, TuEs030, CURRENT_TIMER, SERVICE_TIMER,
 };
-use oxicat_esc::{Esc, PdiError};
+use oxicat_esc::Esc;
 use oxicat_plant::re30::{BridgeCommand, Re30Drive, Re30Params};
 use oxicat_slave::Slave;
 
 use oxicat_sim::firmware::AttachError;
 use oxicat_sim::node::{EscEvent, Node};
+use oxicat_sim::pdi_path::{Direct, PdiPath, PdiRoute, SpiPath};
 use oxicat_sim::segment::{Segment, SlaveId, TopologyError};
 
 /// Mailbox size of the board (its definition: 128 bytes).
 pub const MBX: usize = 128;
-/// The board's stack on a software ESC.
-pub type TueSlave = Slave<Esc, { device::IMAGE }, MBX>;
+/// The board's stack on the firmware's `Pdi` of path `P` (the software ESC by default).
+pub type TueSlave<P = Direct> = Slave<<P as PdiPath>::Pdi, { device::IMAGE }, MBX>;
 /// The firmware on the bench hardware.
 pub type TueApp = TuEs030<BenchBoard>;
 
@@ -187,10 +188,12 @@ pub struct TueCounters {
     pub pdi_errors: u64,
 }
 
-/// The board: stack, firmware and plant.
-pub struct TueBoard {
+/// The board: stack, firmware and plant, reaching its ESC through `P`.
+pub struct TueBoard<P: PdiPath = Direct> {
+    /// How the firmware reaches its ESC.
+    pub path: P,
     /// The slave stack.
-    pub slave: TueSlave,
+    pub slave: TueSlave<P>,
     /// The firmware (its `board` holds the plant).
     pub app: TueApp,
     /// What ran.
@@ -200,8 +203,8 @@ pub struct TueBoard {
     plant_ns: u64,
 }
 
-impl TueBoard {
-    fn note(&mut self, r: Result<(), PdiError>) {
+impl<P: PdiPath> TueBoard<P> {
+    fn note<E>(&mut self, r: Result<(), E>) {
         if r.is_err() {
             self.counters.pdi_errors += 1;
         }
@@ -235,47 +238,49 @@ impl TueBoard {
         }
         self.slave.on_timer(CURRENT_TIMER, &mut self.app);
         self.counters.ticks += 1;
-        let r = self.slave.poll(esc, &mut self.app);
+        let Self {
+            path, slave, app, ..
+        } = self;
+        let r = path.with_pdi(esc, |pdi| slave.poll(pdi, app));
         self.note(r);
     }
 }
 
 /// Access to the board from outside the segment.
-#[derive(Clone)]
-pub struct TueHandle(Arc<Mutex<TueBoard>>);
+pub struct TueHandle<P: PdiPath = Direct>(Arc<Mutex<TueBoard<P>>>);
 
-impl TueHandle {
+impl<P: PdiPath> Clone for TueHandle<P> {
+    fn clone(&self) -> Self {
+        Self(self.0.clone())
+    }
+}
+
+impl<P: PdiPath> TueHandle<P> {
     /// Locks the board (do not hold it while the segment runs).
-    pub fn lock(&self) -> MutexGuard<'_, TueBoard> {
+    pub fn lock(&self) -> MutexGuard<'_, TueBoard<P>> {
         self.0.lock().unwrap_or_else(|e| e.into_inner())
     }
 }
 
 /// The board as a segment node.
-pub struct TueNode(Arc<Mutex<TueBoard>>);
+pub struct TueNode<P: PdiPath = Direct>(Arc<Mutex<TueBoard<P>>>);
 
-impl TueNode {
-    fn lock(&self) -> MutexGuard<'_, TueBoard> {
+impl<P: PdiPath> TueNode<P> {
+    fn lock(&self) -> MutexGuard<'_, TueBoard<P>> {
         self.0.lock().unwrap_or_else(|e| e.into_inner())
     }
 }
 
-impl Node<Esc> for TueNode {
+impl<P: PdiPath> Node<Esc> for TueNode<P> {
     fn on_event(&mut self, esc: &mut Esc, ev: EscEvent, _t: u64) {
         let mut b = self.lock();
+        let TueBoard {
+            path, slave, app, ..
+        } = &mut *b;
         let r = match ev {
-            EscEvent::Irq => {
-                let TueBoard { slave, app, .. } = &mut *b;
-                slave.on_pdi_irq(esc, app)
-            }
-            EscEvent::Sync0 => {
-                let TueBoard { slave, app, .. } = &mut *b;
-                slave.on_sync0(esc, app)
-            }
-            EscEvent::Sync1 => {
-                let TueBoard { slave, app, .. } = &mut *b;
-                slave.on_sync1(esc, app)
-            }
+            EscEvent::Irq => path.with_pdi(esc, |pdi| slave.on_pdi_irq(pdi, app)),
+            EscEvent::Sync0 => path.with_pdi(esc, |pdi| slave.on_sync0(pdi, app)),
+            EscEvent::Sync1 => path.with_pdi(esc, |pdi| slave.on_sync1(pdi, app)),
             EscEvent::PdWatchdog | EscEvent::PdiWatchdog => Ok(()),
         };
         b.note(r);
@@ -302,13 +307,37 @@ pub fn attach(
     id: SlaveId,
     config: &TueConfig,
 ) -> Result<TueHandle, AttachError> {
+    attach_with(segment, id, config, |_| Ok(Direct))
+}
+
+/// [`attach`] with the firmware reaching its ESC through the chip driver of `route` over
+/// the simulated SPI (`PdiRoute::Direct` is refused: use [`attach`]).
+pub fn attach_via(
+    segment: &mut Segment,
+    id: SlaveId,
+    config: &TueConfig,
+    route: PdiRoute,
+) -> Result<TueHandle<SpiPath>, AttachError> {
+    attach_with(segment, id, config, |esc| SpiPath::new(route, esc))
+}
+
+fn attach_with<P: PdiPath>(
+    segment: &mut Segment,
+    id: SlaveId,
+    config: &TueConfig,
+    path: impl FnOnce(&mut Esc) -> Result<P, oxicat_sim::pdi_path::PathInitError>,
+) -> Result<TueHandle<P>, AttachError> {
     let now = segment.now();
     let esc = segment
         .esc_mut(id)
         .ok_or(AttachError::Topology(TopologyError::NoSuchSlave(id)))?;
-    let slave = TueSlave::new(&device::DEF, esc).map_err(AttachError::Init)?;
+    let mut path = path(esc)?;
+    let slave = path
+        .with_pdi(esc, |pdi| TueSlave::<P>::new(&device::DEF, pdi))
+        .map_err(|e| AttachError::from(P::init_error(e)))?;
     let start = now.div_ceil(TICK_NS) * TICK_NS;
     let board = TueBoard {
+        path,
         slave,
         app: TuEs030::new(BenchBoard::new(config)),
         counters: TueCounters::default(),
@@ -330,5 +359,10 @@ pub const KIT: crate::registry::Kit = crate::registry::Kit {
                   bridges (current loops, encoders, line voltage; normal/FRF PDO modes)",
     def: |_| &crate::tue_es030::device::DEF,
     esc: oxicat_esc::EscConfig::et1200,
-    attach: |segment, id, _k| attach(segment, id, &TueConfig::default()).map(drop),
+    attach: |segment, id, _k, route| match route {
+        PdiRoute::Direct => attach(segment, id, &TueConfig::default()).map(drop),
+        route => attach_via(segment, id, &TueConfig::default(), route).map(drop),
+    },
+    sync: oxicat_slave::SyncMode::SmSync,
+    cycle_ns: 1_000_000,
 };
