@@ -28,21 +28,7 @@ pub const CTL_WE_ERROR: u16 = 0x4000;
 /// 0x0502 bit 15: busy.
 pub const CTL_BUSY: u16 = 0x8000;
 
-/// CRC-8 of the SII configuration area (polynomial 0x07, initial value 0xFF).
-pub fn crc8(data: &[u8]) -> u8 {
-    let mut crc: u8 = 0xFF;
-    for &b in data {
-        crc ^= b;
-        for _ in 0..8 {
-            crc = if crc & 0x80 != 0 {
-                (crc << 1) ^ 0x07
-            } else {
-                crc << 1
-            };
-        }
-    }
-    crc
-}
+pub use oxicat_wire::crc::sii_crc8 as crc8;
 
 /// Byte `i` of the EEPROM, 0xFF beyond its end (an erased EEPROM).
 #[inline]

@@ -7,22 +7,7 @@
 //! it finished gives the previous result (85 °C after power-on). Sensors can be unplugged
 //! and their next scratchpad reads corrupted (CRC faults).
 
-/// Dallas/Maxim CRC-8.
-pub fn crc8(data: &[u8]) -> u8 {
-    let mut crc = 0u8;
-    for &b0 in data {
-        let mut b = b0;
-        for _ in 0..8 {
-            let mix = (crc ^ b) & 1;
-            crc >>= 1;
-            if mix != 0 {
-                crc ^= 0x8C;
-            }
-            b >>= 1;
-        }
-    }
-    crc
-}
+pub use oxicat_wire::crc::onewire_crc8 as crc8;
 
 /// Duration of a reset + presence sequence \[ns\].
 pub const RESET_NS: u64 = 960_000;

@@ -450,27 +450,7 @@ impl ImageHeader {
     }
 }
 
-/// Incremental CRC-32 (IEEE 802.3, reflected, as zlib): `crc32_update(0, a)` then `b`
-/// equals `crc32(a ++ b)`.
-pub fn crc32_update(crc: u32, data: &[u8]) -> u32 {
-    let mut c = !crc;
-    for &byte in data {
-        c ^= byte as u32;
-        for _ in 0..8 {
-            c = if c & 1 != 0 {
-                (c >> 1) ^ 0xEDB8_8320
-            } else {
-                c >> 1
-            };
-        }
-    }
-    !c
-}
-
-/// CRC-32 of `data` (IEEE 802.3 / zlib).
-pub fn crc32(data: &[u8]) -> u32 {
-    crc32_update(0, data)
-}
+pub use oxicat_wire::crc::{crc32, crc32_update};
 
 // ---------------------------------------------------------------------- firmware store
 

@@ -13,6 +13,7 @@
 extern crate std;
 
 pub mod coe;
+pub mod crc;
 pub mod datagram;
 pub mod eoe;
 pub mod error;

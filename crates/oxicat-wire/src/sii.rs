@@ -43,25 +43,7 @@ pub const FIXED_AREA_LEN: usize = 0x80;
 /// Category type that ends the list.
 pub const CATEGORY_END: u16 = 0xFFFF;
 
-/// CRC-8 of the SII configuration area: polynomial 0x07, initial value 0xFF, no reflection.
-pub const fn sii_crc8(bytes: &[u8]) -> u8 {
-    let mut crc: u8 = 0xFF;
-    let mut i = 0;
-    while i < bytes.len() {
-        crc ^= bytes[i];
-        let mut b = 0;
-        while b < 8 {
-            crc = if crc & 0x80 != 0 {
-                (crc << 1) ^ 0x07
-            } else {
-                crc << 1
-            };
-            b += 1;
-        }
-        i += 1;
-    }
-    crc
-}
+pub use crate::crc::sii_crc8;
 
 /// The configuration area, words 0..=7, loaded into ESC registers at power-on.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]

@@ -63,26 +63,7 @@ pub trait OneWireBus {
     }
 }
 
-/// Dallas/Maxim CRC-8 (x⁸ + x⁵ + x⁴ + 1, reflected); 0 over data followed by its CRC.
-pub const fn crc8(data: &[u8]) -> u8 {
-    let mut crc = 0u8;
-    let mut i = 0;
-    while i < data.len() {
-        let mut b = data[i];
-        let mut k = 0;
-        while k < 8 {
-            let mix = (crc ^ b) & 1;
-            crc >>= 1;
-            if mix != 0 {
-                crc ^= 0x8C;
-            }
-            b >>= 1;
-            k += 1;
-        }
-        i += 1;
-    }
-    crc
-}
+pub use oxicat_wire::crc::onewire_crc8 as crc8;
 
 /// Why a 1-Wire transaction failed.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
