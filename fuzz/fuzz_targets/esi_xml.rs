@@ -1,5 +1,5 @@
 //! ESI XML files a user hands the CLI (`device check`, the replay bench), through
-//! `oxicat_device::esi::parse`. Nothing may panic; every model it returns compares equal
+//! `oxicat_esi::esi::parse`. Nothing may panic; every model it returns compares equal
 //! to itself.
 #![no_main]
 
@@ -9,10 +9,10 @@ fuzz_target!(|data: &[u8]| {
     let Ok(text) = std::str::from_utf8(data) else {
         return;
     };
-    if let Ok(models) = oxicat_device::esi::parse(text) {
+    if let Ok(models) = oxicat_esi::esi::parse(text) {
         for m in &models {
             assert!(
-                oxicat_device::compare(m, m).is_empty(),
+                oxicat_esi::compare(m, m).is_empty(),
                 "a model differs from itself"
             );
         }

@@ -1,5 +1,5 @@
 //! Firmware images a user hands `foe-write` / `fw-image`: the 32-byte header
-//! (`oxicat_slave::foe::ImageHeader`) and payload check of `oxicat_device::fwimage`.
+//! (`oxicat_slave::foe::ImageHeader`) and payload check of `oxicat_esi::fwimage`.
 //! Nothing may panic; a header that parses writes back to the same 32 bytes, and an image
 //! reported whole has exactly the payload length and CRC-32 its header states.
 #![no_main]
@@ -16,7 +16,7 @@ fuzz_target!(|data: &[u8]| {
             "header round trip"
         );
     }
-    if let Ok((h, whole)) = oxicat_device::fwimage::inspect(data) {
+    if let Ok((h, whole)) = oxicat_esi::fwimage::inspect(data) {
         let payload = &data[IMAGE_HEADER_LEN..];
         assert_eq!(
             whole,

@@ -1,17 +1,17 @@
 //! SII EEPROM files a user hands the CLI (`sii-write`, `device check`, the replay bench):
-//! binary images and Intel HEX text, through `oxicat_device::sii::{parse_any, parse,
+//! binary images and Intel HEX text, through `oxicat_esi::sii::{parse_any, parse,
 //! intel_hex}`. Nothing may panic; an image that decodes compares equal to itself, and an
 //! Intel HEX file decodes to the image `parse` gets.
 #![no_main]
 
 use libfuzzer_sys::fuzz_target;
-use oxicat_device::sii;
+use oxicat_esi::sii;
 
 fuzz_target!(|data: &[u8]| {
     let any = sii::parse_any(data);
     if let Ok(m) = &any {
         assert!(
-            oxicat_device::compare(m, m).is_empty(),
+            oxicat_esi::compare(m, m).is_empty(),
             "a model differs from itself"
         );
     }

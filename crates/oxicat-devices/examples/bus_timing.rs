@@ -15,7 +15,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         Some(a) => a.parse()?,
         None => 1000,
     };
-    let sii = oxicat_device::sii::generate(device::device(Side::Left))?;
+    let sii = oxicat_esi::sii::generate(device::device(Side::Left))?;
     println!("Laelaps leg node, DC SYNC0, {cycles} cycles per run, CPU 1 µs per SYNC0 (thesis), SYNC0 handler = 38-byte RxPDO read + 22-byte TxPDO write");
     println!();
     println!("| chip | SPI MHz | cycle µs | SYNC0 lost | SYNC0 delayed | busy µs (bus + CPU) | input latency µs (max) | cycles with fresh inputs | 0x1C32:0B / 0C |");

@@ -77,7 +77,7 @@ pub fn names() -> String {
 #[derive(Debug)]
 pub enum NodeError {
     /// The SII image could not be generated from the definition.
-    Sii(oxicat_device::Error),
+    Sii(oxicat_esi::Error),
     /// The firmware did not boot.
     Attach(AttachError),
 }
@@ -113,7 +113,7 @@ pub fn add_node_via(
     route: PdiRoute,
 ) -> Result<SlaveId, NodeError> {
     let def = (kit.def)(k);
-    let sii = oxicat_device::sii::generate(def).map_err(NodeError::Sii)?;
+    let sii = oxicat_esi::sii::generate(def).map_err(NodeError::Sii)?;
     let mut cfg = (kit.esc)();
     cfg.clock.drift_ppm = drift_ppm;
     let id = segment.add(Esc::new(cfg, sii));

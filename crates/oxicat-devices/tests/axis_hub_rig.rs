@@ -7,7 +7,7 @@ use oxicat_plant::onewire::{ds18b20_rom, Ds18b20, OneWireNet};
 use oxicat_plant::ws2812::decode;
 
 fn sii() -> Vec<u8> {
-    oxicat_device::sii::generate(&device::DEF).expect("SII of the hub")
+    oxicat_esi::sii::generate(&device::DEF).expect("SII of the hub")
 }
 
 fn bus(n: usize) -> SimOneWire {

@@ -22,7 +22,7 @@ fn big<F: FnOnce() + Send + 'static>(f: F) {
 
 fn segment(n: usize) -> (Link, Vec<JointHandle>) {
     let mut seg = Segment::new();
-    let sii = oxicat_device::sii::generate(&oxicat_devices::cia402::DEF).unwrap();
+    let sii = oxicat_esi::sii::generate(&oxicat_devices::cia402::DEF).unwrap();
     let mut hs = Vec::new();
     for _ in 0..n {
         let id = seg.add(oxicat_esc::Esc::new(

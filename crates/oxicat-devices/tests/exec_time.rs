@@ -12,7 +12,7 @@ use oxicat_sim::pdi_path::PdiRoute;
 use oxicat_sim::segment::Segment;
 
 fn leg_at(route: PdiRoute, cycle_ns: u32, cycles: u32) -> ProbeReport {
-    let sii = oxicat_device::sii::generate(device::device(Side::Left)).expect("SII");
+    let sii = oxicat_esi::sii::generate(device::device(Side::Left)).expect("SII");
     let mut cfg = ProbeConfig::new(route, cycle_ns);
     cfg.cycles = cycles;
     timing_probe::run(&cfg, sii).unwrap_or_else(|e| panic!("{route}: {e}"))
@@ -85,7 +85,7 @@ fn a_10_mhz_lan9252_overruns_a_100_us_cycle() {
 /// the MCU busy for its bus time, so passes run no more often than that.
 #[test]
 fn the_firmware_node_counts_its_busy_time_only_when_asked() {
-    let sii = oxicat_device::sii::generate(&demo::DEF).expect("demo SII");
+    let sii = oxicat_esi::sii::generate(&demo::DEF).expect("demo SII");
     let route = PdiRoute::lan9252(20);
     for timing in [None, Some(ExecTiming::bus_only().cpu(Work::Poll, 2_000))] {
         let mut seg = Segment::new();

@@ -20,7 +20,7 @@ fn big<F: FnOnce() + Send + 'static>(f: F) {
 
 fn bench() -> (Link, Arc<Mutex<Segment>>, TueHandle) {
     let mut seg = Segment::new();
-    let sii = oxicat_device::sii::generate(&oxicat_devices::tue_es030::device::DEF).unwrap();
+    let sii = oxicat_esi::sii::generate(&oxicat_devices::tue_es030::device::DEF).unwrap();
     let id = seg.add(oxicat_esc::Esc::new(oxicat_esc::EscConfig::et1200(), sii));
     let h = attach(&mut seg, id, &TueConfig::default()).unwrap();
     let seg = Arc::new(Mutex::new(seg));

@@ -3,7 +3,7 @@
 //! from the SII before PRE-OP (or BOOT), free run, process-data SyncManagers and FMMUs
 //! before SAFE-OP.
 
-use oxicat_device::model::SmKind;
+use oxicat_esi::model::SmKind;
 
 use crate::{AlState, Master, MasterError};
 
@@ -199,7 +199,7 @@ impl Master {
         let Ok(img) = self.sii_image(position).await else {
             return false;
         };
-        let Ok(m) = oxicat_device::sii::parse(&img) else {
+        let Ok(m) = oxicat_esi::sii::parse(&img) else {
             return false;
         };
         m.mailbox.and_then(|m| m.coe).is_some()
@@ -217,7 +217,7 @@ impl Master {
     pub(crate) async fn configure_pd(&self, position: usize) -> Result<(), MasterError> {
         let img = self.sii_image(position).await?;
         let model =
-            oxicat_device::sii::parse(&img).map_err(|e| MasterError::SiiImage(e.to_string()))?;
+            oxicat_esi::sii::parse(&img).map_err(|e| MasterError::SiiImage(e.to_string()))?;
         let layout = self.pdos(position)?;
         let bytes = |list: &[crate::pdo::Pdo]| -> u16 {
             let bits: u32 = list

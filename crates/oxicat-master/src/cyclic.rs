@@ -113,9 +113,9 @@ impl Master {
     /// 6) and it is on (time ≠ 0).
     pub fn pd_watchdog(&self, position: usize) -> Result<Option<Duration>, MasterError> {
         let triggers = self.sii_model(position).ok().is_some_and(|m| {
-            m.sms.iter().any(|sm| {
-                sm.kind == oxicat_device::model::SmKind::Outputs && sm.control & 0x40 != 0
-            })
+            m.sms
+                .iter()
+                .any(|sm| sm.kind == oxicat_esi::model::SmKind::Outputs && sm.control & 0x40 != 0)
         });
         if !triggers {
             return Ok(None);

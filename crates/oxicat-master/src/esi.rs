@@ -1,10 +1,10 @@
 //! An ESI (ETG.2000 EtherCATInfo XML) for a live slave, built from its SII (identity, names,
 //! SyncManagers, FMMUs, PDOs, DC, EEPROM) and its CoE dictionary (SDO information); element
-//! names as `oxicat-device`'s generator writes them, readable by its ESI parser.
+//! names as `oxicat-esi`'s generator writes them, readable by its ESI parser.
 
-use oxicat_device::esi::{bool_attr, head, hx, Head, Xml};
-use oxicat_device::model::{hex, FmmuKind, SmKind};
-use oxicat_device::DeviceModel;
+use oxicat_esi::esi::{bool_attr, head, hx, Head, Xml};
+use oxicat_esi::model::{hex, FmmuKind, SmKind};
+use oxicat_esi::DeviceModel;
 
 use crate::coe::{type_name, ObjectDesc};
 use crate::{Master, MasterError};

@@ -847,7 +847,7 @@ impl Master {
 
     pub(crate) async fn name_async(&self, position: usize) -> Result<String, MasterError> {
         let img = self.sii_image(position).await?;
-        Ok(oxicat_device::sii::parse(&img)
+        Ok(oxicat_esi::sii::parse(&img)
             .ok()
             // The order string (general category), as ethercrab and IgH name a slave.
             .and_then(|m| m.order_code.or(m.name))

@@ -2,7 +2,7 @@
 //! taken from the SII when the slave has no CoE; process-data variables named after the
 //! slaves' own descriptions and placed in ethercrab's process image.
 
-use oxicat_device::DeviceModel;
+use oxicat_esi::DeviceModel;
 
 use crate::value::ValueType;
 use crate::{Master, MasterError};
@@ -159,7 +159,7 @@ impl Master {
     /// The SII of the slave decoded into the comparable model (names, PDOs, CoE details).
     pub fn sii_model(&self, position: usize) -> Result<DeviceModel, MasterError> {
         let img = futures_lite::future::block_on(self.sii_image(position))?;
-        oxicat_device::sii::parse(&img).map_err(|e| MasterError::SiiImage(e.to_string()))
+        oxicat_esi::sii::parse(&img).map_err(|e| MasterError::SiiImage(e.to_string()))
     }
 
     /// The PDO assignment and mapping of the slave at `position` (CoE when it has CoE,
@@ -175,7 +175,7 @@ impl Master {
             futures_lite::future::block_on(self.pdos_coe(position, model.as_ref()))
         } else {
             let m = model.ok_or(MasterError::NoCoe(position))?;
-            let conv = |list: &[oxicat_device::model::PdoModel], sm: u8| -> Vec<Pdo> {
+            let conv = |list: &[oxicat_esi::model::PdoModel], sm: u8| -> Vec<Pdo> {
                 list.iter()
                     .filter(|p| p.sm == Some(sm))
                     .map(|p| Pdo {
@@ -192,11 +192,11 @@ impl Master {
                     .collect()
             };
             // The SM numbers of the process data in this SII.
-            let sm_of = |k: oxicat_device::model::SmKind| {
+            let sm_of = |k: oxicat_esi::model::SmKind| {
                 m.sms.iter().position(|s| s.kind == k).map(|i| i as u8)
             };
-            let out_sm = sm_of(oxicat_device::model::SmKind::Outputs).unwrap_or(2);
-            let in_sm = sm_of(oxicat_device::model::SmKind::Inputs).unwrap_or(3);
+            let out_sm = sm_of(oxicat_esi::model::SmKind::Outputs).unwrap_or(2);
+            let in_sm = sm_of(oxicat_esi::model::SmKind::Inputs).unwrap_or(3);
             Ok(SlavePdos {
                 position,
                 source: PdoSource::Sii,

@@ -309,7 +309,7 @@ pub fn hex_dump(img: &[u8]) -> String {
 pub fn decode(img: &[u8]) -> Result<String, MasterError> {
     use std::fmt::Write;
     let im = SiiImage::new(img).map_err(|e| MasterError::SiiImage(format!("{e}")))?;
-    let m = oxicat_device::sii::parse(img).map_err(|e| MasterError::SiiImage(e.to_string()))?;
+    let m = oxicat_esi::sii::parse(img).map_err(|e| MasterError::SiiImage(e.to_string()))?;
     let cfg = im.config();
     let id = im.identity();
     let mut s = String::new();

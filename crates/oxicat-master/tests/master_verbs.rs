@@ -76,7 +76,7 @@ fn sdo_info_lists_the_dictionary() {
 fn sii_read_decode_and_pdos() {
     let (m, _seg, _fws, _) = common::demo_master(1);
     let img = m.sii_read(0, false).unwrap();
-    let gen = oxicat_device::sii::generate(&oxicat_devices::demo::DEF).unwrap();
+    let gen = oxicat_esi::sii::generate(&oxicat_devices::demo::DEF).unwrap();
     assert_eq!(&img[..], &gen[..img.len()]);
     let text = oxicat_master::sii::decode(&img).unwrap();
     assert!(text.contains("Vendor ID:       0xe0000000"), "{text}");
@@ -93,7 +93,7 @@ fn sii_read_decode_and_pdos() {
 fn xml_parses_with_the_esi_parser() {
     let (m, _seg, _fws, _) = common::demo_master(1);
     let xml = m.esi(0).unwrap();
-    let devs = oxicat_device::esi::parse(&xml).expect("ESI parses");
+    let devs = oxicat_esi::esi::parse(&xml).expect("ESI parses");
     assert_eq!(devs.len(), 1);
     let d = &devs[0];
     assert_eq!(d.vendor_id, oxicat_devices::demo::DEF.identity.vendor_id);
@@ -203,7 +203,7 @@ fn record_writes_a_csv_with_header_and_rows() {
 #[test]
 fn sii_write_verifies_refuses_other_device_and_bad_crc() {
     let (m, seg, _fws, _) = common::demo_master(1);
-    let mut img = oxicat_device::sii::generate(&oxicat_devices::demo::DEF).unwrap();
+    let mut img = oxicat_esi::sii::generate(&oxicat_devices::demo::DEF).unwrap();
     // A changed serial number (same identity otherwise) is written and verified.
     img[0x1C] = 0x42;
     let mut calls = 0;

@@ -459,7 +459,7 @@ mod tests {
     #[test]
     fn drivers_start_and_lend_the_esc_back() {
         let def = oxicat_devices::laelaps::device::device(oxicat_devices::laelaps::Side::Left);
-        let sii = oxicat_device::sii::generate(def).expect("SII");
+        let sii = oxicat_esi::sii::generate(def).expect("SII");
         for route in [
             PdiRoute::lan9252(20),
             PdiRoute::et1100(20),

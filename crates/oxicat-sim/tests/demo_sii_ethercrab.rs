@@ -1,5 +1,5 @@
-//! ethercrab parses the SII that `oxicat-device` generates from the demo device's one
-//! definition (`oxicat_device::sii::generate(&demo::DEF)`): it names and identifies the node from
+//! ethercrab parses the SII that `oxicat-esi` generates from the demo device's one
+//! definition (`oxicat_esi::sii::generate(&demo::DEF)`): it names and identifies the node from
 //! it, takes the mailbox and process-data SyncManagers and the FMMU usage from it, and the
 //! firmware (the `oxicat-slave` stack with the `Demo` application) accepts what ethercrab
 //! configures into the ESC on PRE-OP -> SAFE-OP. Checked on the ESC's registers.
@@ -182,7 +182,7 @@ fn check(s: &Seen) {
 #[test]
 fn ethercrab_reads_generated_sii_coe() {
     static PDU: Pdu = PduStorage::new();
-    let sii = oxicat_device::sii::generate(&demo::DEF).expect("demo SII");
+    let sii = oxicat_esi::sii::generate(&demo::DEF).expect("demo SII");
     let s = run(sii, &PDU);
     check(&s);
     // FMMU usage from the SII's FMMU category: outputs, then inputs.
@@ -192,7 +192,7 @@ fn ethercrab_reads_generated_sii_coe() {
 #[test]
 fn ethercrab_reads_generated_sii_pdo_categories() {
     static PDU: Pdu = PduStorage::new();
-    let mut sii = oxicat_device::sii::generate(&demo::DEF).expect("demo SII");
+    let mut sii = oxicat_esi::sii::generate(&demo::DEF).expect("demo SII");
     // Mailbox protocols (word 0x1C, outside the CRC'd configuration area): drop CoE, so
     // ethercrab sizes the process data from the SII's RxPDO/TxPDO categories.
     let w = u16::from_le_bytes([sii[0x38], sii[0x39]]);

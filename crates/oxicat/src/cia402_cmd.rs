@@ -127,7 +127,7 @@ fn link(a: &Cia402Args) -> Result<Link, MasterError> {
         return Ok(Link::Iface(i.clone()));
     }
     let mut seg = Segment::new();
-    let sii = oxicat_device::sii::generate(&oxicat_devices::cia402::DEF)
+    let sii = oxicat_esi::sii::generate(&oxicat_devices::cia402::DEF)
         .map_err(|e| MasterError::Usage(format!("SII of the CiA402 joint: {e}")))?;
     for _ in 0..a.joints {
         let id = seg.add(oxicat_esc::Esc::new(

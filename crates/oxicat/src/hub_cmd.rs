@@ -30,7 +30,7 @@ pub struct HubDemoArgs {
 
 /// Runs the scenario, printing one line per step; an error if a step was not reached.
 pub fn run(a: HubDemoArgs) -> Result<(), CliError> {
-    let sii = oxicat_device::sii::generate(&oxicat_devices::axis_hub::device::DEF)
+    let sii = oxicat_esi::sii::generate(&oxicat_devices::axis_hub::device::DEF)
         .map_err(CliError::Device)?;
     let cfg = ScenarioConfig {
         sync: match a.sync {

@@ -59,7 +59,7 @@ pub fn fw_image(device: &str, payload: &Path, output: &Path) -> Result<String, c
             format!("{}: {e}", payload.display()),
         ))
     })?;
-    let img = oxicat_device::fwimage::build(def, &data);
+    let img = oxicat_esi::fwimage::build(def, &data);
     std::fs::write(output, &img).map_err(|e| {
         crate::CliError::Io(std::io::Error::new(
             e.kind(),
@@ -457,10 +457,10 @@ pub fn graph(slaves: &[SlaveInfo]) -> String {
 pub fn pdos_text(
     p: usize,
     heading: bool,
-    sms: &[oxicat_device::model::SmModel],
+    sms: &[oxicat_esi::model::SmModel],
     l: &oxicat_master::pdo::SlavePdos,
 ) -> String {
-    use oxicat_device::model::SmKind;
+    use oxicat_esi::model::SmKind;
     let mut t = String::new();
     if heading {
         t.push_str(&format!("=== Master 0, Slave {p} ===\n"));

@@ -111,7 +111,7 @@ pub enum CliError {
     /// No device of that name.
     UnknownDevice(String),
     /// Generation failed.
-    Device(oxicat_device::Error),
+    Device(oxicat_esi::Error),
     /// Writing the output failed.
     Io(std::io::Error),
     /// `oxicat sim` failed.
@@ -164,10 +164,10 @@ fn print_text(text: &str) -> Result<(), CliError> {
 pub fn device_output(name: &str, what: DeviceOutput) -> Result<Vec<u8>, CliError> {
     let def = device_def(name)?;
     let r = match what {
-        DeviceOutput::Esi => oxicat_device::esi::generate(def).map(String::into_bytes),
-        DeviceOutput::Sii => oxicat_device::sii::generate(def),
-        DeviceOutput::Od => oxicat_device::od::table(def).map(String::into_bytes),
-        DeviceOutput::Check => oxicat_device::check(def).map(|f| {
+        DeviceOutput::Esi => oxicat_esi::esi::generate(def).map(String::into_bytes),
+        DeviceOutput::Sii => oxicat_esi::sii::generate(def),
+        DeviceOutput::Od => oxicat_esi::od::table(def).map(String::into_bytes),
+        DeviceOutput::Check => oxicat_esi::check(def).map(|f| {
             let mut s = String::new();
             for (pair, finding) in &f {
                 s.push_str(&format!("{pair:?}: {finding:?}\n"));

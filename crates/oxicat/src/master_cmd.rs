@@ -572,7 +572,7 @@ pub fn run(cmd: MasterCommand, out: &mut dyn Write) -> Result<(), MasterError> {
                         MasterError::Usage(format!("cannot read {}: {e}", f.display()))
                     })?;
                     if b.first() == Some(&b':') {
-                        oxicat_device::sii::intel_hex(&b)
+                        oxicat_esi::sii::intel_hex(&b)
                             .map_err(|e| MasterError::SiiImage(e.to_string()))?
                     } else {
                         b

@@ -58,7 +58,7 @@ pub struct TueArgs {
 fn bench() -> Result<Link, MasterError> {
     let mut seg = Segment::new();
     let def = &oxicat_devices::tue_es030::device::DEF;
-    let sii = oxicat_device::sii::generate(def)
+    let sii = oxicat_esi::sii::generate(def)
         .map_err(|e| MasterError::Usage(format!("SII of the TUeES030: {e}")))?;
     let id = seg.add(oxicat_esc::Esc::new(oxicat_esc::EscConfig::et1200(), sii));
     attach(&mut seg, id, &TueConfig::default())

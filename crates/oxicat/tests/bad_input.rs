@@ -211,7 +211,7 @@ fn record_that_fails_leaves_the_users_file_as_it_was() {
 #[test]
 fn sii_write_of_an_image_larger_than_the_eeprom_writes_nothing() {
     let d = work_dir("sii-large");
-    let img = oxicat_device::sii::generate(&oxicat_devices::demo::DEF).expect("image");
+    let img = oxicat_esi::sii::generate(&oxicat_devices::demo::DEF).expect("image");
     let mut big = img.clone();
     big.resize(img.len() * 2, 0xFF);
     std::fs::write(d.join("big.bin"), &big).expect("write");
@@ -249,7 +249,7 @@ fn sii_write_keeps_a_backup_of_the_old_image_and_names_it() {
         "{out}"
     );
     let old = std::fs::read(d.join("sii-backup-0.bin")).expect("backup");
-    let img = oxicat_device::sii::generate(&oxicat_devices::demo::DEF).expect("image");
+    let img = oxicat_esi::sii::generate(&oxicat_devices::demo::DEF).expect("image");
     assert_eq!(old, img, "the slave's whole EEPROM before the write");
     // A second write keeps the first backup.
     let out = ok_in(&d, &["sii-write", "--device", "demo", "--sim", "demo:1"]);
@@ -268,7 +268,7 @@ fn sii_write_that_stops_half_way_says_half_written_and_names_the_backup() {
     .expect("write");
     let served = served_common::serve_file(&seg);
     let udp = served.addr.as_str();
-    let img = oxicat_device::sii::generate(&oxicat_devices::demo::DEF).expect("image");
+    let img = oxicat_esi::sii::generate(&oxicat_devices::demo::DEF).expect("image");
     let err = error_in(&d, &["sii-write", "--device", "demo", "--udp", udp]);
     assert!(err.contains("write of word 0x0040 refused"), "{err}");
     assert!(

@@ -14,7 +14,7 @@ fn device_esi_to_stdout_parses() {
     let o = oxicat(&["device", "demo", "esi"]);
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     let xml = String::from_utf8(o.stdout).unwrap();
-    let m = oxicat_device::esi::parse(&xml).unwrap().remove(0);
+    let m = oxicat_esi::esi::parse(&xml).unwrap().remove(0);
     assert_eq!(m.name.as_deref(), Some("EtherCAT Application (SPI)"));
 }
 
@@ -25,7 +25,7 @@ fn device_sii_to_file_parses() {
     let f = dir.join("demo-additions.bin");
     let o = oxicat(&["device", "demo-additions", "sii", "-o", f.to_str().unwrap()]);
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
-    let m = oxicat_device::sii::parse(&std::fs::read(&f).unwrap()).unwrap();
+    let m = oxicat_esi::sii::parse(&std::fs::read(&f).unwrap()).unwrap();
     assert!(m.rx_pdos.iter().any(|p| p.index == 0x1603));
     let _ = std::fs::remove_dir_all(dir);
 }

@@ -27,7 +27,7 @@ fn demo_with(identity: Identity) -> DeviceDef {
 
 fn write_image(name: &str, def: &DeviceDef, payload: &[u8]) -> PathBuf {
     let p = tmp(name);
-    std::fs::write(&p, oxicat_device::fwimage::build(def, payload)).unwrap();
+    std::fs::write(&p, oxicat_esi::fwimage::build(def, payload)).unwrap();
     p
 }
 
@@ -86,7 +86,7 @@ fn foe_write_rejects_wrong_device_corrupted_and_outside_boot() {
         revision: 3,
         ..demo_id()
     });
-    let mut img = oxicat_device::fwimage::build(&def, &[0x5A; 500]);
+    let mut img = oxicat_esi::fwimage::build(&def, &[0x5A; 500]);
     img[300] ^= 0xFF;
     let f = tmp("corrupt.bin");
     std::fs::write(&f, img).unwrap();

@@ -54,7 +54,7 @@ fn fw_image_builds_what_foe_write_installs() {
     let built = std::fs::read(&img).unwrap();
     assert_eq!(
         built,
-        oxicat_device::fwimage::build(&oxicat_devices::demo::DEF, &[0x5A; 1000])
+        oxicat_esi::fwimage::build(&oxicat_devices::demo::DEF, &[0x5A; 1000])
     );
     let out = ok(&[
         "foe-write",

@@ -64,7 +64,7 @@ fn sii_read_write_pdos_sdos_xml_regs() {
     let _ = err;
     let dir = std::env::temp_dir().join(format!("oxicat-master-cli-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
-    let mut img = oxicat_device::sii::generate(&oxicat_devices::demo::DEF).unwrap();
+    let mut img = oxicat_esi::sii::generate(&oxicat_devices::demo::DEF).unwrap();
     img[0x10] ^= 0x55; // vendor id
     let other = dir.join("other.bin");
     std::fs::write(&other, &img).unwrap();
@@ -98,7 +98,7 @@ fn sii_read_write_pdos_sdos_xml_regs() {
         "{out}"
     );
     let xml = ok(&["xml", "--sim", "demo:1"]);
-    let d = oxicat_device::esi::parse(&xml).expect("ESI parses");
+    let d = oxicat_esi::esi::parse(&xml).expect("ESI parses");
     assert_eq!(
         d[0].product_code,
         oxicat_devices::demo::DEF.identity.product_code

@@ -5,8 +5,8 @@
 //! (ethercrab in this process). The registry of this test build includes the toy device
 //! of the README's "Add a device" recipe (feature `toy`).
 
-use oxicat_device::model::{compare, from_def};
 use oxicat_devices::registry::kits;
+use oxicat_esi::model::{compare, from_def};
 
 mod bin_common;
 mod served_common;
@@ -26,7 +26,7 @@ fn every_registered_device_generates_consistent_esi_sii_and_od() {
         let name = kit.name;
         // ESI: parses, and describes the definition (the same device model).
         let esi = ok(&["device", name, "esi"]);
-        let models = oxicat_device::esi::parse(&esi).expect("the ESI parses");
+        let models = oxicat_esi::esi::parse(&esi).expect("the ESI parses");
         assert_eq!(models.len(), 1, "{name}");
         let findings = compare(&from_def(def), &models[0]);
         assert!(findings.is_empty(), "{name} ESI: {findings:?}");
@@ -34,12 +34,8 @@ fn every_registered_device_generates_consistent_esi_sii_and_od() {
         let file = dir.join(format!("{name}.bin"));
         ok(&["device", name, "sii", "-o", file.to_str().expect("path")]);
         let sii = std::fs::read(&file).expect("SII file");
-        assert_eq!(
-            sii,
-            oxicat_device::sii::generate(def).expect("SII"),
-            "{name}"
-        );
-        let parsed = oxicat_device::sii::parse(&sii).expect("the SII parses");
+        assert_eq!(sii, oxicat_esi::sii::generate(def).expect("SII"), "{name}");
+        let parsed = oxicat_esi::sii::parse(&sii).expect("the SII parses");
         assert_eq!(parsed.product_code, def.identity.product_code, "{name}");
         // The object dictionary table lists the identity object.
         let od = ok(&["device", name, "od"]);

@@ -22,8 +22,8 @@ use std::process::Command;
 use std::sync::OnceLock;
 
 use netns_common::NetnsSim;
-use oxicat_device::model::DeviceModel;
 use oxicat_devices::registry::{kits, Kit};
+use oxicat_esi::model::DeviceModel;
 use oxicat_slave::od::{DataType, DefaultValue, ObjectCode};
 use oxicat_slave::{AlState, DeviceDef, SyncMode};
 
@@ -141,8 +141,8 @@ fn missing_index(def: &DeviceDef) -> u16 {
 
 /// The device's ESI (as `oxicat device <name> esi` writes it), parsed.
 fn esi_model(def: &'static DeviceDef) -> DeviceModel {
-    let esi = oxicat_device::esi::generate(def).expect("ESI of the definition");
-    let mut models = oxicat_device::esi::parse(&esi).expect("our ESI parses");
+    let esi = oxicat_esi::esi::generate(def).expect("ESI of the definition");
+    let mut models = oxicat_esi::esi::parse(&esi).expect("our ESI parses");
     assert_eq!(models.len(), 1, "one device per ESI");
     models.remove(0)
 }

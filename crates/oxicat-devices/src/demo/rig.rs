@@ -49,7 +49,7 @@ pub const FIRMWARE_FILE: &str = "firmware.bin";
 /// `version.txt` readable always.
 pub fn files(def: &'static DeviceDef) -> FirmwareUpdate<RamStore<2, SLOT_BYTES>> {
     let payload = format!("oxicat demo firmware {}", def.sw_version);
-    let img = oxicat_device::fwimage::build(def, payload.as_bytes());
+    let img = oxicat_esi::fwimage::build(def, payload.as_bytes());
     let store = RamStore::with_image(&img).unwrap_or_default();
     FirmwareUpdate::new(
         store,

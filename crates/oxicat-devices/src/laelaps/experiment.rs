@@ -458,7 +458,7 @@ pub fn run_trot(s: &Scenario, progress: &mut dyn FnMut(Progress)) -> Result<Trot
     let mut handles: Vec<(LegId, AnyLegRigHandle)> = Vec::new();
     for leg in chain_legs() {
         let def = device::device(leg.side());
-        let sii = oxicat_device::sii::generate(def)
+        let sii = oxicat_esi::sii::generate(def)
             .map_err(|e| MasterError::Usage(format!("SII of the leg node: {e}")))?;
         let id = seg.add(Esc::new(route.esc_config(EscConfig::et1100()), sii));
         let h = attach_leg_routed(&mut seg, id, leg, rig_config(s, leg, &phases), route)

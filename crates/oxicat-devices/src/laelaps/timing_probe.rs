@@ -205,7 +205,7 @@ impl Master {
 }
 
 /// Runs a Laelaps (hind-left) leg node as the module documentation describes; `eeprom` is
-/// its SII image (`oxicat_device::sii::generate(laelaps::device::device(Side::Left))`).
+/// its SII image (`oxicat_esi::sii::generate(laelaps::device::device(Side::Left))`).
 pub fn run(cfg: &ProbeConfig, eeprom: Vec<u8>) -> Result<ProbeReport, ProbeError> {
     let leg = LegId::HindLeft;
     let mut seg = Segment::new();

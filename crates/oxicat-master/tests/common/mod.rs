@@ -1,4 +1,4 @@
-//! Segments of demo devices (oxicat-devices `demo`: definition, SII from oxicat-device,
+//! Segments of demo devices (oxicat-devices `demo`: definition, SII from oxicat-esi,
 //! the `Demo` application on the oxicat-slave stack) for the master tests.
 #![allow(dead_code)]
 
@@ -38,7 +38,7 @@ pub type Handle = FirmwareHandle<DemoFw, { demo::IMAGE }, MBX>;
 
 /// A line of `n` ET1100s running the demo firmware.
 pub fn demo_segment(n: usize) -> (Arc<Mutex<Segment>>, Vec<Handle>, Vec<SharedLeds>) {
-    let sii = oxicat_device::sii::generate(&demo::DEF).expect("demo SII");
+    let sii = oxicat_esi::sii::generate(&demo::DEF).expect("demo SII");
     let mut seg = Segment::new();
     let mut fws = Vec::new();
     let mut leds = Vec::new();
@@ -63,7 +63,7 @@ pub fn demo_segment(n: usize) -> (Arc<Mutex<Segment>>, Vec<Handle>, Vec<SharedLe
 
 /// A line of `n` ESC-only slaves (no firmware) with the demo SII.
 pub fn esc_only_segment(n: usize) -> Arc<Mutex<Segment>> {
-    let sii = oxicat_device::sii::generate(&demo::DEF).expect("demo SII");
+    let sii = oxicat_esi::sii::generate(&demo::DEF).expect("demo SII");
     let mut seg = Segment::new();
     for _ in 0..n {
         seg.add(Esc::new(EscConfig::et1100(), sii.clone()));

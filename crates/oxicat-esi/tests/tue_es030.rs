@@ -1,7 +1,7 @@
 //! The TUeES030: definition, generated ESI and generated SII agree.
 
-use oxicat_device::{check, esi, sii};
 use oxicat_devices::tue_es030::device;
+use oxicat_esi::{check, esi, sii};
 
 #[test]
 fn tue_es030_definition_esi_and_sii_agree() {

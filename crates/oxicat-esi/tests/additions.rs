@@ -2,8 +2,8 @@
 //! outputs) is one line in `oxicat_devices::demo::additions`; here we check that ESI, SII,
 //! object dictionary and process-data layout all contain it.
 
-use oxicat_device::{esi, sii};
 use oxicat_devices::demo;
+use oxicat_esi::{esi, sii};
 use oxicat_slave::Od;
 
 /// Output bits as a master computes them from the OD (0x1C12 → 0x16xx → entry lengths).

@@ -3,8 +3,8 @@
 
 use std::path::PathBuf;
 
-use oxicat_device::model::{FmmuKind, SmKind};
-use oxicat_device::{compare, esi, sii, Finding};
+use oxicat_esi::model::{FmmuKind, SmKind};
+use oxicat_esi::{compare, esi, sii, Finding};
 
 fn reference() -> PathBuf {
     std::env::var_os("OXICAT_REFERENCE")
@@ -134,20 +134,20 @@ fn a_wrong_pair_is_reported_as_typed_findings() {
 fn bad_input_is_a_typed_error_not_a_panic() {
     assert!(matches!(
         esi::parse("<EtherCATInfo>"),
-        Err(oxicat_device::Error::Xml(_))
+        Err(oxicat_esi::Error::Xml(_))
     ));
     assert!(matches!(
         esi::parse("<Other/>"),
-        Err(oxicat_device::Error::Missing(_))
+        Err(oxicat_esi::Error::Missing(_))
     ));
     let bad = "<EtherCATInfo><Vendor><Id>#xZZ</Id></Vendor><Descriptions><Devices/></Descriptions></EtherCATInfo>";
     assert!(matches!(
         esi::parse(bad),
-        Err(oxicat_device::Error::BadValue { .. })
+        Err(oxicat_esi::Error::BadValue { .. })
     ));
     assert!(matches!(
         sii::parse(&[0u8; 10]),
-        Err(oxicat_device::Error::Sii(_))
+        Err(oxicat_esi::Error::Sii(_))
     ));
     // A category running past the image end.
     let mut img = vec![0u8; 256];

@@ -1,9 +1,9 @@
 //! The demo device: its definition, generated ESI and generated SII agree; the ESI is
 //! well-formed and uses ESI element names; the SII is what the definition says.
 
-use oxicat_device::model::{FmmuKind, SmKind};
-use oxicat_device::{check, esi, model, sii};
 use oxicat_devices::demo;
+use oxicat_esi::model::{FmmuKind, SmKind};
+use oxicat_esi::{check, esi, model, sii};
 
 #[test]
 fn definition_esi_and_sii_agree() {
@@ -120,7 +120,7 @@ fn esi_model_is_table_2_2() {
     let tx: Vec<u16> = m.tx_pdos.iter().map(|p| p.index).collect();
     assert_eq!(rx, [0x1600, 0x1601, 0x1602]);
     assert_eq!(tx, [0x1A01, 0x1A02, 0x1A03]);
-    let bits = |p: &[oxicat_device::model::PdoModel]| -> u32 {
+    let bits = |p: &[oxicat_esi::model::PdoModel]| -> u32 {
         p.iter()
             .flat_map(|p| &p.entries)
             .map(|e| e.bits as u32)

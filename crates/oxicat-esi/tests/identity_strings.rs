@@ -4,7 +4,7 @@
 //! code, which SOEM takes as the slave's name; name index = the device name, which IgH
 //! shows).
 
-use oxicat_device::{check, sii, Pair};
+use oxicat_esi::{check, sii, Pair};
 use oxicat_slave::{DeviceDef, Od};
 use oxicat_wire::sii::SiiImage;
 
@@ -62,14 +62,14 @@ fn check_compares_identity_strings_with_esi_and_sii() {
 #[test]
 fn check_reports_a_served_name_that_differs() {
     // A definition whose OD serves another 0x1008 than its name: the check must see it.
-    let mut model = oxicat_device::model::from_def(&oxicat_devices::demo::DEF);
+    let mut model = oxicat_esi::model::from_def(&oxicat_devices::demo::DEF);
     let esi = model.clone();
     model.id_strings[0].1.push_str(" (longer)");
-    let f = oxicat_device::model::compare(&model, &esi);
+    let f = oxicat_esi::model::compare(&model, &esi);
     assert!(
         f.iter().any(|f| matches!(
             f,
-            oxicat_device::model::Finding::Text {
+            oxicat_esi::model::Finding::Text {
                 field: "0x1008",
                 ..
             }

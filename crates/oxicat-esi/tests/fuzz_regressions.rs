@@ -6,9 +6,9 @@
 fn intel_hex_with_non_ascii_is_an_error() {
     // fuzz/artifacts/sii_file/crash-8b22d4a5912f7f5891def690a8da2c4bc1ac1ddb
     let input: &[u8] = b":fffffff\xc3\x8d:\x0b";
-    let e = oxicat_device::sii::intel_hex(input).expect_err("not Intel HEX");
+    let e = oxicat_esi::sii::intel_hex(input).expect_err("not Intel HEX");
     assert!(e.to_string().contains("Intel HEX"), "{e}");
-    assert!(oxicat_device::sii::parse_any(input).is_err());
+    assert!(oxicat_esi::sii::parse_any(input).is_err());
 }
 
 /// `sii_file` (issue 13 item 19): an image whose PDO category lists index 0 twice with
@@ -40,9 +40,9 @@ fn a_model_with_a_repeated_pdo_index_equals_itself() {
         0xff, 0xff, 0xff, 0xff, 0xff, 0xff, 0xff, 0xff, 0xff, 0xff, 0xff, 0xff, 0xff, 0xff, 0xff,
         0xff, 0xff, 0xff, 0xff, 0xff, 0xff, 0xff, 0xff, 0xff, 0xff, 0x00, 0x3a, 0x0a, 0x0a,
     ];
-    let m = oxicat_device::sii::parse_any(&IMAGE).expect("the image decodes");
+    let m = oxicat_esi::sii::parse_any(&IMAGE).expect("the image decodes");
     assert!(m.rx_pdos.len() + m.tx_pdos.len() >= 2);
-    assert_eq!(oxicat_device::compare(&m, &m), Vec::new());
+    assert_eq!(oxicat_esi::compare(&m, &m), Vec::new());
 }
 
 /// `sii_file` (issue 13 item 19, 8.2 M executions into its second campaign; input minimised
@@ -77,7 +77,7 @@ fn a_model_with_a_repeated_identity_string_equals_itself() {
         0xff, 0xff, 0xff, 0xff, 0xff, 0xff, 0xff, 0xff, 0xff, 0xff, 0xff, 0xff, 0x00, 0x00, 0x00,
         0x32, 0x00, 0x3a, 0x00, 0x00, 0x00, 0x00, 0x01, 0x1c, 0x09, 0x00, 0x3a, 0x00,
     ];
-    let m = oxicat_device::sii::parse_any(&IMAGE).expect("the image decodes");
-    let findings = oxicat_device::compare(&m, &m);
+    let m = oxicat_esi::sii::parse_any(&IMAGE).expect("the image decodes");
+    let findings = oxicat_esi::compare(&m, &m);
     assert!(findings.is_empty(), "{findings:?}");
 }

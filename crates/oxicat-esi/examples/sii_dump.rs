@@ -4,7 +4,7 @@ fn main() {
         eprintln!("usage: sii_dump FILE");
         std::process::exit(2);
     };
-    match std::fs::read(&p).map(|b| oxicat_device::sii::parse_any(&b)) {
+    match std::fs::read(&p).map(|b| oxicat_esi::sii::parse_any(&b)) {
         Ok(Ok(m)) => println!("{m:#?}"),
         Ok(Err(e)) => eprintln!("{p}: {e}"),
         Err(e) => eprintln!("{p}: {e}"),

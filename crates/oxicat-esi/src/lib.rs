@@ -1,4 +1,4 @@
-//! `oxicat-device`: device description tooling around the one static
+//! `oxicat-esi`: device description tooling around the one static
 //! [`oxicat_slave::DeviceDef`] of a device.
 //!
 //! - [`esi::generate`]: definition → ESI XML (ETG.2000 `EtherCATInfo`),

@@ -1,8 +1,8 @@
 //! The CiA402 joint drive: definition, generated ESI and generated SII agree; the profile
 //! objects and the default PDOs are where ETG.6010 puts them.
 
-use oxicat_device::{check, esi, sii};
 use oxicat_devices::cia402::device;
+use oxicat_esi::{check, esi, sii};
 
 #[test]
 fn cia402_definition_esi_and_sii_agree() {
@@ -33,19 +33,19 @@ fn cia402_definition_esi_and_sii_agree() {
 #[test]
 fn esi_profile_number_is_the_low_word_of_0x1000_and_check_compares_it() {
     let def = &oxicat_devices::cia402::DEF;
-    let xml = oxicat_device::esi::generate(def).unwrap();
-    let esi = &oxicat_device::esi::parse(&xml).unwrap()[0];
+    let xml = oxicat_esi::esi::generate(def).unwrap();
+    let esi = &oxicat_esi::esi::parse(&xml).unwrap()[0];
     assert_eq!(def.device_type & 0xFFFF, 402);
     assert_eq!(esi.profile_no, Some(402));
     // An ESI that says 5001 for a drive whose 0x1000 says 402 is a finding.
     let wrong = xml.replace("<ProfileNo>402</ProfileNo>", "<ProfileNo>5001</ProfileNo>");
     assert_ne!(wrong, xml);
-    let esi = &oxicat_device::esi::parse(&wrong).unwrap()[0];
-    let f = oxicat_device::model::compare(&oxicat_device::model::from_def(def), esi);
+    let esi = &oxicat_esi::esi::parse(&wrong).unwrap()[0];
+    let f = oxicat_esi::model::compare(&oxicat_esi::model::from_def(def), esi);
     assert!(
         f.iter().any(|f| matches!(
             f,
-            oxicat_device::model::Finding::Identity {
+            oxicat_esi::model::Finding::Identity {
                 field: "profile_no",
                 left: 402,
                 right: 5001
