@@ -571,7 +571,7 @@ impl Esc {
             let o = st.off as usize;
             if st.write {
                 let b = sm.buffered_write_commit();
-                regs[0x0805 + 8 * i] = sm.buffered_status_reg();
+                regs[regs::sm_reg(i, 5)] = sm.buffered_status_reg();
                 let to = st.ram as usize + b as usize * l;
                 copy_small(&mut ram[to..to + l], &win[o..o + l]);
                 if st.wd {
@@ -580,7 +580,7 @@ impl Esc {
                 }
             } else {
                 let b = sm.buffered_read_whole();
-                regs[0x0805 + 8 * i] = sm.buffered_status_reg();
+                regs[regs::sm_reg(i, 5)] = sm.buffered_status_reg();
                 let from = st.ram as usize + b as usize * l;
                 copy_small(&mut win[o..o + l], &ram[from..from + l]);
             }
@@ -653,7 +653,7 @@ impl Esc {
                 if sm.write_open && sm.ecat_writes() {
                     sm.write_open = false;
                     let st = sm.status_reg();
-                    self.mem[0x0805 + 8 * i] = st;
+                    self.mem[regs::sm_reg(i, 5)] = st;
                 }
             }
         }
@@ -1239,7 +1239,7 @@ impl Esc {
                     self.events_dirty = true;
                 }
                 if self.al_ev & AL_EV_SM_CHANGE != 0
-                    && (0..self.cfg.sm_count as usize).any(|i| hit(0x0806 + 8 * i))
+                    && (0..self.cfg.sm_count as usize).any(|i| hit(regs::sm_reg(i, 6)))
                 {
                     self.al_ev &= !AL_EV_SM_CHANGE;
                     self.events_dirty = true;
@@ -1292,7 +1292,12 @@ impl Esc {
         let old_al_ctl = self.reg16(regs::AL_CONTROL);
         // Only `write_side_effects` of a write to the SM registers looks at these.
         let old_activate: [u8; 16] = if c < 0x0880 && e > 0x0800 {
-            core::array::from_fn(|i| self.mem.get(0x0806 + 8 * i).copied().unwrap_or_default())
+            core::array::from_fn(|i| {
+                self.mem
+                    .get(regs::sm_reg(i, 6))
+                    .copied()
+                    .unwrap_or_default()
+            })
         } else {
             [0; 16]
         };
@@ -1430,7 +1435,7 @@ impl Esc {
                 if i >= n {
                     break;
                 }
-                if side == Side::Ecat && old != self.mem[0x0806 + 8 * i] {
+                if side == Side::Ecat && old != self.mem[regs::sm_reg(i, 6)] {
                     self.al_ev |= AL_EV_SM_CHANGE;
                 }
                 self.reload_sm(i);
@@ -1480,7 +1485,7 @@ impl Esc {
             sm.close_read();
         }
         let status = sm.status_reg();
-        self.mem[0x0805 + 8 * i] = status;
+        self.mem[regs::sm_reg(i, 5)] = status;
         self.events_dirty = true;
         self.copy_out(cur + off, o, or);
         true
@@ -1495,7 +1500,7 @@ impl Esc {
         };
         let from = (sm.start as u32 + off) as usize;
         let status = sm.status_reg();
-        self.mem[0x0805 + 8 * i] = status;
+        self.mem[regs::sm_reg(i, 5)] = status;
         self.events_dirty = true;
         match self.mem.get(from..from + o.len()) {
             Some(src) => copy_small(o, src),
@@ -1514,7 +1519,7 @@ impl Esc {
         self.pending_sms |= 1 << i;
         let to = (sm.start as u32 + off) as usize;
         let status = sm.status_reg();
-        self.mem[0x0805 + 8 * i] = status;
+        self.mem[regs::sm_reg(i, 5)] = status;
         self.events_dirty = true;
         match self.mem.get_mut(to..to + d.len()) {
             Some(dst) => copy_small(dst, d),
@@ -1549,7 +1554,7 @@ impl Esc {
             }
         }
         let status = self.sms[i].status_reg();
-        self.mem[0x0805 + 8 * i] = status;
+        self.mem[regs::sm_reg(i, 5)] = status;
         self.events_dirty = true;
         true
     }
@@ -1562,7 +1567,7 @@ impl Esc {
         let start = sm.start as u32;
         let end = sm.end();
         let off = sm.buf_offset(sm.last_written.min(2));
-        self.mem[0x0805 + 8 * i] = status;
+        self.mem[regs::sm_reg(i, 5)] = status;
         self.events_dirty = true;
         if side == Side::Ecat && wd {
             self.pd_wd_last = Some(self.now);
@@ -1578,7 +1583,7 @@ impl Esc {
     }
 
     fn reload_sm(&mut self, i: usize) {
-        let b = 0x0800 + 8 * i;
+        let b = regs::sm_reg(i, 0);
         let mut r = [0u8; 8];
         r.copy_from_slice(&self.mem[b..b + 8]);
         let sm = &mut self.sms[i];
@@ -1608,7 +1613,7 @@ impl Esc {
     fn rebuild_fmmus(&mut self) {
         self.fmmus.clear();
         for n in 0..self.cfg.fmmu_count as usize {
-            let b = 0x0600 + 16 * n;
+            let b = regs::fmmu_reg(n, 0);
             if let Some(f) = Fmmu::decode(&self.mem[b..b + 16]) {
                 self.fmmus.push(f);
             }
@@ -2060,10 +2065,10 @@ fn dc_unit_owner(a: usize, ctrl: u8) -> Option<bool> {
 fn chip_permissions(cfg: &EscConfig) -> Vec<u8> {
     let mut p = PERMISSIONS.to_vec();
     for f in cfg.fmmu_count as usize..16 {
-        p[0x0600 + 16 * f..0x0610 + 16 * f].fill(0);
+        p[regs::fmmu_reg(f, 0)..regs::fmmu_reg(f + 1, 0)].fill(0);
     }
     for n in cfg.sm_count as usize..16 {
-        p[0x0800 + 8 * n..0x0808 + 8 * n].fill(0);
+        p[regs::sm_reg(n, 0)..regs::sm_reg(n + 1, 0)].fill(0);
     }
     match cfg.dc {
         DcSupport::Full => {}

@@ -3,32 +3,13 @@
 
 use crate::regs;
 
-/// 0x0502 bit 0: ECAT write enable (must accompany the write command).
-pub const CTL_WRITE_ENABLE: u16 = 0x0001;
-/// 0x0502 bit 6: 8-byte read support.
-pub const CTL_READ_8: u16 = 0x0040;
-/// 0x0502 bit 7: two address bytes (EEPROM larger than 16 Kbit).
-pub const CTL_ADDR_2BYTES: u16 = 0x0080;
-/// 0x0502 bits 8..10: command (read 1, write 2, reload 4).
-pub const CTL_CMD_MASK: u16 = 0x0700;
-/// Read command.
-pub const CMD_READ: u16 = 0x0100;
-/// Write command.
-pub const CMD_WRITE: u16 = 0x0200;
-/// Reload command.
-pub const CMD_RELOAD: u16 = 0x0400;
-/// 0x0502 bit 11: checksum error in the configuration area.
-pub const CTL_CRC_ERROR: u16 = 0x0800;
-/// 0x0502 bit 12: device information not loaded.
-pub const CTL_NOT_LOADED: u16 = 0x1000;
-/// 0x0502 bit 13: missing acknowledge / invalid command.
-pub const CTL_ACK_ERROR: u16 = 0x2000;
-/// 0x0502 bit 14: write command without write enable.
-pub const CTL_WE_ERROR: u16 = 0x4000;
-/// 0x0502 bit 15: busy.
-pub const CTL_BUSY: u16 = 0x8000;
-
 pub use oxicat_wire::crc::sii_crc8 as crc8;
+pub use oxicat_wire::regs::sii_control::{
+    ACK_ERROR as CTL_ACK_ERROR, ADDR_2BYTES as CTL_ADDR_2BYTES, BUSY as CTL_BUSY,
+    CMD_MASK as CTL_CMD_MASK, CMD_READ, CMD_RELOAD, CMD_WRITE, CRC_ERROR as CTL_CRC_ERROR,
+    NOT_LOADED as CTL_NOT_LOADED, READ_8 as CTL_READ_8, WE_ERROR as CTL_WE_ERROR,
+    WRITE_ENABLE as CTL_WRITE_ENABLE,
+};
 
 /// Byte `i` of the EEPROM, 0xFF beyond its end (an erased EEPROM).
 #[inline]

@@ -4,6 +4,7 @@
 //! before SAFE-OP.
 
 use oxicat_esi::model::SmKind;
+use oxicat_wire::regs;
 
 use crate::{AlState, Master, MasterError};
 
@@ -32,7 +33,7 @@ impl Master {
         len: u16,
         control: u8,
     ) -> Result<(), MasterError> {
-        let reg = 0x0800 + 8 * sm;
+        let reg = oxicat_wire::regs::sm(sm as u8, 0);
         // An active SM takes no new configuration: deactivate it first.
         self.fpwr(position, reg + 6, &[0]).await?;
         let s = start.to_le_bytes();
@@ -148,8 +149,8 @@ impl Master {
         position: usize,
         mode: u16,
     ) -> Result<bool, MasterError> {
-        if self.fprd(position, 0x0981, 1).await?[0] != 0 {
-            self.fpwr(position, 0x0981, &[0]).await?;
+        if self.fprd(position, regs::DC_ACTIVATION + 1, 1).await?[0] != 0 {
+            self.fpwr(position, regs::DC_ACTIVATION + 1, &[0]).await?;
         }
         if !self.has_coe(position).await {
             return Ok(false);
@@ -254,7 +255,7 @@ impl Master {
             if len == 0 {
                 continue;
             }
-            let reg = 0x0600 + 16 * fmmu;
+            let reg = oxicat_wire::regs::fmmu(fmmu as u8, 0);
             let mut f = [0u8; 16];
             f[0..4].copy_from_slice(&(logical + log_off).to_le_bytes());
             f[4..6].copy_from_slice(&len.to_le_bytes());
@@ -269,6 +270,6 @@ impl Master {
             fmmu += 1;
         }
         // No cyclic master keeps the SM watchdog fed once the command has ended.
-        self.fpwr(position, 0x0420, &[0, 0]).await
+        self.fpwr(position, regs::WD_TIME_PD, &[0, 0]).await
     }
 }

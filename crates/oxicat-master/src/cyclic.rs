@@ -2,6 +2,7 @@
 //! the process image every cycle, and give each cycle's inputs/outputs to a callback —
 //! the base of `watch`, `write` and `record`.
 
+use oxicat_wire::regs;
 use std::io::Write;
 use std::time::Duration;
 
@@ -120,8 +121,8 @@ impl Master {
         if !triggers {
             return Ok(None);
         }
-        let div = self.reg_read(position, 0x0400, 2)?;
-        let time = self.reg_read(position, 0x0420, 2)?;
+        let div = self.reg_read(position, regs::WD_DIVIDER, 2)?;
+        let time = self.reg_read(position, regs::WD_TIME_PD, 2)?;
         let div = u64::from(u16::from_le_bytes([div[0], div[1]]));
         let time = u64::from(u16::from_le_bytes([time[0], time[1]]));
         Ok((time != 0).then(|| Duration::from_nanos((div + 2) * 40 * time)))

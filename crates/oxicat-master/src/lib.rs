@@ -23,6 +23,7 @@ pub mod sii;
 mod udp;
 pub mod value;
 
+use oxicat_wire::regs;
 use std::sync::{Arc, Mutex};
 use std::time::Duration;
 
@@ -376,7 +377,7 @@ impl Master {
             let alias = self.read_u16(p, 0x0012).await?;
             let w = self.sii_read_at(p, 0x0008, 16).await?;
             let u = |k: usize| u32::from_le_bytes([w[k], w[k + 1], w[k + 2], w[k + 3]]);
-            let d = self.fprd(p, 0x0928, 4).await?;
+            let d = self.fprd(p, regs::DC_SYSTEM_TIME_DELAY, 4).await?;
             found.push(Found {
                 alias,
                 identity: (u(0), u(4), u(8), u(12)),
@@ -391,7 +392,8 @@ impl Master {
             if st.state() == Some(AlState::Init) && !st.error() {
                 match self.configure_mailbox(p, true).await {
                     Ok(()) => {
-                        self.fpwr(p, 0x0120, &[AlState::PreOp.code(), 0]).await?;
+                        self.fpwr(p, regs::AL_CONTROL, &[AlState::PreOp.code(), 0])
+                            .await?;
                         asked.push(p);
                     }
                     Err(e) => log::warn!("slave {p}: left in INIT: {e}"),
@@ -603,7 +605,7 @@ impl Master {
     }
 
     pub(crate) async fn al_status_async(&self, position: usize) -> Result<AlStatus, MasterError> {
-        let b = self.fprd(position, 0x0130, 6).await?;
+        let b = self.fprd(position, regs::AL_STATUS, 6).await?;
         Ok(AlStatus {
             raw: b[0],
             code: u16::from_le_bytes([b[4], b[5]]),
@@ -617,7 +619,7 @@ impl Master {
             for (position, sd) in self.found.iter().enumerate() {
                 let (vendor_id, product_code, revision, serial) = sd.identity;
                 let status = self.al_status_async(position).await?;
-                let dl = self.read_u16(position, 0x0110).await?;
+                let dl = self.read_u16(position, regs::DL_STATUS).await?;
                 let links = std::array::from_fn(|p| dl & (1 << (4 + p)) != 0);
                 let open = std::array::from_fn(|p| dl & (1 << (9 + 2 * p)) != 0);
                 out.push(SlaveInfo {
@@ -736,7 +738,7 @@ impl Master {
                         }
                         _ => {}
                     }
-                    self.fpwr(p, 0x0120, &[s.code(), 0]).await?;
+                    self.fpwr(p, regs::AL_CONTROL, &[s.code(), 0]).await?;
                     last = self.wait_state(p, s).await?;
                 }
                 out.push((p, last));
@@ -748,7 +750,7 @@ impl Master {
     /// Acknowledges a pending AL error (0x0120 = current state | 0x10) and waits until the
     /// slave clears it (a slave whose error stays keeps the flag: the next request says so).
     async fn acknowledge(&self, position: usize, state: AlState) -> Result<(), MasterError> {
-        self.fpwr(position, 0x0120, &[state.code() | 0x10, 0])
+        self.fpwr(position, regs::AL_CONTROL, &[state.code() | 0x10, 0])
             .await?;
         let deadline = std::time::Instant::now() + self.options.timeouts.state_transition;
         while self.al_status_async(position).await?.error() {

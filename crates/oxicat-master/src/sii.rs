@@ -1,17 +1,15 @@
 //! SII EEPROM access through the ESC's SII interface (0x0500 ownership, 0x0502 control/
 //! status, 0x0504 address, 0x0508 data): read, decode, check and write an image.
 
+use oxicat_wire::regs;
 use oxicat_wire::sii::{sii_crc8, CategoryType, SiiImage};
 
 use crate::{Master, MasterError};
 
-const CTL: u16 = 0x0502;
-const ADDR: u16 = 0x0504;
-const DATA: u16 = 0x0508;
-const BUSY: u16 = 0x8000;
-const ERR_ACK: u16 = 0x2000;
-const ERR_WE: u16 = 0x4000;
-const READ8: u16 = 0x0040;
+use oxicat_wire::regs::sii_control::{
+    ACK_ERROR as ERR_ACK, BUSY, READ_8 as READ8, WE_ERROR as ERR_WE,
+};
+use oxicat_wire::regs::{SII_ADDRESS as ADDR, SII_CONTROL as CTL, SII_DATA as DATA};
 
 /// What to do with an SII image before writing it.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
@@ -61,7 +59,7 @@ pub fn image_identity(img: &[u8]) -> Result<(u32, u32, u32), MasterError> {
 impl Master {
     async fn sii_take(&self, position: usize) -> Result<u16, MasterError> {
         // The master owns the EEPROM when 0x0500 bit 0 is 0; the PDI may hold it (0x0501).
-        let own = self.fprd(position, 0x0500, 2).await?;
+        let own = self.fprd(position, regs::SII_CONFIG, 2).await?;
         if own[0] & 1 != 0 {
             if own[1] & 1 != 0 {
                 return Err(sii_err(
@@ -69,7 +67,7 @@ impl Master {
                     "the EEPROM is being accessed by the PDI (0x0501)",
                 ));
             }
-            self.fpwr(position, 0x0500, &[0]).await?;
+            self.fpwr(position, regs::SII_CONFIG, &[0]).await?;
         }
         self.sii_wait(position).await
     }

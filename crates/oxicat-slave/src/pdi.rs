@@ -59,52 +59,9 @@ pub trait Pdi {
     }
 }
 
-/// ESC register addresses used by the stack (Beckhoff ESC datasheet section II).
+/// ESC register addresses used by the stack: the one map of `oxicat_wire::regs`.
 pub mod reg {
-    /// AL control (requested state, error acknowledge).
-    pub const AL_CONTROL: u16 = 0x0120;
-    /// AL status (current state, error indication).
-    pub const AL_STATUS: u16 = 0x0130;
-    /// AL status code.
-    pub const AL_STATUS_CODE: u16 = 0x0134;
-    /// AL event mask (which AL events drive the PDI IRQ).
-    pub const AL_EVENT_MASK: u16 = 0x0204;
-    /// AL event request.
-    pub const AL_EVENT_REQ: u16 = 0x0220;
-    /// Process-data watchdog status (bit 0: watchdog active/not expired).
-    pub const WD_STATUS_PD: u16 = 0x0440;
-    /// First SyncManager register block (8 bytes per SM).
-    pub const SM_BASE: u16 = 0x0800;
-    /// DC cyclic unit control / activation (0x0980 unit control, 0x0981 activation).
-    pub const DC_ACTIVATION: u16 = 0x0980;
-    /// SYNC0 status (reading acknowledges in acknowledge mode).
-    pub const DC_SYNC0_STATUS: u16 = 0x098E;
-    /// SYNC1 status.
-    pub const DC_SYNC1_STATUS: u16 = 0x098F;
-    /// SYNC0 cycle time (u32, ns).
-    pub const DC_SYNC0_CYCLE: u16 = 0x09A0;
-    /// SYNC1 cycle time (u32, ns).
-    pub const DC_SYNC1_CYCLE: u16 = 0x09A4;
-
-    /// Address of register byte `off` of SyncManager `n`.
-    pub const fn sm(n: u8, off: u16) -> u16 {
-        SM_BASE + 8 * n as u16 + off
-    }
-
-    /// AL event request bit 0: AL control written.
-    pub const EV_AL_CONTROL: u32 = 1 << 0;
-    /// AL event request bit 2: SYNC0.
-    pub const EV_SYNC0: u32 = 1 << 2;
-    /// AL event request bit 3: SYNC1.
-    pub const EV_SYNC1: u32 = 1 << 3;
-    /// AL event request bit 4: SM activation changed.
-    pub const EV_SM_CHANGE: u32 = 1 << 4;
-    /// AL event request bit 6: process-data watchdog expired.
-    pub const EV_WATCHDOG: u32 = 1 << 6;
-    /// AL event request bit 8 + n: SyncManager n.
-    pub const fn ev_sm(n: u8) -> u32 {
-        1 << (8 + n as u32)
-    }
+    pub use oxicat_wire::regs::*;
 }
 
 #[cfg(feature = "soft-esc")]

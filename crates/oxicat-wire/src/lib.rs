@@ -22,6 +22,7 @@ pub mod foe;
 pub mod frame;
 pub mod mailbox;
 pub mod pipe;
+pub mod regs;
 pub mod sii;
 pub mod soe;
 pub mod udp;

@@ -172,13 +172,13 @@ impl Master {
 
     /// Configures SyncManager `n` (deactivated first, as a master must).
     fn sm(&mut self, n: u16, start: u16, len: u16, ctrl: u8) -> Result<(), ProbeError> {
-        self.wr(0x0806 + 8 * n, &[0])?;
+        self.wr(oxicat_wire::regs::sm(n as u8, 6), &[0])?;
         let mut r = [0u8; 8];
         r[0..2].copy_from_slice(&start.to_le_bytes());
         r[2..4].copy_from_slice(&len.to_le_bytes());
         r[4] = ctrl;
         r[6] = u8::from(len > 0);
-        self.wr(0x0800 + 8 * n, &r)
+        self.wr(oxicat_wire::regs::sm(n as u8, 0), &r)
     }
 
     /// Requests AL state `st` and lets the firmware run until it answers (≤ 20 ms).
