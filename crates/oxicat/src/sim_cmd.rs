@@ -34,7 +34,8 @@ use oxicat_sim::realtime::{serve, FramePort, RealtimeConfig, RealtimeStats};
 use oxicat_sim::segment::{Segment, TopologyError};
 use serde::Deserialize;
 
-use oxicat_devices::registry::{add_node, NodeError};
+use oxicat_devices::registry::{add_node_via, NodeError};
+use oxicat_sim::pdi_path::PdiRoute;
 
 /// Most nodes on a served segment: a frame passes every ESC twice (processing on the way
 /// out, forwarding on the way back), about 1 µs per node with an ESC's ~0.5 µs delay, so
@@ -190,6 +191,16 @@ pub struct DeviceEntry {
     /// A fault: the SII EEPROM of these nodes acknowledges no write to this word or above
     /// (a write-protected or worn part; 0x0502 bit 13), so an `sii-write` stops half-way.
     pub eeprom_protect_from_word: Option<u16>,
+    /// How the firmware reaches its ESC: `direct` (default), `lan9252` or `et1100` (the
+    /// chip's SPI driver over the simulated SPI bus at [`SPI_MHZ`] MHz).
+    pub pdi: Option<String>,
+}
+
+/// SPI clock of the `lan9252` / `et1100` routes of `sim` and `--sim`.
+pub const SPI_MHZ: u32 = 20;
+
+fn route_of(pdi: Option<&str>) -> Option<PdiRoute> {
+    pdi.map_or(Some(PdiRoute::Direct), |p| PdiRoute::parse(p, SPI_MHZ))
 }
 
 fn one() -> usize {
@@ -216,7 +227,18 @@ pub fn parse_specs_within(
         .flat_map(|a| a.split(|c: char| c == ',' || c.is_whitespace()))
         .filter(|p| !p.is_empty())
     {
-        let (name, count) = match s.split_once(':') {
+        let (spec, pdi) = match s.split_once('@') {
+            Some((spec, route)) => (spec, Some(route.to_string())),
+            None => (s, None),
+        };
+        if route_of(pdi.as_deref()).is_none() {
+            return Err(SimError::Range {
+                key: format!("the route of {s}"),
+                value: pdi.unwrap_or_default(),
+                range: "direct, lan9252 or et1100".into(),
+            });
+        }
+        let (name, count) = match spec.split_once(':') {
             Some((n, c)) => (
                 n,
                 c.parse::<u128>()
@@ -224,7 +246,7 @@ pub fn parse_specs_within(
                     .filter(|&c| c > 0)
                     .ok_or_else(|| SimError::BadSpec(s.to_string()))?,
             ),
-            None => (s, 1),
+            None => (spec, 1),
         };
         total = total.saturating_add(count);
         if total > max as u128 {
@@ -244,6 +266,7 @@ pub fn parse_specs_within(
             esc_delay_ns: None,
             link_delay_ns: None,
             eeprom_protect_from_word: None,
+            pdi,
         });
     }
     Ok(seg)
@@ -293,6 +316,13 @@ pub fn check_segment(desc: &SegmentFile) -> Result<(), SimError> {
                 range: format!("-{MAX_DRIFT_PPM} … {MAX_DRIFT_PPM} ppm"),
             });
         }
+        if route_of(d.pdi.as_deref()).is_none() {
+            return Err(SimError::Range {
+                key: format!("device[{k}].pdi"),
+                value: d.pdi.clone().unwrap_or_default(),
+                range: "direct, lan9252 or et1100".into(),
+            });
+        }
         total = total.saturating_add(d.count);
         if d.count == 0 || total > MAX_SIM_SLAVES {
             return Err(SimError::Range {
@@ -331,12 +361,14 @@ pub fn build_segment_until(
                 return Err(SimError::Interrupted);
             }
             let position = seg.len();
-            let id =
-                add_node(&mut seg, dev, k, entry.drift_ppm).map_err(|error| SimError::Node {
+            let route = route_of(entry.pdi.as_deref()).unwrap_or_default();
+            let id = add_node_via(&mut seg, dev, k, entry.drift_ppm, route).map_err(|error| {
+                SimError::Node {
                     position,
                     device: entry.name.clone(),
                     error,
-                })?;
+                }
+            })?;
             if let (Some(w), Some(esc)) = (entry.eeprom_protect_from_word, seg.esc_mut(id)) {
                 esc.protect_eeprom_from(w);
             }
@@ -737,6 +769,29 @@ mod tests {
             e.contains("device[1].count") && e.contains("1 … 1000"),
             "{e}"
         );
+    }
+
+    #[test]
+    fn a_spec_may_name_the_pdi_route() {
+        let desc = parse_specs(&["demo:2@lan9252,tue-es030@ET1100 cia402-joint".into()]).unwrap();
+        let routes: Vec<_> = desc.devices.iter().map(|d| d.pdi.as_deref()).collect();
+        assert_eq!(routes, vec![Some("lan9252"), Some("ET1100"), None]);
+        assert_eq!(desc.devices[0].count, 2);
+        let (seg, names) = build_segment(&desc).unwrap();
+        assert_eq!(seg.len(), 4);
+        assert_eq!(names[3], "cia402-joint");
+        let e = parse_specs(&["demo@spi".into()]).unwrap_err().to_string();
+        assert!(
+            e.contains("the route of demo@spi = spi") && e.contains("direct, lan9252 or et1100"),
+            "{e}"
+        );
+        let e = parse_segment(
+            "[[device]]\nname = \"demo\"\npdi = \"usb\"\n",
+            Path::new("s.toml"),
+        )
+        .unwrap_err()
+        .to_string();
+        assert!(e.contains("device[0].pdi = usb"), "{e}");
     }
 
     #[test]
