@@ -611,40 +611,17 @@ pub fn hex(b: &[u8]) -> String {
 
 /// ESI name of a CoE base data type.
 pub fn esi_type_name(t: DataType, bits: u16) -> String {
-    match t {
-        DataType::Bool => "BOOL".into(),
-        DataType::Int8 => "SINT".into(),
-        DataType::Int16 => "INT".into(),
-        DataType::Int32 => "DINT".into(),
-        DataType::Int64 => "LINT".into(),
-        DataType::Unsigned8 => "USINT".into(),
-        DataType::Unsigned16 => "UINT".into(),
-        DataType::Unsigned32 => "UDINT".into(),
-        DataType::Unsigned64 => "ULINT".into(),
-        DataType::Real32 => "REAL".into(),
-        DataType::Real64 => "LREAL".into(),
-        DataType::VisibleString => format!("STRING({})", bits / 8),
-        DataType::OctetString => format!("OCTET_STRING({})", bits / 8),
+    let name = oxicat_wire::datatype::by_code(t.code()).map_or("?", |d| d.name);
+    if t.is_string() {
+        format!("{name}({})", bits / 8)
+    } else {
+        name.into()
     }
 }
 
 /// CoE data type code of an ESI type name (`None` for unknown / structured names).
 pub fn type_code(name: &str) -> Option<u16> {
-    Some(match name.trim() {
-        "BOOL" | "BIT" => 0x0001,
-        "SINT" => 0x0002,
-        "INT" => 0x0003,
-        "DINT" => 0x0004,
-        "USINT" | "BYTE" => 0x0005,
-        "UINT" | "WORD" => 0x0006,
-        "UDINT" | "DWORD" => 0x0007,
-        "REAL" => 0x0008,
-        "LREAL" => 0x0011,
-        "LINT" => 0x0015,
-        "ULINT" | "LWORD" => 0x001B,
-        n if n.starts_with("STRING(") => 0x0009,
-        _ => return None,
-    })
+    oxicat_wire::datatype::by_name(name).map(|d| d.code)
 }
 
 fn entry_data_type(def: &DeviceDef, index: u16, sub: u8) -> Option<(String, DataType)> {

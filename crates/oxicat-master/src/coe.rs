@@ -123,25 +123,8 @@ pub fn igh_type_name(code: u16) -> String {
 
 /// A CoE data type code as its ETG name.
 pub fn type_name(code: u16) -> String {
-    match code {
-        0x0001 => "BOOL".into(),
-        0x0002 => "SINT".into(),
-        0x0003 => "INT".into(),
-        0x0004 => "DINT".into(),
-        0x0005 => "USINT".into(),
-        0x0006 => "UINT".into(),
-        0x0007 => "UDINT".into(),
-        0x0008 => "REAL".into(),
-        0x0009 => "STRING".into(),
-        0x000A => "OCTET_STRING".into(),
-        0x000B => "UNICODE_STRING".into(),
-        0x0011 => "LREAL".into(),
-        0x0015 => "LINT".into(),
-        0x001B => "ULINT".into(),
-        0x0029 => "PDO_MAPPING".into(),
-        0x002A => "RECORD".into(),
-        c => format!("DT{c:04X}"),
-    }
+    oxicat_wire::datatype::by_code(code)
+        .map_or_else(|| format!("DT{code:04X}"), |d| d.name.to_string())
 }
 
 fn mbx_err(position: usize, what: impl Into<String>) -> MasterError {

@@ -104,23 +104,28 @@ impl ValueType {
         })
     }
 
-    /// The ETG name of the type (as in ESI files).
-    pub fn esi_name(self) -> &'static str {
+    /// The CoE data type code of the type.
+    pub fn code(self) -> u16 {
         match self {
-            Self::Bool => "BOOL",
-            Self::U8 => "USINT",
-            Self::U16 => "UINT",
-            Self::U32 => "UDINT",
-            Self::U64 => "ULINT",
-            Self::I8 => "SINT",
-            Self::I16 => "INT",
-            Self::I32 => "DINT",
-            Self::I64 => "LINT",
-            Self::F32 => "REAL",
-            Self::F64 => "LREAL",
-            Self::String => "STRING",
-            Self::Hex => "OCTET_STRING",
+            Self::Bool => 0x0001,
+            Self::I8 => 0x0002,
+            Self::I16 => 0x0003,
+            Self::I32 => 0x0004,
+            Self::U8 => 0x0005,
+            Self::U16 => 0x0006,
+            Self::U32 => 0x0007,
+            Self::F32 => 0x0008,
+            Self::String => 0x0009,
+            Self::Hex => 0x000A,
+            Self::F64 => 0x0011,
+            Self::I64 => 0x0015,
+            Self::U64 => 0x001B,
         }
+    }
+
+    /// The ETG name of the type (as in ESI files), from `oxicat_wire::datatype`.
+    pub fn esi_name(self) -> &'static str {
+        oxicat_wire::datatype::by_code(self.code()).map_or("?", |d| d.name)
     }
 
     /// Encodes `text` as this type (little-endian); an error names the value and the type.

@@ -1291,3 +1291,31 @@ fn copy_str(dst: &mut [u8], s: &str) {
     let n = dst.len().min(s.len());
     dst[..n].copy_from_slice(&s.as_bytes()[..n]);
 }
+
+#[cfg(test)]
+mod tests {
+    use super::DataType;
+
+    #[test]
+    fn data_types_agree_with_the_wire_table() {
+        use DataType::*;
+        for t in [
+            Bool,
+            Int8,
+            Int16,
+            Int32,
+            Int64,
+            Unsigned8,
+            Unsigned16,
+            Unsigned32,
+            Unsigned64,
+            Real32,
+            Real64,
+            VisibleString,
+            OctetString,
+        ] {
+            let d = oxicat_wire::datatype::by_code(t.code()).expect("in the table");
+            assert_eq!(d.bits, t.bits(), "{t:?}");
+        }
+    }
+}

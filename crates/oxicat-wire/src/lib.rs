@@ -15,6 +15,7 @@ extern crate std;
 pub mod coe;
 pub mod crc;
 pub mod datagram;
+pub mod datatype;
 pub mod eoe;
 pub mod error;
 pub mod ethernet;
