@@ -64,7 +64,7 @@ pub fn by_name(name: &str) -> Option<&'static DataTypeInfo> {
     };
     DATA_TYPES
         .iter()
-        .filter(|d| d.bits > 0 || matches!(d.code, 0x0009 | 0x000A | 0x000B))
+        .filter(|d| d.bits > 0 || matches!(d.code, 0x0009..=0x000B))
         .find(|d| d.name == base || d.aliases.contains(&base))
         // A bare STRING / OCTET_STRING has no length: only with one.
         .filter(|d| d.bits > 0 || base != n)
