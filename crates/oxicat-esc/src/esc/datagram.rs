@@ -1,0 +1,566 @@
+//! Frames and datagrams: the fused and generic forward paths, the datagram walk, physical
+//! and logical addressing with the working-counter rules, FMMU redirection.
+
+use super::*;
+
+/// The circulating bit of the first datagram, `None` if the frame has no datagram.
+pub(super) fn circulating(frame: &[u8]) -> Option<bool> {
+    frame.get(9).map(|b| b & 0x40 != 0)
+}
+
+pub(super) fn set_circulating(frame: &mut [u8]) {
+    if let Some(b) = frame.get_mut(9) {
+        *b |= 0x40;
+    }
+}
+
+impl Esc {
+    /// A frame's first bit reaches `port` at time `t`; see the API contract. Returns the
+    /// port the frame leaves through or `Dropped` (circulating frame rule).
+    #[inline]
+    pub fn forward(&mut self, port: u8, frame: &mut [u8], t: u64, frame_ok: bool) -> Forward {
+        self.memo.clear();
+        if port == 0 && frame_ok && self.fused.ok {
+            self.now = t;
+            self.dc.frame_arrival_port0(&mut self.mem[..REG_END], t);
+            if let Some(out) = self.process_fused(frame, t) {
+                return out;
+            }
+            return self.forward_after_arrival(0, frame, true);
+        }
+        self.forward_generic(port, frame, t, frame_ok)
+    }
+
+    /// The fused path (see `Fused`), after the frame's arrival: the checks first (no state
+    /// touched when they fail and the generic path takes over), then the plan steps with
+    /// the end-of-frame commit of each written SM, IRQ and working counter, exit port.
+    /// Same effects as `process_frame` plus the exit-port search on such a frame.
+    #[inline(always)]
+    pub(super) fn process_fused(&mut self, frame: &mut [u8], t: u64) -> Option<Forward> {
+        // Frame header, command, index, address and length word in one load.
+        let h = u64::from_le_bytes(*frame.first_chunk::<8>()?);
+        let lf = u16::from_le_bytes(*frame.get(8..10)?.first_chunk::<2>()?);
+        let w = h as u16;
+        let cmd = (h >> 16) as u8;
+        let len = (lf & 0x07FF) as usize;
+        // Frame end (header length); the single datagram must fit in it.
+        let end = ECAT_HEADER_LEN + (w & 0x07FF) as usize;
+        let dg_end = ECAT_HEADER_LEN + DG_HEADER_LEN + len + 2;
+        // One logical datagram (no more-follows) in a datagram frame.
+        if w >> 12 != ECAT_TYPE_DATAGRAMS
+            || cmd.wrapping_sub(CMD_LRD) > CMD_LRW - CMD_LRD
+            || lf & 0x8000 != 0
+            || dg_end > end
+            || end > frame.len()
+        {
+            return None;
+        }
+        let ds = h >> 32;
+        let (lo, hi) = (self.fused.lo, self.fused.hi);
+        if ds > lo || hi > ds + len as u64 {
+            return None;
+        }
+        if self.events_dirty && self.ecat_mask != 0 {
+            self.refresh_events();
+        }
+        #[cfg(test)]
+        {
+            self.fused_hits += 1;
+        }
+        let irq = self.ecat_irq;
+        // The plan window in the frame (inside the datagram data, checked above).
+        let wstart = ECAT_HEADER_LEN + DG_HEADER_LEN + (lo - ds) as usize;
+        let win = frame.get_mut(wstart..wstart + (hi - lo) as usize)?;
+        // Registers (SM status, watchdog status) and process RAM (the SM buffers, which
+        // the fused path requires to lie at or above `REG_END`).
+        let (regs, ram) = self.mem.split_at_mut(REG_END);
+        let regs: &mut [u8; REG_END] = regs.try_into().ok()?;
+        // The steps this command runs (reads come first, then writes): one loop.
+        let c = (cmd - CMD_LRD) as usize;
+        let (from_step, to_step) = self.fused.range[c];
+        for st in self.fused.steps.get(from_step as usize..to_step as usize)? {
+            let i = st.sm as usize & 15;
+            let sm = &mut self.sms[i];
+            let l = st.len as usize;
+            let o = st.off as usize;
+            if st.write {
+                let b = sm.buffered_write_commit();
+                regs[regs::sm_reg(i, 5)] = sm.buffered_status_reg();
+                let to = st.ram as usize + b as usize * l;
+                copy_small(&mut ram[to..to + l], &win[o..o + l]);
+                if st.wd {
+                    self.pd_wd_last = Some(t);
+                    regs[regs::WD_STATUS_PD as usize] |= 1;
+                }
+            } else {
+                let b = sm.buffered_read_whole();
+                regs[regs::sm_reg(i, 5)] = sm.buffered_status_reg();
+                let from = st.ram as usize + b as usize * l;
+                copy_small(&mut win[o..o + l], &ram[from..from + l]);
+            }
+        }
+        let inc = self.fused.inc[(cmd - CMD_LRD) as usize];
+        // Some step ran exactly when the working counter counts.
+        self.events_dirty |= inc != 0;
+        let hirq = u16::from_le_bytes([frame[10], frame[11]]);
+        if irq & !hirq != 0 {
+            frame[10..12].copy_from_slice(&(hirq | irq).to_le_bytes());
+        }
+        if inc != 0 {
+            let wkc = &mut frame[dg_end - 2..dg_end];
+            let w = u16::from_le_bytes([wkc[0], wkc[1]]).wrapping_add(inc);
+            wkc.copy_from_slice(&w.to_le_bytes());
+        }
+        Some(Forward::Port(self.fused.exit))
+    }
+
+    /// `forward` for every frame (the fused path is a shortcut for one kind).
+    pub(super) fn forward_generic(
+        &mut self,
+        port: u8,
+        frame: &mut [u8],
+        t: u64,
+        frame_ok: bool,
+    ) -> Forward {
+        let port = port & 3;
+        self.now = t;
+        self.dc.frame_arrival(&mut self.mem[..REG_END], port, t);
+        self.forward_after_arrival(port, frame, frame_ok)
+    }
+
+    /// `forward` after the DC unit saw the frame's arrival.
+    pub(super) fn forward_after_arrival(
+        &mut self,
+        port: u8,
+        frame: &mut [u8],
+        frame_ok: bool,
+    ) -> Forward {
+        if !frame_ok {
+            let a = regs::RX_ERROR_COUNTER as usize + 2 * port as usize;
+            self.mem[a] = self.mem[a].saturating_add(1);
+        }
+        if port == 0 {
+            self.process_frame(frame, frame_ok);
+        }
+        let mut cur = port;
+        for _ in 0..8 {
+            let nxt = match cur {
+                0 => 3,
+                3 => 1,
+                1 => 2,
+                _ => 0,
+            };
+            if self.port_open(nxt) {
+                return Forward::Port(nxt);
+            }
+            if nxt == 0 {
+                // Port 0 closed: the frame loops back into the processing unit.
+                match circulating(frame) {
+                    Some(true) => return Forward::Dropped,
+                    Some(false) => set_circulating(frame),
+                    None => {}
+                }
+                self.process_frame(frame, frame_ok);
+            }
+            cur = nxt;
+        }
+        Forward::Dropped
+    }
+
+    pub(super) fn process_frame(&mut self, frame: &mut [u8], frame_ok: bool) {
+        self.frame_ok = frame_ok;
+        self.walk_datagrams(frame);
+        if !frame_ok {
+            // A bad frame also abandons a buffer write ECAT had opened.
+            for k in 0..self.active_sms.len() {
+                let i = self.active_sms[k] as usize;
+                let sm = &mut self.sms[i];
+                if sm.write_open && sm.ecat_writes() {
+                    sm.write_open = false;
+                    let st = sm.status_reg();
+                    self.mem[regs::sm_reg(i, 5)] = st;
+                }
+            }
+        }
+        // Only SMs flagged in this frame can have a pending commit (deactivating or
+        // reconfiguring an SM clears its flag); lowest index first, as before.
+        let mut pending = take(&mut self.pending_sms);
+        while pending != 0 {
+            let i = pending.trailing_zeros() as usize;
+            pending &= pending - 1;
+            if self.sms[i].pending_commit {
+                if frame_ok {
+                    self.commit_sm(i, Side::Ecat);
+                } else {
+                    self.sms[i].discard();
+                }
+            }
+        }
+        self.frame_ok = true;
+    }
+
+    /// Walks the datagrams of `frame` exactly as `oxicat_wire::frame::for_each_datagram_mut`
+    /// does (same bounds checks, stops at the first malformed datagram), but hands logical
+    /// datagrams to [`Esc::logical_datagram`] without building a decoded header.
+    #[inline]
+    pub(super) fn walk_datagrams(&mut self, frame: &mut [u8]) {
+        let Some(hdr) = frame.get(..ECAT_HEADER_LEN) else {
+            return;
+        };
+        let w = u16::from_le_bytes([hdr[0], hdr[1]]);
+        if w >> 12 != ECAT_TYPE_DATAGRAMS {
+            return;
+        }
+        let end = ECAT_HEADER_LEN + (w & 0x07FF) as usize;
+        let Some(mut rest) = frame.get_mut(ECAT_HEADER_LEN..end) else {
+            return;
+        };
+        loop {
+            let Some(h) = rest.get(..DG_HEADER_LEN) else {
+                return;
+            };
+            let cmd = h[0];
+            let lf = u16::from_le_bytes([h[6], h[7]]);
+            let len = (lf & 0x07FF) as usize;
+            let total = DG_HEADER_LEN + len + 2;
+            if rest.len() < total {
+                return;
+            }
+            let (dg, tail) = take(&mut rest).split_at_mut(total);
+            if (CMD_LRD..=CMD_LRW).contains(&cmd) {
+                self.logical_datagram(dg, cmd);
+            } else if let Ok((mut d, _)) = DatagramMut::parse(dg) {
+                self.process_datagram(&mut d);
+            }
+            if lf & 0x8000 == 0 {
+                return;
+            }
+            rest = tail;
+        }
+    }
+
+    /// A logical datagram (`dg`: header, data and working counter, already bounds-checked;
+    /// `cmd` is LRD, LWR or LRW): what [`Esc::process_datagram`] does for it, on the raw bytes.
+    #[inline]
+    pub(super) fn logical_datagram(&mut self, dg: &mut [u8], cmd: u8) {
+        if self.events_dirty && self.ecat_mask != 0 {
+            self.refresh_events();
+        }
+        let irq = self.ecat_irq;
+        let (hdr, rest) = dg.split_at_mut(DG_HEADER_LEN);
+        let (data, wkc) = rest.split_at_mut(rest.len() - 2);
+        let addr = u32::from_le_bytes([hdr[2], hdr[3], hdr[4], hdr[5]]);
+        let cmd = match cmd {
+            CMD_LRD => Command::Lrd,
+            CMD_LWR => Command::Lwr,
+            _ => Command::Lrw,
+        };
+        let inc = self.logical(cmd, addr, data);
+        let hirq = u16::from_le_bytes([hdr[8], hdr[9]]);
+        if irq & !hirq != 0 {
+            hdr[8..10].copy_from_slice(&(hirq | irq).to_le_bytes());
+        }
+        if inc != 0 {
+            let w = u16::from_le_bytes([wkc[0], wkc[1]]).wrapping_add(inc);
+            wkc.copy_from_slice(&w.to_le_bytes());
+        }
+    }
+
+    pub(super) fn configured_match(&self, adp: u16) -> bool {
+        adp == self.reg16(regs::STATION_ADDR)
+            || (self.mem[regs::DL_ALIAS_ENABLE as usize] & 1 != 0
+                && adp == self.reg16(regs::STATION_ALIAS))
+    }
+
+    pub(super) fn process_datagram(&mut self, dg: &mut DatagramMut<'_>) {
+        if self.events_dirty && self.ecat_mask != 0 {
+            self.refresh_events();
+        }
+        let Some(cmd) = dg.header.command() else {
+            return;
+        };
+        // The IRQ field passes the ESC before the data: it shows the event state from
+        // before this datagram's own access (a write to the mask 0x0200 or a read of DL
+        // status does not change its own IRQ field).
+        let irq = self.ecat_irq;
+        let mut header_changed = false;
+        let mut inc: u16 = 0;
+        let adp = dg.header.adp();
+        let ado = dg.header.ado() as u32;
+        match cmd {
+            Command::Nop => {}
+            Command::Aprd | Command::Apwr | Command::Aprw | Command::Armw => {
+                if adp == 0 {
+                    inc = self.physical(cmd, ado, dg.data, false);
+                } else if cmd == Command::Armw {
+                    inc = self.physical(Command::Apwr, ado, dg.data, false);
+                }
+                dg.header.address = (dg.header.address & 0xFFFF_0000) | adp.wrapping_add(1) as u32;
+                header_changed = true;
+            }
+            Command::Fprd | Command::Fpwr | Command::Fprw | Command::Frmw => {
+                if self.configured_match(adp) {
+                    inc = self.physical(cmd, ado, dg.data, false);
+                } else if cmd == Command::Frmw {
+                    inc = self.physical(Command::Fpwr, ado, dg.data, false);
+                }
+            }
+            Command::Brd | Command::Bwr | Command::Brw => {
+                inc = self.physical(cmd, ado, dg.data, true);
+                dg.header.address = (dg.header.address & 0xFFFF_0000) | adp.wrapping_add(1) as u32;
+                header_changed = true;
+            }
+            Command::Lrd | Command::Lwr | Command::Lrw => {
+                inc = self.logical(cmd, dg.header.address, dg.data);
+            }
+        }
+        if irq & !dg.header.irq != 0 {
+            dg.header.irq |= irq;
+            header_changed = true;
+        }
+        if header_changed {
+            dg.commit_header();
+        }
+        if inc != 0 {
+            let w = dg.wkc().wrapping_add(inc);
+            dg.set_wkc(w);
+        }
+    }
+
+    /// Physical access by a datagram addressed to this slave; returns the WKC increment.
+    pub(super) fn physical(&mut self, cmd: Command, ado: u32, data: &mut [u8], or: bool) -> u16 {
+        // ARMW/FRMW at the addressed slave read only.
+        let r = cmd.reads();
+        let w = cmd.writes() && !matches!(cmd, Command::Armw | Command::Frmw);
+        match (r, w) {
+            (true, false) => u16::from(self.phys_read(Side::Ecat, ado, data, or)),
+            (false, true) => u16::from(self.phys_write(Side::Ecat, ado, data, None)),
+            (true, true) => {
+                let mut orig = take(&mut self.scratch);
+                orig.clear();
+                orig.extend_from_slice(data);
+                let mut inc = 0;
+                if self.phys_read(Side::Ecat, ado, data, or) {
+                    inc += 1;
+                }
+                if self.phys_write(Side::Ecat, ado, &orig, None) {
+                    inc += 2;
+                }
+                self.scratch = orig;
+                inc
+            }
+            (false, false) => 0,
+        }
+    }
+
+    /// Logical access through the FMMUs; returns the WKC increment.
+    #[inline]
+    pub(super) fn logical(&mut self, cmd: Command, addr: u32, data: &mut [u8]) -> u16 {
+        let ds = addr as u64;
+        let de = ds + data.len() as u64;
+        // O(1) rejection: the datagram misses every FMMU's logical range.
+        if self.log_bit_lo >= de * 8 || self.log_bit_hi <= ds * 8 {
+            return 0;
+        }
+        let do_read = cmd != Command::Lwr && self.fmmu_any_read;
+        let do_write = cmd != Command::Lrd && self.fmmu_any_write;
+        if !do_read && !do_write {
+            return 0;
+        }
+        if self.plan_ok && ds <= self.plan_lo && self.plan_hi <= de {
+            // The datagram covers every FMMU: each step is a whole-buffer SM access.
+            return self.logical_plan(cmd, (self.plan_lo - ds) as usize, data);
+        }
+        let need_copy = do_read && do_write && self.fmmu_rw_overlap;
+        if need_copy || !self.fmmu_all_sm {
+            return self.logical_generic(cmd, addr, data, do_read, do_write, need_copy);
+        }
+        // Every FMMU maps a whole SyncManager buffer byte-aligned (the usual process-data
+        // layout): a datagram covering an FMMU's range accesses the SM buffer in one go;
+        // a partial cover takes the general per-FMMU route.
+        let mut rd = false;
+        let mut wr = false;
+        let n = self.fmmus.len();
+        if do_read {
+            for k in 0..n {
+                let f = &self.fmmus[k];
+                let (s, e) = (f.log_start as u64, f.log_end);
+                if !f.read || s >= de || e <= ds {
+                    continue;
+                }
+                if s >= ds && e <= de {
+                    let i = f.sm.unwrap_or(0) as usize;
+                    let out = &mut data[(s - ds) as usize..(e - ds) as usize];
+                    rd |= self.sm_read_whole(i, out);
+                } else {
+                    let f = *f;
+                    rd |= self.fmmu_read(&f, addr, data);
+                }
+            }
+        }
+        if do_write {
+            for k in 0..n {
+                let f = &self.fmmus[k];
+                let (s, e) = (f.log_start as u64, f.log_end);
+                if !f.write || s >= de || e <= ds {
+                    continue;
+                }
+                if s >= ds && e <= de {
+                    let i = f.sm.unwrap_or(0) as usize;
+                    let inp = &data[(s - ds) as usize..(e - ds) as usize];
+                    wr |= self.sm_write_whole(i, inp);
+                } else {
+                    let f = *f;
+                    wr |= self.fmmu_write(&f, addr, data);
+                }
+            }
+        }
+        let wr_inc = if cmd == Command::Lwr { 1 } else { 2 };
+        u16::from(rd) + wr_inc * u16::from(wr)
+    }
+
+    /// The logical fast path: `data[base..]` starts at the plan window.
+    #[inline(always)]
+    pub(super) fn logical_plan(&mut self, cmd: Command, base: usize, data: &mut [u8]) -> u16 {
+        let Some(win) = data.get_mut(base..) else {
+            return 0;
+        };
+        let mut rd = false;
+        let mut wr = false;
+        let n = self.plan_len as usize;
+        let nr = self.plan_reads as usize;
+        if cmd != Command::Lwr {
+            for k in 0..nr.min(n) {
+                let op = self.plan[k];
+                let (o, l) = (op.off as usize, op.len as usize);
+                if let Some(out) = win.get_mut(o..o + l) {
+                    rd |= self.sm_read_whole(op.sm as usize, out);
+                }
+            }
+        }
+        if cmd != Command::Lrd {
+            for k in nr..n.min(PLAN_MAX) {
+                let op = self.plan[k];
+                let (o, l) = (op.off as usize, op.len as usize);
+                if let Some(inp) = win.get(o..o + l) {
+                    wr |= self.sm_write_whole(op.sm as usize, inp);
+                }
+            }
+        }
+        let wr_inc = if cmd == Command::Lwr { 1 } else { 2 };
+        u16::from(rd) + wr_inc * u16::from(wr)
+    }
+
+    /// Logical access through arbitrary (bit-granular, overlapping, non-SM) FMMUs.
+    pub(super) fn logical_generic(
+        &mut self,
+        cmd: Command,
+        addr: u32,
+        data: &mut [u8],
+        do_read: bool,
+        do_write: bool,
+        need_copy: bool,
+    ) -> u16 {
+        let mut rd = false;
+        let mut wr = false;
+        let n = self.fmmus.len();
+        // Only a logical datagram that touches the FMMUs' logical ranges does work.
+        let ds = addr as u64;
+        let de = ds + data.len() as u64;
+        // Writes use the data as it arrived (before this ESC's reads) when a read and a
+        // write FMMU overlap.
+        let orig = if need_copy {
+            let mut o = take(&mut self.scratch);
+            o.clear();
+            o.extend_from_slice(data);
+            Some(o)
+        } else {
+            None
+        };
+        if do_read {
+            for k in 0..n {
+                let f = self.fmmus[k];
+                if f.read
+                    && f.log_bit_start < de * 8
+                    && f.log_bit_end > ds * 8
+                    && self.fmmu_read(&f, addr, data)
+                {
+                    rd = true;
+                }
+            }
+        }
+        if do_write {
+            for k in 0..n {
+                let f = self.fmmus[k];
+                if f.write && f.log_bit_start < de * 8 && f.log_bit_end > ds * 8 {
+                    let src: &[u8] = orig.as_deref().unwrap_or(data);
+                    if self.fmmu_write(&f, addr, src) {
+                        wr = true;
+                    }
+                }
+            }
+        }
+        if let Some(o) = orig {
+            self.scratch = o;
+        }
+        let wr_inc = if cmd == Command::Lwr { 1 } else { 2 };
+        u16::from(rd) + wr_inc * u16::from(wr)
+    }
+
+    pub(super) fn fmmu_read(&mut self, f: &Fmmu, addr: u32, data: &mut [u8]) -> bool {
+        let (n, dbit, p0) = match f.overlap(addr, data.len()) {
+            Overlap::None => return false,
+            Overlap::WholeSm { sm, at } => {
+                return self.sm_read_whole(sm, &mut data[at..at + f.len as usize])
+            }
+            Overlap::Bytes { phys, d0, d1 } => {
+                return self.phys_read(Side::Ecat, phys, &mut data[d0..d1], false)
+            }
+            Overlap::Bits { n, dbit, pbit0 } => (n, dbit, pbit0),
+        };
+        let (pb0, pb1) = (p0 / 8, (p0 + n - 1) / 8);
+        let mut tmp = take(&mut self.scratch_bits);
+        tmp.clear();
+        tmp.resize(pb1 - pb0 + 1, 0);
+        let ok = self.phys_read(Side::Ecat, pb0 as u32, &mut tmp, false);
+        if ok {
+            let pbit = p0 % 8;
+            for i in 0..n {
+                set_bit(data, dbit + i, get_bit(&tmp, pbit + i));
+            }
+        }
+        self.scratch_bits = tmp;
+        ok
+    }
+
+    pub(super) fn fmmu_write(&mut self, f: &Fmmu, addr: u32, src: &[u8]) -> bool {
+        let (n, dbit, p0) = match f.overlap(addr, src.len()) {
+            Overlap::None => return false,
+            Overlap::WholeSm { sm, at } => {
+                return self.sm_write_whole(sm, &src[at..at + f.len as usize])
+            }
+            Overlap::Bytes { phys, d0, d1 } => {
+                return self.phys_write(Side::Ecat, phys, &src[d0..d1], None)
+            }
+            Overlap::Bits { n, dbit, pbit0 } => (n, dbit, pbit0),
+        };
+        let (pb0, pb1) = (p0 / 8, (p0 + n - 1) / 8);
+        let mut tmp = take(&mut self.scratch_bits);
+        let mut mask = take(&mut self.scratch_mask);
+        tmp.clear();
+        tmp.resize(pb1 - pb0 + 1, 0);
+        mask.clear();
+        mask.resize(pb1 - pb0 + 1, 0);
+        let pbit = p0 % 8;
+        for i in 0..n {
+            set_bit(&mut tmp, pbit + i, get_bit(src, dbit + i));
+            set_bit(&mut mask, pbit + i, true);
+        }
+        let ok = self.phys_write(Side::Ecat, pb0 as u32, &tmp, Some(&mask));
+        self.scratch_bits = tmp;
+        self.scratch_mask = mask;
+        ok
+    }
+
+    // ------------------------------------------------------------------ memory layer
+}

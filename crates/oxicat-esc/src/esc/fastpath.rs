@@ -1,0 +1,196 @@
+//! The logical fast path: plans of whole SyncManager buffers mapped byte-aligned by FMMUs,
+//! and the fused path that runs a cyclic LRW without the generic walk.
+
+use super::*;
+
+/// One step of the logical fast path: a whole SyncManager buffer mapped byte-aligned by
+/// an FMMU, pre-resolved when FMMUs or SMs change.
+#[derive(Debug, Clone, Copy, Default)]
+pub(super) struct PlanOp {
+    /// Offset of the FMMU's logical range from the plan window's start.
+    pub(super) off: u32,
+    /// Length in bytes (= the SM length).
+    pub(super) len: u32,
+    /// SM index.
+    pub(super) sm: u8,
+}
+
+/// Most FMMUs a fast-path plan holds (more take the general route).
+pub(super) const PLAN_MAX: usize = 4;
+
+/// One step of the fused path: a whole buffered-mode SM buffer, byte-aligned.
+#[derive(Debug, Clone, Copy, Default)]
+pub(super) struct FusedStep {
+    /// Offset of the step's bytes from the plan window's start in the datagram data.
+    pub(super) off: u16,
+    /// The SM's start address relative to `REG_END` and length (one buffer).
+    pub(super) ram: u16,
+    pub(super) len: u16,
+    /// SM index.
+    pub(super) sm: u8,
+    /// ECAT writes the SM (a write step; otherwise a read step).
+    pub(super) write: bool,
+    /// The SM triggers the process-data watchdog (write steps).
+    pub(super) wd: bool,
+}
+
+/// The fused path (`Esc::forward_fused`): a frame entering port 0 with a good FCS that
+/// holds a single logical datagram covering the plan window, at an ESC whose plan steps
+/// are all distinct buffered-mode (3-buffer) SMs in process RAM and which has an open
+/// port (the frame does not loop back into the processing unit). Rebuilt with the plan and on port changes.
+#[derive(Debug, Clone, Copy, Default)]
+pub(super) struct Fused {
+    /// The fused path applies to this ESC's configuration.
+    pub(super) ok: bool,
+    /// Port the frame leaves through (first open port after port 0).
+    pub(super) exit: u8,
+    /// The steps LRD, LWR and LRW run: `steps[range[c].0..range[c].1]` (reads come
+    /// first, then writes).
+    pub(super) range: [(u8, u8); 3],
+    /// Plan window `[lo, hi)` (logical bytes).
+    pub(super) lo: u64,
+    pub(super) hi: u64,
+    /// Working-counter increment for LRD, LWR, LRW.
+    pub(super) inc: [u16; 3],
+    pub(super) steps: [FusedStep; PLAN_MAX],
+}
+
+impl Esc {
+    pub(super) fn rebuild_active_sms(&mut self) {
+        self.active_sms.clear();
+        for (i, sm) in self.sms.iter().enumerate().take(self.cfg.sm_count as usize) {
+            if sm.enabled {
+                self.active_sms.push(i as u8);
+            }
+        }
+    }
+
+    pub(super) fn rebuild_fmmus(&mut self) {
+        self.fmmus.clear();
+        for n in 0..self.cfg.fmmu_count as usize {
+            let b = regs::fmmu_reg(n, 0);
+            if let Some(f) = Fmmu::decode(&self.mem[b..b + 16]) {
+                self.fmmus.push(f);
+            }
+        }
+        for f in self.fmmus.iter_mut() {
+            if !f.aligned || f.read == f.write {
+                continue;
+            }
+            let ps = f.phys_start as u32;
+            let pe = ps + f.len as u32;
+            f.sm = self.active_sms.iter().copied().find(|&i| {
+                let sm = &self.sms[i as usize];
+                sm.start as u32 == ps && sm.end() == pe && sm.ecat_writes() == f.write
+            });
+        }
+        self.fmmu_all_sm = self.fmmus.iter().all(|f| f.aligned && f.sm.is_some());
+        self.log_bit_lo = self
+            .fmmus
+            .iter()
+            .map(|f| f.log_bit_start)
+            .min()
+            .unwrap_or(u64::MAX);
+        self.log_bit_hi = self.fmmus.iter().map(|f| f.log_bit_end).max().unwrap_or(0);
+        self.fmmu_any_read = self.fmmus.iter().any(|f| f.read);
+        self.fmmu_any_write = self.fmmus.iter().any(|f| f.write);
+        self.fmmu_rw_overlap = self
+            .fmmus
+            .iter()
+            .any(|r| r.read && self.fmmus.iter().any(|w| w.write && w.overlaps(r)));
+        self.rebuild_plan();
+    }
+
+    /// Pre-resolves the FMMUs for the logical fast path (see `plan_ok`).
+    pub(super) fn rebuild_plan(&mut self) {
+        self.plan_ok = self.fmmu_all_sm
+            && !self.fmmu_rw_overlap
+            && !self.fmmus.is_empty()
+            && self.fmmus.len() <= PLAN_MAX;
+        self.plan_len = 0;
+        if !self.plan_ok {
+            self.rebuild_fused();
+            return;
+        }
+        self.plan_lo = self
+            .fmmus
+            .iter()
+            .map(|f| f.log_start as u64)
+            .min()
+            .unwrap_or(0);
+        self.plan_hi = self.fmmus.iter().map(|f| f.log_end).max().unwrap_or(0);
+        // Reads first, then writes, each in FMMU order (the order `logical` executes).
+        let reads = self.fmmus.iter().filter(|f| f.read);
+        let writes = self.fmmus.iter().filter(|f| f.write);
+        let mut n = 0;
+        for f in reads.chain(writes) {
+            self.plan[n] = PlanOp {
+                off: (f.log_start as u64 - self.plan_lo) as u32,
+                len: f.len as u32,
+                sm: f.sm.unwrap_or(0),
+            };
+            n += 1;
+        }
+        self.plan_len = n as u8;
+        self.plan_reads = self.fmmus.iter().filter(|f| f.read).count() as u8;
+        self.rebuild_fused();
+    }
+
+    /// Decides whether the fused path applies (see `Fused`) and pre-resolves it.
+    pub(super) fn rebuild_fused(&mut self) {
+        let mut f = Fused::default();
+        // Exit port of a frame entering port 0: the first open port in processing order
+        // (port 0 itself last; all closed: the frame loops back, generic path).
+        let exit = [3u8, 1, 2, 0].into_iter().find(|&p| self.port_open(p));
+        let n = self.plan_len as usize;
+        let mut ok = !self.fused_disabled && self.plan_ok && n > 0 && exit.is_some();
+        let mut seen = 0u32;
+        for (k, op) in self.plan[..n].iter().enumerate() {
+            let i = op.sm as usize;
+            let Some(sm) = self.sms.get(i) else {
+                ok = false;
+                break;
+            };
+            let ram_ok = sm.start as usize >= REG_END
+                && sm.start as usize + 3 * sm.len as usize <= self.mem.len();
+            if sm.is_mailbox()
+                || !ram_ok
+                || seen & (1 << i) != 0
+                || op.len != sm.len as u32
+                || op.off > u16::MAX as u32
+            {
+                ok = false;
+                break;
+            }
+            seen |= 1 << i;
+            f.steps[k] = FusedStep {
+                off: op.off as u16,
+                ram: sm.start - REG_END as u16,
+                len: sm.len,
+                sm: op.sm,
+                write: k >= self.plan_reads as usize,
+                wd: sm.ctrl & CTRL_WD_TRIGGER != 0,
+            };
+        }
+        if ok {
+            let nr = self.plan_reads.min(self.plan_len);
+            let rd = u16::from(nr > 0);
+            let wr = u16::from(self.plan_len > nr);
+            f.ok = true;
+            f.exit = exit.unwrap_or(0);
+            f.range = [(0, nr), (nr, self.plan_len), (0, self.plan_len)];
+            f.lo = self.plan_lo;
+            f.hi = self.plan_hi;
+            f.inc = [rd, wr, rd + 2 * wr];
+        }
+        self.fused = f;
+    }
+
+    /// Test switch: `false` forces every frame through the generic path.
+    #[cfg(test)]
+    pub(crate) fn set_fused_enabled(&mut self, on: bool) {
+        self.memo.clear();
+        self.fused_disabled = !on;
+        self.rebuild_fused();
+    }
+}
