@@ -115,13 +115,13 @@ pub const FMMU_BASE: u16 = 0x0600;
 /// First SyncManager register (8 bytes each).
 pub const SM_BASE: u16 = 0x0800;
 /// First DC register.
-pub const DC_BASE: u16 = 0x0900;
+pub const DC_BASE: u16 = dc::RECV_TIME_PORT0;
 /// DC: SYNC0 status.
-pub const DC_SYNC0_STATUS: u16 = 0x098E;
+pub const DC_SYNC0_STATUS: u16 = dc::SYNC0_STATUS;
 /// DC: SYNC1 status.
-pub const DC_SYNC1_STATUS: u16 = 0x098F;
+pub const DC_SYNC1_STATUS: u16 = dc::SYNC1_STATUS;
 /// DC: SYNC pulse length (SII word 2).
-pub const DC_SYNC_PULSE_LEN: u16 = 0x0982;
+pub const DC_SYNC_PULSE_LEN: u16 = dc::PULSE_LENGTH;
 /// Digital I/O output data.
 pub const DIGITAL_OUT: u16 = 0x0F00;
 /// General-purpose outputs.
@@ -138,21 +138,87 @@ pub const SM_LEN: u16 = 8;
 /// Bytes per FMMU register block.
 pub const FMMU_LEN: u16 = 16;
 /// DC receive time of port 0 (latched by a write to it).
-pub const DC_RECV_TIME_PORT0: u16 = 0x0900;
+pub const DC_RECV_TIME_PORT0: u16 = dc::RECV_TIME_PORT0;
 /// DC system time.
-pub const DC_SYSTEM_TIME: u16 = 0x0910;
+pub const DC_SYSTEM_TIME: u16 = dc::SYSTEM_TIME;
 /// DC system time offset.
-pub const DC_SYSTEM_TIME_OFFSET: u16 = 0x0920;
+pub const DC_SYSTEM_TIME_OFFSET: u16 = dc::SYSTEM_TIME_OFFSET;
 /// DC system time delay.
-pub const DC_SYSTEM_TIME_DELAY: u16 = 0x0928;
+pub const DC_SYSTEM_TIME_DELAY: u16 = dc::SYSTEM_TIME_DELAY;
 /// DC cyclic unit control (0x0980) and activation (0x0981).
-pub const DC_ACTIVATION: u16 = 0x0980;
+pub const DC_ACTIVATION: u16 = dc::CYCLIC_UNIT_CONTROL;
 /// SYNC0 start time / next SYNC0 pulse (u64, ns).
-pub const DC_START_TIME: u16 = 0x0990;
+pub const DC_START_TIME: u16 = dc::START_TIME;
 /// SYNC0 cycle time (u32, ns).
-pub const DC_SYNC0_CYCLE: u16 = 0x09A0;
+pub const DC_SYNC0_CYCLE: u16 = dc::SYNC0_CYCLE;
 /// SYNC1 cycle time (u32, ns).
-pub const DC_SYNC1_CYCLE: u16 = 0x09A4;
+pub const DC_SYNC1_CYCLE: u16 = dc::SYNC1_CYCLE;
+
+/// The Distributed Clocks registers (0x0900..0x09FF).
+pub mod dc {
+    /// Receive time port 0 (32 bit); an ECAT write latches all port receive times.
+    pub const RECV_TIME_PORT0: u16 = 0x0900;
+    /// Receive time port 1 (32 bit).
+    pub const RECV_TIME_PORT1: u16 = 0x0904;
+    /// Receive time port 2 (32 bit).
+    pub const RECV_TIME_PORT2: u16 = 0x0908;
+    /// Receive time port 3 (32 bit).
+    pub const RECV_TIME_PORT3: u16 = 0x090C;
+    /// System time (64 bit); an ECAT write feeds the time-control loop.
+    pub const SYSTEM_TIME: u16 = 0x0910;
+    /// Receive time of the processing unit (64 bit).
+    pub const RECV_TIME_EPU: u16 = 0x0918;
+    /// System time offset (64 bit).
+    pub const SYSTEM_TIME_OFFSET: u16 = 0x0920;
+    /// System time delay (32 bit).
+    pub const SYSTEM_TIME_DELAY: u16 = 0x0928;
+    /// System time difference (32 bit, sign-magnitude).
+    pub const SYSTEM_TIME_DIFF: u16 = 0x092C;
+    /// Speed counter start (16 bit).
+    pub const SPEED_COUNTER_START: u16 = 0x0930;
+    /// Speed counter diff (16 bit, two's complement).
+    pub const SPEED_COUNTER_DIFF: u16 = 0x0932;
+    /// System time difference filter depth.
+    pub const SYSTEM_TIME_DIFF_FILTER_DEPTH: u16 = 0x0934;
+    /// Speed counter filter depth.
+    pub const SPEED_COUNTER_FILTER_DEPTH: u16 = 0x0935;
+    /// Cyclic unit control (0: ECAT, 1: PDI for SYNC unit / latch units).
+    pub const CYCLIC_UNIT_CONTROL: u16 = 0x0980;
+    /// Activation register.
+    pub const ACTIVATION: u16 = 0x0981;
+    /// Pulse length of SYNC signals in 10 ns (from the EEPROM).
+    pub const PULSE_LENGTH: u16 = 0x0982;
+    /// Activation status.
+    pub const ACTIVATION_STATUS: u16 = 0x0984;
+    /// SYNC0 status.
+    pub const SYNC0_STATUS: u16 = 0x098E;
+    /// SYNC1 status.
+    pub const SYNC1_STATUS: u16 = 0x098F;
+    /// Start time cyclic operation (write) / next SYNC0 pulse (read), 64 bit.
+    pub const START_TIME: u16 = 0x0990;
+    /// Next SYNC1 pulse (64 bit).
+    pub const NEXT_SYNC1: u16 = 0x0998;
+    /// SYNC0 cycle time (32 bit).
+    pub const SYNC0_CYCLE: u16 = 0x09A0;
+    /// SYNC1 cycle time (32 bit).
+    pub const SYNC1_CYCLE: u16 = 0x09A4;
+    /// Latch0 control.
+    pub const LATCH0_CONTROL: u16 = 0x09A8;
+    /// Latch1 control.
+    pub const LATCH1_CONTROL: u16 = 0x09A9;
+    /// Latch0 status.
+    pub const LATCH0_STATUS: u16 = 0x09AE;
+    /// Latch1 status.
+    pub const LATCH1_STATUS: u16 = 0x09AF;
+    /// Latch0 time positive edge (64 bit).
+    pub const LATCH0_POS: u16 = 0x09B0;
+    /// Latch0 time negative edge (64 bit).
+    pub const LATCH0_NEG: u16 = 0x09B8;
+    /// Latch1 time positive edge (64 bit).
+    pub const LATCH1_POS: u16 = 0x09C0;
+    /// Latch1 time negative edge (64 bit).
+    pub const LATCH1_NEG: u16 = 0x09C8;
+}
 
 /// Address of register byte `off` of SyncManager `n` (0x0800 + 8·n + off): +0 start, +2
 /// length, +4 control, +5 status, +6 activate, +7 PDI control.
