@@ -245,25 +245,16 @@ impl<A: Application<N>, const N: usize, const M: usize, P: PdiPath> Firmware<A, 
         if self.cpu.is_some() {
             return self.timed_event(esc, ev, t);
         }
+        match ev {
+            EscEvent::Irq => self.counters.irqs += 1,
+            EscEvent::Sync0 => self.counters.sync0 += 1,
+            EscEvent::Sync1 => self.counters.sync1 += 1,
+            EscEvent::PdWatchdog | EscEvent::PdiWatchdog => {}
+        }
         let Self {
             slave, app, path, ..
         } = self;
-        let r = match ev {
-            EscEvent::Irq => {
-                self.counters.irqs += 1;
-                path.with_pdi(esc, |pdi| slave.on_pdi_irq(pdi, app))
-            }
-            EscEvent::Sync0 => {
-                self.counters.sync0 += 1;
-                path.with_pdi(esc, |pdi| slave.on_sync0(pdi, app))
-            }
-            EscEvent::Sync1 => {
-                self.counters.sync1 += 1;
-                path.with_pdi(esc, |pdi| slave.on_sync1(pdi, app))
-            }
-            // The watchdogs raise AL events the main loop handles.
-            EscEvent::PdWatchdog | EscEvent::PdiWatchdog => Ok(()),
-        };
+        let r = deliver(path, slave, app, esc, ev);
         self.note(r);
     }
 
@@ -288,6 +279,24 @@ impl<A: Application<N>, const N: usize, const M: usize, P: PdiPath> Firmware<A, 
             self.note(r);
             self.next_poll = next_after(self.next_poll, self.poll_period, t);
         }
+    }
+}
+
+/// Delivers ESC event `ev` to the slave stack the way an MCU's ISRs do: the PDI interrupt,
+/// SYNC0 and SYNC1 run their handler through `path`; the watchdogs raise AL events the main
+/// loop handles (nothing to run). One dispatch for every firmware host on the segment.
+pub fn deliver<A: Application<N>, const N: usize, const M: usize, P: PdiPath>(
+    path: &mut P,
+    slave: &mut Slave<P::Pdi, N, M>,
+    app: &mut A,
+    esc: &mut Esc,
+    ev: EscEvent,
+) -> Result<(), PathPdiError<P>> {
+    match ev {
+        EscEvent::Irq => path.with_pdi(esc, |pdi| slave.on_pdi_irq(pdi, app)),
+        EscEvent::Sync0 => path.with_pdi(esc, |pdi| slave.on_sync0(pdi, app)),
+        EscEvent::Sync1 => path.with_pdi(esc, |pdi| slave.on_sync1(pdi, app)),
+        EscEvent::PdWatchdog | EscEvent::PdiWatchdog => Ok(()),
     }
 }
 

@@ -159,12 +159,7 @@ impl<P: PdiPath> Node<Esc> for JointNode<P> {
         let JointDrive {
             path, slave, app, ..
         } = &mut *b;
-        let r = match ev {
-            EscEvent::Irq => path.with_pdi(esc, |pdi| slave.on_pdi_irq(pdi, app)),
-            EscEvent::Sync0 => path.with_pdi(esc, |pdi| slave.on_sync0(pdi, app)),
-            EscEvent::Sync1 => path.with_pdi(esc, |pdi| slave.on_sync1(pdi, app)),
-            EscEvent::PdWatchdog | EscEvent::PdiWatchdog => Ok(()),
-        };
+        let r = oxicat_sim::firmware::deliver(path, slave, app, esc, ev);
         b.note(r);
     }
 
