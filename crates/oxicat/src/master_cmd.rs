@@ -23,7 +23,8 @@ pub struct LinkArgs {
     #[arg(long, short = 'i')]
     pub iface: Option<String>,
     /// Run against an in-process virtual segment instead: devices of `oxicat sim --list` by
-    /// name with a count, separated by commas or spaces (e.g. `demo:2,tue-es030:1`). The
+    /// name with a count, separated by commas or spaces (e.g. `demo:2,tue-es030:1`), each
+    /// optionally `@lan9252` or `@et1100` (firmware through that chip's SPI driver). The
     /// segment lives for this one command.
     #[arg(long, conflicts_with_all = ["iface", "udp"])]
     pub sim: Option<String>,

@@ -63,7 +63,8 @@ pub struct SimArgs {
     /// A TOML segment file (devices with counts, delays, drift) instead of DEVICES.
     #[arg(long, conflicts_with = "devices")]
     pub segment: Option<PathBuf>,
-    /// Devices in line order, each NAME or NAME:COUNT (see --list), e.g. demo:4.
+    /// Devices in line order, each NAME or NAME:COUNT (see --list), e.g. demo:4; @lan9252 or
+    /// @et1100 after it runs the firmware through that chip's SPI driver (demo:4@lan9252).
     pub devices: Vec<String>,
     /// List the devices that can be simulated and exit.
     #[arg(long)]
@@ -83,7 +84,7 @@ pub enum SimError {
     NoTransport,
     /// No devices given.
     NoDevices,
-    /// A device spec is not NAME or NAME:COUNT.
+    /// A device spec is not NAME, NAME:COUNT or NAME:COUNT@ROUTE.
     BadSpec(String),
     /// No device of that name.
     UnknownDevice(String),
@@ -130,7 +131,10 @@ impl std::fmt::Display for SimError {
                 "no devices: give NAME:COUNT (e.g. demo:4) or --segment file.toml; --list shows \
                  the devices"
             ),
-            Self::BadSpec(s) => write!(f, "{s:?} is not NAME or NAME:COUNT (e.g. demo:4)"),
+            Self::BadSpec(s) => write!(
+                f,
+                "{s:?} is not NAME, NAME:COUNT or NAME:COUNT@ROUTE (e.g. demo:4, demo:4@lan9252)"
+            ),
             Self::UnknownDevice(n) => {
                 write!(
                     f,
