@@ -243,6 +243,10 @@ pub const EV_SYNC1: u32 = 1 << 3;
 pub const EV_SM_CHANGE: u32 = 1 << 4;
 /// AL event request bit 6: process-data watchdog expired.
 pub const EV_WATCHDOG: u32 = 1 << 6;
+/// ECAT event request (0x0210) bit 2: DL status changed.
+pub const ECAT_EV_DL_STATUS: u16 = 1 << 2;
+/// ECAT event request (0x0210) bit 3: AL status changed.
+pub const ECAT_EV_AL_STATUS: u16 = 1 << 3;
 /// AL event request bit 8 + n: SyncManager n.
 pub const fn ev_sm(n: u8) -> u32 {
     1 << (8 + n as u32)

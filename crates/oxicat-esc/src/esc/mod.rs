@@ -79,23 +79,17 @@ impl core::fmt::Display for PdiError {
 
 impl core::error::Error for PdiError {}
 
-/// AL event request bit 0: AL control written.
-const AL_EV_CONTROL: u32 = 1 << 0;
-/// AL event request bit 4: SM activation register changed.
-const AL_EV_SM_CHANGE: u32 = 1 << 4;
-/// AL event request bit 6: process-data watchdog expired.
-const AL_EV_WD: u32 = 1 << 6;
-/// ECAT event request bit 2: DL status changed.
-const ECAT_EV_DL: u16 = 1 << 2;
-/// ECAT event request bit 3: AL status changed.
-const ECAT_EV_AL: u16 = 1 << 3;
-
-const REG_END: usize = 0x1000;
-/// EtherCAT frame header length and the type code of a frame carrying datagrams.
-const ECAT_HEADER_LEN: usize = 2;
-const ECAT_TYPE_DATAGRAMS: u16 = 1;
-/// Datagram header length (before the data).
-const DG_HEADER_LEN: usize = 10;
+// Shared facts from `oxicat-wire`: the AL/ECAT event bits, the register-file end and the
+// frame and datagram header sizes.
+const AL_EV_CONTROL: u32 = regs::EV_AL_CONTROL;
+const AL_EV_SM_CHANGE: u32 = regs::EV_SM_CHANGE;
+const AL_EV_WD: u32 = regs::EV_WATCHDOG;
+const ECAT_EV_DL: u16 = regs::ECAT_EV_DL_STATUS;
+const ECAT_EV_AL: u16 = regs::ECAT_EV_AL_STATUS;
+const REG_END: usize = regs::PROCESS_RAM as usize;
+const ECAT_HEADER_LEN: usize = oxicat_wire::frame::ECAT_HEADER_LEN;
+const ECAT_TYPE_DATAGRAMS: u16 = oxicat_wire::frame::FrameType::Datagrams.code() as u16;
+const DG_HEADER_LEN: usize = oxicat_wire::datagram::DATAGRAM_HEADER_LEN;
 /// Command codes of the logical datagrams.
 const CMD_LRD: u8 = Command::Lrd as u8;
 const CMD_LWR: u8 = Command::Lwr as u8;
