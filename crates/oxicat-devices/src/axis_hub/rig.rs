@@ -273,12 +273,8 @@ pub fn attach_hub(
     segment: &mut Segment,
     id: SlaveId,
     config: &HubConfig,
-) -> Result<HubHandle, TopologyError> {
-    attach_hub_with(segment, id, config, |_| Ok(Direct)).map_err(|e| match e {
-        AttachError::Topology(t) => t,
-        // The direct path cannot fail to start.
-        _ => TopologyError::NoSuchSlave(id),
-    })
+) -> Result<HubHandle, AttachError> {
+    attach_hub_with(segment, id, config, |_| Ok(Direct))
 }
 
 /// [`attach_hub`] with the firmware reaching its ESC through the chip driver of `route`
@@ -902,9 +898,7 @@ pub const KIT: crate::registry::Kit = crate::registry::Kit {
     def: |_| &crate::axis_hub::device::DEF,
     esc: EscConfig::lan9252,
     attach: |segment, id, _k, route| match route {
-        PdiRoute::Direct => attach_hub(segment, id, &HubConfig::default())
-            .map(drop)
-            .map_err(AttachError::Topology),
+        PdiRoute::Direct => attach_hub(segment, id, &HubConfig::default()).map(drop),
         route => attach_hub_via(segment, id, &HubConfig::default(), route).map(drop),
     },
     sync: oxicat_slave::SyncMode::DcSync0,
