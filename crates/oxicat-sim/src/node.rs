@@ -42,3 +42,25 @@ where
         self(esc, ev, t)
     }
 }
+
+/// A board shared between its segment node and the outside (tests, tools): one mutex, a
+/// poisoned lock still gives the board (a panicking test must not hide its state).
+pub struct Shared<T>(std::sync::Arc<std::sync::Mutex<T>>);
+
+impl<T> Shared<T> {
+    /// Shares `board`.
+    pub fn new(board: T) -> Self {
+        Self(std::sync::Arc::new(std::sync::Mutex::new(board)))
+    }
+
+    /// Locks the board (do not hold it while the segment runs).
+    pub fn lock(&self) -> std::sync::MutexGuard<'_, T> {
+        self.0.lock().unwrap_or_else(|e| e.into_inner())
+    }
+}
+
+impl<T> Clone for Shared<T> {
+    fn clone(&self) -> Self {
+        Self(self.0.clone())
+    }
+}

@@ -30,7 +30,7 @@ use oxicat_plant::ws2812::{decode, Decoded};
 
 use oxicat_master::inprocess::{spawn_inprocess_with, InProcessConfig};
 use oxicat_sim::firmware::AttachError;
-use oxicat_sim::node::{EscEvent, Node};
+use oxicat_sim::node::{EscEvent, Node, Shared};
 use oxicat_sim::pdi_path::{Direct, PdiPath, PdiRoute, SpiPath};
 use oxicat_sim::segment::{Segment, SlaveId, TopologyError};
 
@@ -229,42 +229,23 @@ impl<P: PdiPath> HubRig<P> {
 }
 
 /// Access to a hub from outside the segment.
-pub struct HubHandle<P: PdiPath = Direct>(Arc<Mutex<HubRig<P>>>);
-
-impl<P: PdiPath> Clone for HubHandle<P> {
-    fn clone(&self) -> Self {
-        Self(self.0.clone())
-    }
-}
-
-impl<P: PdiPath> HubHandle<P> {
-    /// Locks the hub (do not hold it while the segment runs).
-    pub fn lock(&self) -> MutexGuard<'_, HubRig<P>> {
-        self.0.lock().unwrap_or_else(|e| e.into_inner())
-    }
-}
+pub type HubHandle<P = Direct> = Shared<HubRig<P>>;
 
 /// The [`Node`] of a hub on its ESC.
-pub struct HubRigNode<P: PdiPath = Direct>(Arc<Mutex<HubRig<P>>>);
+pub struct HubRigNode<P: PdiPath = Direct>(Shared<HubRig<P>>);
 
 impl<P: PdiPath> Node<Esc> for HubRigNode<P> {
     fn on_event(&mut self, esc: &mut Esc, ev: EscEvent, _t: u64) {
-        self.0
-            .lock()
-            .unwrap_or_else(|e| e.into_inner())
-            .event(esc, ev);
+        self.0.lock().event(esc, ev);
     }
 
     fn next_wakeup(&self) -> Option<u64> {
-        let r = self.0.lock().unwrap_or_else(|e| e.into_inner());
+        let r = self.0.lock();
         r.next.iter().copied().min().map(|n| n.min(r.next_idle))
     }
 
     fn on_wakeup(&mut self, esc: &mut Esc, t: u64) {
-        self.0
-            .lock()
-            .unwrap_or_else(|e| e.into_inner())
-            .wakeup(esc, t);
+        self.0.lock().wakeup(esc, t);
     }
 }
 
@@ -342,11 +323,11 @@ fn attach_hub_with<P: PdiPath>(
         next_idle: now + IDLE_POLL_NS,
         plant_ns: now,
     };
-    let inner = Arc::new(Mutex::new(rig));
+    let inner = Shared::new(rig);
     segment
         .attach(id, Box::new(HubRigNode(inner.clone())))
         .map_err(AttachError::Topology)?;
-    Ok(HubHandle(inner))
+    Ok(inner)
 }
 
 // ------------------------------------------------------------------ the scenario

@@ -17,15 +17,13 @@
 //! [`JointBench`] is the same firmware and plant without an ESC, for tests of the drive
 //! itself at exactly 1 kHz.
 
-use std::sync::{Arc, Mutex, MutexGuard};
-
 use crate::cia402::{device, Cia402Drive, DriveParams, JointHw, CURRENT_LOOP_TIMER};
 use oxicat_esc::Esc;
 pub use oxicat_plant::bldc_joint::{BldcJoint, BldcJointParams};
 use oxicat_slave::{Od, Slave};
 
 use oxicat_sim::firmware::AttachError;
-use oxicat_sim::node::{EscEvent, Node};
+use oxicat_sim::node::{EscEvent, Node, Shared};
 use oxicat_sim::pdi_path::{Direct, PdiPath, PdiRoute, SpiPath};
 use oxicat_sim::segment::{Segment, SlaveId, TopologyError};
 
@@ -135,27 +133,14 @@ impl<P: PdiPath> JointDrive<P> {
 }
 
 /// Access to the drive from outside the segment.
-pub struct JointHandle<P: PdiPath = Direct>(Arc<Mutex<JointDrive<P>>>);
-
-impl<P: PdiPath> Clone for JointHandle<P> {
-    fn clone(&self) -> Self {
-        Self(self.0.clone())
-    }
-}
-
-impl<P: PdiPath> JointHandle<P> {
-    /// Locks the drive (do not hold it while the segment runs).
-    pub fn lock(&self) -> MutexGuard<'_, JointDrive<P>> {
-        self.0.lock().unwrap_or_else(|e| e.into_inner())
-    }
-}
+pub type JointHandle<P = Direct> = Shared<JointDrive<P>>;
 
 /// The drive as a segment node.
-pub struct JointNode<P: PdiPath = Direct>(Arc<Mutex<JointDrive<P>>>);
+pub struct JointNode<P: PdiPath = Direct>(Shared<JointDrive<P>>);
 
 impl<P: PdiPath> Node<Esc> for JointNode<P> {
     fn on_event(&mut self, esc: &mut Esc, ev: EscEvent, _t: u64) {
-        let mut b = self.0.lock().unwrap_or_else(|e| e.into_inner());
+        let mut b = self.0.lock();
         let JointDrive {
             path, slave, app, ..
         } = &mut *b;
@@ -164,11 +149,11 @@ impl<P: PdiPath> Node<Esc> for JointNode<P> {
     }
 
     fn next_wakeup(&self) -> Option<u64> {
-        Some(self.0.lock().unwrap_or_else(|e| e.into_inner()).next_tick)
+        Some(self.0.lock().next_tick)
     }
 
     fn on_wakeup(&mut self, esc: &mut Esc, t: u64) {
-        let mut b = self.0.lock().unwrap_or_else(|e| e.into_inner());
+        let mut b = self.0.lock();
         while b.next_tick <= t {
             b.tick(esc);
             b.next_tick += TICK_NS;
@@ -218,11 +203,11 @@ fn attach_with<P: PdiPath>(
         counters: JointCounters::default(),
         next_tick: now.div_ceil(TICK_NS) * TICK_NS,
     };
-    let inner = Arc::new(Mutex::new(drive));
+    let inner = Shared::new(drive);
     segment
         .attach(id, Box::new(JointNode(inner.clone())))
         .map_err(AttachError::Topology)?;
-    Ok(JointHandle(inner))
+    Ok(inner)
 }
 
 /// The drive and its joint without an ESC: the object dictionary stands in for the

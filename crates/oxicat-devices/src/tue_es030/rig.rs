@@ -13,7 +13,7 @@
 //! At equal times ESC events come first (the segment's rule), then the tick in the order
 //! above, so a run is a function of the frames and their virtual times only.
 
-use std::sync::{Arc, Mutex, MutexGuard};
+use std::sync::MutexGuard;
 
 use crate::tue_es030::{
     self, control, device, Adcs, Bridges, Encoders, Io, TuEs030, CURRENT_TIMER, SERVICE_TIMER,
@@ -23,7 +23,7 @@ use oxicat_plant::re30::{BridgeCommand, Re30Drive, Re30Params};
 use oxicat_slave::Slave;
 
 use oxicat_sim::firmware::AttachError;
-use oxicat_sim::node::{EscEvent, Node};
+use oxicat_sim::node::{EscEvent, Node, Shared};
 use oxicat_sim::pdi_path::{Direct, PdiPath, PdiRoute, SpiPath};
 use oxicat_sim::segment::{Segment, SlaveId, TopologyError};
 
@@ -247,27 +247,14 @@ impl<P: PdiPath> TueBoard<P> {
 }
 
 /// Access to the board from outside the segment.
-pub struct TueHandle<P: PdiPath = Direct>(Arc<Mutex<TueBoard<P>>>);
-
-impl<P: PdiPath> Clone for TueHandle<P> {
-    fn clone(&self) -> Self {
-        Self(self.0.clone())
-    }
-}
-
-impl<P: PdiPath> TueHandle<P> {
-    /// Locks the board (do not hold it while the segment runs).
-    pub fn lock(&self) -> MutexGuard<'_, TueBoard<P>> {
-        self.0.lock().unwrap_or_else(|e| e.into_inner())
-    }
-}
+pub type TueHandle<P = Direct> = Shared<TueBoard<P>>;
 
 /// The board as a segment node.
-pub struct TueNode<P: PdiPath = Direct>(Arc<Mutex<TueBoard<P>>>);
+pub struct TueNode<P: PdiPath = Direct>(Shared<TueBoard<P>>);
 
 impl<P: PdiPath> TueNode<P> {
     fn lock(&self) -> MutexGuard<'_, TueBoard<P>> {
-        self.0.lock().unwrap_or_else(|e| e.into_inner())
+        self.0.lock()
     }
 }
 
@@ -340,11 +327,11 @@ fn attach_with<P: PdiPath>(
         next_tick: start,
         plant_ns: start,
     };
-    let inner = Arc::new(Mutex::new(board));
+    let inner = Shared::new(board);
     segment
         .attach(id, Box::new(TueNode(inner.clone())))
         .map_err(AttachError::Topology)?;
-    Ok(TueHandle(inner))
+    Ok(inner)
 }
 
 /// The TUeES030 board in the registry.
