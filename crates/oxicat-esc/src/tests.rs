@@ -737,3 +737,63 @@ fn temporary_loop_control_reverts_after_about_a_second() {
     assert_eq!(e.memory()[0x0101], 0x0C);
     assert_eq!(e.forward(0, &mut f, due, true), Forward::Port(0));
 }
+
+/// A SyncManager over registers (as over the digital outputs at 0x0F00) buffers the
+/// access, but the bytes land in registers: their write rights and the rule that register
+/// writes need a good FCS still hold. Found by the esc_process fuzz target (input kept in
+/// `fuzz_regressions.rs`): SM0 laid over the SM registers let a bad-FCS frame change SM1's
+/// status byte.
+#[test]
+fn a_syncmanager_over_registers_keeps_the_register_rules() {
+    let mut e = esc();
+    // Buffered, ECAT writes, over AL status (read-only for ECAT): the access counts (the
+    // SM takes it), AL status stays.
+    sm(&mut e, 2, 0x0130, 2, 0x04, 1);
+    let st = e.al_status();
+    assert_eq!(fpwr(&mut e, 0x0130, &[0x08, 0x00]), 1);
+    assert_eq!(e.al_status(), st);
+    // SM0 over the SM registers; a bad frame writes none of them.
+    sm(&mut e, 0, 0x0804, 0x2001, 0xF4, 1);
+    let before = fprd(&mut e, 0x0800, 0x20).0;
+    let mut f = frame(&[(phys(Command::Bwr, 0, 0x0800, &[0; 16]), &[0; 16])]);
+    e.forward(0, &mut f, 0, false);
+    assert_eq!(fprd(&mut e, 0x0800, 0x20).0, before);
+}
+
+/// The esc_process fuzz input behind the test above (minimised by libFuzzer, three ET1200
+/// ESCs): a BRW lays SM0 over 0x0804.. (activated), then a BWR of zeros over the SM
+/// registers reaches the second ESC with a bad FCS. No SM register may change there.
+#[test]
+fn fuzz_input_bad_fcs_frame_under_an_sm_over_registers() {
+    let frames: [&[u8]; 3] = [
+        &[0x00, 0x04, 0x04, 0x08],
+        &[
+            0x21, 0x10, 0x09, 0x00, 0x00, 0x00, 0x00, 0x08, 0x10, 0xa8, 0x04, 0x05, 0x04, 0x08,
+            0x01, 0x20, 0xf4, 0x00, 0x25, 0x00, 0x00, 0x00, 0x00, 0x00, 0x00, 0x00, 0x00, 0x00,
+            0x6f, 0x54, 0x04, 0x00, 0x8a, 0x00, 0x00,
+        ],
+        &[
+            0x21, 0x10, 0x08, 0x00, 0x00, 0x02, 0x00, 0x08, 0x10, 0xa8, 0x00, 0x00, 0x00, 0x00,
+            0xff, 0x00, 0x00, 0x00, 0x00, 0x00, 0x00, 0x00, 0x00, 0x00, 0x00, 0x00, 0x00, 0x00,
+            0x00, 0x00, 0x00, 0x00, 0x00, 0xff, 0xff,
+        ],
+    ];
+    let mut escs: Vec<Esc> = (0..3)
+        .map(|_| Esc::new(EscConfig::et1200(), eeprom(0x0005, 0)))
+        .collect();
+    for (i, e) in escs.iter_mut().enumerate() {
+        e.set_link(0, true);
+        e.set_link(1, i < 2);
+    }
+    for (n, f) in frames.iter().enumerate() {
+        let mut f = f.to_vec();
+        for (i, e) in escs.iter_mut().enumerate() {
+            let ok = !(n == 2 && i == 1);
+            let before = e.memory()[0x0800..0x0880].to_vec();
+            e.forward(0, &mut f, 1_000, ok);
+            if !ok {
+                assert_eq!(&e.memory()[0x0800..0x0880], &before[..]);
+            }
+        }
+    }
+}

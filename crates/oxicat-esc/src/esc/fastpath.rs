@@ -81,7 +81,11 @@ impl Esc {
             let pe = ps + f.len as u32;
             f.sm = self.active_sms.iter().copied().find(|&i| {
                 let sm = &self.sms[i as usize];
-                sm.start as u32 == ps && sm.end() == pe && sm.ecat_writes() == f.write
+                // Not over registers: the fused copies bypass register write rights.
+                sm.start as usize >= REG_END
+                    && sm.start as u32 == ps
+                    && sm.end() == pe
+                    && sm.ecat_writes() == f.write
             });
         }
         self.fmmu_all_sm = self.fmmus.iter().all(|f| f.aligned && f.sm.is_some());

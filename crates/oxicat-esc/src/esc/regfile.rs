@@ -572,7 +572,12 @@ impl Esc {
         }
         let off = sm.buf_offset(sm.write_buf);
         let done = cur + d.len() as u32 == sm.end();
-        self.store(cur + off, d, m);
+        let to = cur + off;
+        if (to as usize) < REG_END {
+            self.sm_register_store(side, to, d, m);
+        } else {
+            self.store(to, d, m);
+        }
         let sm = &mut self.sms[i];
         if done {
             sm.write_open = false;
@@ -588,6 +593,35 @@ impl Esc {
         self.mem[regs::sm_reg(i, 5)] = status;
         self.events_dirty = true;
         true
+    }
+
+    /// A SyncManager over registers buffers the access, but its bytes land in registers.
+    /// The digital outputs (0x0F00..0x0F04) are the registers an SM is meant for: their
+    /// bytes are stored and take effect at commit, as RAM buffers do (ECAT: only with a
+    /// good FCS). Any other register is written as a plain register write: its write
+    /// rights, the good-FCS rule and its side effects apply.
+    fn sm_register_store(&mut self, side: Side, to: u32, d: &[u8], m: Option<&[u8]>) {
+        const DOUT: core::ops::Range<u32> = 0x0F00..0x0F04;
+        let end = to + d.len() as u32;
+        let mut cur = to;
+        while cur < end {
+            let in_dout = DOUT.contains(&cur);
+            let pe = if in_dout {
+                end.min(DOUT.end)
+            } else if cur < DOUT.start {
+                end.min(DOUT.start)
+            } else {
+                end
+            };
+            let (a, b) = ((cur - to) as usize, (pe - to) as usize);
+            let m = m.map(|m| &m[a..b]);
+            if !in_dout {
+                let _ = self.plain_write(side, cur, &d[a..b], m);
+            } else if side == Side::Pdi || self.frame_ok {
+                self.store(cur, &d[a..b], m);
+            }
+            cur = pe;
+        }
     }
 
     pub(super) fn commit_sm(&mut self, i: usize, side: Side) {
