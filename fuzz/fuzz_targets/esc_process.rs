@@ -98,8 +98,21 @@ fn eeprom() -> Vec<u8> {
 
 static EEPROM: OnceLock<Vec<u8>> = OnceLock::new();
 
-/// The most a datagram's working counter may grow on its way through `n` ESCs.
+/// How often one ESC's processing unit may see a frame on one pass through the ESC: on
+/// entry at port 0, and again each time the frame comes back to a closed port 0 (loop
+/// back into the processing unit, ESC datasheet: that is what the circulating bit stops);
+/// the ESC model lets a frame round its four ports at most twice.
+const PASSES_PER_ESC: u16 = 3;
+
+/// The most a datagram's working counter may grow on its way through `n` ESCs (each may
+/// process it up to [`PASSES_PER_ESC`] times, e.g. when the frame itself reopens port 0
+/// between passes; found by this target).
 fn max_wkc_increment(command: u8, n: u16) -> u16 {
+    PASSES_PER_ESC * max_wkc_increment_once(command, n)
+}
+
+/// [`max_wkc_increment`] for one processing pass per ESC.
+fn max_wkc_increment_once(command: u8, n: u16) -> u16 {
     match Command::from_u8(command) {
         None | Some(Command::Nop) => 0,
         // Auto-increment: only the ESC that sees position 0.
