@@ -1,47 +1,67 @@
-//! Firmware on a simulated ESC: a [`FirmwareNode`] hosts an `oxicat-slave` [`Slave`] and
-//! its [`Application`] behind one ESC of a [`Segment`] and delivers the firmware's events
-//! at their virtual times, as interrupts and the main loop do on a microcontroller:
+//! The firmware host: one simulated MCU behind one ESC of a [`Segment`], delivering its
+//! image's events at their virtual times as interrupts and the main loop do on a
+//! microcontroller. Every device runs in it: a [`Host`] is generic over the image
+//! ([`Image`]: the `oxicat-slave` [`Stack`] with an [`Application`], or a firmware that
+//! wraps the stack itself), the route to the ESC ([`PdiPath`]) and the plant around the
+//! MCU ([`Bench`]).
 //!
 //! | MCU | simulator |
 //! |---|---|
-//! | PDI IRQ ISR | [`EscEvent::Irq`]: the ESC's IRQ line rose (e.g. a frame wrote SM2) → [`Slave::on_pdi_irq`] |
-//! | SYNC0 / SYNC1 ISR | [`EscEvent::Sync0`] / [`EscEvent::Sync1`] → [`Slave::on_sync0`] / [`Slave::on_sync1`] |
-//! | timer ISRs | periodic wakeups per [`FirmwareConfig::timers`] → [`Slave::on_timer`] |
-//! | main loop | a wakeup every [`FirmwareConfig::poll_period_ns`] → [`Slave::poll`] |
+//! | PDI IRQ ISR | [`EscEvent::Irq`]: the ESC's IRQ line rose (e.g. a frame wrote SM2) → [`Image::on_pdi_irq`] |
+//! | SYNC0 / SYNC1 ISR | [`EscEvent::Sync0`] / [`EscEvent::Sync1`] → [`Image::on_sync0`] / [`Image::on_sync1`] |
+//! | timer ISRs | periodic wakeups per [`FirmwareConfig::timers`] → [`Image::on_timer`], with the plant brought up to the instant first ([`Bench::before_timers`]) and taking the timers' outputs after ([`Bench::after_timers`]) |
+//! | main loop | a wakeup every [`FirmwareConfig::poll_period_ns`] → [`Image::poll`] |
 //!
 //! The segment owns the ESC; the firmware gets `&mut Esc` only while it handles an event.
 //! How it reaches the ESC is the node's [`PdiPath`]: by default ([`Direct`]) the software
 //! ESC is its [`oxicat_slave::Pdi`]; [`attach_firmware_via`] puts an `oxicat-pdi` chip
 //! driver over the simulated SPI in between ([`SpiPath`]: LAN9252 or ET1100), so the
 //! firmware runs exactly as on hardware and its bus traffic is counted
-//! ([`Firmware::bus_stats`]). The stack and the application live behind a mutex shared with
-//! the [`FirmwareHandle`] a test or tool keeps to look at them between cycles.
+//! ([`Host::bus_stats`]). The host lives behind a mutex shared with the [`HostHandle`] a
+//! test or tool keeps to look at it between cycles.
 //!
 //! By default every handler runs in zero virtual time. [`FirmwareConfig::timing`] turns on
 //! the execution-time model of [`crate::exec_time`]: a handler takes its SPI bus time plus
 //! a configured CPU time, its ESC writes land when it ends, and events that arrive while
-//! the MCU is busy wait (or are lost) — counted in [`FirmwareHandle::timing`].
-
-use std::sync::{Arc, Mutex, MutexGuard};
+//! the MCU is busy wait (or are lost) — counted in [`Host::timing`].
 
 use oxicat_esc::{Esc, PdiError};
 use oxicat_slave::{Application, DeviceDef, InitError, Pdi, Slave};
 
 use crate::exec_time::{Cpu, ExecTiming, TimingStats, Work};
-use crate::node::{EscEvent, Node};
+use crate::node::{EscEvent, Node, Shared};
 use crate::pdi_path::{BusStats, Direct, PathInitError, PdiPath, PdiRoute, SpiPath};
 use crate::segment::{Segment, SlaveId, TopologyError};
 
 /// Default main-loop period: 50 µs of virtual time.
 pub const DEFAULT_POLL_PERIOD_NS: u64 = 50_000;
 
+/// A periodic timer interrupt of the simulated MCU.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Timer {
+    /// Delivered as [`Image::on_timer`]`(id)`.
+    pub id: u8,
+    /// Period \[ns\] (at least 1).
+    pub period_ns: u64,
+    /// First expiry, after the schedule's start \[ns\].
+    pub first_ns: u64,
+}
+
 /// How the simulated MCU runs the firmware.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct FirmwareConfig {
-    /// Virtual time between two main-loop passes ([`Slave::poll`]); at least 1 ns.
+    /// Virtual time between two main-loop passes ([`Image::poll`]); at least 1 ns.
     pub poll_period_ns: u64,
-    /// Periodic timers: `(id, period in ns)`, each delivered as [`Slave::on_timer`]`(id)`.
-    pub timers: Vec<(u8, u64)>,
+    /// First main-loop pass, after the schedule's start \[ns\].
+    pub poll_first_ns: u64,
+    /// At an instant where both are due, the main loop runs before the timers (`true`) or
+    /// after them (`false`, the default).
+    pub poll_before_timers: bool,
+    /// Periodic timers, run in this order when several are due at one instant.
+    pub timers: Vec<Timer>,
+    /// The schedule starts at the first multiple of this \[ns\] at or after the attach
+    /// time (1: at the attach time), so a board's timers fall on a fixed grid.
+    pub align_ns: u64,
     /// The execution-time model ([`crate::exec_time`]); `None` (the default): handlers
     /// run in zero virtual time.
     pub timing: Option<ExecTiming>,
@@ -51,22 +71,42 @@ impl Default for FirmwareConfig {
     fn default() -> Self {
         Self {
             poll_period_ns: DEFAULT_POLL_PERIOD_NS,
+            poll_first_ns: 0,
+            poll_before_timers: false,
             timers: Vec::new(),
+            align_ns: 1,
             timing: None,
         }
     }
 }
 
 impl FirmwareConfig {
-    /// Adds a periodic timer `id` every `period_ns` (builder style).
-    pub fn timer(mut self, id: u8, period_ns: u64) -> Self {
-        self.timers.push((id, period_ns));
+    /// Adds a periodic timer `id` every `period_ns`, first one period after the start
+    /// (builder style).
+    pub fn timer(self, id: u8, period_ns: u64) -> Self {
+        self.timer_from(id, period_ns, period_ns)
+    }
+
+    /// Adds a periodic timer `id` every `period_ns`, first `first_ns` after the start
+    /// (builder style).
+    pub fn timer_from(mut self, id: u8, period_ns: u64, first_ns: u64) -> Self {
+        self.timers.push(Timer {
+            id,
+            period_ns: period_ns.max(1),
+            first_ns,
+        });
         self
     }
 
     /// Sets the main-loop period (builder style).
     pub fn poll_every(mut self, period_ns: u64) -> Self {
         self.poll_period_ns = period_ns;
+        self
+    }
+
+    /// Starts the schedule on a multiple of `align_ns` (builder style).
+    pub fn aligned(mut self, align_ns: u64) -> Self {
+        self.align_ns = align_ns.max(1);
         self
     }
 
@@ -94,13 +134,82 @@ pub struct FirmwareCounters {
     pub pdi_errors: u64,
 }
 
-/// The firmware of one node: the stack, the application, the MCU's schedule and the way
-/// it reaches its ESC (`P`, [`Direct`] unless attached through a driver).
-pub struct Firmware<A, const N: usize, const M: usize, P: PdiPath = Direct> {
+/// What a microcontroller image offers its interrupt vector and main loop: the handlers
+/// the [`Host`] delivers events to, each given the image's `Pdi` to its ESC.
+///
+/// [`Stack`] (the `oxicat-slave` stack and an [`Application`]) is the usual image; a
+/// firmware that wraps the stack itself (the axis hub) implements it directly; an image
+/// executed instruction by instruction would be another implementation.
+pub trait Image<Pd: Pdi> {
+    /// The PDI interrupt.
+    fn on_pdi_irq(&mut self, pdi: &mut Pd) -> Result<(), Pd::Error>;
+    /// The SYNC0 interrupt.
+    fn on_sync0(&mut self, pdi: &mut Pd) -> Result<(), Pd::Error>;
+    /// The SYNC1 interrupt.
+    fn on_sync1(&mut self, pdi: &mut Pd) -> Result<(), Pd::Error>;
+    /// Timer interrupt `id`.
+    fn on_timer(&mut self, id: u8, pdi: &mut Pd) -> Result<(), Pd::Error>;
+    /// One main-loop pass.
+    fn poll(&mut self, pdi: &mut Pd) -> Result<(), Pd::Error>;
+}
+
+/// The slave stack and its application: the image of every oxicat device built on
+/// `oxicat-slave`.
+pub struct Stack<Pd: Pdi, A, const N: usize, const M: usize> {
     /// The slave stack.
-    pub slave: Slave<P::Pdi, N, M>,
+    pub slave: Slave<Pd, N, M>,
     /// The application.
     pub app: A,
+}
+
+impl<Pd, A, const N: usize, const M: usize> Image<Pd> for Stack<Pd, A, N, M>
+where
+    Pd: Pdi,
+    A: Application<N>,
+{
+    fn on_pdi_irq(&mut self, pdi: &mut Pd) -> Result<(), Pd::Error> {
+        self.slave.on_pdi_irq(pdi, &mut self.app)
+    }
+    fn on_sync0(&mut self, pdi: &mut Pd) -> Result<(), Pd::Error> {
+        self.slave.on_sync0(pdi, &mut self.app)
+    }
+    fn on_sync1(&mut self, pdi: &mut Pd) -> Result<(), Pd::Error> {
+        self.slave.on_sync1(pdi, &mut self.app)
+    }
+    fn on_timer(&mut self, id: u8, _pdi: &mut Pd) -> Result<(), Pd::Error> {
+        self.slave.on_timer(id, &mut self.app);
+        Ok(())
+    }
+    fn poll(&mut self, pdi: &mut Pd) -> Result<(), Pd::Error> {
+        self.slave.poll(pdi, &mut self.app)
+    }
+}
+
+/// The hardware around the MCU that is not its ESC: the plant, its sensors and
+/// actuators. The host calls it at the MCU's timer instants, where a board observes and
+/// drives its plant, and after ESC events; the defaults do nothing (a board without a
+/// plant is `()`).
+pub trait Bench<I>: Send + 'static {
+    /// At `t`, before the timers due at `t` run (once per instant): bring the plant up to
+    /// `t` and latch what the timers read.
+    fn before_timers(&mut self, _image: &mut I, _t: u64) {}
+    /// At `t`, after the timers ran: the plant takes what they wrote.
+    fn after_timers(&mut self, _image: &mut I, _t: u64) {}
+    /// After ESC event `ev` at `t` was handled.
+    fn after_event(&mut self, _image: &mut I, _ev: EscEvent, _t: u64) {}
+}
+
+impl<I> Bench<I> for () {}
+
+/// One simulated MCU: its image `I`, the way it reaches its ESC (`P`, [`Direct`] unless
+/// attached through a driver), its schedule (timers and main loop), the bench `B` around
+/// it and, optionally, the execution-time model. The one firmware host of the segment:
+/// every device runs in one.
+pub struct Host<I, P: PdiPath = Direct, B = ()> {
+    /// The firmware image.
+    pub image: I,
+    /// The plant around the MCU.
+    pub bench: B,
     /// What was delivered so far.
     pub counters: FirmwareCounters,
     /// The last PDI error, if any.
@@ -108,13 +217,31 @@ pub struct Firmware<A, const N: usize, const M: usize, P: PdiPath = Direct> {
     path: P,
     poll_period: u64,
     next_poll: u64,
+    poll_before_timers: bool,
     /// `(id, period, next due time)`.
     timers: Vec<(u8, u64, u64)>,
     /// The MCU under the execution-time model, if on.
     cpu: Option<Cpu>,
 }
 
-impl<A, const N: usize, const M: usize, P: PdiPath> Firmware<A, N, M, P> {
+/// A node running an `oxicat-slave` stack with application `A` (and no plant).
+pub type Firmware<A, const N: usize, const M: usize, P = Direct> =
+    Host<Stack<<P as PdiPath>::Pdi, A, N, M>, P>;
+
+impl<I, P: PdiPath, B> core::ops::Deref for Host<I, P, B> {
+    type Target = I;
+    fn deref(&self) -> &I {
+        &self.image
+    }
+}
+
+impl<I, P: PdiPath, B> core::ops::DerefMut for Host<I, P, B> {
+    fn deref_mut(&mut self) -> &mut I {
+        &mut self.image
+    }
+}
+
+impl<I, P: PdiPath, B> Host<I, P, B> {
     /// How the firmware reaches its ESC.
     pub fn path(&self) -> &P {
         &self.path
@@ -137,7 +264,30 @@ impl<A, const N: usize, const M: usize, P: PdiPath> Firmware<A, N, M, P> {
     }
 }
 
-impl<A: Application<N>, const N: usize, const M: usize, P: PdiPath> Firmware<A, N, M, P> {
+impl<I: Image<P::Pdi>, P: PdiPath, B: Bench<I>> Host<I, P, B> {
+    /// Boots nothing: wraps an image already started on `path`, its schedule starting at
+    /// `now` aligned per `config`.
+    pub fn new(image: I, bench: B, path: P, config: &FirmwareConfig, now: u64) -> Self {
+        let align = config.align_ns.max(1);
+        let start = now.div_ceil(align).saturating_mul(align);
+        Self {
+            image,
+            bench,
+            counters: FirmwareCounters::default(),
+            last_pdi_error: None,
+            path,
+            poll_period: config.poll_period_ns.max(1),
+            next_poll: start.saturating_add(config.poll_first_ns),
+            poll_before_timers: config.poll_before_timers,
+            timers: config
+                .timers
+                .iter()
+                .map(|t| (t.id, t.period_ns.max(1), start.saturating_add(t.first_ns)))
+                .collect(),
+            cpu: config.timing.map(Cpu::new),
+        }
+    }
+
     fn note(&mut self, r: Result<(), <P::Pdi as Pdi>::Error>) {
         if let Err(e) = r {
             self.counters.pdi_errors += 1;
@@ -175,6 +325,7 @@ impl<A: Application<N>, const N: usize, const M: usize, P: PdiPath> Firmware<A, 
             cpu.raise(work, t);
         }
         self.dispatch(esc, t);
+        self.bench.after_event(&mut self.image, ev, t);
     }
 
     /// Under the execution-time model: lands finished handlers' writes and starts whatever
@@ -182,8 +333,8 @@ impl<A: Application<N>, const N: usize, const M: usize, P: PdiPath> Firmware<A, 
     fn dispatch(&mut self, esc: &mut Esc, t: u64) {
         loop {
             let Self {
-                slave,
-                app,
+                image,
+                bench,
                 path,
                 cpu,
                 counters,
@@ -199,15 +350,15 @@ impl<A: Application<N>, const N: usize, const M: usize, P: PdiPath> Firmware<A, 
                     let r = cpu.run(path, esc, work, arrival, t, |path, esc| match work {
                         Work::Sync0 => {
                             counters.sync0 += 1;
-                            path.with_pdi(esc, |pdi| slave.on_sync0(pdi, app))
+                            path.with_pdi(esc, |pdi| image.on_sync0(pdi))
                         }
                         Work::Sync1 => {
                             counters.sync1 += 1;
-                            path.with_pdi(esc, |pdi| slave.on_sync1(pdi, app))
+                            path.with_pdi(esc, |pdi| image.on_sync1(pdi))
                         }
                         _ => {
                             counters.irqs += 1;
-                            path.with_pdi(esc, |pdi| slave.on_pdi_irq(pdi, app))
+                            path.with_pdi(esc, |pdi| image.on_pdi_irq(pdi))
                         }
                     });
                     self.note(r);
@@ -219,11 +370,14 @@ impl<A: Application<N>, const N: usize, const M: usize, P: PdiPath> Firmware<A, 
                 if let Some(k) = due {
                     let (id, period, at) = timers[k];
                     counters.timers += 1;
-                    cpu.run(path, esc, Work::Timer, at, t, |_, _| {
-                        slave.on_timer(id, app)
+                    bench.before_timers(image, t);
+                    let r = cpu.run(path, esc, Work::Timer, at, t, |path, esc| {
+                        path.with_pdi(esc, |pdi| image.on_timer(id, pdi))
                     });
+                    bench.after_timers(image, t);
                     cpu.lose(Work::Timer, (t - at) / period);
                     timers[k].2 = next_after(at, period, t);
+                    self.note(r);
                     continue;
                 }
             }
@@ -231,7 +385,7 @@ impl<A: Application<N>, const N: usize, const M: usize, P: PdiPath> Firmware<A, 
                 let at = self.next_poll;
                 counters.polls += 1;
                 let r = cpu.run(path, esc, Work::Poll, at, t, |path, esc| {
-                    path.with_pdi(esc, |pdi| slave.poll(pdi, app))
+                    path.with_pdi(esc, |pdi| image.poll(pdi))
                 });
                 self.next_poll = next_after(at, self.poll_period, t);
                 self.note(r);
@@ -251,51 +405,62 @@ impl<A: Application<N>, const N: usize, const M: usize, P: PdiPath> Firmware<A, 
             EscEvent::Sync1 => self.counters.sync1 += 1,
             EscEvent::PdWatchdog | EscEvent::PdiWatchdog => {}
         }
-        let Self {
-            slave, app, path, ..
-        } = self;
-        let r = deliver(path, slave, app, esc, ev);
+        let Self { image, path, .. } = self;
+        let r = deliver(path, image, esc, ev);
         self.note(r);
+        self.bench.after_event(&mut self.image, ev, t);
+    }
+
+    fn poll_if_due(&mut self, esc: &mut Esc, t: u64) {
+        if self.next_poll <= t {
+            self.counters.polls += 1;
+            let Self { image, path, .. } = self;
+            let r = path.with_pdi(esc, |pdi| image.poll(pdi));
+            self.note(r);
+            self.next_poll = next_after(self.next_poll, self.poll_period, t);
+        }
     }
 
     fn wakeup(&mut self, esc: &mut Esc, t: u64) {
         if self.cpu.is_some() {
             return self.dispatch(esc, t);
         }
-        for k in 0..self.timers.len() {
-            let (id, period, due) = self.timers[k];
-            if due <= t {
-                self.counters.timers += 1;
-                self.slave.on_timer(id, &mut self.app);
-                self.timers[k].2 = next_after(due, period, t);
-            }
+        if self.poll_before_timers {
+            self.poll_if_due(esc, t);
         }
-        if self.next_poll <= t {
-            self.counters.polls += 1;
-            let Self {
-                slave, app, path, ..
-            } = self;
-            let r = path.with_pdi(esc, |pdi| slave.poll(pdi, app));
-            self.note(r);
-            self.next_poll = next_after(self.next_poll, self.poll_period, t);
+        if self.timers.iter().any(|k| k.2 <= t) {
+            self.bench.before_timers(&mut self.image, t);
+            for k in 0..self.timers.len() {
+                let (id, period, due) = self.timers[k];
+                if due <= t {
+                    self.counters.timers += 1;
+                    let Self { image, path, .. } = self;
+                    let r = path.with_pdi(esc, |pdi| image.on_timer(id, pdi));
+                    self.note(r);
+                    self.timers[k].2 = next_after(due, period, t);
+                }
+            }
+            self.bench.after_timers(&mut self.image, t);
+        }
+        if !self.poll_before_timers {
+            self.poll_if_due(esc, t);
         }
     }
 }
 
-/// Delivers ESC event `ev` to the slave stack the way an MCU's ISRs do: the PDI interrupt,
+/// Delivers ESC event `ev` to an image the way an MCU's ISRs do: the PDI interrupt,
 /// SYNC0 and SYNC1 run their handler through `path`; the watchdogs raise AL events the main
-/// loop handles (nothing to run). One dispatch for every firmware host on the segment.
-pub fn deliver<A: Application<N>, const N: usize, const M: usize, P: PdiPath>(
+/// loop handles (nothing to run).
+pub fn deliver<I: Image<P::Pdi>, P: PdiPath>(
     path: &mut P,
-    slave: &mut Slave<P::Pdi, N, M>,
-    app: &mut A,
+    image: &mut I,
     esc: &mut Esc,
     ev: EscEvent,
 ) -> Result<(), PathPdiError<P>> {
     match ev {
-        EscEvent::Irq => path.with_pdi(esc, |pdi| slave.on_pdi_irq(pdi, app)),
-        EscEvent::Sync0 => path.with_pdi(esc, |pdi| slave.on_sync0(pdi, app)),
-        EscEvent::Sync1 => path.with_pdi(esc, |pdi| slave.on_sync1(pdi, app)),
+        EscEvent::Irq => path.with_pdi(esc, |pdi| image.on_pdi_irq(pdi)),
+        EscEvent::Sync0 => path.with_pdi(esc, |pdi| image.on_sync0(pdi)),
+        EscEvent::Sync1 => path.with_pdi(esc, |pdi| image.on_sync1(pdi)),
         EscEvent::PdWatchdog | EscEvent::PdiWatchdog => Ok(()),
     }
 }
@@ -317,23 +482,14 @@ pub type PathPdiError<P> = <<P as PdiPath>::Pdi as Pdi>::Error;
 /// A new node and its handle, or why the stack did not start on path `P`.
 pub type NodeResult<N, H, P> = Result<(N, H), InitError<PathPdiError<P>>>;
 
+/// Access to a [`Host`] from outside the segment (tests, tools).
+pub type HostHandle<I, P = Direct, B = ()> = Shared<Host<I, P, B>>;
+
 /// Access to a node's [`Firmware`] from outside the segment (tests, tools).
-pub struct FirmwareHandle<A, const N: usize, const M: usize, P: PdiPath = Direct>(
-    Arc<Mutex<Firmware<A, N, M, P>>>,
-);
+pub type FirmwareHandle<A, const N: usize, const M: usize, P = Direct> =
+    Shared<Firmware<A, N, M, P>>;
 
-impl<A, const N: usize, const M: usize, P: PdiPath> Clone for FirmwareHandle<A, N, M, P> {
-    fn clone(&self) -> Self {
-        Self(self.0.clone())
-    }
-}
-
-impl<A, const N: usize, const M: usize, P: PdiPath> FirmwareHandle<A, N, M, P> {
-    /// Locks the firmware (do not hold it while waiting for the segment).
-    pub fn lock(&self) -> MutexGuard<'_, Firmware<A, N, M, P>> {
-        self.0.lock().unwrap_or_else(|e| e.into_inner())
-    }
-
+impl<I, P: PdiPath, B> Shared<Host<I, P, B>> {
     /// What the node's SPI bus carried since the last reset (`None` on the direct path).
     pub fn bus_stats(&self) -> Option<BusStats> {
         self.lock().bus_stats()
@@ -346,78 +502,61 @@ impl<A, const N: usize, const M: usize, P: PdiPath> FirmwareHandle<A, N, M, P> {
     }
 }
 
-/// A [`Node`] running firmware on its ESC; see the module documentation.
-pub struct FirmwareNode<A, const N: usize, const M: usize, P: PdiPath = Direct>(
-    Arc<Mutex<Firmware<A, N, M, P>>>,
-);
+/// The [`Node`] of a [`Host`] on its ESC; see the module documentation.
+pub struct HostNode<I, P: PdiPath = Direct, B = ()>(Shared<Host<I, P, B>>);
 
-impl<A: Application<N> + Send + 'static, const N: usize, const M: usize> FirmwareNode<A, N, M> {
-    /// Boots the firmware on `esc` (the stack initialises the ESC through its PDI); the
-    /// main loop and the timers start at virtual time `start_ns`.
-    pub fn new(
-        def: &'static DeviceDef,
-        esc: &mut Esc,
-        app: A,
-        config: &FirmwareConfig,
-        start_ns: u64,
-    ) -> Result<(Self, FirmwareHandle<A, N, M>), InitError<PdiError>> {
-        Self::with_path(def, esc, app, config, start_ns, Direct)
-    }
-}
-
-impl<A: Application<N> + Send + 'static, const N: usize, const M: usize, P: PdiPath>
-    FirmwareNode<A, N, M, P>
-{
-    /// [`FirmwareNode::new`] with the firmware reaching `esc` through `path` (its driver
-    /// already started).
-    pub fn with_path(
-        def: &'static DeviceDef,
-        esc: &mut Esc,
-        app: A,
-        config: &FirmwareConfig,
-        start_ns: u64,
-        mut path: P,
-    ) -> NodeResult<Self, FirmwareHandle<A, N, M, P>, P> {
-        let slave = path.with_pdi(esc, |pdi| Slave::new(def, pdi))?;
-        let poll_period = config.poll_period_ns.max(1);
-        let fw = Firmware {
-            slave,
-            app,
-            counters: FirmwareCounters::default(),
-            last_pdi_error: None,
-            path,
-            poll_period,
-            next_poll: start_ns,
-            timers: config
-                .timers
-                .iter()
-                .map(|&(id, p)| (id, p.max(1), start_ns.saturating_add(p.max(1))))
-                .collect(),
-            cpu: config.timing.map(Cpu::new),
-        };
-        let inner = Arc::new(Mutex::new(fw));
-        Ok((Self(inner.clone()), FirmwareHandle(inner)))
-    }
-
-    fn lock(&self) -> MutexGuard<'_, Firmware<A, N, M, P>> {
-        self.0.lock().unwrap_or_else(|e| e.into_inner())
-    }
-}
-
-impl<A: Application<N> + Send + 'static, const N: usize, const M: usize, P: PdiPath> Node<Esc>
-    for FirmwareNode<A, N, M, P>
-{
+impl<I: Image<P::Pdi> + Send + 'static, P: PdiPath, B: Bench<I>> Node<Esc> for HostNode<I, P, B> {
     fn on_event(&mut self, esc: &mut Esc, ev: EscEvent, t: u64) {
-        self.lock().event(esc, ev, t);
+        self.0.lock().event(esc, ev, t);
     }
 
     fn next_wakeup(&self) -> Option<u64> {
-        Some(self.lock().next_wakeup())
+        Some(self.0.lock().next_wakeup())
     }
 
     fn on_wakeup(&mut self, esc: &mut Esc, t: u64) {
-        self.lock().wakeup(esc, t);
+        self.0.lock().wakeup(esc, t);
     }
+}
+
+/// A [`HostNode`] running an `oxicat-slave` stack.
+pub type FirmwareNode<A, const N: usize, const M: usize, P = Direct> =
+    HostNode<Stack<<P as PdiPath>::Pdi, A, N, M>, P>;
+
+/// Starts the stack of `def` on `esc` through `path` (as its firmware would at reset).
+pub fn boot_stack<A, const N: usize, const M: usize, P: PdiPath>(
+    def: &'static DeviceDef,
+    esc: &mut Esc,
+    app: A,
+    path: &mut P,
+) -> Result<Stack<P::Pdi, A, N, M>, AttachError> {
+    let slave = path
+        .with_pdi(esc, |pdi| Slave::new(def, pdi))
+        .map_err(|e| AttachError::from(P::init_error(e)))?;
+    Ok(Stack { slave, app })
+}
+
+/// Attaches a host to ESC `id` of `segment`: `boot` starts the image on the ESC through
+/// the path `path` built in front of it; the schedule starts now (aligned per `config`).
+pub fn attach_host<I: Image<P::Pdi> + Send + 'static, P: PdiPath, B: Bench<I>>(
+    segment: &mut Segment,
+    id: SlaveId,
+    config: &FirmwareConfig,
+    bench: B,
+    path: impl FnOnce(&mut Esc) -> Result<P, PathInitError>,
+    boot: impl FnOnce(&mut Esc, &mut P) -> Result<I, AttachError>,
+) -> Result<HostHandle<I, P, B>, AttachError> {
+    let now = segment.now();
+    let esc = segment
+        .esc_mut(id)
+        .ok_or(AttachError::Topology(TopologyError::NoSuchSlave(id)))?;
+    let mut path = path(esc)?;
+    let image = boot(esc, &mut path)?;
+    let host = Shared::new(Host::new(image, bench, path, config, now));
+    segment
+        .attach(id, Box::new(HostNode(host.clone())))
+        .map_err(AttachError::Topology)?;
+    Ok(host)
 }
 
 /// Why firmware could not be attached to a segment's ESC.
@@ -495,17 +634,9 @@ pub fn attach_firmware_with<
     config: &FirmwareConfig,
     path: impl FnOnce(&mut Esc) -> Result<P, PathInitError>,
 ) -> Result<FirmwareHandle<A, N, M, P>, AttachError> {
-    let now = segment.now();
-    let esc = segment
-        .esc_mut(id)
-        .ok_or(AttachError::Topology(TopologyError::NoSuchSlave(id)))?;
-    let path = path(esc)?;
-    let (node, handle) = FirmwareNode::<A, N, M, P>::with_path(def, esc, app, config, now, path)
-        .map_err(|e| AttachError::from(P::init_error(e)))?;
-    segment
-        .attach(id, Box::new(node))
-        .map_err(AttachError::Topology)?;
-    Ok(handle)
+    attach_host(segment, id, config, (), path, |esc, path| {
+        boot_stack(def, esc, app, path)
+    })
 }
 
 #[cfg(test)]

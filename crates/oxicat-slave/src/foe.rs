@@ -1040,6 +1040,9 @@ impl<const N: usize, A: Application<N>, F: FoeFiles> Application<N> for WithFoe<
     fn foe(&mut self) -> Option<&mut dyn FoeFiles> {
         Some(&mut self.files)
     }
+    fn next_emergency(&mut self) -> Option<(u16, u8, [u8; 5])> {
+        self.app.next_emergency()
+    }
 }
 
 #[cfg(test)]

@@ -44,6 +44,13 @@ pub trait Application<const N: usize> {
     fn foe(&mut self) -> Option<&mut dyn FoeFiles> {
         None
     }
+
+    /// A CoE emergency the application raised (error code, error register, 5 bytes of
+    /// manufacturer data). The stack asks after each of its handlers ran and queues what it
+    /// gets ([`Slave::emergency`]), since a hook cannot reach the stack itself.
+    fn next_emergency(&mut self) -> Option<(u16, u8, [u8; 5])> {
+        None
+    }
 }
 
 /// An application without hooks.
@@ -281,6 +288,12 @@ impl<P: Pdi, const N: usize, const M: usize> Slave<P, N, M> {
 
     /// Main-loop work: AL control, watchdog, mailbox; in free run also the process data.
     pub fn poll<A: Application<N>>(&mut self, pdi: &mut P, app: &mut A) -> R<P> {
+        let r = self.poll_inner(pdi, app);
+        self.queue_app_emergencies(app);
+        r
+    }
+
+    fn poll_inner<A: Application<N>>(&mut self, pdi: &mut P, app: &mut A) -> R<P> {
         let ev = pdi.al_event_request()?;
         if ev & reg::EV_AL_CONTROL != 0 {
             self.al_control(pdi, app)?;
@@ -301,6 +314,12 @@ impl<P: Pdi, const N: usize, const M: usize> Slave<P, N, M> {
 
     /// PDI interrupt: in SM-synchronous mode runs the cycle on the SM2 (or SM3) event.
     pub fn on_pdi_irq<A: Application<N>>(&mut self, pdi: &mut P, app: &mut A) -> R<P> {
+        let r = self.on_pdi_irq_inner(pdi, app);
+        self.queue_app_emergencies(app);
+        r
+    }
+
+    fn on_pdi_irq_inner<A: Application<N>>(&mut self, pdi: &mut P, app: &mut A) -> R<P> {
         if self.sync != SyncMode::SmSync || self.state < AlState::SafeOp {
             return Ok(());
         }
@@ -326,6 +345,12 @@ impl<P: Pdi, const N: usize, const M: usize> Slave<P, N, M> {
     /// the counter exceeds the limit. A new SM2 buffer that arrives while the cycle runs
     /// counts in the cycle time too small counter (0x0C).
     pub fn on_sync0<A: Application<N>>(&mut self, pdi: &mut P, app: &mut A) -> R<P> {
+        let r = self.on_sync0_inner(pdi, app);
+        self.queue_app_emergencies(app);
+        r
+    }
+
+    fn on_sync0_inner<A: Application<N>>(&mut self, pdi: &mut P, app: &mut A) -> R<P> {
         let _ack = pdi.read_u8(reg::DC_SYNC0_STATUS)?;
         let inputs = match self.sync {
             SyncMode::DcSync0 => true,
@@ -388,6 +413,14 @@ impl<P: Pdi, const N: usize, const M: usize> Slave<P, N, M> {
     /// the ESC, so no PDI is needed.
     pub fn on_timer<A: Application<N>>(&mut self, id: u8, app: &mut A) {
         app.timer(id, &mut self.od);
+        self.queue_app_emergencies(app);
+    }
+
+    /// Queues the emergencies the application raised in its hooks.
+    fn queue_app_emergencies<A: Application<N>>(&mut self, app: &mut A) {
+        while let Some((code, register, data)) = app.next_emergency() {
+            let _ = self.emergency(code, register, data);
+        }
     }
 
     /// Queues a CoE emergency (and sets 0x1001 to `error_register`); false if the queue

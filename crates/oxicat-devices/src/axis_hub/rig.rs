@@ -1,5 +1,5 @@
-//! The axis communication hub on the virtual segment: one [`HubRigNode`] runs the hub
-//! firmware (`crate::axis_hub`) behind its ESC **and** owns its plant — thermal
+//! The axis communication hub on the virtual segment: the firmware host of `oxicat-sim`
+//! runs the hub firmware (`crate::axis_hub`) behind its ESC with its plant ([`HubPlant`]) — thermal
 //! nodes (four motor housings in ambient air), fifteen DS18B20 on a bit-level 1-Wire bus
 //! (`oxicat_plant::onewire`), and the WS2812 rings whose bit stream is decoded back into
 //! colours (`oxicat_plant::ws2812`).
@@ -29,10 +29,11 @@ use oxicat_plant::thermal::{Mount, TempSensor, ThermalNet, ThermalNode};
 use oxicat_plant::ws2812::{decode, Decoded};
 
 use oxicat_master::inprocess::{spawn_inprocess_with, InProcessConfig};
-use oxicat_sim::firmware::AttachError;
-use oxicat_sim::node::{EscEvent, Node, Shared};
+use oxicat_sim::firmware::{
+    attach_host, AttachError, Bench, FirmwareConfig, Host, HostHandle, Image,
+};
 use oxicat_sim::pdi_path::{Direct, PdiPath, PdiRoute, SpiPath};
-use oxicat_sim::segment::{Segment, SlaveId, TopologyError};
+use oxicat_sim::segment::{Segment, SlaveId};
 
 /// The firmware's 1-Wire bus on the plant's bus model (slots never fail here).
 #[derive(Debug, Clone, Default)]
@@ -124,129 +125,119 @@ pub fn hub_esc(sii: Vec<u8>) -> Esc {
     Esc::new(EscConfig::lan9252(), sii)
 }
 
-/// One hub: firmware and plant, the firmware reaching its ESC through `P`.
-pub struct HubRig<P: PdiPath = Direct> {
-    /// How the firmware reaches its ESC.
-    pub path: P,
-    /// The firmware.
-    pub fw: HubFw<P>,
+impl<P: oxicat_slave::Pdi, B: OneWireBus, L: LedStrip> Image<P> for HubFirmware<P, B, L> {
+    fn on_pdi_irq(&mut self, pdi: &mut P) -> Result<(), P::Error> {
+        HubFirmware::on_pdi_irq(self, pdi);
+        Ok(())
+    }
+    fn on_sync0(&mut self, pdi: &mut P) -> Result<(), P::Error> {
+        HubFirmware::on_sync0(self, pdi);
+        Ok(())
+    }
+    fn on_sync1(&mut self, pdi: &mut P) -> Result<(), P::Error> {
+        HubFirmware::on_sync1(self, pdi);
+        Ok(())
+    }
+    fn on_timer(&mut self, id: u8, pdi: &mut P) -> Result<(), P::Error> {
+        HubFirmware::on_timer(self, id, pdi);
+        Ok(())
+    }
+    fn poll(&mut self, pdi: &mut P) -> Result<(), P::Error> {
+        HubFirmware::poll(self, pdi);
+        Ok(())
+    }
+}
+
+/// The hub's plant on the host: thermal nodes and the sensor models on the 1-Wire bus.
+/// Before the tasks due at an instant run, it catches up to now (thermal step, sensor
+/// dies, 1-Wire clock, DMA done).
+pub struct HubPlant {
     /// Thermal nodes.
     pub thermal: ThermalNet,
     /// Sensor models, one per DS18B20 on the bus (same order).
     pub sensors: Vec<TempSensor>,
-    /// Task releases delivered.
-    pub releases: u64,
-    next: [u64; 4],
-    next_idle: u64,
     plant_ns: u64,
 }
 
-/// The MCU's idle loop: `HubFirmware::poll` (ESM, mailbox) every 1 ms between the tasks.
-pub const IDLE_POLL_NS: u64 = 1_000_000;
-
-impl<P: PdiPath> HubRig<P> {
-    fn catch_up(&mut self, t: u64) {
+impl<P: oxicat_slave::Pdi> Bench<HubFirmware<P, SimOneWire, SimLeds>> for HubPlant {
+    fn before_timers(&mut self, fw: &mut HubFirmware<P, SimOneWire, SimLeds>, t: u64) {
         if t > self.plant_ns {
             self.thermal.advance((t - self.plant_ns) as f64 * 1e-9);
             self.plant_ns = t;
         }
-        let bus = &mut self.fw.app.bus.0;
+        let bus = &mut fw.app.bus.0;
         for (s, d) in self.sensors.iter_mut().zip(bus.devices.iter_mut()) {
             d.die_temp = s.sample(&self.thermal);
             d.plugged = s.plugged;
         }
         bus.set_time(t);
-        self.fw.app.strip.now = t;
+        fw.app.strip.now = t;
     }
+}
 
-    fn wakeup(&mut self, esc: &mut Esc, t: u64) {
-        if self.next_idle <= t {
-            let Self { path, fw, .. } = self;
-            path.with_pdi(esc, |pdi| fw.poll(pdi));
-            while self.next_idle <= t {
-                self.next_idle += IDLE_POLL_NS;
-            }
-        }
-        if self.next.iter().all(|&n| n > t) {
-            return;
-        }
-        self.catch_up(t);
-        for (k, task) in TASKS.iter().enumerate() {
-            if self.next[k] <= t {
-                let Self { path, fw, .. } = self;
-                path.with_pdi(esc, |pdi| fw.on_timer(task.id, pdi));
-                self.releases += 1;
-                while self.next[k] <= t {
-                    self.next[k] += task.period_ns;
-                }
-            }
-        }
-    }
+/// One hub on its host: firmware (`image`, or through `Deref` its fields) and plant
+/// (`bench`), the firmware reaching its ESC through `P`.
+pub type HubRig<P = Direct> = Host<HubFw<P>, P, HubPlant>;
 
-    fn event(&mut self, esc: &mut Esc, ev: EscEvent) {
-        let Self { path, fw, .. } = self;
-        match ev {
-            EscEvent::Irq => path.with_pdi(esc, |pdi| fw.on_pdi_irq(pdi)),
-            EscEvent::Sync0 => path.with_pdi(esc, |pdi| fw.on_sync0(pdi)),
-            EscEvent::Sync1 => path.with_pdi(esc, |pdi| fw.on_sync1(pdi)),
-            EscEvent::PdWatchdog | EscEvent::PdiWatchdog => {}
-        }
-    }
+/// The MCU's idle loop: `HubFirmware::poll` (ESM, mailbox) every 1 ms between the tasks.
+pub const IDLE_POLL_NS: u64 = 1_000_000;
 
+/// What a test or tool does to a hub on the segment.
+pub trait HubBoard {
     /// What LED ring `ring` shows: its last bit stream decoded by the WS2812B model.
-    pub fn ring(&self, ring: usize) -> Decoded {
+    fn ring(&self, ring: usize) -> Decoded;
+    /// Sets the current through motor `m`'s winding \[A\].
+    fn set_motor_current(&mut self, m: usize, amps: f64);
+    /// Unplugs (`false`) or plugs sensor `i`.
+    fn plug_sensor(&mut self, i: usize, plugged: bool);
+    /// Corrupts the next `n` scratchpad reads of sensor `i` (CRC errors).
+    fn corrupt_sensor(&mut self, i: usize, n: u32);
+    /// Task releases delivered.
+    fn releases(&self) -> u64;
+}
+
+impl<P: PdiPath> HubBoard for HubRig<P> {
+    fn ring(&self, ring: usize) -> Decoded {
         let t = ws2812::HUB_TIMING;
-        let buf = self
-            .fw
-            .app
-            .strip
-            .buffers
-            .get(ring)
-            .map_or(&[][..], |b| &b[..]);
+        let buf = self.app.strip.buffers.get(ring).map_or(&[][..], |b| &b[..]);
         decode(buf, t.clock_hz as f64, t.period, ws2812::LEDS_PER_RING)
     }
 
-    /// Sets the current through motor `m`'s winding \[A\].
-    pub fn set_motor_current(&mut self, m: usize, amps: f64) {
-        if let Some(n) = self.thermal.nodes.get_mut(m) {
+    fn set_motor_current(&mut self, m: usize, amps: f64) {
+        if let Some(n) = self.bench.thermal.nodes.get_mut(m) {
             n.current = amps;
         }
     }
 
-    /// Unplugs (`false`) or plugs sensor `i`.
-    pub fn plug_sensor(&mut self, i: usize, plugged: bool) {
-        if let Some(s) = self.sensors.get_mut(i) {
+    fn plug_sensor(&mut self, i: usize, plugged: bool) {
+        if let Some(s) = self.bench.sensors.get_mut(i) {
             s.plugged = plugged;
         }
     }
 
-    /// Corrupts the next `n` scratchpad reads of sensor `i` (CRC errors).
-    pub fn corrupt_sensor(&mut self, i: usize, n: u32) {
-        if let Some(d) = self.fw.app.bus.0.devices.get_mut(i) {
+    fn corrupt_sensor(&mut self, i: usize, n: u32) {
+        if let Some(d) = self.image.app.bus.0.devices.get_mut(i) {
             d.corrupt_reads += n;
         }
+    }
+
+    fn releases(&self) -> u64 {
+        self.counters.timers
     }
 }
 
 /// Access to a hub from outside the segment.
-pub type HubHandle<P = Direct> = Shared<HubRig<P>>;
+pub type HubHandle<P = Direct> = HostHandle<HubFw<P>, P, HubPlant>;
 
-/// The [`Node`] of a hub on its ESC.
-pub struct HubRigNode<P: PdiPath = Direct>(Shared<HubRig<P>>);
-
-impl<P: PdiPath> Node<Esc> for HubRigNode<P> {
-    fn on_event(&mut self, esc: &mut Esc, ev: EscEvent, _t: u64) {
-        self.0.lock().event(esc, ev);
-    }
-
-    fn next_wakeup(&self) -> Option<u64> {
-        let r = self.0.lock();
-        r.next.iter().copied().min().map(|n| n.min(r.next_idle))
-    }
-
-    fn on_wakeup(&mut self, esc: &mut Esc, t: u64) {
-        self.0.lock().wakeup(esc, t);
-    }
+/// The host's schedule: the idle loop every 1 ms (before the tasks at the same instant),
+/// the tasks of [`TASKS`] in priority order, each first one period after the start.
+fn schedule() -> FirmwareConfig {
+    let mut c = FirmwareConfig::default().poll_every(IDLE_POLL_NS);
+    c.poll_first_ns = IDLE_POLL_NS;
+    c.poll_before_timers = true;
+    TASKS
+        .iter()
+        .fold(c, |c, task| c.timer(task.id, task.period_ns))
 }
 
 /// Boots the hub firmware on ESC `id` with its plant; the tasks start one period later.
@@ -276,10 +267,6 @@ fn attach_hub_with<P: PdiPath>(
     path: impl FnOnce(&mut Esc) -> Result<P, oxicat_sim::pdi_path::PathInitError>,
 ) -> Result<HubHandle<P>, AttachError> {
     let now = segment.now();
-    let esc = segment
-        .esc_mut(id)
-        .ok_or(AttachError::Topology(TopologyError::NoSuchSlave(id)))?;
-    let mut path = path(esc)?;
     let (r, rth, tau) = config.motor_params;
     let nodes = (0..config.motors)
         .map(|_| ThermalNode::motor(config.ambient, r, rth, tau))
@@ -306,28 +293,20 @@ fn attach_hub_with<P: PdiPath>(
             ))
         })
         .collect();
-    let fw = path.with_pdi(esc, |pdi| {
-        HubFirmware::new(
-            pdi,
-            SimOneWire(OneWireNet::new(devices)),
-            SimLeds::default(),
-        )
-    });
-    let rig = HubRig {
-        path,
-        fw,
+    let plant = HubPlant {
         thermal,
         sensors,
-        releases: 0,
-        next: TASKS.map(|t| now + t.period_ns),
-        next_idle: now + IDLE_POLL_NS,
         plant_ns: now,
     };
-    let inner = Shared::new(rig);
-    segment
-        .attach(id, Box::new(HubRigNode(inner.clone())))
-        .map_err(AttachError::Topology)?;
-    Ok(inner)
+    attach_host(segment, id, &schedule(), plant, path, |esc, path| {
+        Ok(path.with_pdi(esc, |pdi| {
+            HubFirmware::new(
+                pdi,
+                SimOneWire(OneWireNet::new(devices)),
+                SimLeds::default(),
+            )
+        }))
+    })
 }
 
 // ------------------------------------------------------------------ the scenario
@@ -489,7 +468,7 @@ impl Run<'_> {
         let c = d.colors.first().copied().unwrap_or_default();
         format!(
             "LED ring 0 ({:?}) rgb({},{},{}){}",
-            h.fw.app.led.shown,
+            h.app.led.shown,
             c.r,
             c.g,
             c.b,
@@ -584,7 +563,7 @@ where
             && r.ring_is(COLOR_NORMAL)
     })
     .await?;
-    run.report.sensors_found = run.hub.lock().fw.app.temp.roms().len();
+    run.report.sensors_found = run.hub.lock().app.temp.roms().len();
     run.note(
         &format!(
             "OP, {} sensors found by ROM search, temperatures at ambient, LEDs normal",
@@ -639,10 +618,10 @@ where
     run.note("sensor plugged back: cleared", ok);
 
     // 3. A CRC fault on one read: detected (soft), the bad value is not published.
-    let crc_before = run.hub.lock().fw.app.temp.stats.crc_errors;
+    let crc_before = run.hub.lock().app.temp.stats.crc_errors;
     run.hub.lock().corrupt_sensor(2, 1);
     let ok = cycles_until(run, xchg, 5.0, |_, i| i.error == ERR_TEMP_SENS_CRC).await?;
-    let crc_after = run.hub.lock().fw.app.temp.stats.crc_errors;
+    let crc_after = run.hub.lock().app.temp.stats.crc_errors;
     run.note(
         "scratchpad CRC error: detected, ERROR 1106 (soft)",
         ok && crc_after == crc_before + 1,
@@ -656,7 +635,7 @@ where
         .map_err(|e| e.to_string())?;
     (run.log)("cable to the master opened");
     let t_open = lock(&run.seg).now();
-    let releases_before = run.hub.lock().releases;
+    let releases_before = run.hub.lock().releases();
     let mut answered = 0;
     let step = run.cycle_ns;
     while lock(&run.seg).now() < t_open + 2_000_000_000 {
@@ -668,10 +647,10 @@ where
     let (phase, active, releases, state) = {
         let h = run.hub.lock();
         (
-            h.fw.sup.phase,
-            h.fw.app.sys.is_active(ERR_ECAT_COMM_LOST),
-            h.releases,
-            h.fw.slave().map(|s| (s.state(), s.status_code())),
+            h.sup.phase,
+            h.app.sys.is_active(ERR_ECAT_COMM_LOST),
+            h.releases(),
+            h.slave().map(|s| (s.state(), s.status_code())),
         )
     };
     let phase_text = match phase {
@@ -711,7 +690,7 @@ where
             && r.ring_is(COLOR_NORMAL)
     })
     .await?;
-    let st = run.hub.lock().fw.slave().map(|s| s.state());
+    let st = run.hub.lock().slave().map(|s| s.state());
     let st_text = st.map_or("stack not running".to_string(), |s| s.to_string());
     run.note(
         &format!("back in OP without a reset ({st_text}), error cleared, LEDs normal"),
@@ -868,7 +847,7 @@ fn set_outputs(o: &mut [u8], v: [u16; 4]) {
 
 /// The resolution the firmware read from sensor `i`'s configuration register.
 pub fn sensor_resolution(hub: &HubHandle, i: usize) -> Option<onewire::Resolution> {
-    hub.lock().fw.app.temp.resolution(i)
+    hub.lock().app.temp.resolution(i)
 }
 
 /// The axis communication hub in the registry.

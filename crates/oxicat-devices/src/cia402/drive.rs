@@ -337,8 +337,8 @@ impl<H: JointHw> Cia402Drive<H> {
         self.iq_ref
     }
 
-    /// Takes the next queued emergency `(error code, error register)`; the host passes it
-    /// to `Slave::emergency`.
+    /// Takes the next queued emergency `(error code, error register)` (the stack takes them
+    /// through `Application::next_emergency`).
     pub fn take_emergency(&mut self) -> Option<(u16, u8)> {
         let e = self.emcy[0].take();
         self.emcy.rotate_left(1);
@@ -873,6 +873,10 @@ impl<H: JointHw> Cia402Drive<H> {
 }
 
 impl<const N: usize, H: JointHw> Application<N> for Cia402Drive<H> {
+    fn next_emergency(&mut self) -> Option<(u16, u8, [u8; 5])> {
+        self.take_emergency().map(|(code, reg)| (code, reg, [0; 5]))
+    }
+
     fn state_change(
         &mut self,
         _from: AlState,

@@ -9,7 +9,7 @@
 //! |---|---|
 //! | ESC SYNC0 | `Slave::on_sync0` → drive cycle (state machine, modes, position and velocity loops) |
 //! | ESC PDI IRQ | `Slave::on_pdi_irq` (SM-synchronous / free-run cycles) |
-//! | tick every 50 µs (20 kHz) | 1. the joint catches up to now (fixed substeps) with the voltage the current loop last set; 2. `Slave::on_timer(CURRENT_LOOP_TIMER)`: current loop → new voltage; 3. `Slave::poll` (ESM, mailbox); queued drive emergencies go to `Slave::emergency` |
+//! | tick every 50 µs (20 kHz), on the firmware host's schedule | 1. the joint catches up to now (fixed substeps) with the voltage the current loop last set ([`JointPlant`]); 2. `Slave::on_timer(CURRENT_LOOP_TIMER)`: current loop → new voltage; 3. `Slave::poll` (ESM, mailbox); the stack sends the drive's queued emergencies (`Application::next_emergency`) |
 //!
 //! At equal times ESC events come first (the segment's rule), then the tick, so a run is a
 //! function of the frames and their virtual times only.
@@ -22,10 +22,11 @@ use oxicat_esc::Esc;
 pub use oxicat_plant::bldc_joint::{BldcJoint, BldcJointParams};
 use oxicat_slave::{Od, Slave};
 
-use oxicat_sim::firmware::AttachError;
-use oxicat_sim::node::{EscEvent, Node, Shared};
+use oxicat_sim::firmware::{
+    attach_host, boot_stack, AttachError, Bench, FirmwareConfig, Host, HostHandle, Stack,
+};
 use oxicat_sim::pdi_path::{Direct, PdiPath, PdiRoute, SpiPath};
-use oxicat_sim::segment::{Segment, SlaveId, TopologyError};
+use oxicat_sim::segment::{Segment, SlaveId};
 
 /// Mailbox size of the drive (its definition: 128 bytes).
 pub const MBX: usize = 128;
@@ -84,81 +85,33 @@ pub fn new_app(p: BldcJointParams) -> JointApp {
     )
 }
 
-/// Counters of the node.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
-pub struct JointCounters {
-    /// 20 kHz ticks.
-    pub ticks: u64,
-    /// PDI accesses the ESC refused.
-    pub pdi_errors: u64,
-    /// Emergencies sent.
-    pub emergencies: u64,
-}
+/// The joint's plant on the host: stepped 50 µs at each current-loop tick, before the
+/// loop reads its sensors (the voltage it set last acts over the step).
+#[derive(Debug, Clone, Copy, Default)]
+pub struct JointPlant;
 
-/// The drive: stack, firmware and plant, reaching its ESC through `P`.
-pub struct JointDrive<P: PdiPath = Direct> {
-    /// How the firmware reaches its ESC.
-    pub path: P,
-    /// The slave stack.
-    pub slave: JointSlave<P>,
-    /// The firmware (its `hw.joint` is the plant).
-    pub app: JointApp,
-    /// What ran.
-    pub counters: JointCounters,
-    next_tick: u64,
-}
-
-impl<P: PdiPath> JointDrive<P> {
-    fn note<E>(&mut self, r: Result<(), E>) {
-        if r.is_err() {
-            self.counters.pdi_errors += 1;
-        }
-        while let Some((code, reg)) = self.app.take_emergency() {
-            if self.slave.emergency(code, reg, [0; 5]) {
-                self.counters.emergencies += 1;
-            }
-        }
-    }
-
-    fn tick(&mut self, esc: &mut Esc) {
-        self.app.hw.joint.step(TICK_NS as f64 * 1e-9);
-        self.slave.on_timer(CURRENT_LOOP_TIMER, &mut self.app);
-        self.counters.ticks += 1;
-        let Self {
-            path, slave, app, ..
-        } = self;
-        let r = path.with_pdi(esc, |pdi| slave.poll(pdi, app));
-        self.note(r);
+impl<Pd: oxicat_slave::Pdi> Bench<Stack<Pd, JointApp, { device::IMAGE }, MBX>> for JointPlant {
+    fn before_timers(&mut self, image: &mut Stack<Pd, JointApp, { device::IMAGE }, MBX>, _t: u64) {
+        image.app.hw.joint.step(TICK_NS as f64 * 1e-9);
     }
 }
+
+/// The drive on its host: stack, firmware and joint, reaching its ESC through `P`
+/// (`image.slave`, `image.app`, or through `Deref`: `slave`, `app`).
+pub type JointDrive<P = Direct> =
+    Host<Stack<<P as PdiPath>::Pdi, JointApp, { device::IMAGE }, MBX>, P, JointPlant>;
 
 /// Access to the drive from outside the segment.
-pub type JointHandle<P = Direct> = Shared<JointDrive<P>>;
+pub type JointHandle<P = Direct> =
+    HostHandle<Stack<<P as PdiPath>::Pdi, JointApp, { device::IMAGE }, MBX>, P, JointPlant>;
 
-/// The drive as a segment node.
-pub struct JointNode<P: PdiPath = Direct>(Shared<JointDrive<P>>);
-
-impl<P: PdiPath> Node<Esc> for JointNode<P> {
-    fn on_event(&mut self, esc: &mut Esc, ev: EscEvent, _t: u64) {
-        let mut b = self.0.lock();
-        let JointDrive {
-            path, slave, app, ..
-        } = &mut *b;
-        let r = oxicat_sim::firmware::deliver(path, slave, app, esc, ev);
-        b.note(r);
-    }
-
-    fn next_wakeup(&self) -> Option<u64> {
-        Some(self.0.lock().next_tick)
-    }
-
-    fn on_wakeup(&mut self, esc: &mut Esc, t: u64) {
-        let mut b = self.0.lock();
-        while b.next_tick <= t {
-            b.tick(esc);
-            b.next_tick += TICK_NS;
-        }
-    }
+/// The host's schedule: current loop and main loop every 50 µs on the 50 µs grid, the
+/// loop first.
+fn schedule() -> FirmwareConfig {
+    FirmwareConfig::default()
+        .aligned(TICK_NS)
+        .timer_from(CURRENT_LOOP_TIMER, TICK_NS, 0)
+        .poll_every(TICK_NS)
 }
 
 /// Boots the drive firmware on ESC `id` of `segment` with a joint of `params`; the ticks
@@ -188,26 +141,9 @@ fn attach_with<P: PdiPath>(
     params: BldcJointParams,
     path: impl FnOnce(&mut Esc) -> Result<P, oxicat_sim::pdi_path::PathInitError>,
 ) -> Result<JointHandle<P>, AttachError> {
-    let now = segment.now();
-    let esc = segment
-        .esc_mut(id)
-        .ok_or(AttachError::Topology(TopologyError::NoSuchSlave(id)))?;
-    let mut path = path(esc)?;
-    let slave = path
-        .with_pdi(esc, |pdi| JointSlave::<P>::new(&device::DEF, pdi))
-        .map_err(|e| AttachError::from(P::init_error(e)))?;
-    let drive = JointDrive {
-        path,
-        slave,
-        app: new_app(params),
-        counters: JointCounters::default(),
-        next_tick: now.div_ceil(TICK_NS) * TICK_NS,
-    };
-    let inner = Shared::new(drive);
-    segment
-        .attach(id, Box::new(JointNode(inner.clone())))
-        .map_err(AttachError::Topology)?;
-    Ok(inner)
+    attach_host(segment, id, &schedule(), JointPlant, path, |esc, path| {
+        boot_stack(&device::DEF, esc, new_app(params), path)
+    })
 }
 
 /// The drive and its joint without an ESC: the object dictionary stands in for the

@@ -8,12 +8,10 @@
 //! | event | what runs |
 //! |---|---|
 //! | ESC PDI IRQ (SM2 written) | `Slave::on_pdi_irq`: RxPDO → application → TxPDO (SM-synchronous) |
-//! | tick every 50 µs (20 kHz, the PWM counter's top) | 1. the plants catch up to now in [`TueConfig::substeps`] exact steps; the bridge duties the firmware wrote at the previous tick took effect at its counter bottom, 6.25 µs after it; 2. every 20th tick the 1 kHz service routine (encoders latched with their timestamps, line voltage); 3. the current loop (ADC2 sampled now) → new duties, effective 6.25 µs later; 4. the main loop (`Slave::poll`: ESM, mailbox, watchdog) |
+//! | tick every 50 µs (20 kHz, the PWM counter's top), on the firmware host's schedule | 1. the plants catch up ([`TuePlant`]) to now in [`TueConfig::substeps`] exact steps; the bridge duties the firmware wrote at the previous tick took effect at its counter bottom, 6.25 µs after it; 2. every 20th tick the 1 kHz service routine (encoders latched with their timestamps, line voltage); 3. the current loop (ADC2 sampled now) → new duties, effective 6.25 µs later; 4. the main loop (`Slave::poll`: ESM, mailbox, watchdog) |
 //!
 //! At equal times ESC events come first (the segment's rule), then the tick in the order
 //! above, so a run is a function of the frames and their virtual times only.
-
-use std::sync::MutexGuard;
 
 use crate::tue_es030::{
     self, control, device, Adcs, Bridges, Encoders, Io, TuEs030, CURRENT_TIMER, SERVICE_TIMER,
@@ -22,10 +20,11 @@ use oxicat_esc::Esc;
 use oxicat_plant::re30::{BridgeCommand, Re30Drive, Re30Params};
 use oxicat_slave::Slave;
 
-use oxicat_sim::firmware::AttachError;
-use oxicat_sim::node::{EscEvent, Node, Shared};
+use oxicat_sim::firmware::{
+    attach_host, boot_stack, AttachError, Bench, FirmwareConfig, Host, HostHandle, Stack,
+};
 use oxicat_sim::pdi_path::{Direct, PdiPath, PdiRoute, SpiPath};
-use oxicat_sim::segment::{Segment, SlaveId, TopologyError};
+use oxicat_sim::segment::{Segment, SlaveId};
 
 /// Mailbox size of the board (its definition: 128 bytes).
 pub const MBX: usize = 128;
@@ -179,44 +178,40 @@ impl Io for BenchBoard {
     }
 }
 
-/// Counters of the node.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
-pub struct TueCounters {
-    /// 20 kHz ticks.
-    pub ticks: u64,
-    /// PDI accesses the ESC refused.
-    pub pdi_errors: u64,
-}
-
-/// The board: stack, firmware and plant, reaching its ESC through `P`.
-pub struct TueBoard<P: PdiPath = Direct> {
-    /// How the firmware reaches its ESC.
-    pub path: P,
-    /// The slave stack.
-    pub slave: TueSlave<P>,
-    /// The firmware (its `board` holds the plant).
-    pub app: TueApp,
-    /// What ran.
-    pub counters: TueCounters,
+/// The three motor channels on the host: at each 20 kHz tick, before the firmware's
+/// timers run, the plants catch up to now in exact substeps; the bridge duties the current
+/// loop wrote at the previous tick take effect at its counter bottom,
+/// [`PWM_UPDATE_DELAY_NS`] after it.
+#[derive(Debug, Clone, Copy)]
+pub struct TuePlant {
     substeps: u32,
-    next_tick: u64,
-    plant_ns: u64,
+    /// Plant time \[ns\] (`None` until the first tick).
+    plant_ns: Option<u64>,
+    /// From this plant time on, the bridges take the pending duties.
+    apply_at: u64,
 }
 
-impl<P: PdiPath> TueBoard<P> {
-    fn note<E>(&mut self, r: Result<(), E>) {
-        if r.is_err() {
-            self.counters.pdi_errors += 1;
+impl TuePlant {
+    fn new(cfg: &TueConfig) -> Self {
+        Self {
+            substeps: cfg.substeps,
+            plant_ns: None,
+            apply_at: 0,
         }
     }
+}
 
-    /// Steps the plant from `plant_ns` to `t`, applying pending duties at `apply`.
-    fn step_plant(&mut self, t: u64, apply: u64) {
+/// The board's image: stack and firmware.
+pub type TueImage<P = Direct> = Stack<<P as PdiPath>::Pdi, TueApp, { device::IMAGE }, MBX>;
+
+impl<Pd: oxicat_slave::Pdi> Bench<Stack<Pd, TueApp, { device::IMAGE }, MBX>> for TuePlant {
+    fn before_timers(&mut self, image: &mut Stack<Pd, TueApp, { device::IMAGE }, MBX>, t: u64) {
         let n = self.substeps.max(1) as u64;
         let h_ns = TICK_NS / n;
-        let b = &mut self.app.board;
-        while self.plant_ns + h_ns <= t {
-            if self.plant_ns >= apply {
+        let plant_ns = self.plant_ns.get_or_insert(t);
+        let b = &mut image.app.board;
+        while *plant_ns + h_ns <= t {
+            if *plant_ns >= self.apply_at {
                 for (d, p) in b.drives.iter_mut().zip(b.pending) {
                     d.bridge = p;
                 }
@@ -225,61 +220,30 @@ impl<P: PdiPath> TueBoard<P> {
             for d in &mut b.drives {
                 d.step(h_ns as f64 * 1e-9, supply);
             }
-            self.plant_ns += h_ns;
+            *plant_ns += h_ns;
         }
     }
 
-    fn tick(&mut self, esc: &mut Esc, t: u64) {
-        // The duties written at the previous tick took effect at its counter bottom.
-        let apply = t.saturating_sub(TICK_NS) + PWM_UPDATE_DELAY_NS;
-        self.step_plant(t, apply);
-        if self.counters.ticks.is_multiple_of(TICKS_PER_SERVICE) {
-            self.slave.on_timer(SERVICE_TIMER, &mut self.app);
-        }
-        self.slave.on_timer(CURRENT_TIMER, &mut self.app);
-        self.counters.ticks += 1;
-        let Self {
-            path, slave, app, ..
-        } = self;
-        let r = path.with_pdi(esc, |pdi| slave.poll(pdi, app));
-        self.note(r);
+    fn after_timers(&mut self, _image: &mut Stack<Pd, TueApp, { device::IMAGE }, MBX>, t: u64) {
+        self.apply_at = t + PWM_UPDATE_DELAY_NS;
     }
 }
+
+/// The board on its host: stack, firmware and plant, reaching its ESC through `P`
+/// (`image.slave`, `image.app`, or through `Deref`: `slave`, `app`).
+pub type TueBoard<P = Direct> = Host<TueImage<P>, P, TuePlant>;
 
 /// Access to the board from outside the segment.
-pub type TueHandle<P = Direct> = Shared<TueBoard<P>>;
+pub type TueHandle<P = Direct> = HostHandle<TueImage<P>, P, TuePlant>;
 
-/// The board as a segment node.
-pub struct TueNode<P: PdiPath = Direct>(Shared<TueBoard<P>>);
-
-impl<P: PdiPath> TueNode<P> {
-    fn lock(&self) -> MutexGuard<'_, TueBoard<P>> {
-        self.0.lock()
-    }
-}
-
-impl<P: PdiPath> Node<Esc> for TueNode<P> {
-    fn on_event(&mut self, esc: &mut Esc, ev: EscEvent, _t: u64) {
-        let mut b = self.lock();
-        let TueBoard {
-            path, slave, app, ..
-        } = &mut *b;
-        let r = oxicat_sim::firmware::deliver(path, slave, app, esc, ev);
-        b.note(r);
-    }
-
-    fn next_wakeup(&self) -> Option<u64> {
-        Some(self.lock().next_tick)
-    }
-
-    fn on_wakeup(&mut self, esc: &mut Esc, t: u64) {
-        let mut b = self.lock();
-        while b.next_tick <= t {
-            let tk = b.next_tick;
-            b.tick(esc, tk);
-            b.next_tick = tk + TICK_NS;
-        }
-    }
+/// The host's schedule on the 50 µs grid: at each tick the 1 kHz service routine (every
+/// 20th tick, the first one included), the current loop, then the main loop.
+fn schedule() -> FirmwareConfig {
+    FirmwareConfig::default()
+        .aligned(TICK_NS)
+        .timer_from(SERVICE_TIMER, TICK_NS * TICKS_PER_SERVICE, 0)
+        .timer_from(CURRENT_TIMER, TICK_NS, 0)
+        .poll_every(TICK_NS)
 }
 
 /// Boots the TUeES030 firmware on ESC `id` of `segment` with the bench `config`; the
@@ -309,29 +273,15 @@ fn attach_with<P: PdiPath>(
     config: &TueConfig,
     path: impl FnOnce(&mut Esc) -> Result<P, oxicat_sim::pdi_path::PathInitError>,
 ) -> Result<TueHandle<P>, AttachError> {
-    let now = segment.now();
-    let esc = segment
-        .esc_mut(id)
-        .ok_or(AttachError::Topology(TopologyError::NoSuchSlave(id)))?;
-    let mut path = path(esc)?;
-    let slave = path
-        .with_pdi(esc, |pdi| TueSlave::<P>::new(&device::DEF, pdi))
-        .map_err(|e| AttachError::from(P::init_error(e)))?;
-    let start = now.div_ceil(TICK_NS) * TICK_NS;
-    let board = TueBoard {
-        path,
-        slave,
-        app: TuEs030::new(BenchBoard::new(config)),
-        counters: TueCounters::default(),
-        substeps: config.substeps,
-        next_tick: start,
-        plant_ns: start,
-    };
-    let inner = Shared::new(board);
-    segment
-        .attach(id, Box::new(TueNode(inner.clone())))
-        .map_err(AttachError::Topology)?;
-    Ok(inner)
+    let plant = TuePlant::new(config);
+    attach_host(segment, id, &schedule(), plant, path, |esc, path| {
+        boot_stack(
+            &device::DEF,
+            esc,
+            TuEs030::new(BenchBoard::new(config)),
+            path,
+        )
+    })
 }
 
 /// The TUeES030 board in the registry.
