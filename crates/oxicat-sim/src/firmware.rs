@@ -57,6 +57,10 @@ pub struct FirmwareConfig {
     /// At an instant where both are due, the main loop runs before the timers (`true`) or
     /// after them (`false`, the default).
     pub poll_before_timers: bool,
+    /// `Some(k)`: the main loop falls due after every `k`-th timer instant (at that
+    /// instant) instead of on its own period, as a firmware that runs it from its control
+    /// loop's timer.
+    pub poll_after_timer_instants: Option<u64>,
     /// Periodic timers, run in this order when several are due at one instant.
     pub timers: Vec<Timer>,
     /// The schedule starts at the first multiple of this \[ns\] at or after the attach
@@ -73,6 +77,7 @@ impl Default for FirmwareConfig {
             poll_period_ns: DEFAULT_POLL_PERIOD_NS,
             poll_first_ns: 0,
             poll_before_timers: false,
+            poll_after_timer_instants: None,
             timers: Vec::new(),
             align_ns: 1,
             timing: None,
@@ -187,16 +192,23 @@ where
 
 /// The hardware around the MCU that is not its ESC: the plant, its sensors and
 /// actuators. The host calls it at the MCU's timer instants, where a board observes and
-/// drives its plant, and after ESC events; the defaults do nothing (a board without a
-/// plant is `()`).
+/// drives its plant, and around the handlers of ESC events; the defaults do nothing (a
+/// board without a plant is `()`).
 pub trait Bench<I>: Send + 'static {
-    /// At `t`, before the timers due at `t` run (once per instant): bring the plant up to
-    /// `t` and latch what the timers read.
+    /// At `t`, before the timers due at `t` run (once per instant; under the
+    /// execution-time model, before each timer handler, at the time it runs): bring the
+    /// plant up to `t` and latch what the timers read.
     fn before_timers(&mut self, _image: &mut I, _t: u64) {}
-    /// At `t`, after the timers ran: the plant takes what they wrote.
+    /// After the timers of the instant `t` ran: the plant takes what they wrote.
     fn after_timers(&mut self, _image: &mut I, _t: u64) {}
-    /// After ESC event `ev` at `t` was handled.
-    fn after_event(&mut self, _image: &mut I, _ev: EscEvent, _t: u64) {}
+    /// Before the handler of ESC event `ev` that arrived at `t` runs.
+    fn before_event(&mut self, _image: &mut I, _ev: EscEvent, _t: u64) {}
+    /// After the handler of ESC event `ev` that arrived at `t` ran. `Some(at)`: the
+    /// bench re-phases the MCU's timers, each next due at `at` (a rig that aligns its
+    /// plant to the first synchronous cycle).
+    fn after_event(&mut self, _image: &mut I, _ev: EscEvent, _t: u64) -> Option<u64> {
+        None
+    }
 }
 
 impl<I> Bench<I> for () {}
@@ -218,6 +230,10 @@ pub struct Host<I, P: PdiPath = Direct, B = ()> {
     poll_period: u64,
     next_poll: u64,
     poll_before_timers: bool,
+    /// See [`FirmwareConfig::poll_after_timer_instants`].
+    poll_after_instants: Option<u64>,
+    /// Timer instants so far.
+    instants: u64,
     /// `(id, period, next due time)`.
     timers: Vec<(u8, u64, u64)>,
     /// The MCU under the execution-time model, if on.
@@ -277,8 +293,13 @@ impl<I: Image<P::Pdi>, P: PdiPath, B: Bench<I>> Host<I, P, B> {
             last_pdi_error: None,
             path,
             poll_period: config.poll_period_ns.max(1),
-            next_poll: start.saturating_add(config.poll_first_ns),
+            next_poll: match config.poll_after_timer_instants {
+                Some(_) => u64::MAX,
+                None => start.saturating_add(config.poll_first_ns),
+            },
             poll_before_timers: config.poll_before_timers,
+            poll_after_instants: config.poll_after_timer_instants.map(|k| k.max(1)),
+            instants: 0,
             timers: config
                 .timers
                 .iter()
@@ -325,7 +346,25 @@ impl<I: Image<P::Pdi>, P: PdiPath, B: Bench<I>> Host<I, P, B> {
             cpu.raise(work, t);
         }
         self.dispatch(esc, t);
-        self.bench.after_event(&mut self.image, ev, t);
+    }
+
+    /// After the timers of one instant at `at` ran: the main loop may fall due.
+    fn timer_instant_done(&mut self, at: u64) {
+        self.instants += 1;
+        if let Some(k) = self.poll_after_instants {
+            if self.instants.is_multiple_of(k) && self.next_poll == u64::MAX {
+                self.next_poll = at;
+            }
+        }
+    }
+
+    /// Re-phases the timers when the bench asks to.
+    fn rephase(&mut self, at: Option<u64>) {
+        if let Some(at) = at {
+            for k in &mut self.timers {
+                k.2 = at;
+            }
+        }
     }
 
     /// Under the execution-time model: lands finished handlers' writes and starts whatever
@@ -347,6 +386,12 @@ impl<I: Image<P::Pdi>, P: PdiPath, B: Bench<I>> Host<I, P, B> {
             cpu.retire(esc, t);
             if cpu.isr_free() {
                 if let Some((work, arrival)) = cpu.take_pending() {
+                    let ev = match work {
+                        Work::Sync0 => EscEvent::Sync0,
+                        Work::Sync1 => EscEvent::Sync1,
+                        _ => EscEvent::Irq,
+                    };
+                    bench.before_event(image, ev, arrival);
                     let r = cpu.run(path, esc, work, arrival, t, |path, esc| match work {
                         Work::Sync0 => {
                             counters.sync0 += 1;
@@ -361,7 +406,9 @@ impl<I: Image<P::Pdi>, P: PdiPath, B: Bench<I>> Host<I, P, B> {
                             path.with_pdi(esc, |pdi| image.on_pdi_irq(pdi))
                         }
                     });
+                    let at = bench.after_event(image, ev, arrival);
                     self.note(r);
+                    self.rephase(at);
                     continue;
                 }
                 let due = (0..timers.len())
@@ -378,6 +425,7 @@ impl<I: Image<P::Pdi>, P: PdiPath, B: Bench<I>> Host<I, P, B> {
                     cpu.lose(Work::Timer, (t - at) / period);
                     timers[k].2 = next_after(at, period, t);
                     self.note(r);
+                    self.timer_instant_done(at);
                     continue;
                 }
             }
@@ -387,7 +435,10 @@ impl<I: Image<P::Pdi>, P: PdiPath, B: Bench<I>> Host<I, P, B> {
                 let r = cpu.run(path, esc, Work::Poll, at, t, |path, esc| {
                     path.with_pdi(esc, |pdi| image.poll(pdi))
                 });
-                self.next_poll = next_after(at, self.poll_period, t);
+                self.next_poll = match self.poll_after_instants {
+                    Some(_) => u64::MAX,
+                    None => next_after(at, self.poll_period, t),
+                };
                 self.note(r);
                 continue;
             }
@@ -405,10 +456,12 @@ impl<I: Image<P::Pdi>, P: PdiPath, B: Bench<I>> Host<I, P, B> {
             EscEvent::Sync1 => self.counters.sync1 += 1,
             EscEvent::PdWatchdog | EscEvent::PdiWatchdog => {}
         }
+        self.bench.before_event(&mut self.image, ev, t);
         let Self { image, path, .. } = self;
         let r = deliver(path, image, esc, ev);
         self.note(r);
-        self.bench.after_event(&mut self.image, ev, t);
+        let at = self.bench.after_event(&mut self.image, ev, t);
+        self.rephase(at);
     }
 
     fn poll_if_due(&mut self, esc: &mut Esc, t: u64) {
@@ -417,7 +470,10 @@ impl<I: Image<P::Pdi>, P: PdiPath, B: Bench<I>> Host<I, P, B> {
             let Self { image, path, .. } = self;
             let r = path.with_pdi(esc, |pdi| image.poll(pdi));
             self.note(r);
-            self.next_poll = next_after(self.next_poll, self.poll_period, t);
+            self.next_poll = match self.poll_after_instants {
+                Some(_) => u64::MAX,
+                None => next_after(self.next_poll, self.poll_period, t),
+            };
         }
     }
 
@@ -441,6 +497,7 @@ impl<I: Image<P::Pdi>, P: PdiPath, B: Bench<I>> Host<I, P, B> {
                 }
             }
             self.bench.after_timers(&mut self.image, t);
+            self.timer_instant_done(t);
         }
         if !self.poll_before_timers {
             self.poll_if_due(esc, t);

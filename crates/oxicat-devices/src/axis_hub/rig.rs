@@ -1,5 +1,5 @@
 //! The axis communication hub on the virtual segment: the firmware host of `oxicat-sim`
-//! runs the hub firmware (`crate::axis_hub`) behind its ESC with its plant ([`HubPlant`]) — thermal
+//! runs the hub firmware (`crate::axis_hub`) behind its ESC with its plant (`HubPlant`) — thermal
 //! nodes (four motor housings in ambient air), fifteen DS18B20 on a bit-level 1-Wire bus
 //! (`oxicat_plant::onewire`), and the WS2812 rings whose bit stream is decoded back into
 //! colours (`oxicat_plant::ws2812`).

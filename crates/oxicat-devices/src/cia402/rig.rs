@@ -1,4 +1,4 @@
-//! The CiA402 joint drive on the virtual segment: one [`JointNode`] runs the drive firmware
+//! The CiA402 joint drive on the virtual segment: the firmware host of `oxicat-sim` runs the drive firmware
 //! (`crate::cia402`) on the slave stack behind its ESC and owns the joint it
 //! drives (`oxicat_plant::bldc_joint`: BLDC motor, compliant harmonic gear, link, torque
 //! sensor, encoder with index pulse, home switch).

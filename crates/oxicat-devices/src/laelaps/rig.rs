@@ -1,4 +1,4 @@
-//! The Laelaps II rig on the virtual segment: one [`LegRigNode`] per EtherCAT Control Tower
+//! The Laelaps II rig on the virtual segment: the firmware host of `oxicat-sim`, one per EtherCAT Control Tower,
 //! that runs the leg-node firmware (`crate::laelaps`) on the slave stack behind
 //! its ESC **and** owns the leg it drives (`oxicat_plant::Leg`: amplifiers, motors,
 //! gearheads, coupler, pulley, encoders, two links, treadmill belt).
@@ -57,8 +57,6 @@
 //! preempt. The release instant `T0` is the SYNC0 edge. Off (the default), everything
 //! above holds unchanged.
 
-use std::sync::{Arc, Mutex, MutexGuard};
-
 use crate::demo::Leds;
 use crate::laelaps::{
     self, device, CaptureConfig, EncoderIn, Joint, LegNode, Mode, PwmCommand, PwmOut, QepSample,
@@ -68,10 +66,13 @@ use oxicat_esc::Esc;
 use oxicat_plant::{Leg, LegParams, Treadmill};
 use oxicat_slave::{Pdi, Slave};
 
-use oxicat_sim::exec_time::{Cpu, ExecTiming, TimingStats, Work};
-use oxicat_sim::node::{EscEvent, Node};
+use oxicat_sim::exec_time::{ExecTiming, TimingStats};
+use oxicat_sim::firmware::{
+    attach_host, boot_stack, Bench, FirmwareConfig, Host, HostHandle, Stack,
+};
+use oxicat_sim::node::EscEvent;
 use oxicat_sim::pdi_path::{BusStats, Direct, PathInitError, PdiPath, PdiRoute, SpiPath};
-use oxicat_sim::segment::{Segment, SlaveId, TopologyError};
+use oxicat_sim::segment::{Segment, SlaveId};
 
 /// Mailbox size of the leg node (its device definition: 128 bytes).
 pub const MBX: usize = 128;
@@ -302,52 +303,56 @@ impl Leds for NoLeds {
     }
 }
 
-/// Counters of one rig node.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
-pub struct RigCounters {
-    /// SYNC0 interrupts.
-    pub sync0: u64,
-    /// Joint-loop ticks.
-    pub joint_loops: u64,
-    /// Plant ticks.
-    pub plant_ticks: u64,
-    /// Main-loop passes.
-    pub polls: u64,
-    /// PDI accesses the ESC refused.
-    pub pdi_errors: u64,
-}
+/// The leg-node image: the stack and the leg-node application on the firmware's `Pdi`.
+pub type LegImage<Pd> = Stack<Pd, LegApp, { device::IMAGE }, MBX>;
 
-/// One tower: the leg-node firmware and the leg it drives; `P` is how the firmware reaches
-/// its ESC ([`Direct`]: the software ESC is its `Pdi`).
-pub struct LegRig<P: PdiPath = Direct> {
+/// The leg a tower drives, as the firmware host's plant: before each joint-loop tick it
+/// catches up to now (once released) and latches the eQEP registers from the encoders;
+/// after the tick the amplifiers take the PWM; around SYNC0 it watches for the cycle that
+/// enters Operational and releases the leg there (see the module documentation).
+pub struct LegPlant {
     /// The leg this tower drives.
     pub leg_id: LegId,
-    /// The slave stack.
-    pub slave: Slave<P::Pdi, { device::IMAGE }, MBX>,
-    /// The application.
-    pub app: LegApp,
     /// The leg.
     pub plant: Leg,
-    /// What ran so far.
-    pub counters: RigCounters,
     /// SYNC0 time at which the rig released the leg (`T0`), if it has.
     pub released_at: Option<u64>,
     /// SYNC0 count (since boot) of the release.
     pub released_at_sync0: Option<u64>,
+    /// Plant ticks so far.
+    pub plant_ticks: u64,
     config: RigConfig,
-    next_tick: u64,
-    ticks: u64,
+    /// SYNC0s seen so far.
+    sync0: u64,
+    /// The application's mode before the running SYNC0 handler.
+    mode_before: Mode,
     /// Virtual time the plant has advanced since the release \[ns\].
     plant_ns: u64,
-    path: P,
-    /// The MCU under the execution-time model, if on.
-    cpu: Option<Cpu>,
-    /// Under the model: the tick at which a main-loop pass fell due, if it has not run.
-    poll_due: Option<u64>,
 }
 
-impl<P: PdiPath> LegRig<P> {
-    fn sample_encoders(&mut self) {
+impl LegPlant {
+    /// The rig's configuration.
+    pub fn config(&self) -> &RigConfig {
+        &self.config
+    }
+
+    /// The plant catches up to `t` (in substeps of the plant period) if released.
+    fn catch_up(&mut self, t: u64) {
+        if let Some(t0) = self.released_at {
+            let since = t - t0;
+            if since > self.plant_ns {
+                let belt = self.config.belt.at(self.plant_ns as f64 * 1e-9);
+                if belt != self.plant.params().treadmill.speed {
+                    self.plant.set_belt_speed(belt);
+                }
+                self.plant.advance((since - self.plant_ns) as f64 * 1e-9);
+                self.plant_ticks += (since - self.plant_ns).div_ceil(self.config.plant_period_ns);
+                self.plant_ns = since;
+            }
+        }
+    }
+
+    fn sample_encoders(&mut self, app: &mut LegApp) {
         let tick = CaptureConfig::THESIS.tick_s() as f64;
         for (pj, fj) in [
             (oxicat_plant::Joint::Hip, Joint::Hip),
@@ -372,8 +377,8 @@ impl<P: PdiPath> LegRig<P> {
             }
             // Flags accumulate until the firmware reads them.
             let r = match fj {
-                Joint::Hip => &mut self.app.encoders.hip,
-                Joint::Knee => &mut self.app.encoders.knee,
+                Joint::Hip => &mut app.encoders.hip,
+                Joint::Knee => &mut app.encoders.knee,
             };
             let keep = *r;
             *r = s;
@@ -386,8 +391,8 @@ impl<P: PdiPath> LegRig<P> {
         }
     }
 
-    fn apply_pwm(&mut self) {
-        let p = self.app.pwm;
+    fn apply_pwm(&mut self, app: &LegApp) {
+        let p = app.pwm;
         self.plant
             .set_duty(oxicat_plant::Joint::Hip, p.hip.duty as f64, p.hip.reverse);
         self.plant.set_duty(
@@ -396,253 +401,80 @@ impl<P: PdiPath> LegRig<P> {
             p.knee.reverse,
         );
     }
+}
 
-    fn note(&mut self, r: Result<(), <P::Pdi as Pdi>::Error>) {
-        if r.is_err() {
-            self.counters.pdi_errors += 1;
+impl<Pd: Pdi> Bench<LegImage<Pd>> for LegPlant {
+    fn before_timers(&mut self, image: &mut LegImage<Pd>, t: u64) {
+        self.catch_up(t);
+        self.sample_encoders(&mut image.app);
+    }
+
+    fn after_timers(&mut self, image: &mut LegImage<Pd>, _t: u64) {
+        if self.released_at.is_some() {
+            self.apply_pwm(&image.app);
         }
     }
 
-    fn next_wakeup(&self) -> u64 {
-        match &self.cpu {
-            None => self.next_tick,
-            Some(cpu) => {
-                let mut w = cpu.next_end().unwrap_or(u64::MAX);
-                if cpu.isr_free() {
-                    w = w.min(self.next_tick);
-                }
-                if cpu.idle() {
-                    if let Some(p) = self.poll_due {
-                        w = w.min(p);
-                    }
-                }
-                w
-            }
+    fn before_event(&mut self, image: &mut LegImage<Pd>, ev: EscEvent, _t: u64) {
+        if ev == EscEvent::Sync0 {
+            self.sync0 += 1;
+            self.mode_before = image.app.mode();
         }
     }
 
-    /// Lets the leg go at the SYNC0 edge `t` if this SYNC0's cycle entered Operational.
-    fn maybe_release(&mut self, before: Mode, t: u64) {
-        if self.released_at.is_none()
-            && before == Mode::Configuration
-            && self.app.mode() == Mode::Operational
+    /// Lets the leg go at the SYNC0 edge `t` if this SYNC0's cycle entered Operational;
+    /// the joint loop re-phases to `t` + [`JOINT_LOOP_PHASE_NS`].
+    fn after_event(&mut self, image: &mut LegImage<Pd>, ev: EscEvent, t: u64) -> Option<u64> {
+        if ev == EscEvent::Sync0
+            && self.released_at.is_none()
+            && self.mode_before == Mode::Configuration
+            && image.app.mode() == Mode::Operational
         {
             self.released_at = Some(t);
-            self.released_at_sync0 = Some(self.counters.sync0);
+            self.released_at_sync0 = Some(self.sync0);
             self.plant_ns = 0;
-            self.next_tick = t + JOINT_LOOP_PHASE_NS;
+            return Some(t + JOINT_LOOP_PHASE_NS);
         }
+        None
     }
+}
 
-    /// The plant catches up to `t` (in substeps of the plant period) if released.
-    fn catch_up(&mut self, t: u64) {
-        if let Some(t0) = self.released_at {
-            let since = t - t0;
-            if since > self.plant_ns {
-                let belt = self.config.belt.at(self.plant_ns as f64 * 1e-9);
-                if belt != self.plant.params().treadmill.speed {
-                    self.plant.set_belt_speed(belt);
-                }
-                self.plant.advance((since - self.plant_ns) as f64 * 1e-9);
-                self.counters.plant_ticks +=
-                    (since - self.plant_ns).div_ceil(self.config.plant_period_ns);
-                self.plant_ns = since;
-            }
-        }
-    }
+/// Counters of one rig node.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct RigCounters {
+    /// SYNC0 interrupts.
+    pub sync0: u64,
+    /// Joint-loop ticks.
+    pub joint_loops: u64,
+    /// Plant ticks.
+    pub plant_ticks: u64,
+    /// Main-loop passes.
+    pub polls: u64,
+    /// PDI accesses the ESC refused.
+    pub pdi_errors: u64,
+}
 
-    /// Under the execution-time model: lands finished handlers' writes and starts whatever
-    /// may run at `t` (pending interrupts, the joint-loop tick, then the main loop).
-    fn dispatch(&mut self, esc: &mut Esc, t: u64) {
-        loop {
-            let Self {
-                slave,
-                app,
-                path,
-                cpu,
-                counters,
-                ..
-            } = self;
-            let Some(cpu) = cpu.as_mut() else {
-                return;
-            };
-            cpu.retire(esc, t);
-            if cpu.isr_free() {
-                if let Some((work, arrival)) = cpu.take_pending() {
-                    if work == Work::Sync0 {
-                        counters.sync0 += 1;
-                        let before = app.mode();
-                        let r = cpu.run(path, esc, work, arrival, t, |path, esc| {
-                            path.with_pdi(esc, |pdi| slave.on_sync0(pdi, app))
-                        });
-                        self.note(r);
-                        self.maybe_release(before, arrival);
-                    } else {
-                        let r = cpu.run(path, esc, work, arrival, t, |path, esc| {
-                            path.with_pdi(esc, |pdi| slave.on_pdi_irq(pdi, app))
-                        });
-                        self.note(r);
-                    }
-                    continue;
-                }
-                if self.next_tick <= t {
-                    let at = self.next_tick;
-                    self.catch_up(t);
-                    self.sample_encoders();
-                    let Self {
-                        slave, app, path, ..
-                    } = self;
-                    if let Some(cpu) = self.cpu.as_mut() {
-                        cpu.run(path, esc, Work::Timer, at, t, |_, _| {
-                            slave.on_timer(JOINT_LOOP_TIMER, app)
-                        });
-                        cpu.lose(Work::Timer, (t - at) / JOINT_LOOP_NS);
-                    }
-                    self.counters.joint_loops += 1;
-                    if self.released_at.is_some() {
-                        self.apply_pwm();
-                    }
-                    self.ticks += 1;
-                    if self.ticks.is_multiple_of(self.config.poll_every) && self.poll_due.is_none()
-                    {
-                        self.poll_due = Some(at);
-                    }
-                    while self.next_tick <= t {
-                        self.next_tick += JOINT_LOOP_NS;
-                    }
-                    continue;
-                }
-            }
-            let Self {
-                slave,
-                app,
-                path,
-                cpu,
-                counters,
-                ..
-            } = self;
-            let Some(cpu) = cpu.as_mut() else {
-                return;
-            };
-            if let Some(at) = self.poll_due.filter(|&p| p <= t && cpu.idle()) {
-                self.poll_due = None;
-                counters.polls += 1;
-                let r = cpu.run(path, esc, Work::Poll, at, t, |path, esc| {
-                    path.with_pdi(esc, |pdi| slave.poll(pdi, app))
-                });
-                self.note(r);
-                continue;
-            }
-            return;
-        }
-    }
+/// One tower on its firmware host: the leg-node image (`image`, or through `Deref` its
+/// `slave` and `app`) and the leg it drives (`bench`); `P` is how the firmware reaches its
+/// ESC ([`Direct`]: the software ESC is its `Pdi`).
+pub type LegRig<P = Direct> = Host<LegImage<<P as PdiPath>::Pdi>, P, LegPlant>;
 
-    fn event(&mut self, esc: &mut Esc, ev: EscEvent, t: u64) {
-        if let Some(cpu) = self.cpu.as_mut() {
-            let work = match ev {
-                EscEvent::Sync0 => Work::Sync0,
-                EscEvent::Irq => Work::Irq,
-                EscEvent::Sync1 | EscEvent::PdWatchdog | EscEvent::PdiWatchdog => return,
-            };
-            cpu.retire(esc, t);
-            cpu.raise(work, t);
-            return self.dispatch(esc, t);
-        }
-        match ev {
-            EscEvent::Sync0 => {
-                self.counters.sync0 += 1;
-                let before = self.app.mode();
-                let Self {
-                    slave, app, path, ..
-                } = self;
-                let r = path.with_pdi(esc, |pdi| slave.on_sync0(pdi, app));
-                self.note(r);
-                if self.released_at.is_none()
-                    && before == Mode::Configuration
-                    && self.app.mode() == Mode::Operational
-                {
-                    self.released_at = Some(t);
-                    self.released_at_sync0 = Some(self.counters.sync0);
-                    self.plant_ns = 0;
-                    self.next_tick = t + JOINT_LOOP_PHASE_NS;
-                }
-            }
-            EscEvent::Irq => {
-                let Self {
-                    slave, app, path, ..
-                } = self;
-                let r = path.with_pdi(esc, |pdi| slave.on_pdi_irq(pdi, app));
-                self.note(r);
-            }
-            EscEvent::Sync1 | EscEvent::PdWatchdog | EscEvent::PdiWatchdog => {}
-        }
-    }
-
-    /// One tick at `t`: the plant catches up to `t` (in substeps of the plant period), then
-    /// the joint loop, then (every `poll_every` ticks) the main loop.
-    fn wakeup(&mut self, esc: &mut Esc, t: u64) {
-        if self.cpu.is_some() {
-            return self.dispatch(esc, t);
-        }
-        if t < self.next_tick {
-            return;
-        }
-        self.catch_up(t);
-        self.sample_encoders();
-        self.slave.on_timer(JOINT_LOOP_TIMER, &mut self.app);
-        self.counters.joint_loops += 1;
-        if self.released_at.is_some() {
-            self.apply_pwm();
-        }
-        self.ticks += 1;
-        if self.ticks.is_multiple_of(self.config.poll_every) {
-            self.counters.polls += 1;
-            let Self {
-                slave, app, path, ..
-            } = self;
-            let r = path.with_pdi(esc, |pdi| slave.poll(pdi, app));
-            self.note(r);
-        }
-        while self.next_tick <= t {
-            self.next_tick += JOINT_LOOP_NS;
-        }
-    }
-
-    /// The rig's configuration.
-    pub fn config(&self) -> &RigConfig {
-        &self.config
-    }
-
-    /// How the firmware reaches its ESC.
-    pub fn path(&self) -> &P {
-        &self.path
-    }
-
-    /// What the node's SPI bus carried since the last reset (`None` on the direct path).
-    pub fn bus_stats(&self) -> Option<BusStats> {
-        self.path.bus_stats()
-    }
-
-    /// Clears the node's bus counters.
-    pub fn reset_bus_stats(&self) {
-        self.path.reset_bus_stats()
-    }
-
-    /// What the execution-time model saw (`None` when it is off).
-    pub fn timing(&self) -> Option<TimingStats> {
-        self.cpu.as_ref().map(Cpu::stats)
-    }
-
-    /// What a tool reports about the node.
-    pub fn report(&self) -> LegReport {
-        LegReport {
-            leg_id: self.leg_id,
-            clock_ns: self.app.clock().nanos(),
-            released_at_sync0: self.released_at_sync0,
-            counters: self.counters,
-            bus: self.bus_stats(),
-            timing: self.timing(),
-        }
+/// What a tool reports about a node.
+pub fn report<P: PdiPath>(rig: &LegRig<P>) -> LegReport {
+    let c = rig.counters;
+    LegReport {
+        leg_id: rig.bench.leg_id,
+        clock_ns: rig.app.clock().nanos(),
+        released_at_sync0: rig.bench.released_at_sync0,
+        counters: RigCounters {
+            sync0: c.sync0,
+            joint_loops: c.timers,
+            plant_ticks: rig.bench.plant_ticks,
+            polls: c.polls,
+            pdi_errors: c.pdi_errors,
+        },
+        bus: rig.bus_stats(),
+        timing: rig.timing(),
     }
 }
 
@@ -664,20 +496,7 @@ pub struct LegReport {
 }
 
 /// Access to a rig node from outside the segment (tests, tools).
-pub struct LegRigHandle<P: PdiPath = Direct>(Arc<Mutex<LegRig<P>>>);
-
-impl<P: PdiPath> Clone for LegRigHandle<P> {
-    fn clone(&self) -> Self {
-        Self(self.0.clone())
-    }
-}
-
-impl<P: PdiPath> LegRigHandle<P> {
-    /// Locks the rig (do not hold it while the segment runs).
-    pub fn lock(&self) -> MutexGuard<'_, LegRig<P>> {
-        self.0.lock().unwrap_or_else(|e| e.into_inner())
-    }
-}
+pub type LegRigHandle<P = Direct> = HostHandle<LegImage<<P as PdiPath>::Pdi>, P, LegPlant>;
 
 /// A rig node's handle whatever its path ([`attach_leg_routed`]).
 #[derive(Clone)]
@@ -692,8 +511,8 @@ impl AnyLegRigHandle {
     /// A snapshot of the node.
     pub fn report(&self) -> LegReport {
         match self {
-            Self::Direct(h) => h.lock().report(),
-            Self::Spi(h) => h.lock().report(),
+            Self::Direct(h) => report(&h.lock()),
+            Self::Spi(h) => report(&h.lock()),
         }
     }
 
@@ -703,29 +522,6 @@ impl AnyLegRigHandle {
             Self::Direct(h) => h.lock().reset_bus_stats(),
             Self::Spi(h) => h.lock().reset_bus_stats(),
         }
-    }
-}
-
-/// The [`Node`] of one tower on its ESC; see the module documentation.
-pub struct LegRigNode<P: PdiPath = Direct>(Arc<Mutex<LegRig<P>>>);
-
-impl<P: PdiPath> LegRigNode<P> {
-    fn lock(&self) -> MutexGuard<'_, LegRig<P>> {
-        self.0.lock().unwrap_or_else(|e| e.into_inner())
-    }
-}
-
-impl<P: PdiPath> Node<Esc> for LegRigNode<P> {
-    fn on_event(&mut self, esc: &mut Esc, ev: EscEvent, t: u64) {
-        self.lock().event(esc, ev, t);
-    }
-
-    fn next_wakeup(&self) -> Option<u64> {
-        Some(self.lock().next_wakeup())
-    }
-
-    fn on_wakeup(&mut self, esc: &mut Esc, t: u64) {
-        self.lock().wakeup(esc, t);
     }
 }
 
@@ -772,45 +568,32 @@ pub fn attach_leg_with<P: PdiPath>(
     config: RigConfig,
     path: impl FnOnce(&mut Esc) -> Result<P, PathInitError>,
 ) -> Result<LegRigHandle<P>, RigError> {
-    let now = segment.now();
-    let esc = segment
-        .esc_mut(id)
-        .ok_or(RigError::Topology(TopologyError::NoSuchSlave(id)))?;
     let def = device::device(leg.side());
-    let mut path = path(esc)?;
-    let slave = path
-        .with_pdi(esc, |pdi| Slave::new(def, pdi))
-        .map_err(|e| RigError::from(P::init_error(e)))?;
     let mut params = config.leg;
     params.substep = config.plant_period_ns.clamp(1_000, 100_000) as f64 * 1e-9;
-    let plant = Leg::new(params);
+    let mut schedule = FirmwareConfig::default().timer(JOINT_LOOP_TIMER, JOINT_LOOP_NS);
+    schedule.poll_after_timer_instants = Some(config.poll_every);
+    schedule.timing = config.timing;
+    let plant = LegPlant {
+        leg_id: leg,
+        plant: Leg::new(params),
+        released_at: None,
+        released_at_sync0: None,
+        plant_ticks: 0,
+        config,
+        sync0: 0,
+        mode_before: Mode::Configuration,
+        plant_ns: 0,
+    };
     let app = laelaps::LegNode::new(
         leg.side(),
         PwmLatch::default(),
         QepRegisters::default(),
         NoLeds::default(),
     );
-    let rig = LegRig {
-        leg_id: leg,
-        slave,
-        app,
-        plant,
-        counters: RigCounters::default(),
-        released_at: None,
-        released_at_sync0: None,
-        next_tick: now + JOINT_LOOP_NS,
-        ticks: 0,
-        plant_ns: 0,
-        cpu: config.timing.map(Cpu::new),
-        poll_due: None,
-        config,
-        path,
-    };
-    let inner = Arc::new(Mutex::new(rig));
-    segment
-        .attach(id, Box::new(LegRigNode(inner.clone())))
-        .map_err(RigError::Topology)?;
-    Ok(LegRigHandle(inner))
+    attach_host(segment, id, &schedule, plant, path, |esc, path| {
+        boot_stack(def, esc, app, path)
+    })
 }
 
 /// The Laelaps II leg node in the registry.
