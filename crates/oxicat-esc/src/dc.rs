@@ -77,14 +77,9 @@ pub struct ClockConfig {
     pub start_offset_ns: u64,
 }
 
-/// SYNC and latch events produced while advancing time.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
-pub struct DcEvents {
-    /// Global time of a SYNC0 rising edge in the advanced interval.
-    pub sync0: Option<u64>,
-    /// Global time of a SYNC1 rising edge in the advanced interval.
-    pub sync1: Option<u64>,
-}
+/// The DC unit reports its SYNC edges in the ESC's one events type (the watchdog flags
+/// stay false here).
+pub use crate::EscEvents as DcEvents;
 
 /// DC register addresses (0x0900..0x09FF): `oxicat_wire::regs::dc`.
 pub mod reg {

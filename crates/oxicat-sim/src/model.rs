@@ -3,18 +3,9 @@
 //! [`oxicat_esc::Esc`] implements [`SegmentEsc`]; unit tests of the walk and the scheduler use
 //! a tiny fake.
 
-/// Events an ESC reported while time advanced (mirrors `oxicat_esc::EscEvents`).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
-pub struct AdvanceEvents {
-    /// Global time of a SYNC0 rising edge in the advanced interval.
-    pub sync0: Option<u64>,
-    /// Global time of a SYNC1 rising edge in the advanced interval.
-    pub sync1: Option<u64>,
-    /// The process-data watchdog expired in the interval.
-    pub pd_watchdog_expired: bool,
-    /// The PDI watchdog expired in the interval.
-    pub pdi_watchdog_expired: bool,
-}
+/// Events an ESC reported while time advanced: the ESC's own type, one for the chip, the
+/// segment and its stand-ins.
+pub use oxicat_esc::EscEvents as AdvanceEvents;
 
 /// The ECAT-side and timing interface of an ESC, as the segment drives it.
 pub trait SegmentEsc: Send {
@@ -44,13 +35,7 @@ impl SegmentEsc for oxicat_esc::Esc {
     }
 
     fn advance(&mut self, t: u64) -> AdvanceEvents {
-        let e = oxicat_esc::Esc::advance(self, t);
-        AdvanceEvents {
-            sync0: e.sync0,
-            sync1: e.sync1,
-            pd_watchdog_expired: e.pd_watchdog_expired,
-            pdi_watchdog_expired: e.pdi_watchdog_expired,
-        }
+        oxicat_esc::Esc::advance(self, t)
     }
 
     fn next_event(&self) -> Option<u64> {

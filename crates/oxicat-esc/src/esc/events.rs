@@ -206,11 +206,7 @@ impl Esc {
             self.memo.clear();
             self.dc.advance_slow(&mut self.mem[..REG_END], t)
         };
-        let mut ev = EscEvents {
-            sync0: dce.sync0,
-            sync1: dce.sync1,
-            ..EscEvents::default()
-        };
+        let mut ev = dce;
         if let Some(d) = self.pd_wd_deadline() {
             if t >= d {
                 self.pd_wd_last = None;
