@@ -17,6 +17,7 @@ pub mod interrupt;
 pub mod master_cmd;
 pub mod output;
 pub mod sim_cmd;
+pub mod sweep_cmd;
 pub mod trot_cmd;
 pub mod tue_cmd;
 
@@ -54,6 +55,9 @@ pub enum Command {
     /// The Laelaps II trotting experiment (thesis Table 4-1) on the virtual segment: CSV,
     /// figures, summary.
     Trot(trot_cmd::TrotArgs),
+    /// The trot scenario for every point of a grid of values (`--set KEY=V1,V2,…`), in
+    /// parallel, with one table of tracking errors (`sweep.csv`).
+    Sweep(sweep_cmd::SweepArgs),
     /// The TUeES030 motor I/O board (normal-mode position loop, FRF current-loop
     /// identification) on the virtual segment.
     TueEs030(tue_cmd::TueArgs),
@@ -211,6 +215,7 @@ pub fn run(cli: Cli) -> Result<(), CliError> {
         }
         Command::Foe(c) => foe_cmd::run(c, &mut std::io::stdout().lock()).map_err(CliError::Master),
         Command::Trot(a) => print_text(&trot_cmd::run(a).map_err(CliError::Master)?),
+        Command::Sweep(a) => print_text(&sweep_cmd::run(a).map_err(CliError::Master)?),
         Command::TueEs030(a) => print_text(&tue_cmd::run(a).map_err(CliError::Master)?),
     }
 }

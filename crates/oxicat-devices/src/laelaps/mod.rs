@@ -55,6 +55,8 @@ pub mod rig;
 #[cfg(feature = "bench")]
 pub mod scenario;
 #[cfg(feature = "bench")]
+pub mod sweep;
+#[cfg(feature = "bench")]
 pub mod timing_probe;
 
 pub use app::{LegNode, Mode, PwmOut};
