@@ -99,6 +99,14 @@ pub fn run(a: TrotArgs) -> Result<String, MasterError> {
     crate::output::write_file(&csv_path, csv(&run).as_bytes())?;
     let sum = summarize(&run);
     let mut md = summary_markdown(&run, &sum);
+    // The thesis' planning check: where the ellipse leaves the reach (held there).
+    let reach = s.reach_check();
+    if !reach.is_empty() {
+        md.push_str("\n## Workspace check\n\n");
+        for w in &reach {
+            md.push_str(&format!("- {}\n", w.line()));
+        }
+    }
     let rec_s = run.rows.len() as f64 * s.cycle_ns() as f64 * 1e-9;
     let speed = format!(
         "\nSimulated {:.1} s ({:.1} s recorded) in {:.2} s of wall-clock time ({:.2} s for the \

@@ -643,3 +643,185 @@ mod tests {
         );
     }
 }
+
+/// Where a leg's ellipse leaves the workspace the IK accepts (thesis equations 3-4, 3-5:
+/// `√(l1² + l2²) < r < l1 + l2`); there the firmware holds the last reachable point.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ReachWarning {
+    /// `FL`, `FR`, `HL` or `HR`.
+    pub leg: String,
+    /// Each arc outside: from, to in ms after the ellipse's angle 0 (the leg's phase not
+    /// added), and the toe target at both ends \[cm\].
+    pub arcs: Vec<ReachArc>,
+    /// Share of each step spent outside \[%\].
+    pub share_pct: f64,
+    /// Time outside over the steady trot \[s\].
+    pub trot_s: f64,
+}
+
+/// One arc of a step outside the workspace.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ReachArc {
+    /// Start, end \[ms into the step\].
+    pub ms: (f64, f64),
+    /// Toe target at the start and at the end `(x, y)` \[cm\].
+    pub toe_cm: ((f64, f64), (f64, f64)),
+    /// Beyond the outer limit (`true`: r ≥ l1 + l2) or inside the inner one.
+    pub too_far: bool,
+}
+
+impl ReachWarning {
+    /// One line per leg, e.g. for the trot's output and `summary.md`.
+    pub fn line(&self) -> String {
+        let arcs: Vec<String> = self
+            .arcs
+            .iter()
+            .map(|a| {
+                format!(
+                    "{:.0}–{:.0} ms{} (toe {:.1},{:.1} → {:.1},{:.1} cm, {})",
+                    a.ms.0,
+                    a.ms.1,
+                    if a.ms.1 < a.ms.0 {
+                        " across the step's start"
+                    } else {
+                        ""
+                    },
+                    a.toe_cm.0 .0,
+                    a.toe_cm.0 .1,
+                    a.toe_cm.1 .0,
+                    a.toe_cm.1 .1,
+                    if a.too_far {
+                        "beyond l1+l2"
+                    } else {
+                        "inside √(l1²+l2²)"
+                    }
+                )
+            })
+            .collect();
+        format!(
+            "workspace: leg {} leaves the reach for {:.1} % of each step ({:.2} s of the \
+             steady trot), held at the last reachable point: {}",
+            self.leg,
+            self.share_pct,
+            self.trot_s,
+            arcs.join("; ")
+        )
+    }
+}
+
+impl Scenario {
+    /// The workspace check of the thesis' planning (§3.3): every leg's full ellipse
+    /// sampled over one step (3,600 points) with the firmware's own trajectory and
+    /// workspace test; a warning per leg that leaves the reach, with where and how long.
+    pub fn reach_check(&self) -> Vec<ReachWarning> {
+        use crate::laelaps::kinematics::{reachable, R_MAX};
+        use crate::laelaps::trajectory::Ellipse;
+        const N: usize = 3600;
+        let mut out = Vec::new();
+        for l in &self.legs {
+            let e = Ellipse {
+                x_centre: (l.x_centre_cm / 100.0) as f32,
+                y_centre: (l.y_centre_cm / 100.0) as f32,
+                a: (l.a_cm / 100.0) as f32,
+                b: (l.b_cm / 100.0) as f32,
+                freq: l.freq_hz as f32,
+                phase: 0.0,
+                flatness: l.flatness as f32,
+            };
+            let period_ms = 1000.0 / l.freq_hz;
+            let at = |k: usize| {
+                let t = k as f64 / N as f64 / l.freq_hz;
+                let (x, y) = e.point(t as f32);
+                (k as f64 * period_ms / N as f64, x, y, !reachable(x, y))
+            };
+            let samples: Vec<_> = (0..N).map(at).collect();
+            let outside = samples.iter().filter(|s| s.3).count();
+            if outside == 0 {
+                continue;
+            }
+            // Arcs, starting where a reachable sample precedes an outside one (wrapping).
+            let start = (0..N).find(|&k| !samples[k].3).unwrap_or(0);
+            let mut arcs = Vec::new();
+            let mut k = 0;
+            while k < N {
+                let i = (start + k) % N;
+                if samples[i].3 {
+                    let first = samples[i];
+                    let mut last = first;
+                    while k + 1 < N && samples[(start + k + 1) % N].3 {
+                        k += 1;
+                        last = samples[(start + k) % N];
+                    }
+                    let r = (f64::from(first.1).powi(2) + f64::from(first.2).powi(2)).sqrt();
+                    arcs.push(ReachArc {
+                        ms: (first.0, last.0 + period_ms / N as f64),
+                        toe_cm: (
+                            (f64::from(first.1) * 100.0, f64::from(first.2) * 100.0),
+                            (f64::from(last.1) * 100.0, f64::from(last.2) * 100.0),
+                        ),
+                        too_far: r >= f64::from(R_MAX) - 1e-3,
+                    });
+                }
+                k += 1;
+            }
+            arcs.sort_by(|a, b| a.ms.0.total_cmp(&b.ms.0));
+            let share = outside as f64 / N as f64;
+            out.push(ReachWarning {
+                leg: l.leg.clone(),
+                arcs,
+                share_pct: 100.0 * share,
+                trot_s: share * self.procedure.trot_s,
+            });
+        }
+        out
+    }
+}
+
+#[cfg(test)]
+mod reach_tests {
+    use super::Scenario;
+
+    /// Table 4-1: the fore legs' stance line (59.9 cm) reaches l1 + l2 = 60 cm at
+    /// |x| = √(60² − 59.9²) = 3.46 cm, so with a = 5 cm both stance ends are outside; the
+    /// hind legs' (59.8 cm) reach 4.90 cm, just short of 5 cm.
+    #[test]
+    fn table_4_1_leaves_the_reach_at_the_stance_ends() {
+        let s = Scenario::thesis();
+        let w = s.reach_check();
+        let fore: Vec<_> = w.iter().filter(|w| w.leg.starts_with('F')).collect();
+        assert_eq!(fore.len(), 2, "{w:?}");
+        for f in &fore {
+            // cos(angle) > 3.46 / 5 on the flat half: 2 × 46.2° of 360° = 25.7 %, and a
+            // little more where the swing half starts and ends near the stance line.
+            assert!((25.7..27.5).contains(&f.share_pct), "{}", f.line());
+            assert_eq!(f.arcs.len(), 2, "{}", f.line());
+            assert!(f.arcs.iter().all(|a| a.too_far));
+            for a in &f.arcs {
+                // One end where the stance line crosses the reach, the other past x = ±a
+                // on the swing half.
+                let (p, q) = a.toe_cm;
+                let (inner, outer) = if p.0.abs() < q.0.abs() {
+                    (p, q)
+                } else {
+                    (q, p)
+                };
+                assert!((inner.0.abs() - 3.46).abs() < 0.05, "{}", f.line());
+                assert!((inner.1 - 59.9).abs() < 0.01, "{}", f.line());
+                assert!((outer.0.abs() - 5.0).abs() < 0.05, "{}", f.line());
+            }
+            assert!((f.trot_s - f.share_pct / 100.0 * s.procedure.trot_s).abs() < 1e-9);
+        }
+        for h in w.iter().filter(|w| w.leg.starts_with('H')) {
+            // 2 × acos(4.90 / 5) = 2 × 11.5° of 360° = 6.4 % on the flat half, and more
+            // where the swing half starts and ends.
+            assert!((6.4..10.0).contains(&h.share_pct), "{}", h.line());
+            assert!(h.share_pct < 0.5 * fore[0].share_pct, "{}", h.line());
+        }
+        // A smaller step stays inside.
+        let small = Scenario::parse(
+            &crate::laelaps::scenario::DEFAULT_TOML.replace("a_cm = 5.0", "a_cm = 3.0"),
+        )
+        .unwrap();
+        assert!(small.reach_check().is_empty());
+    }
+}
