@@ -52,6 +52,18 @@ fn trot_tracks_and_keeps_the_gait() {
         assert_eq!((n.pdi_errors, n.spi), (0, None));
     }
     tracks_and_keeps_the_gait(&s, &r);
+    // The figures: the thesis' zoomed window and the whole run, PNG and SVG.
+    let dir = std::env::temp_dir().join(format!("oxicat-trot-figures-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).expect("temp dir");
+    let files = oxicat_devices::laelaps::plot::write_figures(&r, &dir).expect("figures");
+    assert_eq!(files.len(), 2 + 6 * 4, "{files:?}");
+    for stem in ["knee_angles", "hip_pwm", "knee_speed"] {
+        for f in [format!("{stem}.png"), format!("{stem}_whole_run.svg")] {
+            let len = std::fs::metadata(dir.join(&f)).map_or(0, |m| m.len());
+            assert!(len > 10_000, "{f}: {len} bytes");
+        }
+    }
+    let _ = std::fs::remove_dir_all(dir);
 }
 
 /// The trot through a chip driver: every node reaches OP, no WKC or PDI errors, tracking

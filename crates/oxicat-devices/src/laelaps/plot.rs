@@ -56,6 +56,89 @@ struct Data {
     t: Vec<f64>,
     /// Toe paths over the whole steady window.
     toe: [Vec<LegSample>; 4],
+    /// Phase boundaries to mark \[s\] (whole-run figures).
+    marks: Vec<f64>,
+}
+
+/// Most samples a whole-run series keeps: per bucket of the run, the samples with the
+/// lowest and the highest value (so peaks and PWM limits survive the thinning).
+const WHOLE_RUN_POINTS: usize = 4000;
+
+/// Thins `n` samples to at most `max_points` (≥ 2) by buckets: per bucket the index of its
+/// lowest and of its highest `value` (in that order), so every bucket's extremes — peaks,
+/// limits reached — survive.
+pub fn thin_min_max(n: usize, max_points: usize, value: impl Fn(usize) -> f64) -> Vec<usize> {
+    let bucket = n.div_ceil((max_points / 2).max(1)).max(1);
+    let mut out = Vec::with_capacity(2 * n.div_ceil(bucket));
+    for start in (0..n).step_by(bucket) {
+        let end = (start + bucket).min(n);
+        let by = |a: &usize, b: &usize| value(*a).total_cmp(&value(*b));
+        out.push((start..end).min_by(by).unwrap_or(start));
+        out.push((start..end).max_by(by).unwrap_or(start));
+    }
+    out
+}
+
+/// The whole run (every phase, from `State_Machine = 1`), each leg thinned by
+/// [`thin_min_max`] of the series `s` (the time of a bucket's pair: its start and end), with
+/// the phase boundaries.
+fn whole_run(run: &TrotRun, s: Series) -> Data {
+    let cyc = run.scenario.cycle_ns() as f64 * 1e-9;
+    let n = run.rows.len();
+    let mut legs: [Vec<LegSample>; 4] = Default::default();
+    for (li, leg) in LegId::TABLE.into_iter().enumerate() {
+        let all: Vec<LegSample> = run
+            .rows
+            .iter()
+            .map(|r| sample(&r.inputs[li], leg))
+            .collect();
+        legs[li] = thin_min_max(n, WHOLE_RUN_POINTS, |k| s.values(&all[k]).0)
+            .into_iter()
+            .map(|k| all[k])
+            .collect();
+    }
+    let bucket = n.div_ceil(WHOLE_RUN_POINTS / 2).max(1);
+    let t = (0..n)
+        .step_by(bucket)
+        .flat_map(|a| [a, (a + bucket).min(n) - 1])
+        .map(|k| k as f64 * cyc)
+        .collect();
+    let p = &run.phases;
+    let marks = [p.ramp_b, p.ramp_a, p.trot, p.back_a, p.back_b, p.stop]
+        .iter()
+        .map(|&k| k as f64 * cyc)
+        .collect();
+    Data {
+        legs,
+        t,
+        toe: Default::default(),
+        marks,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::thin_min_max;
+
+    #[test]
+    fn thinning_keeps_every_buckets_extremes() {
+        let v: Vec<f64> = (0..61_250).map(|k| ((k * 7919) % 1000) as f64).collect();
+        let idx = thin_min_max(v.len(), 4000, |k| v[k]);
+        assert!(idx.len() <= 4000 && idx.len() > 3900, "{}", idx.len());
+        assert!(
+            idx.windows(2).all(|w| w[0] / 31 <= w[1] / 31),
+            "in time order by bucket"
+        );
+        let kept_max = idx.iter().map(|&k| v[k]).fold(f64::MIN, f64::max);
+        let kept_min = idx.iter().map(|&k| v[k]).fold(f64::MAX, f64::min);
+        assert_eq!((kept_min, kept_max), (0.0, 999.0));
+        // A lone spike survives.
+        let mut w = vec![0.0; 61_250];
+        w[12_345] = 38.25;
+        assert!(thin_min_max(w.len(), 4000, |k| w[k]).contains(&12_345));
+        // Few samples: all kept (twice each at most).
+        assert_eq!(thin_min_max(3, 4000, |k| k as f64), vec![0, 0, 1, 1, 2, 2]);
+    }
 }
 
 fn data(run: &TrotRun) -> Data {
@@ -78,6 +161,7 @@ fn data(run: &TrotRun) -> Data {
         legs: pick(p0, p1),
         t: (p0..p1).map(|k| k as f64 * cyc).collect(),
         toe: pick(w0, w1),
+        marks: Vec::new(),
     }
 }
 
@@ -201,6 +285,12 @@ where
                 ))?;
             }
         }
+        for &m in &d.marks {
+            chart.draw_series(LineSeries::new(
+                [(m, lo), (m, hi)],
+                GREEN.mix(0.7).stroke_width(2),
+            ))?;
+        }
         if pts.iter().any(|p| p.1.is_some()) {
             chart.draw_series(LineSeries::new(
                 d.t.iter()
@@ -306,6 +396,24 @@ pub fn write_figures(run: &TrotRun, dir: &Path) -> Result<Vec<PathBuf>, MasterEr
         draw_series(
             SVGBackend::new(&svg, (900, 1000)).into_drawing_area(),
             &d,
+            s,
+        )
+        .map_err(|e| err(&svg, e))?;
+        out.extend([png, svg]);
+        // The same series over the whole run, the phases marked (thesis figures 4-2 to
+        // 4-7 show the whole experiment).
+        let whole = whole_run(run, s);
+        let png = dir.join(format!("{}_whole_run.png", s.file()));
+        draw_series(
+            BitMapBackend::new(&png, (1400, 1000)).into_drawing_area(),
+            &whole,
+            s,
+        )
+        .map_err(|e| err(&png, e))?;
+        let svg = dir.join(format!("{}_whole_run.svg", s.file()));
+        draw_series(
+            SVGBackend::new(&svg, (1400, 1000)).into_drawing_area(),
+            &whole,
             s,
         )
         .map_err(|e| err(&svg, e))?;
