@@ -16,6 +16,7 @@ pub mod igh_cmd;
 pub mod interrupt;
 pub mod master_cmd;
 pub mod output;
+pub mod parquet_out;
 pub mod sim_cmd;
 pub mod sweep_cmd;
 pub mod trot_cmd;

@@ -163,3 +163,26 @@ mod tests {
         assert!(e.to_string().contains("/nonexistent-dir/x.csv"), "{e}");
     }
 }
+
+/// Recording format of the experiments (`--format`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum Format {
+    /// CSV only.
+    Csv,
+    /// Apache Parquet only.
+    Parquet,
+    /// Both.
+    Both,
+}
+
+impl Format {
+    /// Whether the CSV is written.
+    pub fn csv(self) -> bool {
+        matches!(self, Format::Csv | Format::Both)
+    }
+
+    /// Whether the Parquet file is written.
+    pub fn parquet(self) -> bool {
+        matches!(self, Format::Parquet | Format::Both)
+    }
+}

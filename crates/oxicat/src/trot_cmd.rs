@@ -43,6 +43,10 @@ pub struct TrotArgs {
     /// Skip the figures.
     #[arg(long)]
     pub no_plots: bool,
+    /// Recording format: `csv` (`trot.csv`), `parquet` (`trot.parquet`: the same table,
+    /// typed columns, units in its metadata) or `both`.
+    #[arg(long, value_enum, default_value = "csv")]
+    pub format: crate::output::Format,
     /// No progress bar.
     #[arg(long, short)]
     pub quiet: bool,
@@ -95,8 +99,18 @@ pub fn run(a: TrotArgs) -> Result<String, MasterError> {
     })?;
     bar.finish_and_clear();
     let t_out = Instant::now();
-    let csv_path = a.out.join("trot.csv");
-    crate::output::write_file(&csv_path, csv(&run).as_bytes())?;
+    let table = csv(&run);
+    let mut files = Vec::new();
+    if a.format.csv() {
+        let p = a.out.join("trot.csv");
+        crate::output::write_file(&p, table.as_bytes())?;
+        files.push(p);
+    }
+    if a.format.parquet() {
+        let p = a.out.join("trot.parquet");
+        crate::parquet_out::csv_to_parquet(&table, &p)?;
+        files.push(p);
+    }
     let sum = summarize(&run);
     let mut md = summary_markdown(&run, &sum);
     // The thesis' planning check: where the ellipse leaves the reach (held there).
@@ -120,7 +134,7 @@ pub fn run(a: TrotArgs) -> Result<String, MasterError> {
     );
     let sum_path = a.out.join("summary.md");
     crate::output::write_file(&sum_path, md.as_bytes())?;
-    let mut files = vec![csv_path, sum_path];
+    files.push(sum_path);
     if !a.no_plots {
         files.extend(plot::write_figures(&run, &a.out)?);
     }
