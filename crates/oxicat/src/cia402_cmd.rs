@@ -43,6 +43,9 @@ pub struct Cia402Args {
     /// Output directory (`move`).
     #[arg(long, default_value = "out/cia402")]
     pub out: PathBuf,
+    /// Recording format of `cia402.csv`: `csv`, `parquet` or `both`.
+    #[arg(long, value_enum, default_value = "csv")]
+    pub format: crate::output::Format,
 }
 
 /// The verbs.
@@ -196,8 +199,12 @@ pub fn run(a: Cia402Args) -> Result<String, MasterError> {
     }
     if let Cia402Verb::Move { .. } = a.verb {
         std::fs::create_dir_all(&a.out).map_err(|e| MasterError::File(a.out.clone(), e))?;
-        let csv = a.out.join("cia402.csv");
-        crate::output::write_file(&csv, r.csv().as_bytes())?;
+        let written = crate::output::write_recording(&a.out, "cia402", &r.csv(), a.format)?;
+        let csv = written
+            .iter()
+            .map(|p| p.display().to_string())
+            .collect::<Vec<_>>()
+            .join(", ");
         let figures = cia402::write_following_error_plots(&r, drives.len(), &a.out)?;
         for (d, (rms, max)) in r.following_error(drives.len()).iter().enumerate() {
             let _ = writeln!(
@@ -208,7 +215,7 @@ pub fn run(a: Cia402Args) -> Result<String, MasterError> {
         let _ = writeln!(
             out,
             "wrote {}, {} and {}",
-            csv.display(),
+            csv,
             figures[0].display(),
             figures[1].display()
         );

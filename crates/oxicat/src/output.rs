@@ -186,3 +186,25 @@ impl Format {
         matches!(self, Format::Parquet | Format::Both)
     }
 }
+
+/// Writes a recording (`csv`: the CSV text, header first) as `<dir>/<stem>.csv` and/or
+/// `<dir>/<stem>.parquet` per `format`; returns the paths written.
+pub fn write_recording(
+    dir: &Path,
+    stem: &str,
+    csv: &str,
+    format: Format,
+) -> Result<Vec<std::path::PathBuf>, MasterError> {
+    let mut files = Vec::new();
+    if format.csv() {
+        let p = dir.join(format!("{stem}.csv"));
+        write_file(&p, csv.as_bytes())?;
+        files.push(p);
+    }
+    if format.parquet() {
+        let p = dir.join(format!("{stem}.parquet"));
+        crate::parquet_out::csv_to_parquet(csv, &p)?;
+        files.push(p);
+    }
+    Ok(files)
+}

@@ -99,18 +99,7 @@ pub fn run(a: TrotArgs) -> Result<String, MasterError> {
     })?;
     bar.finish_and_clear();
     let t_out = Instant::now();
-    let table = csv(&run);
-    let mut files = Vec::new();
-    if a.format.csv() {
-        let p = a.out.join("trot.csv");
-        crate::output::write_file(&p, table.as_bytes())?;
-        files.push(p);
-    }
-    if a.format.parquet() {
-        let p = a.out.join("trot.parquet");
-        crate::parquet_out::csv_to_parquet(&table, &p)?;
-        files.push(p);
-    }
+    let mut files = crate::output::write_recording(&a.out, "trot", &csv(&run), a.format)?;
     let sum = summarize(&run);
     let mut md = summary_markdown(&run, &sum);
     // The thesis' planning check: where the ellipse leaves the reach (held there).

@@ -53,6 +53,10 @@ pub struct TueArgs {
     /// No progress bar.
     #[arg(long, short)]
     pub quiet: bool,
+    /// Recording format: `csv`, `parquet` (same table, typed, units in its metadata) or
+    /// `both`.
+    #[arg(long, value_enum, default_value = "csv")]
+    pub format: crate::output::Format,
 }
 
 fn bench() -> Result<Link, MasterError> {
@@ -88,11 +92,6 @@ pub fn bench_params() -> TueParams {
         encres: [500; 3],
         ..TueParams::default()
     }
-}
-
-fn write(path: PathBuf, text: &str) -> Result<PathBuf, MasterError> {
-    crate::output::write_file(&path, text.as_bytes())?;
-    Ok(path)
 }
 
 /// Refuses a number that cannot work (NaN, infinite, out of range), naming the option and
@@ -169,7 +168,13 @@ fn normal(a: &TueArgs) -> Result<String, MasterError> {
         o
     })?;
     b.finish_and_clear();
-    let csv = write(a.out.join("normal.csv"), &tue::normal_csv(&rows))?;
+    let written =
+        crate::output::write_recording(&a.out, "normal", &tue::normal_csv(&rows), a.format)?;
+    let csv = written
+        .iter()
+        .map(|p| p.display().to_string())
+        .collect::<Vec<_>>()
+        .join(" and ");
     let c0 = c0.unwrap_or(0);
     let err = rows[20..]
         .iter()
@@ -191,7 +196,7 @@ fn normal(a: &TueArgs) -> Result<String, MasterError> {
         err,
         imax,
         rows.last().map(|r| r.input.linevoltage).unwrap_or(0) as f64 * 0.01,
-        csv.display()
+        csv
     );
     Ok(out)
 }
@@ -285,7 +290,7 @@ fn frf(a: &TueArgs) -> Result<String, MasterError> {
         }
         csv.push('\n');
     }
-    let mut files = vec![write(a.out.join("frf.csv"), &csv)?];
+    let mut files = crate::output::write_recording(&a.out, "frf", &csv, a.format)?;
     let refs: Vec<(&str, &[FrfPoint])> = curves.iter().map(|(n, p)| (n.as_str(), &p[..])).collect();
     files.extend(tue::plot_bode(
         &refs,

@@ -13,6 +13,7 @@ fn big<F: FnOnce() + Send + 'static>(f: F) {
 
 fn args(verb: Cia402Verb, joints: usize, out: std::path::PathBuf) -> Cia402Args {
     Cia402Args {
+        format: oxicat::output::Format::Csv,
         verb,
         joints,
         iface: None,
