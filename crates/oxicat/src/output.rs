@@ -208,3 +208,18 @@ pub fn write_recording(
     }
     Ok(files)
 }
+
+/// `s` as a JSON string literal (quotes, backslashes and control characters escaped).
+pub fn json_string(s: &str) -> String {
+    let mut o = String::from("\"");
+    for c in s.chars() {
+        match c {
+            '"' => o.push_str("\\\""),
+            '\\' => o.push_str("\\\\"),
+            c if (c as u32) < 0x20 => o.push_str(&format!("\\u{:04x}", c as u32)),
+            c => o.push(c),
+        }
+    }
+    o.push('"');
+    o
+}

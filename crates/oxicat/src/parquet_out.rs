@@ -45,20 +45,6 @@ fn unit(header: &str) -> Option<&str> {
     h.ends_with(']').then(|| &h[open + 2..h.len() - 1])
 }
 
-fn json_string(s: &str) -> String {
-    let mut o = String::from("\"");
-    for c in s.chars() {
-        match c {
-            '"' => o.push_str("\\\""),
-            '\\' => o.push_str("\\\\"),
-            c if (c as u32) < 0x20 => o.push_str(&format!("\\u{:04x}", c as u32)),
-            c => o.push(c),
-        }
-    }
-    o.push('"');
-    o
-}
-
 /// Splits one CSV line into fields (double quotes around a field allowed, `""` inside).
 fn fields(line: &str) -> Vec<String> {
     let mut out = Vec::new();
@@ -127,7 +113,15 @@ pub fn csv_to_parquet_bytes(csv: &str) -> Result<Vec<u8>, String> {
         .map_err(|e| e.to_string())?;
     let units: Vec<String> = header
         .iter()
-        .filter_map(|h| unit(h).map(|u| format!("{}:{}", json_string(h), json_string(u))))
+        .filter_map(|h| {
+            unit(h).map(|u| {
+                format!(
+                    "{}:{}",
+                    crate::output::json_string(h),
+                    crate::output::json_string(u)
+                )
+            })
+        })
         .collect();
     let mut props = WriterProperties::builder()
         .set_compression(Compression::SNAPPY)

@@ -76,19 +76,7 @@ fn python_with_pysoem() -> Result<PathBuf, String> {
     ))
 }
 
-fn json_str(s: &str) -> String {
-    let mut o = String::from("\"");
-    for c in s.chars() {
-        match c {
-            '"' => o.push_str("\\\""),
-            '\\' => o.push_str("\\\\"),
-            c if (c as u32) < 0x20 => o.push_str(&format!("\\u{:04x}", c as u32)),
-            c => o.push(c),
-        }
-    }
-    o.push('"');
-    o
-}
+use oxicat::output::json_string as json_str;
 
 /// An application entry SOEM can write in PREOP and read back: an unsigned integer of 1,
 /// 2 or 4 bytes, with a value beside its default that its range allows.
