@@ -1,7 +1,7 @@
-//! The CiA402 joint drive on the virtual segment: the firmware host of `oxicat-sim` runs the drive firmware
-//! (`crate::cia402`) on the slave stack behind its ESC and owns the joint it
-//! drives (`oxicat_plant::bldc_joint`: BLDC motor, compliant harmonic gear, link, torque
-//! sensor, encoder with index pulse, home switch).
+//! The CiA402 joint drive on the virtual segment: the firmware host of `oxicat-sim` runs
+//! the drive firmware (`crate::cia402`) on the slave stack behind its ESC and owns the
+//! joint it drives (`oxicat_plant::bldc_joint`: BLDC motor, compliant harmonic gear, link,
+//! torque sensor, encoder with index pulse, home switch).
 //!
 //! # What happens when, in virtual time
 //!

@@ -1,7 +1,7 @@
-//! The Laelaps II rig on the virtual segment: the firmware host of `oxicat-sim`, one per EtherCAT Control Tower,
-//! that runs the leg-node firmware (`crate::laelaps`) on the slave stack behind
-//! its ESC **and** owns the leg it drives (`oxicat_plant::Leg`: amplifiers, motors,
-//! gearheads, coupler, pulley, encoders, two links, treadmill belt).
+//! The Laelaps II rig on the virtual segment: the firmware host of `oxicat-sim`, one per
+//! EtherCAT Control Tower, that runs the leg-node firmware (`crate::laelaps`) on the slave
+//! stack behind its ESC **and** owns the leg it drives (`oxicat_plant::Leg`: amplifiers,
+//! motors, gearheads, coupler, pulley, encoders, two links, treadmill belt).
 //!
 //! # What happens when, in virtual time
 //!

@@ -1,7 +1,7 @@
-//! The TUeES030 board on the virtual segment: the firmware host of `oxicat-sim` runs the board's firmware
-//! (`crate::tue_es030`) on the slave stack behind its ESC and owns the three motor
-//! channels it drives (`oxicat_plant::re30`: DRV8412 bridge, RE 30 motor, LT1999 sense
-//! with its RC filter, encoder), the supply and the other I/O.
+//! The TUeES030 board on the virtual segment: the firmware host of `oxicat-sim` runs the
+//! board's firmware (`crate::tue_es030`) on the slave stack behind its ESC and owns the
+//! three motor channels it drives (`oxicat_plant::re30`: DRV8412 bridge, RE 30 motor,
+//! LT1999 sense with its RC filter, encoder), the supply and the other I/O.
 //!
 //! # What happens when, in virtual time
 //!
