@@ -358,6 +358,15 @@ impl<I: Image<P::Pdi>, P: PdiPath, B: Bench<I>> Host<I, P, B> {
         }
     }
 
+    /// The next main-loop pass after the one due at `due` ran at `t`: on its own period, or
+    /// none until a timer instant makes it due.
+    fn poll_after(&self, due: u64, t: u64) -> u64 {
+        match self.poll_after_instants {
+            Some(_) => u64::MAX,
+            None => next_after(due, self.poll_period, t),
+        }
+    }
+
     /// Re-phases the timers when the bench asks to.
     fn rephase(&mut self, at: Option<u64>) {
         if let Some(at) = at {
@@ -435,10 +444,7 @@ impl<I: Image<P::Pdi>, P: PdiPath, B: Bench<I>> Host<I, P, B> {
                 let r = cpu.run(path, esc, Work::Poll, at, t, |path, esc| {
                     path.with_pdi(esc, |pdi| image.poll(pdi))
                 });
-                self.next_poll = match self.poll_after_instants {
-                    Some(_) => u64::MAX,
-                    None => next_after(at, self.poll_period, t),
-                };
+                self.next_poll = self.poll_after(at, t);
                 self.note(r);
                 continue;
             }
@@ -470,10 +476,7 @@ impl<I: Image<P::Pdi>, P: PdiPath, B: Bench<I>> Host<I, P, B> {
             let Self { image, path, .. } = self;
             let r = path.with_pdi(esc, |pdi| image.poll(pdi));
             self.note(r);
-            self.next_poll = match self.poll_after_instants {
-                Some(_) => u64::MAX,
-                None => next_after(self.next_poll, self.poll_period, t),
-            };
+            self.next_poll = self.poll_after(self.next_poll, t);
         }
     }
 

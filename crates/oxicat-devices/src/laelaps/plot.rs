@@ -64,11 +64,16 @@ struct Data {
 /// lowest and the highest value (so peaks and PWM limits survive the thinning).
 const WHOLE_RUN_POINTS: usize = 4000;
 
+/// Samples per bucket of [`thin_min_max`].
+fn bucket_len(n: usize, max_points: usize) -> usize {
+    n.div_ceil((max_points / 2).max(1)).max(1)
+}
+
 /// Thins `n` samples to at most `max_points` (≥ 2) by buckets: per bucket the index of its
 /// lowest and of its highest `value` (in that order), so every bucket's extremes — peaks,
 /// limits reached — survive.
 pub fn thin_min_max(n: usize, max_points: usize, value: impl Fn(usize) -> f64) -> Vec<usize> {
-    let bucket = n.div_ceil((max_points / 2).max(1)).max(1);
+    let bucket = bucket_len(n, max_points);
     let mut out = Vec::with_capacity(2 * n.div_ceil(bucket));
     for start in (0..n).step_by(bucket) {
         let end = (start + bucket).min(n);
@@ -97,7 +102,7 @@ fn whole_run(run: &TrotRun, s: Series) -> Data {
             .map(|k| all[k])
             .collect();
     }
-    let bucket = n.div_ceil(WHOLE_RUN_POINTS / 2).max(1);
+    let bucket = bucket_len(n, WHOLE_RUN_POINTS);
     let t = (0..n)
         .step_by(bucket)
         .flat_map(|a| [a, (a + bucket).min(n) - 1])
@@ -361,7 +366,27 @@ pub const FIGURES: [&str; 7] = [
     "hip_speed",
 ];
 
-/// Writes the seven figures as `<stem>.png` and `<stem>.svg` into `dir`; returns the paths.
+/// Draws series `s` of `d` as `<stem>.png` and `<stem>.svg` in `dir`.
+fn series_files(
+    dir: &Path,
+    stem: &str,
+    size: (u32, u32),
+    d: &Data,
+    s: Series,
+) -> Result<[PathBuf; 2], MasterError> {
+    let err = |p: &Path, e: Box<dyn std::error::Error>| {
+        MasterError::Usage(format!("figure {}: {e}", p.display()))
+    };
+    let png = dir.join(format!("{stem}.png"));
+    draw_series(BitMapBackend::new(&png, size).into_drawing_area(), d, s)
+        .map_err(|e| err(&png, e))?;
+    let svg = dir.join(format!("{stem}.svg"));
+    draw_series(SVGBackend::new(&svg, size).into_drawing_area(), d, s).map_err(|e| err(&svg, e))?;
+    Ok([png, svg])
+}
+
+/// Writes the seven figures and the six whole-run ones as `<stem>.png` and `<stem>.svg`
+/// into `dir`; returns the paths.
 pub fn write_figures(run: &TrotRun, dir: &Path) -> Result<Vec<PathBuf>, MasterError> {
     font_ready()?;
     let d = data(run);
@@ -385,39 +410,17 @@ pub fn write_figures(run: &TrotRun, dir: &Path) -> Result<Vec<PathBuf>, MasterEr
         .map_err(|e| err(&svg, e))?;
     out.extend([png, svg]);
     for s in series {
-        let png = dir.join(format!("{}.png", s.file()));
-        draw_series(
-            BitMapBackend::new(&png, (900, 1000)).into_drawing_area(),
-            &d,
-            s,
-        )
-        .map_err(|e| err(&png, e))?;
-        let svg = dir.join(format!("{}.svg", s.file()));
-        draw_series(
-            SVGBackend::new(&svg, (900, 1000)).into_drawing_area(),
-            &d,
-            s,
-        )
-        .map_err(|e| err(&svg, e))?;
-        out.extend([png, svg]);
+        out.extend(series_files(dir, s.file(), (900, 1000), &d, s)?);
         // The same series over the whole run, the phases marked (thesis figures 4-2 to
         // 4-7 show the whole experiment).
-        let whole = whole_run(run, s);
-        let png = dir.join(format!("{}_whole_run.png", s.file()));
-        draw_series(
-            BitMapBackend::new(&png, (1400, 1000)).into_drawing_area(),
-            &whole,
+        let stem = format!("{}_whole_run", s.file());
+        out.extend(series_files(
+            dir,
+            &stem,
+            (1400, 1000),
+            &whole_run(run, s),
             s,
-        )
-        .map_err(|e| err(&png, e))?;
-        let svg = dir.join(format!("{}_whole_run.svg", s.file()));
-        draw_series(
-            SVGBackend::new(&svg, (1400, 1000)).into_drawing_area(),
-            &whole,
-            s,
-        )
-        .map_err(|e| err(&svg, e))?;
-        out.extend([png, svg]);
+        )?);
     }
     Ok(out)
 }
