@@ -21,29 +21,50 @@ pub mod registry;
 pub mod toy;
 pub mod tue_es030;
 
-/// Declares process-data records and their PDOs in one table and generates, in the
-/// current module, `OBJECTS` (records, inputs then outputs, index order), `RX_PDOS`,
-/// `TX_PDOS`, `RX_ASSIGN`, `TX_ASSIGN` (every PDO assigned, in order) and `IMAGE` (the
-/// object image size). Each PDO maps the records listed in it, entry by entry.
+/// Declares a device's process data once — record, entry, CoE type, and optionally its
+/// physical scaling and unit and a firmware handle name — and generates, in the current
+/// module:
+///
+/// - `OBJECTS`: the records (inputs 0x6xxx, then outputs 0x7xxx), each entry with its
+///   [`Scale`](oxicat_slave::Scale) (what SDO users and the master's recordings see);
+/// - `RX_PDOS`, `TX_PDOS`: the mappings, entry sizes taken from the types;
+///   `RX_ASSIGN`, `TX_ASSIGN`: every PDO assigned, in order;
+/// - `OUTPUT_BYTES`, `INPUT_BYTES`: the SM2/SM3 sizes of that assignment; `IMAGE`: the
+///   object image size;
+/// - `PdVars`: the firmware's typed handles (`Var<i16>` for an `Int16`) on every entry that
+///   names one (`=> field`), resolved once with `PdVars::resolve(&od)`.
+///
+/// An entry is `sub "Name": Type`, then optionally `["unit" / den]` (the integer is
+/// `value × den`), then optionally `=> field`.
 ///
 /// ```
 /// mod io {
 ///     oxicat_devices::pd_table! {
-///         tx { 0x1A00 "Inputs" { 0x6000 "Inputs" { 1 "In1": Int16 } } }
-///         rx { 0x1600 "Outputs" { 0x7000 "Outputs" { 1 "Out1": Int16, 2 "Out2": Bool } } }
+///         tx { 0x1A00 "Inputs" { 0x6000 "Inputs" { 1 "Angle": Int16 ["deg" / 100] => angle } } }
+///         rx { 0x1600 "Outputs" { 0x7000 "Outputs" { 1 "Out1": Int16, 2 "Out2": Bool => out2 } } }
 ///     }
 /// }
 /// assert_eq!(io::OBJECTS.len(), 2);
 /// assert_eq!(io::RX_PDOS[0].entries.len(), 2);
+/// assert_eq!((io::OUTPUT_BYTES, io::INPUT_BYTES), (3, 2));
+/// assert_eq!(io::OBJECTS[0].entries[1].scale.unwrap().unit, "deg");
 /// ```
 #[macro_export]
 macro_rules! pd_table {
     (
         tx { $( $tpdo:literal $tpname:literal {
-            $( $tidx:literal $trec:literal { $( $tsub:literal $tname:literal : $tty:ident ),* $(,)? } )*
+            $( $tidx:literal $trec:literal { $(
+                $tsub:literal $tname:literal : $tty:ident
+                $( [ $tunit:literal / $tden:literal ] )?
+                $( => $tfield:ident )?
+            ),* $(,)? } )*
         } )* }
         rx { $( $rpdo:literal $rpname:literal {
-            $( $ridx:literal $rrec:literal { $( $rsub:literal $rname:literal : $rty:ident ),* $(,)? } )*
+            $( $ridx:literal $rrec:literal { $(
+                $rsub:literal $rname:literal : $rty:ident
+                $( [ $runit:literal / $rden:literal ] )?
+                $( => $rfield:ident )?
+            ),* $(,)? } )*
         } )* }
     ) => {
         use $crate::__slave::{
@@ -58,7 +79,8 @@ macro_rules! pd_table {
                 code: __C::Record,
                 entries: &[
                     __E::new(0, "SubIndex 000", __T::Unsigned8, __A::RO),
-                    $( __E::new($tsub, $tname, __T::$tty, __A::RO).pdo(__M::Tx) ),*
+                    $( __E::new($tsub, $tname, __T::$tty, __A::RO).pdo(__M::Tx)
+                        $( .with_scale(&$crate::__slave::Scale { unit: $tunit, num: 1, den: $tden }) )? ),*
                 ],
             }, )* )*
             $( $( __O {
@@ -67,7 +89,8 @@ macro_rules! pd_table {
                 code: __C::Record,
                 entries: &[
                     __E::new(0, "SubIndex 000", __T::Unsigned8, __A::RO),
-                    $( __E::new($rsub, $rname, __T::$rty, __A::RW).pdo(__M::Rx) ),*
+                    $( __E::new($rsub, $rname, __T::$rty, __A::RW).pdo(__M::Rx)
+                        $( .with_scale(&$crate::__slave::Scale { unit: $runit, num: 1, den: $rden }) )? ),*
                 ],
             }, )* )*
         ];
@@ -77,19 +100,49 @@ macro_rules! pd_table {
         pub static TX_PDOS: &[__P] = &[ $( __P {
             index: $tpdo,
             name: $tpname,
-            entries: &[ $( $( __PE::new($tidx, $tsub, __T::$tty.bits() as u8) ),* ),* ],
+            entries: &[ $( $( __PE::of(OBJECTS, $tidx, $tsub) ),* ),* ],
             configurable: false,
         } ),* ];
         /// RxPDOs (outputs).
         pub static RX_PDOS: &[__P] = &[ $( __P {
             index: $rpdo,
             name: $rpname,
-            entries: &[ $( $( __PE::new($ridx, $rsub, __T::$rty.bits() as u8) ),* ),* ],
+            entries: &[ $( $( __PE::of(OBJECTS, $ridx, $rsub) ),* ),* ],
             configurable: false,
         } ),* ];
         /// Default TxPDO assignment (0x1C13).
         pub static TX_ASSIGN: &[u16] = &[ $( $tpdo ),* ];
         /// Default RxPDO assignment (0x1C12).
         pub static RX_ASSIGN: &[u16] = &[ $( $rpdo ),* ];
+        /// Output (RxPDO) process data bytes of the default assignment (SM2).
+        pub const OUTPUT_BYTES: usize = $crate::__slave::pdo_bytes(RX_PDOS, RX_ASSIGN);
+        /// Input (TxPDO) process data bytes of the default assignment (SM3).
+        pub const INPUT_BYTES: usize = $crate::__slave::pdo_bytes(TX_PDOS, TX_ASSIGN);
+
+        /// Typed handles on the process-data entries that name one, resolved once
+        /// against the dictionary so the cycle reads and writes the image by offset.
+        #[derive(Debug, Clone, Copy)]
+        pub struct PdVars {
+            $( $( $( $(
+                #[doc = concat!("`", stringify!($tidx), ":", stringify!($tsub), "` ", $tname, " (input).")]
+                pub $tfield: $crate::__slave::Var<$crate::__slave::od::ty::$tty>,
+            )? )* )* )*
+            $( $( $( $(
+                #[doc = concat!("`", stringify!($ridx), ":", stringify!($rsub), "` ", $rname, " (output).")]
+                pub $rfield: $crate::__slave::Var<$crate::__slave::od::ty::$rty>,
+            )? )* )* )*
+        }
+
+        impl PdVars {
+            /// Resolves every handle; `None` if the dictionary lacks one or its type
+            /// differs (not this device's dictionary).
+            pub fn resolve<const N: usize>(od: &$crate::__slave::Od<N>) -> Option<Self> {
+                let _ = od; // a table may name no handle
+                Some(Self {
+                    $( $( $( $( $tfield: od.var($tidx, $tsub).ok()?, )? )* )* )*
+                    $( $( $( $( $rfield: od.var($ridx, $rsub).ok()?, )? )* )* )*
+                })
+            }
+        }
     };
 }

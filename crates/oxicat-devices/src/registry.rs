@@ -68,6 +68,17 @@ pub fn find(name: &str) -> Option<&'static Kit> {
     KITS.iter().find(|k| k.name == name)
 }
 
+/// The device whose definition has this vendor ID, product code and revision, as a master
+/// finds them in a slave's SII (node 0's definition: the Laelaps builds share one identity;
+/// the revision tells the demo, its variant and the leg node apart, which share a product
+/// code as in the thesis).
+pub fn by_identity(vendor_id: u32, product_code: u32, revision: u32) -> Option<&'static Kit> {
+    KITS.iter().find(|k| {
+        let id = (k.def)(0).identity;
+        (id.vendor_id, id.product_code, id.revision) == (vendor_id, product_code, revision)
+    })
+}
+
 /// The names of every device, comma-separated (for "unknown device" messages).
 pub fn names() -> String {
     KITS.iter().map(|k| k.name).collect::<Vec<_>>().join(", ")

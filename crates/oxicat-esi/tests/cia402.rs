@@ -20,14 +20,10 @@ fn cia402_definition_esi_and_sii_agree() {
     }
     let img = sii::generate(&device::DEF).unwrap();
     assert!(img.len() >= 128);
-    assert_eq!(
-        device::DEF.default_output_bits(),
-        8 * device::OUTPUT_BYTES as u32
-    );
-    assert_eq!(
-        device::DEF.default_input_bits(),
-        8 * device::INPUT_BYTES as u32
-    );
+    // 2 + 1 + 4 + 4 + 2 out, 2 + 1 + 4 + 4 + 2 + 2 in (sizes derived from the entries).
+    assert_eq!(device::DEF.default_output_bits(), 8 * 13);
+    assert_eq!(device::DEF.default_input_bits(), 8 * 15);
+    assert_eq!((device::OUTPUT_BYTES, device::INPUT_BYTES), (13, 15));
 }
 
 #[test]

@@ -83,8 +83,11 @@ pub struct Variable {
     pub ty: ValueType,
     /// Object index and subindex.
     pub object: (u16, u8),
-    /// Unit text for CSV headers.
+    /// Unit text for CSV headers: the declared physical unit when `scale` is set, else the
+    /// CoE type name.
     pub unit: String,
+    /// The entry's physical scaling, when its device declares one ([`Variable::with_scale`]).
+    pub scale: Option<oxicat_slave::Scale>,
 }
 
 impl Variable {
@@ -117,9 +120,45 @@ impl Variable {
         }
     }
 
-    /// Formats bytes read by [`Variable::get`].
+    /// The variable decoded with its device's declared scaling: values in `scale.unit`,
+    /// the CSV header says that unit instead of the CoE type.
+    pub fn with_scale(mut self, scale: oxicat_slave::Scale) -> Self {
+        if self.ty.integer(&[0; 8]).is_some() && self.ty != ValueType::Bool {
+            self.unit = scale.unit.to_string();
+            self.scale = Some(scale);
+        }
+        self
+    }
+
+    /// Formats bytes read by [`Variable::get`] (in the physical unit when scaled).
     pub fn format(&self, b: &[u8]) -> String {
-        self.ty.format_plain(b)
+        match (self.scale, self.ty.integer(b)) {
+            (Some(s), Some(raw)) => crate::value::format_scaled(raw, &s),
+            _ => self.ty.format_plain(b),
+        }
+    }
+
+    /// Encodes a value given as text: in the physical unit when scaled (rounded to the
+    /// nearest step, checked against the type's range), else as [`ValueType::encode`].
+    pub fn encode(&self, text: &str) -> Result<Vec<u8>, MasterError> {
+        let Some(s) = self.scale else {
+            return self.ty.encode(text);
+        };
+        let raw = crate::value::parse_scaled(text, &s).ok_or_else(|| MasterError::BadValue {
+            value: text.to_string(),
+            ty: self.ty,
+            why: format!("not a number of {}", s.unit),
+        })?;
+        self.ty
+            .encode(&raw.to_string())
+            .map_err(|_| MasterError::BadValue {
+                value: text.to_string(),
+                ty: self.ty,
+                why: format!(
+                    "{text} {} is {raw} steps of {}/{} {}, out of the type's range",
+                    s.unit, s.num, s.den, s.unit
+                ),
+            })
     }
 }
 
@@ -285,6 +324,7 @@ pub fn variables(p: &SlavePdos) -> Vec<Variable> {
                         ty: e.ty,
                         object: (e.index, e.sub),
                         unit: e.ty.esi_name().to_string(),
+                        scale: None,
                     });
                 }
                 bit += e.bits as usize;

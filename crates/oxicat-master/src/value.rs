@@ -199,6 +199,25 @@ impl ValueType {
         r.unwrap_or_else(|| hex(b))
     }
 
+    /// The integer in `b` if this is an integer type (sign-extended for signed types).
+    pub fn integer(self, b: &[u8]) -> Option<i128> {
+        fn arr<const N: usize>(b: &[u8]) -> Option<[u8; N]> {
+            b.get(..N).and_then(|s| s.try_into().ok())
+        }
+        Some(match self {
+            Self::Bool => i128::from(b.first()? & 1),
+            Self::U8 => i128::from(u8::from_le_bytes(arr(b)?)),
+            Self::U16 => i128::from(u16::from_le_bytes(arr(b)?)),
+            Self::U32 => i128::from(u32::from_le_bytes(arr(b)?)),
+            Self::U64 => i128::from(u64::from_le_bytes(arr(b)?)),
+            Self::I8 => i128::from(i8::from_le_bytes(arr(b)?)),
+            Self::I16 => i128::from(i16::from_le_bytes(arr(b)?)),
+            Self::I32 => i128::from(i32::from_le_bytes(arr(b)?)),
+            Self::I64 => i128::from(i64::from_le_bytes(arr(b)?)),
+            _ => return None,
+        })
+    }
+
     /// The plain value (no hex in brackets), for CSV and watch lines.
     pub fn format_plain(self, b: &[u8]) -> String {
         let s = self.format(b);
@@ -313,5 +332,48 @@ mod tests {
         assert!(ValueType::I8.encode("x").is_err());
         assert_eq!(ValueType::Hex.encode("01:ab").unwrap(), vec![1, 0xab]);
         assert_eq!(parse_u16("1018h"), Some(0x1018));
+    }
+}
+
+/// `raw` in the unit of `scale`, exact: `raw / 10^k` printed with `k` decimals when the
+/// factor is a power of ten (`-5` at 1/100 → `-0.05`), the shortest exact `f64` otherwise.
+pub fn format_scaled(raw: i128, scale: &oxicat_slave::Scale) -> String {
+    match scale.decimals() {
+        Some(0) => raw.to_string(),
+        Some(k) => {
+            let den = 10i128.pow(k as u32);
+            let sign = if raw < 0 { "-" } else { "" };
+            let a = raw.unsigned_abs();
+            let den = den as u128;
+            format!("{sign}{}.{:0k$}", a / den, a % den)
+        }
+        None => scale.value(raw as f64).to_string(),
+    }
+}
+
+/// The raw integer of a physical value given on the command line (`12.5` deg at 1/100 →
+/// 1250), rounded to the nearest step.
+pub fn parse_scaled(text: &str, scale: &oxicat_slave::Scale) -> Option<i128> {
+    let v: f64 = text.trim().parse().ok()?;
+    let raw = scale.raw(v).round();
+    (raw.is_finite() && raw.abs() < 1e30).then_some(raw as i128)
+}
+
+#[cfg(test)]
+mod scaled_tests {
+    use super::*;
+    use oxicat_slave::Scale;
+
+    #[test]
+    fn scaled_values_print_exactly_in_their_unit() {
+        let deg = Scale::per("deg", 100);
+        assert_eq!(format_scaled(-5, &deg), "-0.05");
+        assert_eq!(format_scaled(12345, &deg), "123.45");
+        assert_eq!(format_scaled(-32768, &deg), "-327.68");
+        assert_eq!(format_scaled(7, &Scale::per("Hz", 1)), "7");
+        assert_eq!(format_scaled(3, &Scale::ratio("x", 1, 4)), "0.75");
+        assert_eq!(parse_scaled("12.5", &deg), Some(1250));
+        assert_eq!(parse_scaled("-0.004", &deg), Some(0));
+        assert_eq!(parse_scaled("nan", &deg), None);
     }
 }

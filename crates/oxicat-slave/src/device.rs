@@ -2,7 +2,7 @@
 //! supported sync modes. One `static` value per device; the object dictionary, the PDO
 //! layout and the ESM checks are all derived from it.
 
-use crate::od::ObjectDef;
+use crate::od::{EntryDef, ObjectDef};
 pub use oxicat_wire::sii::FmmuUsage;
 
 /// Identity of a device (object 0x1018, SII words 0x08..0x0F).
@@ -58,6 +58,18 @@ impl PdoEntry {
         Self { index, sub, bits }
     }
 
+    /// The entry `index:sub` of `objects`, its bit length taken from its definition (no
+    /// hand-written sizes). In a `const`/`static` a missing entry stops the build.
+    pub const fn of(objects: &'static [ObjectDef], index: u16, sub: u8) -> Self {
+        match crate::od::find_entry(objects, index, sub) {
+            Some(e) => {
+                assert!(e.bits <= 255, "a mapped entry has at most 255 bits");
+                Self::new(index, sub, e.bits as u8)
+            }
+            None => panic!("PdoEntry::of: no such object entry"),
+        }
+    }
+
     /// A gap of `bits` bits.
     pub const fn gap(bits: u8) -> Self {
         Self {
@@ -80,6 +92,32 @@ impl PdoEntry {
             bits: v as u8,
         }
     }
+}
+
+/// Bytes of the process data of the PDOs `assign` (in that order) of `pdos`: the SM2/SM3
+/// size a layout gives, derived from the mappings (no hand-written sizes). In a `const` an
+/// assigned PDO missing from `pdos` stops the build.
+pub const fn pdo_bytes(pdos: &[PdoDef], assign: &[u16]) -> usize {
+    let mut bits = 0usize;
+    let mut a = 0;
+    while a < assign.len() {
+        let mut p = 0;
+        let mut found = false;
+        while p < pdos.len() {
+            if pdos[p].index == assign[a] {
+                let mut e = 0;
+                while e < pdos[p].entries.len() {
+                    bits += pdos[p].entries[e].bits as usize;
+                    e += 1;
+                }
+                found = true;
+            }
+            p += 1;
+        }
+        assert!(found, "pdo_bytes: an assigned PDO is not defined");
+        a += 1;
+    }
+    bits.div_ceil(8)
 }
 
 /// A PDO (mapping object 0x16xx RxPDO or 0x1Axx TxPDO) with its default mapping.
@@ -224,6 +262,16 @@ impl DeviceDef {
             .iter()
             .chain(self.tx_pdos.iter())
             .find(|p| p.index == index)
+    }
+
+    /// The definition of application entry `index:sub`.
+    pub fn entry_def(&self, index: u16, sub: u8) -> Option<&'static EntryDef> {
+        self.object(index)?.entries.iter().find(|e| e.sub == sub)
+    }
+
+    /// The physical scaling of application entry `index:sub`, if it declares one.
+    pub fn scale(&self, index: u16, sub: u8) -> Option<crate::od::Scale> {
+        self.entry_def(index, sub)?.scale.copied()
     }
 
     /// The application object with index `index`.

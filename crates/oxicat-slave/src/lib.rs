@@ -19,11 +19,11 @@ pub mod pdi;
 pub mod pdo;
 pub mod slave;
 
-pub use device::{DeviceDef, Identity, MailboxDef, PdoDef, PdoEntry, SyncDef, SyncMode};
+pub use device::{pdo_bytes, DeviceDef, Identity, MailboxDef, PdoDef, PdoEntry, SyncDef, SyncMode};
 pub use esm::{AlState, AlStatusCode};
 pub use od::{
-    image_size, Access, DataType, DefError, DefaultValue, EntryDef, EntryRef, ObjectCode,
-    ObjectDef, Od, OdError, OdType, PdoMapping, Var,
+    find_entry, image_size, Access, DataType, DefError, DefaultValue, EntryDef, EntryRef,
+    ObjectCode, ObjectDef, Od, OdError, OdType, PdoMapping, Scale, Var,
 };
 pub use pdi::{IrqLines, Pdi};
 pub use slave::{Application, InitError, Slave, Stats};

@@ -202,6 +202,62 @@ pub struct EntryDef {
     pub unit: u32,
     /// Allowed range for integer entries (`min > max`: no check).
     pub range: (i64, i64),
+    /// How the integer maps to a physical value (process data: what a master's
+    /// recordings show); `None`: a plain number.
+    pub scale: Option<&'static Scale>,
+}
+
+/// How a process-data integer maps to a physical value: `value = raw × num / den`, in
+/// `unit`. Declared once on the entry ([`EntryDef::with_scale`]); the master decodes with it
+/// (CSV headers in physical units), the firmware encodes with it.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Scale {
+    /// Unit of the scaled value (`"deg"`, `"A"`, `"%"`).
+    pub unit: &'static str,
+    /// Numerator of the factor from raw to unit.
+    pub num: u32,
+    /// Denominator of the factor from raw to unit.
+    pub den: u32,
+}
+
+impl Scale {
+    /// `raw / den` in `unit` (`Scale::per("deg", 100)`: the integer is hundredths of a degree).
+    pub const fn per(unit: &'static str, den: u32) -> Self {
+        Self { unit, num: 1, den }
+    }
+
+    /// `raw × num / den` in `unit`.
+    pub const fn ratio(unit: &'static str, num: u32, den: u32) -> Self {
+        Self { unit, num, den }
+    }
+
+    /// The physical value of a raw integer.
+    pub fn value(&self, raw: f64) -> f64 {
+        raw * f64::from(self.num) / f64::from(self.den)
+    }
+
+    /// The raw integer (unrounded) of a physical value.
+    pub fn raw(&self, value: f64) -> f64 {
+        value * f64::from(self.den) / f64::from(self.num)
+    }
+
+    /// Decimals that show every raw step exactly: `k` when the factor is `1 / 10^k`, else
+    /// `None` (print the shortest exact form).
+    pub const fn decimals(&self) -> Option<usize> {
+        if self.num != 1 {
+            return None;
+        }
+        let (mut d, mut k) = (self.den, 0);
+        while d % 10 == 0 {
+            d /= 10;
+            k += 1;
+        }
+        if d == 1 {
+            Some(k)
+        } else {
+            None
+        }
+    }
 }
 
 impl EntryDef {
@@ -217,6 +273,7 @@ impl EntryDef {
             default: DefaultValue::Bits(0),
             unit: 0,
             range: (1, 0),
+            scale: None,
         }
     }
 
@@ -270,6 +327,14 @@ impl EntryDef {
         self
     }
 
+    /// With a physical scaling (`.with_scale(&CENTI_DEG)` with
+    /// `const CENTI_DEG: Scale = Scale::per("deg", 100)`: hundredths of a degree). A
+    /// reference, so an unscaled entry costs one word of flash, not a whole [`Scale`].
+    pub const fn with_scale(mut self, s: &'static Scale) -> Self {
+        self.scale = Some(s);
+        self
+    }
+
     /// With an allowed value range (integer entries).
     pub const fn range(mut self, min: i64, max: i64) -> Self {
         self.range = (min, max);
@@ -284,6 +349,30 @@ impl EntryDef {
             self.bits.div_ceil(8) as usize
         }
     }
+}
+
+/// Entry `index:sub` of `objects`, usable in a `const` (a definition's tables are
+/// `'static`): how generated tables and master-side decoders reach one declaration.
+pub const fn find_entry(
+    objects: &'static [ObjectDef],
+    index: u16,
+    sub: u8,
+) -> Option<&'static EntryDef> {
+    let mut i = 0;
+    while i < objects.len() {
+        if objects[i].index == index {
+            let entries = objects[i].entries;
+            let mut k = 0;
+            while k < entries.len() {
+                if entries[k].sub == sub {
+                    return Some(&entries[k]);
+                }
+                k += 1;
+            }
+        }
+        i += 1;
+    }
+    None
 }
 
 /// Object code (SDO information).
@@ -735,6 +824,34 @@ impl OdType for bool {
             *v = u8::from(self);
         }
     }
+}
+
+/// The Rust type of each scalar [`DataType`], under the variant's name, so that a
+/// declaration naming the CoE type (`Int16`) can name its typed handle
+/// (`Var<ty::Int16>` = `Var<i16>`); used by the devices' `pd_table!`.
+pub mod ty {
+    /// BOOLEAN.
+    pub type Bool = bool;
+    /// INTEGER8.
+    pub type Int8 = i8;
+    /// INTEGER16.
+    pub type Int16 = i16;
+    /// INTEGER32.
+    pub type Int32 = i32;
+    /// INTEGER64.
+    pub type Int64 = i64;
+    /// UNSIGNED8.
+    pub type Unsigned8 = u8;
+    /// UNSIGNED16.
+    pub type Unsigned16 = u16;
+    /// UNSIGNED32.
+    pub type Unsigned32 = u32;
+    /// UNSIGNED64.
+    pub type Unsigned64 = u64;
+    /// REAL32.
+    pub type Real32 = f32;
+    /// REAL64.
+    pub type Real64 = f64;
 }
 
 /// Why a definition cannot be used.

@@ -13,6 +13,7 @@ use std::time::Duration;
 
 use clap::{Args, Subcommand};
 use oxicat_master::cyclic::CycleOptions;
+use oxicat_master::pdo::Variable;
 use oxicat_master::value::{parse_int, parse_u16, ValueType};
 use oxicat_master::{AlState, Link, Master, MasterError, MasterOptions};
 
@@ -908,7 +909,7 @@ pub fn run(cmd: MasterCommand, out: &mut dyn Write) -> Result<(), MasterError> {
             let mut m = open(&link)?;
             m.prepare_cyclic()?;
             let layouts = m.layouts()?;
-            let vars: Vec<_> = m.resolve(&vars, &layouts)?.into_iter().flatten().collect();
+            let vars = with_device_units(&m, m.resolve(&vars, &layouts)?.concat());
             let mut err = None;
             // A virtual segment runs as fast as the host can: show its lines at the pace of
             // the cycle (every × cycle per line) as on a real segment.
@@ -953,8 +954,11 @@ pub fn run(cmd: MasterCommand, out: &mut dyn Write) -> Result<(), MasterError> {
             let mut m = open(&link)?;
             m.prepare_cyclic()?;
             let layouts = m.layouts()?;
-            let vars = m.resolve(std::slice::from_ref(&var), &layouts)?.remove(0);
-            let data = vars[0].ty.encode(&value)?;
+            let vars = with_device_units(
+                &m,
+                m.resolve(std::slice::from_ref(&var), &layouts)?.remove(0),
+            );
+            let data = vars[0].encode(&value)?;
             if let Some(v) = vars
                 .iter()
                 .find(|v| v.dir == oxicat_master::pdo::Dir::Input)
@@ -1003,7 +1007,7 @@ pub fn run(cmd: MasterCommand, out: &mut dyn Write) -> Result<(), MasterError> {
             let mut m = open(&link)?;
             m.prepare_cyclic()?;
             let layouts = m.layouts()?;
-            let vars: Vec<_> = m.resolve(&vars, &layouts)?.into_iter().flatten().collect();
+            let vars = with_device_units(&m, m.resolve(&vars, &layouts)?.concat());
             let to_stdout = crate::output::is_stdout(&output);
             let mut file = match to_stdout {
                 true => None,
@@ -1057,4 +1061,26 @@ pub fn run(cmd: MasterCommand, out: &mut dyn Write) -> Result<(), MasterError> {
             }
         }
     }
+}
+
+/// Gives each variable the physical scaling its device declares (the registry's device with
+/// the slave's vendor ID, product code and revision): `record` headers and values in units
+/// (`0.hip_angle [deg]`, `-12.34`), `watch` values in units, `write` values given in units.
+/// Slaves of other devices keep raw integers under their CoE type.
+fn with_device_units(m: &Master, vars: Vec<Variable>) -> Vec<Variable> {
+    vars.into_iter()
+        .map(|v| {
+            let scale = m
+                .identity(v.position)
+                .ok()
+                .and_then(|(vendor, product, rev, _)| {
+                    let kit = oxicat_devices::registry::by_identity(vendor, product, rev)?;
+                    (kit.def)(0).scale(v.object.0, v.object.1)
+                });
+            match scale {
+                Some(s) => v.with_scale(s),
+                None => v,
+            }
+        })
+        .collect()
 }

@@ -173,3 +173,67 @@ fn write_watch_record() {
     );
     assert_eq!(lines.len(), 51);
 }
+
+/// A device's declared units (its `pd_table!`) are what `write`, `watch` and `record` speak:
+/// the master finds the device by the slave's identity, the values are exact decimals.
+#[test]
+fn a_declared_unit_is_what_write_watch_and_record_speak() {
+    // traj_freq100 is Hz × 100 on the wire: 1.5 Hz goes out as 150 and reads back as 1.50.
+    let out = ok(&["write", "0.traj_freq100", "1.5", "--sim", "laelaps-leg:1"]);
+    assert_eq!(out, "0.traj_freq100 = 1.50\n");
+    // 400 Hz would be 40,000 steps: more than an INT16 holds.
+    let err = fails(&["write", "0.traj_freq100", "400", "--sim", "laelaps-leg:1"]);
+    assert!(
+        err.contains("40000 steps") && err.contains("range"),
+        "{err}"
+    );
+    let err = fails(&["write", "0.traj_freq100", "fast", "--sim", "laelaps-leg:1"]);
+    assert!(err.contains("not a number of Hz"), "{err}");
+    let out = ok(&[
+        "watch",
+        "0.Time",
+        "--every",
+        "2",
+        "--count",
+        "2",
+        "--sim",
+        "laelaps-leg:1",
+    ]);
+    assert!(
+        out.lines()
+            .all(|l| l.starts_with("0.Time=") && l.contains('.')),
+        "{out}"
+    );
+
+    let dir = std::env::temp_dir().join(format!("oxicat-units-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let csv = dir.join("units.csv");
+    ok(&[
+        "record",
+        "--cycle",
+        "400us",
+        "--duration",
+        "8ms",
+        "0.hip_angle",
+        "0.velocity_knee1000",
+        "0.State_Machine",
+        "-o",
+        csv.to_str().unwrap(),
+        "--sim",
+        "laelaps-leg:1",
+    ]);
+    let text = std::fs::read_to_string(&csv).unwrap();
+    let lines: Vec<&str> = text.lines().collect();
+    assert_eq!(
+        lines[0],
+        "cycle,time [s],0.hip_angle [deg],0.velocity_knee1000 [rad/s motor],0.State_Machine [BOOL]"
+    );
+    for l in &lines[1..] {
+        let f: Vec<&str> = l.split(',').collect();
+        let decimals = |s: &str| s.split_once('.').map(|(_, d)| d.len());
+        assert_eq!(decimals(f[2]), Some(2), "{l}");
+        assert_eq!(decimals(f[3]), Some(3), "{l}");
+        assert!(f[4] == "0" || f[4] == "1", "{l}");
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+}

@@ -80,8 +80,9 @@ fn master_verbs_on_a_veth_as_a_new_user() {
 
     // Online write of an output (read back while cycling); afterwards the slaves are back in
     // PREOP without an error (nobody cycles: no watchdog left to expire), outputs safe.
-    let out = ok(&bench, &["write", "1.Kp100_knee", "1234"]);
-    assert_eq!(out, "1.Kp100_knee = 1234\n");
+    // In the entry's declared unit: 12.34 × 100 = 1234 on the wire.
+    let out = ok(&bench, &["write", "1.Kp100_knee", "12.34"]);
+    assert_eq!(out, "1.Kp100_knee = 12.34\n");
     let out = ok(&bench, &["slaves"]);
     assert_eq!(states(&out), vec!["PREOP"; 4], "{out}");
 
@@ -108,7 +109,7 @@ fn master_verbs_on_a_veth_as_a_new_user() {
     let lines: Vec<&str> = text.lines().collect();
     assert_eq!(
         lines[0],
-        "cycle,time [s],0.knee_angle [INT],3.hip_angle [INT]"
+        "cycle,time [s],0.knee_angle [deg],3.hip_angle [deg]"
     );
     assert!(lines.len() > 100, "{} rows", lines.len() - 1);
     assert!(lines[1..].iter().all(|l| l.split(',').count() == 4));

@@ -13,7 +13,7 @@
 use oxicat_slave::device::{DcOpMode, DeviceInfo, Group};
 use oxicat_slave::{
     Access, DataType, DeviceDef, EntryDef, Identity, MailboxDef, ObjectCode, ObjectDef, PdoDef,
-    PdoEntry, PdoMapping, SyncDef, SyncMode,
+    PdoEntry, PdoMapping, Scale, SyncDef, SyncMode,
 };
 
 /// Number of temperature channels (the report's `NUM_OF_SENSORS 15u`).
@@ -45,6 +45,9 @@ const fn rx(sub: u8, name: &'static str) -> EntryDef {
     EntryDef::new(sub, name, DataType::Unsigned16, Access::RW).pdo(PdoMapping::Rx)
 }
 
+/// Temperatures: 0.01 °C steps.
+const CENTI_DEG_C: Scale = Scale::per("°C", 100);
+
 const SUB0: EntryDef = EntryDef::new(0, "SubIndex 000", DataType::Unsigned8, Access::RO);
 
 /// The application objects, index order.
@@ -55,21 +58,21 @@ pub static OBJECTS: &[ObjectDef] = &[
         code: ObjectCode::Record,
         entries: &[
             SUB0,
-            tx(1, "TEMPERATURE0", DataType::Int16),
-            tx(2, "TEMPERATURE1", DataType::Int16),
-            tx(3, "TEMPERATURE2", DataType::Int16),
-            tx(4, "TEMPERATURE3", DataType::Int16),
-            tx(5, "TEMPERATURE4", DataType::Int16),
-            tx(6, "TEMPERATURE5", DataType::Int16),
-            tx(7, "TEMPERATURE6", DataType::Int16),
-            tx(8, "TEMPERATURE7", DataType::Int16),
-            tx(9, "TEMPERATURE8", DataType::Int16),
-            tx(10, "TEMPERATURE9", DataType::Int16),
-            tx(11, "TEMPERATURE10", DataType::Int16),
-            tx(12, "TEMPERATURE11", DataType::Int16),
-            tx(13, "TEMPERATURE12", DataType::Int16),
-            tx(14, "TEMPERATURE13", DataType::Int16),
-            tx(15, "TEMPERATURE14", DataType::Int16),
+            tx(1, "TEMPERATURE0", DataType::Int16).with_scale(&CENTI_DEG_C),
+            tx(2, "TEMPERATURE1", DataType::Int16).with_scale(&CENTI_DEG_C),
+            tx(3, "TEMPERATURE2", DataType::Int16).with_scale(&CENTI_DEG_C),
+            tx(4, "TEMPERATURE3", DataType::Int16).with_scale(&CENTI_DEG_C),
+            tx(5, "TEMPERATURE4", DataType::Int16).with_scale(&CENTI_DEG_C),
+            tx(6, "TEMPERATURE5", DataType::Int16).with_scale(&CENTI_DEG_C),
+            tx(7, "TEMPERATURE6", DataType::Int16).with_scale(&CENTI_DEG_C),
+            tx(8, "TEMPERATURE7", DataType::Int16).with_scale(&CENTI_DEG_C),
+            tx(9, "TEMPERATURE8", DataType::Int16).with_scale(&CENTI_DEG_C),
+            tx(10, "TEMPERATURE9", DataType::Int16).with_scale(&CENTI_DEG_C),
+            tx(11, "TEMPERATURE10", DataType::Int16).with_scale(&CENTI_DEG_C),
+            tx(12, "TEMPERATURE11", DataType::Int16).with_scale(&CENTI_DEG_C),
+            tx(13, "TEMPERATURE12", DataType::Int16).with_scale(&CENTI_DEG_C),
+            tx(14, "TEMPERATURE13", DataType::Int16).with_scale(&CENTI_DEG_C),
+            tx(15, "TEMPERATURE14", DataType::Int16).with_scale(&CENTI_DEG_C),
         ],
     },
     ObjectDef {
@@ -118,7 +121,7 @@ pub static OBJECTS: &[ObjectDef] = &[
 pub const IMAGE: usize = oxicat_slave::image_size(OBJECTS);
 
 const fn t16(sub: u8) -> PdoEntry {
-    PdoEntry::new(0x6000, sub, 16)
+    PdoEntry::of(OBJECTS, 0x6000, sub)
 }
 
 /// TxPDO 0x1A00 "Input mapping 0": 15 temperatures + STATUS, EVENT, ERROR (38 bytes).
@@ -141,9 +144,9 @@ pub static TX_PDOS: &[PdoDef] = &[PdoDef {
         t16(13),
         t16(14),
         t16(15),
-        PdoEntry::new(0x6001, 1, 32),
-        PdoEntry::new(0x6001, 2, 16),
-        PdoEntry::new(0x6001, 3, 16),
+        PdoEntry::of(OBJECTS, 0x6001, 1),
+        PdoEntry::of(OBJECTS, 0x6001, 2),
+        PdoEntry::of(OBJECTS, 0x6001, 3),
     ],
     configurable: false,
 }];
@@ -153,13 +156,22 @@ pub static RX_PDOS: &[PdoDef] = &[PdoDef {
     index: 0x1600,
     name: "MasterCMDs process data mapping",
     entries: &[
-        PdoEntry::new(0x7000, 1, 16),
-        PdoEntry::new(0x7000, 2, 16),
-        PdoEntry::new(0x7000, 3, 16),
-        PdoEntry::new(0x7000, 4, 16),
+        PdoEntry::of(OBJECTS, 0x7000, 1),
+        PdoEntry::of(OBJECTS, 0x7000, 2),
+        PdoEntry::of(OBJECTS, 0x7000, 3),
+        PdoEntry::of(OBJECTS, 0x7000, 4),
     ],
     configurable: false,
 }];
+
+/// Default RxPDO assignment (0x1C12).
+pub static RX_ASSIGN: &[u16] = &[0x1600];
+/// Default TxPDO assignment (0x1C13).
+pub static TX_ASSIGN: &[u16] = &[0x1A00];
+/// Output (RxPDO) bytes of the default assignment.
+pub const OUTPUT_BYTES: usize = oxicat_slave::pdo_bytes(RX_PDOS, RX_ASSIGN);
+/// Input (TxPDO) bytes of the default assignment.
+pub const INPUT_BYTES: usize = oxicat_slave::pdo_bytes(TX_PDOS, TX_ASSIGN);
 
 /// ESI/SII description data.
 pub const INFO: DeviceInfo = DeviceInfo {
@@ -203,8 +215,8 @@ pub static DEF: DeviceDef = DeviceDef {
     objects: OBJECTS,
     rx_pdos: RX_PDOS,
     tx_pdos: TX_PDOS,
-    rx_assign: &[0x1600],
-    tx_assign: &[0x1A00],
+    rx_assign: RX_ASSIGN,
+    tx_assign: TX_ASSIGN,
     assign_configurable: false,
     sync: SyncDef {
         supported: 0x0007,

@@ -266,3 +266,15 @@ fn device_definition_builds() {
     let od = oxicat_slave::Od::<{ device::IMAGE }>::new(&device::DEF).expect("definition");
     assert_eq!(od.get::<u16>(0xF000, 1), Ok(0x0010));
 }
+
+#[test]
+fn pdo_sizes_are_the_reports_and_temperatures_carry_their_unit() {
+    use super::device;
+    // 15 × INT16 + UDINT + 2 × UINT = 38 bytes in, 4 × UINT = 8 bytes out (derived).
+    assert_eq!((device::OUTPUT_BYTES, device::INPUT_BYTES), (8, 38));
+    let s = device::DEF
+        .scale(0x6000, 15)
+        .expect("temperatures are scaled");
+    assert_eq!((s.unit, s.value(2512.0)), ("°C", 25.12));
+    assert_eq!(device::DEF.scale(0x6001, 1), None);
+}

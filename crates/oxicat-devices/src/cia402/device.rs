@@ -49,6 +49,15 @@ macro_rules! v {
     ($name:literal, $t:ident, $a:ident, def $d:expr) => {
         &[E::new(0, $name, T::$t, A::$a).default_i64($d)]
     };
+    ($name:literal, $t:ident, $a:ident, $m:ident, [$u:literal / $den:literal]) => {
+        &[E::new(0, $name, T::$t, A::$a)
+            .pdo(M::$m)
+            .with_scale(&oxicat_slave::Scale {
+                unit: $u,
+                num: 1,
+                den: $den,
+            })]
+    };
     ($name:literal, $t:ident, $a:ident, $m:ident, def $d:expr) => {
         &[E::new(0, $name, T::$t, A::$a).pdo(M::$m).default_i64($d)]
     };
@@ -86,7 +95,7 @@ pub static OBJECTS: &[ObjectDef] = &[
     var(
         0x2002,
         "Joint torque sensor",
-        v!("Joint torque sensor", Int32, RO, Tx),
+        v!("Joint torque sensor", Int32, RO, Tx, ["N m" / 1000]),
     ),
     var(0x603F, "Error code", v!("Error code", Unsigned16, RO, Tx)),
     var(0x6040, "Controlword", v!("Controlword", Unsigned16, RW, Rx)),
@@ -134,7 +143,7 @@ pub static OBJECTS: &[ObjectDef] = &[
     var(
         0x6064,
         "Position actual value",
-        v!("Position actual value", Int32, RO, Tx),
+        v!("Position actual value", Int32, RO, Tx, ["inc" / 1]),
     ),
     var(
         0x6065,
@@ -159,14 +168,18 @@ pub static OBJECTS: &[ObjectDef] = &[
     var(
         0x606C,
         "Velocity actual value",
-        v!("Velocity actual value", Int32, RO, Tx),
+        v!("Velocity actual value", Int32, RO, Tx, ["inc/s" / 1]),
     ),
     var(
         0x606D,
         "Velocity window",
         v!("Velocity window", Unsigned16, RW, def 2000),
     ),
-    var(0x6071, "Target torque", v!("Target torque", Int16, RW, Rx)),
+    var(
+        0x6071,
+        "Target torque",
+        v!("Target torque", Int16, RW, Rx, ["%" / 10]),
+    ),
     var(
         0x6072,
         "Max torque",
@@ -185,17 +198,17 @@ pub static OBJECTS: &[ObjectDef] = &[
     var(
         0x6077,
         "Torque actual value",
-        v!("Torque actual value", Int16, RO, Tx),
+        v!("Torque actual value", Int16, RO, Tx, ["%" / 10]),
     ),
     var(
         0x6078,
         "Current actual value",
-        v!("Current actual value", Int16, RO, Tx),
+        v!("Current actual value", Int16, RO, Tx, ["%" / 10]),
     ),
     var(
         0x607A,
         "Target position",
-        v!("Target position", Int32, RW, Rx),
+        v!("Target position", Int32, RW, Rx, ["inc" / 1]),
     ),
     var(0x607C, "Home offset", v!("Home offset", Int32, RW, Rx)),
     ObjectDef {
@@ -261,18 +274,22 @@ pub static OBJECTS: &[ObjectDef] = &[
     var(
         0x60B0,
         "Position offset",
-        v!("Position offset", Int32, RW, Rx),
+        v!("Position offset", Int32, RW, Rx, ["inc" / 1]),
     ),
     var(
         0x60B1,
         "Velocity offset",
-        v!("Velocity offset", Int32, RW, Rx),
+        v!("Velocity offset", Int32, RW, Rx, ["inc/s" / 1]),
     ),
-    var(0x60B2, "Torque offset", v!("Torque offset", Int16, RW, Rx)),
+    var(
+        0x60B2,
+        "Torque offset",
+        v!("Torque offset", Int16, RW, Rx, ["%" / 10]),
+    ),
     var(
         0x60F4,
         "Following error actual value",
-        v!("Following error actual value", Int32, RO, Tx),
+        v!("Following error actual value", Int32, RO, Tx, ["inc" / 1]),
     ),
     var(
         0x60FD,
@@ -282,7 +299,7 @@ pub static OBJECTS: &[ObjectDef] = &[
     var(
         0x60FF,
         "Target velocity",
-        v!("Target velocity", Int32, RW, Rx),
+        v!("Target velocity", Int32, RW, Rx, ["inc/s" / 1]),
     ),
     var(
         0x6502,
@@ -299,11 +316,11 @@ pub static RX_PDOS: &[PdoDef] = &[PdoDef {
     index: 0x1600,
     name: "RxPDO 1",
     entries: &[
-        PE::new(0x6040, 0, 16),
-        PE::new(0x6060, 0, 8),
-        PE::new(0x607A, 0, 32),
-        PE::new(0x60FF, 0, 32),
-        PE::new(0x6071, 0, 16),
+        PE::of(OBJECTS, 0x6040, 0),
+        PE::of(OBJECTS, 0x6060, 0),
+        PE::of(OBJECTS, 0x607A, 0),
+        PE::of(OBJECTS, 0x60FF, 0),
+        PE::of(OBJECTS, 0x6071, 0),
     ],
     configurable: true,
 }];
@@ -313,20 +330,25 @@ pub static TX_PDOS: &[PdoDef] = &[PdoDef {
     index: 0x1A00,
     name: "TxPDO 1",
     entries: &[
-        PE::new(0x6041, 0, 16),
-        PE::new(0x6061, 0, 8),
-        PE::new(0x6064, 0, 32),
-        PE::new(0x606C, 0, 32),
-        PE::new(0x6077, 0, 16),
-        PE::new(0x603F, 0, 16),
+        PE::of(OBJECTS, 0x6041, 0),
+        PE::of(OBJECTS, 0x6061, 0),
+        PE::of(OBJECTS, 0x6064, 0),
+        PE::of(OBJECTS, 0x606C, 0),
+        PE::of(OBJECTS, 0x6077, 0),
+        PE::of(OBJECTS, 0x603F, 0),
     ],
     configurable: true,
 }];
 
 /// Default RxPDO bytes (2 + 1 + 4 + 4 + 2).
-pub const OUTPUT_BYTES: usize = 13;
+pub const OUTPUT_BYTES: usize = oxicat_slave::pdo_bytes(RX_PDOS, RX_ASSIGN);
 /// Default TxPDO bytes (2 + 1 + 4 + 4 + 2 + 2).
-pub const INPUT_BYTES: usize = 15;
+pub const INPUT_BYTES: usize = oxicat_slave::pdo_bytes(TX_PDOS, TX_ASSIGN);
+
+/// Default RxPDO assignment (0x1C12).
+pub static RX_ASSIGN: &[u16] = &[0x1600];
+/// Default TxPDO assignment (0x1C13).
+pub static TX_ASSIGN: &[u16] = &[0x1A00];
 
 /// ESI/SII description data.
 pub const INFO: DeviceInfo = DeviceInfo {
@@ -365,8 +387,8 @@ pub static DEF: DeviceDef = DeviceDef {
     objects: OBJECTS,
     rx_pdos: RX_PDOS,
     tx_pdos: TX_PDOS,
-    rx_assign: &[0x1600],
-    tx_assign: &[0x1A00],
+    rx_assign: RX_ASSIGN,
+    tx_assign: TX_ASSIGN,
     assign_configurable: false,
     sync: SyncDef {
         supported: 0x0007,

@@ -174,11 +174,21 @@ impl Cia402Run {
             .collect()
     }
 
-    /// CSV: cycle, time, drive, controlword, mode, target, statusword, mode display,
-    /// position, velocity, torque, error code.
+    /// CSV: cycle, time, drive, controlword, mode, target position, statusword, mode display,
+    /// position, velocity, torque, error code; positions, velocity and torque in the units
+    /// the drive declares (increments, increments/s, % of rated torque).
     pub fn csv(&self) -> String {
-        let mut s = String::from(
-            "cycle,time [s],drive,controlword,mode,target position,statusword,mode display,position,velocity,torque,error code\n",
+        use oxicat_master::value::format_scaled;
+        let sc = |index: u16| {
+            super::DEF
+                .scale(index, 0)
+                .expect("the joint declares this entry's unit")
+        };
+        let (target, pos, vel, torque) = (sc(0x607A), sc(0x6064), sc(0x606C), sc(0x6077));
+        let mut s = format!(
+            "cycle,time [s],drive,controlword,mode,target position [{}],statusword,mode display,\
+             position [{}],velocity [{}],torque [{}],error code\n",
+            target.unit, pos.unit, vel.unit, torque.unit
         );
         for r in &self.rows {
             s += &format!(
@@ -188,12 +198,12 @@ impl Cia402Run {
                 r.drive,
                 r.out.controlword,
                 r.out.mode,
-                r.out.target_position,
+                format_scaled(r.out.target_position.into(), &target),
                 r.inp.statusword,
                 r.inp.mode_display,
-                r.inp.position,
-                r.inp.velocity,
-                r.inp.torque,
+                format_scaled(r.inp.position.into(), &pos),
+                format_scaled(r.inp.velocity.into(), &vel),
+                format_scaled(r.inp.torque.into(), &torque),
                 r.inp.error_code
             );
         }

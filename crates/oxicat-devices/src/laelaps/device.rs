@@ -42,51 +42,67 @@ use oxicat_slave::{DeviceDef, Identity, MailboxDef, Od, SyncDef, SyncMode, Var};
 crate::pd_table! {
     tx {
         0x1A01 "InputMapping1" {
-            0x6010 "hip_angle" { 1 "hip_angle": Int16, 2 "Desired_hip_angle": Int16 }
-            0x6012 "FeedbackTime" { 1 "Time": Unsigned16 }
-            0x6014 "knee_angle" { 1 "knee_angle": Int16, 2 "Desired_knee_angle": Int16 }
+            0x6010 "hip_angle" {
+                1 "hip_angle": Int16 ["deg" / 100] => hip,
+                2 "Desired_hip_angle": Int16 ["deg" / 100] => hip_desired
+            }
+            0x6012 "FeedbackTime" { 1 "Time": Unsigned16 ["s" / 100] => time }
+            0x6014 "knee_angle" {
+                1 "knee_angle": Int16 ["deg" / 100] => knee,
+                2 "Desired_knee_angle": Int16 ["deg" / 100] => knee_desired
+            }
         }
         0x1A02 "Commands" {
-            0x6020 "Commands" { 1 "PWM10000_knee": Int16, 2 "PWM10000_hip": Int16 }
+            0x6020 "Commands" {
+                1 "PWM10000_knee": Int16 ["%" / 100] => pwm_knee,
+                2 "PWM10000_hip": Int16 ["%" / 100] => pwm_hip
+            }
         }
         0x1A03 "Velocity" {
-            0x6030 "Velocity" { 1 "velocity_knee1000": Int32, 2 "velocity_hip1000": Int32 }
+            0x6030 "Velocity" {
+                1 "velocity_knee1000": Int32 ["rad/s motor" / 1000] => velocity_knee,
+                2 "velocity_hip1000": Int32 ["rad/s motor" / 1000] => velocity_hip
+            }
         }
     }
     rx {
         0x1600 "Buttons" {
             0x7000 "Buttons" {
-                1 "State_Machine": Bool, 2 "Initialize_clock": Bool,
+                1 "State_Machine": Bool => state_machine, 2 "Initialize_clock": Bool,
                 3 "Initialize_angles": Bool, 4 "Inverse_Kinematics": Bool,
-                5 "Blue_LED": Bool, 6 "Red_LED": Bool, 7 "Button1": Bool, 8 "Button2": Bool,
-                9 "Transition_time": Int8
+                5 "Blue_LED": Bool => blue_led, 6 "Red_LED": Bool => red_led,
+                7 "Button1": Bool, 8 "Button2": Bool,
+                9 "Transition_time": Int8 ["s" / 1] => transition_time
             }
         }
         0x1601 "OutputMapping1" {
             0x7010 "Desired_x_value" { 1 "Desired_x_value": Int32 }
-            0x7012 "TargetMode" { 1 "FilterBandwidth": Unsigned16 }
+            0x7012 "TargetMode" { 1 "FilterBandwidth": Unsigned16 ["Hz" / 1] => filter_bandwidth }
             0x7014 "Desired_y_value" { 1 "Desired_y_value": Int32 }
         }
         0x1602 "ControlGains" {
             0x7020 "ControlGains" {
-                1 "Kp100_knee": Int16, 2 "Kd1000_knee": Int16, 3 "Ki100_knee": Int16,
-                4 "Kp100_hip": Int16, 5 "Kd1000_hip": Int16, 6 "Ki100_hip": Int16
+                1 "Kp100_knee": Int16 ["1/rev" / 100] => kp_knee,
+                2 "Kd1000_knee": Int16 ["s" / 1000] => kd_knee,
+                3 "Ki100_knee": Int16 ["1/s" / 100] => ki_knee,
+                4 "Kp100_hip": Int16 ["1/rev" / 100] => kp_hip,
+                5 "Kd1000_hip": Int16 ["s" / 1000] => kd_hip,
+                6 "Ki100_hip": Int16 ["1/s" / 100] => ki_hip
             }
         }
         0x1603 "TrajectoryParameters" {
             0x7030 "TrajectoryParameters" {
-                1 "x_cntr_traj1000": Int16, 2 "y_cntr_traj1000": Int16,
-                3 "a_ellipse100": Int16, 4 "b_ellipse100": Int16, 5 "traj_freq100": Int16,
-                6 "phase_deg": Int16, 7 "FlatnessParam100": Int16
+                1 "x_cntr_traj1000": Int16 ["m" / 1000] => x_centre,
+                2 "y_cntr_traj1000": Int16 ["m" / 1000] => y_centre,
+                3 "a_ellipse100": Int16 ["m" / 100] => a,
+                4 "b_ellipse100": Int16 ["m" / 100] => b,
+                5 "traj_freq100": Int16 ["Hz" / 100] => freq,
+                6 "phase_deg": Int16 ["deg" / 1] => phase,
+                7 "FlatnessParam100": Int16 ["1" / 100] => flatness
             }
         }
     }
 }
-
-/// Output (RxPDO) process data size in bytes (Table 3-1).
-pub const OUTPUT_BYTES: usize = 38;
-/// Input (TxPDO) process data size in bytes (Table 3-2).
-pub const INPUT_BYTES: usize = 22;
 
 /// ESI/SII description data of the leg node.
 pub const INFO: DeviceInfo = DeviceInfo {
@@ -164,51 +180,22 @@ pub fn device(side: Side) -> &'static DeviceDef {
     }
 }
 
-/// Typed handles on every Laelaps process-data entry (and the SYNC0 cycle time
-/// 0x1C32:02), resolved once ([`PdoVars::resolve`]) so that the SYNC0 cycle reads and
-/// writes the image by offset instead of looking each entry up by index.
+/// Typed handles on the Laelaps process-data entries (generated with the table, see
+/// [`PdVars`]) and the SYNC0 cycle time 0x1C32:02, resolved once ([`PdoVars::resolve`]) so
+/// that the SYNC0 cycle reads and writes the image by offset instead of looking each entry
+/// up by index.
 #[derive(Debug, Clone, Copy)]
 pub struct PdoVars {
-    state_machine: Var<bool>,
-    blue_led: Var<bool>,
-    red_led: Var<bool>,
-    transition_time: Var<i8>,
-    filter_bandwidth: Var<u16>,
-    gains: [Var<i16>; 6],
-    traj: [Var<i16>; 7],
-    hip: [Var<i16>; 2],
-    time: Var<u16>,
-    knee: [Var<i16>; 2],
-    pwm: [Var<i16>; 2],
-    velocity: [Var<i32>; 2],
+    /// The process-data entries.
+    pub pd: PdVars,
     cycle_time: Var<u32>,
 }
 
 impl PdoVars {
     /// Resolves all entries; `None` if the dictionary lacks one (not a Laelaps OD).
     pub fn resolve<const N: usize>(od: &Od<N>) -> Option<Self> {
-        let v16 = |i: u16, s: u8| od.var::<i16>(i, s).ok();
-        let mut gains = [v16(0x7020, 1)?; 6];
-        for (k, g) in gains.iter_mut().enumerate() {
-            *g = v16(0x7020, k as u8 + 1)?;
-        }
-        let mut traj = [v16(0x7030, 1)?; 7];
-        for (k, g) in traj.iter_mut().enumerate() {
-            *g = v16(0x7030, k as u8 + 1)?;
-        }
         Some(Self {
-            state_machine: od.var(0x7000, 1).ok()?,
-            blue_led: od.var(0x7000, 5).ok()?,
-            red_led: od.var(0x7000, 6).ok()?,
-            transition_time: od.var(0x7000, 9).ok()?,
-            filter_bandwidth: od.var(0x7012, 1).ok()?,
-            gains,
-            traj,
-            hip: [v16(0x6010, 1)?, v16(0x6010, 2)?],
-            time: od.var(0x6012, 1).ok()?,
-            knee: [v16(0x6014, 1)?, v16(0x6014, 2)?],
-            pwm: [v16(0x6020, 1)?, v16(0x6020, 2)?],
-            velocity: [od.var(0x6030, 1).ok()?, od.var(0x6030, 2).ok()?],
+            pd: PdVars::resolve(od)?,
             cycle_time: od.var(0x1C32, 2).ok()?,
         })
     }
@@ -276,8 +263,8 @@ impl Command {
 
     /// As [`Command::read`] through resolved handles (the per-cycle path).
     pub fn load<const N: usize>(od: &Od<N>, v: &PdoVars) -> Self {
-        let g = |k: usize| od.load(v.gains[k]) as f32;
-        let tr = |k: usize| od.load(v.traj[k]) as f32;
+        let v = &v.pd;
+        let f = |h: Var<i16>| od.load(h) as f32;
         Self {
             operational: od.load(v.state_machine),
             blue_led: od.load(v.blue_led),
@@ -285,23 +272,23 @@ impl Command {
             transition_time_s: od.load(v.transition_time) as f32,
             filter_hz: od.load(v.filter_bandwidth) as f32,
             knee: Gains {
-                kp: g(0) / 100.0,
-                kd: g(1) / 1000.0,
-                ki: g(2) / 100.0,
+                kp: f(v.kp_knee) / 100.0,
+                kd: f(v.kd_knee) / 1000.0,
+                ki: f(v.ki_knee) / 100.0,
             },
             hip: Gains {
-                kp: g(3) / 100.0,
-                kd: g(4) / 1000.0,
-                ki: g(5) / 100.0,
+                kp: f(v.kp_hip) / 100.0,
+                kd: f(v.kd_hip) / 1000.0,
+                ki: f(v.ki_hip) / 100.0,
             },
             ellipse: Ellipse {
-                x_centre: tr(0) / 1000.0,
-                y_centre: tr(1) / 1000.0,
-                a: tr(2) / 100.0,
-                b: tr(3) / 100.0,
-                freq: tr(4) / 100.0,
-                phase: tr(5) * (PI / 180.0),
-                flatness: tr(6) / 100.0,
+                x_centre: f(v.x_centre) / 1000.0,
+                y_centre: f(v.y_centre) / 1000.0,
+                a: f(v.a) / 100.0,
+                b: f(v.b) / 100.0,
+                freq: f(v.freq) / 100.0,
+                phase: f(v.phase) * (PI / 180.0),
+                flatness: f(v.flatness) / 100.0,
             },
         }
     }
@@ -383,16 +370,17 @@ impl Feedback {
 
     /// As [`Feedback::write`] through resolved handles (the per-cycle path).
     pub fn store<const N: usize>(&self, od: &mut Od<N>, v: &PdoVars) {
+        let v = &v.pd;
         let deg100 = |rad: f32| (rad * (18_000.0 / PI)) as i16;
-        od.store(v.hip[0], deg100(self.hip));
-        od.store(v.hip[1], deg100(self.hip_desired));
+        od.store(v.hip, deg100(self.hip));
+        od.store(v.hip_desired, deg100(self.hip_desired));
         od.store(v.time, ((self.time_s * 100.0 + 0.5) as u32) as u16);
-        od.store(v.knee[0], deg100(self.knee));
-        od.store(v.knee[1], deg100(self.knee_desired));
-        od.store(v.pwm[0], (self.u_knee * 10_000.0) as i16);
-        od.store(v.pwm[1], (self.u_hip * 10_000.0) as i16);
-        od.store(v.velocity[0], (self.velocity_knee * 1000.0) as i32);
-        od.store(v.velocity[1], (self.velocity_hip * 1000.0) as i32);
+        od.store(v.knee, deg100(self.knee));
+        od.store(v.knee_desired, deg100(self.knee_desired));
+        od.store(v.pwm_knee, (self.u_knee * 10_000.0) as i16);
+        od.store(v.pwm_hip, (self.u_hip * 10_000.0) as i16);
+        od.store(v.velocity_knee, (self.velocity_knee * 1000.0) as i32);
+        od.store(v.velocity_hip, (self.velocity_hip * 1000.0) as i32);
     }
 
     /// Reads the inputs back into SI units (what a master decodes).
@@ -440,9 +428,11 @@ mod tests {
     #[test]
     fn sizes_are_38_and_22_bytes() {
         for d in [&LEFT, &RIGHT] {
-            assert_eq!(d.default_output_bits(), OUTPUT_BYTES as u32 * 8);
-            assert_eq!(d.default_input_bits(), INPUT_BYTES as u32 * 8);
+            // Tables 3-1 and 3-2; the sizes are derived from the declaration.
+            assert_eq!(d.default_output_bits(), 38 * 8);
+            assert_eq!(d.default_input_bits(), 22 * 8);
         }
+        assert_eq!((OUTPUT_BYTES, INPUT_BYTES), (38, 22));
     }
 
     /// The output image, entry by entry in PDO order, as Table 3-1.

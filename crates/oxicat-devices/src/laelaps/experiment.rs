@@ -50,7 +50,7 @@ use oxicat_master::inprocess::{inprocess_task, InProcessConfig};
 use oxicat_sim::exec_time::TimingStats;
 use oxicat_sim::pdi_path::{BusStats as SpiStats, PdiRoute};
 use oxicat_sim::segment::Segment;
-use oxicat_slave::DeviceDef;
+use oxicat_slave::{DataType, DeviceDef};
 
 use crate::laelaps::scenario::Scenario;
 use oxicat_master::MasterError;
@@ -120,17 +120,19 @@ fn get(image: &[u8], p: PdoPlace, signed: bool) -> i32 {
     }
 }
 
-/// The 9 input variables of a leg node (Table 3-2), in record order, with their scaling.
+/// The 9 input variables of a leg node (Table 3-2), in record order, under their CSV
+/// names; type, unit and scaling come from the device's one declaration
+/// ([`crate::laelaps::device`]'s `pd_table!`).
 pub const INPUTS: [InputVar; 9] = [
-    InputVar::new("hip_angle", 0x6010, 1, true, "deg", 100),
-    InputVar::new("Desired_hip_angle", 0x6010, 2, true, "deg", 100),
-    InputVar::new("Time", 0x6012, 1, false, "s", 100),
-    InputVar::new("knee_angle", 0x6014, 1, true, "deg", 100),
-    InputVar::new("Desired_knee_angle", 0x6014, 2, true, "deg", 100),
-    InputVar::new("PWM_knee", 0x6020, 1, true, "%", 100),
-    InputVar::new("PWM_hip", 0x6020, 2, true, "%", 100),
-    InputVar::new("velocity_knee", 0x6030, 1, true, "rad/s motor", 1000),
-    InputVar::new("velocity_hip", 0x6030, 2, true, "rad/s motor", 1000),
+    InputVar::of("hip_angle", 0x6010, 1),
+    InputVar::of("Desired_hip_angle", 0x6010, 2),
+    InputVar::of("Time", 0x6012, 1),
+    InputVar::of("knee_angle", 0x6014, 1),
+    InputVar::of("Desired_knee_angle", 0x6014, 2),
+    InputVar::of("PWM_knee", 0x6020, 1),
+    InputVar::of("PWM_hip", 0x6020, 2),
+    InputVar::of("velocity_knee", 0x6030, 1),
+    InputVar::of("velocity_hip", 0x6030, 2),
 ];
 
 /// Index of each variable in [`INPUTS`].
@@ -173,21 +175,23 @@ pub struct InputVar {
 }
 
 impl InputVar {
-    const fn new(
-        name: &'static str,
-        index: u16,
-        sub: u8,
-        signed: bool,
-        unit: &'static str,
-        divisor: i32,
-    ) -> Self {
+    /// Input `index:sub` of the leg node's declaration, recorded as `name`. The build stops
+    /// if the entry is missing or declares no `raw / 10^k` scaling.
+    const fn of(name: &'static str, index: u16, sub: u8) -> Self {
+        let Some(e) = oxicat_slave::find_entry(crate::laelaps::device::OBJECTS, index, sub) else {
+            panic!("not a leg-node input");
+        };
+        let Some(scale) = e.scale else {
+            panic!("a recorded input declares its unit");
+        };
+        assert!(scale.num == 1 && scale.den <= i32::MAX as u32);
         Self {
             name,
             index,
             sub,
-            signed,
-            unit,
-            divisor,
+            signed: matches!(e.dtype, DataType::Int8 | DataType::Int16 | DataType::Int32),
+            unit: scale.unit,
+            divisor: scale.den as i32,
         }
     }
 

@@ -20,8 +20,15 @@
 use oxicat_slave::device::{DeviceInfo, Group};
 use oxicat_slave::{
     Access as A, DataType as T, DeviceDef, EntryDef as E, Identity, MailboxDef, ObjectCode,
-    ObjectDef, PdoDef, PdoEntry as PE, PdoMapping as M, SyncDef, SyncMode,
+    ObjectDef, PdoDef, PdoEntry as PE, PdoMapping as M, Scale, SyncDef, SyncMode,
 };
+
+/// Velocities: 0.1 rad/s steps.
+const DECI_RAD_S: Scale = Scale::per("rad/s", 10);
+/// Currents: 1 mA steps.
+const MILLI_A: Scale = Scale::per("A", 1000);
+/// Voltages: 10 mV steps.
+const CENTI_V: Scale = Scale::per("V", 100);
 
 const SUB0: E = E::new(0, "SubIndex 000", T::Unsigned8, A::RO);
 
@@ -46,8 +53,8 @@ const fn motor_tx() -> [E; 6] {
         tx(1, "State", T::Unsigned8),
         tx(2, "Count", T::Unsigned32),
         tx(3, "Timestamp", T::Unsigned32),
-        tx(4, "Velocity", T::Int16),
-        tx(5, "Current", T::Int16),
+        tx(4, "Velocity", T::Int16).with_scale(&DECI_RAD_S),
+        tx(5, "Current", T::Int16).with_scale(&MILLI_A),
     ]
 }
 static MOTOR_TX: [E; 6] = motor_tx();
@@ -65,7 +72,7 @@ static OTHERS_TX: [E; 14] = [
     tx(9, "Pos3", T::Unsigned16),
     tx(10, "Analog1", T::Unsigned16),
     tx(11, "Analog2", T::Unsigned16),
-    tx(12, "Linevoltage", T::Unsigned16),
+    tx(12, "Linevoltage", T::Unsigned16).with_scale(&CENTI_V),
     tx(13, "Ectime", T::Unsigned16),
 ];
 
@@ -91,8 +98,8 @@ static CURRENT_BUF: [E; FRF_PER_CYCLE + 1] = current_buffer();
 static MOTOR_RX: [E; 4] = [
     SUB0,
     rx(1, "Mcom", T::Unsigned8),
-    rx(2, "Setpoint", T::Int16),
-    rx(3, "Ff", T::Int16),
+    rx(2, "Setpoint", T::Int16).with_scale(&MILLI_A),
+    rx(3, "Ff", T::Int16).with_scale(&CENTI_V),
 ];
 
 static OTHERS_RX: [E; 4] = [
@@ -187,26 +194,29 @@ pub static OBJECTS: &[ObjectDef] = &[
 /// Object image size of [`OBJECTS`].
 pub const IMAGE: usize = oxicat_slave::image_size(OBJECTS);
 
-const MOTOR_TX_MAP: [(u8, u8); 5] = [(1, 8), (2, 32), (3, 32), (4, 16), (5, 16)];
+/// Mapping entry `index:sub`, its size from the record's definition.
+const fn e(index: u16, sub: u8) -> PE {
+    PE::of(OBJECTS, index, sub)
+}
 
 const fn pdo_1a00() -> [PE; 28] {
-    let mut out = [PE::new(0, 0, 0); 28];
+    let mut out = [PE::gap(0); 28];
     let mut k = 0;
     let mut m = 0;
     while m < 3 {
         let mut j = 0;
         while j < 5 {
-            out[k] = PE::new(0x6000 + m, MOTOR_TX_MAP[j].0, MOTOR_TX_MAP[j].1);
+            out[k] = e(0x6000 + m, j as u8 + 1);
             k += 1;
             j += 1;
         }
         m += 1;
     }
-    out[k] = PE::new(0x6010, 1, 8);
+    out[k] = e(0x6010, 1);
     k += 1;
     let mut s = 2;
     while s <= 13 {
-        out[k] = PE::new(0x6010, s, 16);
+        out[k] = e(0x6010, s);
         k += 1;
         s += 1;
     }
@@ -214,38 +224,38 @@ const fn pdo_1a00() -> [PE; 28] {
 }
 
 const fn pdo_1600() -> [PE; 12] {
-    let mut out = [PE::new(0, 0, 0); 12];
+    let mut out = [PE::gap(0); 12];
     let mut m = 0;
     while m < 4 {
         let idx = if m < 3 { 0x7000 + m } else { 0x7010 };
         let k = 3 * m as usize;
-        out[k] = PE::new(idx, 1, 8);
-        out[k + 1] = PE::new(idx, 2, 16);
-        out[k + 2] = PE::new(idx, 3, 16);
+        out[k] = e(idx, 1);
+        out[k + 1] = e(idx, 2);
+        out[k + 2] = e(idx, 3);
         m += 1;
     }
     out
 }
 
 const fn pdo_1601() -> [PE; FRF_PER_CYCLE + 2] {
-    let mut out = [PE::new(0x7020, 1, 8); FRF_PER_CYCLE + 2];
-    out[1] = PE::new(0x7020, 2, 8);
+    let mut out = [e(0x7020, 1); FRF_PER_CYCLE + 2];
+    out[1] = e(0x7020, 2);
     let mut i = 0;
     while i < FRF_PER_CYCLE {
-        out[i + 2] = PE::new(0x7020, i as u8 + 3, 16);
+        out[i + 2] = e(0x7020, i as u8 + 3);
         i += 1;
     }
     out
 }
 
 const fn pdo_1a01() -> [PE; FRF_PER_CYCLE + 4] {
-    let mut out = [PE::new(0x6020, 1, 8); FRF_PER_CYCLE + 4];
-    out[1] = PE::new(0x6020, 2, 8);
-    out[2] = PE::new(0x6020, 3, 8);
-    out[3] = PE::new(0x6020, 4, 16);
+    let mut out = [e(0x6020, 1); FRF_PER_CYCLE + 4];
+    out[1] = e(0x6020, 2);
+    out[2] = e(0x6020, 3);
+    out[3] = e(0x6020, 4);
     let mut i = 0;
     while i < FRF_PER_CYCLE {
-        out[i + 4] = PE::new(0x6021, i as u8 + 1, 16);
+        out[i + 4] = e(0x6021, i as u8 + 1);
         i += 1;
     }
     out
@@ -288,14 +298,14 @@ pub static TX_PDOS: &[PdoDef] = &[
     },
 ];
 
-/// Normal-mode output bytes (`rxpdo1_t`).
-pub const NORMAL_RX_BYTES: usize = 20;
-/// Normal-mode input bytes (`txpdo1_t`).
-pub const NORMAL_TX_BYTES: usize = 64;
-/// FRF-mode output bytes (`rxpdo2_t`).
-pub const FRF_RX_BYTES: usize = 46;
-/// FRF-mode input bytes (`txpdo2_t`).
-pub const FRF_TX_BYTES: usize = 49;
+/// Normal-mode output bytes (`rxpdo1_t`, 20).
+pub const NORMAL_RX_BYTES: usize = oxicat_slave::pdo_bytes(RX_PDOS, &[0x1600]);
+/// Normal-mode input bytes (`txpdo1_t`, 64).
+pub const NORMAL_TX_BYTES: usize = oxicat_slave::pdo_bytes(TX_PDOS, &[0x1A00]);
+/// FRF-mode output bytes (`rxpdo2_t`, 46).
+pub const FRF_RX_BYTES: usize = oxicat_slave::pdo_bytes(RX_PDOS, &[0x1601]);
+/// FRF-mode input bytes (`txpdo2_t`, 49).
+pub const FRF_TX_BYTES: usize = oxicat_slave::pdo_bytes(TX_PDOS, &[0x1A01]);
 
 /// ESI/SII description data.
 pub const INFO: DeviceInfo = DeviceInfo {

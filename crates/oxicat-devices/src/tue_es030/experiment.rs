@@ -313,29 +313,44 @@ pub fn run_normal(
 }
 
 /// CSV of a normal-mode run: cycle, time, then per motor mcom, setpoint, count, velocity,
-/// current, and the line voltage.
+/// current, and the line voltage. Scaled columns are in the units the device declares
+/// (setpoint and current in A, velocity in rad/s, line voltage in V), with the decimals of
+/// one raw step.
 pub fn normal_csv(rows: &[NormalRow]) -> String {
+    use oxicat_master::value::format_scaled;
+    let sc = |index: u16, sub: u8| {
+        super::device::DEF
+            .scale(index, sub)
+            .expect("the TUeES030 declares this entry's unit")
+    };
+    let (setpoint, velocity, current) = (sc(0x7000, 2), sc(0x6000, 4), sc(0x6000, 5));
+    let line = sc(0x6010, 12);
     let mut s = String::from("cycle,time [s]");
     for k in 1..=3 {
         s += &format!(
-            ",mcom{k},setpoint{k} [mA],count{k},timestamp{k},velocity{k} [0.1 rad/s],current{k} [mA]"
+            ",mcom{k},setpoint{k} [{}],count{k},timestamp{k},velocity{k} [{}],current{k} [{}]",
+            setpoint.unit, velocity.unit, current.unit
         );
     }
-    s += ",linevoltage [10 mV],ectime\n";
+    s += &format!(",linevoltage [{}],ectime\n", line.unit);
     for r in rows {
         s += &format!("{},{:.6}", r.cycle, r.time);
         for k in 0..3 {
             s += &format!(
                 ",{},{},{},{},{},{}",
                 r.output.mcom[k],
-                r.output.setpoint[k],
+                format_scaled(r.output.setpoint[k].into(), &setpoint),
                 r.input.count[k],
                 r.input.timestamp[k],
-                r.input.velocity[k],
-                r.input.current[k]
+                format_scaled(r.input.velocity[k].into(), &velocity),
+                format_scaled(r.input.current[k].into(), &current)
             );
         }
-        s += &format!(",{},{}\n", r.input.linevoltage, r.input.ectime);
+        s += &format!(
+            ",{},{}\n",
+            format_scaled(r.input.linevoltage.into(), &line),
+            r.input.ectime
+        );
     }
     s
 }

@@ -10,10 +10,20 @@ fn bytes(index: u16) -> usize {
 
 #[test]
 fn pdo_sizes_are_the_manuals() {
-    assert_eq!(bytes(0x1600), device::NORMAL_RX_BYTES);
-    assert_eq!(bytes(0x1A00), device::NORMAL_TX_BYTES);
-    assert_eq!(bytes(0x1601), device::FRF_RX_BYTES);
-    assert_eq!(bytes(0x1A01), device::FRF_TX_BYTES);
+    // The manual's packed structs: rxpdo1_t 20, txpdo1_t 64, rxpdo2_t 46, txpdo2_t 49 bytes.
+    assert_eq!(bytes(0x1600), 20);
+    assert_eq!(bytes(0x1A00), 64);
+    assert_eq!(bytes(0x1601), 46);
+    assert_eq!(bytes(0x1A01), 49);
+    assert_eq!(
+        [
+            device::NORMAL_RX_BYTES,
+            device::NORMAL_TX_BYTES,
+            device::FRF_RX_BYTES,
+            device::FRF_TX_BYTES
+        ],
+        [20, 64, 46, 49]
+    );
     assert_eq!(DEF.default_output_bits(), 160);
     assert_eq!(DEF.default_input_bits(), 512);
 }
