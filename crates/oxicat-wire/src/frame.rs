@@ -149,36 +149,17 @@ impl<'a> Iterator for Datagrams<'a> {
 }
 
 /// Calls `f` for each datagram of the EtherCAT frame in `buf` (starting at the EtherCAT
-/// header), with mutable access to data and working counter. Returns the number of
-/// datagrams visited, or the error that stopped the walk (datagrams before it were visited).
+/// header), with mutable access to data and working counter and a decoded copy of the
+/// header. Returns the number of datagrams visited, or the error that stopped the walk
+/// (datagrams before it were visited). The walk is [`crate::view::walk_datagrams`]'s.
 pub fn for_each_datagram_mut<E: From<WireError>>(
     buf: &mut [u8],
     mut f: impl FnMut(&mut DatagramMut<'_>) -> Result<(), E>,
 ) -> Result<usize, E> {
-    let header = EcatHeader::parse(buf)?;
-    if header.frame_type != FrameType::Datagrams {
-        return Err(WireError::UnknownType(header.frame_type.code()).into());
-    }
-    let end = ECAT_HEADER_LEN + header.len as usize;
-    if buf.len() < end {
-        return Err(WireError::LengthMismatch {
-            declared: header.len as usize,
-            available: buf.len() - ECAT_HEADER_LEN,
-        }
-        .into());
-    }
-    let mut rest = &mut buf[ECAT_HEADER_LEN..end];
-    let mut n = 0;
-    loop {
-        let (mut dg, tail) = DatagramMut::parse(rest)?;
-        let more = dg.header.more_follows;
-        f(&mut dg)?;
-        n += 1;
-        if !more {
-            return Ok(n);
-        }
-        rest = tail;
-    }
+    crate::view::walk_datagrams(buf, |v| {
+        let (mut dg, _) = DatagramMut::parse(v.into_inner())?;
+        f(&mut dg)
+    })
 }
 
 /// Builds an Ethernet frame with one or more datagrams, padded to the Ethernet minimum.

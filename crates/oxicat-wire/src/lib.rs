@@ -27,6 +27,7 @@ pub mod regs;
 pub mod sii;
 pub mod soe;
 pub mod udp;
+pub mod view;
 
 pub use datagram::{Command, DatagramHeader, DatagramMut, DatagramRef};
 pub use error::WireError;

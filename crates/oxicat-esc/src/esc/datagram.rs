@@ -37,25 +37,28 @@ impl Esc {
     /// Same effects as `process_frame` plus the exit-port search on such a frame.
     #[inline(always)]
     pub(super) fn process_fused(&mut self, frame: &mut [u8], t: u64) -> Option<Forward> {
-        // Frame header, command, index, address and length word in one load.
-        let h = u64::from_le_bytes(*frame.first_chunk::<8>()?);
-        let lf = u16::from_le_bytes(*frame.get(8..10)?.first_chunk::<2>()?);
-        let w = h as u16;
-        let cmd = (h >> 16) as u8;
-        let len = (lf & 0x07FF) as usize;
+        // The frame header and the first datagram's header through wire's views, over a
+        // fixed-size copy of the first 12 bytes so that every field read is one load with
+        // no bounds check left.
+        let dg_at = ECAT_HEADER_LEN;
+        let head: &[u8; ECAT_HEADER_LEN + DG_HEADER_LEN] = frame.first_chunk()?;
+        let f = view::Frame::new_unchecked(&head[..]);
+        let d = view::Datagram::new_unchecked(&head[dg_at..]);
+        let cmd = d.command_raw();
+        let len = d.data_len();
         // Frame end (header length); the single datagram must fit in it.
-        let end = ECAT_HEADER_LEN + (w & 0x07FF) as usize;
-        let dg_end = ECAT_HEADER_LEN + DG_HEADER_LEN + len + 2;
+        let end = f.end();
+        let dg_end = dg_at + DG_HEADER_LEN + len + 2;
         // One logical datagram (no more-follows) in a datagram frame.
-        if w >> 12 != ECAT_TYPE_DATAGRAMS
+        if !f.is_datagrams()
             || cmd.wrapping_sub(CMD_LRD) > CMD_LRW - CMD_LRD
-            || lf & 0x8000 != 0
+            || d.more_follows()
             || dg_end > end
             || end > frame.len()
         {
             return None;
         }
-        let ds = h >> 32;
+        let ds = u64::from(d.address());
         let (lo, hi) = (self.fused.lo, self.fused.hi);
         if ds > lo || hi > ds + len as u64 {
             return None;
@@ -102,12 +105,13 @@ impl Esc {
         let inc = self.fused.inc[(cmd - CMD_LRD) as usize];
         // Some step ran exactly when the working counter counts.
         self.events_dirty |= inc != 0;
-        let hirq = u16::from_le_bytes([frame[10], frame[11]]);
-        if irq & !hirq != 0 {
-            frame[10..12].copy_from_slice(&(hirq | irq).to_le_bytes());
-        }
+        // IRQ through a view of the fixed-size header; the working counter where the
+        // checked length put it.
+        let head: &mut [u8; DG_HEADER_LEN] = frame.get_mut(dg_at..)?.first_chunk_mut()?;
+        view::Datagram::new_unchecked(&mut head[..]).or_irq(irq);
         if inc != 0 {
-            let wkc = &mut frame[dg_end - 2..dg_end];
+            let at = dg_at + view::field::wkc(len).start;
+            let wkc = frame.get_mut(at..at + 2)?;
             let w = u16::from_le_bytes([wkc[0], wkc[1]]).wrapping_add(inc);
             wkc.copy_from_slice(&w.to_le_bytes());
         }
@@ -199,71 +203,39 @@ impl Esc {
         self.frame_ok = true;
     }
 
-    /// Walks the datagrams of `frame` exactly as `oxicat_wire::frame::for_each_datagram_mut`
-    /// does (same bounds checks, stops at the first malformed datagram), but hands logical
-    /// datagrams to [`Esc::logical_datagram`] without building a decoded header.
+    /// Walks the datagrams of `frame` with wire's one walker (it stops at the first
+    /// malformed datagram, as an ESC does: the rest of the frame passes untouched) and hands
+    /// logical datagrams to [`Esc::logical_datagram`] as views, without decoding a header.
     #[inline]
     pub(super) fn walk_datagrams(&mut self, frame: &mut [u8]) {
-        let Some(hdr) = frame.get(..ECAT_HEADER_LEN) else {
-            return;
-        };
-        let w = u16::from_le_bytes([hdr[0], hdr[1]]);
-        if w >> 12 != ECAT_TYPE_DATAGRAMS {
-            return;
-        }
-        let end = ECAT_HEADER_LEN + (w & 0x07FF) as usize;
-        let Some(mut rest) = frame.get_mut(ECAT_HEADER_LEN..end) else {
-            return;
-        };
-        loop {
-            let Some(h) = rest.get(..DG_HEADER_LEN) else {
-                return;
-            };
-            let cmd = h[0];
-            let lf = u16::from_le_bytes([h[6], h[7]]);
-            let len = (lf & 0x07FF) as usize;
-            let total = DG_HEADER_LEN + len + 2;
-            if rest.len() < total {
-                return;
-            }
-            let (dg, tail) = take(&mut rest).split_at_mut(total);
+        let _ = view::walk_datagrams::<WireError>(frame, |dg| {
+            let cmd = dg.command_raw();
             if (CMD_LRD..=CMD_LRW).contains(&cmd) {
                 self.logical_datagram(dg, cmd);
-            } else if let Ok((mut d, _)) = DatagramMut::parse(dg) {
+            } else if let Ok((mut d, _)) = DatagramMut::parse(dg.into_inner()) {
                 self.process_datagram(&mut d);
             }
-            if lf & 0x8000 == 0 {
-                return;
-            }
-            rest = tail;
-        }
+            Ok(())
+        });
     }
 
-    /// A logical datagram (`dg`: header, data and working counter, already bounds-checked;
-    /// `cmd` is LRD, LWR or LRW): what [`Esc::process_datagram`] does for it, on the raw bytes.
+    /// A logical datagram (a checked view; `cmd` is LRD, LWR or LRW): what
+    /// [`Esc::process_datagram`] does for it, in place.
     #[inline]
-    pub(super) fn logical_datagram(&mut self, dg: &mut [u8], cmd: u8) {
+    pub(super) fn logical_datagram(&mut self, mut dg: view::Datagram<&mut [u8]>, cmd: u8) {
         if self.events_dirty && self.ecat_mask != 0 {
             self.refresh_events();
         }
         let irq = self.ecat_irq;
-        let (hdr, rest) = dg.split_at_mut(DG_HEADER_LEN);
-        let (data, wkc) = rest.split_at_mut(rest.len() - 2);
-        let addr = u32::from_le_bytes([hdr[2], hdr[3], hdr[4], hdr[5]]);
+        let addr = dg.address();
         let cmd = match cmd {
             CMD_LRD => Command::Lrd,
             CMD_LWR => Command::Lwr,
             _ => Command::Lrw,
         };
-        let inc = self.logical(cmd, addr, data);
-        let hirq = u16::from_le_bytes([hdr[8], hdr[9]]);
-        if irq & !hirq != 0 {
-            hdr[8..10].copy_from_slice(&(hirq | irq).to_le_bytes());
-        }
-        if inc != 0 {
-            let w = u16::from_le_bytes([wkc[0], wkc[1]]).wrapping_add(inc);
-            wkc.copy_from_slice(&w.to_le_bytes());
-        }
+        let inc = self.logical(cmd, addr, dg.data_mut());
+        dg.or_irq(irq);
+        dg.add_wkc(inc);
     }
 
     pub(super) fn configured_match(&self, adp: u16) -> bool {

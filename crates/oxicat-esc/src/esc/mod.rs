@@ -18,7 +18,7 @@ use alloc::vec::Vec;
 use core::mem::take;
 use core::sync::atomic::{AtomicU32, AtomicU8, Ordering};
 
-use oxicat_wire::{Command, DatagramMut};
+use oxicat_wire::{view, Command, DatagramMut, WireError};
 
 use crate::config::{DcSupport, EscConfig};
 use crate::dc::Dc;
@@ -88,7 +88,6 @@ const ECAT_EV_DL: u16 = regs::ECAT_EV_DL_STATUS;
 const ECAT_EV_AL: u16 = regs::ECAT_EV_AL_STATUS;
 const REG_END: usize = regs::PROCESS_RAM as usize;
 const ECAT_HEADER_LEN: usize = oxicat_wire::frame::ECAT_HEADER_LEN;
-const ECAT_TYPE_DATAGRAMS: u16 = oxicat_wire::frame::FrameType::Datagrams.code() as u16;
 const DG_HEADER_LEN: usize = oxicat_wire::datagram::DATAGRAM_HEADER_LEN;
 /// Command codes of the logical datagrams.
 const CMD_LRD: u8 = Command::Lrd as u8;
