@@ -22,6 +22,8 @@ use oxicat_devices::cia402::rig::{attach, BldcJointParams};
 use oxicat_master::{Link, Master, MasterError};
 use oxicat_sim::segment::Segment;
 
+use crate::{CliError, UsageError};
+
 /// Arguments of `oxicat cia402`.
 #[derive(Debug, clap::Args)]
 pub struct Cia402Args {
@@ -78,7 +80,7 @@ pub enum Cia402Verb {
 }
 
 /// Parses a mode name or number.
-pub fn parse_mode(s: &str) -> Result<i8, MasterError> {
+pub fn parse_mode(s: &str) -> Result<i8, UsageError> {
     Ok(match s.to_ascii_lowercase().as_str() {
         "pp" => mode::PP,
         "pv" => mode::PV,
@@ -89,7 +91,7 @@ pub fn parse_mode(s: &str) -> Result<i8, MasterError> {
         "cst" => mode::CST,
         n => n
             .parse()
-            .map_err(|_| MasterError::Usage(format!("unknown mode {s:?}")))?,
+            .map_err(|_| UsageError::UnknownMode(s.to_string()))?,
     })
 }
 
@@ -101,50 +103,65 @@ pub const MIN_CYCLE_US: u64 = 100;
 pub const MAX_CYCLE_US: u64 = 50_000;
 
 /// Refuses arguments that cannot work, before a segment is built.
-fn check_args(a: &Cia402Args) -> Result<(), MasterError> {
+fn check_args(a: &Cia402Args) -> Result<(), UsageError> {
     let max = oxicat_master::MAX_SLAVES;
     if a.iface.is_none() && !(1..=max).contains(&a.joints) {
-        return Err(MasterError::Usage(format!(
-            "--joints {}: 1 … {max} drives (the master's group holds {max})",
-            a.joints
-        )));
+        return Err(UsageError::OutOfRange {
+            option: "--joints",
+            value: a.joints.to_string(),
+            allowed: format!("1 … {max} drives (the master's group holds {max})"),
+        });
     }
     if !(MIN_CYCLE_US..=MAX_CYCLE_US).contains(&a.cycle_us) {
-        return Err(MasterError::Usage(format!(
-            "--cycle-us {}: {MIN_CYCLE_US} … {MAX_CYCLE_US} µs (below {MIN_CYCLE_US} µs the master cannot keep the cycle; above {MAX_CYCLE_US} µs the drive's 100 ms process-data watchdog comes close)",
-            a.cycle_us
-        )));
+        return Err(UsageError::OutOfRange {
+            option: "--cycle-us",
+            value: a.cycle_us.to_string(),
+            allowed: format!("{MIN_CYCLE_US} … {MAX_CYCLE_US} µs (below {MIN_CYCLE_US} µs the master cannot keep the cycle; above {MAX_CYCLE_US} µs the drive's 100 ms process-data watchdog comes close)"),
+        });
     }
     if let Cia402Verb::Move { duration_ms, .. } = a.verb {
         if !(1..=3_600_000).contains(&duration_ms) {
-            return Err(MasterError::Usage(format!(
-                "--duration-ms {duration_ms}: 1 … 3600000 ms"
-            )));
+            return Err(UsageError::OutOfRange {
+                option: "--duration-ms",
+                value: duration_ms.to_string(),
+                allowed: "1 … 3600000 ms".into(),
+            });
         }
     }
     Ok(())
 }
 
-fn link(a: &Cia402Args) -> Result<Link, MasterError> {
+/// The virtual device, as errors name it.
+const BENCH: &str = "CiA402 joint";
+
+fn link(a: &Cia402Args) -> Result<Link, CliError> {
     if let Some(i) = &a.iface {
         return Ok(Link::Iface(i.clone()));
     }
     let mut seg = Segment::new();
-    let sii = oxicat_esi::sii::generate(&oxicat_devices::cia402::DEF)
-        .map_err(|e| MasterError::Usage(format!("SII of the CiA402 joint: {e}")))?;
+    let sii = oxicat_esi::sii::generate(&oxicat_devices::cia402::DEF).map_err(|error| {
+        CliError::BenchSii {
+            bench: BENCH,
+            error,
+        }
+    })?;
     for _ in 0..a.joints {
         let id = seg.add(oxicat_esc::Esc::new(
             oxicat_esc::EscConfig::et1100(),
             sii.clone(),
         ));
-        attach(&mut seg, id, BldcJointParams::default())
-            .map_err(|e| MasterError::Usage(format!("CiA402 joint firmware: {e}")))?;
+        attach(&mut seg, id, BldcJointParams::default()).map_err(|error| {
+            CliError::BenchFirmware {
+                bench: BENCH,
+                error,
+            }
+        })?;
     }
     Ok(Link::Sim(Arc::new(Mutex::new(seg))))
 }
 
 /// Runs `oxicat cia402`; returns the text it printed.
-pub fn run(a: Cia402Args) -> Result<String, MasterError> {
+pub fn run(a: Cia402Args) -> Result<String, CliError> {
     check_args(&a)?;
     let sim = a.iface.is_none();
     let mut m = Master::open(link(&a)?)?;

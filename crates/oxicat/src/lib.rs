@@ -4,7 +4,7 @@
 #![warn(missing_docs)]
 
 use std::io::Write;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 use clap::{Parser, Subcommand, ValueEnum};
 use oxicat_slave::DeviceDef;
@@ -21,6 +21,9 @@ pub mod sim_cmd;
 pub mod sweep_cmd;
 pub mod trot_cmd;
 pub mod tue_cmd;
+pub mod usage;
+
+pub use usage::UsageError;
 
 /// The command line.
 #[derive(Debug, Parser)]
@@ -123,6 +126,66 @@ pub enum CliError {
     Sim(sim_cmd::SimError),
     /// A master verb failed.
     Master(oxicat_master::MasterError),
+    /// A mistake in the arguments (see [`UsageError`]).
+    Usage(UsageError),
+    /// The SII image of an experiment's virtual device could not be generated.
+    BenchSii {
+        /// The device (`TUeES030`).
+        bench: &'static str,
+        /// Why.
+        error: oxicat_esi::Error,
+    },
+    /// The firmware of an experiment's virtual device could not be attached to its ESC.
+    BenchFirmware {
+        /// The device.
+        bench: &'static str,
+        /// Why.
+        error: oxicat_sim::firmware::AttachError,
+    },
+    /// `sii-write` failed after it had written words: the EEPROM is half written, and the
+    /// message says how to restore the old image.
+    SiiHalfWritten {
+        /// Why the write stopped.
+        error: oxicat_master::MasterError,
+        /// The slave.
+        position: usize,
+        /// Where its old image is (see [`master_cmd::restore_hint`]).
+        backup: PathBuf,
+        /// Words written.
+        written: usize,
+        /// Words of the image.
+        words: usize,
+    },
+    /// Points of `oxicat sweep` failed (the table has the others).
+    SweepFailed {
+        /// How many failed.
+        failed: usize,
+        /// Points in all.
+        points: usize,
+        /// The table written (`sweep.csv`).
+        table: PathBuf,
+        /// The first failure.
+        first: String,
+    },
+    /// A recording could not be converted to Parquet.
+    Parquet {
+        /// The Parquet file.
+        path: PathBuf,
+        /// Why.
+        error: String,
+    },
+}
+
+impl From<oxicat_master::MasterError> for CliError {
+    fn from(e: oxicat_master::MasterError) -> Self {
+        CliError::Master(e)
+    }
+}
+
+impl From<UsageError> for CliError {
+    fn from(e: UsageError) -> Self {
+        CliError::Usage(e)
+    }
 }
 
 impl std::fmt::Display for CliError {
@@ -139,6 +202,31 @@ impl std::fmt::Display for CliError {
             CliError::Io(e) => write!(f, "writing the output failed: {e}"),
             CliError::Sim(e) => write!(f, "{e}"),
             CliError::Master(e) => write!(f, "{e}"),
+            CliError::Usage(e) => write!(f, "{e}"),
+            CliError::BenchSii { bench, error } => write!(f, "SII of the {bench}: {error}"),
+            CliError::BenchFirmware { bench, error } => write!(f, "{bench} firmware: {error}"),
+            CliError::SiiHalfWritten {
+                error,
+                position,
+                backup,
+                written,
+                words,
+            } => write!(
+                f,
+                "{error}\n{} ({written} of {words} words were written)",
+                master_cmd::restore_hint(*position, backup)
+            ),
+            CliError::SweepFailed {
+                failed,
+                points,
+                table,
+                first,
+            } => write!(
+                f,
+                "{failed} of {points} points failed (see {}): {first}",
+                table.display()
+            ),
+            CliError::Parquet { path, error } => write!(f, "{}: {error}", path.display()),
         }
     }
 }
@@ -184,39 +272,49 @@ pub fn device_output(name: &str, what: DeviceOutput) -> Result<Vec<u8>, CliError
     r.map_err(CliError::Device)
 }
 
-/// Runs a parsed command line.
+/// Runs a parsed command line: one function per verb (`master_cmd::run` and `foe_cmd::run`
+/// dispatch their verbs the same way).
 pub fn run(cli: Cli) -> Result<(), CliError> {
     match cli.command {
-        Command::Device(a) if a.name == "list" => {
-            print!("{}", igh_cmd::device_list());
-            Ok(())
-        }
-        Command::Version => {
-            print!("{}", igh_cmd::version());
-            Ok(())
-        }
+        Command::Device(a) if a.name == "list" => device_list(),
+        Command::Device(a) => device(a),
+        Command::Version => version(),
         Command::FwImage {
             device,
             payload,
             output,
-        } => {
-            print!("{}", igh_cmd::fw_image(&device, &payload, &output)?);
-            Ok(())
-        }
-        Command::Device(a) => {
-            let bytes = device_output(&a.name, a.what)?;
-            output::write_output(a.output.as_deref(), &bytes, &mut std::io::stdout().lock())
-                .map_err(CliError::Master)
-        }
-        Command::Cia402(a) => print_text(&cia402_cmd::run(a).map_err(CliError::Master)?),
+        } => fw_image(&device, &payload, &output),
+        Command::Cia402(a) => print_text(&cia402_cmd::run(a)?),
         Command::Sim(a) => sim_cmd::run(a).map_err(CliError::Sim),
         Command::HubDemo(a) => hub_cmd::run(a),
-        Command::Master(c) => {
-            master_cmd::run(c, &mut std::io::stdout().lock()).map_err(CliError::Master)
-        }
-        Command::Foe(c) => foe_cmd::run(c, &mut std::io::stdout().lock()).map_err(CliError::Master),
-        Command::Trot(a) => print_text(&trot_cmd::run(a).map_err(CliError::Master)?),
-        Command::Sweep(a) => print_text(&sweep_cmd::run(a).map_err(CliError::Master)?),
-        Command::TueEs030(a) => print_text(&tue_cmd::run(a).map_err(CliError::Master)?),
+        Command::Master(c) => master_cmd::run(c, &mut std::io::stdout().lock()),
+        Command::Foe(c) => foe_cmd::run(c, &mut std::io::stdout().lock()),
+        Command::Trot(a) => print_text(&trot_cmd::run(a)?),
+        Command::Sweep(a) => print_text(&sweep_cmd::run(a)?),
+        Command::TueEs030(a) => print_text(&tue_cmd::run(a)?),
     }
+}
+
+/// `oxicat device list`.
+fn device_list() -> Result<(), CliError> {
+    print!("{}", igh_cmd::device_list());
+    Ok(())
+}
+
+/// `oxicat device <name> <what> [-o file]`.
+fn device(a: DeviceArgs) -> Result<(), CliError> {
+    let bytes = device_output(&a.name, a.what)?;
+    output::write_output(a.output.as_deref(), &bytes, &mut std::io::stdout().lock())
+}
+
+/// `oxicat version`.
+fn version() -> Result<(), CliError> {
+    print!("{}", igh_cmd::version());
+    Ok(())
+}
+
+/// `oxicat fw-image <device> <payload> -o <image>`.
+fn fw_image(device: &str, payload: &Path, output: &Path) -> Result<(), CliError> {
+    print!("{}", igh_cmd::fw_image(device, payload, output)?);
+    Ok(())
 }

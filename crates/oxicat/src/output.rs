@@ -8,6 +8,8 @@ use std::path::{Path, PathBuf};
 
 use oxicat_master::MasterError;
 
+use crate::{CliError, UsageError};
+
 /// Whether `path` means standard output (`-`).
 pub fn is_stdout(path: &Path) -> bool {
     path.as_os_str() == "-"
@@ -25,10 +27,10 @@ pub struct AtomicFile {
 impl AtomicFile {
     /// Creates the temporary file for `dest` (in `dest`'s directory, so the rename stays on
     /// one file system).
-    pub fn create(dest: &Path) -> Result<Self, MasterError> {
+    pub fn create(dest: &Path) -> Result<Self, CliError> {
         let name = dest
             .file_name()
-            .ok_or_else(|| MasterError::Usage(format!("{} is not a file name", dest.display())))?;
+            .ok_or_else(|| UsageError::NotAFileName(dest.to_path_buf()))?;
         let dir = match dest.parent() {
             Some(d) if !d.as_os_str().is_empty() => d.to_path_buf(),
             _ => PathBuf::from("."),
@@ -92,14 +94,14 @@ impl Drop for AtomicFile {
 
 /// Writes `bytes` to `dest` through a temporary file (see [`AtomicFile`]); `-` is standard
 /// output.
-pub fn write_file(dest: &Path, bytes: &[u8]) -> Result<(), MasterError> {
+pub fn write_file(dest: &Path, bytes: &[u8]) -> Result<(), CliError> {
     if is_stdout(dest) {
-        return write_stdout(&mut std::io::stdout().lock(), bytes);
+        return Ok(write_stdout(&mut std::io::stdout().lock(), bytes)?);
     }
     let mut f = AtomicFile::create(dest)?;
     f.write_all(bytes)
         .map_err(|e| MasterError::File(dest.to_path_buf(), e))?;
-    f.commit()
+    Ok(f.commit()?)
 }
 
 /// Writes `bytes` to the file `output` (see [`write_file`]) or, without one or for `-`, to
@@ -108,10 +110,10 @@ pub fn write_output(
     output: Option<&Path>,
     bytes: &[u8],
     out: &mut dyn Write,
-) -> Result<(), MasterError> {
+) -> Result<(), CliError> {
     match output {
         Some(p) if !is_stdout(p) => write_file(p, bytes),
-        _ => write_stdout(out, bytes),
+        _ => Ok(write_stdout(out, bytes)?),
     }
 }
 
@@ -194,7 +196,7 @@ pub fn write_recording(
     stem: &str,
     csv: &str,
     format: Format,
-) -> Result<Vec<std::path::PathBuf>, MasterError> {
+) -> Result<Vec<std::path::PathBuf>, CliError> {
     let mut files = Vec::new();
     if format.csv() {
         let p = dir.join(format!("{stem}.csv"));

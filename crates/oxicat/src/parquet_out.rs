@@ -12,13 +12,14 @@
 use std::path::Path;
 use std::sync::Arc;
 
-use oxicat_master::MasterError;
 use parquet::basic::{Compression, Encoding, LogicalType, Repetition, Type as Physical};
 use parquet::data_type::{ByteArray, ByteArrayType, DoubleType, Int64Type};
 use parquet::file::metadata::KeyValue;
 use parquet::file::properties::WriterProperties;
 use parquet::file::writer::SerializedFileWriter;
 use parquet::schema::types::{ColumnPath, Type};
+
+use crate::CliError;
 
 #[derive(Debug, Clone, Copy, PartialEq)]
 enum Kind {
@@ -68,9 +69,11 @@ fn fields(line: &str) -> Vec<String> {
 
 /// Writes the table of `csv` (header line first) as a Parquet file at `path` (atomically:
 /// a file that exists is replaced only when the new one is complete).
-pub fn csv_to_parquet(csv: &str, path: &Path) -> Result<(), MasterError> {
-    let bytes = csv_to_parquet_bytes(csv)
-        .map_err(|e| MasterError::Usage(format!("{}: {e}", path.display())))?;
+pub fn csv_to_parquet(csv: &str, path: &Path) -> Result<(), CliError> {
+    let bytes = csv_to_parquet_bytes(csv).map_err(|error| CliError::Parquet {
+        path: path.to_path_buf(),
+        error,
+    })?;
     crate::output::write_file(path, &bytes)
 }
 

@@ -7,6 +7,8 @@ use oxicat_devices::laelaps::scenario::DEFAULT_TOML;
 use oxicat_devices::laelaps::sweep::{self, Axis};
 use oxicat_master::MasterError;
 
+use crate::{CliError, UsageError};
+
 /// Arguments of `oxicat sweep`.
 #[derive(Debug, clap::Args)]
 pub struct SweepArgs {
@@ -35,14 +37,14 @@ pub struct SweepArgs {
     pub quiet: bool,
 }
 
-fn parse_shard(s: &str) -> Result<(usize, usize), MasterError> {
+fn parse_shard(s: &str) -> Result<(usize, usize), UsageError> {
     s.split_once('/')
         .and_then(|(i, n)| Some((i.trim().parse().ok()?, n.trim().parse().ok()?)))
-        .ok_or_else(|| MasterError::Usage(format!("--shard {s}: expected I/N, e.g. 2/8")))
+        .ok_or_else(|| UsageError::BadShard(s.to_string()))
 }
 
 /// Runs `oxicat sweep`; returns what it prints.
-pub fn run(a: SweepArgs) -> Result<String, MasterError> {
+pub fn run(a: SweepArgs) -> Result<String, CliError> {
     let base = match &a.scenario {
         Some(p) => std::fs::read_to_string(p).map_err(|e| MasterError::File(p.clone(), e))?,
         None => DEFAULT_TOML.to_string(),
@@ -58,7 +60,12 @@ pub fn run(a: SweepArgs) -> Result<String, MasterError> {
         .jobs
         .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()));
     if jobs == 0 {
-        return Err(MasterError::Usage("--jobs 0: at least 1".into()));
+        return Err(UsageError::OutOfRange {
+            option: "--jobs",
+            value: jobs.to_string(),
+            allowed: "at least 1".into(),
+        }
+        .into());
     }
     std::fs::create_dir_all(&a.out).map_err(|e| MasterError::File(a.out.clone(), e))?;
     let quiet = a.quiet || !std::io::IsTerminal::is_terminal(&std::io::stderr());
@@ -118,13 +125,12 @@ pub fn run(a: SweepArgs) -> Result<String, MasterError> {
         a.out.display()
     ));
     if !failed.is_empty() {
-        return Err(MasterError::Usage(format!(
-            "{} of {} points failed (see {}): {}",
-            failed.len(),
-            results.len(),
-            path.display(),
-            failed[0]
-        )));
+        return Err(CliError::SweepFailed {
+            failed: failed.len(),
+            points: results.len(),
+            table: path,
+            first: failed.swap_remove(0),
+        });
     }
     Ok(out)
 }

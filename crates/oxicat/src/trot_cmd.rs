@@ -13,6 +13,8 @@ use oxicat_devices::laelaps::scenario::{ExecTime, PdiChip, Scenario};
 use oxicat_master::MasterError;
 use oxicat_sim::exec_time::Work;
 
+use crate::{CliError, UsageError};
+
 /// Arguments of `oxicat trot`.
 #[derive(Debug, clap::Args)]
 pub struct TrotArgs {
@@ -53,25 +55,34 @@ pub struct TrotArgs {
 }
 
 /// Runs `oxicat trot`; returns the text it printed.
-pub fn run(a: TrotArgs) -> Result<String, MasterError> {
+pub fn run(a: TrotArgs) -> Result<String, CliError> {
     let mut s = match &a.scenario {
         Some(p) => Scenario::load(p)?,
         None => Scenario::thesis(),
     };
     if let Some(d) = a.duration {
         if !(0.0..=3600.0).contains(&d) {
-            return Err(MasterError::Usage(format!("--duration {d}: 0…3600 s")));
+            return Err(UsageError::OutOfRange {
+                option: "--duration",
+                value: d.to_string(),
+                allowed: "0…3600 s".into(),
+            }
+            .into());
         }
         s = s.with_trot(d);
     }
     if let Some(p) = &a.pdi {
-        let chip = PdiChip::parse(p)
-            .ok_or_else(|| MasterError::Usage(format!("--pdi {p}: direct, lan9252 or et1100")))?;
+        let chip = PdiChip::parse(p).ok_or_else(|| UsageError::UnknownPdi(p.clone()))?;
         s = s.with_pdi(chip);
     }
     if let Some(m) = a.spi_mhz {
         if !(1..=100).contains(&m) {
-            return Err(MasterError::Usage(format!("--spi-mhz {m}: 1…100")));
+            return Err(UsageError::OutOfRange {
+                option: "--spi-mhz",
+                value: m.to_string(),
+                allowed: "1…100".into(),
+            }
+            .into());
         }
         s.pdi.spi_mhz = m;
     }

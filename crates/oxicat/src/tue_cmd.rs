@@ -20,6 +20,11 @@ use oxicat_devices::tue_es030::rig::{attach, TueConfig};
 use oxicat_master::{Link, Master, MasterError};
 use oxicat_sim::segment::Segment;
 
+use crate::{CliError, UsageError};
+
+/// The virtual device, as errors name it.
+const BENCH: &str = "TUeES030";
+
 /// Which experiment.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
 pub enum TueExperiment {
@@ -59,14 +64,18 @@ pub struct TueArgs {
     pub format: crate::output::Format,
 }
 
-fn bench() -> Result<Link, MasterError> {
+fn bench() -> Result<Link, CliError> {
     let mut seg = Segment::new();
     let def = &oxicat_devices::tue_es030::device::DEF;
-    let sii = oxicat_esi::sii::generate(def)
-        .map_err(|e| MasterError::Usage(format!("SII of the TUeES030: {e}")))?;
+    let sii = oxicat_esi::sii::generate(def).map_err(|error| CliError::BenchSii {
+        bench: BENCH,
+        error,
+    })?;
     let id = seg.add(oxicat_esc::Esc::new(oxicat_esc::EscConfig::et1200(), sii));
-    attach(&mut seg, id, &TueConfig::default())
-        .map_err(|e| MasterError::Usage(format!("TUeES030 firmware: {e}")))?;
+    attach(&mut seg, id, &TueConfig::default()).map_err(|error| CliError::BenchFirmware {
+        bench: BENCH,
+        error,
+    })?;
     Ok(Link::Sim(Arc::new(Mutex::new(seg))))
 }
 
@@ -96,18 +105,22 @@ pub fn bench_params() -> TueParams {
 
 /// Refuses a number that cannot work (NaN, infinite, out of range), naming the option and
 /// its range, before anything runs.
-pub fn check_args(a: &TueArgs) -> Result<(), MasterError> {
-    let range = |key: &str, v: f32, lo: f32, hi: f32, why: &str| {
+pub fn check_args(a: &TueArgs) -> Result<(), UsageError> {
+    let range = |option: &'static str, v: f32, lo: f32, hi: f32, why: &'static str| {
         if v.is_finite() && (lo..=hi).contains(&v) {
             Ok(())
         } else {
-            Err(MasterError::Usage(format!(
-                "{key} {v} is not in {lo} … {hi} ({why})"
-            )))
+            Err(UsageError::OutOfBounds {
+                option,
+                value: v.to_string(),
+                lo: lo.to_string(),
+                hi: hi.to_string(),
+                why,
+            })
         }
     };
     if a.p.is_empty() {
-        return Err(MasterError::Usage("--p: give at least one P gain".into()));
+        return Err(UsageError::NoGain);
     }
     for &p in &a.p {
         range("--p", p, 0.01, 1000.0, "current-loop P gain, V/A")?;
@@ -115,16 +128,19 @@ pub fn check_args(a: &TueArgs) -> Result<(), MasterError> {
     range("--i", a.i, 0.0, 1000.0, "current-loop I gain")?;
     range("--limit", a.limit, 0.0, 100.0, "integrator limit, A s")?;
     if !(2..=1000).contains(&a.periods) {
-        return Err(MasterError::Usage(format!(
-            "--periods {} is not in 2 … 1000 (the first period is discarded; 1000 are 100 s)",
-            a.periods
-        )));
+        return Err(UsageError::OutOfBounds {
+            option: "--periods",
+            value: a.periods.to_string(),
+            lo: "2".into(),
+            hi: "1000".into(),
+            why: "the first period is discarded; 1000 are 100 s",
+        });
     }
     Ok(())
 }
 
 /// Runs `oxicat tue-es030`; returns the text it printed.
-pub fn run(a: TueArgs) -> Result<String, MasterError> {
+pub fn run(a: TueArgs) -> Result<String, CliError> {
     check_args(&a)?;
     std::fs::create_dir_all(&a.out).map_err(|e| MasterError::File(a.out.clone(), e))?;
     match a.experiment {
@@ -133,7 +149,7 @@ pub fn run(a: TueArgs) -> Result<String, MasterError> {
     }
 }
 
-fn normal(a: &TueArgs) -> Result<String, MasterError> {
+fn normal(a: &TueArgs) -> Result<String, CliError> {
     let link = bench()?;
     let m = Master::open(link.clone())?;
     let (mut m, _) = tue::set_mode(&link, m, 0, TueMode::Normal)?;
@@ -229,7 +245,7 @@ fn describe(p: f32, mg: &Margins, share: f64, complete: bool) -> String {
     )
 }
 
-fn frf(a: &TueArgs) -> Result<String, MasterError> {
+fn frf(a: &TueArgs) -> Result<String, CliError> {
     let period = 2000;
     let periods = a.periods;
     let (sp, bins) = tue::multisine(period, periods, 10.0, 9900.0, 60, 400.0);
