@@ -230,6 +230,110 @@ impl Lan9252Model {
     }
 }
 
+/// One CS-low frame in progress on a byte-clocked bus (see [`Lan9252Model::clock_byte`]).
+#[derive(Debug, Default, Clone)]
+pub struct Lan9252Frame {
+    /// Bytes clocked so far.
+    n: usize,
+    /// Command and address bytes.
+    hdr: [u8; 3],
+    /// The DWORD last read in this frame (a read frame reads each DWORD once).
+    cache: Option<(u16, [u8; 4])>,
+    /// A write frame left a DWORD incomplete.
+    touched: bool,
+}
+
+impl Lan9252Frame {
+    /// The chip address of data byte `i` (after the header) of this frame.
+    fn at(&self, i: usize) -> u16 {
+        let field = u16::from_be_bytes([self.hdr[1], self.hdr[2]]);
+        let base = field & 0x3FFF;
+        if field & cmd::ADDR_INC != 0 {
+            base.wrapping_add(i as u16)
+        } else if is_rd_fifo(base) || is_wr_fifo(base) {
+            base
+        } else {
+            (base & !3) | ((base as usize + i) & 3) as u16
+        }
+    }
+}
+
+impl Lan9252Model {
+    /// Clocks one byte of the frame `f` (CS low): MOSI in, MISO out, with the effects a
+    /// real chip has at that byte — how an emulated MCU's SPI peripheral, which moves a
+    /// byte at a time and needs each read byte before it sends the next, drives the chip.
+    /// [`Model::frame`] is exactly this over a whole frame; end it with
+    /// [`Lan9252Model::end_frame`] when CS goes high.
+    pub fn clock_byte(&mut self, f: &mut Lan9252Frame, mosi: u8) -> u8 {
+        let k = f.n;
+        f.n += 1;
+        if k < 3 {
+            f.hdr[k] = mosi;
+            return 0xFF;
+        }
+        match f.hdr[0] {
+            cmd::READ | cmd::FAST_READ => {
+                let start = if f.hdr[0] == cmd::FAST_READ { 4 } else { 3 };
+                if k < start {
+                    return 0xFF;
+                }
+                let a = f.at(k - start);
+                if is_rd_fifo(a) {
+                    match self.rd_fifo.pop_front() {
+                        Some(b) => {
+                            if self.rd_fifo.is_empty() {
+                                self.rd_active = false;
+                            }
+                            b
+                        }
+                        None => {
+                            self.proto_err();
+                            0xFF
+                        }
+                    }
+                } else {
+                    let dw = a & !3;
+                    let v = match f.cache {
+                        Some((d, v)) if d == dw => v,
+                        _ => {
+                            let v = self.read_reg(dw).to_le_bytes();
+                            f.cache = Some((dw, v));
+                            v
+                        }
+                    };
+                    v[(a & 3) as usize]
+                }
+            }
+            cmd::WRITE => {
+                let a = f.at(k - 3);
+                if is_wr_fifo(a) {
+                    self.fifo_push(mosi);
+                } else {
+                    self.pend[(a & 3) as usize] = mosi;
+                    f.touched = true;
+                    if a & 3 == 3 {
+                        let v = u32::from_le_bytes(self.pend);
+                        self.write_reg(a & !3, v);
+                        f.touched = false;
+                    }
+                }
+                0xFF
+            }
+            _ => 0xFF,
+        }
+    }
+
+    /// CS goes high: a frame too short for a header, an unknown command or a partial DWORD
+    /// write counts as a protocol error, as in [`Model::frame`].
+    pub fn end_frame(&mut self, f: Lan9252Frame) {
+        let known = matches!(f.hdr[0], cmd::READ | cmd::FAST_READ | cmd::WRITE);
+        // A partial DWORD write: the LAN9252 requires whole DWORDs.
+        if f.n < 3 || !known || f.touched {
+            self.proto_err();
+        }
+    }
+}
+
 fn is_rd_fifo(a: u16) -> bool {
     a < 0x20
 }
@@ -243,79 +347,9 @@ impl Model for Lan9252Model {
     }
 
     fn frame(&mut self, mosi: &[u8], _delays: &[(usize, u32)]) -> Vec<u8> {
-        let mut miso = vec![0xFFu8; mosi.len()];
-        if mosi.len() < 3 {
-            self.proto_err();
-            return miso;
-        }
-        let field = u16::from_be_bytes([mosi[1], mosi[2]]);
-        let inc = field & cmd::ADDR_INC != 0;
-        let base = field & 0x3FFF;
-        let at = |i: usize| -> u16 {
-            if inc {
-                base.wrapping_add(i as u16)
-            } else if is_rd_fifo(base) || is_wr_fifo(base) {
-                base
-            } else {
-                (base & !3) | ((base as usize + i) & 3) as u16
-            }
-        };
-        match mosi[0] {
-            cmd::READ | cmd::FAST_READ => {
-                let start = if mosi[0] == cmd::FAST_READ { 4 } else { 3 };
-                let mut cache: Option<(u16, [u8; 4])> = None;
-                for (k, m) in miso.iter_mut().enumerate().skip(start) {
-                    let a = at(k - start);
-                    *m = if is_rd_fifo(a) {
-                        match self.rd_fifo.pop_front() {
-                            Some(b) => {
-                                if self.rd_fifo.is_empty() {
-                                    self.rd_active = false;
-                                }
-                                b
-                            }
-                            None => {
-                                self.proto_err();
-                                0xFF
-                            }
-                        }
-                    } else {
-                        let dw = a & !3;
-                        let v = match cache {
-                            Some((d, v)) if d == dw => v,
-                            _ => {
-                                let v = self.read_reg(dw).to_le_bytes();
-                                cache = Some((dw, v));
-                                v
-                            }
-                        };
-                        v[(a & 3) as usize]
-                    };
-                }
-            }
-            cmd::WRITE => {
-                let mut touched = false;
-                for (i, &b) in mosi.iter().enumerate().skip(3) {
-                    let a = at(i - 3);
-                    if is_wr_fifo(a) {
-                        self.fifo_push(b);
-                        continue;
-                    }
-                    self.pend[(a & 3) as usize] = b;
-                    touched = true;
-                    if a & 3 == 3 {
-                        let v = u32::from_le_bytes(self.pend);
-                        self.write_reg(a & !3, v);
-                        touched = false;
-                    }
-                }
-                if touched {
-                    // A partial DWORD write: the LAN9252 requires whole DWORDs.
-                    self.proto_err();
-                }
-            }
-            _ => self.proto_err(),
-        }
+        let mut f = Lan9252Frame::default();
+        let miso = mosi.iter().map(|&b| self.clock_byte(&mut f, b)).collect();
+        self.end_frame(f);
         miso
     }
 

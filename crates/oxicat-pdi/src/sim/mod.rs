@@ -12,7 +12,7 @@ mod et1100;
 mod lan9252;
 
 pub use et1100::Et1100Model;
-pub use lan9252::Lan9252Model;
+pub use lan9252::{Lan9252Frame, Lan9252Model};
 
 use core::convert::Infallible;
 use embedded_hal::digital::{self, InputPin};
