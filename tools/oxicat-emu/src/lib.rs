@@ -17,9 +17,10 @@
 //! | RCC | reset values; HSE/PLL/PLLI2S/PLLSAI/LSE/LSI ready flags follow their enables, SWS follows SW |
 //! | PWR | VOSRDY set; over-drive ready flags follow ODEN/ODSWEN |
 //! | FLASH | ACR stored (latency reads back) |
+//! | bit-band alias | 0x4200_0000.. : a word per peripheral bit, read-modify-write of the register |
 //! | GPIOA..C | registers stored; BSRR sets/resets ODR; IDR = ODR for outputs, PA10 = LAN9252 IRQ, PB3/PB5 = SYNC0/SYNC1, PC13 = button released |
 //! | SPI1 | a byte per DR write clocked through the chip (`Lan9252Model::clock_byte`) while PB6 (CS) is low; TXE always set, RXNE until DR is read; bus time counted at the CR1 baud rate |
-//! | SysTick | CSR/RVR/CVR/CALIB, COUNTFLAG from the cycle count |
+//! | SysTick | CSR/RVR/CVR/CALIB, COUNTFLAG from the cycle count (processor clock or HCLK/8) |
 //! | SCB | CPACR and the rest of the SCS page stored (no exceptions are taken yet) |
 //!
 //! Time: the CPU's cycle count is the number of instructions executed (one cycle per
@@ -41,6 +42,8 @@ pub const FLASH: (u64, u64) = (0x0800_0000, 512 * 1024);
 pub const SRAM: (u64, u64) = (0x2000_0000, 128 * 1024);
 /// Peripheral space modelled (APB1, APB2, AHB1).
 const PERIPH: (u64, u64) = (0x4000_0000, 0x8_0000);
+/// The peripheral bit-band alias (one word per bit of `PERIPH`).
+const BITBAND: (u64, u64) = (0x4200_0000, PERIPH.1 * 32);
 /// The System Control Space page (SysTick, NVIC, SCB).
 const SCS: (u64, u64) = (0xE000_E000, 0x1000);
 /// CPU clock of the images (180 MHz SYSCLK).
@@ -315,7 +318,10 @@ impl Periph {
     fn syst_read(&mut self, off: u64) -> u32 {
         let rvr = u64::from(self.scs[(SYST - SCS.0 + 4) as usize / 4] & 0x00FF_FFFF);
         let csr = self.scs[(SYST - SCS.0) as usize / 4];
-        let period = rvr + 1;
+        // CLKSOURCE (bit 2): the processor clock, else the external reference HCLK/8; a
+        // period is RVR + 1 ticks.
+        let cycles_per_tick = if csr & 4 != 0 { 1 } else { 8 };
+        let period = (rvr + 1) * cycles_per_tick;
         let enabled = csr & 1 != 0;
         let elapsed = self.cycles.saturating_sub(self.syst_ref);
         if enabled && elapsed >= period {
@@ -330,7 +336,7 @@ impl Periph {
             }
             8 if enabled => {
                 let left = period - (self.cycles - self.syst_ref) % period;
-                (left % period) as u32
+                ((left / cycles_per_tick) % (rvr + 1)) as u32
             }
             0xC => 0x4000_0000 | (CPU_HZ / 8 / 100) as u32, // CALIB: NOREF, 10 ms at HCLK/8
             _ => self.scs[(SYST - SCS.0 + off) as usize / 4],
@@ -432,6 +438,24 @@ impl Board {
                 let mut p = w.borrow_mut();
                 let old = p.reg(a & !3);
                 p.write(a & !3, merge_sized(old, a, size, v));
+            }),
+        )
+        .map_err(fault)?;
+        // Bit-band alias: word k of the alias is bit k % 32 of word k / 32 of the block.
+        let (r, w) = (periph.clone(), periph.clone());
+        let target = |off: u64| (PERIPH.0 + (off / 128) * 4, ((off / 4) % 32) as u32);
+        uc.mmio_map(
+            BITBAND.0,
+            BITBAND.1,
+            Some(move |_: &mut Unicorn<'_, ()>, off: u64, _size: usize| {
+                let (a, bit) = target(off);
+                u64::from((r.borrow_mut().read(a) >> bit) & 1)
+            }),
+            Some(move |_: &mut Unicorn<'_, ()>, off: u64, _size: usize, v: u64| {
+                let (a, bit) = target(off);
+                let mut p = w.borrow_mut();
+                let old = p.reg(a);
+                p.write(a, (old & !(1 << bit)) | (u32::from(v & 1 != 0) << bit));
             }),
         )
         .map_err(fault)?;

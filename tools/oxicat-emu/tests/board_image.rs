@@ -1,0 +1,158 @@
+//! The STM32F446 + LAN9252 board image (`firmware/stm32f446-lan9252`, the demo device), the
+//! bytes that would be flashed, executed instruction by instruction: it boots, brings the
+//! LAN9252 up over the emulated SPI1, and its slave stack answers a master on the ECAT side
+//! (INIT → PREOP, an SDO upload of 0x1018:01).
+
+use std::path::PathBuf;
+
+use oxicat_emu::{Board, EmuError};
+use oxicat_esc::{Esc, EscConfig};
+use oxicat_pdi::sim::{BusConfig, Handle, Lan9252Model};
+use oxicat_wire::frame::FrameBuilder;
+use oxicat_wire::{Command, DatagramHeader, EcatFrame};
+
+/// The release ELF `.ci/run` builds before the tests.
+fn image() -> Option<Vec<u8>> {
+    let p = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join(
+        "../../firmware/stm32f446-lan9252/target/thumbv7em-none-eabihf/release/oxicat-firmware-stm32f446-lan9252",
+    );
+    match std::fs::read(&p) {
+        Ok(b) => Some(b),
+        Err(e) if std::env::var_os("CI").is_some() => {
+            panic!("{}: {e} (build it: cd firmware/stm32f446-lan9252 && cargo build --release)", p.display())
+        }
+        Err(e) => {
+            eprintln!("skipped: {}: {e}", p.display());
+            None
+        }
+    }
+}
+
+/// The master's side: single datagrams to the one ESC (position 0) at the board's time.
+struct Master {
+    chip: Handle<Lan9252Model>,
+}
+
+impl Master {
+    fn frame(&self, board: &Board, cmd: Command, ado: u16, data: &[u8]) -> (Vec<u8>, u16) {
+        let mut buf = vec![0u8; 1600];
+        let mut fb = FrameBuilder::new_bare(&mut buf).unwrap();
+        fb.push(DatagramHeader::physical(cmd, 0, 0, ado, data.len() as u16), data)
+            .unwrap();
+        let n = fb.finish();
+        buf.truncate(n);
+        let t = board.time_ns();
+        self.chip.with_esc(|esc| esc.forward(0, &mut buf, t, true));
+        let f = EcatFrame::parse(&buf).unwrap();
+        let d = f.datagrams().next().unwrap().unwrap();
+        (d.data.to_vec(), d.wkc)
+    }
+
+    fn wr(&self, b: &Board, ado: u16, data: &[u8]) {
+        assert_eq!(self.frame(b, Command::Apwr, ado, data).1, 1, "APWR {ado:#06x}");
+    }
+
+    fn rd(&self, b: &Board, ado: u16, len: usize) -> Vec<u8> {
+        let (d, wkc) = self.frame(b, Command::Aprd, ado, &vec![0; len]);
+        assert_eq!(wkc, 1, "APRD {ado:#06x}");
+        d
+    }
+
+    fn al_status(&self, b: &Board) -> u16 {
+        let s = self.rd(b, 0x0130, 2);
+        u16::from_le_bytes([s[0], s[1]])
+    }
+}
+
+fn boot() -> Option<(Board, Master)> {
+    let img = image()?;
+    let def = &oxicat_devices::demo::DEF;
+    let esc = Esc::new(EscConfig::lan9252(), oxicat_testkit::device::eeprom(def));
+    let chip = Lan9252Model::handle(esc, BusConfig::mhz(22));
+    let board = Board::new(&img, chip.clone()).expect("the image loads");
+    Some((board, Master { chip }))
+}
+
+#[test]
+fn the_demo_board_image_boots_reaches_preop_and_answers_an_sdo() {
+    let Some((mut b, m)) = boot() else { return };
+    // Boot: clocks, the 50 ms power-on wait on SysTick, the LAN9252's init over SPI and the
+    // stack's start-up, until the image is in its main loop (the stack polls AL control
+    // over SPI every pass: the frame count keeps rising).
+    let up = b
+        .run_until(200_000, 100_000_000, |b| b.spi_stats().frames > 200)
+        .unwrap_or_else(|e| panic!("{e}"));
+    let s = b.spi_stats();
+    assert!(up, "the image did not reach its main loop: {s:?}, PC {:#010x}", b.pc());
+    assert_eq!(s.bytes_without_cs, 0, "every byte inside a CS frame");
+    assert!(b.time_ns() >= 50_000_000, "the 50 ms power-on wait ran on SysTick");
+    assert_eq!(m.chip.stats().protocol_errors, 0, "the chip saw only well-formed frames");
+    assert_eq!(m.al_status(&b) & 0x1F, 0x01, "INIT after start-up");
+
+    // Mailbox SMs as the SII says (demo: 0x1000 / 0x1080, 128 bytes), then PREOP.
+    let sm = |start: u16, ctrl: u8| {
+        let mut r = [0u8; 8];
+        r[..2].copy_from_slice(&start.to_le_bytes());
+        r[2..4].copy_from_slice(&128u16.to_le_bytes());
+        r[4] = ctrl;
+        r[6] = 1; // enable
+        r
+    };
+    m.wr(&b, 0x0800, &sm(0x1000, 0x26));
+    m.wr(&b, 0x0808, &sm(0x1080, 0x22));
+    m.wr(&b, 0x0120, &2u16.to_le_bytes());
+    let preop = b
+        .run_until(50_000, 20_000_000, |b| m.al_status(b) & 0x1F == 0x02)
+        .unwrap_or_else(|e| panic!("{e}"));
+    assert!(preop, "AL status {:#06x}", m.al_status(&b));
+
+    // SDO upload 0x1018:01 (vendor ID): mailbox header, CoE header (SDO request), expedited
+    // initiate-upload request.
+    let mut req = vec![0u8; 128];
+    req[..6].copy_from_slice(&[10, 0, 0, 0, 0, 0x13]); // len 10, CoE, counter 1
+    req[6..8].copy_from_slice(&0x2000u16.to_le_bytes());
+    req[8..16].copy_from_slice(&[0x40, 0x18, 0x10, 0x01, 0, 0, 0, 0]);
+    m.wr(&b, 0x1000, &req);
+    let full = |b: &mut Board| m.rd(b, 0x080D, 1)[0] & 0x08 != 0;
+    let answered = b
+        .run_until(50_000, 20_000_000, full)
+        .unwrap_or_else(|e| panic!("{e}"));
+    assert!(answered, "no SDO response from the image");
+    let resp = m.rd(&b, 0x1080, 128);
+    assert_eq!(resp[5] & 0x0F, 0x03, "a CoE reply");
+    assert_eq!(u16::from_le_bytes([resp[6], resp[7]]) >> 12, 3, "SDO response");
+    assert_eq!(resp[8], 0x43, "expedited upload of 4 bytes");
+    let vendor = u32::from_le_bytes([resp[12], resp[13], resp[14], resp[15]]);
+    assert_eq!(vendor, oxicat_devices::demo::DEF.identity.vendor_id);
+    eprintln!(
+        "image: {} instructions, {:.1} ms simulated, SPI {:?}",
+        b.instructions(),
+        b.time_ns() as f64 * 1e-6,
+        b.spi_stats()
+    );
+}
+
+#[test]
+fn a_corrupt_image_is_a_fault_with_its_pc_not_a_hang() {
+    let Some(mut img) = image() else { return };
+    // Point the reset vector at an address no block maps: the first fetch faults.
+    let segs = oxicat_emu::elf_segments(&img).unwrap();
+    let flash = &segs[0];
+    let vt = img
+        .windows(flash.data.len().min(64))
+        .position(|w| w == &flash.data[..flash.data.len().min(64)])
+        .expect("the vector table is in the file");
+    img[vt + 4..vt + 8].copy_from_slice(&0x3000_0001u32.to_le_bytes());
+    let esc = Esc::new(
+        EscConfig::lan9252(),
+        oxicat_testkit::device::eeprom(&oxicat_devices::demo::DEF),
+    );
+    let mut b = Board::new(&img, Lan9252Model::handle(esc, BusConfig::mhz(22))).unwrap();
+    match b.run(1000) {
+        Err(EmuError::Fault { pc, reason }) => {
+            assert_eq!(pc & !1, 0x3000_0000, "{reason}");
+            assert!(reason.contains("FETCH") || reason.contains("UNMAPPED"), "{reason}");
+        }
+        other => panic!("expected a fault, got {other:?}"),
+    }
+}
