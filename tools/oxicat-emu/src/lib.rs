@@ -29,6 +29,8 @@
 
 #![warn(missing_docs)]
 
+pub mod node;
+
 use std::cell::RefCell;
 use std::rc::Rc;
 
@@ -433,12 +435,14 @@ impl Board {
                 let word = r.borrow_mut().read(a & !3);
                 read_sized(word, a, size)
             }),
-            Some(move |_: &mut Unicorn<'_, ()>, off: u64, size: usize, v: u64| {
-                let a = PERIPH.0 + off;
-                let mut p = w.borrow_mut();
-                let old = p.reg(a & !3);
-                p.write(a & !3, merge_sized(old, a, size, v));
-            }),
+            Some(
+                move |_: &mut Unicorn<'_, ()>, off: u64, size: usize, v: u64| {
+                    let a = PERIPH.0 + off;
+                    let mut p = w.borrow_mut();
+                    let old = p.reg(a & !3);
+                    p.write(a & !3, merge_sized(old, a, size, v));
+                },
+            ),
         )
         .map_err(fault)?;
         // Bit-band alias: word k of the alias is bit k % 32 of word k / 32 of the block.
@@ -451,12 +455,14 @@ impl Board {
                 let (a, bit) = target(off);
                 u64::from((r.borrow_mut().read(a) >> bit) & 1)
             }),
-            Some(move |_: &mut Unicorn<'_, ()>, off: u64, _size: usize, v: u64| {
-                let (a, bit) = target(off);
-                let mut p = w.borrow_mut();
-                let old = p.reg(a);
-                p.write(a, (old & !(1 << bit)) | (u32::from(v & 1 != 0) << bit));
-            }),
+            Some(
+                move |_: &mut Unicorn<'_, ()>, off: u64, _size: usize, v: u64| {
+                    let (a, bit) = target(off);
+                    let mut p = w.borrow_mut();
+                    let old = p.reg(a);
+                    p.write(a, (old & !(1 << bit)) | (u32::from(v & 1 != 0) << bit));
+                },
+            ),
         )
         .map_err(fault)?;
         let (r, w) = (periph.clone(), periph.clone());
@@ -468,26 +474,33 @@ impl Board {
                 let word = r.borrow_mut().scs_read(a & !3);
                 read_sized(word, a, size)
             }),
-            Some(move |_: &mut Unicorn<'_, ()>, off: u64, size: usize, v: u64| {
-                let a = SCS.0 + off;
-                let mut p = w.borrow_mut();
-                let old = p.scs[((a & !3) - SCS.0) as usize / 4];
-                p.scs_write(a & !3, merge_sized(old, a, size, v));
-            }),
+            Some(
+                move |_: &mut Unicorn<'_, ()>, off: u64, size: usize, v: u64| {
+                    let a = SCS.0 + off;
+                    let mut p = w.borrow_mut();
+                    let old = p.scs[((a & !3) - SCS.0) as usize / 4];
+                    p.scs_write(a & !3, merge_sized(old, a, size, v));
+                },
+            ),
         )
         .map_err(fault)?;
         // Cycles: one per instruction, counted per translated block as it runs (Thumb-2
         // instructions are 2 or 4 bytes: the block's bytes / 3 on average).
         let c = periph.clone();
-        uc.add_block_hook(1, 0, move |_: &mut Unicorn<'_, ()>, _addr: u64, size: u32| {
-            c.borrow_mut().cycles += u64::from(size.div_ceil(3));
-        })
+        uc.add_block_hook(
+            1,
+            0,
+            move |_: &mut Unicorn<'_, ()>, _addr: u64, size: u32| {
+                c.borrow_mut().cycles += u64::from(size.div_ceil(3));
+            },
+        )
         .map_err(fault)?;
         let mut vt = [0u8; 8];
         uc.mem_read(FLASH.0, &mut vt).map_err(fault)?;
         let sp = u32::from_le_bytes([vt[0], vt[1], vt[2], vt[3]]);
         let pc = u32::from_le_bytes([vt[4], vt[5], vt[6], vt[7]]);
-        uc.reg_write(RegisterARM::SP, u64::from(sp)).map_err(fault)?;
+        uc.reg_write(RegisterARM::SP, u64::from(sp))
+            .map_err(fault)?;
         Ok(Board {
             uc,
             periph,
@@ -573,7 +586,9 @@ mod tests {
 
     #[test]
     fn a_file_that_is_not_an_arm_elf_is_refused_with_the_reason() {
-        assert!(matches!(elf_segments(b"hello"), Err(EmuError::BadImage(w)) if w.contains("magic")));
+        assert!(
+            matches!(elf_segments(b"hello"), Err(EmuError::BadImage(w)) if w.contains("magic"))
+        );
         let mut e = vec![0u8; 64];
         e[..4].copy_from_slice(b"\x7fELF");
         e[4] = 2;
@@ -583,7 +598,9 @@ mod tests {
         e[18] = 62; // x86-64
         assert!(matches!(elf_segments(&e), Err(EmuError::BadImage(w)) if w.contains("ARM")));
         e[18] = 40;
-        assert!(matches!(elf_segments(&e), Err(EmuError::BadImage(w)) if w.contains("no loadable")));
+        assert!(
+            matches!(elf_segments(&e), Err(EmuError::BadImage(w)) if w.contains("no loadable"))
+        );
         // A program header table past the end.
         e[28] = 200;
         e[44] = 1;
