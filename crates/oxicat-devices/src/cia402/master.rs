@@ -177,27 +177,26 @@ impl Cia402Run {
     /// CSV: cycle, time, drive, controlword, mode, target, statusword, mode display,
     /// position, velocity, torque, error code.
     pub fn csv(&self) -> String {
-        let mut s = String::from(
-            "cycle,time [s],drive,controlword,mode,target position,statusword,mode display,position,velocity,torque,error code\n",
-        );
-        for r in &self.rows {
-            s += &format!(
-                "{},{:.6},{},0x{:04X},{},{},0x{:04X},{},{},{},{},0x{:04X}\n",
-                r.cycle,
-                r.time,
-                r.drive,
-                r.out.controlword,
-                r.out.mode,
-                r.out.target_position,
-                r.inp.statusword,
-                r.inp.mode_display,
-                r.inp.position,
-                r.inp.velocity,
-                r.inp.torque,
-                r.inp.error_code
-            );
-        }
-        s
+        let h = "cycle,time [s],drive,controlword,mode,target position,statusword,mode display,\
+                 position,velocity,torque,error code";
+        let body = self.rows.iter().map(|r| {
+            vec![
+                r.cycle.to_string(),
+                format!("{:.6}", r.time),
+                r.drive.to_string(),
+                format!("0x{:04X}", r.out.controlword),
+                r.out.mode.to_string(),
+                r.out.target_position.to_string(),
+                format!("0x{:04X}", r.inp.statusword),
+                r.inp.mode_display.to_string(),
+                r.inp.position.to_string(),
+                r.inp.velocity.to_string(),
+                r.inp.torque.to_string(),
+                format!("0x{:04X}", r.inp.error_code),
+            ]
+        });
+        let h = h.split(',').map(String::from).collect();
+        crate::csv_text(std::iter::once(h).chain(body)).expect("fixed columns")
     }
 }
 

@@ -315,29 +315,34 @@ pub fn run_normal(
 /// CSV of a normal-mode run: cycle, time, then per motor mcom, setpoint, count, velocity,
 /// current, and the line voltage.
 pub fn normal_csv(rows: &[NormalRow]) -> String {
-    let mut s = String::from("cycle,time [s]");
+    let mut h = vec!["cycle".to_string(), "time [s]".into()];
     for k in 1..=3 {
-        s += &format!(
-            ",mcom{k},setpoint{k} [mA],count{k},timestamp{k},velocity{k} [0.1 rad/s],current{k} [mA]"
-        );
+        h.extend([
+            format!("mcom{k}"),
+            format!("setpoint{k} [mA]"),
+            format!("count{k}"),
+            format!("timestamp{k}"),
+            format!("velocity{k} [0.1 rad/s]"),
+            format!("current{k} [mA]"),
+        ]);
     }
-    s += ",linevoltage [10 mV],ectime\n";
-    for r in rows {
-        s += &format!("{},{:.6}", r.cycle, r.time);
+    h.extend(["linevoltage [10 mV]".into(), "ectime".into()]);
+    let body = rows.iter().map(|r| {
+        let mut f = vec![r.cycle.to_string(), format!("{:.6}", r.time)];
         for k in 0..3 {
-            s += &format!(
-                ",{},{},{},{},{},{}",
-                r.output.mcom[k],
-                r.output.setpoint[k],
-                r.input.count[k],
-                r.input.timestamp[k],
-                r.input.velocity[k],
-                r.input.current[k]
-            );
+            f.extend([
+                r.output.mcom[k].to_string(),
+                r.output.setpoint[k].to_string(),
+                r.input.count[k].to_string(),
+                r.input.timestamp[k].to_string(),
+                r.input.velocity[k].to_string(),
+                r.input.current[k].to_string(),
+            ]);
         }
-        s += &format!(",{},{}\n", r.input.linevoltage, r.input.ectime);
-    }
-    s
+        f.extend([r.input.linevoltage.to_string(), r.input.ectime.to_string()]);
+        f
+    });
+    crate::csv_text(std::iter::once(h).chain(body)).expect("fixed columns")
 }
 
 /// The manual's flow control: entries to send for the fill level `buf`.
