@@ -17,6 +17,20 @@ pub mod demo;
 pub mod laelaps;
 #[cfg(feature = "bench")]
 pub mod registry;
+
+/// A CSV written in memory by the `csv` crate (which joins the fields and quotes those
+/// that need it; their formatting is the caller's), as text.
+#[cfg(feature = "bench")]
+pub(crate) fn csv_text(rows: impl IntoIterator<Item = Vec<String>>) -> Result<String, csv::Error> {
+    let mut w = csv::Writer::from_writer(Vec::new());
+    for r in rows {
+        w.write_record(&r)?;
+    }
+    let b = w
+        .into_inner()
+        .map_err(|e| csv::Error::from(e.into_error()))?;
+    Ok(String::from_utf8(b).expect("UTF-8 fields give UTF-8"))
+}
 #[cfg(feature = "toy")]
 pub mod toy;
 pub mod tue_es030;

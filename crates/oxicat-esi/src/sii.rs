@@ -1,6 +1,7 @@
 //! SII EEPROM image (ETG.2010) from a definition, and SII image → [`DeviceModel`]. All byte
 //! layouts come from `oxicat_wire::sii`.
 
+use ihex::{ReaderError, Record};
 use oxicat_slave::DeviceDef;
 use oxicat_wire::sii::{
     general_flags, write_category, write_strings, CategoryType, MailboxArea, SiiConfig, SiiDc,
@@ -400,55 +401,43 @@ pub fn parse_any(bytes: &[u8]) -> Result<DeviceModel, Error> {
     }
 }
 
-/// Decodes Intel HEX records (types 00, 01, 02, 04) into a flat image.
+/// Decodes Intel HEX (records read by the `ihex` crate; types 00–05, 03 and 05 ignored)
+/// into a flat image, gaps filled with 0xFF; lines are trimmed and blank lines skipped.
 pub fn intel_hex(text: &[u8]) -> Result<Vec<u8>, Error> {
-    let bad = |t: &str| Error::BadValue {
-        what: "Intel HEX record",
-        text: t.to_string(),
+    let bad = |what, line: &str| Error::BadValue {
+        what,
+        text: line.to_string(),
     };
-    let text = std::str::from_utf8(text).map_err(|_| bad("not UTF-8"))?;
+    let text = std::str::from_utf8(text).map_err(|_| bad("Intel HEX record", "not UTF-8"))?;
     let mut out = Vec::new();
     let mut base = 0usize;
     for line in text.lines().map(str::trim).filter(|l| !l.is_empty()) {
-        let hexpart = line.strip_prefix(':').ok_or_else(|| bad(line))?;
-        // Hex digits are ASCII; anything else would also split a character below.
-        if !hexpart.is_ascii() || hexpart.len() & 1 != 0 || hexpart.len() < 10 {
-            return Err(bad(line));
-        }
-        let b: Vec<u8> = (0..hexpart.len() / 2)
-            .map(|i| u8::from_str_radix(&hexpart[2 * i..2 * i + 2], 16))
-            .collect::<Result<_, _>>()
-            .map_err(|_| bad(line))?;
-        let n = b[0] as usize;
-        if b.len() != n + 5 {
-            return Err(Error::BadValue {
-                what: "Intel HEX record (its length byte does not match the record)",
-                text: line.to_string(),
-            });
-        }
-        let sum = b.iter().fold(0u8, |a, x| a.wrapping_add(*x));
-        if sum != 0 {
-            return Err(Error::BadValue {
-                what: "Intel HEX record (checksum wrong: the bytes do not sum to 0 mod 256)",
-                text: line.to_string(),
-            });
-        }
-        let addr = u16::from_be_bytes([b[1], b[2]]) as usize;
-        match b[3] {
-            0 => {
-                let at = base + addr;
-                if at + n > 1 << 20 {
-                    return Err(bad(line));
-                }
-                if out.len() < at + n {
-                    out.resize(at + n, 0xFF);
-                }
-                out[at..at + n].copy_from_slice(&b[4..4 + n]);
+        let what = |e| match e {
+            ReaderError::ChecksumMismatch(..) => {
+                "Intel HEX record (checksum wrong: the bytes do not sum to 0 mod 256)"
             }
-            1 => break,
-            2 if n == 2 => base = (u16::from_be_bytes([b[4], b[5]]) as usize) << 4,
-            4 if n == 2 => base = (u16::from_be_bytes([b[4], b[5]]) as usize) << 16,
-            _ => {}
+            ReaderError::PayloadLengthMismatch => {
+                "Intel HEX record (its length byte does not match the record)"
+            }
+            ReaderError::UnsupportedRecordType(_) => "Intel HEX record (type not 00 to 05)",
+            ReaderError::InvalidLengthForType => "Intel HEX record (wrong length for its type)",
+            _ => "Intel HEX record",
+        };
+        match Record::from_record_string(line).map_err(|e| bad(what(e), line))? {
+            Record::Data { offset, value } => {
+                let at = base + usize::from(offset);
+                if at + value.len() > 1 << 20 {
+                    return Err(bad("Intel HEX record", line));
+                }
+                if out.len() < at + value.len() {
+                    out.resize(at + value.len(), 0xFF);
+                }
+                out[at..at + value.len()].copy_from_slice(&value);
+            }
+            Record::EndOfFile => break,
+            Record::ExtendedSegmentAddress(a) => base = usize::from(a) << 4,
+            Record::ExtendedLinearAddress(a) => base = usize::from(a) << 16,
+            Record::StartSegmentAddress { .. } | Record::StartLinearAddress(_) => {}
         }
     }
     Ok(out)

@@ -505,18 +505,23 @@ impl Master {
         progress: &mut dyn FnMut(u64, u64),
         stop: &std::sync::atomic::AtomicBool,
     ) -> Result<CycleStats, MasterError> {
+        // The csv crate joins the fields and quotes those that need it (a variable name,
+        // unit or string value with a comma or a quote); it buffers, so the rows reach
+        // `out` in blocks and once more at the end, whatever ended the run.
+        let mut w = csv::Writer::from_writer(out);
         let mut header = vec!["cycle".to_string(), "time [s]".to_string()];
         header.extend(vars.iter().map(|v| format!("{} [{}]", v.name, v.unit)));
-        writeln!(out, "{}", header.join(",")).map_err(MasterError::Output)?;
-        let mut err = None;
+        w.write_record(&header)
+            .map_err(|e| MasterError::Output(e.into()))?;
+        let mut err: Option<std::io::Error> = None;
         let stats = self.run_cyclic(opts, |io| {
             let mut row = vec![
                 io.cycle.to_string(),
                 format!("{:.9}", io.time_ns as f64 * 1e-9),
             ];
             row.extend(vars.iter().map(|v| v.format(&io.get(v))));
-            if let Err(e) = writeln!(out, "{}", row.join(",")) {
-                err = Some(e);
+            if let Err(e) = w.write_record(&row) {
+                err = Some(e.into());
                 return Ok(Flow::Stop);
             }
             progress(io.cycle + 1, cycles);
@@ -526,8 +531,10 @@ impl Master {
             } else {
                 Flow::Continue
             })
-        })?;
-        if let Some(e) = err {
+        });
+        let flushed = w.flush();
+        let stats = stats?;
+        if let Some(e) = err.or(flushed.err()) {
             return Err(MasterError::Output(e));
         }
         Ok(stats)

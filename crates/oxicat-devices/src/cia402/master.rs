@@ -185,29 +185,37 @@ impl Cia402Run {
                 .expect("the joint declares this entry's unit")
         };
         let (target, pos, vel, torque) = (sc(0x607A), sc(0x6064), sc(0x606C), sc(0x6077));
-        let mut s = format!(
-            "cycle,time [s],drive,controlword,mode,target position [{}],statusword,mode display,\
-             position [{}],velocity [{}],torque [{}],error code\n",
-            target.unit, pos.unit, vel.unit, torque.unit
-        );
-        for r in &self.rows {
-            s += &format!(
-                "{},{:.6},{},0x{:04X},{},{},0x{:04X},{},{},{},{},0x{:04X}\n",
-                r.cycle,
-                r.time,
-                r.drive,
-                r.out.controlword,
-                r.out.mode,
+        let h = [
+            "cycle".to_string(),
+            "time [s]".into(),
+            "drive".into(),
+            "controlword".into(),
+            "mode".into(),
+            format!("target position [{}]", target.unit),
+            "statusword".into(),
+            "mode display".into(),
+            format!("position [{}]", pos.unit),
+            format!("velocity [{}]", vel.unit),
+            format!("torque [{}]", torque.unit),
+            "error code".into(),
+        ];
+        let body = self.rows.iter().map(|r| {
+            vec![
+                r.cycle.to_string(),
+                format!("{:.6}", r.time),
+                r.drive.to_string(),
+                format!("0x{:04X}", r.out.controlword),
+                r.out.mode.to_string(),
                 format_scaled(r.out.target_position.into(), &target),
-                r.inp.statusword,
-                r.inp.mode_display,
+                format!("0x{:04X}", r.inp.statusword),
+                r.inp.mode_display.to_string(),
                 format_scaled(r.inp.position.into(), &pos),
                 format_scaled(r.inp.velocity.into(), &vel),
                 format_scaled(r.inp.torque.into(), &torque),
-                r.inp.error_code
-            );
-        }
-        s
+                format!("0x{:04X}", r.inp.error_code),
+            ]
+        });
+        crate::csv_text(std::iter::once(h.to_vec()).chain(body)).expect("fixed columns")
     }
 }
 

@@ -233,51 +233,75 @@ pub fn run(
 /// The summary table (CSV): one row per point and leg, the tracking errors over the steady
 /// trot in degrees and millimetres, and the point's CSV digest.
 pub fn table(axes: &[Axis], results: &[Result<PointResult, MasterError>]) -> String {
-    let mut s = String::from("point");
-    for a in axes {
-        s.push(',');
-        s.push_str(&a.key);
-    }
-    s.push_str(
-        ",leg,knee_rms [deg],knee_max [deg],hip_rms [deg],hip_max [deg],toe_rms [mm],\
-         knee_pwm_at_limit [%],hip_pwm_at_limit [%],trot_csv_fnv64,error\n",
+    let mut h = vec!["point".to_string()];
+    h.extend(axes.iter().map(|a| a.key.clone()));
+    h.extend(
+        [
+            "leg",
+            "knee_rms [deg]",
+            "knee_max [deg]",
+            "hip_rms [deg]",
+            "hip_max [deg]",
+            "toe_rms [mm]",
+            "knee_pwm_at_limit [%]",
+            "hip_pwm_at_limit [%]",
+            "trot_csv_fnv64",
+            "error",
+        ]
+        .map(String::from),
     );
+    let mut rows = vec![h];
     for r in results {
         match r {
             Ok(p) => {
                 for (leg, l) in LegId::TABLE.iter().zip(&p.legs) {
-                    s.push_str(&p.index.to_string());
-                    for (_, v) in &p.values {
-                        s.push(',');
-                        s.push_str(v);
-                    }
-                    s.push_str(&format!(
-                        ",{},{:.4},{:.4},{:.4},{:.4},{:.3},{:.2},{:.2},{:016x},\n",
-                        leg.code(),
-                        l.knee_rms_deg,
-                        l.knee_max_deg,
-                        l.hip_rms_deg,
-                        l.hip_max_deg,
-                        l.toe_rms_mm,
-                        l.knee_at_limit_pct,
-                        l.hip_at_limit_pct,
-                        p.csv_fnv64
-                    ));
+                    let mut f = vec![p.index.to_string()];
+                    f.extend(p.values.iter().map(|(_, v)| v.clone()));
+                    f.extend([
+                        leg.code().to_string(),
+                        format!("{:.4}", l.knee_rms_deg),
+                        format!("{:.4}", l.knee_max_deg),
+                        format!("{:.4}", l.hip_rms_deg),
+                        format!("{:.4}", l.hip_max_deg),
+                        format!("{:.3}", l.toe_rms_mm),
+                        format!("{:.2}", l.knee_at_limit_pct),
+                        format!("{:.2}", l.hip_at_limit_pct),
+                        format!("{:016x}", p.csv_fnv64),
+                        String::new(),
+                    ]);
+                    rows.push(f);
                 }
             }
             Err(e) => {
-                s.push_str(&format!("?{}", ",".repeat(axes.len() + 9)));
-                s.push_str(&format!("\"{}\"\n", e.to_string().replace('"', "'")));
+                // A failed point: its error in the last column, the others empty.
+                let mut f = vec![String::new(); axes.len() + 11];
+                f[0] = "?".into();
+                f[axes.len() + 10] = e.to_string();
+                rows.push(f);
             }
         }
     }
-    s
+    crate::csv_text(rows).expect("fixed columns")
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
     use crate::laelaps::scenario::DEFAULT_TOML;
+
+    /// A failed point fills the error column, the last one: every row has the header's
+    /// fields (before the `csv` crate the error landed one column early, in the digest's).
+    #[test]
+    fn a_failed_point_has_its_error_in_the_last_column() {
+        let axes = vec![Axis::parse("control.knee.kp=40,80").unwrap()];
+        let t = table(&axes, &[Err(usage("no, \"this\" failed".into()))]);
+        let mut lines = t.lines();
+        let head = lines.next().unwrap();
+        let row = lines.next().unwrap();
+        assert_eq!(head.split(',').count(), 12, "{head}");
+        assert!(head.ends_with(",error"), "{head}");
+        assert_eq!(row, r#"?,,,,,,,,,,,"no, ""this"" failed""#);
+    }
 
     #[test]
     fn axes_parse_and_refuse() {

@@ -325,34 +325,37 @@ pub fn normal_csv(rows: &[NormalRow]) -> String {
     };
     let (setpoint, velocity, current) = (sc(0x7000, 2), sc(0x6000, 4), sc(0x6000, 5));
     let line = sc(0x6010, 12);
-    let mut s = String::from("cycle,time [s]");
+    let mut h = vec!["cycle".to_string(), "time [s]".into()];
     for k in 1..=3 {
-        s += &format!(
-            ",mcom{k},setpoint{k} [{}],count{k},timestamp{k},velocity{k} [{}],current{k} [{}]",
-            setpoint.unit, velocity.unit, current.unit
-        );
+        h.extend([
+            format!("mcom{k}"),
+            format!("setpoint{k} [{}]", setpoint.unit),
+            format!("count{k}"),
+            format!("timestamp{k}"),
+            format!("velocity{k} [{}]", velocity.unit),
+            format!("current{k} [{}]", current.unit),
+        ]);
     }
-    s += &format!(",linevoltage [{}],ectime\n", line.unit);
-    for r in rows {
-        s += &format!("{},{:.6}", r.cycle, r.time);
+    h.extend([format!("linevoltage [{}]", line.unit), "ectime".into()]);
+    let body = rows.iter().map(|r| {
+        let mut f = vec![r.cycle.to_string(), format!("{:.6}", r.time)];
         for k in 0..3 {
-            s += &format!(
-                ",{},{},{},{},{},{}",
-                r.output.mcom[k],
+            f.extend([
+                r.output.mcom[k].to_string(),
                 format_scaled(r.output.setpoint[k].into(), &setpoint),
-                r.input.count[k],
-                r.input.timestamp[k],
+                r.input.count[k].to_string(),
+                r.input.timestamp[k].to_string(),
                 format_scaled(r.input.velocity[k].into(), &velocity),
-                format_scaled(r.input.current[k].into(), &current)
-            );
+                format_scaled(r.input.current[k].into(), &current),
+            ]);
         }
-        s += &format!(
-            ",{},{}\n",
+        f.extend([
             format_scaled(r.input.linevoltage.into(), &line),
-            r.input.ectime
-        );
-    }
-    s
+            r.input.ectime.to_string(),
+        ]);
+        f
+    });
+    crate::csv_text(std::iter::once(h).chain(body)).expect("fixed columns")
 }
 
 /// The manual's flow control: entries to send for the fill level `buf`.
