@@ -11,24 +11,36 @@ use oxicat_pdi::sim::{BusConfig, Handle, Lan9252Model};
 use oxicat_wire::frame::FrameBuilder;
 use oxicat_wire::{Command, DatagramHeader, EcatFrame};
 
-/// The release ELF `.ci/run` builds before the tests.
+/// The release ELF `.ci/run` builds before the tests: `OXICAT_BOARD_IMAGE` if set, else in
+/// the firmware's own target directory, or in `CARGO_TARGET_DIR` when the build used one.
 fn image() -> Option<Vec<u8>> {
-    let p = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join(
-        "../../firmware/stm32f446-lan9252/target/thumbv7em-none-eabihf/release/oxicat-firmware-stm32f446-lan9252",
-    );
-    match std::fs::read(&p) {
-        Ok(b) => Some(b),
-        Err(e) if std::env::var_os("CI").is_some() => {
-            panic!(
-                "{}: {e} (build it: cd firmware/stm32f446-lan9252 && cargo build --release)",
-                p.display()
-            )
-        }
-        Err(e) => {
-            eprintln!("skipped: {}: {e}", p.display());
-            None
+    const ELF: &str = "thumbv7em-none-eabihf/release/oxicat-firmware-stm32f446-lan9252";
+    let own = PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+        .join("../../firmware/stm32f446-lan9252/target")
+        .join(ELF);
+    let candidates: Vec<PathBuf> = match std::env::var_os("OXICAT_BOARD_IMAGE") {
+        Some(p) => vec![PathBuf::from(p)],
+        None => std::env::var_os("CARGO_TARGET_DIR")
+            .map(|d| PathBuf::from(d).join(ELF))
+            .into_iter()
+            .chain([own])
+            .collect(),
+    };
+    for p in &candidates {
+        if let Ok(b) = std::fs::read(p) {
+            return Some(b);
         }
     }
+    let tried: Vec<String> = candidates.iter().map(|p| p.display().to_string()).collect();
+    let msg = format!(
+        "no board image at {} (build it: cd firmware/stm32f446-lan9252 && cargo build --release)",
+        tried.join(" or ")
+    );
+    if std::env::var_os("CI").is_some() {
+        panic!("{msg}");
+    }
+    eprintln!("skipped: {msg}");
+    None
 }
 
 /// The master's side: single datagrams to the one ESC (position 0) at the board's time.
