@@ -297,8 +297,7 @@ pub fn run(cli: Cli) -> Result<(), CliError> {
 
 /// `oxicat device list`.
 fn device_list() -> Result<(), CliError> {
-    print!("{}", igh_cmd::device_list());
-    Ok(())
+    print_text(&igh_cmd::device_list())
 }
 
 /// `oxicat device <name> <what> [-o file]`.
@@ -309,12 +308,10 @@ fn device(a: DeviceArgs) -> Result<(), CliError> {
 
 /// `oxicat version`.
 fn version() -> Result<(), CliError> {
-    print!("{}", igh_cmd::version());
-    Ok(())
+    print_text(&igh_cmd::version())
 }
 
 /// `oxicat fw-image <device> <payload> -o <image>`.
 fn fw_image(device: &str, payload: &Path, output: &Path) -> Result<(), CliError> {
-    print!("{}", igh_cmd::fw_image(device, payload, output)?);
-    Ok(())
+    print_text(&igh_cmd::fw_image(device, payload, output)?)
 }

@@ -433,16 +433,24 @@ fn help_text_has_no_markdown_escapes() {
 
 #[test]
 fn a_closed_standard_output_ends_quietly() {
-    let mut child = Command::new(env!("CARGO_BIN_EXE_oxicat"))
-        .args(["sdos", "--sim", "demo:1"])
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .spawn()
-        .expect("spawn");
-    // The reader goes away before anything is written (`| head -0`).
-    drop(child.stdout.take());
-    let o = child.wait_with_output().expect("wait");
-    let err = String::from_utf8_lossy(&o.stderr);
-    assert!(o.status.success(), "{:?}: {err}", o.status);
-    assert!(err.is_empty(), "{err}");
+    // Every kind of printing verb: a master verb, and the ones that need no segment
+    // (`device list`, `version` printed with `print!` and panicked on a closed pipe).
+    for args in [
+        &["sdos", "--sim", "demo:1"][..],
+        &["device", "list"][..],
+        &["version"][..],
+    ] {
+        let mut child = Command::new(env!("CARGO_BIN_EXE_oxicat"))
+            .args(args)
+            .stdout(Stdio::piped())
+            .stderr(Stdio::piped())
+            .spawn()
+            .expect("spawn");
+        // The reader goes away before anything is written (`| head -0`).
+        drop(child.stdout.take());
+        let o = child.wait_with_output().expect("wait");
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert!(o.status.success(), "{args:?}: {:?}: {err}", o.status);
+        assert!(err.is_empty(), "{args:?}: {err}");
+    }
 }
