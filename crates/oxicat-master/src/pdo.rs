@@ -123,7 +123,7 @@ impl Variable {
     /// The variable decoded with its device's declared scaling: values in `scale.unit`,
     /// the CSV header says that unit instead of the CoE type.
     pub fn with_scale(mut self, scale: oxicat_slave::Scale) -> Self {
-        if self.ty.integer(&[0; 8]).is_some() && self.ty != ValueType::Bool {
+        if self.ty.is_integer() {
             self.unit = scale.unit.to_string();
             self.scale = Some(scale);
         }

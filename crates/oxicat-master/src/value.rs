@@ -199,6 +199,21 @@ impl ValueType {
         r.unwrap_or_else(|| hex(b))
     }
 
+    /// True for the integer types (not BOOL, reals, strings, bytes).
+    pub const fn is_integer(self) -> bool {
+        matches!(
+            self,
+            Self::U8
+                | Self::U16
+                | Self::U32
+                | Self::U64
+                | Self::I8
+                | Self::I16
+                | Self::I32
+                | Self::I64
+        )
+    }
+
     /// The integer in `b` if this is an integer type (sign-extended for signed types).
     pub fn integer(self, b: &[u8]) -> Option<i128> {
         fn arr<const N: usize>(b: &[u8]) -> Option<[u8; N]> {

@@ -94,11 +94,11 @@ impl PdoEntry {
     }
 }
 
-/// Bytes of the process data of the PDOs `assign` (in that order) of `pdos`: the SM2/SM3
-/// size a layout gives, derived from the mappings (no hand-written sizes). In a `const` an
-/// assigned PDO missing from `pdos` stops the build.
-pub const fn pdo_bytes(pdos: &[PdoDef], assign: &[u16]) -> usize {
-    let mut bits = 0usize;
+/// Bits of the process data of the PDOs `assign` (in that order) of `pdos`, and whether
+/// every assigned PDO was found (a missing one adds nothing).
+const fn assigned_bits(pdos: &[PdoDef], assign: &[u16]) -> (u32, bool) {
+    let mut bits = 0u32;
+    let mut all = true;
     let mut a = 0;
     while a < assign.len() {
         let mut p = 0;
@@ -107,17 +107,26 @@ pub const fn pdo_bytes(pdos: &[PdoDef], assign: &[u16]) -> usize {
             if pdos[p].index == assign[a] {
                 let mut e = 0;
                 while e < pdos[p].entries.len() {
-                    bits += pdos[p].entries[e].bits as usize;
+                    bits += pdos[p].entries[e].bits as u32;
                     e += 1;
                 }
                 found = true;
             }
             p += 1;
         }
-        assert!(found, "pdo_bytes: an assigned PDO is not defined");
+        all &= found;
         a += 1;
     }
-    bits.div_ceil(8)
+    (bits, all)
+}
+
+/// Bytes of the process data of the PDOs `assign` (in that order) of `pdos`: the SM2/SM3
+/// size a layout gives, derived from the mappings (no hand-written sizes). In a `const` an
+/// assigned PDO missing from `pdos` stops the build.
+pub const fn pdo_bytes(pdos: &[PdoDef], assign: &[u16]) -> usize {
+    let (bits, all) = assigned_bits(pdos, assign);
+    assert!(all, "pdo_bytes: an assigned PDO is not defined");
+    (bits as usize).div_ceil(8)
 }
 
 /// A PDO (mapping object 0x16xx RxPDO or 0x1Axx TxPDO) with its default mapping.
@@ -266,7 +275,7 @@ impl DeviceDef {
 
     /// The definition of application entry `index:sub`.
     pub fn entry_def(&self, index: u16, sub: u8) -> Option<&'static EntryDef> {
-        self.object(index)?.entries.iter().find(|e| e.sub == sub)
+        crate::od::find_entry(self.objects, index, sub)
     }
 
     /// The physical scaling of application entry `index:sub`, if it declares one.
@@ -281,12 +290,12 @@ impl DeviceDef {
 
     /// Bits of the default RxPDO assignment (SM2 size in bits).
     pub fn default_output_bits(&self) -> u32 {
-        assigned_bits(self, self.rx_assign)
+        assigned_bits(self.rx_pdos, self.rx_assign).0
     }
 
     /// Bits of the default TxPDO assignment (SM3 size in bits).
     pub fn default_input_bits(&self) -> u32 {
-        assigned_bits(self, self.tx_assign)
+        assigned_bits(self.tx_pdos, self.tx_assign).0
     }
 
     /// CoE details as the SII general category encodes them (ETG.2010 bit layout).
@@ -334,15 +343,6 @@ impl DeviceDef {
         }
         v
     }
-}
-
-fn assigned_bits(d: &DeviceDef, assign: &[u16]) -> u32 {
-    assign
-        .iter()
-        .filter_map(|i| d.pdo(*i))
-        .flat_map(|p| p.entries.iter())
-        .map(|e| e.bits as u32)
-        .sum()
 }
 
 /// A device group (ESI `Descriptions/Groups/Group`; the SII group string).

@@ -129,12 +129,6 @@ impl<T: AsRef<[u8]>> Frame<T> {
 }
 
 impl<T: AsRef<[u8]> + AsMut<[u8]>> Frame<T> {
-    /// The whole buffer, writable (header included).
-    #[inline(always)]
-    pub fn buffer_mut(&mut self) -> &mut [u8] {
-        self.buffer.as_mut()
-    }
-
     /// The declared datagram bytes (checked views only: `new_checked` made them fit).
     #[inline(always)]
     pub fn payload_mut(&mut self) -> &mut [u8] {

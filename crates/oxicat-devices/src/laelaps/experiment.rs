@@ -50,7 +50,7 @@ use oxicat_master::inprocess::{inprocess_task, InProcessConfig};
 use oxicat_sim::exec_time::TimingStats;
 use oxicat_sim::pdi_path::{BusStats as SpiStats, PdiRoute};
 use oxicat_sim::segment::Segment;
-use oxicat_slave::{DataType, DeviceDef};
+use oxicat_slave::DeviceDef;
 
 use crate::laelaps::scenario::Scenario;
 use oxicat_master::MasterError;
@@ -189,7 +189,7 @@ impl InputVar {
             name,
             index,
             sub,
-            signed: matches!(e.dtype, DataType::Int8 | DataType::Int16 | DataType::Int32),
+            signed: e.dtype.is_signed(),
             unit: scale.unit,
             divisor: scale.den as i32,
         }
