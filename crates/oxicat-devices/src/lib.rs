@@ -45,8 +45,14 @@ pub mod tue_es030;
 ///   `RX_ASSIGN`, `TX_ASSIGN`: every PDO assigned, in order;
 /// - `OUTPUT_BYTES`, `INPUT_BYTES`: the SM2/SM3 sizes of that assignment; `IMAGE`: the
 ///   object image size;
-/// - `PdVars`: the firmware's typed handles (`Var<i16>` for an `Int16`) on every entry that
-///   names one (`=> field`), resolved once with `PdVars::resolve(&od)`.
+/// - `PdVars` and its value `VARS`: the firmware's typed handles (`Var<i16>` for an
+///   `Int16`) on every entry that names one (`=> field`), computed when the crate builds
+///   ([`Var::of`](oxicat_slave::Var::of)).
+///
+/// Devices whose records repeat per channel or carry arrays of samples (the TUeES030's three
+/// motors and 22 FRF samples, the hub's 15 temperatures) declare their `OBJECTS` with
+/// `const fn`s instead, and their handles with [`Var::across`](oxicat_slave::Var::across) /
+/// [`Var::subs`](oxicat_slave::Var::subs): the same build-time offsets and type checks.
 ///
 /// An entry is `sub "Name": Type`, then optionally `["unit" / den]` (the integer is
 /// `value × den`), then optionally `=> field`.
@@ -133,8 +139,8 @@ macro_rules! pd_table {
         /// Input (TxPDO) process data bytes of the default assignment (SM3).
         pub const INPUT_BYTES: usize = $crate::__slave::pdo_bytes(TX_PDOS, TX_ASSIGN);
 
-        /// Typed handles on the process-data entries that name one, resolved once
-        /// against the dictionary so the cycle reads and writes the image by offset.
+        /// Typed handles on the process-data entries that name one ([`VARS`]): offsets
+        /// into the object image, computed from the declaration when the crate builds.
         #[derive(Debug, Clone, Copy)]
         pub struct PdVars {
             $( $( $( $(
@@ -147,16 +153,11 @@ macro_rules! pd_table {
             )? )* )* )*
         }
 
-        impl PdVars {
-            /// Resolves every handle; `None` if the dictionary lacks one or its type
-            /// differs (not this device's dictionary).
-            pub fn resolve<const N: usize>(od: &$crate::__slave::Od<N>) -> Option<Self> {
-                let _ = od; // a table may name no handle
-                Some(Self {
-                    $( $( $( $( $tfield: od.var($tidx, $tsub).ok()?, )? )* )* )*
-                    $( $( $( $( $rfield: od.var($ridx, $rsub).ok()?, )? )* )* )*
-                })
-            }
-        }
+        /// The handles of [`PdVars`], valid for a dictionary built on a definition
+        /// whose `objects` is [`OBJECTS`].
+        pub const VARS: PdVars = PdVars {
+            $( $( $( $( $tfield: $crate::__slave::Var::of(OBJECTS, $tidx, $tsub), )? )* )* )*
+            $( $( $( $( $rfield: $crate::__slave::Var::of(OBJECTS, $ridx, $rsub), )? )* )* )*
+        };
     };
 }

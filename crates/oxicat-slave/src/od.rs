@@ -773,12 +773,114 @@ impl<T: OdType> Var<T> {
     pub fn entry(&self) -> EntryRef {
         self.r
     }
+
+    /// The handle on `index:sub` of a device's application objects (its
+    /// [`DeviceDef::objects`](crate::DeviceDef)), computed from the declaration when the
+    /// crate is built: no lookup at run time, and a missing entry or an entry whose CoE type
+    /// is not `T`'s stops the build (in a `const`). Valid for the dictionary built from
+    /// that definition ([`Od::new`] lays the application objects out in declaration order).
+    ///
+    /// ```
+    /// use oxicat_slave::{Access, DataType, EntryDef, ObjectCode, ObjectDef, Var};
+    /// static OBJECTS: &[ObjectDef] = &[ObjectDef {
+    ///     index: 0x6000,
+    ///     name: "Inputs",
+    ///     code: ObjectCode::Record,
+    ///     entries: &[
+    ///         EntryDef::new(0, "SubIndex 000", DataType::Unsigned8, Access::RO),
+    ///         EntryDef::new(1, "Angle", DataType::Int16, Access::RO),
+    ///     ],
+    /// }];
+    /// const ANGLE: Var<i16> = Var::of(OBJECTS, 0x6000, 1);
+    /// assert_eq!(ANGLE.entry().bits(), 16);
+    /// ```
+    ///
+    /// A wrong type does not build:
+    ///
+    /// ```compile_fail
+    /// # use oxicat_slave::{Access, DataType, EntryDef, ObjectCode, ObjectDef, Var};
+    /// # static OBJECTS: &[ObjectDef] = &[ObjectDef { index: 0x6000, name: "Inputs",
+    /// #     code: ObjectCode::Record, entries: &[
+    /// #         EntryDef::new(0, "SubIndex 000", DataType::Unsigned8, Access::RO),
+    /// #         EntryDef::new(1, "Angle", DataType::Int16, Access::RO)] }];
+    /// const ANGLE: Var<u16> = Var::of(OBJECTS, 0x6000, 1);
+    /// # let _ = ANGLE;
+    /// ```
+    pub const fn of(objects: &[ObjectDef], index: u16, sub: u8) -> Self {
+        let mut base = 0;
+        let mut i = 0;
+        while i < objects.len() {
+            let o = &objects[i];
+            if o.index == index {
+                let mut off = base;
+                let mut j = 0;
+                while j < o.entries.len() {
+                    let e = &o.entries[j];
+                    if e.sub == sub {
+                        assert!(
+                            e.dtype.code() == T::DTYPE.code() && e.bits == T::BITS,
+                            "typed handle: the entry's CoE type is not the handle's"
+                        );
+                        return Var {
+                            r: EntryRef {
+                                area_app: true,
+                                offset: off,
+                                len: e.storage_len(),
+                                bits: e.bits,
+                            },
+                            _t: core::marker::PhantomData,
+                        };
+                    }
+                    off += e.storage_len();
+                    j += 1;
+                }
+                panic!("typed handle: the object has no such subindex");
+            }
+            base += o.storage_len();
+            i += 1;
+        }
+        panic!("typed handle: no such application object")
+    }
+
+    /// Handles on `N` consecutive subindexes of one object, from `first_sub` (an array of
+    /// samples, a record's run of like entries); as [`Var::of`].
+    pub const fn subs<const N: usize>(
+        objects: &[ObjectDef],
+        index: u16,
+        first_sub: u8,
+    ) -> [Self; N] {
+        let mut out = [Self::of(objects, index, first_sub); N];
+        let mut k = 1;
+        while k < N {
+            out[k] = Self::of(objects, index, first_sub + k as u8);
+            k += 1;
+        }
+        out
+    }
+
+    /// Handles on subindex `sub` of `N` consecutive objects from `first_index` (records
+    /// repeated per channel: motor 1, 2, 3); as [`Var::of`].
+    pub const fn across<const N: usize>(
+        objects: &[ObjectDef],
+        first_index: u16,
+        sub: u8,
+    ) -> [Self; N] {
+        let mut out = [Self::of(objects, first_index, sub); N];
+        let mut k = 1;
+        while k < N {
+            out[k] = Self::of(objects, first_index + k as u16, sub);
+            k += 1;
+        }
+        out
+    }
 }
 
 /// Rust types that map onto CoE scalar types for typed access.
 pub trait OdType: Copy {
     /// Bit length the entry must have.
     const BITS: u16;
+    /// The CoE type a [`Var::of`] handle's entry must have.
+    const DTYPE: DataType;
     /// Decodes from the little-endian image bytes (exactly the storage length).
     fn from_le(b: &[u8]) -> Self;
     /// Encodes into the image bytes.
@@ -786,9 +888,10 @@ pub trait OdType: Copy {
 }
 
 macro_rules! od_type {
-    ($t:ty, $bits:expr) => {
+    ($t:ty, $bits:expr, $dt:ident) => {
         impl OdType for $t {
             const BITS: u16 = $bits;
+            const DTYPE: DataType = DataType::$dt;
             fn from_le(b: &[u8]) -> Self {
                 let mut a = [0u8; core::mem::size_of::<$t>()];
                 let n = a.len().min(b.len());
@@ -803,19 +906,20 @@ macro_rules! od_type {
         }
     };
 }
-od_type!(u8, 8);
-od_type!(i8, 8);
-od_type!(u16, 16);
-od_type!(i16, 16);
-od_type!(u32, 32);
-od_type!(i32, 32);
-od_type!(u64, 64);
-od_type!(i64, 64);
-od_type!(f32, 32);
-od_type!(f64, 64);
+od_type!(u8, 8, Unsigned8);
+od_type!(i8, 8, Int8);
+od_type!(u16, 16, Unsigned16);
+od_type!(i16, 16, Int16);
+od_type!(u32, 32, Unsigned32);
+od_type!(i32, 32, Int32);
+od_type!(u64, 64, Unsigned64);
+od_type!(i64, 64, Int64);
+od_type!(f32, 32, Real32);
+od_type!(f64, 64, Real64);
 
 impl OdType for bool {
     const BITS: u16 = 1;
+    const DTYPE: DataType = DataType::Bool;
     fn from_le(b: &[u8]) -> Self {
         b.first().is_some_and(|v| v & 1 != 0)
     }
@@ -964,6 +1068,23 @@ impl<const N: usize> Od<N> {
     /// The device definition.
     pub fn def(&self) -> &'static DeviceDef {
         self.def
+    }
+
+    /// True when this dictionary's application objects are laid out as `objects` (the
+    /// same indices and, per entry, subindex, type and bit length): the condition under
+    /// which build-time handles ([`Var::of`] on `objects`) are valid for it. Compared by
+    /// content, since the address of a static's data is not a reliable identity.
+    pub fn built_on(&self, objects: &[ObjectDef]) -> bool {
+        let mine = self.def.objects;
+        mine.len() == objects.len()
+            && mine.iter().zip(objects).all(|(a, b)| {
+                a.index == b.index
+                    && a.entries.len() == b.entries.len()
+                    && a.entries
+                        .iter()
+                        .zip(b.entries)
+                        .all(|(x, y)| x.sub == y.sub && x.dtype == y.dtype && x.bits == y.bits)
+            })
     }
 
     /// Resets every value (application and communication objects) to its default.

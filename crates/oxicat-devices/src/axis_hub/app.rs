@@ -90,23 +90,19 @@ struct HubIo {
 }
 
 impl HubIo {
+    /// The handles, from the declaration ([`device::OBJECTS`]): offsets and types checked
+    /// when the crate builds.
+    const VARS: Self = Self {
+        temps: Var::subs(device::OBJECTS, 0x6000, 1),
+        status: Var::of(device::OBJECTS, 0x6001, 1),
+        event: Var::of(device::OBJECTS, 0x6001, 2),
+        error: Var::of(device::OBJECTS, 0x6001, 3),
+        cmd: Var::subs(device::OBJECTS, 0x7000, 1),
+    };
+
+    /// The handles for `od`; `None` if it is not the hub's dictionary.
     fn resolve<const N: usize>(od: &Od<N>) -> Option<Self> {
-        let mut temps = [od.var(0x6000, 1).ok()?; SENSORS];
-        for (i, t) in temps.iter_mut().enumerate() {
-            *t = od.var(0x6000, i as u8 + 1).ok()?;
-        }
-        Some(Self {
-            temps,
-            status: od.var(0x6001, 1).ok()?,
-            event: od.var(0x6001, 2).ok()?,
-            error: od.var(0x6001, 3).ok()?,
-            cmd: [
-                od.var(0x7000, 1).ok()?,
-                od.var(0x7000, 2).ok()?,
-                od.var(0x7000, 3).ok()?,
-                od.var(0x7000, 4).ok()?,
-            ],
-        })
+        od.built_on(device::OBJECTS).then_some(Self::VARS)
     }
 }
 

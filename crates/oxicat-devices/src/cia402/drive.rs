@@ -9,6 +9,7 @@
 //! The joint torque sensor is sampled each cycle and reported in 0x2002 (mN·m, output
 //! side); it is not used in the loops.
 
+use super::device::OBJECTS;
 use super::fsm::{cw, sw, Events, Fsm, Options, Ramp, State};
 use oxicat_slave::{AlState, AlStatusCode, Application, Od, Var};
 
@@ -111,28 +112,33 @@ struct Io {
 }
 
 impl Io {
+    /// The handles, from the declaration ([`OBJECTS`]): offsets and types checked when
+    /// the crate builds.
+    const VARS: Self = Self {
+        controlword: Var::of(OBJECTS, 0x6040, 0),
+        statusword: Var::of(OBJECTS, 0x6041, 0),
+        mode: Var::of(OBJECTS, 0x6060, 0),
+        mode_display: Var::of(OBJECTS, 0x6061, 0),
+        target_position: Var::of(OBJECTS, 0x607A, 0),
+        target_velocity: Var::of(OBJECTS, 0x60FF, 0),
+        target_torque: Var::of(OBJECTS, 0x6071, 0),
+        position_actual: Var::of(OBJECTS, 0x6064, 0),
+        position_demand: Var::of(OBJECTS, 0x6062, 0),
+        velocity_actual: Var::of(OBJECTS, 0x606C, 0),
+        torque_actual: Var::of(OBJECTS, 0x6077, 0),
+        current_actual: Var::of(OBJECTS, 0x6078, 0),
+        error_code: Var::of(OBJECTS, 0x603F, 0),
+        following_error: Var::of(OBJECTS, 0x60F4, 0),
+        joint_torque: Var::of(OBJECTS, 0x2002, 0),
+        digital_inputs: Var::of(OBJECTS, 0x60FD, 0),
+        position_offset: Var::of(OBJECTS, 0x60B0, 0),
+        velocity_offset: Var::of(OBJECTS, 0x60B1, 0),
+        torque_offset: Var::of(OBJECTS, 0x60B2, 0),
+    };
+
+    /// The handles for `od`; `None` if it is not the drive's dictionary.
     fn resolve<const N: usize>(od: &Od<N>) -> Option<Self> {
-        Some(Self {
-            controlword: od.var(0x6040, 0).ok()?,
-            statusword: od.var(0x6041, 0).ok()?,
-            mode: od.var(0x6060, 0).ok()?,
-            mode_display: od.var(0x6061, 0).ok()?,
-            target_position: od.var(0x607A, 0).ok()?,
-            target_velocity: od.var(0x60FF, 0).ok()?,
-            target_torque: od.var(0x6071, 0).ok()?,
-            position_actual: od.var(0x6064, 0).ok()?,
-            position_demand: od.var(0x6062, 0).ok()?,
-            velocity_actual: od.var(0x606C, 0).ok()?,
-            torque_actual: od.var(0x6077, 0).ok()?,
-            current_actual: od.var(0x6078, 0).ok()?,
-            error_code: od.var(0x603F, 0).ok()?,
-            following_error: od.var(0x60F4, 0).ok()?,
-            joint_torque: od.var(0x2002, 0).ok()?,
-            digital_inputs: od.var(0x60FD, 0).ok()?,
-            position_offset: od.var(0x60B0, 0).ok()?,
-            velocity_offset: od.var(0x60B1, 0).ok()?,
-            torque_offset: od.var(0x60B2, 0).ok()?,
-        })
+        od.built_on(OBJECTS).then_some(Self::VARS)
     }
 }
 

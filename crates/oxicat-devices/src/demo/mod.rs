@@ -11,7 +11,7 @@
 //! the thesis' 16-step change (record "Additions" 0x7030 with two INT16 outputs) done as one
 //! extra line in one place.
 
-use oxicat_slave::{AlState, AlStatusCode, Application, Od, Var};
+use oxicat_slave::{AlState, AlStatusCode, Application, Od};
 
 /// The two LEDs of the LaunchPad (GPIO31 blue, GPIO34 red; the driver handles active-low).
 pub trait Leds {
@@ -37,33 +37,33 @@ macro_rules! demo_device {
         $crate::pd_table! {
             tx {
                 0x1A01 "InputMapping1" {
-                    0x6010 "Input1INT32" { 1 "InINT32Var1": Int32 }
-                    0x6012 "InputUINT16" { 1 "InUINT16Var1": Unsigned16 }
-                    0x6014 "Input2INT32" { 1 "InINT32Var2": Int32 }
+                    0x6010 "Input1INT32" { 1 "InINT32Var1": Int32 => i1 }
+                    0x6012 "InputUINT16" { 1 "InUINT16Var1": Unsigned16 => iu1 }
+                    0x6014 "Input2INT32" { 1 "InINT32Var2": Int32 => i2 }
                 }
                 0x1A02 "InputINT16" {
-                    0x6020 "InputINT16" { 1 "InINT16Var1": Int16, 2 "InINT16Var2": Int16 }
+                    0x6020 "InputINT16" { 1 "InINT16Var1": Int16 => sum, 2 "InINT16Var2": Int16 => diff }
                 }
                 0x1A03 "Input3INT32" {
-                    0x6030 "Input3INT32" { 1 "InINT32Var3": Int32, 2 "InINT32Var4": Int32 }
+                    0x6030 "Input3INT32" { 1 "InINT32Var3": Int32 => counter, 2 "InINT32Var4": Int32 => buttons }
                 }
             }
             rx {
                 0x1600 "Buttons" {
                     0x7000 "Buttons" {
                         1 "Button1": Bool, 2 "Button2": Bool, 3 "Button3": Bool,
-                        4 "Button4": Bool, 5 "Blue_LED": Bool, 6 "Red_LED": Bool,
-                        7 "Button7": Bool, 8 "Button8": Bool, 9 "Sync": Int8
+                        4 "Button4": Bool, 5 "Blue_LED": Bool => blue, 6 "Red_LED": Bool => red,
+                        7 "Button7": Bool, 8 "Button8": Bool, 9 "Sync": Int8 => sync
                     }
                 }
                 0x1601 "OutputMapping1" {
-                    0x7010 "Output1INT32" { 1 "OutINT32Var1": Int32 }
-                    0x7012 "OutputUINT16" { 1 "OutUINT16Var1": Unsigned16 }
-                    0x7014 "Output2INT32" { 1 "OutINT32Var2": Int32 }
+                    0x7010 "Output1INT32" { 1 "OutINT32Var1": Int32 => o1 }
+                    0x7012 "OutputUINT16" { 1 "OutUINT16Var1": Unsigned16 => u1 }
+                    0x7014 "Output2INT32" { 1 "OutINT32Var2": Int32 => o2 }
                 }
                 0x1602 "OutputINT16" {
                     0x7020 "OutputINT16" {
-                        1 "OutINT16Var1": Int16, 2 "OutINT16Var2": Int16,
+                        1 "OutINT16Var1": Int16 => a, 2 "OutINT16Var2": Int16 => b,
                         3 "OutINT16Var3": Int16, 4 "OutINT16Var4": Int16,
                         5 "OutINT16Var5": Int16, 6 "OutINT16Var6": Int16
                     }
@@ -71,6 +71,14 @@ macro_rules! demo_device {
                 $( $extra )*
             }
         }
+
+        /// The demo application's handles on this variant (its [`VARS`] in the base
+        /// variant's type).
+        pub const IO: $crate::demo::PdVars = $crate::demo::PdVars {
+            blue: VARS.blue, red: VARS.red, sync: VARS.sync, o1: VARS.o1, u1: VARS.u1,
+            o2: VARS.o2, a: VARS.a, b: VARS.b, i1: VARS.i1, iu1: VARS.iu1, i2: VARS.i2,
+            sum: VARS.sum, diff: VARS.diff, counter: VARS.counter, buttons: VARS.buttons,
+        };
 
         /// The device definition: the one source of OD, ESI and SII.
         pub static DEF: $crate::__slave::DeviceDef = $crate::__slave::DeviceDef {
@@ -151,46 +159,20 @@ pub mod additions {
     }
 }
 
-/// Typed handles on the entries the demo application touches each cycle, resolved once
-/// (on PREOP -> SAFEOP, or on first use) instead of looked up by index every cycle.
-#[derive(Debug, Clone, Copy)]
-struct DemoIo {
-    blue: Var<bool>,
-    red: Var<bool>,
-    sync: Var<i8>,
-    o1: Var<i32>,
-    u1: Var<u16>,
-    o2: Var<i32>,
-    a: Var<i16>,
-    b: Var<i16>,
-    i1: Var<i32>,
-    iu1: Var<u16>,
-    i2: Var<i32>,
-    sum: Var<i16>,
-    diff: Var<i16>,
-    counter: Var<i32>,
-    buttons: Var<i32>,
-}
+/// The demo application's typed handles: the table's [`PdVars`] of the variant whose
+/// dictionary it runs on (every variant names the same entries; build-time offsets).
+type DemoIo = PdVars;
+
+/// Each variant's objects and its handles, in the base variant's type.
+const VARIANTS: [(&[oxicat_slave::ObjectDef], DemoIo); 2] =
+    [(OBJECTS, IO), (additions::OBJECTS, additions::IO)];
 
 impl DemoIo {
     fn resolve<const N: usize>(od: &Od<N>) -> Option<Self> {
-        Some(Self {
-            blue: od.var(0x7000, 5).ok()?,
-            red: od.var(0x7000, 6).ok()?,
-            sync: od.var(0x7000, 9).ok()?,
-            o1: od.var(0x7010, 1).ok()?,
-            u1: od.var(0x7012, 1).ok()?,
-            o2: od.var(0x7014, 1).ok()?,
-            a: od.var(0x7020, 1).ok()?,
-            b: od.var(0x7020, 2).ok()?,
-            i1: od.var(0x6010, 1).ok()?,
-            iu1: od.var(0x6012, 1).ok()?,
-            i2: od.var(0x6014, 1).ok()?,
-            sum: od.var(0x6020, 1).ok()?,
-            diff: od.var(0x6020, 2).ok()?,
-            counter: od.var(0x6030, 1).ok()?,
-            buttons: od.var(0x6030, 2).ok()?,
-        })
+        VARIANTS
+            .iter()
+            .find(|(o, _)| od.built_on(o))
+            .map(|&(_, io)| io)
     }
 }
 

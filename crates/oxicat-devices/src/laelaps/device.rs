@@ -180,10 +180,10 @@ pub fn device(side: Side) -> &'static DeviceDef {
     }
 }
 
-/// Typed handles on the Laelaps process-data entries (generated with the table, see
-/// [`PdVars`]) and the SYNC0 cycle time 0x1C32:02, resolved once ([`PdoVars::resolve`]) so
-/// that the SYNC0 cycle reads and writes the image by offset instead of looking each entry
-/// up by index.
+/// Typed handles on the Laelaps process-data entries (generated with the table, [`VARS`])
+/// and the SYNC0 cycle time 0x1C32:02 (a communication object, resolved once:
+/// [`PdoVars::resolve`]) so that the SYNC0 cycle reads and writes the image by offset
+/// instead of looking each entry up by index.
 #[derive(Debug, Clone, Copy)]
 pub struct PdoVars {
     /// The process-data entries.
@@ -192,10 +192,13 @@ pub struct PdoVars {
 }
 
 impl PdoVars {
-    /// Resolves all entries; `None` if the dictionary lacks one (not a Laelaps OD).
+    /// The handles for `od`; `None` if it is not built on the Laelaps objects.
     pub fn resolve<const N: usize>(od: &Od<N>) -> Option<Self> {
+        if !od.built_on(OBJECTS) {
+            return None;
+        }
         Some(Self {
-            pd: PdVars::resolve(od)?,
+            pd: VARS,
             cycle_time: od.var(0x1C32, 2).ok()?,
         })
     }

@@ -2,11 +2,11 @@
 //! test builds only): one INT16 output, one INT16 input that echoes it plus one, and a cycle
 //! counter. Its whole diff is this folder, its line in the registry and its `mod` line.
 
-use oxicat_slave::{AlState, AlStatusCode, Application, Od, Var};
+use oxicat_slave::{AlState, AlStatusCode, Application, Od};
 
 crate::pd_table! {
-    tx { 0x1A00 "Inputs" { 0x6000 "Inputs" { 1 "Echo": Int16, 2 "Cycles": Unsigned32 } } }
-    rx { 0x1600 "Outputs" { 0x7000 "Outputs" { 1 "Value": Int16 } } }
+    tx { 0x1A00 "Inputs" { 0x6000 "Inputs" { 1 "Echo": Int16 => echo, 2 "Cycles": Unsigned32 => cycles } } }
+    rx { 0x1600 "Outputs" { 0x7000 "Outputs" { 1 "Value": Int16 => value } } }
 }
 
 /// The definition: the one source of OD, ESI and SII.
@@ -53,7 +53,7 @@ pub static DEF: oxicat_slave::DeviceDef = oxicat_slave::DeviceDef {
 #[derive(Debug, Default)]
 pub struct Toy {
     cycles: u32,
-    io: Option<(Var<i16>, Var<i16>, Var<u32>)>,
+    io: Option<PdVars>,
 }
 
 impl<const N: usize> Application<N> for Toy {
@@ -64,13 +64,7 @@ impl<const N: usize> Application<N> for Toy {
         od: &mut Od<N>,
     ) -> Result<(), AlStatusCode> {
         if to == AlState::SafeOp {
-            self.io = (|| {
-                Some((
-                    od.var(0x7000, 1).ok()?,
-                    od.var(0x6000, 1).ok()?,
-                    od.var(0x6000, 2).ok()?,
-                ))
-            })();
+            self.io = od.built_on(OBJECTS).then_some(VARS);
         }
         Ok(())
     }
@@ -81,10 +75,10 @@ impl<const N: usize> Application<N> for Toy {
 
     fn cycle(&mut self, od: &mut Od<N>) {
         self.cycles = self.cycles.wrapping_add(1);
-        if let Some((value, echo, cycles)) = self.io {
-            let v = od.load(value);
-            od.store(echo, v.wrapping_add(1));
-            od.store(cycles, self.cycles);
+        if let Some(io) = self.io {
+            let v = od.load(io.value);
+            od.store(io.echo, v.wrapping_add(1));
+            od.store(io.cycles, self.cycles);
         }
     }
 }

@@ -8,7 +8,7 @@ use super::control::q8mul;
 use super::control::{
     param2int, phases, u2pwm, Motor, MotorParams, KILLVOLTAGE, R2IGAINCH1_Q8, R2IGAIN_Q8, R2U_FP,
 };
-use super::device::FRF_PER_CYCLE;
+use super::device::{FRF_PER_CYCLE, OBJECTS};
 use super::ring::Ring;
 
 /// Timer id of the 20 kHz current loop (`INTPWM` → `i_handler_pwm`).
@@ -133,49 +133,37 @@ struct FrfIo {
     cur: [Var<i16>; FRF_PER_CYCLE],
 }
 
-fn arr<T: Copy, const K: usize>(f: impl Fn(usize) -> Option<T>) -> Option<[T; K]> {
-    let first = f(0)?;
-    let mut out = [first; K];
-    for (k, o) in out.iter_mut().enumerate() {
-        *o = f(k)?;
-    }
-    Some(out)
-}
-
 impl NormalIo {
-    fn resolve<const N: usize>(od: &Od<N>) -> Option<Self> {
-        let m = |k: usize| 0x7000 + k as u16;
-        let t = |k: usize| 0x6000 + k as u16;
-        Some(Self {
-            mcom: arr(|k| od.var(m(k), 1).ok())?,
-            sp: arr(|k| od.var(m(k), 2).ok())?,
-            ff: arr(|k| od.var(m(k), 3).ok())?,
-            dig_out: od.var(0x7010, 1).ok()?,
-            aout: arr(|k| od.var(0x7010, k as u8 + 2).ok())?,
-            mstate: arr(|k| od.var(t(k), 1).ok())?,
-            count: arr(|k| od.var(t(k), 2).ok())?,
-            ts: arr(|k| od.var(t(k), 3).ok())?,
-            vel: arr(|k| od.var(t(k), 4).ok())?,
-            cur: arr(|k| od.var(t(k), 5).ok())?,
-            dig_in: od.var(0x6010, 1).ok()?,
-            others: arr(|k| od.var(0x6010, k as u8 + 2).ok())?,
-        })
-    }
+    /// The normal-mode handles, from the declaration ([`OBJECTS`]): offsets and types
+    /// checked when the crate builds.
+    const VARS: Self = Self {
+        mcom: Var::across(OBJECTS, 0x7000, 1),
+        sp: Var::across(OBJECTS, 0x7000, 2),
+        ff: Var::across(OBJECTS, 0x7000, 3),
+        dig_out: Var::of(OBJECTS, 0x7010, 1),
+        aout: Var::subs(OBJECTS, 0x7010, 2),
+        mstate: Var::across(OBJECTS, 0x6000, 1),
+        count: Var::across(OBJECTS, 0x6000, 2),
+        ts: Var::across(OBJECTS, 0x6000, 3),
+        vel: Var::across(OBJECTS, 0x6000, 4),
+        cur: Var::across(OBJECTS, 0x6000, 5),
+        dig_in: Var::of(OBJECTS, 0x6010, 1),
+        others: Var::subs(OBJECTS, 0x6010, 2),
+    };
 }
 
 impl FrfIo {
-    fn resolve<const N: usize>(od: &Od<N>) -> Option<Self> {
-        Some(Self {
-            mcom: od.var(0x7020, 1).ok()?,
-            entries: od.var(0x7020, 2).ok()?,
-            sp: arr(|k| od.var(0x7020, k as u8 + 3).ok())?,
-            mstate: od.var(0x6020, 1).ok()?,
-            buffer: od.var(0x6020, 2).ok()?,
-            entries_out: od.var(0x6020, 3).ok()?,
-            ectime: od.var(0x6020, 4).ok()?,
-            cur: arr(|k| od.var(0x6021, k as u8 + 1).ok())?,
-        })
-    }
+    /// The FRF-mode handles, as [`NormalIo::VARS`].
+    const VARS: Self = Self {
+        mcom: Var::of(OBJECTS, 0x7020, 1),
+        entries: Var::of(OBJECTS, 0x7020, 2),
+        sp: Var::subs(OBJECTS, 0x7020, 3),
+        mstate: Var::of(OBJECTS, 0x6020, 1),
+        buffer: Var::of(OBJECTS, 0x6020, 2),
+        entries_out: Var::of(OBJECTS, 0x6020, 3),
+        ectime: Var::of(OBJECTS, 0x6020, 4),
+        cur: Var::subs(OBJECTS, 0x6021, 1),
+    };
 }
 
 /// Counters for diagnostics.
@@ -279,12 +267,11 @@ impl<B: Board> TuEs030<B> {
         self.motors[k].par = param2int(&p);
     }
 
+    /// Takes the build-time handles when `od` is the TUeES030's dictionary.
     fn resolve<const N: usize>(&mut self, od: &Od<N>) {
-        if self.normal.is_none() {
-            self.normal = NormalIo::resolve(od);
-        }
-        if self.frf.is_none() {
-            self.frf = FrfIo::resolve(od);
+        if od.built_on(OBJECTS) {
+            self.normal = Some(NormalIo::VARS);
+            self.frf = Some(FrfIo::VARS);
         }
     }
 
