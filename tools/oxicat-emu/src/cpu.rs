@@ -251,7 +251,7 @@ impl Board {
         self.read_words(frame, &mut w[..n])?;
         let xpsr = w[7];
         let stacked_ipsr = (xpsr & 0x1FF) as u16;
-        if to_thread != (stacked_ipsr == 0) {
+        if to_thread != (stacked_ipsr == 0) || usize::from(stacked_ipsr) >= crate::nvic::NUM_EXC {
             return Err(fault(
                 target,
                 format!(

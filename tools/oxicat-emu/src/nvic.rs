@@ -366,7 +366,7 @@ impl Scs {
     fn irq_word(&self, set: u128, addr: u64) -> u32 {
         let word = ((addr & 0x1F) / 4) as u32;
         let irqs = (set >> 16) & ((1u128 << NUM_IRQ) - 1);
-        (irqs >> (32 * word)) as u32
+        irqs.checked_shr(32 * word).unwrap_or(0) as u32
     }
 
     fn prio_word(&self, first: usize) -> u32 {
@@ -441,7 +441,8 @@ impl Scs {
     pub fn write(&mut self, addr: u64, v: u32, now: u64, active: u64) -> bool {
         let irq_bits = |a: u64| -> u128 {
             let word = ((a & 0x1F) / 4) as u32;
-            (u128::from(v) << (16 + 32 * word)) & (((1u128 << NUM_IRQ) - 1) << 16)
+            u128::from(v).checked_shl(16 + 32 * word).unwrap_or(0)
+                & (((1u128 << NUM_IRQ) - 1) << 16)
         };
         match addr {
             SYST => {
@@ -611,7 +612,11 @@ mod tests {
         s.write(STIR, 40, 0, 0);
         assert_eq!(s.read(NVIC_ISPR + 4, 0), 1 << 8);
         s.write(STIR, 500, 0, 0); // out of range: ignored
-                                  // A byte write to ISER sets only its own bits.
+                                  // Words past the 97 IRQs read as zero and ignore writes.
+        s.write(NVIC_ISER + 0x1C, u32::MAX, 0, 0);
+        assert_eq!(s.read(NVIC_ISER + 0x1C, 0), 0);
+        assert_eq!(s.read(NVIC_ISER + 0x0C, 0), 0);
+        // A byte write to ISER sets only its own bits.
         assert_eq!(s.merge_base(NVIC_ISER), 0);
     }
 

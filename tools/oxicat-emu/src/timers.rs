@@ -373,7 +373,7 @@ impl Timer {
                 }
                 self.r(o)
             }
-            o => self.r(o),
+            o => self.regs.get(o / 4).copied().unwrap_or(0),
         }
     }
 
@@ -497,7 +497,7 @@ impl Timer {
         };
         let ccer = self.r(CCER);
         if ((ccer >> 1) ^ (ccer >> 5)) & 1 != 0 {
-            delta = -delta;
+            delta = delta.wrapping_neg();
         }
         if delta == 0 {
             return;
@@ -694,5 +694,8 @@ mod tests {
         t.write(CCER, 1 | 2 | (1 << 4), 0);
         assert_eq!(t.pwm_duty(1), Some(0.75));
         assert_eq!(t.pwm_duty(3), None);
+        // Offsets past the register file read as zero and ignore writes.
+        t.write(0x3FC, 7, 0);
+        assert_eq!(t.read(0x3FC, 0), 0);
     }
 }
