@@ -2,63 +2,76 @@
 //!
 //! The bytes that would be flashed — a board firmware's ELF — run on a Cortex-M4 in the
 //! Unicorn engine; the STM32F446 peripherals the images use are modelled here at register
-//! level (from RM0390), and its SPI1 is wired to `oxicat-pdi`'s LAN9252 chip model in front
-//! of a software ESC, so a master on the ECAT side talks to the *image*, not to
-//! host-compiled Rust.
+//! level (from RM0390 and the ARMv7-M architecture reference), and its SPI1 is wired to
+//! `oxicat-pdi`'s LAN9252 chip model in front of a software ESC, so a master on the ECAT
+//! side talks to the *image*, not to host-compiled Rust.
 //!
 //! This crate is GPL-2.0-or-later because Unicorn is GPL-2.0; nothing in the MIT/Apache
 //! workspace depends on it.
 //!
-//! What is modelled (exactly what `firmware/stm32f446-lan9252` touches):
+//! What is modelled (what `firmware/stm32f446-lan9252` and `firmware/laelaps-leg` touch):
 //!
 //! | block | model |
 //! |---|---|
 //! | flash, SRAM | 512 KiB at 0x0800_0000 (the ELF's load segments at their load addresses), 128 KiB at 0x2000_0000 |
-//! | RCC | reset values; HSE/PLL/PLLI2S/PLLSAI/LSE/LSI ready flags follow their enables, SWS follows SW |
+//! | RCC | reset values; HSE/PLL/PLLI2S/PLLSAI/LSE/LSI ready flags follow their enables, SWS follows SW; CFGR's APB prescalers (and DCKCFGR.TIMPRE) set the timer clocks |
 //! | PWR | VOSRDY set; over-drive ready flags follow ODEN/ODSWEN |
 //! | FLASH | ACR stored (latency reads back) |
-//! | bit-band alias | 0x4200_0000.. : a word per peripheral bit, read-modify-write of the register |
-//! | GPIOA..C | registers stored; BSRR sets/resets ODR; IDR = ODR for outputs, PA10 = LAN9252 IRQ, PB3/PB5 = SYNC0/SYNC1, PC13 = button released |
+//! | bit-band alias | 0x4200_0000.. : a word per peripheral bit, read-modify-write of the register (through its read, as the bus does) |
+//! | GPIOA..H | registers stored (MODER, AFR …); BSRR sets/resets ODR; IDR: PA10 = LAN9252 IRQ, PB3/PB5 = SYNC0/SYNC1, then levels injected with [`Board::set_input`], PC13 = button released, ODR for outputs, pull-ups high |
 //! | SPI1 | a byte per DR write clocked through the chip (`Lan9252Model::clock_byte`) while PB6 (CS) is low; TXE always set, RXNE until DR is read; bus time counted at the CR1 baud rate |
-//! | SysTick | CSR/RVR/CVR/CALIB, COUNTFLAG from the cycle count (processor clock or HCLK/8) |
-//! | SCB | CPACR and the rest of the SCS page stored (no exceptions are taken yet) |
+//! | EXTI, SYSCFG | EXTICR1..4 select the port of lines 0..15; RTSR/FTSR edges on IMR lines set PR (write-1-to-clear), SWIER; pins sampled after every engine run, SPI frame and GPIO write; IRQs EXTI0..4, EXTI9_5, EXTI15_10 |
+//! | TIM1..TIM14 | one model (`timers`): PSC/ARR (preloaded)/CNT from the cycle count at the APB timer clock, up/down/center-aligned, RCR (TIM1/8), UDIS/URS/OPM, UG; UIF → update IRQ; CCR/CCMR/CCER stored, PWM duty ([`Board::pwm_duty`]); encoder mode (SMS 1/2/3) from [`Board::set_encoder`]; input capture with CCxIF/CCxOF from [`Board::capture`]. No output-compare match flags |
+//! | NVIC, SCB | ISER/ICER/ISPR/ICPR/IABR, IPR (4 bits), STIR; ICSR (VECTACTIVE/VECTPENDING/RETTOBASE, PENDSV/PENDST/NMIPEND set/clear), VTOR, AIRCR (PRIGROUP; SYSRESETREQ stops the image with a fault), SCR.SLEEPONEXIT, CCR, SHPR1..3, SHCSR enables, CPACR, FPCCR; the rest of the page stored |
+//! | exceptions | taken at translated-block boundaries by the board (`cpu`): 8-word frame, or 26 with S0..S15/FPSCR when CONTROL.FPCA (stacked eagerly although FPCCR resets with LSPEN/ASPEN set: same result for both sides), 8-byte alignment, EXC_RETURN, MSP/PSP, tail-chaining, preemption by group priority, PRIMASK/BASEPRI/FAULTMASK, SVC → SVCall, PendSV, SysTick. Inside the engine the core stays in thread mode: `mrs rX, ipsr` reads 0 (ICSR has the number); unprivileged thread mode is refused |
+//! | SysTick | CSR/RVR/CVR/CALIB from the cycle count (processor clock or HCLK/8); COUNTFLAG; TICKINT pends SysTick at each wrap |
+//! | DWT | CTRL (CYCCNTENA), CYCCNT counting the cycles the core runs (not sleeps) while DEMCR.TRCENA; other registers stored |
+//! | DBGMCU | IDCODE (STM32F446, 0x421); the rest stored |
+//! | sleep | WFI (and WFE without a pending event) skips time to the next timer/SysTick event or the end of the run, waking on a pending exception that would preempt (PRIMASK does not stop the wake-up) |
+//!
+//! Faults are reported, never taken: an access outside these blocks, an undefined
+//! instruction, BKPT, a floating-point instruction with CPACR's CP10/CP11 off (found when
+//! the engine returns, so the PC is near, not at, the instruction), an SVC that cannot
+//! preempt, a bad vector or EXC_RETURN, a stack the frame does not fit — each is an
+//! [`EmuError::Fault`] with the PC and the reason, never a hang.
 //!
 //! Time: the CPU's cycle count is the number of instructions executed (one cycle per
-//! instruction, counted per translated block), at 180 MHz. Anything the image touches
-//! outside these blocks is reported as a fault with its PC and address, never a hang.
+//! instruction, counted per translated block as it starts), plus SPI wait, exception
+//! entry/return (12/10, tail-chain 6) and sleep, at 180 MHz.
 
 #![warn(missing_docs)]
 
+mod cpu;
+mod exti;
 pub mod node;
+mod nvic;
+mod periph;
+mod timers;
 
 use std::cell::RefCell;
 use std::rc::Rc;
 
-use oxicat_pdi::sim::{Handle, Lan9252Frame, Lan9252Model, Model, PinKind};
+use oxicat_pdi::sim::{Handle, Lan9252Model};
 use unicorn_engine::unicorn_const::{Arch, Mode, Prot};
 use unicorn_engine::{ArmCpuModel, RegisterARM, Unicorn};
+
+use nvic::{Masks, SVCALL};
+use periph::{Periph, GPIOA, PERIPH, PORTS};
 
 /// Flash base and size (STM32F446RE).
 pub const FLASH: (u64, u64) = (0x0800_0000, 512 * 1024);
 /// SRAM base and size (SRAM1 + SRAM2).
 pub const SRAM: (u64, u64) = (0x2000_0000, 128 * 1024);
-/// Peripheral space modelled (APB1, APB2, AHB1).
-const PERIPH: (u64, u64) = (0x4000_0000, 0x8_0000);
 /// The peripheral bit-band alias (one word per bit of `PERIPH`).
 const BITBAND: (u64, u64) = (0x4200_0000, PERIPH.1 * 32);
 /// The System Control Space page (SysTick, NVIC, SCB).
-const SCS: (u64, u64) = (0xE000_E000, 0x1000);
+const SCS: (u64, u64) = (nvic::SCS_BASE, 0x1000);
+/// The DWT page.
+const DWT: (u64, u64) = (nvic::DWT_BASE, 0x1000);
+/// DBGMCU.
+const DBGMCU: (u64, u64) = (0xE004_2000, 0x1000);
 /// CPU clock of the images (180 MHz SYSCLK).
 pub const CPU_HZ: u64 = 180_000_000;
-
-const RCC: u64 = 0x4002_3800;
-const FLASH_R: u64 = 0x4002_3C00;
-const PWR: u64 = 0x4000_7000;
-const GPIOA: u64 = 0x4002_0000;
-const GPIOB: u64 = 0x4002_0400;
-const GPIOC: u64 = 0x4002_0800;
-const SPI1: u64 = 0x4001_3000;
-const SYST: u64 = 0xE000_E010;
 
 /// Why an image stopped.
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -178,194 +191,6 @@ pub struct SpiStats {
     pub bytes_without_cs: u64,
 }
 
-/// Peripheral state of the STM32F446 board.
-struct Periph {
-    chip: Handle<Lan9252Model>,
-    regs: Vec<u32>,
-    scs: Vec<u32>,
-    frame: Option<Lan9252Frame>,
-    spi_rx: u8,
-    rxne: bool,
-    spi: SpiStats,
-    cycles: u64,
-    /// Cycle count at SysTick's last reload.
-    syst_ref: u64,
-    countflag: bool,
-}
-
-impl Periph {
-    fn reg(&self, addr: u64) -> u32 {
-        self.regs[((addr - PERIPH.0) / 4) as usize]
-    }
-
-    fn set(&mut self, addr: u64, v: u32) {
-        self.regs[((addr - PERIPH.0) / 4) as usize] = v;
-    }
-
-    /// Reset values the HAL relies on.
-    fn reset(&mut self) {
-        self.set(RCC, 0x0000_0083); // HSION, HSIRDY
-        self.set(RCC + 0x04, 0x2400_3010); // PLLCFGR
-        self.set(RCC + 0x74, 0x0E00_0000); // CSR: reset flags
-        self.set(PWR + 0x04, 1 << 14); // CSR: VOSRDY
-        self.set(GPIOA, 0xA800_0000);
-        self.set(GPIOB, 0x0000_0280);
-        self.set(SPI1 + 0x08, 0x0002); // SR: TXE
-    }
-
-    fn pin(&self, kind: PinKind) -> bool {
-        self.chip.with(|m| m.pin(kind))
-    }
-
-    fn gpio_idr(&self, port: u64) -> u32 {
-        let mut idr = self.reg(port + 0x14) & 0xFFFF;
-        let mut put = |pin: u32, level: bool| {
-            idr = (idr & !(1 << pin)) | (u32::from(level) << pin);
-        };
-        match port {
-            GPIOA => put(10, self.pin(PinKind::Irq)),
-            GPIOB => {
-                put(3, self.pin(PinKind::Sync0));
-                put(5, self.pin(PinKind::Sync1));
-            }
-            GPIOC => put(13, true),
-            _ => {}
-        }
-        idr
-    }
-
-    /// PB6 (CS) changed to `high`.
-    fn chip_select(&mut self, high: bool) {
-        match (high, self.frame.take()) {
-            (false, None) => {
-                self.frame = Some(Lan9252Frame::default());
-                self.spi.frames += 1;
-            }
-            (true, Some(f)) => self.chip.with(|m| m.end_frame(f)),
-            (_, f) => self.frame = f,
-        }
-    }
-
-    fn write_odr(&mut self, port: u64, odr: u32) {
-        let old = self.reg(port + 0x14);
-        self.set(port + 0x14, odr & 0xFFFF);
-        if port == GPIOB && (old ^ odr) & (1 << 6) != 0 {
-            self.chip_select(odr & (1 << 6) != 0);
-        }
-    }
-
-    fn spi_dr_write(&mut self, v: u8) {
-        self.spi.bytes += 1;
-        self.spi_rx = match self.frame.as_mut() {
-            Some(f) => self.chip.with(|m| m.clock_byte(f, v)),
-            None => {
-                self.spi.bytes_without_cs += 1;
-                0xFF
-            }
-        };
-        self.rxne = true;
-        // The byte takes 8 SCLK periods at PCLK2 (90 MHz) / 2^(BR+1).
-        let br = (self.reg(SPI1) >> 3) & 7;
-        self.cycles += 8 * 2 * (2u64 << br);
-    }
-
-    fn read(&mut self, addr: u64) -> u32 {
-        match addr {
-            a if a == SPI1 + 0x08 => 0x0002 | u32::from(self.rxne),
-            a if a == SPI1 + 0x0C => {
-                self.rxne = false;
-                u32::from(self.spi_rx)
-            }
-            a if a == GPIOA + 0x10 || a == GPIOB + 0x10 || a == GPIOC + 0x10 => {
-                self.gpio_idr(a - 0x10)
-            }
-            a => self.reg(a),
-        }
-    }
-
-    fn write(&mut self, addr: u64, v: u32) {
-        match addr {
-            a if a == RCC => {
-                // Ready flags follow their enables: HSE 16/17, PLL 24/25, PLLI2S 26/27,
-                // PLLSAI 28/29; HSI stays on.
-                let mut r = (v & 0x5505_00F9) | 0x3;
-                for en in [16, 24, 26, 28] {
-                    if v & (1 << en) != 0 {
-                        r |= 1 << (en + 1);
-                    }
-                }
-                self.set(a, r);
-            }
-            a if a == RCC + 0x08 => self.set(a, (v & !0xC) | ((v & 3) << 2)),
-            a if a == RCC + 0x70 => self.set(a, (v & !2) | ((v & 1) << 1)),
-            a if a == RCC + 0x74 => self.set(a, (v & !2) | ((v & 1) << 1)),
-            a if a == PWR => {
-                self.set(a, v);
-                let csr = (self.reg(PWR + 4) & !(3 << 16)) | (v & (3 << 16));
-                self.set(PWR + 4, csr | (1 << 14));
-            }
-            a if a == FLASH_R => self.set(a, v),
-            a if a == SPI1 + 0x0C => self.spi_dr_write(v as u8),
-            a if a == SPI1 + 0x08 => {}
-            a if [GPIOA, GPIOB, GPIOC].contains(&(a - 0x18)) => {
-                let port = a - 0x18;
-                let odr = (self.reg(port + 0x14) | (v & 0xFFFF)) & !(v >> 16);
-                self.write_odr(port, odr);
-            }
-            a if [GPIOA, GPIOB, GPIOC].contains(&(a - 0x14)) => self.write_odr(a - 0x14, v),
-            a => self.set(a, v),
-        }
-    }
-
-    fn syst_read(&mut self, off: u64) -> u32 {
-        let rvr = u64::from(self.scs[(SYST - SCS.0 + 4) as usize / 4] & 0x00FF_FFFF);
-        let csr = self.scs[(SYST - SCS.0) as usize / 4];
-        // CLKSOURCE (bit 2): the processor clock, else the external reference HCLK/8; a
-        // period is RVR + 1 ticks.
-        let cycles_per_tick = if csr & 4 != 0 { 1 } else { 8 };
-        let period = (rvr + 1) * cycles_per_tick;
-        let enabled = csr & 1 != 0;
-        let elapsed = self.cycles.saturating_sub(self.syst_ref);
-        if enabled && elapsed >= period {
-            self.countflag = true;
-            self.syst_ref += elapsed / period * period;
-        }
-        match off {
-            0 => {
-                let v = csr | (u32::from(self.countflag) << 16);
-                self.countflag = false;
-                v
-            }
-            8 if enabled => {
-                let left = period - (self.cycles - self.syst_ref) % period;
-                ((left / cycles_per_tick) % (rvr + 1)) as u32
-            }
-            0xC => 0x4000_0000 | (CPU_HZ / 8 / 100) as u32, // CALIB: NOREF, 10 ms at HCLK/8
-            _ => self.scs[(SYST - SCS.0 + off) as usize / 4],
-        }
-    }
-
-    fn scs_read(&mut self, addr: u64) -> u32 {
-        if (SYST..SYST + 0x10).contains(&addr) {
-            return self.syst_read(addr - SYST);
-        }
-        self.scs[((addr - SCS.0) / 4) as usize]
-    }
-
-    fn scs_write(&mut self, addr: u64, v: u32) {
-        if addr == SYST + 8 {
-            // Any write clears CVR and COUNTFLAG.
-            self.syst_ref = self.cycles;
-            self.countflag = false;
-            return;
-        }
-        if addr == SYST && v & 1 != 0 && self.scs[(SYST - SCS.0) as usize / 4] & 1 == 0 {
-            self.syst_ref = self.cycles;
-        }
-        self.scs[((addr - SCS.0) / 4) as usize] = v;
-    }
-}
-
 /// Sub-word access to a 32-bit register file.
 fn read_sized(word: u32, addr: u64, size: usize) -> u64 {
     let shift = (addr & 3) * 8;
@@ -386,12 +211,32 @@ fn merge_sized(old: u32, addr: u64, size: usize, v: u64) -> u32 {
     (old & !mask) | (((v as u32) << shift) & mask)
 }
 
+/// A name for the engine's CPU exception numbers (QEMU's `EXCP_*`).
+fn intr_name(n: u32) -> &'static str {
+    match n {
+        1 => "undefined instruction",
+        2 => "SVC",
+        3 => "prefetch abort",
+        4 => "data abort",
+        7 => "BKPT",
+        9 => "exception exit",
+        17 => "no coprocessor (NOCP)",
+        18 => "invalid state (INVSTATE)",
+        _ => "CPU exception",
+    }
+}
+
 /// An STM32F446 running a board image, with a LAN9252 (the chip model `chip`) on SPI1.
 pub struct Board {
     uc: Unicorn<'static, ()>,
     periph: Rc<RefCell<Periph>>,
     pc: u32,
-    instructions: u64,
+    /// Asleep in WFI/WFE (or SLEEPONEXIT).
+    sleeping: bool,
+    /// The event register WFE consumes (set by exception entry and return).
+    event: bool,
+    /// CONTROL.FPCA as last seen (the CPACR check looks for it rising).
+    fpca: bool,
 }
 
 impl Board {
@@ -412,20 +257,7 @@ impl Board {
         for s in &segs {
             uc.mem_write(u64::from(s.addr), &s.data).map_err(fault)?;
         }
-        let mut p = Periph {
-            chip,
-            regs: vec![0; (PERIPH.1 / 4) as usize],
-            scs: vec![0; (SCS.1 / 4) as usize],
-            frame: None,
-            spi_rx: 0xFF,
-            rxne: false,
-            spi: SpiStats::default(),
-            cycles: 0,
-            syst_ref: 0,
-            countflag: false,
-        };
-        p.reset();
-        let periph = Rc::new(RefCell::new(p));
+        let periph = Rc::new(RefCell::new(Periph::new(chip)));
         let (r, w) = (periph.clone(), periph.clone());
         uc.mmio_map(
             PERIPH.0,
@@ -439,7 +271,7 @@ impl Board {
                 move |_: &mut Unicorn<'_, ()>, off: u64, size: usize, v: u64| {
                     let a = PERIPH.0 + off;
                     let mut p = w.borrow_mut();
-                    let old = p.reg(a & !3);
+                    let old = p.merge_base(a & !3);
                     p.write(a & !3, merge_sized(old, a, size, v));
                 },
             ),
@@ -459,41 +291,132 @@ impl Board {
                 move |_: &mut Unicorn<'_, ()>, off: u64, _size: usize, v: u64| {
                     let (a, bit) = target(off);
                     let mut p = w.borrow_mut();
-                    let old = p.reg(a);
+                    let old = p.read(a);
                     p.write(a, (old & !(1 << bit)) | (u32::from(v & 1 != 0) << bit));
                 },
             ),
         )
         .map_err(fault)?;
+        for (base, size) in [SCS, DWT] {
+            let (r, w) = (periph.clone(), periph.clone());
+            uc.mmio_map(
+                base,
+                size,
+                Some(move |_: &mut Unicorn<'_, ()>, off: u64, size: usize| {
+                    let a = base + off;
+                    let word = r.borrow_mut().scs_read(a & !3);
+                    read_sized(word, a, size)
+                }),
+                Some(
+                    move |_: &mut Unicorn<'_, ()>, off: u64, size: usize, v: u64| {
+                        let a = base + off;
+                        let mut p = w.borrow_mut();
+                        let old = p.scs_merge_base(a & !3);
+                        p.scs_write(a & !3, merge_sized(old, a, size, v));
+                    },
+                ),
+            )
+            .map_err(fault)?;
+        }
         let (r, w) = (periph.clone(), periph.clone());
         uc.mmio_map(
-            SCS.0,
-            SCS.1,
+            DBGMCU.0,
+            DBGMCU.1,
             Some(move |_: &mut Unicorn<'_, ()>, off: u64, size: usize| {
-                let a = SCS.0 + off;
-                let word = r.borrow_mut().scs_read(a & !3);
-                read_sized(word, a, size)
+                let word = match off & !3 {
+                    0 => 0x1000_6421, // IDCODE: rev Z, DEV_ID 0x421 (STM32F446)
+                    o => r
+                        .borrow()
+                        .dbgmcu
+                        .get((o / 4) as usize)
+                        .copied()
+                        .unwrap_or(0),
+                };
+                read_sized(word, DBGMCU.0 + off, size)
             }),
             Some(
                 move |_: &mut Unicorn<'_, ()>, off: u64, size: usize, v: u64| {
-                    let a = SCS.0 + off;
                     let mut p = w.borrow_mut();
-                    let old = p.scs[((a & !3) - SCS.0) as usize / 4];
-                    p.scs_write(a & !3, merge_sized(old, a, size, v));
+                    if let Some(reg) = p.dbgmcu.get_mut((off / 4) as usize) {
+                        *reg = merge_sized(*reg, DBGMCU.0 + off, size, v);
+                    }
                 },
             ),
         )
         .map_err(fault)?;
-        // Cycles: one per instruction, counted per translated block as it runs (Thumb-2
-        // instructions are 2 or 4 bytes: the block's bytes / 3 on average).
+        // Cycles: one per instruction, counted per translated block as it starts
+        // (Thumb-2 instructions are 2 or 4 bytes: the block's bytes / 3 on average). The
+        // engine stops before the block where the board has work: a timer or SysTick event
+        // due, the end of the run, a register write that may pend an interrupt, or a
+        // change of PRIMASK/BASEPRI/FAULTMASK while an exception waits on them.
         let c = periph.clone();
         uc.add_block_hook(
             1,
             0,
-            move |_: &mut Unicorn<'_, ()>, _addr: u64, size: u32| {
-                c.borrow_mut().cycles += u64::from(size.div_ceil(3));
+            move |uc: &mut Unicorn<'_, ()>, _addr: u64, size: u32| {
+                let stop = {
+                    let mut p = c.borrow_mut();
+                    // The hook runs before the block: a stop here leaves it unexecuted.
+                    let stop = p.cycles >= p.wake_at
+                        || p.watch.is_some_and(|m| {
+                            let now = Masks {
+                                primask: uc.reg_read(RegisterARM::PRIMASK).unwrap_or(0) as u32,
+                                basepri: uc.reg_read(RegisterARM::BASEPRI).unwrap_or(0) as u32,
+                                faultmask: uc.reg_read(RegisterARM::FAULTMASK).unwrap_or(0) as u32,
+                            };
+                            now != m
+                        });
+                    if stop {
+                        p.stopped = true;
+                    } else {
+                        let n = u64::from(size.div_ceil(3));
+                        p.cycles += n;
+                        p.insns += n;
+                    }
+                    stop
+                };
+                if stop {
+                    let _ = uc.emu_stop();
+                }
             },
         )
+        .map_err(fault)?;
+        // CPU exceptions (SVC, the fetch that is an exception return, BKPT …) stop the
+        // engine; the board handles them.
+        let c = periph.clone();
+        uc.add_intr_hook(move |uc: &mut Unicorn<'_, ()>, intno: u32| {
+            c.borrow_mut().intr = Some(intno);
+            let _ = uc.emu_stop();
+        })
+        .map_err(fault)?;
+        // WFE and YIELD reach the engine's "invalid instruction" path: WFE becomes a sleep,
+        // YIELD a no-op; anything else stays an undefined-instruction fault.
+        let c = periph.clone();
+        uc.add_insn_invalid_hook(move |uc: &mut Unicorn<'_, ()>| {
+            let pc = uc.reg_read(RegisterARM::PC).unwrap_or(0);
+            let mut b = [0u8; 4];
+            let half = |b: &[u8]| u16::from_le_bytes([b[0], b[1]]);
+            let hint = if uc.mem_read(pc.wrapping_sub(2), &mut b[..2]).is_ok()
+                && matches!(half(&b), 0xBF10 | 0xBF20)
+            {
+                Some(half(&b) == 0xBF20)
+            } else if uc.mem_read(pc.wrapping_sub(4), &mut b).is_ok()
+                && half(&b) == 0xF3AF
+                && matches!(half(&b[2..]), 0x8001 | 0x8002)
+            {
+                Some(half(&b[2..]) == 0x8002)
+            } else {
+                None
+            };
+            match hint {
+                Some(wfe) => {
+                    c.borrow_mut().wait_event = Some(wfe);
+                    let _ = uc.emu_stop();
+                    true
+                }
+                None => false,
+            }
+        })
         .map_err(fault)?;
         let mut vt = [0u8; 8];
         uc.mem_read(FLASH.0, &mut vt).map_err(fault)?;
@@ -505,37 +428,158 @@ impl Board {
             uc,
             periph,
             pc,
-            instructions: 0,
+            sleeping: false,
+            event: false,
+            fpca: false,
         })
     }
 
-    /// Runs `n` instructions (fewer if the image stops). A fault is an error with the PC.
-    pub fn run(&mut self, n: usize) -> Result<(), EmuError> {
-        let r = self.uc.emu_start(u64::from(self.pc | 1), u64::MAX, 0, n);
-        let pc = self.uc.reg_read(RegisterARM::PC).unwrap_or(0) as u32;
-        self.instructions += n as u64;
-        match r {
-            Ok(()) => {
-                self.pc = pc;
-                Ok(())
-            }
-            Err(e) => Err(EmuError::Fault {
-                pc,
-                reason: format!("{e:?}"),
-            }),
+    fn fault(&self, reason: impl Into<String>) -> EmuError {
+        EmuError::Fault {
+            pc: self.pc,
+            reason: reason.into(),
         }
     }
 
-    /// Runs slices of `slice` instructions until `done` holds or `max` instructions ran;
-    /// whether `done` held.
+    /// Runs the board for `n` CPU cycles (about `n` instructions; less while it sleeps),
+    /// to the block boundary at or after them. A fault is an error with the PC.
+    pub fn run(&mut self, n: usize) -> Result<(), EmuError> {
+        let end = self.cycles() + n as u64;
+        self.run_to(end)
+    }
+
+    /// Runs the board until its clock reaches `t_ns` (see [`Board::run`]).
+    pub fn run_to_ns(&mut self, t_ns: u64) -> Result<(), EmuError> {
+        let end = (u128::from(t_ns) * u128::from(CPU_HZ)).div_ceil(1_000_000_000);
+        self.run_to(u64::try_from(end).unwrap_or(u64::MAX))
+    }
+
+    /// Runs until the cycle count reaches `end`: peripherals brought up to date, pending
+    /// exceptions taken and sleep skipped between engine runs.
+    fn run_to(&mut self, end: u64) -> Result<(), EmuError> {
+        loop {
+            self.service()?;
+            let now = self.cycles();
+            if now >= end {
+                return Ok(());
+            }
+            if self.sleeping {
+                let mut p = self.periph.borrow_mut();
+                let next = p.next_event().unwrap_or(end).min(end).max(now + 1);
+                p.slept += next - now;
+                p.cycles = next;
+                continue;
+            }
+            {
+                let mut p = self.periph.borrow_mut();
+                // At least one block runs: every event up to now has been handled.
+                p.wake_at = p.next_event().unwrap_or(u64::MAX).min(end).max(now + 1);
+                p.stopped = false;
+                p.intr = None;
+                p.wait_event = None;
+            }
+            let r = self.uc.emu_start(u64::from(self.pc | 1), u64::MAX, 0, 0);
+            self.pc = self.uc.reg_read(RegisterARM::PC).unwrap_or(0) as u32;
+            if let Err(e) = r {
+                return Err(self.fault(format!("{e:?}")));
+            }
+            self.check_fpu()?;
+            let (intr, stopped, wait) = {
+                let p = self.periph.borrow();
+                (p.intr, p.stopped, p.wait_event)
+            };
+            match (intr, wait) {
+                (Some(n), _) => self.on_intr(n)?,
+                (None, Some(true)) if self.event => self.event = false,
+                (None, Some(true)) => self.sleeping = true,
+                (None, Some(false)) => {}
+                // Stopped by neither the board nor an exception: WFI halted the engine.
+                (None, None) if !stopped => self.sleeping = true,
+                (None, None) => {}
+            }
+        }
+    }
+
+    /// Brings the peripherals up to now, pends what their interrupt lines raise, wakes
+    /// the core if an exception would, and takes the exception that preempts, if any.
+    fn service(&mut self) -> Result<(), EmuError> {
+        let masks = self.masks()?;
+        let take = {
+            let mut p = self.periph.borrow_mut();
+            if p.scs.reset_requested {
+                drop(p);
+                return Err(self.fault("SYSRESETREQ: the image requested a system reset"));
+            }
+            p.sync_all();
+            p.sample_pins();
+            let lines = p.irq_lines();
+            p.scs.assert_lines(lines);
+            if self.sleeping && p.scs.wakes(masks) {
+                self.sleeping = false;
+            }
+            let take = if self.sleeping {
+                None
+            } else {
+                p.scs.takeable(masks)
+            };
+            // Blocked only by the masks: watch them from the block hook.
+            p.watch =
+                (take.is_none() && p.scs.takeable(Masks::default()).is_some()).then_some(masks);
+            take
+        };
+        if let Some(e) = take {
+            self.enter(e)?;
+        }
+        Ok(())
+    }
+
+    /// A CPU exception the engine raised.
+    fn on_intr(&mut self, n: u32) -> Result<(), EmuError> {
+        match n {
+            2 => {
+                // SVC is synchronous: SVCall must be able to preempt, else it escalates
+                // to HardFault.
+                let masks = self.masks()?;
+                let mut p = self.periph.borrow_mut();
+                let svc = p.scs.group(p.scs.priority(SVCALL));
+                if svc >= p.scs.execution_priority(masks) {
+                    drop(p);
+                    return Err(
+                        self.fault("SVC where SVCall cannot preempt (HardFault escalation)")
+                    );
+                }
+                p.scs.pending |= nvic::bit(SVCALL);
+                Ok(())
+            }
+            3 if self.pc >= 0xFFFF_FFE0 => self.exception_return(self.pc),
+            n => Err(self.fault(format!("{} (engine exception {n})", intr_name(n)))),
+        }
+    }
+
+    /// A floating-point instruction with CP10/CP11 off in CPACR is a UsageFault (NOCP)
+    /// on the Cortex-M4; the engine runs it anyway but marks the FP context active.
+    fn check_fpu(&mut self) -> Result<(), EmuError> {
+        let control = self.uc.reg_read(RegisterARM::CONTROL).unwrap_or(0);
+        let fpca = control & 4 != 0;
+        if fpca && !self.fpca && !self.periph.borrow().scs.fpu_enabled() {
+            return Err(self.fault(
+                "UsageFault (NOCP): a floating-point instruction ran with CPACR.CP10/CP11 off",
+            ));
+        }
+        self.fpca = fpca;
+        Ok(())
+    }
+
+    /// Runs slices of `slice` cycles until `done` holds or `max` cycles ran; whether
+    /// `done` held.
     pub fn run_until(
         &mut self,
         slice: usize,
         max: u64,
         mut done: impl FnMut(&mut Self) -> bool,
     ) -> Result<bool, EmuError> {
-        let start = self.instructions;
-        while self.instructions - start < max {
+        let start = self.cycles();
+        while self.cycles() - start < max {
             self.run(slice)?;
             if done(self) {
                 return Ok(true);
@@ -544,19 +588,25 @@ impl Board {
         Ok(false)
     }
 
-    /// Instructions executed so far (as asked of the engine).
+    /// Instructions executed so far (counted per translated block, like the cycles).
     pub fn instructions(&self) -> u64 {
-        self.instructions
+        self.periph.borrow().insns
     }
 
-    /// CPU cycles so far (instructions plus SPI wait), the image's time base.
+    /// CPU cycles so far (instructions plus SPI wait, exception entry/return and sleep),
+    /// the image's time base.
     pub fn cycles(&self) -> u64 {
         self.periph.borrow().cycles
     }
 
+    /// Cycles the core spent asleep (WFI/WFE).
+    pub fn slept_cycles(&self) -> u64 {
+        self.periph.borrow().slept
+    }
+
     /// Simulated time in ns at [`CPU_HZ`].
     pub fn time_ns(&self) -> u64 {
-        self.cycles() * 1_000_000_000 / CPU_HZ
+        (u128::from(self.cycles()) * 1_000_000_000 / u128::from(CPU_HZ)) as u64
     }
 
     /// The program counter where the last run stopped.
@@ -569,14 +619,97 @@ impl Board {
         self.periph.borrow().spi
     }
 
-    /// An output pin's level (`port` 'A'..='C').
+    /// Reads image memory (flash or SRAM) at `addr`.
+    pub fn read_memory(&self, addr: u32, buf: &mut [u8]) -> Result<(), EmuError> {
+        self.uc
+            .mem_read(u64::from(addr), buf)
+            .map_err(|e| self.fault(format!("read of {addr:#010x}: {e:?}")))
+    }
+
+    fn port(port: char) -> Option<u8> {
+        let p = (port.to_ascii_uppercase() as u32).checked_sub('A' as u32)?;
+        (u64::from(p) < PORTS).then_some(p as u8)
+    }
+
+    /// An output pin's level (`port` 'A'..='H'; false for another letter).
     pub fn output(&self, port: char, pin: u8) -> bool {
-        let base = match port {
-            'A' => GPIOA,
-            'B' => GPIOB,
-            _ => GPIOC,
+        let Some(p) = Self::port(port) else {
+            return false;
         };
-        self.periph.borrow().reg(base + 0x14) & (1 << pin) != 0
+        let base = GPIOA + 0x400 * u64::from(p);
+        self.periph.borrow().reg(base + 0x14) & (1 << (pin & 15)) != 0
+    }
+
+    /// Drives input pin `pin` of `port` ('A'..='H') to `level` (a plant's sensor, a
+    /// button); EXTI sees the edge at the next run. The LAN9252's pins (PA10, PB3, PB5)
+    /// stay the chip's.
+    pub fn set_input(&mut self, port: char, pin: u8, level: bool) {
+        let Some(p) = Self::port(port) else {
+            return;
+        };
+        let mut per = self.periph.borrow_mut();
+        let (mask, levels) = &mut per.inputs[usize::from(p)];
+        let b = 1u16 << (pin & 15);
+        *mask |= b;
+        *levels = if level { *levels | b } else { *levels & !b };
+    }
+
+    /// The duty (0..=1) of timer `tim`'s channel `ch` (TIM1 = 1, CH1 = 1) as a PWM output:
+    /// CCRx / (ARR + 1) in PWM mode 1, inverted in PWM mode 2 and for an active-low
+    /// channel; `None` unless the channel is an enabled PWM output on a running timer
+    /// (with MOE on TIM1/TIM8).
+    pub fn pwm_duty(&self, tim: u8, ch: u8) -> Option<f64> {
+        self.periph.borrow_mut().timer(tim)?.pwm_duty(ch)
+    }
+
+    /// The shaft on timer `tim`'s encoder inputs is at `edges` quadrature edges (four per
+    /// line): in encoder mode (SMCR.SMS = 1/2/3, CEN set) CNT follows, wrapping within
+    /// ARR with an update event per wrap. Outside encoder mode only the position is kept.
+    pub fn set_encoder(&mut self, tim: u8, edges: i64) {
+        let mut p = self.periph.borrow_mut();
+        let now = p.cycles;
+        if let Some(t) = p.timer(tim) {
+            t.sync(now);
+            t.set_encoder(edges);
+        }
+    }
+
+    /// An active edge on timer `tim`'s input TI`input` (1..=4) now: every channel in
+    /// input-capture mode mapped to it latches CNT into CCRx and sets CCxIF (CCxOF if it
+    /// was set). Returns how many channels captured.
+    pub fn capture(&mut self, tim: u8, input: u8) -> usize {
+        let mut p = self.periph.borrow_mut();
+        let now = p.cycles;
+        p.timer(tim).map_or(0, |t| t.capture(input, now))
+    }
+
+    /// The counter of timer `tim` now.
+    pub fn timer_count(&self, tim: u8) -> Option<u32> {
+        let mut p = self.periph.borrow_mut();
+        let now = p.cycles;
+        p.timer(tim).map(|t| t.read(0x24, now))
+    }
+
+    /// Interrupt handlers entered so far, by IRQ number (index 0..97).
+    pub fn interrupts_taken(&self) -> Vec<u64> {
+        self.periph.borrow().scs.taken[16..].to_vec()
+    }
+
+    /// Times exception `number` (IPSR numbering: 11 SVCall, 14 PendSV, 15 SysTick, 16 + n
+    /// IRQ n) was entered.
+    pub fn exceptions_taken(&self, number: u16) -> u64 {
+        self.periph
+            .borrow()
+            .scs
+            .taken
+            .get(usize::from(number))
+            .copied()
+            .unwrap_or(0)
+    }
+
+    /// The exception being handled (IPSR), 0 in thread mode.
+    pub fn active_exception(&self) -> u16 {
+        self.periph.borrow().scs.ipsr
     }
 }
 

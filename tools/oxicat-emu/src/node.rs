@@ -40,10 +40,6 @@ pub struct EmulatedNode {
     thread: Option<JoinHandle<()>>,
 }
 
-/// Instructions per engine call: small enough that the board's clock overshoots the
-/// segment's by at most a few µs.
-const STEP: usize = 2_000;
-
 impl EmulatedNode {
     /// Boots `image` (an ELF) on its own thread with a LAN9252 on SPI1 clocked at
     /// `spi_mhz`; the node wakes the CPU every `slice_ns` of virtual time besides the
@@ -74,8 +70,8 @@ impl EmulatedNode {
                 };
                 let mut fault = None;
                 while let Ok(t) = runs.recv() {
-                    while fault.is_none() && board.time_ns() < t {
-                        if let Err(e) = board.run(STEP) {
+                    if fault.is_none() {
+                        if let Err(e) = board.run_to_ns(t) {
                             fault = Some(e);
                         }
                     }

@@ -1,0 +1,433 @@
+//! The STM32F446's peripheral bus as the image sees it: RCC, PWR, FLASH, GPIOA..H, SPI1
+//! (wired to the LAN9252 model), EXTI/SYSCFG, the timers, and the Cortex-M4's System
+//! Control Space. One `Periph` is shared by the engine's MMIO callbacks and hooks and by
+//! the board between engine runs.
+
+use oxicat_pdi::sim::{Handle, Lan9252Frame, Lan9252Model, Model, PinKind};
+
+use crate::exti::{Exti, EXTI_BASE, SYSCFG_BASE};
+use crate::nvic::{Masks, Scs, DWT_BASE};
+use crate::timers::{Timer, TIMERS};
+use crate::SpiStats;
+
+/// Peripheral space modelled (APB1, APB2, AHB1).
+pub(crate) const PERIPH: (u64, u64) = (0x4000_0000, 0x8_0000);
+
+pub(crate) const RCC: u64 = 0x4002_3800;
+const RCC_CFGR: u64 = RCC + 0x08;
+const RCC_DCKCFGR: u64 = RCC + 0x8C;
+const FLASH_R: u64 = 0x4002_3C00;
+const PWR: u64 = 0x4000_7000;
+/// GPIOA; ports B..H follow every 0x400.
+pub(crate) const GPIOA: u64 = 0x4002_0000;
+/// Ports A..H.
+pub(crate) const PORTS: u64 = 8;
+const SPI1: u64 = 0x4001_3000;
+
+/// Peripheral state of the STM32F446 board.
+pub(crate) struct Periph {
+    chip: Handle<Lan9252Model>,
+    regs: Vec<u32>,
+    pub scs: Scs,
+    pub exti: Exti,
+    pub timers: Vec<Timer>,
+    frame: Option<Lan9252Frame>,
+    spi_rx: u8,
+    rxne: bool,
+    pub spi: SpiStats,
+    /// CPU cycles: the board's time base.
+    pub cycles: u64,
+    /// Instructions executed (estimated per block like `cycles`).
+    pub insns: u64,
+    /// Cycles spent asleep (WFI/WFE skipped forward).
+    pub slept: u64,
+    /// Input levels injected per port: (mask of driven pins, levels).
+    pub inputs: [(u16, u16); PORTS as usize],
+    /// The block hook stops the engine at this cycle (0: at the next block).
+    pub wake_at: u64,
+    /// The block hook stopped the engine.
+    pub stopped: bool,
+    /// A CPU exception the engine raised (`intno`), which stopped it.
+    pub intr: Option<u32>,
+    /// WFE/YIELD stopped the engine (true for WFE).
+    pub wait_event: Option<bool>,
+    /// While an exception is blocked only by these mask values, the block hook stops the
+    /// engine when they change.
+    pub watch: Option<Masks>,
+    /// DBGMCU registers after IDCODE (CR, APB1_FZ, APB2_FZ), stored.
+    pub dbgmcu: [u32; 4],
+}
+
+impl Periph {
+    pub fn new(chip: Handle<Lan9252Model>) -> Self {
+        let mut p = Periph {
+            chip,
+            regs: vec![0; (PERIPH.1 / 4) as usize],
+            scs: Scs::new(),
+            exti: Exti::default(),
+            timers: TIMERS.iter().map(|k| Timer::new(*k)).collect(),
+            frame: None,
+            spi_rx: 0xFF,
+            rxne: false,
+            spi: SpiStats::default(),
+            cycles: 0,
+            insns: 0,
+            slept: 0,
+            inputs: [(0, 0); PORTS as usize],
+            wake_at: u64::MAX,
+            stopped: false,
+            intr: None,
+            wait_event: None,
+            watch: None,
+            dbgmcu: [0; 4],
+        };
+        p.reset();
+        p
+    }
+
+    pub fn reg(&self, addr: u64) -> u32 {
+        self.regs[((addr - PERIPH.0) / 4) as usize]
+    }
+
+    fn set(&mut self, addr: u64, v: u32) {
+        self.regs[((addr - PERIPH.0) / 4) as usize] = v;
+    }
+
+    /// Reset values the HAL relies on.
+    fn reset(&mut self) {
+        self.set(RCC, 0x0000_0083); // HSION, HSIRDY
+        self.set(RCC + 0x04, 0x2400_3010); // PLLCFGR
+        self.set(RCC + 0x74, 0x0E00_0000); // CSR: reset flags
+        self.set(PWR + 0x04, 1 << 14); // CSR: VOSRDY
+        self.set(GPIOA, 0xA800_0000);
+        self.set(GPIOA + 0x400, 0x0000_0280);
+        self.set(SPI1 + 0x08, 0x0002); // SR: TXE
+    }
+
+    /// Cycles the core ran (not asleep): what DWT CYCCNT counts.
+    pub fn active_cycles(&self) -> u64 {
+        self.cycles - self.slept
+    }
+
+    fn pin(&self, kind: PinKind) -> bool {
+        self.chip.with(|m| m.pin(kind))
+    }
+
+    /// Port index (0 = A) of a GPIO register address, if it is one.
+    fn port_of(addr: u64) -> Option<u64> {
+        let rel = addr.checked_sub(GPIOA)?;
+        (rel < PORTS * 0x400).then_some(rel / 0x400)
+    }
+
+    /// The level of pin `pin` of port `port` (0 = A): the LAN9252's pins (PA10 IRQ, PB3
+    /// SYNC0, PB5 SYNC1), then injected inputs, PC13 (the button, released), outputs at
+    /// their ODR level, inputs with a pull-up high, else low.
+    pub fn pin_level(&self, port: u8, pin: u32) -> bool {
+        match (port, pin) {
+            (0, 10) => return self.pin(PinKind::Irq),
+            (1, 3) => return self.pin(PinKind::Sync0),
+            (1, 5) => return self.pin(PinKind::Sync1),
+            _ => {}
+        }
+        let (mask, levels) = self
+            .inputs
+            .get(usize::from(port))
+            .copied()
+            .unwrap_or((0, 0));
+        if mask & (1 << pin) != 0 {
+            return levels & (1 << pin) != 0;
+        }
+        if (port, pin) == (2, 13) {
+            return true;
+        }
+        let base = GPIOA + 0x400 * u64::from(port);
+        let mode = (self.reg(base) >> (2 * pin)) & 3;
+        let pull = (self.reg(base + 0x0C) >> (2 * pin)) & 3;
+        if mode == 0 && pull == 1 {
+            return true;
+        }
+        if mode == 0 && pull == 2 {
+            return false;
+        }
+        self.reg(base + 0x14) & (1 << pin) != 0
+    }
+
+    fn gpio_idr(&self, port: u64) -> u32 {
+        // The chip's pins cost a lock each: only ports A and B have them.
+        (0..16).fold(0, |idr, pin| {
+            idr | (u32::from(self.pin_level(port as u8, pin)) << pin)
+        })
+    }
+
+    /// Samples the EXTI lines' pins; whether an interrupt line may have risen.
+    pub fn sample_pins(&mut self) -> bool {
+        if !self.exti.watching() {
+            return false;
+        }
+        let mut exti = std::mem::take(&mut self.exti);
+        let changed = exti.sample(|port, line| self.pin_level(port, line));
+        self.exti = exti;
+        changed
+    }
+
+    /// PB6 (CS) changed to `high`.
+    fn chip_select(&mut self, high: bool) {
+        match (high, self.frame.take()) {
+            (false, None) => {
+                self.frame = Some(Lan9252Frame::default());
+                self.spi.frames += 1;
+            }
+            (true, Some(f)) => {
+                self.chip.with(|m| m.end_frame(f));
+                // The chip's IRQ/SYNC pins may have changed with the frame.
+                if self.sample_pins() {
+                    self.wake_at = 0;
+                }
+            }
+            (_, f) => self.frame = f,
+        }
+    }
+
+    fn write_odr(&mut self, port: u64, odr: u32) {
+        let base = GPIOA + 0x400 * port;
+        let old = self.reg(base + 0x14);
+        self.set(base + 0x14, odr & 0xFFFF);
+        if port == 1 && (old ^ odr) & (1 << 6) != 0 {
+            self.chip_select(odr & (1 << 6) != 0);
+        }
+        if self.exti.watching() && self.sample_pins() {
+            self.wake_at = 0;
+        }
+    }
+
+    fn spi_dr_write(&mut self, v: u8) {
+        self.spi.bytes += 1;
+        self.spi_rx = match self.frame.as_mut() {
+            Some(f) => self.chip.with(|m| m.clock_byte(f, v)),
+            None => {
+                self.spi.bytes_without_cs += 1;
+                0xFF
+            }
+        };
+        self.rxne = true;
+        // The byte takes 8 SCLK periods at PCLK2 (90 MHz) / 2^(BR+1).
+        let br = (self.reg(SPI1) >> 3) & 7;
+        self.cycles += 8 * 2 * (2u64 << br);
+    }
+
+    /// CPU cycles per tick of the APB1 (or APB2) timer clock: TIMxCLK is PCLKx when the
+    /// APB prescaler is 1, else 2 × PCLKx (4 × with DCKCFGR.TIMPRE, up to HCLK).
+    fn timer_div(&self, apb2: bool) -> u64 {
+        let cfgr = self.reg(RCC_CFGR);
+        let ppre = if apb2 {
+            (cfgr >> 13) & 7
+        } else {
+            (cfgr >> 10) & 7
+        };
+        let div: u64 = if ppre < 4 { 1 } else { 2 << (ppre - 4) };
+        let mul = if self.reg(RCC_DCKCFGR) & (1 << 24) != 0 {
+            4
+        } else {
+            2
+        };
+        (div / mul).max(1)
+    }
+
+    fn timer_index(addr: u64) -> Option<usize> {
+        let base = addr & !0x3FF;
+        if !(0x4000_0000..0x4000_2400).contains(&base)
+            && !(0x4001_0000..0x4001_0800).contains(&base)
+            && !(0x4001_4000..0x4001_4C00).contains(&base)
+        {
+            return None;
+        }
+        TIMERS.iter().position(|k| k.base == base)
+    }
+
+    /// The timer `number` (1 = TIM1), with its clock divider brought up to date.
+    pub fn timer(&mut self, number: u8) -> Option<&mut Timer> {
+        let apb1 = self.timer_div(false);
+        let apb2 = self.timer_div(true);
+        let t = self.timers.iter_mut().find(|t| t.kind.number == number)?;
+        t.clk_div = if t.kind.apb2 { apb2 } else { apb1 };
+        Some(t)
+    }
+
+    fn timer_at(&mut self, i: usize) -> &mut Timer {
+        let div = self.timer_div(self.timers[i].kind.apb2);
+        let t = &mut self.timers[i];
+        if t.clk_div != div {
+            // A new clock tree: the time so far counted at the old rate.
+            t.clk_div = div;
+        }
+        t
+    }
+
+    /// Brings SysTick and the timers up to now.
+    pub fn sync_all(&mut self) {
+        let now = self.cycles;
+        self.scs.syst_sync(now);
+        for i in 0..self.timers.len() {
+            self.timer_at(i).sync(now);
+        }
+    }
+
+    /// The interrupt lines the peripherals drive high.
+    pub fn irq_lines(&self) -> u128 {
+        self.timers
+            .iter()
+            .fold(self.exti.irq_lines(), |l, t| l | t.irq_lines())
+    }
+
+    /// The cycle of the next timer or SysTick event that raises an interrupt.
+    pub fn next_event(&self) -> Option<u64> {
+        self.timers
+            .iter()
+            .filter_map(|t| t.next_event())
+            .chain(self.scs.syst_next())
+            .min()
+    }
+
+    /// The word a sub-word write merges into.
+    pub fn merge_base(&self, addr: u64) -> u32 {
+        if (EXTI_BASE..EXTI_BASE + 0x18).contains(&addr) {
+            return self.exti.merge_base(addr);
+        }
+        if Self::port_of(addr).is_some() && addr & 0x3FF == 0x18 {
+            return 0; // BSRR
+        }
+        self.reg(addr)
+    }
+
+    pub fn read(&mut self, addr: u64) -> u32 {
+        match addr {
+            a if a == SPI1 + 0x08 => 0x0002 | u32::from(self.rxne),
+            a if a == SPI1 + 0x0C => {
+                self.rxne = false;
+                u32::from(self.spi_rx)
+            }
+            a if (SYSCFG_BASE..EXTI_BASE + 0x400).contains(&a) => {
+                if !(SYSCFG_BASE + 0x30..EXTI_BASE).contains(&a) {
+                    self.exti.read(a)
+                } else {
+                    self.reg(a)
+                }
+            }
+            a => {
+                if let Some(port) = Self::port_of(a) {
+                    if a & 0x3FF == 0x10 {
+                        return self.gpio_idr(port);
+                    }
+                }
+                if let Some(i) = Self::timer_index(a) {
+                    let now = self.cycles;
+                    return self.timer_at(i).read((a & 0x3FF) as usize, now);
+                }
+                self.reg(a)
+            }
+        }
+    }
+
+    pub fn write(&mut self, addr: u64, v: u32) {
+        match addr {
+            a if a == SPI1 + 0x0C => self.spi_dr_write(v as u8),
+            a if a == SPI1 + 0x08 => {}
+            a if a == RCC => {
+                // Ready flags follow their enables: HSE 16/17, PLL 24/25, PLLI2S 26/27,
+                // PLLSAI 28/29; HSI stays on.
+                let mut r = (v & 0x5505_00F9) | 0x3;
+                for en in [16, 24, 26, 28] {
+                    if v & (1 << en) != 0 {
+                        r |= 1 << (en + 1);
+                    }
+                }
+                self.set(a, r);
+            }
+            a if a == RCC_CFGR || a == RCC_DCKCFGR => {
+                // The timers count at the old clock up to now.
+                let now = self.cycles;
+                for i in 0..self.timers.len() {
+                    self.timer_at(i).sync(now);
+                }
+                let v = if a == RCC_CFGR {
+                    (v & !0xC) | ((v & 3) << 2)
+                } else {
+                    v
+                };
+                self.set(a, v);
+                self.wake_at = 0;
+            }
+            a if a == RCC + 0x70 => self.set(a, (v & !2) | ((v & 1) << 1)),
+            a if a == RCC + 0x74 => self.set(a, (v & !2) | ((v & 1) << 1)),
+            a if a == PWR => {
+                self.set(a, v);
+                let csr = (self.reg(PWR + 4) & !(3 << 16)) | (v & (3 << 16));
+                self.set(PWR + 4, csr | (1 << 14));
+            }
+            a if a == FLASH_R => self.set(a, v),
+            a if (SYSCFG_BASE..EXTI_BASE + 0x400).contains(&a) => {
+                if !(SYSCFG_BASE + 0x30..EXTI_BASE).contains(&a) {
+                    // Edges so far count under the old configuration; a newly unmasked
+                    // line starts from its pin's present level.
+                    self.sample_pins();
+                    self.exti.write(a, v);
+                    self.sample_pins();
+                    self.wake_at = 0;
+                } else {
+                    self.set(a, v);
+                }
+            }
+            a => {
+                if let Some(port) = Self::port_of(a) {
+                    match a & 0x3FF {
+                        0x18 => {
+                            let base = GPIOA + 0x400 * port;
+                            let odr = (self.reg(base + 0x14) | (v & 0xFFFF)) & !(v >> 16);
+                            return self.write_odr(port, odr);
+                        }
+                        0x14 => return self.write_odr(port, v),
+                        0x10 => return, // IDR is read-only
+                        _ => {}
+                    }
+                }
+                if let Some(i) = Self::timer_index(a) {
+                    let now = self.cycles;
+                    let off = (a & 0x3FF) as usize;
+                    self.timer_at(i).write(off, v, now);
+                    // Compare registers change no event; anything else may.
+                    if !(0x34..0x44).contains(&off) {
+                        self.wake_at = 0;
+                    }
+                    return;
+                }
+                self.set(a, v);
+            }
+        }
+    }
+
+    /// A read of the SCS page or the DWT.
+    pub fn scs_read(&mut self, addr: u64) -> u32 {
+        if (DWT_BASE..DWT_BASE + 0x1000).contains(&addr) {
+            return self.scs.dwt_read(addr, self.active_cycles());
+        }
+        let now = self.cycles;
+        self.scs.read(addr, now)
+    }
+
+    pub fn scs_merge_base(&self, addr: u64) -> u32 {
+        if (DWT_BASE..DWT_BASE + 0x1000).contains(&addr) {
+            return self.scs.dwt_read(addr, self.active_cycles());
+        }
+        self.scs.merge_base(addr)
+    }
+
+    pub fn scs_write(&mut self, addr: u64, v: u32) {
+        let active = self.active_cycles();
+        if (DWT_BASE..DWT_BASE + 0x1000).contains(&addr) {
+            return self.scs.dwt_write(addr, v, active);
+        }
+        if self.scs.write(addr, v, self.cycles, active) {
+            self.wake_at = 0;
+        }
+    }
+}

@@ -1,0 +1,701 @@
+//! STM32F446 timers TIM1..TIM14 (RM0390 §16–§19): one model keyed by base address.
+//!
+//! The counter is evaluated lazily from the CPU cycle count: `sync` brings it up to a
+//! cycle, counting prescaler ticks at the timer clock (cycles per tick from RCC's APB
+//! prescalers) with the preloaded PSC (and ARR when ARPE) taking effect at update events,
+//! up-, down- and center-aligned counting, the repetition counter of TIM1/TIM8, UDIS,
+//! URS, OPM. SR flags: UIF on update, CCxIF/CCxOF on input capture; the IRQ lines follow
+//! SR & DIER. Encoder mode (SMCR.SMS = 1, 2, 3) takes its position from the board
+//! (`Board::set_encoder`); input capture latches CNT on an injected edge
+//! (`Board::capture`). Output compare match flags (CCxIF in output mode) are not modelled;
+//! CCR/CCMR/CCER are stored and the PWM duty is derived from them.
+
+/// Register offsets.
+const CR1: usize = 0x00;
+const SMCR: usize = 0x08;
+const DIER: usize = 0x0C;
+const SR: usize = 0x10;
+const EGR: usize = 0x14;
+const CCMR1: usize = 0x18;
+const CCER: usize = 0x20;
+const CNT: usize = 0x24;
+const PSC: usize = 0x28;
+const ARR: usize = 0x2C;
+const RCR: usize = 0x30;
+const CCR1: usize = 0x34;
+const BDTR: usize = 0x44;
+
+const CEN: u32 = 1;
+const UDIS: u32 = 1 << 1;
+const URS: u32 = 1 << 2;
+const OPM: u32 = 1 << 3;
+const DIR: u32 = 1 << 4;
+const ARPE: u32 = 1 << 7;
+const UIF: u32 = 1;
+
+/// Which timer, where, and its interrupt lines.
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct TimerKind {
+    /// Register block base.
+    pub base: u64,
+    /// Timer number (1 for TIM1 …).
+    pub number: u8,
+    /// On APB2 (else APB1).
+    pub apb2: bool,
+    /// 32-bit counter (TIM2, TIM5).
+    pub wide: bool,
+    /// Advanced-control (TIM1, TIM8): repetition counter, BDTR.MOE.
+    pub advanced: bool,
+    /// Capture/compare channels (0 for the basic TIM6/TIM7).
+    pub channels: u8,
+    /// IRQs: update, capture/compare, trigger/commutation, break (all the same on
+    /// timers with one vector).
+    pub irq_up: u16,
+    pub irq_cc: u16,
+    pub irq_trg: u16,
+    pub irq_brk: u16,
+}
+
+const fn kind(number: u8, base: u64, apb2: bool, wide: bool, channels: u8, irq: u16) -> TimerKind {
+    TimerKind {
+        base,
+        number,
+        apb2,
+        wide,
+        advanced: false,
+        channels,
+        irq_up: irq,
+        irq_cc: irq,
+        irq_trg: irq,
+        irq_brk: irq,
+    }
+}
+
+const fn advanced(number: u8, base: u64, up: u16, cc: u16, trg: u16, brk: u16) -> TimerKind {
+    TimerKind {
+        base,
+        number,
+        apb2: true,
+        wide: false,
+        advanced: true,
+        channels: 4,
+        irq_up: up,
+        irq_cc: cc,
+        irq_trg: trg,
+        irq_brk: brk,
+    }
+}
+
+/// The STM32F446's timers (RM0390 table 38 for the IRQ positions).
+pub(crate) const TIMERS: [TimerKind; 14] = [
+    advanced(1, 0x4001_0000, 25, 27, 26, 24),
+    kind(2, 0x4000_0000, false, true, 4, 28),
+    kind(3, 0x4000_0400, false, false, 4, 29),
+    kind(4, 0x4000_0800, false, false, 4, 30),
+    kind(5, 0x4000_0C00, false, true, 4, 50),
+    kind(6, 0x4000_1000, false, false, 0, 54),
+    kind(7, 0x4000_1400, false, false, 0, 55),
+    advanced(8, 0x4001_0400, 44, 46, 45, 43),
+    kind(9, 0x4001_4000, true, false, 2, 24),
+    kind(10, 0x4001_4400, true, false, 1, 25),
+    kind(11, 0x4001_4800, true, false, 1, 26),
+    kind(12, 0x4000_1800, false, false, 2, 43),
+    kind(13, 0x4000_1C00, false, false, 1, 44),
+    kind(14, 0x4000_2000, false, false, 1, 45),
+];
+
+/// One timer's state.
+pub(crate) struct Timer {
+    pub kind: TimerKind,
+    regs: [u32; 0x54 / 4],
+    cnt: u32,
+    /// Prescaler ticks since the last counter tick.
+    phase: u64,
+    /// Cycle up to which the counter is evaluated.
+    last: u64,
+    /// CPU cycles per timer-clock tick.
+    pub clk_div: u64,
+    psc_sh: u32,
+    arr_sh: u32,
+    rep: u32,
+    /// Center-aligned: counting down now.
+    down: bool,
+    /// Encoder: the last injected position in quadrature edges.
+    enc: i64,
+}
+
+impl Timer {
+    pub fn new(kind: TimerKind) -> Self {
+        let mut t = Timer {
+            kind,
+            regs: [0; 0x54 / 4],
+            cnt: 0,
+            phase: 0,
+            last: 0,
+            clk_div: 1,
+            psc_sh: 0,
+            arr_sh: 0,
+            rep: 0,
+            down: false,
+            enc: 0,
+        };
+        let max = t.max();
+        t.regs[ARR / 4] = max;
+        t.arr_sh = max;
+        t
+    }
+
+    fn r(&self, off: usize) -> u32 {
+        self.regs[off / 4]
+    }
+
+    fn max(&self) -> u32 {
+        if self.kind.wide {
+            u32::MAX
+        } else {
+            0xFFFF
+        }
+    }
+
+    fn cms(&self) -> u32 {
+        (self.r(CR1) >> 5) & 3
+    }
+
+    fn sms(&self) -> u32 {
+        self.r(SMCR) & 7
+    }
+
+    fn encoder(&self) -> bool {
+        (1..=3).contains(&self.sms())
+    }
+
+    /// Counting from its clock: enabled and not in encoder or external-clock mode.
+    fn running(&self) -> bool {
+        self.r(CR1) & CEN != 0 && !self.encoder() && self.sms() != 7
+    }
+
+    /// Counter ticks from CNT to the next overflow/underflow.
+    fn ticks_to_event(&self) -> u64 {
+        let (cnt, arr) = (u64::from(self.cnt), u64::from(self.arr_sh));
+        if self.cms() != 0 {
+            if self.down {
+                cnt.max(1)
+            } else if cnt < arr {
+                arr - cnt
+            } else {
+                1
+            }
+        } else if self.r(CR1) & DIR != 0 {
+            cnt + 1
+        } else if cnt <= arr {
+            arr - cnt + 1
+        } else {
+            u64::from(self.max()) - cnt + 1
+        }
+    }
+
+    fn advance(&mut self, ticks: u64) {
+        let t = ticks as u32;
+        let down = if self.cms() != 0 {
+            self.down
+        } else {
+            self.r(CR1) & DIR != 0
+        };
+        self.cnt = if down {
+            self.cnt.wrapping_sub(t)
+        } else {
+            self.cnt.wrapping_add(t)
+        } & self.max();
+    }
+
+    /// An overflow/underflow: the counter wraps; with the repetition counter at zero (and
+    /// UDIS clear) it is an update event.
+    fn overflow(&mut self) {
+        if self.cms() != 0 {
+            if self.down {
+                self.cnt = 0;
+                self.down = false;
+            } else {
+                self.cnt = self.arr_sh;
+                self.down = true;
+            }
+        } else if self.r(CR1) & DIR != 0 {
+            self.cnt = self.r(ARR);
+        } else {
+            self.cnt = 0;
+        }
+        if self.rep > 0 {
+            self.rep -= 1;
+            return;
+        }
+        self.update_event(true);
+        if self.cms() == 0 && self.r(CR1) & DIR != 0 {
+            self.cnt = self.arr_sh;
+        }
+    }
+
+    fn update_event(&mut self, set_uif: bool) {
+        if self.r(CR1) & UDIS != 0 {
+            return;
+        }
+        self.psc_sh = self.r(PSC) & 0xFFFF;
+        self.arr_sh = self.r(ARR);
+        if self.kind.advanced {
+            self.rep = self.r(RCR) & 0xFF;
+        }
+        if set_uif {
+            self.regs[SR / 4] |= UIF;
+        }
+        if self.r(CR1) & OPM != 0 {
+            self.regs[CR1 / 4] &= !CEN;
+        }
+    }
+
+    /// Prescaler ticks from now to the next over/underflow.
+    fn pticks_to_event(&self) -> u64 {
+        (self.ticks_to_event() * (u64::from(self.psc_sh) + 1)).saturating_sub(self.phase)
+    }
+
+    /// Brings the counter up to cycle `now`.
+    pub fn sync(&mut self, now: u64) {
+        if !self.running() {
+            self.last = now;
+            return;
+        }
+        if now <= self.last {
+            return;
+        }
+        let k = self.clk_div.max(1);
+        let mut pt = (now - self.last) / k;
+        self.last += pt * k;
+        // Bounded: after the first event, whole cycles of 2 × (RCR + 1) periods are
+        // skipped at once, leaving at most that many events to step through.
+        let mut fast_forwarded = false;
+        loop {
+            let need = self.pticks_to_event();
+            if pt < need {
+                let psc = u64::from(self.psc_sh) + 1;
+                let total = self.phase + pt;
+                self.advance(total / psc);
+                self.phase = total % psc;
+                return;
+            }
+            pt -= need;
+            self.phase = 0;
+            self.overflow();
+            if !self.running() {
+                return;
+            }
+            if !fast_forwarded {
+                fast_forwarded = true;
+                let psc = u64::from(self.psc_sh) + 1;
+                let period = if self.cms() != 0 {
+                    u64::from(self.arr_sh).max(1)
+                } else {
+                    u64::from(self.arr_sh) + 1
+                };
+                let reps = if self.kind.advanced {
+                    u64::from(self.r(RCR) & 0xFF) + 1
+                } else {
+                    1
+                };
+                let cycle = 2 * reps * period * psc;
+                if pt >= cycle {
+                    pt %= cycle;
+                    if self.r(CR1) & UDIS == 0 {
+                        self.regs[SR / 4] |= UIF;
+                    }
+                }
+            }
+        }
+    }
+
+    /// The cycle of the next update event, when it would raise an interrupt that is not
+    /// already raised.
+    pub fn next_event(&self) -> Option<u64> {
+        if !self.running()
+            || self.r(DIER) & 1 == 0
+            || self.r(SR) & UIF != 0
+            || self.r(CR1) & UDIS != 0
+        {
+            return None;
+        }
+        let psc = u64::from(self.psc_sh) + 1;
+        let period = if self.cms() != 0 {
+            u64::from(self.arr_sh).max(1)
+        } else {
+            u64::from(self.arr_sh) + 1
+        };
+        let pt = self.pticks_to_event() + u64::from(self.rep) * period * psc;
+        Some(self.last + pt * self.clk_div.max(1))
+    }
+
+    /// The IRQ lines this timer drives high (exception-number bit set).
+    pub fn irq_lines(&self) -> u128 {
+        let on = self.r(SR) & self.r(DIER);
+        let k = &self.kind;
+        let mut lines = 0u128;
+        let mut raise = |irq: u16, mask: u32| {
+            if on & mask != 0 {
+                lines |= crate::nvic::bit(16 + irq);
+            }
+        };
+        raise(k.irq_up, UIF);
+        raise(k.irq_cc, 0x1E);
+        raise(k.irq_trg, 0x60);
+        raise(k.irq_brk, 0x80);
+        lines
+    }
+
+    fn ccs(&self, ch: u8) -> u32 {
+        let ccmr = self.r(CCMR1 + 4 * usize::from((ch - 1) / 2));
+        (ccmr >> (8 * u32::from((ch - 1) % 2))) & 3
+    }
+
+    pub fn read(&mut self, off: usize, now: u64) -> u32 {
+        self.sync(now);
+        match off {
+            CR1 => {
+                let down = if self.cms() != 0 {
+                    self.down
+                } else {
+                    self.r(CR1) & DIR != 0
+                };
+                (self.r(CR1) & !DIR) | if down { DIR } else { 0 }
+            }
+            CNT => self.cnt,
+            EGR => 0,
+            o if (CCR1..CCR1 + 16).contains(&o) => {
+                let ch = ((o - CCR1) / 4 + 1) as u8;
+                if ch <= self.kind.channels && self.ccs(ch) != 0 {
+                    // Reading an input-capture CCR clears CCxIF.
+                    self.regs[SR / 4] &= !(1 << ch);
+                }
+                self.r(o)
+            }
+            o => self.regs.get(o / 4).copied().unwrap_or(0),
+        }
+    }
+
+    /// Returns whether the interrupt lines may have changed.
+    pub fn write(&mut self, off: usize, v: u32, now: u64) -> bool {
+        self.sync(now);
+        match off {
+            CR1 => {
+                let was = self.running();
+                let cms_was = self.cms();
+                self.regs[CR1 / 4] = v & 0x3FF;
+                if self.cms() != 0 && cms_was == 0 {
+                    self.down = false;
+                }
+                if !was && self.running() {
+                    self.last = now;
+                }
+                if self.r(CR1) & ARPE == 0 {
+                    self.arr_sh = self.r(ARR);
+                }
+            }
+            SR => self.regs[SR / 4] &= v, // rc_w0
+            EGR => {
+                if v & 1 != 0 {
+                    // UG: re-initialise the counter and the prescaler; unless UDIS, an
+                    // update event (UIF only when URS is clear).
+                    let down = self.cms() == 0 && self.r(CR1) & DIR != 0;
+                    self.phase = 0;
+                    if self.r(CR1) & UDIS == 0 {
+                        self.psc_sh = self.r(PSC) & 0xFFFF;
+                        self.arr_sh = self.r(ARR);
+                        if self.kind.advanced {
+                            self.rep = self.r(RCR) & 0xFF;
+                        }
+                        if self.r(CR1) & URS == 0 {
+                            self.regs[SR / 4] |= UIF;
+                        }
+                    }
+                    self.cnt = if down { self.arr_sh } else { 0 };
+                    self.down = false;
+                }
+                for ch in 1..=self.kind.channels {
+                    if v & (1 << ch) != 0 {
+                        self.capture_channel(ch);
+                    }
+                }
+            }
+            CNT => self.cnt = v & self.max(),
+            PSC => self.regs[PSC / 4] = v & 0xFFFF,
+            ARR => {
+                self.regs[ARR / 4] = v & self.max();
+                if self.r(CR1) & ARPE == 0 {
+                    self.arr_sh = v & self.max();
+                }
+            }
+            SMCR => {
+                let was = self.encoder();
+                self.regs[SMCR / 4] = v;
+                if !was && self.encoder() {
+                    self.last = now;
+                }
+            }
+            o if (CCR1..CCR1 + 16).contains(&o) => {
+                let ch = ((o - CCR1) / 4 + 1) as u8;
+                if ch > self.kind.channels || self.ccs(ch) == 0 {
+                    self.regs[o / 4] = v & self.max();
+                }
+            }
+            o if o < self.regs.len() * 4 => self.regs[o / 4] = v,
+            _ => {}
+        }
+        matches!(off, CR1 | SR | EGR | DIER)
+    }
+
+    /// Latches CNT into CCRx (an input-capture event on channel `ch`).
+    fn capture_channel(&mut self, ch: u8) {
+        let f = 1u32 << ch;
+        if self.ccs(ch) != 0 {
+            if self.r(SR) & f != 0 {
+                self.regs[SR / 4] |= 1 << (8 + ch); // CCxOF
+            }
+            self.regs[(CCR1 + 4 * usize::from(ch - 1)) / 4] = self.cnt;
+        }
+        self.regs[SR / 4] |= f;
+    }
+
+    /// An active edge on input TIn (1..=4) at `now`: every channel in input-capture mode
+    /// mapped to it (CCxS = 01 for its own input, 10 for its pair's) and enabled (CCxE)
+    /// captures. Returns how many channels captured.
+    pub fn capture(&mut self, input: u8, now: u64) -> usize {
+        self.sync(now);
+        let mut n = 0;
+        for ch in 1..=self.kind.channels {
+            let pair = if ch % 2 == 1 { ch + 1 } else { ch - 1 };
+            let mapped = match self.ccs(ch) {
+                1 => input == ch,
+                2 => input == pair,
+                _ => false,
+            };
+            let enabled = self.r(CCER) & (1 << (4 * (ch - 1))) != 0;
+            if mapped && enabled {
+                self.capture_channel(ch);
+                n += 1;
+            }
+        }
+        n
+    }
+
+    /// Encoder mode: the shaft is at `edges` quadrature edges (four per line). SMS = 3
+    /// counts every edge, SMS = 1/2 the edges of one input (half); CC1P xor CC2P reverses
+    /// the direction. CNT wraps within 0..=ARR with an update event per wrap.
+    pub fn set_encoder(&mut self, edges: i64) {
+        let prev = self.enc;
+        self.enc = edges;
+        if !self.encoder() || self.r(CR1) & CEN == 0 {
+            return;
+        }
+        let mut delta = match self.sms() {
+            3 => edges.wrapping_sub(prev),
+            _ => edges.div_euclid(2).wrapping_sub(prev.div_euclid(2)),
+        };
+        let ccer = self.r(CCER);
+        if ((ccer >> 1) ^ (ccer >> 5)) & 1 != 0 {
+            delta = delta.wrapping_neg();
+        }
+        if delta == 0 {
+            return;
+        }
+        let span = i128::from(self.arr_sh) + 1;
+        let pos = i128::from(self.cnt) + i128::from(delta);
+        let wraps = pos.div_euclid(span);
+        self.cnt = pos.rem_euclid(span) as u32;
+        if delta < 0 {
+            self.regs[CR1 / 4] |= DIR;
+        } else {
+            self.regs[CR1 / 4] &= !DIR;
+        }
+        if wraps != 0 && self.r(CR1) & UDIS == 0 {
+            self.update_event(true);
+        }
+    }
+
+    /// The duty of channel `ch` (1..=4) as a PWM output: `None` unless the channel is an
+    /// enabled output (CCxE, and BDTR.MOE on TIM1/TIM8) in PWM mode 1 or 2 on a running
+    /// counter. Active-low polarity (CCxP) inverts it.
+    pub fn pwm_duty(&self, ch: u8) -> Option<f64> {
+        if ch == 0 || ch > self.kind.channels || self.ccs(ch) != 0 || !self.running() {
+            return None;
+        }
+        let ccer = self.r(CCER) >> (4 * (ch - 1));
+        if ccer & 1 == 0 || (self.kind.advanced && self.r(BDTR) & (1 << 15) == 0) {
+            return None;
+        }
+        let ccmr = self.r(CCMR1 + 4 * usize::from((ch - 1) / 2));
+        let ocm = (ccmr >> (4 + 8 * u32::from((ch - 1) % 2))) & 7;
+        let ccr = f64::from(self.r(CCR1 + 4 * usize::from(ch - 1)));
+        let arr = f64::from(self.arr_sh);
+        let high = if self.cms() != 0 {
+            (ccr / arr.max(1.0)).min(1.0)
+        } else {
+            (ccr / (arr + 1.0)).min(1.0)
+        };
+        let duty = match ocm {
+            6 => high,
+            7 => 1.0 - high,
+            _ => return None,
+        };
+        Some(if ccer & 2 != 0 { 1.0 - duty } else { duty })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn tim6() -> Timer {
+        let mut t = Timer::new(TIMERS[5]);
+        t.clk_div = 2; // 90 MHz timer clock at 180 MHz
+        t
+    }
+
+    #[test]
+    fn an_upcounter_reaches_its_update_event_at_psc_and_arr_and_sets_uif() {
+        let mut t = tim6();
+        t.write(PSC, 8, 0); // 10 MHz counter clock
+        t.write(ARR, 999, 0); // 10 kHz updates
+        t.write(EGR, 1, 0); // load PSC
+        t.write(SR, 0, 0);
+        t.write(DIER, 1, 0);
+        t.write(CR1, CEN, 100);
+        // 1,000 counter ticks × 9 × 2 cycles = 18,000 cycles.
+        assert_eq!(t.next_event(), Some(100 + 18_000));
+        assert_eq!(t.read(CNT, 100 + 18 * 500), 500);
+        assert_eq!(t.read(SR, 100 + 17_999) & UIF, 0);
+        assert_eq!(t.read(SR, 100 + 18_000) & UIF, UIF);
+        assert_eq!(t.irq_lines(), crate::nvic::bit(16 + 54));
+        assert_eq!(t.read(CNT, 100 + 18_000), 0);
+        t.write(SR, !UIF, 100 + 18_000);
+        assert_eq!(t.irq_lines(), 0);
+        assert_eq!(t.next_event(), Some(100 + 36_000));
+        // Many periods at once.
+        assert_eq!(t.read(CNT, 100 + 18_000 * 1_000 + 18 * 7), 7);
+        assert_eq!(t.read(SR, 100 + 18_000 * 1_000 + 18 * 7) & UIF, UIF);
+    }
+
+    #[test]
+    fn psc_waits_for_the_update_event_and_arr_preloads_only_with_arpe() {
+        let mut t = tim6();
+        t.clk_div = 1;
+        t.write(ARR, 9, 0);
+        t.write(CR1, CEN, 0);
+        t.write(PSC, 1, 0); // takes effect at the first update (10 ticks)
+        assert_eq!(t.read(CNT, 10), 0);
+        assert_eq!(t.read(CNT, 14), 2);
+        // ARPE: the new ARR waits for the next update.
+        t.write(CR1, CEN | ARPE, 14);
+        t.write(ARR, 3, 14);
+        assert_eq!(t.read(CNT, 29), 9);
+        assert_eq!(t.read(CNT, 30), 0);
+        assert_eq!(t.read(CNT, 38), 0, "period 4 × 2 now");
+    }
+
+    #[test]
+    fn downcounting_and_center_aligned_counting_follow_dir_and_cms() {
+        let mut t = Timer::new(TIMERS[2]); // TIM3
+        t.write(ARR, 4, 0);
+        t.write(CR1, CEN | DIR, 0);
+        t.write(EGR, 1, 0);
+        assert_eq!(t.read(CNT, 0), 4);
+        assert_eq!(t.read(CNT, 4), 0);
+        assert_eq!(t.read(CNT, 5), 4, "underflow reloads ARR");
+        let mut c = Timer::new(TIMERS[2]);
+        c.write(ARR, 4, 0);
+        c.write(CR1, CEN | (1 << 5), 0);
+        assert_eq!(c.read(CNT, 3), 3);
+        assert_eq!(c.read(CNT, 4), 4);
+        assert_eq!(
+            c.read(CR1, 4) & DIR,
+            DIR,
+            "counting down after the overflow"
+        );
+        assert_eq!(c.read(CNT, 7), 1);
+        assert_eq!(c.read(CNT, 8), 0);
+        assert_eq!(c.read(CNT, 9), 1);
+    }
+
+    #[test]
+    fn tim1_updates_every_rcr_plus_one_periods_and_opm_stops_the_counter() {
+        let mut t = Timer::new(TIMERS[0]);
+        t.write(ARR, 9, 0);
+        t.write(RCR, 2, 0);
+        t.write(EGR, 1, 0);
+        t.write(SR, 0, 0);
+        t.write(DIER, 1, 0);
+        t.write(CR1, CEN, 0);
+        assert_eq!(t.next_event(), Some(30));
+        assert_eq!(t.read(SR, 29) & UIF, 0);
+        assert_eq!(t.read(SR, 30) & UIF, UIF);
+        let mut o = Timer::new(TIMERS[5]);
+        o.write(ARR, 9, 0);
+        o.write(CR1, CEN | OPM, 0);
+        assert_eq!(o.read(CNT, 100), 0);
+        assert_eq!(o.read(CR1, 100) & CEN, 0, "one pulse");
+    }
+
+    #[test]
+    fn encoder_mode_takes_cnt_from_the_position_and_wraps_at_arr() {
+        let mut t = Timer::new(TIMERS[1]); // TIM2, 32-bit
+        t.write(ARR, 999, 0);
+        t.write(SMCR, 3, 0);
+        t.write(CR1, CEN, 0);
+        t.set_encoder(250);
+        assert_eq!(t.read(CNT, 1_000_000), 250, "no counting from the clock");
+        t.set_encoder(-10);
+        assert_eq!(t.read(CNT, 0), 990);
+        assert_eq!(t.read(CR1, 0) & DIR, DIR);
+        assert_eq!(t.read(SR, 0) & UIF, UIF, "underflow is an update");
+        // SMS = 1 counts half the edges; CC1P reverses.
+        t.write(SMCR, 1, 0);
+        t.write(CNT, 0, 0);
+        t.write(CCER, 1 << 1, 0);
+        t.set_encoder(-10 + 20);
+        assert_eq!(t.read(CNT, 0), 990);
+    }
+
+    #[test]
+    fn an_edge_captures_cnt_into_the_mapped_channels_with_overcapture() {
+        let mut t = Timer::new(TIMERS[2]); // TIM3
+        t.write(CCMR1, 1 | (2 << 8), 0); // CC1 ← TI1, CC2 ← TI1
+        t.write(CCER, 1 | (1 << 4), 0);
+        t.write(DIER, 1 << 1, 0);
+        t.write(CR1, CEN, 0);
+        assert_eq!(t.capture(1, 1234), 2);
+        assert_eq!(t.read(SR, 1234) & 0x6, 0x6);
+        assert_eq!(t.irq_lines(), crate::nvic::bit(16 + 29));
+        assert_eq!(t.capture(2, 1300), 0, "nothing mapped to TI2");
+        t.capture(1, 2000);
+        assert_eq!(t.read(SR, 2000) & (1 << 9), 1 << 9, "CC1OF");
+        assert_eq!(t.read(CCR1, 2000), 2000);
+        assert_eq!(t.read(SR, 2000) & 2, 0, "reading CCR1 cleared CC1IF");
+        t.write(CCR1, 5, 2000);
+        assert_eq!(t.read(CCR1, 2000), 2000, "read-only in input mode");
+    }
+
+    #[test]
+    fn pwm_duty_follows_ccr_arr_mode_polarity_and_moe() {
+        let mut t = Timer::new(TIMERS[0]); // TIM1
+        t.write(ARR, 8999, 0);
+        t.write(CCMR1, (6 << 4) | (7 << 12), 0); // CH1 PWM1, CH2 PWM2
+        t.write(CCR1, 2250, 0);
+        t.write(CCR1 + 4, 2250, 0);
+        t.write(CCER, 1 | (1 << 4), 0);
+        t.write(CR1, CEN, 0);
+        assert_eq!(t.pwm_duty(1), None, "MOE off");
+        t.write(BDTR, 1 << 15, 0);
+        assert_eq!(t.pwm_duty(1), Some(0.25));
+        assert_eq!(t.pwm_duty(2), Some(0.75));
+        t.write(CCER, 1 | 2 | (1 << 4), 0);
+        assert_eq!(t.pwm_duty(1), Some(0.75));
+        assert_eq!(t.pwm_duty(3), None);
+        // Offsets past the register file read as zero and ignore writes.
+        t.write(0x3FC, 7, 0);
+        assert_eq!(t.read(0x3FC, 0), 0);
+    }
+}

@@ -1,0 +1,274 @@
+//! The exception, interrupt and timer models against small Thumb-2 programs
+//! (`tests/asm/*.s`, assembled into the committed `*.elf` by `tests/asm/build.sh`): each
+//! program has its own vector table and leaves its observations in SRAM from 0x2000_0000.
+
+use oxicat_emu::{Board, EmuError};
+use oxicat_esc::{Esc, EscConfig};
+use oxicat_pdi::sim::{BusConfig, Lan9252Model};
+
+fn board(elf: &[u8]) -> Board {
+    let esc = Esc::new(EscConfig::lan9252(), vec![0; 128]);
+    Board::new(elf, Lan9252Model::handle(esc, BusConfig::mhz(22))).expect("the program loads")
+}
+
+fn word(b: &Board, off: u32) -> u32 {
+    let mut w = [0u8; 4];
+    b.read_memory(0x2000_0000 + off, &mut w).unwrap();
+    u32::from_le_bytes(w)
+}
+
+/// Runs until the program sets its done word (RAM + 0).
+fn run_done(b: &mut Board) {
+    let done = b
+        .run_until(50, 2_000_000, |b| word(b, 0) == 1)
+        .unwrap_or_else(|e| panic!("{e}"));
+    assert!(done, "the program did not finish: PC {:#010x}", b.pc());
+}
+
+#[test]
+fn svc_enters_svcall_and_pendsv_tail_chains_with_the_thread_state_intact() {
+    let mut b = board(include_bytes!("asm/svc_pendsv.elf"));
+    run_done(&mut b);
+    assert_eq!((word(&b, 0x04), word(&b, 0x08)), (1, 1), "one of each");
+    assert_eq!(word(&b, 0x0C), 11, "VECTACTIVE in SVCall");
+    assert_eq!(word(&b, 0x10), 14, "VECTACTIVE in PendSV");
+    assert_eq!(
+        word(&b, 0x1C),
+        0xFFFF_FFF9,
+        "EXC_RETURN: thread, MSP, basic frame"
+    );
+    assert_eq!(
+        word(&b, 0x14),
+        0x2002_0000 - 32,
+        "an 8-word frame below the stack top"
+    );
+    assert_eq!(
+        word(&b, 0x18),
+        word(&b, 0x14),
+        "PendSV runs on the same frame"
+    );
+    assert_eq!(word(&b, 0x40), 1, "PendSV after SVCall");
+    assert_ne!(word(&b, 0x20) & (1 << 11), 0, "RETTOBASE in PendSV");
+    assert_eq!(word(&b, 0x3C), 1, "PendSV ran before the thread resumed");
+    let regs: Vec<u32> = (0..5).map(|k| word(&b, 0x24 + 4 * k)).collect();
+    assert_eq!(
+        regs,
+        [0x11, 0x22, 0x33, 0x44, 0x5555],
+        "r0-r3, r12 unstacked"
+    );
+    assert_eq!(
+        word(&b, 0x38) >> 28,
+        0b0110,
+        "Z and C back in the thread's APSR"
+    );
+    assert_eq!(b.exceptions_taken(11), 1);
+    assert_eq!(b.exceptions_taken(14), 1);
+    assert_eq!(b.active_exception(), 0, "back in thread mode");
+}
+
+#[test]
+fn a_higher_priority_irq_preempts_and_basepri_and_primask_hold_irqs_back() {
+    let mut b = board(include_bytes!("asm/preempt.elf"));
+    run_done(&mut b);
+    let n = word(&b, 0x04);
+    let log: Vec<u32> = (0..n).map(|k| word(&b, 0x08 + 4 * k)).collect();
+    assert_eq!(
+        log,
+        [
+            0x10, 0x20, 0x11, // IRQ0, preempted by IRQ1
+            0x01, 0x02, // BASEPRI 0x80 holds IRQ0 (0x80) back ...
+            0x10, 0x20, 0x11, // ... until cleared
+            0x03, 0x04, // PRIMASK holds IRQ1 back ...
+            0x20, // ... until cpsie
+            0x05,
+        ]
+    );
+    assert_eq!(word(&b, 0x64), 0b11, "IRQ0 and IRQ1 active while nested");
+    assert_eq!(word(&b, 0x80) & (1 << 11), 0, "no RETTOBASE while nested");
+    assert_eq!(word(&b, 0x80) & 0x1FF, 17, "VECTACTIVE = IRQ1");
+    assert_eq!(word(&b, 0x6C), 0b10, "IRQ1 alone the third time");
+    let taken = b.interrupts_taken();
+    assert_eq!((taken[0], taken[1]), (2, 3));
+}
+
+#[test]
+fn systick_interrupts_wake_wfi_and_sleep_skips_the_time_between() {
+    let mut b = board(include_bytes!("asm/systick_wfi.elf"));
+    run_done(&mut b);
+    assert_eq!(word(&b, 0x04), 10);
+    assert_eq!(b.exceptions_taken(15), 10);
+    let c = b.cycles();
+    assert!(
+        (10_000..10_200).contains(&c),
+        "ten ticks of 1,000 cycles: {c}"
+    );
+    assert!(
+        b.slept_cycles() > 8_000 && b.instructions() < 2_000,
+        "asleep between ticks: slept {}, {} instructions",
+        b.slept_cycles(),
+        b.instructions()
+    );
+    // SysTick is off now: a sleeping board runs 1 s of time without executing.
+    let i = b.instructions();
+    b.run(180_000_000).unwrap();
+    assert!(b.instructions() - i < 10);
+    assert_eq!(word(&b, 0x04), 10);
+}
+
+#[test]
+fn exti_lines_interrupt_on_their_selected_edge_of_an_injected_pin() {
+    let mut b = board(include_bytes!("asm/exti.elf"));
+    b.set_input('C', 0, true);
+    b.set_input('B', 12, false);
+    b.run(2_000).unwrap();
+    assert_eq!((word(&b, 0x04), word(&b, 0x08)), (0, 0));
+    b.set_input('C', 0, false); // falling: selected
+    b.run(1_000).unwrap();
+    assert_eq!(word(&b, 0x04), 1);
+    b.set_input('C', 0, true); // rising: not selected
+    b.run(1_000).unwrap();
+    assert_eq!(word(&b, 0x04), 1);
+    b.set_input('B', 12, true); // rising on line 12
+    b.run(1_000).unwrap();
+    assert_eq!(word(&b, 0x08), 1);
+    assert_eq!(word(&b, 0x0C), 1 << 12, "PR as the handler saw it");
+    b.set_input('B', 12, false);
+    b.set_input('C', 0, false);
+    b.run(1_000).unwrap();
+    assert_eq!((word(&b, 0x04), word(&b, 0x08)), (2, 1));
+    let taken = b.interrupts_taken();
+    assert_eq!((taken[6], taken[40]), (2, 1), "EXTI0, EXTI15_10");
+}
+
+#[test]
+fn tim6_interrupts_at_each_update_of_its_90_mhz_clock_divided_by_psc_and_arr() {
+    let mut b = board(include_bytes!("asm/tim6.elf"));
+    b.run(1_000).unwrap();
+    let before = word(&b, 0x04);
+    // 10 kHz: 18,000 cycles per update at 180 MHz.
+    b.run(18_000 * 10).unwrap();
+    assert_eq!(word(&b, 0x04) - before, 10);
+    assert_eq!(b.interrupts_taken()[54], u64::from(word(&b, 0x04)));
+    for k in 1..=word(&b, 0x04).min(16) {
+        let cnt = word(&b, 0x40 + 4 * k);
+        assert!(
+            cnt < 5,
+            "entry {k} read CNT {cnt}: the update had just happened"
+        );
+    }
+    assert!(b.instructions() < 2_000, "asleep between updates");
+}
+
+#[test]
+fn dwt_cyccnt_counts_cycles_only_with_trcena_and_cyccntena() {
+    let mut b = board(include_bytes!("asm/dwt.elf"));
+    run_done(&mut b);
+    assert_eq!(
+        (word(&b, 0x04), word(&b, 0x08)),
+        (0, 0),
+        "no TRCENA: no count"
+    );
+    let d = word(&b, 0x10).wrapping_sub(word(&b, 0x0C));
+    assert!(
+        (2_000..2_030).contains(&d),
+        "1,000 passes of two instructions: {d}"
+    );
+}
+
+#[test]
+fn timers_give_pwm_duty_encoder_counts_and_input_captures() {
+    let mut b = board(include_bytes!("asm/timers.elf"));
+    run_done(&mut b);
+    assert_eq!(b.pwm_duty(1, 1), Some(0.25));
+    assert_eq!(b.pwm_duty(1, 2), None, "CH2 not enabled");
+    b.set_encoder(2, 123_456);
+    b.set_encoder(3, 1_005);
+    b.run(200).unwrap();
+    assert_eq!((word(&b, 0x04), word(&b, 0x08)), (123_456, 5));
+    b.set_encoder(2, -1);
+    b.run(200).unwrap();
+    assert_eq!(word(&b, 0x04), u32::MAX, "wrapped below zero");
+    assert_eq!(b.timer_count(2), Some(u32::MAX));
+    let cnt = b.timer_count(4).unwrap();
+    assert_eq!(b.capture(4, 1), 1);
+    assert_eq!(b.capture(4, 2), 0, "nothing on TI2");
+    b.run(200).unwrap();
+    assert_eq!(word(&b, 0x10), 1, "one capture interrupt");
+    assert_eq!(word(&b, 0x0C), cnt, "CCR1 latched CNT at the edge");
+    assert_eq!(word(&b, 0x14) & 2, 0, "reading CCR1 cleared CC1IF");
+    assert_eq!(b.interrupts_taken()[30], 1);
+}
+
+#[test]
+fn an_isr_using_s0_leaves_the_threads_live_fp_registers_intact() {
+    let mut b = board(include_bytes!("asm/fp.elf"));
+    run_done(&mut b);
+    assert_eq!(word(&b, 0x04), 2);
+    assert_eq!(word(&b, 0x08), 0xFFFF_FFF9, "no FP context: basic frame");
+    assert_eq!(word(&b, 0x0C), 0xFFFF_FFE9, "FP context: extended frame");
+    assert_eq!(word(&b, 0x10), 0x3FC0_0000, "S0 = 1.5 again");
+    assert_eq!(word(&b, 0x14), 0x4049_0FDB, "S15 = pi again");
+    assert_eq!(word(&b, 0x18), 0x0300_0000, "FPSCR again");
+    assert_eq!(word(&b, 0x1C) & 4, 4, "CONTROL.FPCA back on in the thread");
+    assert_eq!(
+        word(&b, 0x20) & 4,
+        0,
+        "no FP context on entry to the handler"
+    );
+}
+
+#[test]
+fn an_fp_instruction_with_cpacr_off_is_a_nocp_fault() {
+    let mut b = board(include_bytes!("asm/nocp.elf"));
+    match b.run(1_000) {
+        Err(EmuError::Fault { pc, reason }) => {
+            assert!(reason.contains("NOCP"), "{reason}");
+            assert!((0x0800_0140..0x0800_0160).contains(&pc), "{pc:#x}");
+        }
+        other => panic!("expected a NOCP fault, got {other:?}"),
+    }
+}
+
+/// The committed ELF files are what the sources assemble to (checked where the tools are).
+#[test]
+fn the_test_programs_match_their_sources() {
+    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/asm");
+    if std::process::Command::new("llvm-mc")
+        .arg("--version")
+        .output()
+        .is_err()
+    {
+        eprintln!("skipped: no llvm-mc");
+        return;
+    }
+    let tmp = std::env::temp_dir().join(format!("oxicat-emu-asm-{}", std::process::id()));
+    std::fs::create_dir_all(&tmp).unwrap();
+    for e in std::fs::read_dir(&dir).unwrap() {
+        let p = e.unwrap().path();
+        if p.extension()
+            .is_some_and(|x| x == "s" || x == "inc" || x == "ld" || x == "sh")
+        {
+            std::fs::copy(&p, tmp.join(p.file_name().unwrap())).unwrap();
+        }
+    }
+    let ok = std::process::Command::new("sh")
+        .arg(tmp.join("build.sh"))
+        .status()
+        .is_ok_and(|s| s.success());
+    if !ok {
+        eprintln!("skipped: the assembler or linker is missing");
+        return;
+    }
+    for e in std::fs::read_dir(&tmp).unwrap() {
+        let p = e.unwrap().path();
+        if p.extension().is_some_and(|x| x == "elf") {
+            let committed = std::fs::read(dir.join(p.file_name().unwrap())).unwrap();
+            assert!(
+                std::fs::read(&p).unwrap() == committed,
+                "{} is stale: run tests/asm/build.sh",
+                p.display()
+            );
+        }
+    }
+    let _ = std::fs::remove_dir_all(&tmp);
+}
