@@ -74,6 +74,10 @@ pub struct DriveParams {
     pub cycle_s: f32,
     /// Over-current trip \[A\].
     pub max_current: f32,
+    /// Motor pole pairs. The drive's loops work on the q axis and do not use it; a board
+    /// that commutates (electrical angle = pole pairs × motor angle) takes it from here, so
+    /// the motor is described in one place.
+    pub pole_pairs: u32,
 }
 
 impl Default for DriveParams {
@@ -84,6 +88,7 @@ impl Default for DriveParams {
             bus_voltage: 48.0,
             cycle_s: 0.001,
             max_current: 20.0,
+            pole_pairs: 4,
         }
     }
 }
