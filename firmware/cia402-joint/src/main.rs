@@ -1,0 +1,411 @@
+//! The CiA402 joint drive (`oxicat_devices::cia402::Cia402Drive`, the same application the
+//! virtual segment hosts in `cia402::rig`) on the oxicat slave stack, on an STM32F446 with
+//! an ET1100 on SPI1, a three-phase bridge on TIM1, an incremental encoder with index on
+//! TIM2, phase currents, joint torque and bus voltage on ADC1. This file and its modules
+//! are board glue only. Wiring, pin map, priorities: README.md.
+//!
+//! What runs where (the rig's table, on interrupts):
+//!
+//! | event | handler | priority | runs |
+//! |---|---|---|---|
+//! | ADC1 injected sequence done, 20 kHz (TIM1 PWM centre) | `ADC` | 0x10 | `Cia402Drive::run_current_loop` (currents → i_q, PI, SVPWM) |
+//! | SYNC0 rising (PB3) | `EXTI3` | 0x20 | `Slave::on_sync0` (outputs, application cycle: `run_cycle`, inputs) |
+//! | SYNC1 rising (PB5) | `EXTI9_5` | 0x20 | `Slave::on_sync1` |
+//! | PDI IRQ falling (PA10) | `EXTI15_10` | 0x20 | `Slave::on_pdi_irq` |
+//! | every 20th current-loop tick (1 ms) | thread | — | `Slave::poll` (ESM, mailbox, emergencies; free run: the cycle), LEDs, then WFI |
+//!
+//! Sharing: the stack and the ESC driver are used only at priority 0x20 — the three ESC
+//! handlers, which cannot preempt one another — and by the thread with BASEPRI raised to
+//! 0x20 ([`with_esc_from_thread`]), so their SPI transactions never interleave and never
+//! hold off the current loop. The drive is shared between the current loop and the
+//! stack's hooks: it lives in a `cortex_m::interrupt::Mutex`, and every hook the stack
+//! calls ([`DriveHooks`]) takes it in a short critical section (the drive's own code, no
+//! SPI).
+#![no_std]
+#![no_main]
+
+mod board;
+mod foc;
+
+use core::cell::{RefCell, UnsafeCell};
+use core::mem::MaybeUninit;
+use core::sync::atomic::{compiler_fence, AtomicU32, Ordering};
+
+use board::{BoardLeds, JointBoard, Motor};
+use cortex_m::interrupt::{self as irq, Mutex};
+use cortex_m::peripheral::NVIC;
+use cortex_m::register::{basepri, basepri_max};
+use cortex_m_rt::{entry, exception, ExceptionFrame};
+use embedded_hal_bus::spi::{ExclusiveDevice, NoDelay};
+use oxicat_devices::cia402::{device, Cia402Drive, DriveParams, CURRENT_LOOP_HZ};
+use oxicat_pdi::{Et1100Config, Et1100Spi};
+use oxicat_slave::{AlState, AlStatusCode, Application, Od, Slave};
+use stm32f4xx_hal::{
+    gpio::{Edge, ExtiPin, Output, Pin},
+    pac::{self, interrupt, Interrupt},
+    prelude::*,
+    spi::{Mode, Phase, Polarity, Spi},
+};
+
+/// Mailbox buffer size of the stack: the drive's mailboxes are 128 bytes.
+const MBX: usize = 128;
+/// The main loop polls the stack every 20 current-loop ticks (1 ms). In free run that is
+/// also the application cycle, which matches the cycle the drive assumes when 0x1C32:02
+/// does not say (`DriveParams::cycle_s`, 1 ms).
+const POLL_EVERY_TICKS: u32 = CURRENT_LOOP_HZ / 1000;
+/// Start-up: how long to wait for the ET1100's EEPROM_LOADED \[ms\].
+const EEPROM_WAIT_MS: u32 = 1000;
+
+/// NVIC priorities (upper nibble: the F446 implements 4 bits; lower = more urgent).
+const PRIO_CURRENT_LOOP: u8 = 0x10;
+/// SYNC0, SYNC1 and the PDI IRQ share one level so they never preempt one another.
+const PRIO_ESC: u8 = 0x20;
+
+type EscSpi = ExclusiveDevice<Spi<pac::SPI1>, Pin<'B', 6, Output>, NoDelay>;
+type Esc = Et1100Spi<EscSpi>;
+type JointSlave = Slave<Esc, { device::IMAGE }, MBX>;
+type Drive = Cia402Drive<JointBoard>;
+
+/// The stack and its ESC driver.
+struct EscSide {
+    slave: JointSlave,
+    esc: Esc,
+}
+
+/// Storage for [`EscSide`], shared by priority rather than by a lock: see [`EscCell::get`].
+struct EscCell(UnsafeCell<MaybeUninit<EscSide>>);
+
+// SAFETY: access is serialised by interrupt priority (EscCell::get's contract).
+unsafe impl Sync for EscCell {}
+
+impl EscCell {
+    /// The ESC side.
+    ///
+    /// # Safety
+    /// The caller runs at priority [`PRIO_ESC`] (one of the three ESC handlers) or has
+    /// BASEPRI at `PRIO_ESC` or more urgent ([`with_esc_from_thread`]), it does not keep
+    /// the reference beyond that, and [`EscCell::init`] ran before the ESC interrupts were
+    /// unmasked.
+    #[allow(clippy::mut_from_ref)]
+    unsafe fn get(&self) -> &mut EscSide {
+        unsafe { (*self.0.get()).assume_init_mut() }
+    }
+
+    /// Stores the ESC side.
+    ///
+    /// # Safety
+    /// Called once, before the ESC interrupts are unmasked.
+    unsafe fn init(&self, side: EscSide) {
+        unsafe { (*self.0.get()).write(side) };
+    }
+}
+
+static ESC: EscCell = EscCell(UnsafeCell::new(MaybeUninit::uninit()));
+/// The drive application, shared by the current loop and the stack's hooks.
+static DRIVE: Mutex<RefCell<Option<Drive>>> = Mutex::new(RefCell::new(None));
+/// Current-loop ticks since start (the main loop's poll schedule and LED clock).
+static TICKS: AtomicU32 = AtomicU32::new(0);
+
+/// Runs `f` on the drive in a critical section.
+fn with_drive<R>(f: impl FnOnce(&mut Drive) -> R) -> R {
+    irq::free(|cs| {
+        let mut d = DRIVE.borrow(cs).borrow_mut();
+        f(d.as_mut()
+            .expect("the drive is set before interrupts are enabled"))
+    })
+}
+
+/// Runs `f` on the stack from the thread, with the ESC handlers masked (BASEPRI) and the
+/// current loop still running.
+fn with_esc_from_thread<R>(f: impl FnOnce(&mut EscSide) -> R) -> R {
+    let old = basepri::read();
+    basepri_max::write(PRIO_ESC);
+    compiler_fence(Ordering::SeqCst);
+    // SAFETY: BASEPRI masks every ESC handler; `main` stored the ESC side first.
+    let r = f(unsafe { ESC.get() });
+    compiler_fence(Ordering::SeqCst);
+    // SAFETY: restores the level this function found.
+    unsafe { basepri::write(old) };
+    r
+}
+
+/// The application as the stack sees it: every hook forwards to the shared
+/// [`Cia402Drive`] inside a critical section, so the SPI work of the stack's handlers runs
+/// with the current loop enabled and only the drive's own computation excludes it.
+/// (`foe` keeps the default `None`: the drive has no FoE files.)
+struct DriveHooks;
+
+impl<const N: usize> Application<N> for DriveHooks {
+    fn state_change(
+        &mut self,
+        from: AlState,
+        to: AlState,
+        od: &mut Od<N>,
+    ) -> Result<(), AlStatusCode> {
+        with_drive(|d| d.state_change(from, to, od))
+    }
+
+    fn safe_outputs(&mut self, od: &mut Od<N>) {
+        with_drive(|d| Application::<N>::safe_outputs(d, od))
+    }
+
+    fn cycle(&mut self, od: &mut Od<N>) {
+        with_drive(|d| Application::<N>::cycle(d, od))
+    }
+
+    fn timer(&mut self, id: u8, od: &mut Od<N>) {
+        with_drive(|d| Application::<N>::timer(d, id, od))
+    }
+
+    fn sdo_written(&mut self, index: u16, sub: u8, od: &mut Od<N>) {
+        with_drive(|d| Application::<N>::sdo_written(d, index, sub, od))
+    }
+
+    fn next_emergency(&mut self) -> Option<(u16, u8, [u8; 5])> {
+        with_drive(Application::<N>::next_emergency)
+    }
+}
+
+/// Clears EXTI line `line`'s pending bit.
+fn clear_exti(line: u8) {
+    // SAFETY: PR is write-1-to-clear; only this line's bit is written.
+    unsafe { (*pac::EXTI::ptr()).pr().write(|w| w.bits(1 << line)) };
+}
+
+/// 20 kHz current loop: ADC1's injected sequence (triggered by TIM1 at the PWM centre)
+/// is done; currents → i_q → PI → duties for the next PWM period.
+#[interrupt]
+fn ADC() {
+    with_drive(|d| {
+        d.hw.ack_conversion();
+        d.run_current_loop();
+    });
+    TICKS.fetch_add(1, Ordering::Relaxed);
+}
+
+/// SYNC0: the application cycle (outputs, `run_cycle`, inputs).
+#[interrupt]
+fn EXTI3() {
+    clear_exti(3);
+    // SAFETY: ESC handler at PRIO_ESC.
+    let e = unsafe { ESC.get() };
+    let _ = e.slave.on_sync0(&mut e.esc, &mut DriveHooks);
+}
+
+/// SYNC1 (PB5, the only line enabled in 5..9).
+#[interrupt]
+fn EXTI9_5() {
+    clear_exti(5);
+    // SAFETY: ESC handler at PRIO_ESC.
+    let e = unsafe { ESC.get() };
+    let _ = e.slave.on_sync1(&mut e.esc, &mut DriveHooks);
+}
+
+/// PDI IRQ (PA10, the only line enabled in 10..15).
+#[interrupt]
+fn EXTI15_10() {
+    clear_exti(10);
+    // SAFETY: ESC handler at PRIO_ESC.
+    let e = unsafe { ESC.get() };
+    let _ = e.slave.on_pdi_irq(&mut e.esc, &mut DriveHooks);
+}
+
+/// Blinks ERR forever: the ESC did not come up at start-up.
+fn fail(leds: &mut BoardLeds, delay: &mut impl embedded_hal::delay::DelayNs) -> ! {
+    board::bridge_emergency_off();
+    loop {
+        leds.set(false, true);
+        delay.delay_ms(100);
+        leds.set(false, false);
+        delay.delay_ms(100);
+    }
+}
+
+/// ETG.1300 RUN indicator from the AL state at `ms`: off (INIT), blinking 2.5 Hz (PREOP),
+/// single flash 200 ms per 1.2 s (SAFEOP), on (OP); BOOT flickers.
+fn run_led(state: AlState, ms: u32) -> bool {
+    match state {
+        AlState::Init => false,
+        AlState::PreOp => (ms / 200).is_multiple_of(2),
+        AlState::SafeOp => ms % 1200 < 200,
+        AlState::Op => true,
+        AlState::Boot => (ms / 50).is_multiple_of(2),
+    }
+}
+
+#[entry]
+fn main() -> ! {
+    let dp = pac::Peripherals::take().unwrap();
+    let cp = cortex_m::Peripherals::take().unwrap();
+    // 8 MHz HSE -> 180 MHz SYSCLK; APB1 45 MHz, APB2 90 MHz (TIM1 180 MHz, ADC 90 MHz / 4).
+    let rcc = dp.RCC.constrain();
+    let clocks = rcc
+        .cfgr
+        .use_hse(8.MHz())
+        .sysclk(180.MHz())
+        .pclk1(45.MHz())
+        .pclk2(90.MHz())
+        .freeze();
+    let mut delay = cp.SYST.delay(&clocks);
+    // Keep the debug port alive through WFI (probe-rs attach while running).
+    dp.DBGMCU.cr().modify(|_, w| w.dbg_sleep().set_bit());
+
+    let gpioa = dp.GPIOA.split();
+    let gpiob = dp.GPIOB.split();
+    let gpioc = dp.GPIOC.split();
+
+    let mut leds = BoardLeds {
+        run: gpioc.pc8.into_push_pull_output(),
+        err: gpioc.pc9.into_push_pull_output(),
+    };
+
+    // Bridge first, disabled: enable line PC11 low before TIM1 drives anything. PWM
+    // phase a PA8 (TIM1_CH1), b PA9 (TIM1_CH2), c PB15 (TIM1_CH3N), all AF1.
+    let bridge_enable = gpioc.pc11.into_push_pull_output_in_state(false.into());
+    let _pwm_a = gpioa.pa8.into_alternate::<1>();
+    let _pwm_b = gpioa.pa9.into_alternate::<1>();
+    let _pwm_c = gpiob.pb15.into_alternate::<1>();
+    // Encoder A/B PA0/PA1 (TIM2_CH1/CH2), index PB10 (TIM2_CH3), AF1.
+    let _enc_a = gpioa.pa0.into_alternate::<1>();
+    let _enc_b = gpioa.pa1.into_alternate::<1>();
+    let _enc_z = gpiob.pb10.into_alternate::<1>();
+    // Analog inputs: PC0 i_a, PC1 i_b, PC2 joint torque, PC3 bus voltage.
+    let _ia = gpioc.pc0.into_analog();
+    let _ib = gpioc.pc1.into_analog();
+    let _torque = gpioc.pc2.into_analog();
+    let _vbus = gpioc.pc3.into_analog();
+    let home = gpioc.pc10.into_pull_up_input();
+
+    let params = DriveParams::default();
+    let mut hw = JointBoard::new(
+        dp.TIM1,
+        dp.TIM2,
+        dp.ADC1,
+        home,
+        bridge_enable,
+        clocks.timclk2().raw(),
+        Motor {
+            counts_per_rev: params.counts_per_rev,
+            pole_pairs: params.pole_pairs,
+            bus_voltage: params.bus_voltage,
+        },
+    );
+    // Current-sense offsets with the bridge off, then the rotor's electrical zero.
+    let _ = hw.calibrate();
+    hw.align(&mut delay);
+
+    // ET1100 on SPI1: SCK PA5, MISO PA6, MOSI PA7, mode 0 (PDI config 0x0150 = 0x00 in
+    // the drive's SII), 90 MHz / 8 = 11.25 MHz; CS PB6.
+    let spi = Spi::new(
+        dp.SPI1,
+        (gpioa.pa5, gpioa.pa6, gpioa.pa7),
+        Mode {
+            polarity: Polarity::IdleLow,
+            phase: Phase::CaptureOnFirstTransition,
+        },
+        11250.kHz(),
+        &clocks,
+    );
+    let cs = gpiob.pb6.into_push_pull_output_in_state(true.into());
+    let Ok(spi) = ExclusiveDevice::new_no_delay(spi, cs);
+    // The lines go to EXTI below, not to the driver.
+    let mut esc = Et1100Spi::new(spi, oxicat_pdi::NoLines, Et1100Config::default());
+    // EEPROM_LOADED (PB4): the ET1100 configures its PDI from the SII first.
+    let mut eeprom_loaded = gpiob.pb4.into_pull_down_input();
+    for _ in 0..EEPROM_WAIT_MS {
+        if eeprom_loaded.is_high() {
+            break;
+        }
+        delay.delay_ms(1);
+    }
+    if esc.init(&mut eeprom_loaded).is_err() {
+        fail(&mut leds, &mut delay);
+    }
+    let slave = match JointSlave::new(&device::DEF, &mut esc) {
+        Ok(s) => s,
+        Err(_) => fail(&mut leds, &mut delay),
+    };
+
+    let drive = Cia402Drive::new(hw, params);
+    irq::free(|cs| *DRIVE.borrow(cs).borrow_mut() = Some(drive));
+    // SAFETY: once, before any ESC interrupt is unmasked.
+    unsafe { ESC.init(EscSide { slave, esc }) };
+
+    // ESC lines on EXTI: SPI_IRQ PA10 falling (active low; pull-up for an open-drain
+    // configuration), SYNC0 PB3 and SYNC1 PB5 rising (push-pull, active high).
+    let mut syscfg = dp.SYSCFG.constrain();
+    let mut exti = dp.EXTI;
+    let mut irq_pin = gpioa.pa10.into_pull_up_input();
+    let mut sync0 = gpiob.pb3.into_floating_input();
+    let mut sync1 = gpiob.pb5.into_floating_input();
+    irq_pin.make_interrupt_source(&mut syscfg);
+    irq_pin.trigger_on_edge(&mut exti, Edge::Falling);
+    irq_pin.enable_interrupt(&mut exti);
+    sync0.make_interrupt_source(&mut syscfg);
+    sync0.trigger_on_edge(&mut exti, Edge::Rising);
+    sync0.enable_interrupt(&mut exti);
+    sync1.make_interrupt_source(&mut syscfg);
+    sync1.trigger_on_edge(&mut exti, Edge::Rising);
+    sync1.enable_interrupt(&mut exti);
+    for line in [3, 5, 10] {
+        clear_exti(line);
+    }
+
+    // SAFETY: priorities are set before unmasking; the shared state is initialised. The
+    // ADC line may be pending from the calibration's conversions: unpended first.
+    unsafe {
+        let mut nvic = cp.NVIC;
+        nvic.set_priority(Interrupt::ADC, PRIO_CURRENT_LOOP);
+        for i in [Interrupt::EXTI3, Interrupt::EXTI9_5, Interrupt::EXTI15_10] {
+            nvic.set_priority(i, PRIO_ESC);
+        }
+        NVIC::unpend(Interrupt::ADC);
+        NVIC::unmask(Interrupt::ADC);
+        NVIC::unmask(Interrupt::EXTI3);
+        NVIC::unmask(Interrupt::EXTI9_5);
+        NVIC::unmask(Interrupt::EXTI15_10);
+    }
+
+    let mut last_poll = TICKS.load(Ordering::Relaxed);
+    let mut last_irq_kick = last_poll;
+    loop {
+        let now = TICKS.load(Ordering::Relaxed);
+        if now.wrapping_sub(last_poll) >= POLL_EVERY_TICKS {
+            last_poll = now;
+            let (state, err) = with_esc_from_thread(|e| {
+                let _ = e.slave.poll(&mut e.esc, &mut DriveHooks);
+                (e.slave.state(), e.slave.error_indicated())
+            });
+            let ms = now / (CURRENT_LOOP_HZ / 1000);
+            leds.set(run_led(state, ms), err);
+        }
+        // The IRQ line is a level: a cause that arrives while it is still low from another
+        // gives no new falling edge. Re-run the handler while the line stays low, once per
+        // current-loop tick (a cause only `poll` clears would otherwise make this spin).
+        if irq_pin.is_low() && now != last_irq_kick {
+            last_irq_kick = now;
+            NVIC::pend(Interrupt::EXTI15_10);
+        }
+        // Every event is an interrupt (the current loop at least every 50 µs): sleep.
+        cortex_m::asm::wfi();
+    }
+}
+
+/// Panics switch the bridge off, then halt.
+#[panic_handler]
+fn panic(_: &core::panic::PanicInfo) -> ! {
+    cortex_m::interrupt::disable();
+    board::bridge_emergency_off();
+    loop {
+        cortex_m::asm::nop();
+    }
+}
+
+/// So do hard faults.
+#[exception]
+unsafe fn HardFault(_: &ExceptionFrame) -> ! {
+    board::bridge_emergency_off();
+    loop {
+        cortex_m::asm::nop();
+    }
+}
