@@ -192,3 +192,40 @@ pub struct StackStats {
 
 /// The paint pattern.
 pub(crate) const PAINT: u32 = 0xC5AC_CE55;
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_preempting_handler_counts_in_the_span_but_not_in_the_own_time() {
+        let mut p = Profile::default();
+        p.enter(25, 100); // EXTI3
+        p.enter(70, 150); // TIM6 preempts
+        p.leave(170);
+        p.leave(300);
+        let s = p.get(25);
+        assert_eq!((s.runs, s.preempted_runs), (1, 1));
+        assert_eq!((s.max_cycles, s.max_own_cycles), (200, 180));
+        assert_eq!(p.get(70).own_cycles, 20);
+        // Tail-chain: one ends where the next starts.
+        p.enter(25, 400);
+        p.leave(450);
+        p.enter(56, 450);
+        p.leave(460);
+        assert_eq!((p.get(25).runs, p.get(25).min_cycles), (2, 50));
+        p.reset(1_000);
+        assert_eq!(p.get(25), HandlerStats::default());
+        assert_eq!(
+            p.get(999),
+            HandlerStats::default(),
+            "out of range reads as none"
+        );
+        p.leave(5); // no frame: ignored
+    }
+
+    #[test]
+    fn a_file_that_is_not_an_elf_has_no_size() {
+        assert!(image_size(b"nope").is_err());
+    }
+}
