@@ -170,6 +170,11 @@ impl Board {
         self.set_control(control & !((CONTROL_SPSEL | CONTROL_FPCA) as u32))?;
         self.set_reg(RegisterARM::CPSR, cpsr & !IT_BITS)?;
         self.set_reg(RegisterARM::LR, exc_return)?;
+        {
+            let mut p = self.periph.borrow_mut();
+            let now = p.cycles;
+            p.profile.enter(e, now);
+        }
         self.branch_to_handler(e, vector, ENTRY_CYCLES);
         Ok(())
     }
@@ -236,6 +241,12 @@ impl Board {
             let control = self.reg(RegisterARM::CONTROL)?;
             self.set_control(control & !(CONTROL_FPCA as u32))?;
             self.set_reg(RegisterARM::LR, exc_return)?;
+            {
+                let mut p = self.periph.borrow_mut();
+                let now = p.cycles;
+                p.profile.leave(now);
+                p.profile.enter(e, now);
+            }
             self.branch_to_handler(e, vector, TAIL_CYCLES);
             return Ok(());
         }
@@ -301,6 +312,8 @@ impl Board {
             let mut p = self.periph.borrow_mut();
             p.scs.ipsr = stacked_ipsr;
             p.cycles += RETURN_CYCLES;
+            let now = p.cycles;
+            p.profile.leave(now);
             to_thread && p.scs.sleep_on_exit()
         };
         if sleep {

@@ -21,7 +21,9 @@
 //! | GPIOA..H | registers stored (MODER, AFR …); BSRR sets/resets ODR; IDR: PA10 = LAN9252 IRQ, PB3/PB5 = SYNC0/SYNC1, then levels injected with [`Board::set_input`], PC13 = button released, ODR for outputs, pull-ups high |
 //! | SPI1 | a byte per DR write clocked through the chip (`Lan9252Model::clock_byte`) while PB6 (CS) is low; TXE always set, RXNE until DR is read; bus time counted at the CR1 baud rate |
 //! | EXTI, SYSCFG | EXTICR1..4 select the port of lines 0..15; RTSR/FTSR edges on IMR lines set PR (write-1-to-clear), SWIER; pins sampled after every engine run, SPI frame and GPIO write; IRQs EXTI0..4, EXTI9_5, EXTI15_10 |
-//! | TIM1..TIM14 | one model (`timers`): PSC/ARR (preloaded)/CNT from the cycle count at the APB timer clock, up/down/center-aligned, RCR (TIM1/8), UDIS/URS/OPM, UG; UIF → update IRQ; CCR/CCMR/CCER stored, PWM duty ([`Board::pwm_duty`]); encoder mode (SMS 1/2/3) from [`Board::set_encoder`]; input capture with CCxIF/CCxOF from [`Board::capture`]. No output-compare match flags |
+//! | TIM1..TIM14 | one model (`timers`): PSC/ARR (preloaded)/CNT from the cycle count at the APB timer clock, up/down/center-aligned, RCR (TIM1/8), UDIS/URS/OPM, UG; UIF → update IRQ; CCR/CCMR/CCER stored, PWM duty ([`Board::pwm_duty`]); encoder mode (SMS 1/2/3) from [`Board::set_encoder`]; input capture with CCxIF/CCxOF from [`Board::capture`]; timer links: TRGO in compare-pulse mode (CR2.MMS = 011) on a CH1 capture → the timers whose SMCR.TS selects it (ITR0..3, RM0390's table) capture on TRC (CCxS = 11). No output-compare match flags, no other master/slave modes |
+//! | plant | a [`BoardPlant`] stepped in lockstep with the CPU ([`plant::run_with_plant`], [`node::EmulatedNode::with_plant`]) schedules [`Stimulus`]es (encoder positions, capture edges, input levels) at their times of the board's clock; [`laelaps`]: the Laelaps II leg on the leg image's pins |
+//! | profile | handler time per exception from entry to return, preemption counted apart ([`Board::handler_stats`]); painted stack high-water mark ([`Board::stack_stats`]); flash/RAM from the ELF ([`Board::image_size`]) |
 //! | NVIC, SCB | ISER/ICER/ISPR/ICPR/IABR, IPR (4 bits), STIR; ICSR (VECTACTIVE/VECTPENDING/RETTOBASE, PENDSV/PENDST/NMIPEND set/clear), VTOR, AIRCR (PRIGROUP; SYSRESETREQ stops the image with a fault), SCR.SLEEPONEXIT, CCR, SHPR1..3, SHCSR enables, CPACR, FPCCR; the rest of the page stored |
 //! | exceptions | taken at translated-block boundaries by the board (`cpu`): 8-word frame, or 26 with S0..S15/FPSCR when CONTROL.FPCA (stacked eagerly although FPCCR resets with LSPEN/ASPEN set: same result for both sides), 8-byte alignment, EXC_RETURN, MSP/PSP, tail-chaining, preemption by group priority, PRIMASK/BASEPRI/FAULTMASK, SVC → SVCall, PendSV, SysTick. Inside the engine the core stays in thread mode: `mrs rX, ipsr` reads 0 (ICSR has the number); unprivileged thread mode is refused |
 //! | SysTick | CSR/RVR/CVR/CALIB from the cycle count (processor clock or HCLK/8); COUNTFLAG; TICKINT pends SysTick at each wrap |
@@ -43,10 +45,16 @@
 
 mod cpu;
 mod exti;
+pub mod laelaps;
 pub mod node;
 mod nvic;
 mod periph;
+pub mod plant;
+mod stats;
 mod timers;
+
+pub use plant::BoardPlant;
+pub use stats::{image_size, HandlerStats, ImageSize, StackStats};
 
 use std::cell::RefCell;
 use std::rc::Rc;
@@ -180,6 +188,37 @@ pub fn elf_segments(elf: &[u8]) -> Result<Vec<Segment>, EmuError> {
     Ok(out)
 }
 
+/// An input event a plant schedules at a time of the board's clock
+/// ([`Board::schedule`]): applied when the CPU's clock reaches it, between instructions.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Stimulus {
+    /// The shaft on timer `tim`'s encoder inputs is at `edges` quadrature edges
+    /// ([`Board::set_encoder`]).
+    Encoder {
+        /// Timer number (TIM2 = 2).
+        tim: u8,
+        /// Position in quadrature edges (four per line).
+        edges: i64,
+    },
+    /// An active edge on timer `tim`'s input TI`input` ([`Board::capture`]), with the
+    /// TRGO pulse it causes routed to the linked timers.
+    Capture {
+        /// Timer number.
+        tim: u8,
+        /// Input 1..=4.
+        input: u8,
+    },
+    /// Input pin `pin` of `port` ('A'..='H') driven to `level` ([`Board::set_input`]).
+    Input {
+        /// Port letter.
+        port: char,
+        /// Pin 0..=15.
+        pin: u8,
+        /// Level.
+        level: bool,
+    },
+}
+
 /// SPI traffic of the image, as counted on the emulated bus.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
 pub struct SpiStats {
@@ -237,6 +276,10 @@ pub struct Board {
     event: bool,
     /// CONTROL.FPCA as last seen (the CPACR check looks for it rising).
     fpca: bool,
+    /// Flash and static RAM of the image.
+    size: ImageSize,
+    /// The painted stack region: initial SP and the painting's lowest address.
+    stack: StackStats,
 }
 
 impl Board {
@@ -424,14 +467,104 @@ impl Board {
         let pc = u32::from_le_bytes([vt[4], vt[5], vt[6], vt[7]]);
         uc.reg_write(RegisterARM::SP, u64::from(sp))
             .map_err(fault)?;
-        Ok(Board {
+        let size = stats::image_size(image)?;
+        // Only an image that declares its static RAM (`.data`/`.bss` segments) is painted:
+        // a bare program may use SRAM it never declared, expecting it as it finds it.
+        let bottom = if size.ram > 0 {
+            size.ram_end.next_multiple_of(4)
+        } else {
+            sp
+        };
+        let mut board = Board {
             uc,
             periph,
             pc,
             sleeping: false,
             event: false,
             fpca: false,
-        })
+            size,
+            stack: StackStats {
+                top: sp,
+                bottom,
+                max_depth: 0,
+            },
+        };
+        board.paint(bottom, sp);
+        Ok(board)
+    }
+
+    /// Fills `[from, to)` of SRAM with the stack paint pattern (clamped to SRAM).
+    fn paint(&mut self, from: u32, to: u32) {
+        let lo = u64::from(from).max(SRAM.0);
+        let hi = u64::from(to).min(SRAM.0 + SRAM.1) & !3;
+        if hi > lo {
+            let bytes: Vec<u8> =
+                std::iter::repeat_n(stats::PAINT.to_le_bytes(), ((hi - lo) / 4) as usize)
+                    .flatten()
+                    .collect();
+            let _ = self.uc.mem_write(lo, &bytes);
+        }
+    }
+
+    /// Flash and static RAM of the image (from its ELF program headers).
+    pub fn image_size(&self) -> ImageSize {
+        self.size
+    }
+
+    /// The stack's high-water mark since reset (or since [`Board::repaint_stack`]): the
+    /// region from the end of the static RAM to the initial SP is painted with a pattern
+    /// at reset, and the lowest word that no longer holds it is the deepest the stack
+    /// reached (a frame that skips words it never writes can hide a little of its depth).
+    pub fn stack_stats(&self) -> StackStats {
+        let (lo, hi) = (self.stack.bottom, self.stack.top);
+        let mut s = self.stack;
+        if hi <= lo || u64::from(lo) < SRAM.0 || u64::from(hi) > SRAM.0 + SRAM.1 {
+            return s;
+        }
+        let mut buf = vec![0u8; (hi - lo) as usize & !3];
+        if self.uc.mem_read(u64::from(lo), &mut buf).is_err() {
+            return s;
+        }
+        let first = buf
+            .chunks_exact(4)
+            .position(|w| w != stats::PAINT.to_le_bytes());
+        s.max_depth = first.map_or(0, |k| hi - (lo + 4 * k as u32));
+        s
+    }
+
+    /// Paints the stack region below the current SP again, so [`Board::stack_stats`] then
+    /// measures from now (e.g. the steady state after the start-up code's deeper frames).
+    pub fn repaint_stack(&mut self) {
+        let sp = self.uc.reg_read(RegisterARM::SP).unwrap_or(0) as u32;
+        let (lo, hi) = (self.stack.bottom, sp.min(self.stack.top));
+        self.paint(lo, hi);
+    }
+
+    /// The handler times of exception `number` (IPSR numbering: 15 SysTick, 16 + n IRQ n)
+    /// since reset or [`Board::reset_handler_stats`].
+    pub fn handler_stats(&self, number: u16) -> HandlerStats {
+        self.periph.borrow().profile.get(number)
+    }
+
+    /// Clears the handler times (a handler running now counts from now).
+    pub fn reset_handler_stats(&mut self) {
+        let mut p = self.periph.borrow_mut();
+        let now = p.cycles;
+        p.profile.reset(now);
+    }
+
+    /// Schedules `s` at the board's time `at_ns` (applied when the CPU's clock reaches it,
+    /// at once if it is past); stimuli at equal times apply in the order scheduled.
+    pub fn schedule(&mut self, at_ns: u64, s: Stimulus) {
+        let at = (u128::from(at_ns) * u128::from(CPU_HZ)).div_ceil(1_000_000_000);
+        self.periph
+            .borrow_mut()
+            .schedule(u64::try_from(at).unwrap_or(u64::MAX), s);
+    }
+
+    /// Stimuli scheduled and not applied yet.
+    pub fn scheduled(&self) -> usize {
+        self.periph.borrow().stimuli.len()
     }
 
     fn fault(&self, reason: impl Into<String>) -> EmuError {
@@ -506,6 +639,7 @@ impl Board {
         let masks = self.masks()?;
         let take = {
             let mut p = self.periph.borrow_mut();
+            p.apply_due();
             if p.scs.reset_requested {
                 drop(p);
                 return Err(self.fault("SYSRESETREQ: the image requested a system reset"));
@@ -678,9 +812,7 @@ impl Board {
     /// input-capture mode mapped to it latches CNT into CCRx and sets CCxIF (CCxOF if it
     /// was set). Returns how many channels captured.
     pub fn capture(&mut self, tim: u8, input: u8) -> usize {
-        let mut p = self.periph.borrow_mut();
-        let now = p.cycles;
-        p.timer(tim).map_or(0, |t| t.capture(input, now))
+        self.periph.borrow_mut().capture(tim, input)
     }
 
     /// The counter of timer `tim` now.

@@ -6,6 +6,9 @@
 //! segment's ESC to the chip, lets the CPU run until the board's clock reaches the
 //! segment's time, and takes the ESC back. Unicorn is not `Send`, so each board runs on a
 //! thread of its own and the node (which the segment needs `Send`) talks to it by channel.
+//! A [`BoardPlant`] given to [`EmulatedNode::with_plant`] runs on that thread in lockstep
+//! with the CPU ([`crate::plant`]); a [`NodeHandle`] asks the board for its figures
+//! ([`NodeReport`]) from outside the segment.
 
 use std::sync::mpsc::{channel, Receiver, Sender};
 use std::thread::JoinHandle;
@@ -14,7 +17,117 @@ use oxicat_esc::{Esc, EscConfig};
 use oxicat_pdi::sim::{BusConfig, Handle, Lan9252Model};
 use oxicat_sim::node::{EscEvent, Node};
 
-use crate::{Board, EmuError, SpiStats};
+use crate::plant::{run_with_plant, BoardPlant};
+use crate::{Board, EmuError, HandlerStats, ImageSize, SpiStats, StackStats};
+
+/// What the board thread is asked to do.
+enum Cmd {
+    /// Run to this time \[ns\] and report progress.
+    Run(u64),
+    /// Send the full figures.
+    Report(Sender<NodeReport>),
+    /// Clear the handler times and repaint the stack below the current SP.
+    ResetStats,
+    /// End the board thread.
+    Stop,
+}
+
+/// The figures of an emulated board (see [`Board::handler_stats`], [`Board::stack_stats`],
+/// [`Board::image_size`]).
+#[derive(Debug, Clone, Default)]
+pub struct NodeReport {
+    /// The board's clock \[ns\].
+    pub time_ns: u64,
+    /// CPU cycles so far, and of them asleep.
+    pub cycles: u64,
+    /// Cycles asleep (WFI).
+    pub slept_cycles: u64,
+    /// Instructions executed.
+    pub instructions: u64,
+    /// Handler times by exception number (IPSR numbering), since reset or the last
+    /// [`NodeHandle::reset_stats`].
+    pub handlers: Vec<HandlerStats>,
+    /// Cycle count at the last reset of the handler times.
+    pub stats_since_cycle: u64,
+    /// Times each exception was entered since reset (IPSR numbering).
+    pub taken: Vec<u64>,
+    /// Painted-stack figures.
+    pub stack: StackStats,
+    /// Flash and static RAM of the image.
+    pub image: ImageSize,
+    /// SPI traffic.
+    pub spi: SpiStats,
+    /// The fault that stopped the image, if it stopped.
+    pub fault: Option<EmuError>,
+}
+
+impl NodeReport {
+    /// The handler times of exception `number`.
+    pub fn handler(&self, number: u16) -> HandlerStats {
+        self.handlers
+            .get(usize::from(number))
+            .copied()
+            .unwrap_or_default()
+    }
+
+    /// Share of the cycles since the last reset of the figures spent in exception
+    /// `number`'s own handler code (preemptions excluded).
+    pub fn load(&self, number: u16) -> f64 {
+        let span = self.cycles.saturating_sub(self.stats_since_cycle);
+        if span == 0 {
+            return 0.0;
+        }
+        self.handler(number).own_cycles as f64 / span as f64
+    }
+}
+
+fn report_of(board: &Board, since: u64, fault: &Option<EmuError>) -> NodeReport {
+    NodeReport {
+        time_ns: board.time_ns(),
+        cycles: board.cycles(),
+        slept_cycles: board.slept_cycles(),
+        instructions: board.instructions(),
+        handlers: (0..crate::nvic::NUM_EXC as u16)
+            .map(|e| board.handler_stats(e))
+            .collect(),
+        stats_since_cycle: since,
+        taken: (0..crate::nvic::NUM_EXC as u16)
+            .map(|e| board.exceptions_taken(e))
+            .collect(),
+        stack: board.stack_stats(),
+        image: board.image_size(),
+        spi: board.spi_stats(),
+        fault: fault.clone(),
+    }
+}
+
+/// Asks an [`EmulatedNode`]'s board for its figures from outside the segment (a test, a
+/// tool), also after the node went into the segment.
+#[derive(Clone)]
+pub struct NodeHandle {
+    cmd: Sender<Cmd>,
+    sync0: std::sync::Arc<std::sync::atomic::AtomicU64>,
+}
+
+impl NodeHandle {
+    /// The board's figures now (`None` if the board thread has ended).
+    pub fn report(&self) -> Option<NodeReport> {
+        let (tx, rx) = channel();
+        self.cmd.send(Cmd::Report(tx)).ok()?;
+        rx.recv().ok()
+    }
+
+    /// Clears the handler times and repaints the stack below the current SP, so the
+    /// figures cover what runs from now on.
+    pub fn reset_stats(&self) {
+        let _ = self.cmd.send(Cmd::ResetStats);
+    }
+
+    /// SYNC0 events the segment delivered to this node so far.
+    pub fn sync0_events(&self) -> u64 {
+        self.sync0.load(std::sync::atomic::Ordering::Relaxed)
+    }
+}
 
 /// What the board thread reports after each run.
 #[derive(Debug, Clone, Default)]
@@ -32,7 +145,8 @@ pub struct Progress {
 /// A board image on the segment (see the module docs).
 pub struct EmulatedNode {
     chip: Handle<Lan9252Model>,
-    run: Sender<u64>,
+    run: Sender<Cmd>,
+    sync0: std::sync::Arc<std::sync::atomic::AtomicU64>,
     done: Receiver<Progress>,
     last: Progress,
     slice_ns: u64,
@@ -46,13 +160,24 @@ impl EmulatedNode {
     /// segment's events. The ELF is checked here: a bad image is refused before anything
     /// runs.
     pub fn new(image: Vec<u8>, spi_mhz: u32, slice_ns: u64) -> Result<Self, EmuError> {
+        Self::with_plant(image, spi_mhz, slice_ns, None)
+    }
+
+    /// [`EmulatedNode::new`] with `plant` on the board's pins, stepped in lockstep with
+    /// the CPU on the board's thread ([`crate::plant`]).
+    pub fn with_plant(
+        image: Vec<u8>,
+        spi_mhz: u32,
+        slice_ns: u64,
+        mut plant: Option<Box<dyn BoardPlant>>,
+    ) -> Result<Self, EmuError> {
         crate::elf_segments(&image)?;
         // The chip's stand-in ESC until the segment lends it the real one.
         let chip = Lan9252Model::handle(
             Esc::new(EscConfig::lan9252(), vec![0; 128]),
             BusConfig::mhz(spi_mhz),
         );
-        let (run, runs) = channel::<u64>();
+        let (run, runs) = channel::<Cmd>();
         let (report, done) = channel::<Progress>();
         let c = chip.clone();
         let thread = std::thread::Builder::new()
@@ -69,9 +194,29 @@ impl EmulatedNode {
                     }
                 };
                 let mut fault = None;
-                while let Ok(t) = runs.recv() {
+                let mut next_step = 0u64;
+                let mut since = 0u64;
+                while let Ok(cmd) = runs.recv() {
+                    let t = match cmd {
+                        Cmd::Run(t) => t,
+                        Cmd::Report(to) => {
+                            let _ = to.send(report_of(&board, since, &fault));
+                            continue;
+                        }
+                        Cmd::Stop => return,
+                        Cmd::ResetStats => {
+                            board.reset_handler_stats();
+                            board.repaint_stack();
+                            since = board.cycles();
+                            continue;
+                        }
+                    };
                     if fault.is_none() {
-                        if let Err(e) = board.run_to_ns(t) {
+                        let r = match plant.as_deref_mut() {
+                            Some(p) => run_with_plant(&mut board, p, &mut next_step, t),
+                            None => board.run_to_ns(t),
+                        };
+                        if let Err(e) = r {
                             fault = Some(e);
                         }
                     }
@@ -93,12 +238,21 @@ impl EmulatedNode {
         Ok(EmulatedNode {
             chip,
             run,
+            sync0: Default::default(),
             done,
             last: Progress::default(),
             slice_ns: slice_ns.max(1_000),
             next: 0,
             thread: Some(thread),
         })
+    }
+
+    /// A handle that asks the board for its figures ([`NodeReport`]).
+    pub fn handle(&self) -> NodeHandle {
+        NodeHandle {
+            cmd: self.run.clone(),
+            sync0: self.sync0.clone(),
+        }
     }
 
     /// What the board reported last.
@@ -112,7 +266,7 @@ impl EmulatedNode {
             return;
         }
         self.chip.swap_esc(esc);
-        let p = match self.run.send(t) {
+        let p = match self.run.send(Cmd::Run(t)) {
             Ok(()) => self.done.recv().ok(),
             Err(_) => None,
         };
@@ -139,7 +293,11 @@ fn log_fault(f: &EmuError) {
 }
 
 impl Node for EmulatedNode {
-    fn on_event(&mut self, esc: &mut Esc, _ev: EscEvent, t: u64) {
+    fn on_event(&mut self, esc: &mut Esc, ev: EscEvent, t: u64) {
+        if ev == EscEvent::Sync0 {
+            self.sync0
+                .fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+        }
         self.advance(esc, t);
     }
 
@@ -155,9 +313,8 @@ impl Node for EmulatedNode {
 
 impl Drop for EmulatedNode {
     fn drop(&mut self) {
-        // Closing the channel ends the board thread.
-        let (dead, _) = channel();
-        self.run = dead;
+        // Ends the board thread (handles keep the channel open).
+        let _ = self.run.send(Cmd::Stop);
         if let Some(t) = self.thread.take() {
             let _ = t.join();
         }

@@ -8,7 +8,7 @@ use oxicat_pdi::sim::{Handle, Lan9252Frame, Lan9252Model, Model, PinKind};
 use crate::exti::{Exti, EXTI_BASE, SYSCFG_BASE};
 use crate::nvic::{Masks, Scs, DWT_BASE};
 use crate::timers::{Timer, TIMERS};
-use crate::SpiStats;
+use crate::{SpiStats, Stimulus};
 
 /// Peripheral space modelled (APB1, APB2, AHB1).
 pub(crate) const PERIPH: (u64, u64) = (0x4000_0000, 0x8_0000);
@@ -56,6 +56,10 @@ pub(crate) struct Periph {
     pub watch: Option<Masks>,
     /// DBGMCU registers after IDCODE (CR, APB1_FZ, APB2_FZ), stored.
     pub dbgmcu: [u32; 4],
+    /// Stimuli scheduled by a plant, by cycle (equal cycles in the order scheduled).
+    pub stimuli: std::collections::VecDeque<(u64, Stimulus)>,
+    /// Exception profile (handler times).
+    pub profile: crate::stats::Profile,
 }
 
 impl Periph {
@@ -80,6 +84,8 @@ impl Periph {
             wait_event: None,
             watch: None,
             dbgmcu: [0; 4],
+            stimuli: std::collections::VecDeque::new(),
+            profile: crate::stats::Profile::default(),
         };
         p.reset();
         p
@@ -279,13 +285,97 @@ impl Periph {
             .fold(self.exti.irq_lines(), |l, t| l | t.irq_lines())
     }
 
-    /// The cycle of the next timer or SysTick event that raises an interrupt.
+    /// The cycle of the next timer or SysTick event that raises an interrupt, or of the
+    /// next scheduled stimulus.
     pub fn next_event(&self) -> Option<u64> {
         self.timers
             .iter()
             .filter_map(|t| t.next_event())
             .chain(self.scs.syst_next())
+            .chain(self.stimuli.front().map(|s| s.0))
             .min()
+    }
+
+    /// Schedules `s` at cycle `at` (after the stimuli already scheduled at that cycle).
+    pub fn schedule(&mut self, at: u64, s: Stimulus) {
+        let i = self.stimuli.partition_point(|(c, _)| *c <= at);
+        self.stimuli.insert(i, (at, s));
+    }
+
+    /// Applies the stimuli due by now, in order.
+    pub fn apply_due(&mut self) {
+        while self.stimuli.front().is_some_and(|s| s.0 <= self.cycles) {
+            let Some((_, s)) = self.stimuli.pop_front() else {
+                break;
+            };
+            self.apply(s);
+        }
+    }
+
+    /// Applies one stimulus now.
+    pub fn apply(&mut self, s: Stimulus) {
+        let now = self.cycles;
+        match s {
+            Stimulus::Encoder { tim, edges } => {
+                if let Some(t) = self.timer(tim) {
+                    t.sync(now);
+                    t.set_encoder(edges);
+                }
+            }
+            Stimulus::Capture { tim, input } => {
+                self.capture(tim, input);
+            }
+            Stimulus::Input { port, pin, level } => {
+                let p = (port.to_ascii_uppercase() as u32).wrapping_sub('A' as u32);
+                if let Some((mask, levels)) = self.inputs.get_mut(p as usize) {
+                    let b = 1u16 << (pin & 15);
+                    *mask |= b;
+                    *levels = if level { *levels | b } else { *levels & !b };
+                }
+            }
+        }
+    }
+
+    /// An edge on timer `tim`'s input TI`input` now, with the TRGO pulses it causes routed
+    /// to the linked timers; how many channels of `tim` captured.
+    pub fn capture(&mut self, tim: u8, input: u8) -> usize {
+        let now = self.cycles;
+        let n = self.timer(tim).map_or(0, |t| t.capture(input, now));
+        self.route_trgo();
+        n
+    }
+
+    /// Delivers pending TRGO pulses to the timers whose SMCR.TS selects their source
+    /// (bounded: a loop of links cannot spin).
+    pub fn route_trgo(&mut self) {
+        let now = self.cycles;
+        for _ in 0..4 {
+            let mut pulses: Vec<(u8, u32)> = Vec::new();
+            for t in &mut self.timers {
+                let n = t.take_trgo();
+                if n > 0 {
+                    pulses.push((t.kind.number, n));
+                }
+            }
+            if pulses.is_empty() {
+                return;
+            }
+            for i in 0..self.timers.len() {
+                let Some(src) = self.timers[i].trigger_source() else {
+                    continue;
+                };
+                for &(from, n) in &pulses {
+                    if from == src {
+                        for _ in 0..n {
+                            self.timer_at(i).trigger(now);
+                        }
+                    }
+                }
+            }
+        }
+        for t in &mut self.timers {
+            t.take_trgo();
+        }
     }
 
     /// The word a sub-word write merges into.
@@ -394,6 +484,9 @@ impl Periph {
                     let now = self.cycles;
                     let off = (a & 0x3FF) as usize;
                     self.timer_at(i).write(off, v, now);
+                    if off == 0x14 {
+                        self.route_trgo(); // EGR.CC1G on a compare-pulse master
+                    }
                     // Compare registers change no event; anything else may.
                     if !(0x34..0x44).contains(&off) {
                         self.wake_at = 0;

@@ -9,9 +9,17 @@
 //! (`Board::set_encoder`); input capture latches CNT on an injected edge
 //! (`Board::capture`). Output compare match flags (CCxIF in output mode) are not modelled;
 //! CCR/CCMR/CCER are stored and the PWM duty is derived from them.
+//!
+//! Timer links (RM0390 §17.3.15, table "TIMx internal trigger connection"): a master's
+//! TRGO in mode CR2.MMS = 011 (compare pulse) pulses whenever CC1IF is set by a capture
+//! (an injected edge or EGR.CC1G); a timer whose SMCR.TS selects that master as ITR0..3
+//! sees the pulse on TRGI, and its channels in input-capture mode on TRC (CCxS = 11,
+//! enabled) capture. The other master modes (reset, enable, update, OCxREF) and the slave
+//! modes (reset, gated, trigger) do not produce or act on pulses here.
 
 /// Register offsets.
 const CR1: usize = 0x00;
+const CR2: usize = 0x04;
 const SMCR: usize = 0x08;
 const DIER: usize = 0x0C;
 const SR: usize = 0x10;
@@ -32,6 +40,9 @@ const OPM: u32 = 1 << 3;
 const DIR: u32 = 1 << 4;
 const ARPE: u32 = 1 << 7;
 const UIF: u32 = 1;
+/// BDTR: main output enable, automatic output enable.
+const MOE: u32 = 1 << 15;
+const AOE: u32 = 1 << 14;
 
 /// Which timer, where, and its interrupt lines.
 #[derive(Debug, Clone, Copy)]
@@ -122,6 +133,25 @@ pub(crate) struct Timer {
     down: bool,
     /// Encoder: the last injected position in quadrature edges.
     enc: i64,
+    /// TRGO pulses not yet routed to the linked timers.
+    trgo_pending: u32,
+}
+
+/// The timer whose TRGO drives internal trigger ITR`ts` of timer `number` (RM0390 tables
+/// 94, 99, 106: TIM1/8, TIM2..5, TIM9/12); `None` for TS values that are not ITRs.
+pub(crate) fn itr_source(number: u8, ts: u32) -> Option<u8> {
+    let table: [u8; 4] = match number {
+        1 => [5, 2, 3, 4],
+        2 => [1, 8, 3, 4],
+        3 => [1, 2, 5, 4],
+        4 => [1, 2, 3, 8],
+        5 => [2, 3, 4, 8],
+        8 => [1, 2, 4, 5],
+        9 => [2, 3, 10, 11],
+        12 => [4, 5, 13, 14],
+        _ => return None,
+    };
+    table.get(ts as usize).copied()
 }
 
 impl Timer {
@@ -138,6 +168,7 @@ impl Timer {
             rep: 0,
             down: false,
             enc: 0,
+            trgo_pending: 0,
         };
         let max = t.max();
         t.regs[ARR / 4] = max;
@@ -246,8 +277,16 @@ impl Timer {
         if set_uif {
             self.regs[SR / 4] |= UIF;
         }
+        self.automatic_output_enable();
         if self.r(CR1) & OPM != 0 {
             self.regs[CR1 / 4] &= !CEN;
+        }
+    }
+
+    /// TIM1/TIM8: with BDTR.AOE an update event sets MOE (RM0390 §17.4.18).
+    fn automatic_output_enable(&mut self) {
+        if self.kind.advanced && self.r(BDTR) & AOE != 0 {
+            self.regs[BDTR / 4] |= MOE;
         }
     }
 
@@ -411,6 +450,7 @@ impl Timer {
                         if self.r(CR1) & URS == 0 {
                             self.regs[SR / 4] |= UIF;
                         }
+                        self.automatic_output_enable();
                     }
                     self.cnt = if down { self.arr_sh } else { 0 };
                     self.down = false;
@@ -448,7 +488,8 @@ impl Timer {
         matches!(off, CR1 | SR | EGR | DIER)
     }
 
-    /// Latches CNT into CCRx (an input-capture event on channel `ch`).
+    /// Latches CNT into CCRx (an input-capture event on channel `ch`); a capture on CH1
+    /// of a master in compare-pulse mode pulses TRGO (`trgo_pending`).
     fn capture_channel(&mut self, ch: u8) {
         let f = 1u32 << ch;
         if self.ccs(ch) != 0 {
@@ -458,6 +499,36 @@ impl Timer {
             self.regs[(CCR1 + 4 * usize::from(ch - 1)) / 4] = self.cnt;
         }
         self.regs[SR / 4] |= f;
+        if ch == 1 && (self.r(CR2) >> 4) & 7 == 3 {
+            self.trgo_pending += 1;
+        }
+    }
+
+    /// TRGO pulses since the last call (the bus routes them to the linked timers).
+    pub fn take_trgo(&mut self) -> u32 {
+        std::mem::take(&mut self.trgo_pending)
+    }
+
+    /// The timer number whose TRGO is this timer's trigger input (SMCR.TS = ITR0..3), if
+    /// one is selected.
+    pub fn trigger_source(&self) -> Option<u8> {
+        let ts = (self.r(SMCR) >> 4) & 7;
+        itr_source(self.kind.number, ts)
+    }
+
+    /// A pulse on TRGI at `now`: every input-capture channel on TRC (CCxS = 11) that is
+    /// enabled captures. Returns how many captured.
+    pub fn trigger(&mut self, now: u64) -> usize {
+        self.sync(now);
+        let mut n = 0;
+        for ch in 1..=self.kind.channels {
+            let enabled = self.r(CCER) & (1 << (4 * (ch - 1))) != 0;
+            if self.ccs(ch) == 3 && enabled {
+                self.capture_channel(ch);
+                n += 1;
+            }
+        }
+        n
     }
 
     /// An active edge on input TIn (1..=4) at `now`: every channel in input-capture mode
@@ -524,7 +595,7 @@ impl Timer {
             return None;
         }
         let ccer = self.r(CCER) >> (4 * (ch - 1));
-        if ccer & 1 == 0 || (self.kind.advanced && self.r(BDTR) & (1 << 15) == 0) {
+        if ccer & 1 == 0 || (self.kind.advanced && self.r(BDTR) & MOE == 0) {
             return None;
         }
         let ccmr = self.r(CCMR1 + 4 * usize::from((ch - 1) / 2));
@@ -679,6 +750,34 @@ mod tests {
     }
 
     #[test]
+    fn a_capture_on_ch1_of_a_compare_pulse_master_captures_trc_of_its_itr_slaves() {
+        assert_eq!(itr_source(5, 0), Some(2), "TIM5 ITR0 = TIM2");
+        assert_eq!(itr_source(4, 2), Some(3), "TIM4 ITR2 = TIM3");
+        assert_eq!(itr_source(6, 0), None);
+        let mut enc = Timer::new(TIMERS[1]); // TIM2
+        enc.write(CCMR1, 1 | (1 << 8), 0);
+        enc.write(CCER, 1 | (1 << 4), 0);
+        enc.write(SMCR, 3, 0);
+        enc.write(CR1, CEN, 0);
+        enc.capture(1, 10);
+        assert_eq!(enc.take_trgo(), 0, "MMS = 000: no pulse");
+        enc.write(CR2, 3 << 4, 10);
+        enc.capture(2, 20);
+        assert_eq!(enc.take_trgo(), 0, "only CH1 pulses");
+        enc.capture(1, 30);
+        assert_eq!(enc.take_trgo(), 1);
+        let mut cap = Timer::new(TIMERS[4]); // TIM5
+        cap.write(SMCR, 0 << 4, 0);
+        cap.write(CCMR1, 3, 0); // CC1 on TRC
+        cap.write(CCER, 1, 0);
+        cap.write(CR1, CEN, 0);
+        assert_eq!(cap.trigger_source(), Some(2));
+        assert_eq!(cap.trigger(500), 1);
+        assert_eq!(cap.read(SR, 500) & 2, 2);
+        assert_eq!(cap.read(CCR1, 500), 500);
+    }
+
+    #[test]
     fn pwm_duty_follows_ccr_arr_mode_polarity_and_moe() {
         let mut t = Timer::new(TIMERS[0]); // TIM1
         t.write(ARR, 8999, 0);
@@ -688,7 +787,12 @@ mod tests {
         t.write(CCER, 1 | (1 << 4), 0);
         t.write(CR1, CEN, 0);
         assert_eq!(t.pwm_duty(1), None, "MOE off");
-        t.write(BDTR, 1 << 15, 0);
+        // AOE: the next update event sets MOE.
+        t.write(BDTR, AOE, 0);
+        assert_eq!(t.pwm_duty(1), None, "MOE waits for an update event");
+        t.read(CNT, 9000);
+        assert_eq!(t.read(BDTR, 9000) & MOE, MOE, "set by the update");
+        t.write(BDTR, MOE, 9000);
         assert_eq!(t.pwm_duty(1), Some(0.25));
         assert_eq!(t.pwm_duty(2), Some(0.75));
         t.write(CCER, 1 | 2 | (1 << 4), 0);
