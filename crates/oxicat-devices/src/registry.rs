@@ -123,11 +123,27 @@ pub fn add_node_via(
     drift_ppm: f64,
     route: PdiRoute,
 ) -> Result<SlaveId, NodeError> {
+    add_node_on(segment, kit, k, (kit.esc)(), drift_ppm, |s, id| {
+        (kit.attach)(s, id, k, route)
+    })
+}
+
+/// Adds node `k` of `kit` on an ESC configured as `esc` (with its oscillator off by
+/// `drift_ppm`) and its SII, and lets `boot` put firmware on it: the seam for firmware
+/// other than the host-compiled application (a board image on an emulated MCU, whose ESC
+/// is the chip the board carries).
+pub fn add_node_on(
+    segment: &mut Segment,
+    kit: &Kit,
+    k: usize,
+    mut esc: EscConfig,
+    drift_ppm: f64,
+    boot: impl FnOnce(&mut Segment, SlaveId) -> Result<(), AttachError>,
+) -> Result<SlaveId, NodeError> {
     let def = (kit.def)(k);
     let sii = oxicat_esi::sii::generate(def).map_err(NodeError::Sii)?;
-    let mut cfg = (kit.esc)();
-    cfg.clock.drift_ppm = drift_ppm;
-    let id = segment.add(Esc::new(cfg, sii));
-    (kit.attach)(segment, id, k, route).map_err(NodeError::Attach)?;
+    esc.clock.drift_ppm = drift_ppm;
+    let id = segment.add(Esc::new(esc, sii));
+    boot(segment, id).map_err(NodeError::Attach)?;
     Ok(id)
 }

@@ -620,7 +620,7 @@ pub fn attach_host<I: Image<P::Pdi> + Send + 'static, P: PdiPath, B: Bench<I>>(
 }
 
 /// Why firmware could not be attached to a segment's ESC.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[derive(Debug, Clone, PartialEq, Eq)]
 pub enum AttachError {
     /// No such ESC.
     Topology(TopologyError),
@@ -628,6 +628,9 @@ pub enum AttachError {
     Init(InitError<PdiError>),
     /// The chip driver, or the stack through it, did not start.
     Path(PathInitError),
+    /// The machine-code route: the board image could not be loaded or faulted at boot
+    /// (the emulator's own error, as text).
+    Image(String),
 }
 
 impl From<PathInitError> for AttachError {
@@ -645,6 +648,7 @@ impl core::fmt::Display for AttachError {
             Self::Topology(e) => write!(f, "{e}"),
             Self::Init(e) => write!(f, "the slave stack did not start: {e:?}"),
             Self::Path(e) => write!(f, "{e}"),
+            Self::Image(e) => write!(f, "board image: {e}"),
         }
     }
 }

@@ -44,6 +44,12 @@ pub struct RealtimeConfig {
     pub idle: Duration,
     /// Poll without sleeping (one core at 100 %, lowest latency).
     pub spin: bool,
+    /// Real time per virtual time: 1 follows the host's clock; `k` runs the segment `k`
+    /// times slower (a virtual millisecond every `k` real ones), for firmware that cannot
+    /// keep real time on this host (a board image executed instruction by instruction, a
+    /// debug build under load). A master sees a slower segment: its DC cycles, watchdogs
+    /// and firmware timers all stretch by `k`. 0 is taken as 1.
+    pub slowdown: u32,
 }
 
 impl Default for RealtimeConfig {
@@ -51,6 +57,7 @@ impl Default for RealtimeConfig {
         Self {
             idle: Duration::from_millis(1),
             spin: false,
+            slowdown: 1,
         }
     }
 }
@@ -90,7 +97,8 @@ pub fn serve<P: FramePort, E: SegmentEsc>(
     let lock = || segment.lock().unwrap_or_else(|e| e.into_inner());
     let base = lock().now();
     let start = Instant::now();
-    let now = |start: &Instant| base.saturating_add(start.elapsed().as_nanos() as u64);
+    let k = u64::from(config.slowdown.max(1));
+    let now = |start: &Instant| base.saturating_add(start.elapsed().as_nanos() as u64 / k);
     let wait = if config.spin {
         Duration::ZERO
     } else {
@@ -215,5 +223,53 @@ mod tests {
         let v = seg.lock().unwrap().now();
         assert!(v > 0);
         assert!(v <= real + 1_000_000);
+    }
+
+    #[test]
+    fn a_slowdown_stretches_virtual_time() {
+        let mut seg = Segment::new();
+        seg.add(oxicat_esc::Esc::new(
+            oxicat_esc::EscConfig::et1100(),
+            vec![0; 256],
+        ));
+        let seg = Arc::new(Mutex::new(seg));
+        let stop = Arc::new(AtomicBool::new(false));
+        // Frames that each take a real millisecond to come: the segment is advanced to
+        // "now" before each, which with a slowdown of 1000 is a thousandth of the time.
+        struct Slow(Queue);
+        impl FramePort for Slow {
+            type Peer = ();
+            fn recv(&mut self, buf: &mut Vec<u8>, t: Duration) -> Result<Option<()>, NetError> {
+                std::thread::sleep(Duration::from_millis(1));
+                self.0.recv(buf, t)
+            }
+            fn send(&mut self, frame: &[u8], p: &()) -> Result<(), NetError> {
+                self.0.send(frame, p)
+            }
+            fn describe(&self) -> String {
+                "slow queue".into()
+            }
+        }
+        let mut port = Slow(Queue {
+            inbox: VecDeque::from(vec![brd_frame(); 20]),
+            sent: Arc::new(Mutex::new(Vec::new())),
+            stop: stop.clone(),
+        });
+        let config = RealtimeConfig {
+            slowdown: 1000,
+            ..RealtimeConfig::default()
+        };
+        let t0 = Instant::now();
+        serve(&seg, &mut port, &config, &RealtimeStats::default(), &stop).unwrap();
+        let real = t0.elapsed().as_nanos() as u64;
+        let v = seg.lock().unwrap().now();
+        assert!(real >= 20_000_000, "twenty frames a real millisecond apart");
+        assert!(v > 0, "virtual time moved");
+        // At real time it would be at least `real`; slowed 1000 times it is a thousandth
+        // of that plus the frames' own trips through the ESC (a few µs each).
+        assert!(
+            v <= real / 1000 + 20 * 20_000,
+            "virtual {v} ns for {real} real ns at 1/1000"
+        );
     }
 }

@@ -75,6 +75,32 @@ pub struct SimArgs {
     /// No live status line.
     #[arg(short, long)]
     pub quiet: bool,
+    /// Run the segment K times slower than real time (its DC cycles, watchdogs and firmware
+    /// timers stretch by K), for firmware that cannot keep real time on this host.
+    #[arg(long, value_name = "K", default_value_t = 1, value_parser = clap::value_parser!(u32).range(1..=10_000))]
+    pub slowdown: u32,
+}
+
+/// Puts node `k` of a registered device on the segment (with its oscillator off by
+/// `drift_ppm`, its firmware reaching the ESC through `route`): [`host_node`] runs the
+/// host-compiled firmware; the board-image emulator's binary passes its own.
+pub type AddNode<'a> = &'a dyn Fn(
+    &mut Segment,
+    &'static oxicat_devices::registry::Kit,
+    usize,
+    f64,
+    PdiRoute,
+) -> Result<oxicat_sim::segment::SlaveId, NodeError>;
+
+/// The host-compiled firmware of the registry ([`add_node_via`]).
+pub fn host_node(
+    seg: &mut Segment,
+    kit: &'static oxicat_devices::registry::Kit,
+    k: usize,
+    drift_ppm: f64,
+    route: PdiRoute,
+) -> Result<oxicat_sim::segment::SlaveId, NodeError> {
+    add_node_via(seg, kit, k, drift_ppm, route)
 }
 
 /// Why `oxicat sim` failed.
@@ -351,6 +377,15 @@ pub fn build_segment_until(
     desc: &SegmentFile,
     stop: &AtomicBool,
 ) -> Result<(Segment, Vec<String>), SimError> {
+    build_segment_with(desc, stop, &host_node)
+}
+
+/// [`build_segment_until`] with each node put on the segment by `add`.
+pub fn build_segment_with(
+    desc: &SegmentFile,
+    stop: &AtomicBool,
+    add: AddNode<'_>,
+) -> Result<(Segment, Vec<String>), SimError> {
     if desc.devices.iter().all(|d| d.count == 0) {
         return Err(SimError::NoDevices);
     }
@@ -366,13 +401,12 @@ pub fn build_segment_until(
             }
             let position = seg.len();
             let route = route_of(entry.pdi.as_deref()).unwrap_or_default();
-            let id = add_node_via(&mut seg, dev, k, entry.drift_ppm, route).map_err(|error| {
-                SimError::Node {
+            let id =
+                add(&mut seg, dev, k, entry.drift_ppm, route).map_err(|error| SimError::Node {
                     position,
                     device: entry.name.clone(),
                     error,
-                }
-            })?;
+                })?;
             if let (Some(w), Some(esc)) = (entry.eeprom_protect_from_word, seg.esc_mut(id)) {
                 esc.protect_eeprom_from(w);
             }
@@ -476,6 +510,15 @@ fn status_thread(
 
 /// Serves the segment of `args` until `stop` is set.
 pub fn serve_until(args: &SimArgs, stop: Arc<AtomicBool>) -> Result<(), SimError> {
+    serve_until_with(args, stop, &host_node)
+}
+
+/// [`serve_until`] with each node put on the segment by `add`.
+pub fn serve_until_with(
+    args: &SimArgs,
+    stop: Arc<AtomicBool>,
+    add: AddNode<'_>,
+) -> Result<(), SimError> {
     if args.iface.is_none() && args.udp.is_none() {
         return Err(SimError::NoTransport);
     }
@@ -486,11 +529,12 @@ pub fn serve_until(args: &SimArgs, stop: Arc<AtomicBool>) -> Result<(), SimError
     check_segment(&desc)?;
     let total: usize = desc.devices.iter().map(|d| d.count).sum();
     eprintln!("oxicat sim: booting {total} slave(s); Ctrl-C to stop");
-    let (seg, names) = build_segment_until(&desc, &stop)?;
+    let (seg, names) = build_segment_with(&desc, &stop, add)?;
     let n = seg.len();
     let segment = Arc::new(Mutex::new(seg));
     let config = RealtimeConfig {
         spin: args.spin,
+        slowdown: args.slowdown,
         ..RealtimeConfig::default()
     };
     let wait = if config.spin {
@@ -524,14 +568,25 @@ pub fn serve_udp_until(
     port: oxicat_sim::net::udp::UdpPort,
     stop: Arc<AtomicBool>,
 ) -> Result<(), SimError> {
+    serve_udp_until_with(args, port, stop, &host_node)
+}
+
+/// [`serve_udp_until`] with each node put on the segment by `add`.
+pub fn serve_udp_until_with(
+    args: &SimArgs,
+    port: oxicat_sim::net::udp::UdpPort,
+    stop: Arc<AtomicBool>,
+    add: AddNode<'_>,
+) -> Result<(), SimError> {
     let desc = match &args.segment {
         Some(p) => read_segment_file(p)?,
         None => parse_specs(&args.devices)?,
     };
-    let (seg, names) = build_segment(&desc)?;
+    let (seg, names) = build_segment_with(&desc, &AtomicBool::new(false), add)?;
     let n = seg.len();
     let config = RealtimeConfig {
         spin: args.spin,
+        slowdown: args.slowdown,
         ..RealtimeConfig::default()
     };
     let summary = summarize(&names);

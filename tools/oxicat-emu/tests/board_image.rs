@@ -3,44 +3,17 @@
 //! LAN9252 up over the emulated SPI1, and its slave stack answers a master on the ECAT side
 //! (INIT → PREOP, an SDO upload of 0x1018:01).
 
-use std::path::PathBuf;
-
 use oxicat_emu::{Board, EmuError};
 use oxicat_esc::{Esc, EscConfig};
 use oxicat_pdi::sim::{BusConfig, Handle, Lan9252Model};
 use oxicat_wire::frame::FrameBuilder;
 use oxicat_wire::{Command, DatagramHeader, EcatFrame};
 
-/// The release ELF `.ci/run` builds before the tests: `OXICAT_BOARD_IMAGE` if set, else in
-/// the firmware's own target directory, or in `CARGO_TARGET_DIR` when the build used one.
+mod common;
+
+/// The board image (`firmware/stm32f446-lan9252`, or `OXICAT_BOARD_IMAGE`).
 fn image() -> Option<Vec<u8>> {
-    const ELF: &str = "thumbv7em-none-eabihf/release/oxicat-firmware-stm32f446-lan9252";
-    let own = PathBuf::from(env!("CARGO_MANIFEST_DIR"))
-        .join("../../firmware/stm32f446-lan9252/target")
-        .join(ELF);
-    let candidates: Vec<PathBuf> = match std::env::var_os("OXICAT_BOARD_IMAGE") {
-        Some(p) => vec![PathBuf::from(p)],
-        None => std::env::var_os("CARGO_TARGET_DIR")
-            .map(|d| PathBuf::from(d).join(ELF))
-            .into_iter()
-            .chain([own])
-            .collect(),
-    };
-    for p in &candidates {
-        if let Ok(b) = std::fs::read(p) {
-            return Some(b);
-        }
-    }
-    let tried: Vec<String> = candidates.iter().map(|p| p.display().to_string()).collect();
-    let msg = format!(
-        "no board image at {} (build it: cd firmware/stm32f446-lan9252 && cargo build --release)",
-        tried.join(" or ")
-    );
-    if std::env::var_os("CI").is_some() {
-        panic!("{msg}");
-    }
-    eprintln!("skipped: {msg}");
-    None
+    common::image("stm32f446-lan9252", "OXICAT_BOARD_IMAGE")
 }
 
 /// The master's side: single datagrams to the one ESC (position 0) at the board's time.

@@ -48,6 +48,7 @@ fn serve_with(segment: Option<std::path::PathBuf>, devices: &[&str]) -> Served {
         list: false,
         spin: false,
         quiet: true,
+        slowdown: 1,
     };
     let stop = Arc::new(AtomicBool::new(false));
     let s = stop.clone();

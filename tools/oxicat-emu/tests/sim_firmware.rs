@@ -1,0 +1,131 @@
+//! `oxicat-emu sim --firmware`: board images served to a master outside the process.
+//! The demo board image runs on two emulated boards of a segment served on UDP (slowed
+//! down: a polling main loop is emulated in full and cannot keep real time here); an
+//! ethercrab master in this process reaches it over the socket, brings both to OP and
+//! exchanges process data with the right working counter every cycle; bad `--firmware`
+//! arguments are refused with the reason.
+
+mod common;
+
+use std::io::{BufRead, BufReader};
+use std::process::{Child, Command, Stdio};
+use std::sync::mpsc;
+use std::time::Duration;
+
+use oxicat_master::cyclic::{CycleOptions, Flow};
+use oxicat_master::{Link, Master, MasterOptions};
+
+struct Served(Child);
+impl Drop for Served {
+    fn drop(&mut self) {
+        let _ = self.0.kill();
+        let _ = self.0.wait();
+    }
+}
+
+/// Starts `oxicat-emu sim … --udp 127.0.0.1:0`; returns it and the address it serves on.
+fn serve(args: &[&str]) -> (Served, String) {
+    let mut child = Command::new(env!("CARGO_BIN_EXE_oxicat-emu"))
+        .args(["sim", "--quiet", "--udp", "127.0.0.1:0"])
+        .args(args)
+        .stdin(Stdio::null())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("spawn oxicat-emu");
+    let stderr = child.stderr.take().expect("stderr");
+    let served = Served(child);
+    let (tx, rx) = mpsc::channel();
+    std::thread::spawn(move || {
+        for line in BufReader::new(stderr).lines().map_while(Result::ok) {
+            let _ = tx.send(line);
+        }
+    });
+    loop {
+        let line = rx
+            .recv_timeout(Duration::from_secs(120))
+            .expect("oxicat-emu prints where it serves");
+        if let Some(rest) = line.split(" on EtherCAT over UDP on ").nth(1) {
+            let addr = rest.split(';').next().unwrap_or_default().to_string();
+            return (served, addr);
+        }
+    }
+}
+
+#[test]
+fn ethercrab_runs_two_served_demo_board_images_in_op_over_udp() {
+    let Some(img) = common::image("stm32f446-lan9252", "OXICAT_BOARD_IMAGE") else {
+        return;
+    };
+    let path = std::env::temp_dir().join(format!("oxicat-emu-demo-{}.elf", std::process::id()));
+    std::fs::write(&path, img).unwrap();
+    let fw = format!("demo={}", path.display());
+    // 20 times slower than real time: two boards emulated in full on a loaded 2-core box.
+    let (_served, addr) = serve(&["--firmware", &fw, "--slowdown", "20", "demo:2"]);
+    // The boards boot first (the demo image's 50 ms power-on wait polls SysTick and is
+    // emulated in full, slower than the slowed-down clock): until then the segment falls
+    // behind and frames time out, so the master tries again, as one waits for a machine to
+    // power up.
+    let options = || {
+        let mut o = MasterOptions::for_link(&Link::Udp(addr.clone()));
+        o.timeouts.pdu = Duration::from_secs(2);
+        o.timeouts.state_transition = Duration::from_secs(120);
+        o.timeouts.mailbox_response = Duration::from_secs(30);
+        o.mailbox_timeout = Duration::from_secs(30);
+        o
+    };
+    let mut tries = 0;
+    let mut m = loop {
+        match Master::open_with(Link::Udp(addr.clone()), options()) {
+            Ok(m) => break m,
+            Err(e) if tries < 30 => {
+                tries += 1;
+                eprintln!("not yet ({e}); again");
+                std::thread::sleep(Duration::from_secs(1));
+            }
+            Err(e) => panic!("ethercrab does not scan the served images: {e}"),
+        }
+    };
+    let cycles = 300;
+    let stats = m
+        .run_cyclic(
+            CycleOptions {
+                cycle: Duration::from_millis(2),
+                dc: false,
+            },
+            |io| {
+                Ok(if io.cycle + 1 >= cycles {
+                    Flow::Stop
+                } else {
+                    Flow::Continue
+                })
+            },
+        )
+        .unwrap_or_else(|e| panic!("{e}"));
+    let _ = std::fs::remove_file(&path);
+    assert_eq!((stats.cycles, stats.wkc_errors), (cycles, 0), "{stats:?}");
+}
+
+#[test]
+fn bad_firmware_arguments_are_refused_with_the_reason() {
+    let run = |args: &[&str]| {
+        let out = Command::new(env!("CARGO_BIN_EXE_oxicat-emu"))
+            .args(["sim", "--udp", "127.0.0.1:0"])
+            .args(args)
+            .output()
+            .unwrap();
+        assert!(!out.status.success(), "{args:?} was accepted");
+        String::from_utf8_lossy(&out.stderr).to_string()
+    };
+    let e = run(&["--firmware", "nope=x.elf", "demo:1"]);
+    assert!(e.contains("no device `nope`"), "{e}");
+    let e = run(&["--firmware", "demo", "demo:1"]);
+    assert!(e.contains("expected NAME=ELF"), "{e}");
+    let e = run(&["--firmware", "demo=/nonexistent.elf", "demo:1"]);
+    assert!(e.contains("/nonexistent.elf"), "{e}");
+    // Not an ELF: refused before anything boots.
+    let junk = std::env::temp_dir().join(format!("oxicat-emu-junk-{}.elf", std::process::id()));
+    std::fs::write(&junk, b"not an image").unwrap();
+    let e = run(&["--firmware", &format!("demo={}", junk.display()), "demo:1"]);
+    let _ = std::fs::remove_file(&junk);
+    assert!(e.contains("not a board image"), "{e}");
+}
