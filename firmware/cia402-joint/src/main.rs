@@ -233,6 +233,26 @@ fn run_led(state: AlState, ms: u32) -> bool {
     }
 }
 
+/// Starts the slave stack on the ET1100 and stores it with the driver in [`ESC`]. A
+/// function of its own, not inlined: the `Slave` (several KB) and the moves of it live in
+/// this frame, gone when it returns; built in `main`, which never returns, they held about
+/// 22 KB of stack for good under every interrupt (the Laelaps image's painted stack in
+/// `tools/oxicat-emu` showed it; `sub sp` in this ELF's `main` was 22,144 B).
+#[inline(never)]
+fn start_stack(mut esc: Esc) -> Result<(), ()> {
+    let slave = JointSlave::new(&device::DEF, &mut esc).map_err(|_| ())?;
+    // SAFETY: once, before any ESC interrupt is unmasked (main enables them afterwards).
+    unsafe { ESC.init(EscSide { slave, esc }) };
+    Ok(())
+}
+
+/// Builds the drive into [`DRIVE`], in a frame of its own as [`start_stack`].
+#[inline(never)]
+fn start_drive(hw: JointBoard, params: DriveParams) {
+    let drive = Cia402Drive::new(hw, params);
+    irq::free(|cs| *DRIVE.borrow(cs).borrow_mut() = Some(drive));
+}
+
 #[entry]
 fn main() -> ! {
     let dp = pac::Peripherals::take().unwrap();
@@ -321,15 +341,10 @@ fn main() -> ! {
     if esc.init(&mut eeprom_loaded).is_err() {
         fail(&mut leds, &mut delay);
     }
-    let slave = match JointSlave::new(&device::DEF, &mut esc) {
-        Ok(s) => s,
-        Err(_) => fail(&mut leds, &mut delay),
-    };
-
-    let drive = Cia402Drive::new(hw, params);
-    irq::free(|cs| *DRIVE.borrow(cs).borrow_mut() = Some(drive));
-    // SAFETY: once, before any ESC interrupt is unmasked.
-    unsafe { ESC.init(EscSide { slave, esc }) };
+    if start_stack(esc).is_err() {
+        fail(&mut leds, &mut delay);
+    }
+    start_drive(hw, params);
 
     // ESC lines on EXTI: SPI_IRQ PA10 falling (active low; pull-up for an open-drain
     // configuration), SYNC0 PB3 and SYNC1 PB5 rising (push-pull, active high).
