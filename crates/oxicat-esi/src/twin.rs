@@ -946,6 +946,16 @@ fn build_device(esi: &Esi, d: Node, cand: Candidate) -> Result<Twin, TwinError> 
         Served::EscOnly
     };
 
+    if let Some((k, v)) = children(d, "Sm").enumerate().find(|(_, s)| {
+        s.attribute("Virtual")
+            .is_some_and(|v| v == "true" || v == "1")
+    }) {
+        return Err(TwinError::Unsupported(format!(
+            "SM{k} is virtual (its process data are ESC registers at {}, mapped by an FMMU \
+             without a sync manager); twins do not model virtual sync managers",
+            v.attribute("StartAddress").unwrap_or("?")
+        )));
+    }
     // Sync managers: the stack serves SM0/SM1 mailbox, SM2 outputs, SM3 inputs.
     let kinds: Vec<SmKind> = m.sms.iter().map(|s| s.kind).collect();
     if served == Served::Stack {
@@ -1464,8 +1474,16 @@ fn build_device(esi: &Esi, d: Node, cand: Candidate) -> Result<Twin, TwinError> 
         }
     }
     let esc = EscSpec {
+        // A master maps each process-data SM with an FMMU of its own (ethercrab does).
         fmmu_count: ctl_num("FmmuCount")
-            .map_or(m.fmmus.len().max(3) as u32, |v| v)
+            .map_or(
+                m.fmmus.len().max(3).max(
+                    sms.iter()
+                        .filter(|s| matches!(s.sm_type, SmType::Outputs | SmType::Inputs))
+                        .count(),
+                ) as u32,
+                |v| v,
+            )
             .clamp(1, 16) as u8,
         sm_count: ctl_num("SmCount")
             .map_or(m.sms.len().max(4) as u32, |v| v)

@@ -152,7 +152,10 @@ fn selectors_pick_by_type_or_product_code_and_the_highest_revision() {
 #[test]
 fn malformed_xml_is_refused_with_the_parsers_reason() {
     let e = build("<EtherCATInfo><Vendor>", &Selector::default()).unwrap_err();
-    assert!(matches!(&e, TwinError::Xml(m) if m.contains("never closed")), "{e:?}");
+    assert!(
+        matches!(&e, TwinError::Xml(m) if m.contains("never closed")),
+        "{e:?}"
+    );
     let e = build("<EtherCATInfo><Vendor></Vedor>", &Selector::default()).unwrap_err();
     assert!(matches!(&e, TwinError::Xml(m) if m.contains("1:")), "{e:?}");
     let e = build("<Other/>", &Selector::default()).unwrap_err();
