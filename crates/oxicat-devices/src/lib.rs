@@ -17,6 +17,8 @@ pub mod demo;
 pub mod laelaps;
 #[cfg(feature = "bench")]
 pub mod registry;
+#[cfg(feature = "bench")]
+pub mod twin;
 
 /// A CSV written in memory by the `csv` crate (which joins the fields and quotes those
 /// that need it; their formatting is the caller's), as text.

@@ -2,6 +2,9 @@
 //! list`, `sim`, `sim --list`, `--sim`, `sii-write --device`, `fw-image`, `cstruct
 //! --device`) and every test that walks "all devices" reads [`kits`].
 //!
+//! A twin of a vendor's ESI ([`crate::twin`]) is a device too: [`resolve`] takes
+//! `esi=FILE[:TYPE[:REVISION]]` wherever it takes a kit's name, and [`Device`] is either.
+//!
 //! Adding a device: its kit folder (firmware, definition, `rig.rs` with a [`Kit`] constant)
 //! and one line in [`KITS`]. README section "Add a device" has the recipe.
 
@@ -91,6 +94,99 @@ pub enum NodeError {
     Sii(oxicat_esi::Error),
     /// The firmware did not boot.
     Attach(AttachError),
+}
+
+/// A device a verb names: a kit of this repository or a twin of a vendor's ESI.
+#[derive(Debug, Clone, Copy)]
+pub enum Device {
+    /// A kit of [`KITS`].
+    Kit(&'static Kit),
+    /// A twin ([`crate::twin`]).
+    Twin(&'static crate::twin::Twin),
+}
+
+impl Device {
+    /// The name users type (`demo`, `esi=EL2008.xml:EL2008`).
+    pub fn name(&self) -> &'static str {
+        match self {
+            Self::Kit(k) => k.name,
+            Self::Twin(t) => &t.spec,
+        }
+    }
+
+    /// The definition of node `k`.
+    pub fn def(&self, k: usize) -> &'static DeviceDef {
+        match self {
+            Self::Kit(kit) => (kit.def)(k),
+            Self::Twin(t) => t.esi.def,
+        }
+    }
+
+    /// The sync mode its bench runs (twins: free run).
+    pub fn sync(&self) -> SyncMode {
+        match self {
+            Self::Kit(k) => k.sync,
+            Self::Twin(_) => SyncMode::FreeRun,
+        }
+    }
+
+    /// The cycle time of its bench in ns (twins: 1 ms).
+    pub fn cycle_ns(&self) -> u32 {
+        match self {
+            Self::Kit(k) => k.cycle_ns,
+            Self::Twin(_) => 1_000_000,
+        }
+    }
+}
+
+/// Why a device name does not resolve.
+#[derive(Debug)]
+pub enum ResolveError {
+    /// No kit of that name.
+    Unknown(String),
+    /// The twin could not be built.
+    Twin(crate::twin::LoadError),
+}
+
+impl core::fmt::Display for ResolveError {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        match self {
+            Self::Unknown(n) => write!(
+                f,
+                "unknown device {n:?}; known: {}, or esi=FILE[:TYPE[:REVISION]] for a twin of a vendor's ESI",
+                names()
+            ),
+            Self::Twin(e) => write!(f, "{e}"),
+        }
+    }
+}
+
+impl std::error::Error for ResolveError {}
+
+/// The device `name` names: a kit, or `esi=FILE[:TYPE[:REVISION]]` for a twin.
+pub fn resolve(name: &str) -> Result<Device, ResolveError> {
+    if let Some(spec) = name.strip_prefix(crate::twin::PREFIX) {
+        return crate::twin::load(spec)
+            .map(Device::Twin)
+            .map_err(ResolveError::Twin);
+    }
+    find(name)
+        .map(Device::Kit)
+        .ok_or_else(|| ResolveError::Unknown(name.to_string()))
+}
+
+/// [`add_node_via`] for any [`Device`]: node `k` at the end of the line.
+pub fn add_device_node(
+    segment: &mut Segment,
+    dev: Device,
+    k: usize,
+    drift_ppm: f64,
+    route: PdiRoute,
+) -> Result<SlaveId, NodeError> {
+    match dev {
+        Device::Kit(kit) => add_node_via(segment, kit, k, drift_ppm, route),
+        Device::Twin(t) => crate::twin::add_node(segment, t, drift_ppm, route),
+    }
 }
 
 impl core::fmt::Display for NodeError {

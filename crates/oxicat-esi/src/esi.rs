@@ -581,7 +581,7 @@ fn parse_bool(s: &str) -> Option<bool> {
     }
 }
 
-fn parse_hex_bytes(s: &str) -> Option<Vec<u8>> {
+pub(crate) fn parse_hex_bytes(s: &str) -> Option<Vec<u8>> {
     let s: String = s.chars().filter(|c| !c.is_whitespace()).collect();
     if s.len() & 1 != 0 {
         return None;
@@ -612,7 +612,7 @@ fn num<T: TryFrom<i64>>(what: &'static str, s: &str) -> Result<T, Error> {
         })
 }
 
-fn num_u32(what: &'static str, s: &str) -> Result<u32, Error> {
+pub(crate) fn num_u32(what: &'static str, s: &str) -> Result<u32, Error> {
     // Product codes and vendor IDs may be written as negative decimals (signed 32-bit).
     let v = parse_num(s).ok_or_else(|| Error::BadValue {
         what,
@@ -673,7 +673,12 @@ fn pdo(n: Node) -> Result<PdoModel, Error> {
     })
 }
 
-fn device(vendor_id: u32, vendor_name: Option<String>, d: Node) -> Result<DeviceModel, Error> {
+/// The model of one `Device` element (shared with [`crate::twin`]).
+pub(crate) fn device(
+    vendor_id: u32,
+    vendor_name: Option<String>,
+    d: Node,
+) -> Result<DeviceModel, Error> {
     let t = child(d, "Type").ok_or(Error::Missing("Device/Type"))?;
     let mut m = DeviceModel {
         vendor_id,

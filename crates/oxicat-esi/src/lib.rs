@@ -8,7 +8,9 @@
 //! - [`model::from_def`] and [`check`]: the definition, its ESI and its SII compared field
 //!   by field; differences are typed [`Finding`]s,
 //! - [`od::table`]: the object dictionary as the stack serves it, as a text table,
-//! - [`fwimage::build`]: a firmware image (header + payload) for the FoE update flow.
+//! - [`fwimage::build`]: a firmware image (header + payload) for the FoE update flow,
+//! - [`twin::build`]: a vendor's ESI device → a runtime definition + SII image + ESC
+//!   description that the one slave stack serves as a virtual twin.
 #![forbid(unsafe_code)]
 #![warn(missing_docs)]
 
@@ -17,6 +19,7 @@ pub mod fwimage;
 pub mod model;
 pub mod od;
 pub mod sii;
+pub mod twin;
 
 pub use model::{compare, DeviceModel, Finding};
 

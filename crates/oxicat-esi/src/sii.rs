@@ -53,8 +53,29 @@ fn port_type(c: char) -> u16 {
     }
 }
 
+/// The sync managers of an SII image and which one each assigned PDO goes to, when they
+/// are not the stack's standard four (SM0/SM1 mailbox, SM2 outputs, SM3 inputs): a twin
+/// built from a vendor's ESI ([`crate::twin`]) lays them out as its ESI says (a digital
+/// terminal without a mailbox has only `Outputs` at 0x0F00, say).
+#[derive(Debug, Clone, Default, PartialEq, Eq)]
+pub struct SmLayout {
+    /// The sync managers in SM order.
+    pub sms: Vec<SiiSyncManager>,
+    /// `(PDO index, SM)` of every PDO assigned by default (the others are written with SM
+    /// 0xFF).
+    pub pdo_sm: Vec<(u16, u8)>,
+    /// The device has a mailbox (SII words 0x18..0x1B and the mailbox DLL flag); without
+    /// one both are 0.
+    pub mailbox: bool,
+}
+
 /// Generates the SII image of a definition (`info.eeprom_bytes` long, unused space 0xFF).
 pub fn generate(def: &DeviceDef) -> Result<Vec<u8>, Error> {
+    generate_with(def, None)
+}
+
+/// [`generate`] with the sync managers of `layout` instead of the stack's standard four.
+pub fn generate_with(def: &DeviceDef, layout: Option<&SmLayout>) -> Result<Vec<u8>, Error> {
     let info = &def.info;
     let size = info.eeprom_bytes as usize;
     if size < 256 || !size.is_power_of_two() {
@@ -84,12 +105,22 @@ pub fn generate(def: &DeviceDef) -> Result<Vec<u8>, Error> {
     let m = def.mailbox;
     let area = |o, s| MailboxArea { offset: o, size: s };
     let boot = def.boot_mailbox;
+    let has_mailbox = layout.is_none_or(|l| l.mailbox);
+    let (std_rx, std_tx) = if has_mailbox {
+        (area(m.rx_start, m.rx_len), area(m.tx_start, m.tx_len))
+    } else {
+        (area(0, 0), area(0, 0))
+    };
     SiiMailboxConfig {
         bootstrap_rx: boot.map_or(area(0, 0), |b| area(b.rx_start, b.rx_len)),
         bootstrap_tx: boot.map_or(area(0, 0), |b| area(b.tx_start, b.tx_len)),
-        standard_rx: area(m.rx_start, m.rx_len),
-        standard_tx: area(m.tx_start, m.tx_len),
-        protocols: def.mailbox_protocols(),
+        standard_rx: std_rx,
+        standard_tx: std_tx,
+        protocols: if has_mailbox {
+            def.mailbox_protocols()
+        } else {
+            0
+        },
     }
     .write(&mut img)?;
     let w = |img: &mut [u8], word: u16, v: u16| {
@@ -121,7 +152,11 @@ pub fn generate(def: &DeviceDef) -> Result<Vec<u8>, Error> {
         coe_details: def.coe_details(),
         foe_details: u8::from(info.foe),
         eoe_details: u8::from(info.eoe),
-        flags: general_flags::MBOX_DLL,
+        flags: if has_mailbox {
+            general_flags::MBOX_DLL
+        } else {
+            0
+        },
         current_on_ebus: info.ebus_current_ma,
         group_idx2: group,
         physical_port,
@@ -134,41 +169,56 @@ pub fn generate(def: &DeviceDef) -> Result<Vec<u8>, Error> {
     let ob = def.default_output_bits().div_ceil(8) as u16;
     let ib = def.default_input_bits().div_ceil(8) as u16;
     let c = info.sm_control;
-    let sms = [
-        (m.rx_start, m.rx_len, c.mbx_out, 1u8, SmType::MailboxOut),
-        (m.tx_start, m.tx_len, c.mbx_in, 1, SmType::MailboxIn),
-        (
-            def.sm2_start,
-            ob,
-            c.outputs,
-            u8::from(ob > 0),
-            SmType::Outputs,
-        ),
-        (
-            def.sm3_start,
-            ib,
-            c.inputs,
-            u8::from(ib > 0),
-            SmType::Inputs,
-        ),
-    ];
-    let mut sm = vec![0u8; 8 * sms.len()];
-    for (k, (start, length, control, enable, sm_type)) in sms.into_iter().enumerate() {
-        SiiSyncManager {
+    let sms = match layout {
+        Some(l) => l.sms.clone(),
+        None => [
+            (m.rx_start, m.rx_len, c.mbx_out, 1u8, SmType::MailboxOut),
+            (m.tx_start, m.tx_len, c.mbx_in, 1, SmType::MailboxIn),
+            (
+                def.sm2_start,
+                ob,
+                c.outputs,
+                u8::from(ob > 0),
+                SmType::Outputs,
+            ),
+            (
+                def.sm3_start,
+                ib,
+                c.inputs,
+                u8::from(ib > 0),
+                SmType::Inputs,
+            ),
+        ]
+        .into_iter()
+        .map(|(start, length, control, enable, sm_type)| SiiSyncManager {
             start,
             length,
             control,
             status: 0,
             enable,
             sm_type,
-        }
-        .write(&mut sm[8 * k..])?;
+        })
+        .collect(),
+    };
+    let mut sm = vec![0u8; 8 * sms.len()];
+    for (k, s) in sms.into_iter().enumerate() {
+        s.write(&mut sm[8 * k..])?;
     }
+    // The SM of an assigned PDO: the layout's, or SM2 (outputs) / SM3 (inputs).
+    let sm_of = |index: u16, standard: u8| match layout {
+        Some(l) => l.pdo_sm.iter().find(|(p, _)| *p == index).map(|(_, s)| *s),
+        None => Some(standard),
+    };
 
     let mut pdo_cat = |pdos: &[oxicat_slave::PdoDef], smn: u8, assign: &[u16]| {
         let mut out = Vec::new();
         for p in pdos {
             let assigned = assign.contains(&p.index);
+            let smn = if assigned {
+                sm_of(p.index, smn).unwrap_or(0xFF)
+            } else {
+                0xFF
+            };
             let mut flags = 0;
             if assigned {
                 flags |= PDO_DEFAULT;
@@ -184,7 +234,7 @@ pub fn generate(def: &DeviceDef) -> Result<Vec<u8>, Error> {
                 index: p.index,
                 entry_count: u8::try_from(p.entries.len())
                     .map_err(|_| Error::DoesNotFit("PDO entries"))?,
-                sync_manager: if assigned { smn } else { 0xFF },
+                sync_manager: smn,
                 dc_sync: 0,
                 name_idx: st.idx(p.name)?,
                 flags,

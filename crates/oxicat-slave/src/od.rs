@@ -555,7 +555,8 @@ const fn sync_par_entries() -> [EntryDef; 12] {
         e(9, "Delay time", U32, Access::RO),
         e(0x0B, "SM event missed counter", U16, Access::RO),
         e(0x0C, "Cycle time too small counter", U16, Access::RO),
-        e(0x20, "Sync error", DataType::Bool, Access::RO),
+        // Mappable into TxPDOs (ETG.1020; Beckhoff's encoder terminals map 0x1C32:20).
+        e(0x20, "Sync error", DataType::Bool, Access::RO).pdo(PdoMapping::Tx),
     ]
 }
 
@@ -985,7 +986,7 @@ impl core::fmt::Display for DefError {
             }
             Self::BadObjectOrder(i) => write!(
                 f,
-                "object 0x{i:04X}: application objects must be at 0x2000 or above, sorted and unique"
+                "object 0x{i:04X}: application objects must be sorted and unique, at 0x1000 or above and not where the stack's own objects are (0x1000/01/08/09/0A, 0x1018, 0x10F1, 0x1600-0x17FF, 0x1A00-0x1BFF, 0x1C00-0x1C3F)"
             ),
             Self::BadEntries(i) => write!(
                 f,
@@ -1013,49 +1014,7 @@ pub struct Od<const N: usize> {
 impl<const N: usize> Od<N> {
     /// Checks the definition and fills both images with the default values.
     pub fn new(def: &'static DeviceDef) -> Result<Self, DefError> {
-        let needed = image_size(def.objects);
-        if needed > N {
-            return Err(DefError::ImageTooSmall { needed });
-        }
-        for (index, text) in [
-            (0x1008, def.name),
-            (0x1009, def.hw_version),
-            (0x100A, def.sw_version),
-        ] {
-            if text.len() > STR_MAX as usize {
-                return Err(DefError::StringTooLong(index));
-            }
-        }
-        let mut prev: Option<u16> = None;
-        for o in def.objects {
-            if o.index < 0x2000 || prev.is_some_and(|p| p >= o.index) {
-                return Err(DefError::BadObjectOrder(o.index));
-            }
-            prev = Some(o.index);
-            check_entries(o)?;
-        }
-        for (list, lo, hi) in [
-            (def.rx_pdos, 0x1600u16, 0x17FFu16),
-            (def.tx_pdos, 0x1A00, 0x1BFF),
-        ] {
-            if list.len() > MAX_PDOS {
-                return Err(DefError::BadPdo(lo));
-            }
-            let mut prev: Option<u16> = None;
-            for p in list {
-                if p.index < lo
-                    || p.index > hi
-                    || p.entries.len() > MAX_PDO_ENTRIES
-                    || prev.is_some_and(|q| q >= p.index)
-                {
-                    return Err(DefError::BadPdo(p.index));
-                }
-                prev = Some(p.index);
-            }
-        }
-        if def.rx_assign.len() > MAX_ASSIGN || def.tx_assign.len() > MAX_ASSIGN {
-            return Err(DefError::BadPdo(0x1C12));
-        }
+        check_def(def, N)?;
         let mut od = Self {
             def,
             app: [0; N],
@@ -1472,6 +1431,72 @@ impl<const N: usize> Od<N> {
     }
 }
 
+/// The checks [`Od::new`] makes of a definition, for an application image of `image` bytes:
+/// the image is large enough, the strings fit, application objects are sorted, unique and
+/// in free places, entries well formed, PDOs and assignments within the stack's limits.
+/// A definition built at run time (a twin from an ESI) is checked so before it is booted.
+pub fn check_def(def: &DeviceDef, image: usize) -> Result<(), DefError> {
+    let needed = image_size(def.objects);
+    if needed > image {
+        return Err(DefError::ImageTooSmall { needed });
+    }
+    for (index, text) in [
+        (0x1008, def.name),
+        (0x1009, def.hw_version),
+        (0x100A, def.sw_version),
+    ] {
+        if text.len() > STR_MAX as usize {
+            return Err(DefError::StringTooLong(index));
+        }
+    }
+    let mut prev: Option<u16> = None;
+    for o in def.objects {
+        if !app_index_free(def, o.index) || prev.is_some_and(|p| p >= o.index) {
+            return Err(DefError::BadObjectOrder(o.index));
+        }
+        prev = Some(o.index);
+        check_entries(o)?;
+    }
+    for (list, lo, hi) in [
+        (def.rx_pdos, 0x1600u16, 0x17FFu16),
+        (def.tx_pdos, 0x1A00, 0x1BFF),
+    ] {
+        if list.len() > MAX_PDOS {
+            return Err(DefError::BadPdo(lo));
+        }
+        let mut prev: Option<u16> = None;
+        for p in list {
+            if p.index < lo
+                || p.index > hi
+                || p.entries.len() > MAX_PDO_ENTRIES
+                || prev.is_some_and(|q| q >= p.index)
+            {
+                return Err(DefError::BadPdo(p.index));
+            }
+            prev = Some(p.index);
+        }
+    }
+    if def.rx_assign.len() > MAX_ASSIGN || def.tx_assign.len() > MAX_ASSIGN {
+        return Err(DefError::BadPdo(0x1C12));
+    }
+    Ok(())
+}
+
+/// Whether an application object may have `index`: at 0x1000 or above and not where the
+/// stack keeps its own communication objects (those of [`COMM_LOW`], the PDO mapping and
+/// assignment ranges, the SM objects 0x1C00..0x1C3F). Devices of this repository keep
+/// theirs at 0x2000 and above; a twin of a vendor's ESI also serves objects such as the
+/// TxPDO parameters 0x1800 that Beckhoff terminals map into their PDOs. Such objects come
+/// after 0x1C33 in the SDO information object list.
+fn app_index_free(def: &DeviceDef, index: u16) -> bool {
+    index >= 0x1000
+        && !COMM_LOW.iter().any(|o| o.index == index)
+        && !(0x1600..=0x17FF).contains(&index)
+        && !(0x1A00..=0x1BFF).contains(&index)
+        && !(0x1C00..=0x1C3F).contains(&index)
+        && def.pdo(index).is_none()
+}
+
 fn check_entries(o: &ObjectDef) -> Result<(), DefError> {
     let bad = DefError::BadEntries(o.index);
     if o.entries.is_empty() {
@@ -1555,5 +1580,68 @@ mod tests {
             let d = oxicat_wire::datatype::by_code(t.code()).expect("in the table");
             assert_eq!(d.bits, t.bits(), "{t:?}");
         }
+    }
+}
+
+#[cfg(test)]
+mod app_index_tests {
+    use super::*;
+    use crate::device::DeviceDef;
+
+    static OBJ_1800: [ObjectDef; 2] = [
+        ObjectDef {
+            index: 0x1800,
+            name: "TxPDO-Par",
+            code: ObjectCode::Record,
+            entries: &[
+                EntryDef::new(0, "SubIndex 000", DataType::Unsigned8, Access::RO),
+                EntryDef::new(7, "TxPDO State", DataType::Bool, Access::RO),
+            ],
+        },
+        ObjectDef {
+            index: 0x6000,
+            name: "Inputs",
+            code: ObjectCode::Var,
+            entries: &[EntryDef::new(0, "Value", DataType::Int16, Access::RO)],
+        },
+    ];
+    static DEF_1800: DeviceDef = DeviceDef {
+        objects: &OBJ_1800,
+        ..DeviceDef::BASE
+    };
+    static OBJ_1018: [ObjectDef; 1] = [ObjectDef {
+        index: 0x1018,
+        name: "Identity again",
+        code: ObjectCode::Var,
+        entries: &[EntryDef::new(0, "x", DataType::Unsigned8, Access::RO)],
+    }];
+    static DEF_1018: DeviceDef = DeviceDef {
+        objects: &OBJ_1018,
+        ..DeviceDef::BASE
+    };
+    static OBJ_1C12: [ObjectDef; 1] = [ObjectDef {
+        index: 0x1C20,
+        name: "in the SM range",
+        code: ObjectCode::Var,
+        entries: &[EntryDef::new(0, "x", DataType::Unsigned8, Access::RO)],
+    }];
+    static DEF_1C12: DeviceDef = DeviceDef {
+        objects: &OBJ_1C12,
+        ..DeviceDef::BASE
+    };
+
+    #[test]
+    fn application_objects_may_fill_free_places_of_the_communication_area() {
+        let od = Od::<64>::new(&DEF_1800).expect("0x1800 is free");
+        assert_eq!(od.get::<u8>(0x1800, 0), Ok(7));
+        assert_eq!(od.get::<u16>(0x6000, 0), Ok(0));
+        assert_eq!(
+            Od::<64>::new(&DEF_1018).err(),
+            Some(DefError::BadObjectOrder(0x1018))
+        );
+        assert_eq!(
+            Od::<64>::new(&DEF_1C12).err(),
+            Some(DefError::BadObjectOrder(0x1C20))
+        );
     }
 }

@@ -19,6 +19,11 @@
 //!
 //! The nodes form a line in the order given (port 1 of one to port 0 of the next).
 //!
+//! A twin of a vendor's device, built from its ESI (`oxicat_devices::twin`), is a device
+//! like the others: `esi=FILE[:TYPE or PRODUCT CODE[:REVISION]]` on the command line (a
+//! count as `*N`: `esi=Beckhoff-EL2xxx.xml:EL2008*4`; `oxicat sim --esi FILE:TYPE` adds one
+//! node), and `esi = "FILE:TYPE"` instead of `name` in a `[[device]]`.
+//!
 //! Limits (checked before anything is built, with the key and the range in the message):
 //! at most [`MAX_SIM_SLAVES`] nodes in all; delays 0 … [`MAX_DELAY_NS`] ns; drift
 //! −[`MAX_DRIFT_PPM`] … [`MAX_DRIFT_PPM`] ppm.
@@ -34,7 +39,7 @@ use oxicat_sim::realtime::{serve, FramePort, RealtimeConfig, RealtimeStats};
 use oxicat_sim::segment::{Segment, TopologyError};
 use serde::Deserialize;
 
-use oxicat_devices::registry::{add_node_via, NodeError};
+use oxicat_devices::registry::{add_device_node, Device, NodeError, ResolveError};
 use oxicat_sim::pdi_path::PdiRoute;
 
 /// Most nodes on a served segment: a frame passes every ESC twice (processing on the way
@@ -66,6 +71,10 @@ pub struct SimArgs {
     /// Devices in line order, each NAME or NAME:COUNT (see --list), e.g. demo:4; @lan9252 or
     /// @et1100 after it runs the firmware through that chip's SPI driver (demo:4@lan9252).
     pub devices: Vec<String>,
+    /// A twin of a vendor's device from its ESI, FILE[:TYPE or PRODUCT CODE[:REVISION]]
+    /// (one node each; repeat for more); after DEVICES in the line.
+    #[arg(long, conflicts_with = "segment")]
+    pub esi: Vec<String>,
     /// List the devices that can be simulated and exit.
     #[arg(long)]
     pub list: bool,
@@ -86,21 +95,34 @@ pub struct SimArgs {
 /// host-compiled firmware; the board-image emulator's binary passes its own.
 pub type AddNode<'a> = &'a dyn Fn(
     &mut Segment,
-    &'static oxicat_devices::registry::Kit,
+    Device,
     usize,
     f64,
     PdiRoute,
 ) -> Result<oxicat_sim::segment::SlaveId, NodeError>;
 
-/// The host-compiled firmware of the registry ([`add_node_via`]).
+/// The host-compiled firmware of the registry, or a twin ([`add_device_node`]).
 pub fn host_node(
     seg: &mut Segment,
-    kit: &'static oxicat_devices::registry::Kit,
+    dev: Device,
     k: usize,
     drift_ppm: f64,
     route: PdiRoute,
 ) -> Result<oxicat_sim::segment::SlaveId, NodeError> {
-    add_node_via(seg, kit, k, drift_ppm, route)
+    add_device_node(seg, dev, k, drift_ppm, route)
+}
+
+impl SimArgs {
+    /// DEVICES, then one `esi=…` per `--esi`.
+    pub fn all_devices(&self) -> Vec<String> {
+        let mut v = self.devices.clone();
+        v.extend(
+            self.esi
+                .iter()
+                .map(|e| format!("{}{e}", oxicat_devices::twin::PREFIX)),
+        );
+        v
+    }
 }
 
 /// Why `oxicat sim` failed.
@@ -114,6 +136,9 @@ pub enum SimError {
     BadSpec(String),
     /// No device of that name.
     UnknownDevice(String),
+    /// A twin of an ESI could not be built (the file, the type, or why it cannot be
+    /// served).
+    Twin(String),
     /// The segment file could not be read.
     SegmentFile(PathBuf, std::io::Error),
     /// The segment file is not valid.
@@ -168,6 +193,7 @@ impl std::fmt::Display for SimError {
                     oxicat_devices::registry::names()
                 )
             }
+            Self::Twin(e) => write!(f, "{e}"),
             Self::SegmentFile(p, e) => write!(f, "cannot read {}: {e}", p.display()),
             Self::SegmentToml(p, e) => write!(f, "{}: {e}", p.display()),
             Self::Node {
@@ -206,8 +232,11 @@ pub struct SegmentFile {
 #[derive(Debug, Clone, PartialEq, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct DeviceEntry {
-    /// Device name (see `oxicat sim --list`).
+    /// Device name (see `oxicat sim --list`), or `esi=FILE[:TYPE[:REVISION]]`.
+    #[serde(default)]
     pub name: String,
+    /// A twin from an ESI, `FILE[:TYPE or PRODUCT CODE[:REVISION]]` (instead of `name`).
+    pub esi: Option<String>,
     /// How many in a row.
     #[serde(default = "one")]
     pub count: usize,
@@ -268,7 +297,13 @@ pub fn parse_specs_within(
                 range: "direct, lan9252 or et1100".into(),
             });
         }
-        let (name, count) = match spec.split_once(':') {
+        let twin = spec.starts_with(oxicat_devices::twin::PREFIX);
+        let split = if twin {
+            spec.rsplit_once('*')
+        } else {
+            spec.split_once(':')
+        };
+        let (name, count) = match split {
             Some((n, c)) => (
                 n,
                 c.parse::<u128>()
@@ -291,6 +326,7 @@ pub fn parse_specs_within(
         }
         seg.devices.push(DeviceEntry {
             name: name.to_string(),
+            esi: None,
             count: count as usize,
             drift_ppm: 0.0,
             esc_delay_ns: None,
@@ -337,6 +373,14 @@ pub fn check_segment(desc: &SegmentFile) -> Result<(), SimError> {
     delay("link_delay_ns".into(), desc.link_delay_ns)?;
     let mut total = 0usize;
     for (k, d) in desc.devices.iter().enumerate() {
+        if d.name.is_empty() == d.esi.is_none() {
+            return Err(SimError::Range {
+                key: format!("device[{k}].name / device[{k}].esi"),
+                value: if d.name.is_empty() { "neither".into() } else { "both".into() },
+                range: "one of them: name (a device of oxicat sim --list) or esi (FILE[:TYPE[:REVISION]])"
+                    .into(),
+            });
+        }
         delay(format!("device[{k}].esc_delay_ns"), d.esc_delay_ns)?;
         delay(format!("device[{k}].link_delay_ns"), d.link_delay_ns)?;
         if !(d.drift_ppm.is_finite() && d.drift_ppm.abs() <= MAX_DRIFT_PPM) {
@@ -393,8 +437,14 @@ pub fn build_segment_with(
     let mut seg = Segment::new();
     let mut names = Vec::new();
     for entry in &desc.devices {
-        let dev = oxicat_devices::registry::find(&entry.name)
-            .ok_or_else(|| SimError::UnknownDevice(entry.name.clone()))?;
+        let name = match &entry.esi {
+            Some(e) => format!("{}{e}", oxicat_devices::twin::PREFIX),
+            None => entry.name.clone(),
+        };
+        let dev = oxicat_devices::registry::resolve(&name).map_err(|e| match e {
+            ResolveError::Unknown(n) => SimError::UnknownDevice(n),
+            e => SimError::Twin(e.to_string()),
+        })?;
         for k in 0..entry.count {
             if stop.load(Ordering::Relaxed) {
                 return Err(SimError::Interrupted);
@@ -404,7 +454,7 @@ pub fn build_segment_with(
             let id =
                 add(&mut seg, dev, k, entry.drift_ppm, route).map_err(|error| SimError::Node {
                     position,
-                    device: entry.name.clone(),
+                    device: name.clone(),
                     error,
                 })?;
             if let (Some(w), Some(esc)) = (entry.eeprom_protect_from_word, seg.esc_mut(id)) {
@@ -418,7 +468,7 @@ pub fn build_segment_with(
                     seg.set_link_delay(id, 0, d).map_err(SimError::Topology)?;
                 }
             }
-            names.push(entry.name.clone());
+            names.push(name.clone());
         }
     }
     if let Some(d) = desc.master_link_delay_ns {
@@ -524,7 +574,7 @@ pub fn serve_until_with(
     }
     let desc = match &args.segment {
         Some(p) => read_segment_file(p)?,
-        None => parse_specs(&args.devices)?,
+        None => parse_specs(&args.all_devices())?,
     };
     check_segment(&desc)?;
     let total: usize = desc.devices.iter().map(|d| d.count).sum();
@@ -580,7 +630,7 @@ pub fn serve_udp_until_with(
 ) -> Result<(), SimError> {
     let desc = match &args.segment {
         Some(p) => read_segment_file(p)?,
-        None => parse_specs(&args.devices)?,
+        None => parse_specs(&args.all_devices())?,
     };
     let (seg, names) = build_segment_with(&desc, &AtomicBool::new(false), add)?;
     let n = seg.len();

@@ -45,6 +45,7 @@ fn serve_with(segment: Option<std::path::PathBuf>, devices: &[&str]) -> Served {
         udp: Some(addr.clone()),
         segment,
         devices: devices.iter().map(|s| s.to_string()).collect(),
+        esi: Vec::new(),
         list: false,
         spin: false,
         quiet: true,

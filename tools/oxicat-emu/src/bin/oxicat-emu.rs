@@ -20,7 +20,7 @@ use std::sync::Arc;
 use clap::{Parser, Subcommand};
 use oxicat::sim_cmd::{host_node, serve_until_with, SimArgs};
 use oxicat_devices::laelaps::rig::{chain_legs, RigConfig};
-use oxicat_devices::registry::{add_node_on, Kit, NodeError};
+use oxicat_devices::registry::{add_node_on, Device, Kit, NodeError};
 use oxicat_emu::laelaps::LegBoardPlant;
 use oxicat_emu::node::EmulatedNode;
 use oxicat_emu::plant::BoardPlant;
@@ -103,13 +103,17 @@ fn run(args: EmuSimArgs) -> Result<(), String> {
     let images = images(&args.firmware)?;
     let spi_mhz = args.spi_mhz;
     let add = move |seg: &mut Segment,
-                    kit: &'static Kit,
+                    dev: Device,
                     k: usize,
                     drift_ppm: f64,
                     route: PdiRoute|
           -> Result<SlaveId, NodeError> {
-        let Some(list) = images.get(kit.name) else {
-            return host_node(seg, kit, k, drift_ppm, route);
+        let (kit, list) = match dev {
+            Device::Kit(kit) => match images.get(kit.name) {
+                Some(list) => (kit, list),
+                None => return host_node(seg, dev, k, drift_ppm, route),
+            },
+            Device::Twin(_) => return host_node(seg, dev, k, drift_ppm, route),
         };
         let image = list[k % list.len()].clone();
         // The board carries a LAN9252, whatever the device's host bench uses.

@@ -1,0 +1,215 @@
+//! Twins from a vendor's ESI on the virtual segment (feature `bench`): the description
+//! ([`oxicat_esi::twin`]: definition, SII, ESC) booted on the one firmware host with the one
+//! slave stack, or — for a device without a mailbox — the ESC alone in device emulation.
+//!
+//! Process data: a stack twin copies each cycle the k-th mapped output entry to the k-th
+//! mapped input entry where both have the same bit length (the loop-back of
+//! [`oxicat_esi::twin::Twin::loopback`]); every other input keeps its ESI default. An ESC-only
+//! twin has no firmware: its outputs go nowhere and its inputs read 0, as a terminal's
+//! ESC with nothing wired to its pins.
+//!
+//! Twins are named `esi=FILE[:TYPE or PRODUCT CODE[:REVISION]]` wherever devices are named
+//! (`oxicat sim`, `--sim`, a segment file); [`load`] builds each once per process (the
+//! definition is leaked to be `'static`, see [`oxicat_esi::twin`]) and caches it.
+
+use std::collections::HashMap;
+use std::path::{Path, PathBuf};
+use std::sync::Mutex;
+
+use oxicat_esc::{DcSupport, Esc, EscConfig};
+use oxicat_esi::twin::{Candidate, Selector, Served, TwinError};
+use oxicat_sim::firmware::{attach_firmware, attach_firmware_via, FirmwareConfig};
+use oxicat_sim::pdi_path::PdiRoute;
+use oxicat_sim::segment::{Segment, SlaveId};
+use oxicat_slave::{AlState, AlStatusCode, Application, Od, PdoEntry};
+
+use crate::registry::NodeError;
+
+/// The prefix that names a twin where a device name is expected.
+pub const PREFIX: &str = "esi=";
+
+/// A twin as the registry hands it out.
+#[derive(Debug)]
+pub struct Twin {
+    /// The spec it was loaded from (`esi=FILE:TYPE`), its name in listings.
+    pub spec: String,
+    /// The description.
+    pub esi: oxicat_esi::twin::Twin,
+}
+
+/// Why a twin could not be loaded.
+#[derive(Debug)]
+pub enum LoadError {
+    /// The ESI file could not be read.
+    Read(PathBuf, std::io::Error),
+    /// The ESI device cannot be served.
+    Twin(PathBuf, TwinError),
+}
+
+impl std::fmt::Display for LoadError {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Self::Read(p, e) => write!(f, "cannot read the ESI {}: {e}", p.display()),
+            Self::Twin(p, e) => write!(f, "{}: {e}", p.display()),
+        }
+    }
+}
+
+impl std::error::Error for LoadError {}
+
+/// Splits `FILE[:SELECTOR]` (without the `esi=` prefix) into the file and the selector.
+pub fn split_spec(spec: &str) -> Result<(PathBuf, Selector), LoadError> {
+    let (file, sel) = match spec.split_once(':') {
+        Some((f, s)) => (f, s),
+        None => (spec, ""),
+    };
+    let path = PathBuf::from(file);
+    let sel = Selector::parse(sel).map_err(|e| LoadError::Twin(path.clone(), e))?;
+    Ok((path, sel))
+}
+
+type Cache = Mutex<HashMap<String, &'static Twin>>;
+
+fn cache() -> &'static Cache {
+    static C: std::sync::OnceLock<Cache> = std::sync::OnceLock::new();
+    C.get_or_init(|| Mutex::new(HashMap::new()))
+}
+
+/// The twin of `spec` (`FILE[:TYPE[:REVISION]]`, with or without `esi=`), built once per
+/// process.
+pub fn load(spec: &str) -> Result<&'static Twin, LoadError> {
+    let spec = spec.strip_prefix(PREFIX).unwrap_or(spec);
+    let key = format!("{PREFIX}{spec}");
+    if let Some(t) = cache().lock().unwrap_or_else(|e| e.into_inner()).get(&key) {
+        return Ok(t);
+    }
+    let (path, sel) = split_spec(spec)?;
+    let text = read(&path)?;
+    let esi = oxicat_esi::twin::build(&text, &sel).map_err(|e| LoadError::Twin(path, e))?;
+    let t: &'static Twin = Box::leak(Box::new(Twin {
+        spec: key.clone(),
+        esi,
+    }));
+    cache()
+        .lock()
+        .unwrap_or_else(|e| e.into_inner())
+        .insert(key, t);
+    Ok(t)
+}
+
+fn read(path: &Path) -> Result<String, LoadError> {
+    let bytes = std::fs::read(path).map_err(|e| LoadError::Read(path.to_path_buf(), e))?;
+    Ok(oxicat_esi::twin::decode(&bytes))
+}
+
+/// Every device type of the ESI file `path` (parsed once), each with its twin or why it
+/// cannot be served (a catalogue walk).
+pub type Loaded = (Candidate, Result<&'static Twin, TwinError>);
+
+/// See [`Loaded`].
+pub fn load_file(path: &Path) -> Result<Vec<Loaded>, LoadError> {
+    let text = read(path)?;
+    let all =
+        oxicat_esi::twin::build_all(&text).map_err(|e| LoadError::Twin(path.to_path_buf(), e))?;
+    Ok(all
+        .into_iter()
+        .map(|(c, r)| {
+            let r = r.map(|esi| {
+                let spec = format!(
+                    "{PREFIX}{}:{}:{:#010x}",
+                    path.display(),
+                    c.type_name,
+                    c.revision
+                );
+                &*Box::leak(Box::new(Twin { spec, esi }))
+            });
+            (c, r)
+        })
+        .collect())
+}
+
+/// The ESC of a twin: an ET1100's registers with the ESI's FMMU/SM counts, process RAM and
+/// ports, and the full DC unit.
+pub fn esc_config(t: &Twin) -> EscConfig {
+    let e = t.esi.esc;
+    EscConfig {
+        fmmu_count: e.fmmu_count,
+        sm_count: e.sm_count,
+        ram_kib: e.ram_kib,
+        port_descriptor: e.port_descriptor,
+        dc: DcSupport::Full,
+        ..EscConfig::et1100()
+    }
+}
+
+/// The twin's firmware: the stack's hooks with the loop-back.
+struct Loopback(&'static [(PdoEntry, PdoEntry)]);
+
+impl<const N: usize> Application<N> for Loopback {
+    fn state_change(
+        &mut self,
+        _from: AlState,
+        _to: AlState,
+        _od: &mut Od<N>,
+    ) -> Result<(), AlStatusCode> {
+        Ok(())
+    }
+
+    fn cycle(&mut self, od: &mut Od<N>) {
+        for (o, i) in self.0 {
+            let mut buf = [0u8; 8];
+            let n = match od.bytes(o.index, o.sub) {
+                Ok(b) if b.len() <= 8 => {
+                    buf[..b.len()].copy_from_slice(b);
+                    b.len()
+                }
+                _ => continue,
+            };
+            if let Ok(d) = od.bytes_mut(i.index, i.sub) {
+                if d.len() == n {
+                    d.copy_from_slice(&buf[..n]);
+                }
+            }
+        }
+    }
+}
+
+/// Adds node `k` of twin `t` at the end of the segment's line (oscillator off by
+/// `drift_ppm`) and boots it: the stack through `route`, or nothing for an ESC-only twin.
+pub fn add_node(
+    segment: &mut Segment,
+    t: &'static Twin,
+    drift_ppm: f64,
+    route: PdiRoute,
+) -> Result<SlaveId, NodeError> {
+    let mut cfg = esc_config(t);
+    cfg.clock.drift_ppm = drift_ppm;
+    let id = segment.add(Esc::new(cfg, t.esi.sii.clone()));
+    if t.esi.served == Served::EscOnly {
+        return Ok(id);
+    }
+    let small_image = t.esi.image_bytes <= 4096;
+    let small_mbx = t.esi.mailbox_bytes <= 256;
+    match (small_image, small_mbx) {
+        (true, true) => boot::<4096, 256>(segment, id, t, route),
+        (true, false) => boot::<4096, 1024>(segment, id, t, route),
+        (false, true) => boot::<{ oxicat_esi::twin::MAX_IMAGE }, 256>(segment, id, t, route),
+        (false, false) => boot::<{ oxicat_esi::twin::MAX_IMAGE }, 1024>(segment, id, t, route),
+    }
+    .map_err(NodeError::Attach)?;
+    Ok(id)
+}
+
+fn boot<const N: usize, const M: usize>(
+    segment: &mut Segment,
+    id: SlaveId,
+    t: &'static Twin,
+    route: PdiRoute,
+) -> Result<(), oxicat_sim::firmware::AttachError> {
+    let app = Loopback(&t.esi.loopback);
+    let cfg = FirmwareConfig::default();
+    match route {
+        PdiRoute::Direct => attach_firmware::<_, N, M>(segment, id, t.esi.def, app, &cfg).map(drop),
+        route => attach_firmware_via::<_, N, M>(segment, id, t.esi.def, app, &cfg, route).map(drop),
+    }
+}

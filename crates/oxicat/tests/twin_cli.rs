@@ -1,0 +1,133 @@
+//! Twins from ESI on the command line: `oxicat sim --esi FILE:TYPE --udp` serves a vendor's
+//! device and an ethercrab master in this process brings it to OP; `--sim esi=…*N` and a
+//! segment file's `esi =` build twins in process; a bad ESI is refused with its reason.
+
+use std::io::{BufRead, BufReader};
+use std::path::PathBuf;
+use std::process::{Child, Command, Stdio};
+use std::sync::mpsc;
+use std::time::Duration;
+
+use oxicat_master::cyclic::{CycleOptions, Flow};
+use oxicat_master::{Link, Master};
+
+mod served_common;
+
+fn reference() -> PathBuf {
+    std::env::var_os("OXICAT_REFERENCE")
+        .map(PathBuf::from)
+        .unwrap_or_else(|| {
+            PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../../shared/reference")
+        })
+}
+
+fn esi(file: &str) -> String {
+    let p = reference().join("esi-vendor").join(file);
+    assert!(p.exists(), "reference file {} missing", p.display());
+    p.display().to_string()
+}
+
+struct Sim(Child);
+impl Drop for Sim {
+    fn drop(&mut self) {
+        let _ = self.0.kill();
+        let _ = self.0.wait();
+    }
+}
+
+#[test]
+fn sim_esi_serves_a_vendor_device_on_udp_and_ethercrab_reaches_op() {
+    let spec = format!("{}:EL3001", esi("Beckhoff-EL30xx.xml"));
+    let mut child = Command::new(env!("CARGO_BIN_EXE_oxicat"))
+        .args(["sim", "--quiet", "--udp", "127.0.0.1:0", "--esi", &spec])
+        .stdin(Stdio::null())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("spawn oxicat sim");
+    let stderr = child.stderr.take().expect("stderr");
+    let _sim = Sim(child);
+    let (tx, rx) = mpsc::channel();
+    std::thread::spawn(move || {
+        for line in BufReader::new(stderr).lines().map_while(Result::ok) {
+            let _ = tx.send(line);
+        }
+    });
+    let addr = loop {
+        let line = rx
+            .recv_timeout(Duration::from_secs(60))
+            .expect("oxicat sim prints where it serves");
+        if let Some(rest) = line.split(" on EtherCAT over UDP on ").nth(1) {
+            break rest.split(';').next().unwrap_or_default().to_string();
+        }
+    };
+    let run = std::thread::Builder::new()
+        .stack_size(16 << 20)
+        .spawn(move || {
+            let mut m = Master::open(Link::Udp(addr)).expect("master on UDP");
+            let s = m.scan().expect("scan");
+            assert_eq!(s.len(), 1);
+            assert_eq!((s[0].vendor_id, s[0].product_code), (2, 0x0BB9_3052));
+            assert_eq!(s[0].name, "EL3001");
+            let v = m.sdo_upload(0, 0x1018, 2).expect("0x1018:02");
+            assert_eq!(v, 0x0BB9_3052u32.to_le_bytes());
+            let stats = m
+                .run_cyclic(
+                    CycleOptions {
+                        cycle: Duration::from_millis(2),
+                        dc: false,
+                    },
+                    |io| {
+                        Ok(if io.cycle + 1 >= 200 {
+                            Flow::Stop
+                        } else {
+                            Flow::Continue
+                        })
+                    },
+                )
+                .expect("OP and cycling");
+            (stats.cycles, stats.wkc_errors)
+        })
+        .unwrap();
+    let (cycles, wkc_errors) = run.join().expect("master thread");
+    assert_eq!(cycles, 200, "200 cycles in OP");
+    assert_eq!(wkc_errors, 0);
+}
+
+#[test]
+fn sim_option_and_segment_file_take_twins() {
+    let f = esi("Beckhoff-EL2xxx.xml");
+    let out = served_common::cli(&["slaves", "--sim", &format!("esi={f}:EL2008*2")]).unwrap();
+    assert_eq!(out.matches("EL2008").count(), 2, "{out}");
+    let desc = oxicat::sim_cmd::parse_segment(
+        &format!(
+            "[[device]]\nesi = {:?}\ncount = 2\n[[device]]\nname = \"demo\"\n",
+            format!("{f}:EL2004")
+        ),
+        std::path::Path::new("seg.toml"),
+    )
+    .unwrap();
+    let (seg, names) = oxicat::sim_cmd::build_segment(&desc).unwrap();
+    assert_eq!(seg.len(), 3);
+    assert!(
+        names[0].ends_with(":EL2004") && names[2] == "demo",
+        "{names:?}"
+    );
+}
+
+#[test]
+fn a_twin_that_cannot_be_built_says_why() {
+    let f = esi("Beckhoff-EL2xxx.xml");
+    let e = served_common::cli(&["slaves", "--sim", &format!("esi={f}:EL9999")]).unwrap_err();
+    assert!(
+        e.contains("no device type \"EL9999\"") && e.contains("EL2008"),
+        "{e}"
+    );
+    let e = served_common::cli(&["slaves", "--sim", "esi=/nonexistent.xml:X"]).unwrap_err();
+    assert!(e.contains("cannot read the ESI /nonexistent.xml"), "{e}");
+    let both = oxicat::sim_cmd::parse_segment(
+        "[[device]]\nname = \"demo\"\nesi = \"x.xml\"\n",
+        std::path::Path::new("seg.toml"),
+    )
+    .unwrap_err();
+    assert!(both.to_string().contains("one of them"), "{both}");
+}
