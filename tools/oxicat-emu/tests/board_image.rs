@@ -5,9 +5,7 @@
 
 use oxicat_emu::{Board, EmuError};
 use oxicat_esc::{Esc, EscConfig};
-use oxicat_pdi::sim::{BusConfig, Handle, Lan9252Model};
-use oxicat_wire::frame::FrameBuilder;
-use oxicat_wire::{Command, DatagramHeader, EcatFrame};
+use oxicat_pdi::sim::{BusConfig, Lan9252Model};
 
 mod common;
 
@@ -16,48 +14,7 @@ fn image() -> Option<Vec<u8>> {
     common::image("stm32f446-lan9252", "OXICAT_BOARD_IMAGE")
 }
 
-/// The master's side: single datagrams to the one ESC (position 0) at the board's time.
-struct Master {
-    chip: Handle<Lan9252Model>,
-}
-
-impl Master {
-    fn frame(&self, board: &Board, cmd: Command, ado: u16, data: &[u8]) -> (Vec<u8>, u16) {
-        let mut buf = vec![0u8; 1600];
-        let mut fb = FrameBuilder::new_bare(&mut buf).unwrap();
-        fb.push(
-            DatagramHeader::physical(cmd, 0, 0, ado, data.len() as u16),
-            data,
-        )
-        .unwrap();
-        let n = fb.finish();
-        buf.truncate(n);
-        let t = board.time_ns();
-        self.chip.with_esc(|esc| esc.forward(0, &mut buf, t, true));
-        let f = EcatFrame::parse(&buf).unwrap();
-        let d = f.datagrams().next().unwrap().unwrap();
-        (d.data.to_vec(), d.wkc)
-    }
-
-    fn wr(&self, b: &Board, ado: u16, data: &[u8]) {
-        assert_eq!(
-            self.frame(b, Command::Apwr, ado, data).1,
-            1,
-            "APWR {ado:#06x}"
-        );
-    }
-
-    fn rd(&self, b: &Board, ado: u16, len: usize) -> Vec<u8> {
-        let (d, wkc) = self.frame(b, Command::Aprd, ado, &vec![0; len]);
-        assert_eq!(wkc, 1, "APRD {ado:#06x}");
-        d
-    }
-
-    fn al_status(&self, b: &Board) -> u16 {
-        let s = self.rd(b, 0x0130, 2);
-        u16::from_le_bytes([s[0], s[1]])
-    }
-}
+use common::Direct as Master;
 
 fn boot() -> Option<(Board, Master)> {
     let img = image()?;
