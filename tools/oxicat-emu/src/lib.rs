@@ -29,7 +29,7 @@
 //! | SysTick | CSR/RVR/CVR/CALIB from the cycle count (processor clock or HCLK/8); COUNTFLAG; TICKINT pends SysTick at each wrap |
 //! | DWT | CTRL (CYCCNTENA), CYCCNT counting the cycles the core runs (not sleeps) while DEMCR.TRCENA; other registers stored |
 //! | DBGMCU | IDCODE (STM32F446, 0x421); the rest stored |
-//! | sleep | WFI (and WFE without a pending event) skips time to the next timer/SysTick event or the end of the run, waking on a pending exception that would preempt (PRIMASK does not stop the wake-up) |
+//! | sleep | WFI (and WFE without a pending event) skips time to the next timer/SysTick event or the end of the run, waking on a pending exception that would preempt (PRIMASK does not stop the wake-up); a delay loop spinning on SysTick's COUNTFLAG (the same CSR read again within 64 cycles, no other register access between) skips to the next wrap ([`Board::polled_cycles`]) |
 //!
 //! Faults are reported, never taken: an access outside these blocks, an undefined
 //! instruction, BKPT, a floating-point instruction with CPACR's CP10/CP11 off (found when
@@ -736,6 +736,11 @@ impl Board {
     /// Cycles the core spent asleep (WFI/WFE).
     pub fn slept_cycles(&self) -> u64 {
         self.periph.borrow().slept
+    }
+
+    /// Cycles of SysTick delay loops skipped forward instead of emulated (idle polling).
+    pub fn polled_cycles(&self) -> u64 {
+        self.periph.borrow().polled
     }
 
     /// Simulated time in ns at [`CPU_HZ`].

@@ -274,6 +274,12 @@ impl Scs {
         }
     }
 
+    /// The cycle of SysTick's first wrap after `now`, if it counts.
+    pub fn syst_wrap_after(&self, now: u64) -> Option<u64> {
+        let period = self.syst_period()?;
+        Some(self.syst_ref + (now.saturating_sub(self.syst_ref) / period + 1) * period)
+    }
+
     /// The cycle of SysTick's next wrap, when it raises an exception.
     pub fn syst_next(&self) -> Option<u64> {
         let period = self.syst_period()?;

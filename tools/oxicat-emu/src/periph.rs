@@ -23,6 +23,10 @@ pub(crate) const GPIOA: u64 = 0x4002_0000;
 /// Ports A..H.
 pub(crate) const PORTS: u64 = 8;
 const SPI1: u64 = 0x4001_3000;
+/// SysTick's control and status register.
+const SYST_CSR: u64 = 0xE000_E010;
+/// Most cycles between two reads of SysTick's CSR that still make a spinning delay loop.
+const POLL_WINDOW: u64 = 64;
 
 /// Peripheral state of the STM32F446 board.
 pub(crate) struct Periph {
@@ -41,6 +45,12 @@ pub(crate) struct Periph {
     pub insns: u64,
     /// Cycles spent asleep (WFI/WFE skipped forward).
     pub slept: u64,
+    /// Cycles of a SysTick delay loop skipped forward (see [`Periph::scs_read`]).
+    pub polled: u64,
+    /// Register accesses so far (reads and writes of the peripherals and the SCS).
+    mmio_seq: u64,
+    /// The last read of SysTick's CSR that found COUNTFLAG clear: (access number, cycle).
+    syst_poll: Option<(u64, u64)>,
     /// Input levels injected per port: (mask of driven pins, levels).
     pub inputs: [(u16, u16); PORTS as usize],
     /// The block hook stops the engine at this cycle (0: at the next block).
@@ -77,6 +87,9 @@ impl Periph {
             cycles: 0,
             insns: 0,
             slept: 0,
+            polled: 0,
+            mmio_seq: 0,
+            syst_poll: None,
             inputs: [(0, 0); PORTS as usize],
             wake_at: u64::MAX,
             stopped: false,
@@ -390,6 +403,7 @@ impl Periph {
     }
 
     pub fn read(&mut self, addr: u64) -> u32 {
+        self.mmio_seq += 1;
         match addr {
             a if a == SPI1 + 0x08 => 0x0002 | u32::from(self.rxne),
             a if a == SPI1 + 0x0C => {
@@ -419,6 +433,7 @@ impl Periph {
     }
 
     pub fn write(&mut self, addr: u64, v: u32) {
+        self.mmio_seq += 1;
         match addr {
             a if a == SPI1 + 0x0C => self.spi_dr_write(v as u8),
             a if a == SPI1 + 0x08 => {}
@@ -499,12 +514,37 @@ impl Periph {
     }
 
     /// A read of the SCS page or the DWT.
+    ///
+    /// Idle polling is skipped: a read of SysTick's CSR that finds COUNTFLAG clear, when
+    /// the previous register access was the same read a few cycles before (a delay loop
+    /// spinning on `has_wrapped`, as `cortex_m::delay` and the HALs' `SysDelay` do),
+    /// moves the clock to SysTick's next wrap, or to the board's next stop if that comes
+    /// first — the time the loop would have spun, without emulating its instructions.
     pub fn scs_read(&mut self, addr: u64) -> u32 {
+        self.mmio_seq += 1;
         if (DWT_BASE..DWT_BASE + 0x1000).contains(&addr) {
             return self.scs.dwt_read(addr, self.active_cycles());
         }
         let now = self.cycles;
-        self.scs.read(addr, now)
+        let v = self.scs.read(addr, now);
+        if addr == SYST_CSR {
+            if v & (1 << 16) != 0 {
+                self.syst_poll = None;
+            } else {
+                let spinning = self.syst_poll.is_some_and(|(seq, at)| {
+                    seq + 1 == self.mmio_seq && now.saturating_sub(at) <= POLL_WINDOW
+                });
+                if spinning {
+                    if let Some(wrap) = self.scs.syst_wrap_after(now) {
+                        let to = wrap.min(self.wake_at).max(now);
+                        self.polled += to - now;
+                        self.cycles = to;
+                    }
+                }
+                self.syst_poll = Some((self.mmio_seq, self.cycles));
+            }
+        }
+        v
     }
 
     pub fn scs_merge_base(&self, addr: u64) -> u32 {
@@ -515,6 +555,7 @@ impl Periph {
     }
 
     pub fn scs_write(&mut self, addr: u64, v: u32) {
+        self.mmio_seq += 1;
         let active = self.active_cycles();
         if (DWT_BASE..DWT_BASE + 0x1000).contains(&addr) {
             return self.scs.dwt_write(addr, v, active);

@@ -45,6 +45,14 @@ fn the_demo_board_image_boots_reaches_preop_and_answers_an_sdo() {
         b.time_ns() >= 50_000_000,
         "the 50 ms power-on wait ran on SysTick"
     );
+    // That wait spins on SysTick's COUNTFLAG: skipped forward, not emulated (most of its
+    // 9 M cycles at 180 MHz).
+    assert!(
+        b.polled_cycles() >= 40 * 180_000,
+        "the delay loop was emulated in full: {} cycles skipped, {} instructions",
+        b.polled_cycles(),
+        b.instructions()
+    );
     assert_eq!(
         m.chip.stats().protocol_errors,
         0,

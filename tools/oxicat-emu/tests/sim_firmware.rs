@@ -61,10 +61,8 @@ fn ethercrab_runs_two_served_demo_board_images_in_op_over_udp() {
     let fw = format!("demo={}", path.display());
     // 20 times slower than real time: two boards emulated in full on a loaded 2-core box.
     let (_served, addr) = serve(&["--firmware", &fw, "--slowdown", "20", "demo:2"]);
-    // The boards boot first (the demo image's 50 ms power-on wait polls SysTick and is
-    // emulated in full, slower than the slowed-down clock): until then the segment falls
-    // behind and frames time out, so the master tries again, as one waits for a machine to
-    // power up.
+    // The boards boot first: until their clocks catch up with the segment's, frames can
+    // time out, so the master tries again, as one waits for a machine to power up.
     let options = || {
         let mut o = MasterOptions::for_link(&Link::Udp(addr.clone()));
         o.timeouts.pdu = Duration::from_secs(2);
