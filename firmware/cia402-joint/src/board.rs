@@ -174,17 +174,18 @@ impl JointBoard {
             a += self.adc.jdr1().read().bits() & 0xFFF;
             b += self.adc.jdr2().read().bits() & 0xFFF;
         }
-        self.zero = (
-            a as f32 / CAL_SAMPLES as f32,
-            b as f32 / CAL_SAMPLES as f32,
-        );
+        self.zero = (a as f32 / CAL_SAMPLES as f32, b as f32 / CAL_SAMPLES as f32);
         self.read_vbus();
         true
     }
 
     fn read_vbus(&mut self) {
         let v = (self.adc.jdr4().read().bits() & 0xFFF) as f32 * (VREF / ADC_FULL) * VBUS_DIVIDER;
-        self.vbus = if v >= VBUS_MIN { v } else { self.motor.bus_voltage };
+        self.vbus = if v >= VBUS_MIN {
+            v
+        } else {
+            self.motor.bus_voltage
+        };
     }
 
     /// Start-up alignment: the encoder counter is relative, so the electrical angle is
@@ -292,8 +293,16 @@ impl JointHw for JointBoard {
 /// TIM2: encoder mode 3 on TI1/TI2 (PA0/PA1, ×4 counting, 32 bits), channel 3 input
 /// capture on TI3 (PB10, the index, rising edge) — the hardware latches CNT into CCR3.
 fn setup_encoder(t: &pac::TIM2) {
-    t.ccmr1_input()
-        .write(|w| w.cc1s().ti1().ic1f().fck_int_n8().cc2s().ti2().ic2f().fck_int_n8());
+    t.ccmr1_input().write(|w| {
+        w.cc1s()
+            .ti1()
+            .ic1f()
+            .fck_int_n8()
+            .cc2s()
+            .ti2()
+            .ic2f()
+            .fck_int_n8()
+    });
     // IC3F = 0011: fCK_INT, N = 8, as IC1F/IC2F.
     t.ccmr2_input().write(|w| w.cc3s().ti3().ic3f().set(0b0011));
     // CC1E/CC2E: inputs enabled, non-inverted (CCxP = CCxNP = 0); CC3E: capture enabled,
@@ -316,7 +325,14 @@ fn setup_adc(adc: &pac::ADC1) {
     adc.cr1().write(|w| w.scan().set_bit().jeocie().set_bit());
     // 15 cycles for the amplifier outputs, 56 for the divider and the torque amplifier.
     adc.smpr1().write(|w| {
-        w.smp10().cycles15().smp11().cycles15().smp12().cycles56().smp13().cycles56()
+        w.smp10()
+            .cycles15()
+            .smp11()
+            .cycles15()
+            .smp12()
+            .cycles56()
+            .smp13()
+            .cycles56()
     });
     adc.jsqr().write(|w| unsafe {
         w.jsq1()
@@ -330,8 +346,14 @@ fn setup_adc(adc: &pac::ADC1) {
             .jl()
             .bits(3)
     });
-    adc.cr2()
-        .write(|w| w.adon().set_bit().jextsel().tim1trgo().jexten().rising_edge());
+    adc.cr2().write(|w| {
+        w.adon()
+            .set_bit()
+            .jextsel()
+            .tim1trgo()
+            .jexten()
+            .rising_edge()
+    });
 }
 
 /// TIM1: centre-aligned mode 1, ARR = TIMCLK / (2 · 20 kHz), repetition counter 1 (one
@@ -342,7 +364,8 @@ fn setup_adc(adc: &pac::ADC1) {
 /// sides are on, and starts ADC1's injected sequence. No dead time: the gate driver
 /// inserts it (3-PWM inputs). Main output enabled.
 fn setup_pwm(t: &pac::TIM1, arr: u32) {
-    t.cr1().write(|w| w.cms().center_aligned1().arpe().enabled());
+    t.cr1()
+        .write(|w| w.cms().center_aligned1().arpe().enabled());
     t.psc().write(|w| unsafe { w.bits(0) });
     t.arr().write(|w| unsafe { w.bits(arr) });
     t.rcr().write(|w| unsafe { w.bits(1) });
@@ -378,7 +401,9 @@ pub fn bridge_emergency_off() {
     // owner of TIM1 / GPIOC can at worst leave them stopped. BSRR is write-only and
     // atomic: bit 16 + 11 resets PC11 alone.
     unsafe {
-        (*pac::GPIOC::ptr()).bsrr().write(|w| w.bits(1 << (16 + 11)));
+        (*pac::GPIOC::ptr())
+            .bsrr()
+            .write(|w| w.bits(1 << (16 + 11)));
         (*pac::TIM1::ptr())
             .bdtr()
             .modify(|_, w| w.aoe().clear_bit().moe().clear_bit());
