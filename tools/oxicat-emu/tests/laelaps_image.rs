@@ -126,6 +126,20 @@ fn segment(img: &[u8], legs: &[LegId]) -> (Segment, Vec<NodeHandle>) {
 
 #[test]
 fn ethercrab_runs_two_emulated_leg_nodes_in_dc_op_without_losing_a_sync0() {
+    dc_op(1_000);
+}
+
+/// The long run: 10,000 DC cycles (about 4 s of segment time, a couple of minutes
+/// of wall time here), `cargo test -p oxicat-emu --test laelaps_image -- --ignored`.
+#[test]
+#[ignore = "long: 10,000 cycles of two emulated boards"]
+fn ethercrab_runs_two_emulated_leg_nodes_for_10000_dc_cycles() {
+    dc_op(10_000);
+}
+
+/// Two emulated leg nodes in DC OP at the bench's 400 µs for `cycles` cycles: the right
+/// working counter every cycle, every SYNC0 handled, the stack in operation bounded.
+fn dc_op(cycles: u64) {
     let Some(img) = image() else { return };
     assert_eq!(KIT.cycle_ns, 400_000u32, "the leg node's bench cycle");
     let (seg, nodes) = segment(&img, &[LegId::HindRight, LegId::ForeRight]);
@@ -135,7 +149,6 @@ fn ethercrab_runs_two_emulated_leg_nodes_in_dc_op_without_losing_a_sync0() {
     for n in &nodes {
         n.reset_stats();
     }
-    let cycles = 1_000;
     let stats = m
         .run_cyclic(
             CycleOptions {
