@@ -9,7 +9,7 @@ use std::sync::{Arc, Mutex};
 use std::time::Duration;
 
 use oxicat_devices::registry::{add_node_via, kits, Kit};
-use oxicat_master::cyclic::{CycleOptions, Flow};
+use oxicat_master::cyclic::CycleOptions;
 use oxicat_master::{Link, Master};
 use oxicat_sim::pdi_path::PdiRoute;
 use oxicat_sim::segment::Segment;
@@ -37,15 +37,7 @@ fn run(kit: &Kit, route: PdiRoute) -> Result<(), String> {
         cycle: Duration::from_nanos(u64::from(kit.cycle_ns)),
         dc: matches!(kit.sync, SyncMode::DcSync0 | SyncMode::DcSync1),
     };
-    let stats = m
-        .run_cyclic(opts, |io| {
-            Ok(if io.cycle + 1 >= CYCLES {
-                Flow::Stop
-            } else {
-                Flow::Continue
-            })
-        })
-        .map_err(|e| e.to_string())?;
+    let stats = m.run_cycles(opts, CYCLES).map_err(|e| e.to_string())?;
     if stats.cycles != CYCLES || stats.wkc_errors != 0 {
         return Err(format!(
             "{} cycles, {} with a wrong working counter",

@@ -16,10 +16,11 @@ use std::time::{Duration, Instant};
 use oxicat_devices::registry::{add_device_node, Device};
 use oxicat_devices::twin::{load_file, Twin};
 use oxicat_esi::twin::Served;
-use oxicat_master::cyclic::{CycleOptions, Flow};
+use oxicat_master::cyclic::CycleOptions;
 use oxicat_master::{Link, Master};
 use oxicat_sim::pdi_path::PdiRoute;
 use oxicat_sim::segment::Segment;
+use oxicat_testkit::served::reference;
 
 const CYCLES: u64 = 100;
 const BATCH: usize = 32;
@@ -52,14 +53,6 @@ const ALLOWED: &[(&str, &str)] = &[
          no slave can serve both",
     ),
 ];
-
-fn reference() -> PathBuf {
-    std::env::var_os("OXICAT_REFERENCE")
-        .map(PathBuf::from)
-        .unwrap_or_else(|| {
-            PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../../shared/reference")
-        })
-}
 
 fn esi_files() -> Vec<PathBuf> {
     let mut v = Vec::new();
@@ -144,15 +137,7 @@ fn run_batch(twins: &[&'static Twin]) -> Result<(), String> {
         cycle: Duration::from_millis(1),
         dc: false,
     };
-    let stats = m
-        .run_cyclic(opts, |io| {
-            Ok(if io.cycle + 1 >= CYCLES {
-                Flow::Stop
-            } else {
-                Flow::Continue
-            })
-        })
-        .map_err(|e| e.to_string())?;
+    let stats = m.run_cycles(opts, CYCLES).map_err(|e| e.to_string())?;
     if stats.cycles != CYCLES || stats.wkc_errors != 0 {
         return Err(format!(
             "{} cycles, {} with a wrong working counter",

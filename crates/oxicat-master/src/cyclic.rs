@@ -206,6 +206,22 @@ impl Master {
         self.ensure_group()
     }
 
+    /// [`Master::run_cyclic`] for exactly `cycles` cycles with nothing to do between them
+    /// (process data as the slaves and the master's defaults leave it).
+    pub fn run_cycles(
+        &mut self,
+        opts: CycleOptions,
+        cycles: u64,
+    ) -> Result<CycleStats, MasterError> {
+        self.run_cyclic(opts, |io| {
+            Ok(if io.cycle + 1 >= cycles {
+                Flow::Stop
+            } else {
+                Flow::Continue
+            })
+        })
+    }
+
     /// Brings the slaves to OP, calls `step` after every cycle until it says stop, and
     /// takes them back to PRE-OP (no master cycles afterwards: in SAFE-OP/OP the
     /// process-data watchdog would leave them in SAFEOP+ERR 0x001B).

@@ -28,6 +28,7 @@ pub mod bench;
 pub mod device;
 pub mod laelaps;
 pub mod ports;
+pub mod served;
 
 pub use bench::Bench;
 pub use ports::Port;

@@ -1,48 +1,20 @@
 //! `oxicat sim --udp`: EtherCAT over UDP on the loopback interface (no privileges needed),
 //! and the messages of `oxicat sim` for what cannot work.
 
-use std::io::{BufRead, BufReader};
 use std::net::UdpSocket;
-use std::process::{Child, Command, Stdio};
-use std::sync::mpsc;
+use std::process::{Command, Stdio};
 use std::time::Duration;
+
+use oxicat_testkit::served::{spawn_udp, Served};
 
 use oxicat_wire::{Command as Cmd, DatagramHeader, FrameBuilder};
 
-struct Sim(Child);
-impl Drop for Sim {
-    fn drop(&mut self) {
-        let _ = self.0.kill();
-        let _ = self.0.wait();
-    }
-}
-
 /// Starts `oxicat sim --udp 127.0.0.1:0 <devices>`; returns it and the address it bound.
-fn start(devices: &[&str]) -> (Sim, String) {
-    let mut child = Command::new(env!("CARGO_BIN_EXE_oxicat"))
-        .args(["sim", "--quiet", "--udp", "127.0.0.1:0"])
-        .args(devices)
-        .stdin(Stdio::null())
-        .stderr(Stdio::piped())
-        .spawn()
-        .expect("spawn oxicat sim");
-    let stderr = child.stderr.take().expect("stderr");
-    let sim = Sim(child);
-    let (tx, rx) = mpsc::channel();
-    std::thread::spawn(move || {
-        for line in BufReader::new(stderr).lines().map_while(Result::ok) {
-            let _ = tx.send(line);
-        }
-    });
-    loop {
-        let line = rx
-            .recv_timeout(Duration::from_secs(60))
-            .expect("oxicat sim prints where it serves");
-        if let Some(rest) = line.split(" on EtherCAT over UDP on ").nth(1) {
-            let addr = rest.split(';').next().unwrap_or_default().to_string();
-            return (sim, addr);
-        }
-    }
+fn start(devices: &[&str]) -> (Served, String) {
+    let mut cmd = Command::new(env!("CARGO_BIN_EXE_oxicat"));
+    cmd.args(["sim", "--quiet", "--udp", "127.0.0.1:0"])
+        .args(devices);
+    spawn_udp(cmd)
 }
 
 fn brd_al_status(index: u8) -> Vec<u8> {

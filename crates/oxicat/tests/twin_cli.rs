@@ -2,24 +2,15 @@
 //! device and an ethercrab master in this process brings it to OP; `--sim esi=…*N` and a
 //! segment file's `esi =` build twins in process; a bad ESI is refused with its reason.
 
-use std::io::{BufRead, BufReader};
-use std::path::PathBuf;
-use std::process::{Child, Command, Stdio};
-use std::sync::mpsc;
+use std::process::Command;
 use std::time::Duration;
 
-use oxicat_master::cyclic::{CycleOptions, Flow};
+use oxicat_testkit::served::{reference, spawn_udp};
+
+use oxicat_master::cyclic::CycleOptions;
 use oxicat_master::{Link, Master};
 
 mod served_common;
-
-fn reference() -> PathBuf {
-    std::env::var_os("OXICAT_REFERENCE")
-        .map(PathBuf::from)
-        .unwrap_or_else(|| {
-            PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../../shared/reference")
-        })
-}
 
 fn esi(file: &str) -> String {
     let p = reference().join("esi-vendor").join(file);
@@ -27,39 +18,12 @@ fn esi(file: &str) -> String {
     p.display().to_string()
 }
 
-struct Sim(Child);
-impl Drop for Sim {
-    fn drop(&mut self) {
-        let _ = self.0.kill();
-        let _ = self.0.wait();
-    }
-}
-
 #[test]
 fn sim_esi_serves_a_vendor_device_on_udp_and_ethercrab_reaches_op() {
     let spec = format!("{}:EL3001", esi("Beckhoff-EL30xx.xml"));
-    let mut child = Command::new(env!("CARGO_BIN_EXE_oxicat"))
-        .args(["sim", "--quiet", "--udp", "127.0.0.1:0", "--esi", &spec])
-        .stdin(Stdio::null())
-        .stderr(Stdio::piped())
-        .spawn()
-        .expect("spawn oxicat sim");
-    let stderr = child.stderr.take().expect("stderr");
-    let _sim = Sim(child);
-    let (tx, rx) = mpsc::channel();
-    std::thread::spawn(move || {
-        for line in BufReader::new(stderr).lines().map_while(Result::ok) {
-            let _ = tx.send(line);
-        }
-    });
-    let addr = loop {
-        let line = rx
-            .recv_timeout(Duration::from_secs(60))
-            .expect("oxicat sim prints where it serves");
-        if let Some(rest) = line.split(" on EtherCAT over UDP on ").nth(1) {
-            break rest.split(';').next().unwrap_or_default().to_string();
-        }
-    };
+    let mut cmd = Command::new(env!("CARGO_BIN_EXE_oxicat"));
+    cmd.args(["sim", "--quiet", "--udp", "127.0.0.1:0", "--esi", &spec]);
+    let (_sim, addr) = spawn_udp(cmd);
     let run = std::thread::Builder::new()
         .stack_size(16 << 20)
         .spawn(move || {
@@ -71,18 +35,12 @@ fn sim_esi_serves_a_vendor_device_on_udp_and_ethercrab_reaches_op() {
             let v = m.sdo_upload(0, 0x1018, 2).expect("0x1018:02");
             assert_eq!(v, 0x0BB9_3052u32.to_le_bytes());
             let stats = m
-                .run_cyclic(
+                .run_cycles(
                     CycleOptions {
                         cycle: Duration::from_millis(2),
                         dc: false,
                     },
-                    |io| {
-                        Ok(if io.cycle + 1 >= 200 {
-                            Flow::Stop
-                        } else {
-                            Flow::Continue
-                        })
-                    },
+                    200,
                 )
                 .expect("OP and cycling");
             (stats.cycles, stats.wkc_errors)

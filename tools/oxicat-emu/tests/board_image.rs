@@ -140,7 +140,7 @@ fn a_corrupt_image_is_a_fault_with_its_pc_not_a_hang() {
 /// OP and exchange process data for 1,000 cycles with the right working counter each cycle.
 #[test]
 fn ethercrab_runs_two_emulated_demo_boards_in_op_with_the_right_wkc() {
-    use oxicat_master::cyclic::{CycleOptions, Flow};
+    use oxicat_master::cyclic::CycleOptions;
     use oxicat_master::{Link, Master};
     use oxicat_sim::segment::Segment;
     use std::sync::{Arc, Mutex};
@@ -158,18 +158,12 @@ fn ethercrab_runs_two_emulated_demo_boards_in_op_with_the_right_wkc() {
     let mut m = Master::open(Link::Sim(Arc::new(Mutex::new(seg)))).expect("ethercrab scans");
     let cycles = 1_000;
     let stats = m
-        .run_cyclic(
+        .run_cycles(
             CycleOptions {
                 cycle: std::time::Duration::from_millis(1),
                 dc: false,
             },
-            |io| {
-                Ok(if io.cycle + 1 >= cycles {
-                    Flow::Stop
-                } else {
-                    Flow::Continue
-                })
-            },
+            cycles,
         )
         .unwrap_or_else(|e| panic!("{e}"));
     assert_eq!((stats.cycles, stats.wkc_errors), (cycles, 0), "{stats:?}");

@@ -150,18 +150,12 @@ fn dc_op(cycles: u64) {
         n.reset_stats();
     }
     let stats = m
-        .run_cyclic(
+        .run_cycles(
             CycleOptions {
                 cycle: Duration::from_nanos(u64::from(KIT.cycle_ns)),
                 dc: true,
             },
-            |io| {
-                Ok(if io.cycle + 1 >= cycles {
-                    Flow::Stop
-                } else {
-                    Flow::Continue
-                })
-            },
+            cycles,
         )
         .unwrap_or_else(|e| panic!("{e}"));
     assert_eq!((stats.cycles, stats.wkc_errors), (cycles, 0), "{stats:?}");
@@ -194,35 +188,6 @@ fn dc_op(cycles: u64) {
     );
 }
 
-fn put(image: &mut [u8], p: PdoPlace, v: i64) {
-    if p.bits == 1 {
-        let (byte, b) = (p.bit / 8, p.bit % 8);
-        if v != 0 {
-            image[byte] |= 1 << b;
-        } else {
-            image[byte] &= !(1 << b);
-        }
-        return;
-    }
-    let byte = p.bit / 8;
-    let n = usize::from(p.bits) / 8;
-    image[byte..byte + n].copy_from_slice(&v.to_le_bytes()[..n]);
-}
-
-fn get(image: &[u8], p: PdoPlace, signed: bool) -> i32 {
-    let byte = p.bit / 8;
-    let n = usize::from(p.bits) / 8;
-    let mut b = [0u8; 4];
-    b[..n].copy_from_slice(&image[byte..byte + n]);
-    let u = u32::from_le_bytes(b);
-    if signed && n < 4 {
-        let shift = 32 - 8 * n as u32;
-        ((u << shift) as i32) >> shift
-    } else {
-        u as i32
-    }
-}
-
 /// The shipped scenario's Table 4-1 outputs for `leg` as raw PDO integers (the experiment's
 /// scaling): gains ×100 / ×1000, ellipse in mm and whole cm, frequency ×100.
 fn trot_outputs(io: &mut CycleIo, pos: usize, leg: LegId, operational: bool, ab: bool) {
@@ -234,9 +199,9 @@ fn trot_outputs(io: &mut CycleIo, pos: usize, leg: LegId, operational: bool, ab:
     let p = |i: u16, sub: u8| pdo_place(def, true, i, sub).expect("a leg-node output");
     let r = |v: f64| v.round() as i64;
     let img = &mut io.outputs[pos];
-    put(img, p(0x7000, 1), i64::from(operational));
-    put(img, p(0x7000, 9), 1); // Transition_time 1 s (the host test's shortened run)
-    put(img, p(0x7012, 1), i64::from(c.filter_hz));
+    p(0x7000, 1).put(img, i64::from(operational));
+    p(0x7000, 9).put(img, 1); // Transition_time 1 s (the host test's shortened run)
+    p(0x7012, 1).put(img, i64::from(c.filter_hz));
     let gains = [
         c.knee.kp * 100.0,
         c.knee.kd * 1000.0,
@@ -246,7 +211,7 @@ fn trot_outputs(io: &mut CycleIo, pos: usize, leg: LegId, operational: bool, ab:
         c.hip.ki * 100.0,
     ];
     for (k, g) in gains.into_iter().enumerate() {
-        put(img, p(0x7020, k as u8 + 1), r(g));
+        p(0x7020, k as u8 + 1).put(img, r(g));
     }
     let (a, b) = if ab { (t.a_cm, t.b_cm) } else { (0.0, 0.0) };
     let traj = [
@@ -259,7 +224,7 @@ fn trot_outputs(io: &mut CycleIo, pos: usize, leg: LegId, operational: bool, ab:
         t.flatness * 100.0,
     ];
     for (k, v) in traj.into_iter().enumerate() {
-        put(img, p(0x7030, k as u8 + 1), r(v));
+        p(0x7030, k as u8 + 1).put(img, r(v));
     }
 }
 
@@ -300,7 +265,7 @@ fn the_leg_image_tracks_the_trot_through_pwm_plant_and_encoders() {
                 if k >= settle {
                     let mut raw = [0i32; 9];
                     for (x, (p, signed)) in raw.iter_mut().zip(&places) {
-                        *x = get(&io.inputs[0], *p, *signed);
+                        *x = p.get(&io.inputs[0], *signed);
                     }
                     rows.push(raw);
                 }

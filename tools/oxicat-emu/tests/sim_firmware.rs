@@ -7,48 +7,20 @@
 
 mod common;
 
-use std::io::{BufRead, BufReader};
-use std::process::{Child, Command, Stdio};
-use std::sync::mpsc;
+use std::process::Command;
 use std::time::Duration;
 
-use oxicat_master::cyclic::{CycleOptions, Flow};
-use oxicat_master::{Link, Master, MasterOptions};
+use oxicat_testkit::served::{spawn_udp, Served};
 
-struct Served(Child);
-impl Drop for Served {
-    fn drop(&mut self) {
-        let _ = self.0.kill();
-        let _ = self.0.wait();
-    }
-}
+use oxicat_master::cyclic::CycleOptions;
+use oxicat_master::{Link, Master, MasterOptions};
 
 /// Starts `oxicat-emu sim … --udp 127.0.0.1:0`; returns it and the address it serves on.
 fn serve(args: &[&str]) -> (Served, String) {
-    let mut child = Command::new(env!("CARGO_BIN_EXE_oxicat-emu"))
-        .args(["sim", "--quiet", "--udp", "127.0.0.1:0"])
-        .args(args)
-        .stdin(Stdio::null())
-        .stderr(Stdio::piped())
-        .spawn()
-        .expect("spawn oxicat-emu");
-    let stderr = child.stderr.take().expect("stderr");
-    let served = Served(child);
-    let (tx, rx) = mpsc::channel();
-    std::thread::spawn(move || {
-        for line in BufReader::new(stderr).lines().map_while(Result::ok) {
-            let _ = tx.send(line);
-        }
-    });
-    loop {
-        let line = rx
-            .recv_timeout(Duration::from_secs(120))
-            .expect("oxicat-emu prints where it serves");
-        if let Some(rest) = line.split(" on EtherCAT over UDP on ").nth(1) {
-            let addr = rest.split(';').next().unwrap_or_default().to_string();
-            return (served, addr);
-        }
-    }
+    let mut cmd = Command::new(env!("CARGO_BIN_EXE_oxicat-emu"));
+    cmd.args(["sim", "--quiet", "--udp", "127.0.0.1:0"])
+        .args(args);
+    spawn_udp(cmd)
 }
 
 #[test]
@@ -85,18 +57,12 @@ fn ethercrab_runs_two_served_demo_board_images_in_op_over_udp() {
     };
     let cycles = 300;
     let stats = m
-        .run_cyclic(
+        .run_cycles(
             CycleOptions {
                 cycle: Duration::from_millis(2),
                 dc: false,
             },
-            |io| {
-                Ok(if io.cycle + 1 >= cycles {
-                    Flow::Stop
-                } else {
-                    Flow::Continue
-                })
-            },
+            cycles,
         )
         .unwrap_or_else(|e| panic!("{e}"));
     let _ = std::fs::remove_file(&path);

@@ -91,32 +91,36 @@ pub fn pdo_place(def: &DeviceDef, rx: bool, index: u16, sub: u8) -> Option<PdoPl
     None
 }
 
-fn put(image: &mut [u8], p: PdoPlace, v: i64) {
-    if p.bits == 1 {
-        let (byte, b) = (p.bit / 8, p.bit % 8);
-        if v != 0 {
-            image[byte] |= 1 << b;
-        } else {
-            image[byte] &= !(1 << b);
+impl PdoPlace {
+    /// Writes `v` (its low `bits`) into a process-data image at this place.
+    pub fn put(self, image: &mut [u8], v: i64) {
+        if self.bits == 1 {
+            let (byte, b) = (self.bit / 8, self.bit % 8);
+            if v != 0 {
+                image[byte] |= 1 << b;
+            } else {
+                image[byte] &= !(1 << b);
+            }
+            return;
         }
-        return;
+        let byte = self.bit / 8;
+        let n = usize::from(self.bits) / 8;
+        image[byte..byte + n].copy_from_slice(&v.to_le_bytes()[..n]);
     }
-    let byte = p.bit / 8;
-    let n = usize::from(p.bits) / 8;
-    image[byte..byte + n].copy_from_slice(&v.to_le_bytes()[..n]);
-}
 
-fn get(image: &[u8], p: PdoPlace, signed: bool) -> i32 {
-    let byte = p.bit / 8;
-    let n = usize::from(p.bits) / 8;
-    let mut b = [0u8; 4];
-    b[..n].copy_from_slice(&image[byte..byte + n]);
-    let u = u32::from_le_bytes(b);
-    if signed && n < 4 {
-        let shift = 32 - 8 * n as u32;
-        ((u << shift) as i32) >> shift
-    } else {
-        u as i32
+    /// Reads the integer at this place of a process-data image (sign-extended if `signed`).
+    pub fn get(self, image: &[u8], signed: bool) -> i32 {
+        let byte = self.bit / 8;
+        let n = usize::from(self.bits) / 8;
+        let mut b = [0u8; 4];
+        b[..n].copy_from_slice(&image[byte..byte + n]);
+        let u = u32::from_le_bytes(b);
+        if signed && n < 4 {
+            let shift = 32 - 8 * n as u32;
+            ((u << shift) as i32) >> shift
+        } else {
+            u as i32
+        }
     }
 }
 
@@ -244,14 +248,15 @@ impl OutputMap {
     }
 
     fn write(&self, o: &LegOutputs, image: &mut [u8]) {
-        put(image, self.state_machine, i64::from(o.state_machine));
-        put(image, self.transition_time, i64::from(o.transition_time));
-        put(image, self.filter, i64::from(o.filter_hz));
+        self.state_machine.put(image, i64::from(o.state_machine));
+        self.transition_time
+            .put(image, i64::from(o.transition_time));
+        self.filter.put(image, i64::from(o.filter_hz));
         for (p, v) in self.gains.iter().zip(o.gains) {
-            put(image, *p, i64::from(v));
+            p.put(image, i64::from(v));
         }
         for (p, v) in self.traj.iter().zip(o.traj) {
-            put(image, *p, i64::from(v));
+            p.put(image, i64::from(v));
         }
     }
 }
@@ -272,7 +277,7 @@ impl LinkedVariable {
     /// Writes the value into each linked slave's output image.
     pub fn apply(&self, images: &mut [Vec<u8>]) {
         for (pos, place) in &self.targets {
-            put(&mut images[*pos], *place, self.value);
+            place.put(&mut images[*pos], self.value);
         }
     }
 }
@@ -794,7 +799,7 @@ async fn run_master(
                 let img = sd.inputs_raw();
                 let ti = table_index(legs[pos]);
                 for (v, (var, place)) in INPUTS.iter().zip(&in_places).enumerate() {
-                    inputs[ti][v] = get(&img, *place, var.signed);
+                    inputs[ti][v] = place.get(&img, var.signed);
                 }
             }
             if r.working_counter != EXPECTED_WKC {

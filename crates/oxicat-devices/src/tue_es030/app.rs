@@ -267,9 +267,10 @@ impl<B: Board> TuEs030<B> {
         self.motors[k].par = param2int(&p);
     }
 
-    /// Takes the build-time handles when `od` is the TUeES030's dictionary.
+    /// Takes the build-time handles when `od` is the TUeES030's dictionary (checked once:
+    /// this runs every cycle).
     fn resolve<const N: usize>(&mut self, od: &Od<N>) {
-        if od.built_on(OBJECTS) {
+        if self.normal.is_none() && od.built_on(OBJECTS) {
             self.normal = Some(NormalIo::VARS);
             self.frf = Some(FrfIo::VARS);
         }
