@@ -6,7 +6,7 @@ use std::path::PathBuf;
 use std::time::Instant;
 
 use indicatif::{ProgressBar, ProgressStyle};
-use oxicat_devices::laelaps::experiment::run_trot;
+use oxicat_devices::laelaps::experiment::{run_trot, Progress, TrotRun};
 use oxicat_devices::laelaps::plot;
 use oxicat_devices::laelaps::results::{csv, summarize, summary_markdown};
 use oxicat_devices::laelaps::scenario::{ExecTime, PdiChip, Scenario};
@@ -56,6 +56,19 @@ pub struct TrotArgs {
 
 /// Runs `oxicat trot`; returns the text it printed.
 pub fn run(a: TrotArgs) -> Result<String, CliError> {
+    run_with(a, &mut |s, progress| {
+        Ok((run_trot(s, progress)?, String::new()))
+    })
+}
+
+/// How a trot is run on a scenario: the run and a Markdown section for `summary.md` about
+/// its nodes (empty for none).
+pub type TrotRunner<'a> =
+    dyn FnMut(&Scenario, &mut dyn FnMut(Progress)) -> Result<(TrotRun, String), MasterError> + 'a;
+
+/// `oxicat trot` with the run made by `runner` (oxicat-emu's `trot` runs the leg nodes'
+/// board images): the same options, files and summary.
+pub fn run_with(a: TrotArgs, runner: &mut TrotRunner<'_>) -> Result<String, CliError> {
     let mut s = match &a.scenario {
         Some(p) => Scenario::load(p)?,
         None => Scenario::thesis(),
@@ -104,7 +117,7 @@ pub fn run(a: TrotArgs) -> Result<String, CliError> {
         b.set_message("trot");
         b
     };
-    let run = run_trot(&s, &mut |p| {
+    let (run, nodes_md) = runner(&s, &mut |p| {
         bar.set_length(p.total);
         bar.set_position(p.done);
     })?;
@@ -132,6 +145,7 @@ pub fn run(a: TrotArgs) -> Result<String, CliError> {
         rec_s / run.wall_recorded.as_secs_f64().max(1e-9),
         (run.wall - run.wall_recorded).as_secs_f64(),
     );
+    md.push_str(&nodes_md);
     let sum_path = a.out.join("summary.md");
     crate::output::write_file(&sum_path, md.as_bytes())?;
     files.push(sum_path);

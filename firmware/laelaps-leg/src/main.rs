@@ -55,6 +55,15 @@ const SIDE: Side = Side::Left;
 #[cfg(not(feature = "left-leg"))]
 const SIDE: Side = Side::Right;
 
+/// The build's side where tools that load the image can read it (ASCII `L` or `R`, symbol
+/// `OXICAT_LEG_SIDE`): oxicat-emu refuses an image on the wrong side's leg, which would
+/// drive it against its sign conventions. Read once at start-up, so the link keeps it.
+#[no_mangle]
+pub static OXICAT_LEG_SIDE: u8 = match SIDE {
+    Side::Left => b'L',
+    Side::Right => b'R',
+};
+
 /// Mailbox buffer size of the stack: the leg node's mailboxes are 128 bytes.
 const MBX: usize = 128;
 /// Joint-loop rate (`laelaps::hw::CONTROL_PERIOD_S`).
@@ -235,6 +244,8 @@ fn fail(leds: &mut BoardLeds, delay: &mut impl embedded_hal::delay::DelayNs) -> 
 /// stack, `tools/oxicat-emu`).
 #[inline(never)]
 fn start_stack(mut esc: Esc) -> Result<(), ()> {
+    // SAFETY: a plain read of an immutable static; volatile so the link keeps the symbol.
+    let _side = unsafe { core::ptr::read_volatile(&OXICAT_LEG_SIDE) };
     let slave = LegSlave::new(device::device(SIDE), &mut esc).map_err(|_| ())?;
     // SAFETY: once, before any ESC interrupt is unmasked (main enables them afterwards).
     unsafe { ESC.init(EscSide { slave, esc }) };

@@ -70,7 +70,7 @@ fn main() {
     let sii = oxicat_esi::sii::generate(device::device(Side::Right)).expect("SII");
     let id = seg.add(Esc::new(EscConfig::lan9252(), sii));
     let plant = LegBoardPlant::new(leg, RigConfig::laelaps(leg));
-    let node = match EmulatedNode::with_plant(img, 22, 100_000, Some(Box::new(plant))) {
+    let node = match EmulatedNode::with_plant(img, 100_000, Some(Box::new(plant))) {
         Ok(n) => n,
         Err(e) => {
             eprintln!("{path}: {e}");

@@ -52,6 +52,7 @@ mod periph;
 pub mod plant;
 mod stats;
 mod timers;
+pub mod trot;
 
 pub use plant::BoardPlant;
 pub use stats::{image_size, HandlerStats, ImageSize, StackStats};
@@ -186,6 +187,50 @@ pub fn elf_segments(elf: &[u8]) -> Result<Vec<Segment>, EmuError> {
         return Err(bad("no loadable segment"));
     }
     Ok(out)
+}
+
+/// The bytes of the symbol `name` of an image's symbol table, read from its loadable
+/// segments (a constant in flash: `None` when the image has no such symbol or it does not
+/// lie in a loaded segment, e.g. a stripped image).
+pub fn elf_symbol_bytes(elf: &[u8], name: &str) -> Result<Option<Vec<u8>>, EmuError> {
+    let segments = elf_segments(elf)?;
+    let bad = || EmuError::BadImage("truncated section or symbol table".into());
+    let u16_at = |o: usize| -> Result<usize, EmuError> {
+        let b = elf.get(o..o + 2).ok_or_else(bad)?;
+        Ok(usize::from(u16::from_le_bytes([b[0], b[1]])))
+    };
+    let u32_at = |o: usize| -> Result<usize, EmuError> {
+        let b = elf.get(o..o + 4).ok_or_else(bad)?;
+        Ok(u32::from_le_bytes([b[0], b[1], b[2], b[3]]) as usize)
+    };
+    let (shoff, shentsize, shnum) = (u32_at(32)?, u16_at(46)?, u16_at(48)?);
+    for k in 0..shnum {
+        let sh = shoff + k * shentsize;
+        if u32_at(sh + 4)? != 2 {
+            continue; // not SHT_SYMTAB
+        }
+        let (off, size, link) = (u32_at(sh + 16)?, u32_at(sh + 20)?, u32_at(sh + 24)?);
+        let strtab = shoff + link * shentsize;
+        let (str_off, str_size) = (u32_at(strtab + 16)?, u32_at(strtab + 20)?);
+        let strings = elf.get(str_off..str_off + str_size).ok_or_else(bad)?;
+        for e in (off..off + size).step_by(16) {
+            let n = u32_at(e)?;
+            let sym = strings.get(n..).ok_or_else(bad)?;
+            let end = sym.iter().position(|&c| c == 0).unwrap_or(sym.len());
+            if &sym[..end] != name.as_bytes() {
+                continue;
+            }
+            let (addr, len) = (u32_at(e + 4)? as u64, u32_at(e + 8)? as u64);
+            return Ok(segments.iter().find_map(|s| {
+                let start = u64::from(s.addr);
+                (addr >= start && addr + len <= start + s.data.len() as u64).then(|| {
+                    let o = (addr - start) as usize;
+                    s.data[o..o + len as usize].to_vec()
+                })
+            }));
+        }
+    }
+    Ok(None)
 }
 
 /// An input event a plant schedules at a time of the board's clock
@@ -756,6 +801,12 @@ impl Board {
     /// SPI traffic so far.
     pub fn spi_stats(&self) -> SpiStats {
         self.periph.borrow().spi
+    }
+
+    /// SCLK of SPI1 as the image configured it \[Hz\]: PCLK2 (90 MHz) / 2^(BR+1).
+    pub fn spi_sclk_hz(&self) -> u32 {
+        let br = (self.periph.borrow().reg(periph::SPI1) >> 3) & 7;
+        90_000_000 / (2 << br)
     }
 
     /// Reads image memory (flash or SRAM) at `addr`.

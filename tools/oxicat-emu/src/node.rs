@@ -57,6 +57,8 @@ pub struct NodeReport {
     pub image: ImageSize,
     /// SPI traffic.
     pub spi: SpiStats,
+    /// SPI1's clock as the image set it \[Hz\].
+    pub spi_sclk_hz: u32,
     /// The fault that stopped the image, if it stopped.
     pub fault: Option<EmuError>,
 }
@@ -97,6 +99,7 @@ fn report_of(board: &Board, since: u64, fault: &Option<EmuError>) -> NodeReport 
         stack: board.stack_stats(),
         image: board.image_size(),
         spi: board.spi_stats(),
+        spi_sclk_hz: board.spi_sclk_hz(),
         fault: fault.clone(),
     }
 }
@@ -107,6 +110,7 @@ fn report_of(board: &Board, since: u64, fault: &Option<EmuError>) -> NodeReport 
 pub struct NodeHandle {
     cmd: Sender<Cmd>,
     sync0: std::sync::Arc<std::sync::atomic::AtomicU64>,
+    chip: Handle<Lan9252Model>,
 }
 
 impl NodeHandle {
@@ -126,6 +130,17 @@ impl NodeHandle {
     /// SYNC0 events the segment delivered to this node so far.
     pub fn sync0_events(&self) -> u64 {
         self.sync0.load(std::sync::atomic::Ordering::Relaxed)
+    }
+
+    /// What the board's SPI bus carried, as the LAN9252 saw it (transactions, bytes, bus
+    /// time at SCLK, malformed frames) since the last [`NodeHandle::reset_bus_stats`].
+    pub fn bus_stats(&self) -> oxicat_pdi::sim::BusStats {
+        self.chip.stats()
+    }
+
+    /// Clears the LAN9252's bus counters.
+    pub fn reset_bus_stats(&self) {
+        self.chip.reset_stats()
     }
 }
 
@@ -155,27 +170,27 @@ pub struct EmulatedNode {
 }
 
 impl EmulatedNode {
-    /// Boots `image` (an ELF) on its own thread with a LAN9252 on SPI1 clocked at
-    /// `spi_mhz`; the node wakes the CPU every `slice_ns` of virtual time besides the
-    /// segment's events. The ELF is checked here: a bad image is refused before anything
-    /// runs.
-    pub fn new(image: Vec<u8>, spi_mhz: u32, slice_ns: u64) -> Result<Self, EmuError> {
-        Self::with_plant(image, spi_mhz, slice_ns, None)
+    /// Boots `image` (an ELF) on its own thread with a LAN9252 on SPI1 (at the clock the
+    /// image sets: bytes take their time at SPI1's prescaler); the node wakes the CPU every
+    /// `slice_ns` of virtual time besides the segment's events. The ELF is checked here: a
+    /// bad image is refused before anything runs.
+    pub fn new(image: Vec<u8>, slice_ns: u64) -> Result<Self, EmuError> {
+        Self::with_plant(image, slice_ns, None)
     }
 
     /// [`EmulatedNode::new`] with `plant` on the board's pins, stepped in lockstep with
     /// the CPU on the board's thread ([`crate::plant`]).
     pub fn with_plant(
         image: Vec<u8>,
-        spi_mhz: u32,
         slice_ns: u64,
         mut plant: Option<Box<dyn BoardPlant>>,
     ) -> Result<Self, EmuError> {
         crate::elf_segments(&image)?;
-        // The chip's stand-in ESC until the segment lends it the real one.
+        // The chip's stand-in ESC until the segment lends it the real one. (Its bus
+        // configuration times whole-frame transfers only; the emulated SPI1 clocks bytes.)
         let chip = Lan9252Model::handle(
             Esc::new(EscConfig::lan9252(), vec![0; 128]),
-            BusConfig::mhz(spi_mhz),
+            BusConfig::mhz(22),
         );
         let (run, runs) = channel::<Cmd>();
         let (report, done) = channel::<Progress>();
@@ -252,6 +267,7 @@ impl EmulatedNode {
         NodeHandle {
             cmd: self.run.clone(),
             sync0: self.sync0.clone(),
+            chip: self.chip.clone(),
         }
     }
 

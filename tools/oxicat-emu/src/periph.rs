@@ -22,7 +22,7 @@ const PWR: u64 = 0x4000_7000;
 pub(crate) const GPIOA: u64 = 0x4002_0000;
 /// Ports A..H.
 pub(crate) const PORTS: u64 = 8;
-const SPI1: u64 = 0x4001_3000;
+pub(crate) const SPI1: u64 = 0x4001_3000;
 /// SysTick's control and status register.
 const SYST_CSR: u64 = 0xE000_E010;
 /// Most cycles between two reads of SysTick's CSR that still make a spinning delay loop.

@@ -151,7 +151,7 @@ fn ethercrab_runs_two_emulated_demo_boards_in_op_with_the_right_wkc() {
     for _ in 0..2 {
         let sii = oxicat_esi::sii::generate(def).unwrap();
         let id = seg.add(Esc::new(EscConfig::lan9252(), sii));
-        let node = oxicat_emu::node::EmulatedNode::new(img.clone(), 22, 100_000).unwrap();
+        let node = oxicat_emu::node::EmulatedNode::new(img.clone(), 100_000).unwrap();
         seg.attach(id, Box::new(node)).unwrap();
     }
     let wall = std::time::Instant::now();

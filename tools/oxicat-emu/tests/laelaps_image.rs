@@ -116,8 +116,7 @@ fn segment(img: &[u8], legs: &[LegId]) -> (Segment, Vec<NodeHandle>) {
         let sii = oxicat_esi::sii::generate(device::device(SIDE)).unwrap();
         let id = seg.add(Esc::new(EscConfig::lan9252(), sii));
         let plant = LegBoardPlant::new(leg, RigConfig::laelaps(leg));
-        let node =
-            EmulatedNode::with_plant(img.to_vec(), 22, 100_000, Some(Box::new(plant))).unwrap();
+        let node = EmulatedNode::with_plant(img.to_vec(), 100_000, Some(Box::new(plant))).unwrap();
         handles.push(node.handle());
         seg.attach(id, Box::new(node)).unwrap();
     }

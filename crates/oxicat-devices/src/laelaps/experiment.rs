@@ -364,8 +364,9 @@ pub struct BusStats {
     /// Cycles with more or fewer than one SYNC0 per node since the previous cycle.
     pub sync0_missed: u64,
     /// SYNC0 count (per node, since boot) at which each node released its leg; all equal
-    /// when the four trajectory clocks started in the same cycle.
-    pub release_sync0: [u64; 4],
+    /// when the four trajectory clocks started in the same cycle (`None`: not released, or
+    /// a board image, whose release the host does not see).
+    pub release_sync0: [Option<u64>; 4],
     /// Virtual time the bring-up took \[ns\] (varies between runs; not in the CSV).
     pub bringup_ns: u64,
 }
@@ -393,6 +394,9 @@ impl NodePdi {
 pub struct PdiReport {
     /// The route every leg node used.
     pub route: PdiRoute,
+    /// The nodes ran board images instruction by instruction (oxicat-emu) rather than the
+    /// host-compiled firmware: their SPI bus time is simulated, not only counted.
+    pub machine_code: bool,
     /// Per leg, Table 4-1 order (FL, FR, HL, HR).
     pub nodes: [NodePdi; 4],
 }
@@ -454,27 +458,99 @@ pub fn rig_config(s: &Scenario, leg: LegId, phases: &Phases) -> RigConfig {
     }
 }
 
+/// What a run reports about one leg node ([`TrotNode::trot_report`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct TrotNodeReport {
+    /// The firmware's trajectory clock \[ns\], where the host can read it (a board image
+    /// shows only its pins and process data: `None`, and the run takes the clock from the
+    /// node's `Time` input).
+    pub clock_ns: Option<u64>,
+    /// SYNC0 count at which the node released its leg, where the host knows it.
+    pub released_at_sync0: Option<u64>,
+    /// PDI errors, SPI traffic and execution-time figures.
+    pub pdi: NodePdi,
+}
+
+/// A leg node on the trot's segment, whatever runs its firmware: the host-compiled leg
+/// node on a firmware host ([`AnyLegRigHandle`], [`run_trot`]) or a board image executed
+/// instruction by instruction (oxicat-emu's `trot`, through [`run_trot_on`]).
+pub trait TrotNode {
+    /// The node's figures now.
+    fn trot_report(&self) -> TrotNodeReport;
+    /// Clears what the run reports over the recorded cycles: the SPI counters (and a board
+    /// image's handler times and painted stack). Called when the record starts.
+    fn reset_stats(&self);
+}
+
+impl TrotNode for AnyLegRigHandle {
+    fn trot_report(&self) -> TrotNodeReport {
+        let r = self.report();
+        TrotNodeReport {
+            clock_ns: Some(r.clock_ns),
+            released_at_sync0: r.released_at_sync0,
+            pdi: NodePdi {
+                pdi_errors: r.counters.pdi_errors,
+                spi: r.bus,
+                timing: r.timing,
+            },
+        }
+    }
+
+    fn reset_stats(&self) {
+        self.reset_bus_stats()
+    }
+}
+
+/// Puts the node of one leg on the segment: its ESC (with the SII it is given) and its
+/// firmware with the leg's rig (`RigConfig`: plant, substep, belt profile of the scenario).
+pub type AttachLeg<'a> = dyn FnMut(&mut Segment, LegId, Vec<u8>, RigConfig) -> Result<Box<dyn TrotNode>, MasterError>
+    + 'a;
+
 /// Runs scenario `s`; `progress` is called every 250 recorded cycles.
 pub fn run_trot(s: &Scenario, progress: &mut dyn FnMut(Progress)) -> Result<TrotRun, MasterError> {
+    // Four towers, each an ET1100-class ESC (the FB1111; the LAN9252's own core when the
+    // nodes reach it through a LAN9252) with the host-compiled leg node on the route.
+    let route = s.pdi_route();
+    let pdi = PdiReport {
+        route,
+        ..PdiReport::default()
+    };
+    run_trot_on(s, progress, pdi, 0, &mut |seg, leg, sii, rig| {
+        let id = seg.add(Esc::new(route.esc_config(EscConfig::et1100()), sii));
+        let h = attach_leg_routed(seg, id, leg, rig, route)
+            .map_err(|e| MasterError::Usage(format!("tower {id}: {e}")))?;
+        Ok(Box::new(h) as Box<dyn TrotNode>)
+    })
+}
+
+/// [`run_trot`] with the leg nodes `attach` puts on the segment (`pdi`: the route they
+/// use, for the report); the segment runs alone for `power_on_ns` before the master starts,
+/// as boards that boot (and reset their ESC chip) before the master comes up.
+pub fn run_trot_on(
+    s: &Scenario,
+    progress: &mut dyn FnMut(Progress),
+    pdi: PdiReport,
+    power_on_ns: u64,
+    attach: &mut AttachLeg<'_>,
+) -> Result<TrotRun, MasterError> {
     let wall0 = Instant::now();
     let phases = Phases::of(s);
 
-    // The segment: four towers in chain order, each an ET1100-class ESC (the FB1111; the
-    // LAN9252's own core when the nodes reach it through a LAN9252) with the SII generated
-    // from its build's definition, each driving the opposite leg.
-    let route = s.pdi_route();
+    // The segment: four towers in chain order, each with the SII generated from its
+    // build's definition, each driving the opposite leg.
     let mut seg = Segment::new();
-    let mut handles: Vec<(LegId, AnyLegRigHandle)> = Vec::new();
+    let mut handles: Vec<(LegId, Box<dyn TrotNode>)> = Vec::new();
     for leg in chain_legs() {
         let def = device::device(leg.side());
         let sii = oxicat_esi::sii::generate(def)
             .map_err(|e| MasterError::Usage(format!("SII of the leg node: {e}")))?;
-        let id = seg.add(Esc::new(route.esc_config(EscConfig::et1100()), sii));
-        let h = attach_leg_routed(&mut seg, id, leg, rig_config(s, leg, &phases), route)
-            .map_err(|e| MasterError::Usage(format!("tower {id}: {e}")))?;
+        let h = attach(&mut seg, leg, sii, rig_config(s, leg, &phases))?;
         handles.push((leg, h));
     }
     debug_assert_eq!(TOWER_CHAIN.len(), handles.len());
+    if power_on_ns > 0 {
+        seg.advance_to(power_on_ns);
+    }
     let segment = Arc::new(Mutex::new(seg));
 
     let storage: &'static Storage = Box::leak(Box::new(Storage::new()));
@@ -515,20 +591,16 @@ pub fn run_trot(s: &Scenario, progress: &mut dyn FnMut(Progress)) -> Result<Trot
     let (rows, mut bus, wall_recorded) = out?;
     let end_ns = segment.lock().unwrap_or_else(|e| e.into_inner()).now();
     let mut final_clock_ns = [0u64; 4];
-    let mut pdi = PdiReport {
-        route,
-        ..PdiReport::default()
-    };
+    let mut pdi = pdi;
     for (leg, h) in &handles {
-        let r = h.report();
+        let r = h.trot_report();
         let ti = table_index(*leg);
-        final_clock_ns[ti] = r.clock_ns;
-        bus.release_sync0[ti] = r.released_at_sync0.unwrap_or(0);
-        pdi.nodes[ti] = NodePdi {
-            pdi_errors: r.counters.pdi_errors,
-            spi: r.bus,
-            timing: r.timing,
+        final_clock_ns[ti] = match r.clock_ns {
+            Some(c) => c,
+            None => last_time_input_ns(&rows, ti),
         };
+        bus.release_sync0[ti] = r.released_at_sync0;
+        pdi.nodes[ti] = r.pdi;
     }
     Ok(TrotRun {
         scenario: s.clone(),
@@ -540,6 +612,14 @@ pub fn run_trot(s: &Scenario, progress: &mut dyn FnMut(Progress)) -> Result<Trot
         simulated_s: end_ns as f64 * 1e-9,
         final_clock_ns,
         pdi,
+    })
+}
+
+/// The trajectory clock the node of Table 4-1 position `ti` last reported in its `Time`
+/// input (centiseconds on the wire: ±5 ms) \[ns\].
+fn last_time_input_ns(rows: &[Row], ti: usize) -> u64 {
+    rows.last().map_or(0, |r| {
+        u64::try_from(r.inputs[ti][var::TIME]).unwrap_or(0) * 10_000_000
     })
 }
 
@@ -627,7 +707,7 @@ async fn run_master(
     phases: &Phases,
     md: &MainDevice<'static>,
     segment: &Arc<Mutex<Segment>>,
-    handles: &[(LegId, AnyLegRigHandle)],
+    handles: &[(LegId, Box<dyn TrotNode>)],
     progress: &mut dyn FnMut(Progress),
 ) -> Result<(Vec<Row>, BusStats, Duration), MasterError> {
     let lock = || segment.lock().unwrap_or_else(|e| e.into_inner());
@@ -764,7 +844,7 @@ async fn run_master(
             rec_start = Instant::now();
             // SPI traffic is reported over the recorded cycles.
             for (_, h) in handles {
-                h.reset_bus_stats();
+                h.reset_stats();
             }
         }
         // The master's outputs of this cycle.

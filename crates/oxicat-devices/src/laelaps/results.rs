@@ -336,14 +336,19 @@ pub fn summary_markdown(run: &TrotRun, s: &Summary) -> String {
         b.wkc_errors,
         b.sync0_spread_max_ns,
         b.sync0_missed,
-        b.release_sync0[0],
-        b.release_sync0[1],
-        b.release_sync0[2],
-        b.release_sync0[3]
+        sync0_no(b.release_sync0[0]),
+        sync0_no(b.release_sync0[1]),
+        sync0_no(b.release_sync0[2]),
+        sync0_no(b.release_sync0[3])
     );
     pdi_markdown(&mut o, run);
     timing_markdown(&mut o, run);
     o
+}
+
+/// A SYNC0 number, or `–` where the host does not know it.
+fn sync0_no(n: Option<u64>) -> String {
+    n.map_or_else(|| "–".into(), |n| n.to_string())
 }
 
 /// The execution-time model's figures per node (nothing when it is off).
@@ -402,16 +407,25 @@ fn pdi_markdown(o: &mut String, run: &TrotRun) {
     }
     let cycles = run.bus.cycles.max(1);
     let cycle_us = f64::from(run.scenario.bus.cycle_us);
-    let how = if p.nodes.iter().any(|n| n.timing.is_some()) {
-        "simulated: under the execution-time model each handler keeps the MCU busy that long"
+    let how = if p.machine_code {
+        "bus time = 8 bits per byte at the image's SCLK, simulated: the board images run \
+         instruction by instruction and wait for every byte"
+    } else if p.nodes.iter().any(|n| n.timing.is_some()) {
+        "bus time = 8 bits per byte at SCLK + 100 ns CS per transaction, simulated: under \
+         the execution-time model each handler keeps the MCU busy that long"
     } else {
-        "counted, not simulated: the firmware runs in zero virtual time"
+        "bus time = 8 bits per byte at SCLK + 100 ns CS per transaction, counted, not \
+         simulated: the firmware runs in zero virtual time"
+    };
+    let who = if p.machine_code {
+        "board image's"
+    } else {
+        "node's firmware"
     };
     let _ = writeln!(
         o,
-        "\nPDI: every leg node's firmware reaches its ESC through {} (the oxicat-pdi driver over \
-         the simulated chip; bus time = 8 bits per byte at SCLK + 100 ns CS per transaction, \
-         {how}). Per node and recorded cycle:\n",
+        "\nPDI: every leg {who} reaches its ESC through {} (the oxicat-pdi driver over \
+         the simulated chip; {how}). Per node and recorded cycle:\n",
         p.route
     );
     let _ = writeln!(o, "| leg | SPI transactions | SPI bytes | SPI bus time [µs] | share of the {cycle_us:.0} µs cycle | PDI errors | SPI protocol errors |");

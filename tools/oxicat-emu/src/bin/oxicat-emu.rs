@@ -17,7 +17,8 @@ use std::process::ExitCode;
 use std::sync::atomic::AtomicBool;
 use std::sync::Arc;
 
-use clap::{Parser, Subcommand};
+use clap::parser::ValueSource;
+use clap::{CommandFactory, FromArgMatches, Parser, Subcommand};
 use oxicat::sim_cmd::{host_node, serve_until_with, SimArgs};
 use oxicat_devices::laelaps::rig::{chain_legs, RigConfig};
 use oxicat_devices::registry::{add_node_on, Device, Kit, NodeError};
@@ -44,6 +45,30 @@ struct Cli {
 enum Verb {
     /// Serve a segment (as `oxicat sim`) whose nodes of the named devices run board images.
     Sim(EmuSimArgs),
+    /// The Laelaps II trot (as `oxicat trot`) with the four leg nodes' board images in the
+    /// loop (the machine-code route); adds a "Board images" section to summary.md.
+    Trot(EmuTrotArgs),
+}
+
+/// Where `.ci/run` and the firmware README build the two leg-node images.
+const RIGHT_ELF: &str =
+    "firmware/laelaps-leg/target/thumbv7em-none-eabihf/release/oxicat-firmware-laelaps-leg";
+const LEFT_ELF: &str =
+    "firmware/laelaps-leg/target/left/thumbv7em-none-eabihf/release/oxicat-firmware-laelaps-leg";
+
+#[derive(clap::Args)]
+struct EmuTrotArgs {
+    /// The left legs' image (`cargo build --release --features left-leg --target-dir
+    /// target/left` in firmware/laelaps-leg).
+    #[arg(long, value_name = "ELF", default_value = LEFT_ELF)]
+    left: PathBuf,
+    /// The right legs' image (`cargo build --release` in firmware/laelaps-leg).
+    #[arg(long, value_name = "ELF", default_value = RIGHT_ELF)]
+    right: PathBuf,
+    /// The trot's options (`--out` defaults to `out/trot-images`; `--pdi`, `--spi-mhz` and
+    /// `--bus-time` are the host-compiled route's and refused).
+    #[command(flatten)]
+    trot: oxicat::trot_cmd::TrotArgs,
 }
 
 #[derive(clap::Args)]
@@ -52,9 +77,6 @@ struct EmuSimArgs {
     /// cycling). Repeat for several devices.
     #[arg(long = "firmware", value_name = "NAME=ELF[,ELF…]", required = true)]
     firmware: Vec<String>,
-    /// SPI clock of the boards' LAN9252 in MHz.
-    #[arg(long, default_value_t = 22, value_parser = clap::value_parser!(u32).range(1..=30))]
-    spi_mhz: u32,
     #[command(flatten)]
     sim: SimArgs,
 }
@@ -101,7 +123,6 @@ fn plant_for(kit: &Kit, k: usize) -> Option<Box<dyn BoardPlant>> {
 
 fn run(args: EmuSimArgs) -> Result<(), String> {
     let images = images(&args.firmware)?;
-    let spi_mhz = args.spi_mhz;
     let add = move |seg: &mut Segment,
                     dev: Device,
                     k: usize,
@@ -118,7 +139,7 @@ fn run(args: EmuSimArgs) -> Result<(), String> {
         let image = list[k % list.len()].clone();
         // The board carries a LAN9252, whatever the device's host bench uses.
         add_node_on(seg, kit, k, EscConfig::lan9252(), drift_ppm, |seg, id| {
-            let node = EmulatedNode::with_plant(image, spi_mhz, SLICE_NS, plant_for(kit, k))
+            let node = EmulatedNode::with_plant(image, SLICE_NS, plant_for(kit, k))
                 .map_err(|e| AttachError::Image(e.to_string()))?;
             seg.attach(id, Box::new(node))
                 .map_err(AttachError::Topology)
@@ -131,10 +152,45 @@ fn run(args: EmuSimArgs) -> Result<(), String> {
     serve_until_with(&args.sim, stop, &add).map_err(|e| e.to_string())
 }
 
+fn trot(mut args: EmuTrotArgs, default_out: bool) -> Result<(), String> {
+    if args.trot.pdi.is_some() || args.trot.spi_mhz.is_some() || args.trot.bus_time {
+        return Err(
+            "--pdi, --spi-mhz and --bus-time choose the host-compiled firmware's route \
+             and timing model; the board images reach their LAN9252 over SPI1 in machine code, \
+             at the clock the image sets"
+                .into(),
+        );
+    }
+    if default_out {
+        // Next to the host-compiled run's out/trot, not over it.
+        args.trot.out = PathBuf::from("out/trot-images");
+    }
+    let read = |p: &PathBuf| std::fs::read(p).map_err(|e| format!("{}: {e}", p.display()));
+    let images = oxicat_emu::trot::LegImages::new(read(&args.left)?, read(&args.right)?)
+        .map_err(|e| format!("{} / {}: {e}", args.left.display(), args.right.display()))?;
+    let out = oxicat::trot_cmd::run_with(args.trot, &mut |s, progress| {
+        let (run, figures) = oxicat_emu::trot::run(s, &images, progress)?;
+        let md = oxicat_emu::trot::markdown(&run, &figures);
+        Ok((run, md))
+    })
+    .map_err(|e| e.to_string())?;
+    print!("{out}");
+    Ok(())
+}
+
 fn main() -> ExitCode {
-    let Cli { verb } = Cli::parse();
+    let matches = Cli::command().get_matches();
+    let verb = match Cli::from_arg_matches(&matches) {
+        Ok(Cli { verb }) => verb,
+        Err(e) => e.exit(),
+    };
+    let default_out = matches
+        .subcommand_matches("trot")
+        .and_then(|m| m.value_source("out"))
+        .is_none_or(|s| s == ValueSource::DefaultValue);
     let r = match verb {
         Verb::Sim(a) => run(a),
+        Verb::Trot(a) => trot(a, default_out),
     };
     match r {
         Ok(()) => ExitCode::SUCCESS,
