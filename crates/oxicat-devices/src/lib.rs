@@ -18,6 +18,8 @@ pub mod laelaps;
 #[cfg(feature = "bench")]
 pub mod registry;
 #[cfg(feature = "bench")]
+pub mod saved;
+#[cfg(feature = "bench")]
 pub mod twin;
 
 /// A CSV written in memory by the `csv` crate (which joins the fields and quotes those

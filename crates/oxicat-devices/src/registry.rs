@@ -153,7 +153,7 @@ impl core::fmt::Display for ResolveError {
         match self {
             Self::Unknown(n) => write!(
                 f,
-                "unknown device {n:?}; known: {}, or esi=FILE[:TYPE[:REVISION]] for a twin of a vendor's ESI",
+                "unknown device {n:?}; known: {}, esi=FILE[:TYPE[:REVISION]] for a twin of a vendor's ESI, or sii=FILE for a twin of a slave's SII image",
                 names()
             ),
             Self::Twin(e) => write!(f, "{e}"),
@@ -163,8 +163,14 @@ impl core::fmt::Display for ResolveError {
 
 impl std::error::Error for ResolveError {}
 
-/// The device `name` names: a kit, or `esi=FILE[:TYPE[:REVISION]]` for a twin.
+/// The device `name` names: a kit, `esi=FILE[:TYPE[:REVISION]]` for a twin of an ESI, or
+/// `sii=FILE` for a twin of a slave's SII image.
 pub fn resolve(name: &str) -> Result<Device, ResolveError> {
+    if let Some(file) = name.strip_prefix(crate::twin::SII_PREFIX) {
+        return crate::twin::load_sii(std::path::Path::new(file), None, None)
+            .map(Device::Twin)
+            .map_err(ResolveError::Twin);
+    }
     if let Some(spec) = name.strip_prefix(crate::twin::PREFIX) {
         return crate::twin::load(spec)
             .map(Device::Twin)

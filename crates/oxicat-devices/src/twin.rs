@@ -28,6 +28,10 @@ use crate::registry::NodeError;
 /// The prefix that names a twin where a device name is expected.
 pub const PREFIX: &str = "esi=";
 
+/// The prefix that names a twin of a slave's SII image (`sii=FILE`, binary or Intel HEX):
+/// the ESC with that EEPROM, and the stack when the SII has a mailbox ([`load_sii`]).
+pub const SII_PREFIX: &str = "sii=";
+
 /// A twin as the registry hands it out.
 #[derive(Debug)]
 pub struct Twin {
@@ -35,6 +39,9 @@ pub struct Twin {
     pub spec: String,
     /// The description.
     pub esi: oxicat_esi::twin::Twin,
+    /// The ESC information registers 0x0000..0x0009 of a recorded slave (type, revision,
+    /// build, FMMU and SM count, RAM, ports, features), served instead of [`esc_config`]'s.
+    pub esc_registers: Option<[u8; 10]>,
 }
 
 /// Why a twin could not be loaded.
@@ -44,6 +51,8 @@ pub enum LoadError {
     Read(PathBuf, std::io::Error),
     /// The ESI device cannot be served.
     Twin(PathBuf, TwinError),
+    /// A recorded slave's files are not what `oxicat scan --save` writes.
+    Saved(crate::saved::SavedError),
 }
 
 impl std::fmt::Display for LoadError {
@@ -51,6 +60,7 @@ impl std::fmt::Display for LoadError {
         match self {
             Self::Read(p, e) => write!(f, "cannot read the ESI {}: {e}", p.display()),
             Self::Twin(p, e) => write!(f, "{}: {e}", p.display()),
+            Self::Saved(e) => write!(f, "{e}"),
         }
     }
 }
@@ -89,6 +99,7 @@ pub fn load(spec: &str) -> Result<&'static Twin, LoadError> {
     let t: &'static Twin = Box::leak(Box::new(Twin {
         spec: key.clone(),
         esi,
+        esc_registers: None,
     }));
     cache()
         .lock()
@@ -100,6 +111,53 @@ pub fn load(spec: &str) -> Result<&'static Twin, LoadError> {
 fn read(path: &Path) -> Result<String, LoadError> {
     let bytes = std::fs::read(path).map_err(|e| LoadError::Read(path.to_path_buf(), e))?;
     Ok(oxicat_esi::twin::decode(&bytes))
+}
+
+/// The twin of the slave whose SII image is the file `sii` (binary or Intel HEX), with the
+/// CoE dictionary of `dictionary` (a `oxicat scan --save` dictionary file) and the ESC
+/// registers `esc_registers` where it was recorded with them; built once per process.
+pub fn load_sii(
+    sii: &Path,
+    dictionary: Option<&Path>,
+    esc_registers: Option<[u8; 10]>,
+) -> Result<&'static Twin, LoadError> {
+    // The files are read each time (a recording may change between two builds in one
+    // process); the twin is built once per content.
+    let bytes = std::fs::read(sii).map_err(|e| LoadError::Read(sii.to_path_buf(), e))?;
+    let dict_text = dictionary
+        .map(|d| std::fs::read(d).map_err(|e| LoadError::Read(d.to_path_buf(), e)))
+        .transpose()?;
+    let key = {
+        use std::hash::{Hash, Hasher};
+        let mut h = std::collections::hash_map::DefaultHasher::new();
+        (&bytes, &dict_text, esc_registers).hash(&mut h);
+        format!("{SII_PREFIX}{}#{:016x}", sii.display(), h.finish())
+    };
+    if let Some(t) = cache().lock().unwrap_or_else(|e| e.into_inner()).get(&key) {
+        return Ok(t);
+    }
+    let img = if bytes.first() == Some(&b':') {
+        oxicat_esi::sii::intel_hex(&bytes)
+            .map_err(|e| LoadError::Twin(sii.to_path_buf(), TwinError::Sii(e)))?
+    } else {
+        bytes
+    };
+    let dict = dictionary
+        .map(crate::saved::read_dictionary)
+        .transpose()
+        .map_err(LoadError::Saved)?;
+    let esi = oxicat_esi::twin::from_sii(&img, dict.as_deref())
+        .map_err(|e| LoadError::Twin(sii.to_path_buf(), e))?;
+    let t: &'static Twin = Box::leak(Box::new(Twin {
+        spec: format!("{SII_PREFIX}{}", sii.display()),
+        esi,
+        esc_registers,
+    }));
+    cache()
+        .lock()
+        .unwrap_or_else(|e| e.into_inner())
+        .insert(key, t);
+    Ok(t)
 }
 
 /// Every device type of the ESI file `path` (parsed once), each with its twin or why it
@@ -121,7 +179,11 @@ pub fn load_file(path: &Path) -> Result<Vec<Loaded>, LoadError> {
                     c.type_name,
                     c.revision
                 );
-                &*Box::leak(Box::new(Twin { spec, esi }))
+                &*Box::leak(Box::new(Twin {
+                    spec,
+                    esi,
+                    esc_registers: None,
+                }))
             });
             (c, r)
         })
@@ -131,6 +193,26 @@ pub fn load_file(path: &Path) -> Result<Vec<Loaded>, LoadError> {
 /// The ESC of a twin: an ET1100's registers with the ESI's FMMU/SM counts, process RAM and
 /// ports, and the full DC unit.
 pub fn esc_config(t: &Twin) -> EscConfig {
+    if let Some(r) = t.esc_registers {
+        let features = u16::from_le_bytes([r[8], r[9]]);
+        return EscConfig {
+            esc_type: r[0],
+            revision: r[1],
+            build: u16::from_le_bytes([r[2], r[3]]),
+            fmmu_count: r[4].clamp(1, 16),
+            sm_count: r[5].clamp(1, 16),
+            ram_kib: r[6].clamp(1, 60),
+            port_descriptor: r[7],
+            features,
+            // Feature bit 2: distributed clocks.
+            dc: if features & 0x0004 != 0 {
+                DcSupport::Full
+            } else {
+                DcSupport::None
+            },
+            ..EscConfig::et1100()
+        };
+    }
     let e = t.esi.esc;
     EscConfig {
         fmmu_count: e.fmmu_count,

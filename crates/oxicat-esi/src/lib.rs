@@ -9,11 +9,15 @@
 //!   by field; differences are typed [`Finding`]s,
 //! - [`od::table`]: the object dictionary as the stack serves it, as a text table,
 //! - [`fwimage::build`]: a firmware image (header + payload) for the FoE update flow,
+//! - [`eni::parse`] / [`eni::resolve`]: an ENI (EtherCATConfig) → its slaves, each found in
+//!   ESI files by identity,
+//! - [`twin::from_sii`]: a slave recorded by a master (SII image, dictionary) → a twin,
 //! - [`twin::build`]: a vendor's ESI device → a runtime definition + SII image + ESC
 //!   description that the one slave stack serves as a virtual twin.
 #![forbid(unsafe_code)]
 #![warn(missing_docs)]
 
+pub mod eni;
 pub mod esi;
 pub mod fwimage;
 pub mod model;

@@ -177,6 +177,8 @@ pub enum TwinError {
     Inconsistent(String),
     /// The device needs something the stack cannot represent.
     Unsupported(String),
+    /// An SII image (of a twin from a slave's SII) is malformed.
+    Sii(crate::Error),
 }
 
 impl std::fmt::Display for TwinError {
@@ -218,6 +220,7 @@ impl std::fmt::Display for TwinError {
             ),
             Self::Inconsistent(e) => write!(f, "inconsistent ESI: {e}"),
             Self::Unsupported(e) => write!(f, "cannot be served: {e}"),
+            Self::Sii(e) => write!(f, "SII image: {e}"),
         }
     }
 }
@@ -350,6 +353,19 @@ pub fn candidates(xml: &str) -> Result<Vec<Candidate>, TwinError> {
     let doc = parse_doc(xml)?;
     let esi = open(&doc)?;
     esi.devices.iter().map(|d| candidate(*d)).collect()
+}
+
+/// The vendor ID of an ESI file and its device types, in file order (what a search by
+/// identity, e.g. for an ENI's slaves, reads of each file).
+pub fn catalogue(xml: &str) -> Result<(u32, Vec<Candidate>), TwinError> {
+    let doc = parse_doc(xml)?;
+    let esi = open(&doc)?;
+    let c = esi
+        .devices
+        .iter()
+        .map(|d| candidate(*d))
+        .collect::<Result<_, _>>()?;
+    Ok((esi.vendor_id, c))
 }
 
 /// Which of `cands` `sel` names (its position), or why none or several.
@@ -1730,30 +1746,8 @@ fn build_device(esi: &Esi, d: Node, cand: Candidate) -> Result<Twin, TwinError> 
             .map_err(|e| TwinError::Unsupported(format!("the slave stack refuses it: {e}")))?;
     }
 
-    // Loop-back: the k-th output entry to the k-th input entry of the same bit length.
-    let mapped = |defs: &[PdoDef], assign: &[u16]| -> Vec<PdoEntry> {
-        assign
-            .iter()
-            .filter_map(|a| defs.iter().find(|p| p.index == *a))
-            .flat_map(|p| p.entries.iter().copied())
-            .filter(|e| e.index != 0)
-            .collect()
-    };
     let loopback = if served == Served::Stack {
-        let outs = mapped(def.rx_pdos, def.rx_assign);
-        let ins = mapped(def.tx_pdos, def.tx_assign);
-        outs.into_iter()
-            .zip(ins)
-            .filter(|(o, i)| {
-                o.bits == i.bits
-                    && def
-                        .entry_def(o.index, o.sub)
-                        .is_some_and(|e| !e.dtype.is_string())
-                    && def
-                        .entry_def(i.index, i.sub)
-                        .is_some_and(|e| !e.dtype.is_string())
-            })
-            .collect()
+        loopback_of(def)
     } else {
         Vec::new()
     };
@@ -1774,10 +1768,36 @@ fn build_device(esi: &Esi, d: Node, cand: Candidate) -> Result<Twin, TwinError> 
     })
 }
 
+/// The loop-back of a stack twin: the k-th mapped output entry to the k-th mapped input
+/// entry where both have the same bit length and neither is a string.
+pub(crate) fn loopback_of(def: &DeviceDef) -> Vec<(PdoEntry, PdoEntry)> {
+    let mapped = |defs: &[PdoDef], assign: &[u16]| -> Vec<PdoEntry> {
+        assign
+            .iter()
+            .filter_map(|a| defs.iter().find(|p| p.index == *a))
+            .flat_map(|p| p.entries.iter().copied())
+            .filter(|e| e.index != 0)
+            .collect()
+    };
+    let outs = mapped(def.rx_pdos, def.rx_assign);
+    let ins = mapped(def.tx_pdos, def.tx_assign);
+    let plain = |e: &PdoEntry| {
+        def.entry_def(e.index, e.sub)
+            .is_some_and(|d| !d.dtype.is_string())
+    };
+    outs.into_iter()
+        .zip(ins)
+        .filter(|(o, i)| o.bits == i.bits && plain(o) && plain(i))
+        .collect()
+}
+
 /// The ESI type name of a CoE data type code (for PDO entries without a dictionary).
 fn type_name(code: u16) -> String {
     oxicat_wire::datatype::by_code(code).map_or_else(String::new, |d| d.name.to_string())
 }
+
+mod from_sii;
+pub use from_sii::{from_sii, SavedEntry, SavedObject};
 
 #[cfg(test)]
 mod tests;

@@ -17,6 +17,7 @@ pub mod interrupt;
 pub mod master_cmd;
 pub mod output;
 pub mod parquet_out;
+pub mod scan_cmd;
 pub mod sim_cmd;
 pub mod sweep_cmd;
 pub mod trot_cmd;
@@ -167,6 +168,13 @@ pub enum CliError {
         /// The first failure.
         first: String,
     },
+    /// `scan --save` cannot write its directory.
+    SaveDir {
+        /// The directory.
+        dir: PathBuf,
+        /// Why.
+        why: String,
+    },
     /// A recording could not be converted to Parquet.
     Parquet {
         /// The Parquet file.
@@ -227,6 +235,9 @@ impl std::fmt::Display for CliError {
                 table.display()
             ),
             CliError::Parquet { path, error } => write!(f, "{}: {error}", path.display()),
+            CliError::SaveDir { dir, why } => {
+                write!(f, "cannot save the scan in {}: {why}", dir.display())
+            }
         }
     }
 }

@@ -1,4 +1,4 @@
-//! The master verbs of `oxicat`, after the IgH `ethercat` tool: `slaves`, `states`,
+//! The master verbs of `oxicat`, after the IgH `ethercat` tool: `slaves`, `scan`, `states`,
 //! `sii-read`, `sii-write`, `alias`, `upload`, `download`, `sdos`, `pdos`, `cstruct`,
 //! `data`, `graph`, `xml`, `reg-read`, `reg-write`, `watch`, `write`, `record`. Each runs on `--iface <if>` (or `OXICAT_IFACE`),
 //! on a segment served with EtherCAT over UDP `--udp host:port`, or, for tests and trying
@@ -56,6 +56,9 @@ pub struct PosArgs {
 pub enum MasterCommand {
     /// List the slaves: position, address, alias, AL state, name, identity, ports.
     Slaves(SlavesArgs),
+    /// Read every slave (identity, SII, CoE dictionary); with --save DIR record the machine
+    /// so that `oxicat sim --segment DIR` serves it again.
+    Scan(crate::scan_cmd::ScanArgs),
     /// Request an AL state (INIT, PREOP, SAFEOP, OP, BOOT) for all slaves or one.
     States(StatesArgs),
     /// Read a slave's SII EEPROM (decoded by default).
@@ -572,6 +575,7 @@ pub fn run(cmd: MasterCommand, out: &mut dyn Write) -> Result<(), CliError> {
     use MasterCommand as C;
     match cmd {
         C::Slaves(a) => slaves(a, out),
+        C::Scan(a) => crate::scan_cmd::scan(a, out),
         C::States(a) => states(a, out),
         C::SiiRead(a) => sii_read(a, out),
         C::SiiWrite(a) => sii_write(a, out),

@@ -24,6 +24,21 @@
 //! count as `*N`: `esi=Beckhoff-EL2xxx.xml:EL2008*4`; `oxicat sim --esi FILE:TYPE` adds one
 //! node), and `esi = "FILE:TYPE"` instead of `name` in a `[[device]]`.
 //!
+//! A slave's SII image is a device too: `sii=FILE` (binary or Intel HEX) on the command line,
+//! `sii = "FILE"` in a `[[device]]` (with `dictionary = "FILE"`, a CoE dictionary as `oxicat
+//! scan --save` writes it, and `esc_registers = "11 00 …"`, the ESC's registers
+//! 0x0000..0x0009): the ESC with that EEPROM, and the slave stack when the SII has a mailbox.
+//!
+//! A whole machine:
+//! - `--segment DIR`, a directory `oxicat scan --save DIR` wrote
+//!   ([`oxicat_devices::saved`]): each recorded slave from its SII image and dictionary;
+//! - `--eni FILE [--esi-dir DIR …]`, or `eni = "FILE"` (and `esi_dirs = ["DIR", …]`) in a
+//!   segment file: the slaves of an ENI (EtherCATConfig), each a twin of the ESI that the
+//!   search of the ESI directories (default: the ENI's directory) finds for its identity
+//!   ([`oxicat_esi::eni`]); they come before the file's `[[device]]`s.
+//!
+//! Paths in a segment file are taken as given (relative to the working directory).
+//!
 //! Limits (checked before anything is built, with the key and the range in the message):
 //! at most [`MAX_SIM_SLAVES`] nodes in all; delays 0 … [`MAX_DELAY_NS`] ns; drift
 //! −[`MAX_DRIFT_PPM`] … [`MAX_DRIFT_PPM`] ppm.
@@ -65,9 +80,17 @@ pub struct SimArgs {
     /// Serve EtherCAT over UDP on this address, e.g. 127.0.0.1:34980.
     #[arg(long)]
     pub udp: Option<String>,
-    /// A TOML segment file (devices with counts, delays, drift) instead of DEVICES.
+    /// A TOML segment file (devices with counts, delays, drift) instead of DEVICES, or a
+    /// directory `oxicat scan --save` wrote (the recorded machine).
     #[arg(long, conflicts_with = "devices")]
     pub segment: Option<PathBuf>,
+    /// The slaves of an ENI (EtherCATConfig XML), each a twin of the ESI found for its
+    /// identity in the --esi-dir directories; before DEVICES in the line.
+    #[arg(long, conflicts_with = "segment")]
+    pub eni: Option<PathBuf>,
+    /// Where --eni looks for ESI files (repeat for more; default: the ENI's directory).
+    #[arg(long, value_name = "DIR", requires = "eni")]
+    pub esi_dir: Vec<PathBuf>,
     /// Devices in line order, each NAME or NAME:COUNT (see --list), e.g. demo:4; @lan9252 or
     /// @et1100 after it runs the firmware through that chip's SPI driver (demo:4@lan9252).
     pub devices: Vec<String>,
@@ -143,6 +166,10 @@ pub enum SimError {
     SegmentFile(PathBuf, std::io::Error),
     /// The segment file is not valid.
     SegmentToml(PathBuf, String),
+    /// An ENI cannot be read or its slaves not found in ESI files.
+    Eni(PathBuf, oxicat_esi::eni::EniError),
+    /// A saved machine (a directory of `oxicat scan --save`) cannot be read.
+    Saved(oxicat_devices::saved::SavedError),
     /// A node could not be put on the segment.
     Node {
         /// Position on the segment.
@@ -196,6 +223,8 @@ impl std::fmt::Display for SimError {
             Self::Twin(e) => write!(f, "{e}"),
             Self::SegmentFile(p, e) => write!(f, "cannot read {}: {e}", p.display()),
             Self::SegmentToml(p, e) => write!(f, "{}: {e}", p.display()),
+            Self::Eni(p, e) => write!(f, "{}: {e}", p.display()),
+            Self::Saved(e) => write!(f, "{e}"),
             Self::Node {
                 position,
                 device,
@@ -223,6 +252,11 @@ pub struct SegmentFile {
     pub esc_delay_ns: Option<u64>,
     /// Default cable delay between slaves, ns.
     pub link_delay_ns: Option<u64>,
+    /// An ENI whose slaves come first in the line.
+    pub eni: Option<String>,
+    /// Where the ENI's ESI files are (default: the ENI's directory).
+    #[serde(default)]
+    pub esi_dirs: Vec<String>,
     /// The devices in line order.
     #[serde(default, rename = "device")]
     pub devices: Vec<DeviceEntry>,
@@ -237,6 +271,13 @@ pub struct DeviceEntry {
     pub name: String,
     /// A twin from an ESI, `FILE[:TYPE or PRODUCT CODE[:REVISION]]` (instead of `name`).
     pub esi: Option<String>,
+    /// A twin from a slave's SII image file (instead of `name`).
+    pub sii: Option<String>,
+    /// With `sii`: the slave's CoE dictionary (a dictionary file of `oxicat scan --save`).
+    pub dictionary: Option<String>,
+    /// With `sii`: the ESC's registers 0x0000..0x0009 as hex bytes (`11 00 03 00 08 08 08
+    /// 0f fc 01`).
+    pub esc_registers: Option<String>,
     /// How many in a row.
     #[serde(default = "one")]
     pub count: usize,
@@ -297,7 +338,8 @@ pub fn parse_specs_within(
                 range: "direct, lan9252 or et1100".into(),
             });
         }
-        let twin = spec.starts_with(oxicat_devices::twin::PREFIX);
+        let twin = spec.starts_with(oxicat_devices::twin::PREFIX)
+            || spec.starts_with(oxicat_devices::twin::SII_PREFIX);
         let split = if twin {
             spec.rsplit_once('*')
         } else {
@@ -327,6 +369,9 @@ pub fn parse_specs_within(
         seg.devices.push(DeviceEntry {
             name: name.to_string(),
             esi: None,
+            sii: None,
+            dictionary: None,
+            esc_registers: None,
             count: count as usize,
             drift_ppm: 0.0,
             esc_delay_ns: None,
@@ -342,18 +387,131 @@ fn count_range() -> String {
     format!("1 … {MAX_SIM_SLAVES} slaves in all (a frame through {MAX_SIM_SLAVES} ESCs takes a whole 1 kHz cycle)")
 }
 
-/// Reads a TOML segment file and checks its numbers.
+/// Reads a TOML segment file, or the directory of a saved machine ([`read_saved_dir`]), and
+/// checks its numbers.
 pub fn read_segment_file(path: &Path) -> Result<SegmentFile, SimError> {
+    if path.is_dir() {
+        return read_saved_dir(path);
+    }
     let text = std::fs::read_to_string(path).map_err(|e| SimError::SegmentFile(path.into(), e))?;
     parse_segment(&text, path)
 }
 
 /// Parses the text of a TOML segment file and checks its numbers (`path` is named in
-/// errors).
+/// errors); an `eni` puts the ENI's slaves first.
 pub fn parse_segment(text: &str, path: &Path) -> Result<SegmentFile, SimError> {
-    let desc: SegmentFile =
+    let mut desc: SegmentFile =
         toml::from_str(text).map_err(|e| SimError::SegmentToml(path.into(), e.to_string()))?;
+    if let Some(eni) = desc.eni.take() {
+        let dirs: Vec<PathBuf> = desc.esi_dirs.iter().map(PathBuf::from).collect();
+        let (mut devices, notes) = eni_devices(Path::new(&eni), &dirs)?;
+        for n in notes {
+            eprintln!("oxicat sim: {n}");
+        }
+        devices.append(&mut desc.devices);
+        desc.devices = devices;
+    } else if !desc.esi_dirs.is_empty() {
+        return Err(SimError::SegmentToml(
+            path.into(),
+            "esi_dirs is where an eni's ESI files are: give eni = \"FILE\" too".into(),
+        ));
+    }
     check_segment(&desc).map_err(|e| SimError::SegmentToml(path.into(), e.to_string()))?;
+    Ok(desc)
+}
+
+fn device_entry(name: String) -> DeviceEntry {
+    DeviceEntry {
+        name,
+        esi: None,
+        sii: None,
+        dictionary: None,
+        esc_registers: None,
+        count: 1,
+        drift_ppm: 0.0,
+        esc_delay_ns: None,
+        link_delay_ns: None,
+        eeprom_protect_from_word: None,
+        pdi: None,
+    }
+}
+
+/// The slaves of the ENI `eni` as devices (twins of the ESI files of `dirs`, or of the ENI's
+/// directory when `dirs` is empty), and notes on slaves served with another revision.
+pub fn eni_devices(
+    eni: &Path,
+    dirs: &[PathBuf],
+) -> Result<(Vec<DeviceEntry>, Vec<String>), SimError> {
+    let text = std::fs::read(eni).map_err(|e| SimError::SegmentFile(eni.into(), e))?;
+    let parsed = oxicat_esi::eni::parse(&oxicat_esi::twin::decode(&text))
+        .map_err(|e| SimError::Eni(eni.into(), e))?;
+    let dirs = if dirs.is_empty() {
+        vec![match eni.parent() {
+            Some(p) if !p.as_os_str().is_empty() => p.to_path_buf(),
+            _ => PathBuf::from("."),
+        }]
+    } else {
+        dirs.to_vec()
+    };
+    let found =
+        oxicat_esi::eni::resolve(&parsed, &dirs).map_err(|e| SimError::Eni(eni.into(), e))?;
+    let mut notes = Vec::new();
+    let devices = found
+        .into_iter()
+        .map(|r| {
+            notes.extend(r.note);
+            let mut d = device_entry(String::new());
+            d.esi = Some(format!(
+                "{}:{}:{:#010x}",
+                r.file.display(),
+                r.candidate.type_name,
+                r.candidate.revision
+            ));
+            d
+        })
+        .collect();
+    Ok((devices, notes))
+}
+
+/// The machine `oxicat scan --save` recorded in `dir` ([`oxicat_devices::saved`]): one
+/// device per slave, from its SII image, dictionary and ESC registers.
+pub fn read_saved_dir(dir: &Path) -> Result<SegmentFile, SimError> {
+    let m = oxicat_devices::saved::read_manifest(dir).map_err(SimError::Saved)?;
+    let devices = m
+        .slaves
+        .iter()
+        .map(|s| {
+            let mut d = device_entry(String::new());
+            d.sii = Some(dir.join(&s.sii).display().to_string());
+            d.dictionary = s
+                .dictionary
+                .as_ref()
+                .map(|f| dir.join(f).display().to_string());
+            d.esc_registers = Some(s.esc_registers.clone());
+            d
+        })
+        .collect();
+    Ok(SegmentFile {
+        devices,
+        ..SegmentFile::default()
+    })
+}
+
+/// The segment `args` describe: a segment file or saved machine, or the ENI's slaves, then
+/// DEVICES and `--esi`s.
+pub fn describe(args: &SimArgs) -> Result<SegmentFile, SimError> {
+    let mut desc = match &args.segment {
+        Some(p) => read_segment_file(p)?,
+        None => parse_specs(&args.all_devices())?,
+    };
+    if let Some(eni) = &args.eni {
+        let (mut devices, notes) = eni_devices(eni, &args.esi_dir)?;
+        for n in notes {
+            eprintln!("oxicat sim: {n}");
+        }
+        devices.append(&mut desc.devices);
+        desc.devices = devices;
+    }
     Ok(desc)
 }
 
@@ -373,13 +531,32 @@ pub fn check_segment(desc: &SegmentFile) -> Result<(), SimError> {
     delay("link_delay_ns".into(), desc.link_delay_ns)?;
     let mut total = 0usize;
     for (k, d) in desc.devices.iter().enumerate() {
-        if d.name.is_empty() == d.esi.is_none() {
+        let kinds = usize::from(!d.name.is_empty())
+            + usize::from(d.esi.is_some())
+            + usize::from(d.sii.is_some());
+        if kinds != 1 {
             return Err(SimError::Range {
-                key: format!("device[{k}].name / device[{k}].esi"),
-                value: if d.name.is_empty() { "neither".into() } else { "both".into() },
-                range: "one of them: name (a device of oxicat sim --list) or esi (FILE[:TYPE[:REVISION]])"
+                key: format!("device[{k}].name / device[{k}].esi / device[{k}].sii"),
+                value: if kinds == 0 { "none".into() } else { "several".into() },
+                range: "one of them: name (a device of oxicat sim --list), esi (FILE[:TYPE[:REVISION]]) or sii (FILE)"
                     .into(),
             });
+        }
+        if d.sii.is_none() && (d.dictionary.is_some() || d.esc_registers.is_some()) {
+            return Err(SimError::Range {
+                key: format!("device[{k}].dictionary / device[{k}].esc_registers"),
+                value: "without sii".into(),
+                range: "a device given by sii = \"FILE\" (they describe a recorded slave)".into(),
+            });
+        }
+        if let Some(r) = &d.esc_registers {
+            if oxicat_devices::saved::unhex(r).is_none_or(|b| b.len() != 10) {
+                return Err(SimError::Range {
+                    key: format!("device[{k}].esc_registers"),
+                    value: format!("{r:?}"),
+                    range: "10 hex bytes (ESC registers 0x0000 … 0x0009)".into(),
+                });
+            }
         }
         delay(format!("device[{k}].esc_delay_ns"), d.esc_delay_ns)?;
         delay(format!("device[{k}].link_delay_ns"), d.link_delay_ns)?;
@@ -437,14 +614,30 @@ pub fn build_segment_with(
     let mut seg = Segment::new();
     let mut names = Vec::new();
     for entry in &desc.devices {
-        let name = match &entry.esi {
-            Some(e) => format!("{}{e}", oxicat_devices::twin::PREFIX),
-            None => entry.name.clone(),
+        let name = match (&entry.esi, &entry.sii) {
+            (Some(e), _) => format!("{}{e}", oxicat_devices::twin::PREFIX),
+            (_, Some(s)) => format!("{}{s}", oxicat_devices::twin::SII_PREFIX),
+            _ => entry.name.clone(),
         };
-        let dev = oxicat_devices::registry::resolve(&name).map_err(|e| match e {
-            ResolveError::Unknown(n) => SimError::UnknownDevice(n),
-            e => SimError::Twin(e.to_string()),
-        })?;
+        let dev = match &entry.sii {
+            Some(sii) => {
+                let regs = entry.esc_registers.as_deref().and_then(|r| {
+                    let b = oxicat_devices::saved::unhex(r)?;
+                    <[u8; 10]>::try_from(b.as_slice()).ok()
+                });
+                oxicat_devices::twin::load_sii(
+                    Path::new(sii),
+                    entry.dictionary.as_deref().map(Path::new),
+                    regs,
+                )
+                .map(Device::Twin)
+                .map_err(|e| SimError::Twin(e.to_string()))?
+            }
+            None => oxicat_devices::registry::resolve(&name).map_err(|e| match e {
+                ResolveError::Unknown(n) => SimError::UnknownDevice(n),
+                e => SimError::Twin(e.to_string()),
+            })?,
+        };
         for k in 0..entry.count {
             if stop.load(Ordering::Relaxed) {
                 return Err(SimError::Interrupted);
@@ -572,10 +765,7 @@ pub fn serve_until_with(
     if args.iface.is_none() && args.udp.is_none() {
         return Err(SimError::NoTransport);
     }
-    let desc = match &args.segment {
-        Some(p) => read_segment_file(p)?,
-        None => parse_specs(&args.all_devices())?,
-    };
+    let desc = describe(args)?;
     check_segment(&desc)?;
     let total: usize = desc.devices.iter().map(|d| d.count).sum();
     eprintln!("oxicat sim: booting {total} slave(s); Ctrl-C to stop");
@@ -628,10 +818,7 @@ pub fn serve_udp_until_with(
     stop: Arc<AtomicBool>,
     add: AddNode<'_>,
 ) -> Result<(), SimError> {
-    let desc = match &args.segment {
-        Some(p) => read_segment_file(p)?,
-        None => parse_specs(&args.all_devices())?,
-    };
+    let desc = describe(args)?;
     let (seg, names) = build_segment_with(&desc, &AtomicBool::new(false), add)?;
     let n = seg.len();
     let config = RealtimeConfig {

@@ -46,6 +46,8 @@ fn serve_with(segment: Option<std::path::PathBuf>, devices: &[&str]) -> Served {
         segment,
         devices: devices.iter().map(|s| s.to_string()).collect(),
         esi: Vec::new(),
+        eni: None,
+        esi_dir: Vec::new(),
         list: false,
         spin: false,
         quiet: true,
