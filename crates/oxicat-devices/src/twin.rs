@@ -2,11 +2,11 @@
 //! ([`oxicat_esi::twin`]: definition, SII, ESC) booted on the one firmware host with the one
 //! slave stack, or — for a device without a mailbox — the ESC alone in device emulation.
 //!
-//! Process data: a stack twin copies each cycle the k-th mapped output entry to the k-th
-//! mapped input entry where both have the same bit length (the loop-back of
-//! [`oxicat_esi::twin::Twin::loopback`]); every other input keeps its ESI default. An ESC-only
-//! twin has no firmware: its outputs go nowhere and its inputs read 0, as a terminal's
-//! ESC with nothing wired to its pins.
+//! Process data: a stack twin's inputs do what its [`behaviour::Behaviour`] says (by
+//! default, by profile: a CiA402 device runs oxicat's drive on a motor plant, digital
+//! outputs loop back to inputs, analog inputs follow a signal generator), on the segment's
+//! virtual clock ([`firmware`]). An ESC-only twin has no firmware: its outputs go nowhere
+//! and its inputs read 0, as a terminal's ESC with nothing wired to its pins.
 //!
 //! Twins are named `esi=FILE[:TYPE or PRODUCT CODE[:REVISION]]` wherever devices are named
 //! (`oxicat sim`, `--sim`, a segment file); [`load`] builds each once per process (the
@@ -18,12 +18,16 @@ use std::sync::Mutex;
 
 use oxicat_esc::{DcSupport, Esc, EscConfig};
 use oxicat_esi::twin::{Candidate, Selector, Served, TwinError};
-use oxicat_sim::firmware::{attach_firmware, attach_firmware_via, FirmwareConfig};
-use oxicat_sim::pdi_path::PdiRoute;
+use oxicat_sim::firmware::{attach_host, boot_stack, AttachError};
+use oxicat_sim::pdi_path::{Direct, PdiRoute, SpiPath};
 use oxicat_sim::segment::{Segment, SlaveId};
-use oxicat_slave::{AlState, AlStatusCode, Application, Od, PdoEntry};
 
 use crate::registry::NodeError;
+
+pub mod behaviour;
+pub mod firmware;
+
+use behaviour::{Behaviour, Mode};
 
 /// The prefix that names a twin where a device name is expected.
 pub const PREFIX: &str = "esi=";
@@ -35,6 +39,30 @@ pub struct Twin {
     pub spec: String,
     /// The description.
     pub esi: oxicat_esi::twin::Twin,
+    /// What its process data does (by default: by profile).
+    pub behaviour: Behaviour,
+}
+
+impl Twin {
+    /// True when it runs the CiA402 drive: `behaviour = "drive"`, or by profile
+    /// ([`behaviour::is_cia402`]).
+    pub fn drives(&self) -> bool {
+        match self.behaviour.mode {
+            Mode::Drive => true,
+            Mode::Auto => behaviour::is_cia402(self.esi.def, self.esi.profile_no),
+            Mode::Loop | Mode::Hold => false,
+        }
+    }
+}
+
+/// The twin `t` with another behaviour, as a new twin (leaked like the others: one per
+/// segment-file entry that gives a behaviour).
+pub fn with_behaviour(t: &Twin, behaviour: Behaviour) -> &'static Twin {
+    Box::leak(Box::new(Twin {
+        spec: t.spec.clone(),
+        esi: t.esi.clone(),
+        behaviour,
+    }))
 }
 
 /// Why a twin could not be loaded.
@@ -89,6 +117,7 @@ pub fn load(spec: &str) -> Result<&'static Twin, LoadError> {
     let t: &'static Twin = Box::leak(Box::new(Twin {
         spec: key.clone(),
         esi,
+        behaviour: Behaviour::default(),
     }));
     cache()
         .lock()
@@ -121,7 +150,11 @@ pub fn load_file(path: &Path) -> Result<Vec<Loaded>, LoadError> {
                     c.type_name,
                     c.revision
                 );
-                &*Box::leak(Box::new(Twin { spec, esi }))
+                &*Box::leak(Box::new(Twin {
+                    spec,
+                    esi,
+                    behaviour: Behaviour::default(),
+                }))
             });
             (c, r)
         })
@@ -139,38 +172,6 @@ pub fn esc_config(t: &Twin) -> EscConfig {
         port_descriptor: e.port_descriptor,
         dc: DcSupport::Full,
         ..EscConfig::et1100()
-    }
-}
-
-/// The twin's firmware: the stack's hooks with the loop-back.
-struct Loopback(&'static [(PdoEntry, PdoEntry)]);
-
-impl<const N: usize> Application<N> for Loopback {
-    fn state_change(
-        &mut self,
-        _from: AlState,
-        _to: AlState,
-        _od: &mut Od<N>,
-    ) -> Result<(), AlStatusCode> {
-        Ok(())
-    }
-
-    fn cycle(&mut self, od: &mut Od<N>) {
-        for (o, i) in self.0 {
-            let mut buf = [0u8; 8];
-            let n = match od.bytes(o.index, o.sub) {
-                Ok(b) if b.len() <= 8 => {
-                    buf[..b.len()].copy_from_slice(b);
-                    b.len()
-                }
-                _ => continue,
-            };
-            if let Ok(d) = od.bytes_mut(i.index, i.sub) {
-                if d.len() == n {
-                    d.copy_from_slice(&buf[..n]);
-                }
-            }
-        }
     }
 }
 
@@ -205,11 +206,29 @@ fn boot<const N: usize, const M: usize>(
     id: SlaveId,
     t: &'static Twin,
     route: PdiRoute,
-) -> Result<(), oxicat_sim::firmware::AttachError> {
-    let app = Loopback(&t.esi.loopback);
-    let cfg = FirmwareConfig::default();
+) -> Result<(), AttachError> {
+    let app = firmware::TwinApp::new(t.esi.def, &t.behaviour, t.drives());
+    let cfg = firmware::schedule();
+    let bench = firmware::TwinBench;
+    let def = t.esi.def;
     match route {
-        PdiRoute::Direct => attach_firmware::<_, N, M>(segment, id, t.esi.def, app, &cfg).map(drop),
-        route => attach_firmware_via::<_, N, M>(segment, id, t.esi.def, app, &cfg, route).map(drop),
+        PdiRoute::Direct => attach_host(
+            segment,
+            id,
+            &cfg,
+            bench,
+            |_| Ok(Direct),
+            |esc, path| boot_stack::<_, N, M, _>(def, esc, app, path),
+        )
+        .map(drop),
+        route => attach_host(
+            segment,
+            id,
+            &cfg,
+            bench,
+            |esc| SpiPath::new(route, esc),
+            |esc, path| boot_stack::<_, N, M, _>(def, esc, app, path),
+        )
+        .map(drop),
     }
 }

@@ -136,6 +136,8 @@ pub struct Twin {
     pub loopback: Vec<(PdoEntry, PdoEntry)>,
     /// What of the ESI the twin does not serve, one line each.
     pub left_out: Vec<String>,
+    /// The ESI's `Profile/ProfileNo` (402: a CiA402 drive, 5001: a modular device, …).
+    pub profile_no: Option<u32>,
 }
 
 /// Why an ESI device cannot be served.
@@ -1736,24 +1738,14 @@ fn build_device(esi: &Esi, d: Node, cand: Candidate) -> Result<Twin, TwinError> 
             .iter()
             .filter_map(|a| defs.iter().find(|p| p.index == *a))
             .flat_map(|p| p.entries.iter().copied())
-            .filter(|e| e.index != 0)
             .collect()
     };
     let loopback = if served == Served::Stack {
-        let outs = mapped(def.rx_pdos, def.rx_assign);
-        let ins = mapped(def.tx_pdos, def.tx_assign);
-        outs.into_iter()
-            .zip(ins)
-            .filter(|(o, i)| {
-                o.bits == i.bits
-                    && def
-                        .entry_def(o.index, o.sub)
-                        .is_some_and(|e| !e.dtype.is_string())
-                    && def
-                        .entry_def(i.index, i.sub)
-                        .is_some_and(|e| !e.dtype.is_string())
-            })
-            .collect()
+        loop_pairs(
+            def,
+            &mapped(def.rx_pdos, def.rx_assign),
+            &mapped(def.tx_pdos, def.tx_assign),
+        )
     } else {
         Vec::new()
     };
@@ -1771,7 +1763,29 @@ fn build_device(esi: &Esi, d: Node, cand: Candidate) -> Result<Twin, TwinError> 
         },
         loopback,
         left_out,
+        profile_no: m.profile_no,
     })
+}
+
+/// The loop-back pairs of a mapping: the k-th mapped output entry to the k-th mapped input
+/// entry (gaps skipped) where both have the same bit length and neither is a string. The
+/// twin's default for digital I/O, where outputs and inputs pair up.
+pub fn loop_pairs(
+    def: &DeviceDef,
+    outputs: &[PdoEntry],
+    inputs: &[PdoEntry],
+) -> Vec<(PdoEntry, PdoEntry)> {
+    let scalar = |e: &PdoEntry| {
+        def.entry_def(e.index, e.sub)
+            .is_some_and(|d| !d.dtype.is_string())
+    };
+    outputs
+        .iter()
+        .filter(|e| e.index != 0)
+        .zip(inputs.iter().filter(|e| e.index != 0))
+        .filter(|(o, i)| o.bits == i.bits && scalar(o) && scalar(i))
+        .map(|(o, i)| (*o, *i))
+        .collect()
 }
 
 /// The ESI type name of a CoE data type code (for PDO entries without a dictionary).
