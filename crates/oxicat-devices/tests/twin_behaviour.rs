@@ -71,6 +71,121 @@ fn int(b: &[u8], signed: bool) -> i64 {
     }
 }
 
+/// What [`enable_and_ramp`] saw.
+struct DriveRun {
+    /// (controlword, state reached) per step of the enable sequence.
+    seen: Vec<(u16, State)>,
+    /// 0x6061 in the last cycle.
+    mode_display: i64,
+    /// Largest |set-point sent last cycle − actual position| during the ramp.
+    max_err: i64,
+    /// Final position − final target.
+    end_err: i64,
+}
+
+const STEPS: [(u16, State); 3] = [
+    (0x06, State::ReadyToSwitchOn),
+    (0x07, State::SwitchedOn),
+    (0x0F, State::OperationEnabled),
+];
+const MOVE: i64 = 40_000;
+const RAMP: u64 = 800;
+
+/// Walks slave 0 through 0x06/0x07/0x0F (the statusword read back after each; CSP sent in
+/// 0x6060 when the PDOs carry it), then streams an 800 ms cosine ramp of [`MOVE`] counts in
+/// 0x607A at 1 kHz DC and lets it settle 150 ms.
+fn enable_and_ramp(m: &mut Master, vars: &[Variable]) -> DriveRun {
+    let cw = var(vars, Dir::Output, (0x6040, 0));
+    let mode = vars
+        .iter()
+        .find(|v| v.dir == Dir::Output && v.object == (0x6060, 0))
+        .cloned();
+    let target = var(vars, Dir::Output, (0x607A, 0));
+    let sw = var(vars, Dir::Input, (0x6041, 0));
+    let mode_display = var(vars, Dir::Input, (0x6061, 0));
+    let pos = var(vars, Dir::Input, (0x6064, 0));
+    // Phases: 0 wait for Switch on disabled, 1..=3 the controlwords, 4 the ramp, 5 settle.
+    let mut phase = 0usize;
+    let mut since = 0u64;
+    let mut run = DriveRun {
+        seen: Vec::new(),
+        mode_display: 0,
+        max_err: 0,
+        end_err: i64::MAX,
+    };
+    let mut start_pos = 0i64;
+    let mut last_target = 0i64;
+    let stats = m
+        .run_cyclic(
+            CycleOptions {
+                cycle: Duration::from_millis(1),
+                dc: true,
+            },
+            |io| {
+                let s = int(&io.get(&sw), false) as u16;
+                let state = State::decode(s);
+                let p = int(&io.get(&pos), true);
+                run.mode_display = int(&io.get(&mode_display), true);
+                since += 1;
+                assert!(
+                    phase >= 4 || since < 200,
+                    "phase {phase}: statusword {s:#06x} ({state:?})"
+                );
+                match phase {
+                    0 => {
+                        if let Some(mode) = &mode {
+                            io.set(mode, &[8]).unwrap();
+                        }
+                        io.set(&cw, &0u16.to_le_bytes()).unwrap();
+                        if state == Some(State::SwitchOnDisabled) {
+                            phase = 1;
+                            since = 0;
+                            io.set(&cw, &STEPS[0].0.to_le_bytes()).unwrap();
+                        }
+                    }
+                    1..=3 => {
+                        let (c, want) = STEPS[phase - 1];
+                        if state == Some(want) {
+                            run.seen.push((c, want));
+                            phase += 1;
+                            since = 0;
+                            if phase <= 3 {
+                                io.set(&cw, &STEPS[phase - 1].0.to_le_bytes()).unwrap();
+                            } else {
+                                start_pos = p;
+                                last_target = p;
+                            }
+                        }
+                    }
+                    4 => {
+                        // The set-point sent last cycle against the position now: the
+                        // drive runs one cycle behind the frame.
+                        run.max_err = run.max_err.max((last_target - p).abs());
+                        let k = since.min(RAMP) as f64 / RAMP as f64;
+                        let x = 0.5 - 0.5 * (std::f64::consts::PI * k).cos();
+                        let tp = start_pos + (MOVE as f64 * x).round() as i64;
+                        io.set(&target, &(tp as i32).to_le_bytes()).unwrap();
+                        last_target = tp;
+                        if since >= RAMP {
+                            phase = 5;
+                            since = 0;
+                        }
+                    }
+                    _ => {
+                        run.end_err = p - (start_pos + MOVE);
+                        if since >= 150 {
+                            return Ok(Flow::Stop);
+                        }
+                    }
+                }
+                Ok(Flow::Continue)
+            },
+        )
+        .unwrap();
+    assert_eq!(stats.wkc_errors, 0);
+    run
+}
+
 #[test]
 fn a_cia402_twin_from_a_vendor_esi_enables_and_follows_a_csp_ramp_under_ethercrab() {
     big(|| {
@@ -81,104 +196,59 @@ fn a_cia402_twin_from_a_vendor_esi_enables_and_follows_a_csp_ramp_under_ethercra
             "the SOMANET twin runs the CiA402 drive by profile"
         );
         let (mut m, _seg, vars) = open(t);
-        let cw = var(&vars, Dir::Output, (0x6040, 0));
-        let mode = var(&vars, Dir::Output, (0x6060, 0));
-        let target = var(&vars, Dir::Output, (0x607A, 0));
-        let sw = var(&vars, Dir::Input, (0x6041, 0));
-        let mode_display = var(&vars, Dir::Input, (0x6061, 0));
-        let pos = var(&vars, Dir::Input, (0x6064, 0));
-
-        // Phases: 0 wait for Switch on disabled, 1..=3 the controlwords, 4 the ramp, 5 settle.
-        const STEPS: [(u16, State); 3] = [
-            (0x06, State::ReadyToSwitchOn),
-            (0x07, State::SwitchedOn),
-            (0x0F, State::OperationEnabled),
-        ];
-        const MOVE: i64 = 40_000;
-        const RAMP: u64 = 800;
-        let mut phase = 0usize;
-        let mut since = 0u64;
-        let mut seen: Vec<(u16, State)> = Vec::new();
-        let mut start_pos = 0i64;
-        let mut max_err = 0i64;
-        let mut last_target = 0i64;
-        let mut final_pos = 0i64;
-        let mut modes = Vec::new();
-        let stats = m
-            .run_cyclic(
-                CycleOptions {
-                    cycle: Duration::from_millis(1),
-                    dc: true,
-                },
-                |io| {
-                    let s = int(&io.get(&sw), false) as u16;
-                    let state = State::decode(s);
-                    let p = int(&io.get(&pos), true);
-                    modes.push(int(&io.get(&mode_display), true));
-                    since += 1;
-                    assert!(
-                        phase >= 4 || since < 200,
-                        "phase {phase}: statusword {s:#06x} ({state:?})"
-                    );
-                    match phase {
-                        0 => {
-                            io.set(&mode, &[8]).unwrap();
-                            io.set(&cw, &0u16.to_le_bytes()).unwrap();
-                            if state == Some(State::SwitchOnDisabled) {
-                                phase = 1;
-                                since = 0;
-                                io.set(&cw, &STEPS[0].0.to_le_bytes()).unwrap();
-                            }
-                        }
-                        1..=3 => {
-                            let (c, want) = STEPS[phase - 1];
-                            if state == Some(want) {
-                                seen.push((c, want));
-                                phase += 1;
-                                since = 0;
-                                if phase <= 3 {
-                                    io.set(&cw, &STEPS[phase - 1].0.to_le_bytes()).unwrap();
-                                } else {
-                                    start_pos = p;
-                                    last_target = p;
-                                }
-                            }
-                        }
-                        4 => {
-                            // The set-point sent last cycle against the position now: the
-                            // drive runs one cycle behind the frame.
-                            max_err = max_err.max((last_target - p).abs());
-                            let k = since.min(RAMP) as f64 / RAMP as f64;
-                            let x = 0.5 - 0.5 * (std::f64::consts::PI * k).cos();
-                            let tp = start_pos + (MOVE as f64 * x).round() as i64;
-                            io.set(&target, &(tp as i32).to_le_bytes()).unwrap();
-                            last_target = tp;
-                            if since >= RAMP {
-                                phase = 5;
-                                since = 0;
-                            }
-                        }
-                        _ => {
-                            final_pos = p;
-                            if since >= 150 {
-                                return Ok(Flow::Stop);
-                            }
-                        }
-                    }
-                    Ok(Flow::Continue)
-                },
-            )
-            .unwrap();
-        assert_eq!(stats.wkc_errors, 0);
-        assert_eq!(seen, STEPS.to_vec(), "statusword after 0x06, 0x07, 0x0F");
-        assert_eq!(modes.last(), Some(&8), "0x6061 shows CSP");
-        eprintln!("SOMANET twin, CSP ramp of {MOVE} counts: max following error {max_err}");
-        assert!(max_err < 400, "max following error {max_err} counts");
-        assert!(
-            (final_pos - (start_pos + MOVE)).abs() < 50,
-            "ended at {final_pos}, target {}",
-            start_pos + MOVE
+        let run = enable_and_ramp(&mut m, &vars);
+        assert_eq!(
+            run.seen,
+            STEPS.to_vec(),
+            "statusword after 0x06, 0x07, 0x0F"
         );
+        assert_eq!(run.mode_display, 8, "0x6061 shows CSP");
+        eprintln!(
+            "SOMANET twin, CSP ramp of {MOVE} counts: max following error {}, end {}",
+            run.max_err, run.end_err
+        );
+        assert!(run.max_err < 400, "max following error {}", run.max_err);
+        assert!(run.end_err.abs() < 50, "ended {} counts off", run.end_err);
+    });
+}
+
+/// Ingenia's EVS-NET-01 (ProfileNo 402, but 0x1000 = 4): the master assigns the alternative
+/// RxPDO 0x1601 (controlword and target position only) in PREOP, so the mode goes by SDO
+/// (0x6060 is in the dictionary, not in those PDOs); the twin resolves the new layout when
+/// it enters SAFEOP. The ESI's following-error window (0x6065 = 100 counts for 0x6066 =
+/// 10 ms) is the drive's, and the ramp stays within it.
+#[test]
+fn a_cia402_twin_runs_on_a_pdo_layout_the_master_chose() {
+    big(|| {
+        let t = twin("esi-vendor/ingenia_esi.xml");
+        assert_eq!(t.esi.def.device_type & 0xFFFF, 4);
+        assert!(t.drives(), "ProfileNo 402 with 0x6040/0x6041: the drive");
+        let (mut m, _seg, _) = open(t);
+        m.sdo_download(0, 0x1C12, 0, &[0]).unwrap();
+        m.sdo_download(0, 0x1C12, 1, &0x1601u16.to_le_bytes())
+            .unwrap();
+        m.sdo_download(0, 0x1C12, 0, &[1]).unwrap();
+        m.sdo_download(0, 0x6060, 0, &[8]).unwrap();
+        let vars = variables(&m.pdos(0).unwrap());
+        let outs: Vec<(u16, u8)> = vars
+            .iter()
+            .filter(|v| v.dir == Dir::Output)
+            .map(|v| v.object)
+            .collect();
+        assert_eq!(outs, vec![(0x6040, 0), (0x607A, 0)]);
+        let run = enable_and_ramp(&mut m, &vars);
+        assert_eq!(
+            run.seen,
+            STEPS.to_vec(),
+            "statusword after 0x06, 0x07, 0x0F"
+        );
+        assert_eq!(run.mode_display, 8, "0x6061 shows the mode set by SDO");
+        eprintln!(
+            "Ingenia twin on 0x1601, CSP ramp of {MOVE} counts: max following error {}, end {}",
+            run.max_err, run.end_err
+        );
+        assert!(run.max_err < 400, "max following error {}", run.max_err);
+        assert!(run.end_err.abs() < 50, "ended {} counts off", run.end_err);
     });
 }
 

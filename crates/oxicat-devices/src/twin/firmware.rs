@@ -269,6 +269,58 @@ pub fn schedule() -> FirmwareConfig {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::cia402::device::{DEF, IMAGE, OBJECTS};
+    use crate::cia402::State;
+
+    /// A dictionary with only 0x6040, 0x6041, 0x607A and 0x6064 of the joint's objects (a
+    /// foreign layout: not the drive's own, no 0x6060): the drive locates them, runs CSP,
+    /// the mode fixed by the set-point it has.
+    #[test]
+    fn the_drive_runs_csp_on_a_dictionary_with_four_of_its_objects() {
+        let objects: Vec<_> = OBJECTS
+            .iter()
+            .filter(|o| matches!(o.index, 0x6040 | 0x6041 | 0x607A | 0x6064))
+            .copied()
+            .collect();
+        let def: &'static DeviceDef = Box::leak(Box::new(DeviceDef {
+            objects: Box::leak(objects.into_boxed_slice()),
+            rx_pdos: &[],
+            tx_pdos: &[],
+            rx_assign: &[],
+            tx_assign: &[],
+            ..DEF
+        }));
+        let mut od = Od::<IMAGE>::new(def).unwrap();
+        assert!(!od.built_on(OBJECTS));
+        let mut app = new_app(BldcJointParams::default());
+        let cycle = |app: &mut JointApp, od: &mut Od<IMAGE>| {
+            for _ in 0..20 {
+                app.hw.joint.step(TICK_NS as f64 * 1e-9);
+                app.run_current_loop();
+            }
+            app.run_cycle(od);
+            State::decode(od.get::<u16>(0x6041, 0).unwrap())
+        };
+        assert_eq!(cycle(&mut app, &mut od), Some(State::SwitchOnDisabled));
+        for (cw, want) in [
+            (0x06u16, State::ReadyToSwitchOn),
+            (0x07, State::SwitchedOn),
+            (0x0F, State::OperationEnabled),
+        ] {
+            od.set(0x6040, 0, cw).unwrap();
+            assert_eq!(cycle(&mut app, &mut od), Some(want), "after {cw:#04x}");
+        }
+        let start = od.get::<i32>(0x6064, 0).unwrap();
+        for k in 1..=500 {
+            od.set(0x607A, 0, start + 20 * k).unwrap();
+            cycle(&mut app, &mut od);
+        }
+        for _ in 0..100 {
+            cycle(&mut app, &mut od);
+        }
+        let end = od.get::<i32>(0x6064, 0).unwrap();
+        assert!((end - (start + 10_000)).abs() < 50, "{start} → {end}");
+    }
 
     #[test]
     fn values_are_rounded_and_saturated_to_the_entry_type() {
