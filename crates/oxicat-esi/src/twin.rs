@@ -131,8 +131,8 @@ pub struct Twin {
     pub image_bytes: usize,
     /// The larger of the two mailbox sizes (0 without a mailbox).
     pub mailbox_bytes: u16,
-    /// Output entry → input entry copied each cycle (outputs looped back to inputs where
-    /// the k-th mapped output and the k-th mapped input entry have the same bit length).
+    /// The loop-back pairs of the default mapping ([`loop_pairs`]); a twin's firmware pairs
+    /// the mapping the master left active when the process data starts.
     pub loopback: Vec<(PdoEntry, PdoEntry)>,
     /// What of the ESI the twin does not serve, one line each.
     pub left_out: Vec<String>,
