@@ -2,11 +2,11 @@
 //! ([`oxicat_esi::twin`]: definition, SII, ESC) booted on the one firmware host with the one
 //! slave stack, or — for a device without a mailbox — the ESC alone in device emulation.
 //!
-//! Process data: a stack twin copies each cycle the k-th mapped output entry to the k-th
-//! mapped input entry where both have the same bit length (the loop-back of
-//! [`oxicat_esi::twin::Twin::loopback`]); every other input keeps its ESI default. An ESC-only
-//! twin has no firmware: its outputs go nowhere and its inputs read 0, as a terminal's
-//! ESC with nothing wired to its pins.
+//! Process data: a stack twin's inputs do what its [`behaviour::Behaviour`] says (by
+//! default, by profile: a CiA402 device runs oxicat's drive on a motor plant, digital
+//! outputs loop back to inputs, analog inputs follow a signal generator), on the segment's
+//! virtual clock ([`firmware`]). An ESC-only twin has no firmware: its outputs go nowhere
+//! and its inputs read 0, as a terminal's ESC with nothing wired to its pins.
 //!
 //! Twins are named `esi=FILE[:TYPE or PRODUCT CODE[:REVISION]]` wherever devices are named
 //! (`oxicat sim`, `--sim`, a segment file); [`load`] builds each once per process (the
@@ -18,12 +18,16 @@ use std::sync::Mutex;
 
 use oxicat_esc::{DcSupport, Esc, EscConfig};
 use oxicat_esi::twin::{Candidate, Selector, Served, TwinError};
-use oxicat_sim::firmware::{attach_firmware, attach_firmware_via, FirmwareConfig};
-use oxicat_sim::pdi_path::PdiRoute;
+use oxicat_sim::firmware::{attach_host, boot_stack, AttachError};
+use oxicat_sim::pdi_path::{Direct, PdiRoute, SpiPath};
 use oxicat_sim::segment::{Segment, SlaveId};
-use oxicat_slave::{AlState, AlStatusCode, Application, Od, PdoEntry};
 
 use crate::registry::NodeError;
+
+pub mod behaviour;
+pub mod firmware;
+
+use behaviour::{Behaviour, Mode};
 
 /// The prefix that names a twin where a device name is expected.
 pub const PREFIX: &str = "esi=";
@@ -42,6 +46,31 @@ pub struct Twin {
     /// The ESC information registers 0x0000..0x0009 of a recorded slave (type, revision,
     /// build, FMMU and SM count, RAM, ports, features), served instead of [`esc_config`]'s.
     pub esc_registers: Option<[u8; 10]>,
+    /// What its process data does (by default: by profile).
+    pub behaviour: Behaviour,
+}
+
+impl Twin {
+    /// True when it runs the CiA402 drive: `behaviour = "drive"`, or by profile
+    /// ([`behaviour::is_cia402`]).
+    pub fn drives(&self) -> bool {
+        match self.behaviour.mode {
+            Mode::Drive => true,
+            Mode::Auto => behaviour::is_cia402(self.esi.def, self.esi.profile_no),
+            Mode::Loop | Mode::Hold => false,
+        }
+    }
+}
+
+/// The twin `t` with another behaviour, as a new twin (leaked like the others: one per
+/// segment-file entry that gives a behaviour).
+pub fn with_behaviour(t: &Twin, behaviour: Behaviour) -> &'static Twin {
+    Box::leak(Box::new(Twin {
+        spec: t.spec.clone(),
+        esi: t.esi.clone(),
+        esc_registers: t.esc_registers,
+        behaviour,
+    }))
 }
 
 /// Why a twin could not be loaded.
@@ -100,6 +129,7 @@ pub fn load(spec: &str) -> Result<&'static Twin, LoadError> {
         spec: key.clone(),
         esi,
         esc_registers: None,
+        behaviour: Behaviour::default(),
     }));
     cache()
         .lock()
@@ -152,6 +182,7 @@ pub fn load_sii(
         spec: format!("{SII_PREFIX}{}", sii.display()),
         esi,
         esc_registers,
+        behaviour: Behaviour::default(),
     }));
     cache()
         .lock()
@@ -183,6 +214,7 @@ pub fn load_file(path: &Path) -> Result<Vec<Loaded>, LoadError> {
                     spec,
                     esi,
                     esc_registers: None,
+                    behaviour: Behaviour::default(),
                 }))
             });
             (c, r)
@@ -224,38 +256,6 @@ pub fn esc_config(t: &Twin) -> EscConfig {
     }
 }
 
-/// The twin's firmware: the stack's hooks with the loop-back.
-struct Loopback(&'static [(PdoEntry, PdoEntry)]);
-
-impl<const N: usize> Application<N> for Loopback {
-    fn state_change(
-        &mut self,
-        _from: AlState,
-        _to: AlState,
-        _od: &mut Od<N>,
-    ) -> Result<(), AlStatusCode> {
-        Ok(())
-    }
-
-    fn cycle(&mut self, od: &mut Od<N>) {
-        for (o, i) in self.0 {
-            let mut buf = [0u8; 8];
-            let n = match od.bytes(o.index, o.sub) {
-                Ok(b) if b.len() <= 8 => {
-                    buf[..b.len()].copy_from_slice(b);
-                    b.len()
-                }
-                _ => continue,
-            };
-            if let Ok(d) = od.bytes_mut(i.index, i.sub) {
-                if d.len() == n {
-                    d.copy_from_slice(&buf[..n]);
-                }
-            }
-        }
-    }
-}
-
 /// Adds node `k` of twin `t` at the end of the segment's line (oscillator off by
 /// `drift_ppm`) and boots it: the stack through `route`, or nothing for an ESC-only twin.
 pub fn add_node(
@@ -287,11 +287,29 @@ fn boot<const N: usize, const M: usize>(
     id: SlaveId,
     t: &'static Twin,
     route: PdiRoute,
-) -> Result<(), oxicat_sim::firmware::AttachError> {
-    let app = Loopback(&t.esi.loopback);
-    let cfg = FirmwareConfig::default();
+) -> Result<(), AttachError> {
+    let app = firmware::TwinApp::new(t.esi.def, &t.behaviour, t.drives());
+    let cfg = firmware::schedule();
+    let bench = firmware::TwinBench;
+    let def = t.esi.def;
     match route {
-        PdiRoute::Direct => attach_firmware::<_, N, M>(segment, id, t.esi.def, app, &cfg).map(drop),
-        route => attach_firmware_via::<_, N, M>(segment, id, t.esi.def, app, &cfg, route).map(drop),
+        PdiRoute::Direct => attach_host(
+            segment,
+            id,
+            &cfg,
+            bench,
+            |_| Ok(Direct),
+            |esc, path| boot_stack::<_, N, M, _>(def, esc, app, path),
+        )
+        .map(drop),
+        route => attach_host(
+            segment,
+            id,
+            &cfg,
+            bench,
+            |esc| SpiPath::new(route, esc),
+            |esc, path| boot_stack::<_, N, M, _>(def, esc, app, path),
+        )
+        .map(drop),
     }
 }

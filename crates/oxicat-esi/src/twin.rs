@@ -131,11 +131,13 @@ pub struct Twin {
     pub image_bytes: usize,
     /// The larger of the two mailbox sizes (0 without a mailbox).
     pub mailbox_bytes: u16,
-    /// Output entry → input entry copied each cycle (outputs looped back to inputs where
-    /// the k-th mapped output and the k-th mapped input entry have the same bit length).
+    /// The loop-back pairs of the default mapping ([`loop_pairs`]); a twin's firmware pairs
+    /// the mapping the master left active when the process data starts.
     pub loopback: Vec<(PdoEntry, PdoEntry)>,
     /// What of the ESI the twin does not serve, one line each.
     pub left_out: Vec<String>,
+    /// The ESI's `Profile/ProfileNo` (402: a CiA402 drive, 5001: a modular device, …).
+    pub profile_no: Option<u32>,
 }
 
 /// Why an ESI device cannot be served.
@@ -1765,29 +1767,44 @@ fn build_device(esi: &Esi, d: Node, cand: Candidate) -> Result<Twin, TwinError> 
         },
         loopback,
         left_out,
+        profile_no: m.profile_no,
     })
 }
 
-/// The loop-back of a stack twin: the k-th mapped output entry to the k-th mapped input
-/// entry where both have the same bit length and neither is a string.
+/// The loop-back of a stack twin's default mapping ([`loop_pairs`] of its assigned PDOs).
 pub(crate) fn loopback_of(def: &DeviceDef) -> Vec<(PdoEntry, PdoEntry)> {
     let mapped = |defs: &[PdoDef], assign: &[u16]| -> Vec<PdoEntry> {
         assign
             .iter()
             .filter_map(|a| defs.iter().find(|p| p.index == *a))
             .flat_map(|p| p.entries.iter().copied())
-            .filter(|e| e.index != 0)
             .collect()
     };
-    let outs = mapped(def.rx_pdos, def.rx_assign);
-    let ins = mapped(def.tx_pdos, def.tx_assign);
-    let plain = |e: &PdoEntry| {
+    loop_pairs(
+        def,
+        &mapped(def.rx_pdos, def.rx_assign),
+        &mapped(def.tx_pdos, def.tx_assign),
+    )
+}
+
+/// The loop-back pairs of a mapping: the k-th mapped output entry to the k-th mapped input
+/// entry (gaps skipped) where both have the same bit length and neither is a string. The
+/// twin's default for digital I/O, where outputs and inputs pair up.
+pub fn loop_pairs(
+    def: &DeviceDef,
+    outputs: &[PdoEntry],
+    inputs: &[PdoEntry],
+) -> Vec<(PdoEntry, PdoEntry)> {
+    let scalar = |e: &PdoEntry| {
         def.entry_def(e.index, e.sub)
             .is_some_and(|d| !d.dtype.is_string())
     };
-    outs.into_iter()
-        .zip(ins)
-        .filter(|(o, i)| o.bits == i.bits && plain(o) && plain(i))
+    outputs
+        .iter()
+        .filter(|e| e.index != 0)
+        .zip(inputs.iter().filter(|e| e.index != 0))
+        .filter(|(o, i)| o.bits == i.bits && scalar(o) && scalar(i))
+        .map(|(o, i)| (*o, *i))
         .collect()
 }
 

@@ -39,6 +39,45 @@
 //!
 //! Paths in a segment file are taken as given (relative to the working directory).
 //!
+//! What a twin's process data does (twins served by the stack, i.e. with a mailbox;
+//! [`oxicat_devices::twin::behaviour`]) is `behaviour` in its `[[device]]` and one
+//! `[[device.entry]]` per input entry that should do something else:
+//!
+//! ```toml
+//! [[device]]
+//! esi = "SOMANET_CiA_402.xml"
+//! behaviour = "auto"          # by profile (default): CiA402 → drive, digital I/O → loop,
+//!                             # analog inputs → a 1 Hz sine; or "loop", "hold", "drive"
+//!
+//! [[device]]
+//! esi = "kickcat-freedom-k64f.xml"
+//! [[device.entry]]
+//! entry = "0x6001:0"          # INDEX:SUB, or the entry's name in the dictionary
+//! sine = { amplitude = 1000, frequency_hz = 2.0, offset = 0, phase_deg = 0 }
+//! [[device.entry]]
+//! entry = "0x6000:0"
+//! hold = -1234                # or: constant = 5
+//! [[device.entry]]
+//! entry = "0x6002:0"
+//! ramp = { slope_per_s = 100, start = 0, min = -500, max = 500 }   # min/max: wraps
+//! [[device.entry]]
+//! entry = "0x6003:0"
+//! noise = { amplitude = 20, seed = 7, offset = 0 }
+//! [[device.entry]]
+//! entry = "0x6004:0"
+//! csv = { file = "profile.csv", repeat = true }   # lines time_s,value
+//! [[device.entry]]
+//! entry = "0x6005:0"
+//! loop = "0x7000:0"           # copy an output entry of the same bit length
+//! ```
+//!
+//! Signals run on the segment's virtual time (seconds since it was made) and write raw
+//! values, rounded and saturated to the entry's type. Each entry takes exactly one of
+//! `loop`, `hold`, `constant`, `sine`, `ramp`, `noise`, `csv`; an unknown entry, a number
+//! that is not finite, an unreadable or malformed CSV file, `behaviour` on a device that is
+//! not a twin or on a twin without a mailbox are refused, naming the key
+//! (`device[1].entry[0].sine.amplitude`).
+//!
 //! Limits (checked before anything is built, with the key and the range in the message):
 //! at most [`MAX_SIM_SLAVES`] nodes in all; delays 0 … [`MAX_DELAY_NS`] ns; drift
 //! −[`MAX_DRIFT_PPM`] … [`MAX_DRIFT_PPM`] ppm.
@@ -55,6 +94,7 @@ use oxicat_sim::segment::{Segment, TopologyError};
 use serde::Deserialize;
 
 use oxicat_devices::registry::{add_device_node, Device, NodeError, ResolveError};
+use oxicat_devices::twin::behaviour::{Behaviour, EntrySpec, Mode};
 use oxicat_sim::pdi_path::PdiRoute;
 
 /// Most nodes on a served segment: a frame passes every ESC twice (processing on the way
@@ -294,6 +334,12 @@ pub struct DeviceEntry {
     /// How the firmware reaches its ESC: `direct` (default), `lan9252` or `et1100` (the
     /// chip's SPI driver over the simulated SPI bus at [`SPI_MHZ`] MHz).
     pub pdi: Option<String>,
+    /// Twins: what their process data does, `auto` (by profile, the default), `loop`,
+    /// `hold` or `drive` ([`oxicat_devices::twin::behaviour`]).
+    pub behaviour: Option<String>,
+    /// Twins: what single input entries do (`[[device.entry]]`).
+    #[serde(default, rename = "entry")]
+    pub entries: Vec<EntrySpec>,
 }
 
 /// SPI clock of the `lan9252` / `et1100` routes of `sim` and `--sim`.
@@ -378,6 +424,8 @@ pub fn parse_specs_within(
             link_delay_ns: None,
             eeprom_protect_from_word: None,
             pdi,
+            behaviour: None,
+            entries: Vec::new(),
         });
     }
     Ok(seg)
@@ -433,6 +481,8 @@ fn device_entry(name: String) -> DeviceEntry {
         link_delay_ns: None,
         eeprom_protect_from_word: None,
         pdi: None,
+        behaviour: None,
+        entries: Vec::new(),
     }
 }
 
@@ -558,6 +608,20 @@ pub fn check_segment(desc: &SegmentFile) -> Result<(), SimError> {
                 });
             }
         }
+        if d.esi.is_none() && d.sii.is_none() && (d.behaviour.is_some() || !d.entries.is_empty()) {
+            return Err(SimError::Twin(format!(
+                "device[{k}].behaviour / device[{k}].entry: {:?} is not a twin; behaviour is for \
+                 twins (esi = \"FILE:TYPE\", sii = \"FILE\"), a device of this repository runs its own firmware",
+                d.name
+            )));
+        }
+        if let Some(b) = d.behaviour.as_deref().filter(|b| Mode::parse(b).is_none()) {
+            return Err(SimError::Range {
+                key: format!("device[{k}].behaviour"),
+                value: format!("{b:?}"),
+                range: "auto, loop, hold or drive".into(),
+            });
+        }
         delay(format!("device[{k}].esc_delay_ns"), d.esc_delay_ns)?;
         delay(format!("device[{k}].link_delay_ns"), d.link_delay_ns)?;
         if !(d.drift_ppm.is_finite() && d.drift_ppm.abs() <= MAX_DRIFT_PPM) {
@@ -613,7 +677,7 @@ pub fn build_segment_with(
     check_segment(desc)?;
     let mut seg = Segment::new();
     let mut names = Vec::new();
-    for entry in &desc.devices {
+    for (j, entry) in desc.devices.iter().enumerate() {
         let name = match (&entry.esi, &entry.sii) {
             (Some(e), _) => format!("{}{e}", oxicat_devices::twin::PREFIX),
             (_, Some(s)) => format!("{}{s}", oxicat_devices::twin::SII_PREFIX),
@@ -638,6 +702,7 @@ pub fn build_segment_with(
                 e => SimError::Twin(e.to_string()),
             })?,
         };
+        let dev = with_behaviour(dev, entry, j)?;
         for k in 0..entry.count {
             if stop.load(Ordering::Relaxed) {
                 return Err(SimError::Interrupted);
@@ -668,6 +733,28 @@ pub fn build_segment_with(
         seg.set_link_delay(0, 0, d).map_err(SimError::Topology)?;
     }
     Ok((seg, names))
+}
+
+/// The twin `dev` with the behaviour of segment-file entry `entry` (number `j`), checked
+/// against its dictionary; `dev` itself when the entry gives none.
+fn with_behaviour(dev: Device, entry: &DeviceEntry, j: usize) -> Result<Device, SimError> {
+    let Device::Twin(t) = dev else {
+        return Ok(dev);
+    };
+    if entry.behaviour.is_none() && entry.entries.is_empty() {
+        return Ok(dev);
+    }
+    let key = format!("device[{j}]");
+    if t.esi.served == oxicat_esi::twin::Served::EscOnly {
+        return Err(SimError::Twin(format!(
+            "{key}.behaviour: {} has no mailbox and is served by its ESC alone (no firmware \
+             to run a behaviour)",
+            t.spec
+        )));
+    }
+    let b = Behaviour::compile(entry.behaviour.as_deref(), &entry.entries, t.esi.def, &key)
+        .map_err(|e| SimError::Twin(format!("{} ({})", e, t.spec)))?;
+    Ok(Device::Twin(oxicat_devices::twin::with_behaviour(t, b)))
 }
 
 /// AL state name of an AL status register value (error flag as "+ERR").

@@ -93,57 +93,151 @@ impl Default for DriveParams {
     }
 }
 
+/// Where the drive finds its objects: resolved once (on PREOP -> SAFEOP, or at the first
+/// cycle), then plain offset accesses. The controlword and statusword are needed; every other
+/// object may be missing from a dictionary the drive did not declare itself (a twin of a
+/// vendor's ESI): a missing set-point reads 0, a missing actual value is not written.
 #[derive(Debug, Clone, Copy)]
 struct Io {
+    /// The dictionary is the drive's own ([`OBJECTS`]): its manufacturer objects (0x2000
+    /// gains, 0x2002 joint torque) and its motor data (0x6072, 0x6075, 0x6076, 0x6080) are
+    /// the drive's. On a foreign dictionary those are the drive's defaults (the motor is
+    /// the plant the drive was made for, not the one the vendor's values describe), and a
+    /// 0 in a profile parameter (ramps, windows, homing speeds: many ESIs leave them 0 for
+    /// the firmware to fill) reads as not set.
+    own: bool,
+    /// The mode when the dictionary has no 0x6060: the cyclic mode its set-points allow
+    /// (CSP with 0x607A, else CSV with 0x60FF, else CST with 0x6071; 0: none).
+    fixed_mode: i8,
     controlword: Var<u16>,
     statusword: Var<u16>,
-    mode: Var<i8>,
-    mode_display: Var<i8>,
-    target_position: Var<i32>,
-    target_velocity: Var<i32>,
-    target_torque: Var<i16>,
-    position_actual: Var<i32>,
-    position_demand: Var<i32>,
-    velocity_actual: Var<i32>,
-    torque_actual: Var<i16>,
-    current_actual: Var<i16>,
-    error_code: Var<u16>,
-    following_error: Var<i32>,
-    joint_torque: Var<i32>,
-    digital_inputs: Var<u32>,
-    position_offset: Var<i32>,
-    velocity_offset: Var<i32>,
-    torque_offset: Var<i16>,
+    mode: Option<Var<i8>>,
+    mode_display: Option<Var<i8>>,
+    target_position: Option<Var<i32>>,
+    target_velocity: Option<Var<i32>>,
+    target_torque: Option<Var<i16>>,
+    position_actual: Option<Var<i32>>,
+    position_demand: Option<Var<i32>>,
+    velocity_actual: Option<Var<i32>>,
+    torque_actual: Option<Var<i16>>,
+    current_actual: Option<Var<i16>>,
+    error_code: Option<Var<u16>>,
+    following_error: Option<Var<i32>>,
+    joint_torque: Option<Var<i32>>,
+    digital_inputs: Option<Var<u32>>,
+    position_offset: Option<Var<i32>>,
+    velocity_offset: Option<Var<i32>>,
+    torque_offset: Option<Var<i16>>,
 }
 
 impl Io {
-    /// The handles, from the declaration ([`OBJECTS`]): offsets and types checked when
-    /// the crate builds.
+    /// The handles on the drive's own dictionary, from the declaration ([`OBJECTS`]):
+    /// offsets and types checked when the crate builds.
     const VARS: Self = Self {
+        own: true,
+        fixed_mode: 0,
         controlword: Var::of(OBJECTS, 0x6040, 0),
         statusword: Var::of(OBJECTS, 0x6041, 0),
-        mode: Var::of(OBJECTS, 0x6060, 0),
-        mode_display: Var::of(OBJECTS, 0x6061, 0),
-        target_position: Var::of(OBJECTS, 0x607A, 0),
-        target_velocity: Var::of(OBJECTS, 0x60FF, 0),
-        target_torque: Var::of(OBJECTS, 0x6071, 0),
-        position_actual: Var::of(OBJECTS, 0x6064, 0),
-        position_demand: Var::of(OBJECTS, 0x6062, 0),
-        velocity_actual: Var::of(OBJECTS, 0x606C, 0),
-        torque_actual: Var::of(OBJECTS, 0x6077, 0),
-        current_actual: Var::of(OBJECTS, 0x6078, 0),
-        error_code: Var::of(OBJECTS, 0x603F, 0),
-        following_error: Var::of(OBJECTS, 0x60F4, 0),
-        joint_torque: Var::of(OBJECTS, 0x2002, 0),
-        digital_inputs: Var::of(OBJECTS, 0x60FD, 0),
-        position_offset: Var::of(OBJECTS, 0x60B0, 0),
-        velocity_offset: Var::of(OBJECTS, 0x60B1, 0),
-        torque_offset: Var::of(OBJECTS, 0x60B2, 0),
+        mode: Some(Var::of(OBJECTS, 0x6060, 0)),
+        mode_display: Some(Var::of(OBJECTS, 0x6061, 0)),
+        target_position: Some(Var::of(OBJECTS, 0x607A, 0)),
+        target_velocity: Some(Var::of(OBJECTS, 0x60FF, 0)),
+        target_torque: Some(Var::of(OBJECTS, 0x6071, 0)),
+        position_actual: Some(Var::of(OBJECTS, 0x6064, 0)),
+        position_demand: Some(Var::of(OBJECTS, 0x6062, 0)),
+        velocity_actual: Some(Var::of(OBJECTS, 0x606C, 0)),
+        torque_actual: Some(Var::of(OBJECTS, 0x6077, 0)),
+        current_actual: Some(Var::of(OBJECTS, 0x6078, 0)),
+        error_code: Some(Var::of(OBJECTS, 0x603F, 0)),
+        following_error: Some(Var::of(OBJECTS, 0x60F4, 0)),
+        joint_torque: Some(Var::of(OBJECTS, 0x2002, 0)),
+        digital_inputs: Some(Var::of(OBJECTS, 0x60FD, 0)),
+        position_offset: Some(Var::of(OBJECTS, 0x60B0, 0)),
+        velocity_offset: Some(Var::of(OBJECTS, 0x60B1, 0)),
+        torque_offset: Some(Var::of(OBJECTS, 0x60B2, 0)),
     };
 
-    /// The handles for `od`; `None` if it is not the drive's dictionary.
+    /// The handles for `od`: the build-time ones on the drive's own dictionary, else the
+    /// CiA402 objects located by index (subindex 0, bit length checked) in whatever
+    /// dictionary `od` is; `None` without a 16-bit 0x6040 and 0x6041.
     fn resolve<const N: usize>(od: &Od<N>) -> Option<Self> {
-        od.built_on(OBJECTS).then_some(Self::VARS)
+        if od.built_on(OBJECTS) {
+            return Some(Self::VARS);
+        }
+        Self::locate(od)
+    }
+
+    /// The objects located by index in a foreign dictionary (see [`Io::resolve`]).
+    fn locate<const N: usize>(od: &Od<N>) -> Option<Self> {
+        fn v<T: oxicat_slave::OdType, const N: usize>(od: &Od<N>, i: u16) -> Option<Var<T>> {
+            od.var(i, 0).ok()
+        }
+        let target_position = v(od, 0x607A);
+        let target_velocity = v(od, 0x60FF);
+        let target_torque = v(od, 0x6071);
+        let fixed_mode = if target_position.is_some() {
+            mode::CSP
+        } else if target_velocity.is_some() {
+            mode::CSV
+        } else if target_torque.is_some() {
+            mode::CST
+        } else {
+            0
+        };
+        Some(Self {
+            own: false,
+            fixed_mode,
+            controlword: od.var(0x6040, 0).ok()?,
+            statusword: od.var(0x6041, 0).ok()?,
+            mode: v(od, 0x6060),
+            mode_display: v(od, 0x6061),
+            target_position,
+            target_velocity,
+            target_torque,
+            position_actual: v(od, 0x6064),
+            position_demand: v(od, 0x6062),
+            velocity_actual: v(od, 0x606C),
+            torque_actual: v(od, 0x6077),
+            current_actual: v(od, 0x6078),
+            error_code: v(od, 0x603F),
+            following_error: v(od, 0x60F4),
+            joint_torque: None,
+            digital_inputs: v(od, 0x60FD),
+            position_offset: v(od, 0x60B0),
+            velocity_offset: v(od, 0x60B1),
+            torque_offset: v(od, 0x60B2),
+        })
+    }
+
+    /// A profile parameter (see [`Io::own`]): the dictionary's value, the default `d` if the
+    /// object is missing or, on a foreign dictionary, 0.
+    fn param<const N: usize>(&self, od: &Od<N>, i: u16, s: u8, d: u32) -> u32 {
+        od.get::<u32>(i, s)
+            .ok()
+            .filter(|&v| self.own || v != 0)
+            .unwrap_or(d)
+    }
+
+    /// Motor data and tuning (see [`Io::own`]): the dictionary's value on the drive's own
+    /// dictionary, else the default `d`.
+    fn motor<T: oxicat_slave::OdType, const N: usize>(&self, od: &Od<N>, i: u16, s: u8, d: T) -> T {
+        if self.own {
+            od.get::<T>(i, s).unwrap_or(d)
+        } else {
+            d
+        }
+    }
+}
+
+/// The value behind an optional handle (0 when the dictionary lacks the object).
+fn ld<T: oxicat_slave::OdType + Default, const N: usize>(od: &Od<N>, v: Option<Var<T>>) -> T {
+    v.map_or_else(T::default, |v| od.load(v))
+}
+
+/// Writes through an optional handle (nothing when the dictionary lacks the object).
+fn st<T: oxicat_slave::OdType, const N: usize>(od: &mut Od<N>, v: Option<Var<T>>, x: T) {
+    if let Some(v) = v {
+        od.store(v, x);
     }
 }
 
@@ -276,6 +370,7 @@ pub struct Cia402Drive<H: JointHw> {
     active_mode: i8,
     fault: Option<u16>,
     fault_new: bool,
+    cycle_measured: Option<f32>,
     fe_time: f32,
     in_window_time: f32,
     last_cw: u16,
@@ -313,6 +408,7 @@ impl<H: JointHw> Cia402Drive<H> {
             active_mode: 0,
             fault: None,
             fault_new: false,
+            cycle_measured: None,
             fe_time: 0.0,
             in_window_time: 0.0,
             last_cw: 0,
@@ -373,7 +469,17 @@ impl<H: JointHw> Cia402Drive<H> {
         }
     }
 
+    /// The time between application cycles as its host measures it \[s\] (a twin: the
+    /// virtual time between two cycles, whatever the sync mode); it takes precedence over
+    /// 0x1C32:02 and [`DriveParams::cycle_s`]. `None`: not measured.
+    pub fn set_cycle_time(&mut self, s: Option<f32>) {
+        self.cycle_measured = s.filter(|s| s.is_finite() && *s > 0.0);
+    }
+
     fn cycle_s<const N: usize>(&self, od: &Od<N>) -> f32 {
+        if let Some(s) = self.cycle_measured {
+            return s;
+        }
         match od.get::<u32>(0x1C32, 2) {
             Ok(ns) if ns > 0 => ns as f32 * 1e-9,
             _ => self.params.cycle_s,
@@ -384,8 +490,8 @@ impl<H: JointHw> Cia402Drive<H> {
         core::f32::consts::TAU / self.params.counts_per_rev as f32
     }
 
-    fn rated_torque_nm<const N: usize>(od: &Od<N>) -> f32 {
-        od.get::<u32>(0x6076, 0).unwrap_or(200) as f32 * 1e-3
+    fn rated_torque_nm<const N: usize>(io: &Io, od: &Od<N>) -> f32 {
+        io.motor::<u32, N>(od, 0x6076, 0, 200) as f32 * 1e-3
     }
 
     fn shift_zero(&mut self, new_zero: i32) {
@@ -420,14 +526,15 @@ impl<H: JointHw> Cia402Drive<H> {
             return;
         };
         let dt = self.cycle_s(od);
-        let u32o = |i: u16, s: u8, d: u32| od.get::<u32>(i, s).unwrap_or(d) as f32;
+        let u32o = |i: u16, s: u8, d: u32| io.param(od, i, s, d) as f32;
+        let motor = |i: u16, d: u32| io.motor::<u32, N>(od, i, 0, d) as f32;
         let i16o = |i: u16, d: i16| od.get::<i16>(i, 0).unwrap_or(d);
-        let f32o = |s: u8, d: f32| od.get::<f32>(0x2000, s).unwrap_or(d);
+        let f32o = |s: u8, d: f32| io.motor::<f32, N>(od, 0x2000, s, d);
         let pp_vmax = u32o(0x6081, 0, 200_000);
         let pp_win = u32o(0x6067, 0, 200);
         let pp_wtime = u32o(0x6068, 0, 5) * 1e-3;
         let t_slope = u32o(0x6087, 0, 10_000);
-        let rated_i = u32o(0x6075, 0, 4000) * 1e-3;
+        let rated_i = motor(0x6075, 4000) * 1e-3;
         let opt = Options {
             quick_stop: i16o(0x605A, 2),
             shutdown: i16o(0x605B, 0),
@@ -438,9 +545,9 @@ impl<H: JointHw> Cia402Drive<H> {
         let acc = u32o(0x6083, 0, 2_000_000).max(1.0);
         let dec = u32o(0x6084, 0, 2_000_000).max(1.0);
         let qdec = u32o(0x6085, 0, 8_000_000).max(1.0);
-        let vmax_motor = u32o(0x6080, 0, 1_000_000);
-        let rated = Self::rated_torque_nm(od);
-        let max_torque = u32o(0x6072, 0, 3000) * 1e-3 * rated;
+        let vmax_motor = motor(0x6080, 1_000_000);
+        let rated = Self::rated_torque_nm(&io, od);
+        let max_torque = motor(0x6072, 3000) * 1e-3 * rated;
         let vel_window = u32o(0x606D, 0, 2000);
         let kp_v = f32o(3, super::device::gains::VELOCITY_KP);
         let ki_v = f32o(4, super::device::gains::VELOCITY_KI);
@@ -463,7 +570,7 @@ impl<H: JointHw> Cia402Drive<H> {
         // Following error monitor (position modes, drive powered, not coasting).
         let fe = self.prof.pos.wrapping_sub(pos);
         let position_mode = matches!(self.active_mode, mode::PP | mode::HM | mode::CSP);
-        let fe_window = od.get::<u32>(0x6065, 0).unwrap_or(u32::MAX);
+        let fe_window = io.param(od, 0x6065, 0, u32::MAX);
         let fe_timeout = od.get::<u16>(0x6066, 0).unwrap_or(0) as f32 * 1e-3;
         let fe_over = self.power
             && position_mode
@@ -507,7 +614,7 @@ impl<H: JointHw> Cia402Drive<H> {
         }
 
         // Mode switch (takes effect at once; unsupported values are ignored).
-        let want = od.load(io.mode);
+        let want = io.mode.map_or(io.fixed_mode, |m| od.load(m));
         if want != self.active_mode
             && matches!(
                 want,
@@ -519,7 +626,7 @@ impl<H: JointHw> Cia402Drive<H> {
             self.pp_buffered = None;
             self.pp_done = true;
             self.homing = Homing::Idle;
-            self.torque_dem = od.load(io.torque_actual) as f32;
+            self.torque_dem = ld(od, io.torque_actual) as f32;
         }
 
         let rising4 = cwv & cw::NEW_SET_POINT != 0 && self.last_cw & cw::NEW_SET_POINT == 0;
@@ -577,7 +684,7 @@ impl<H: JointHw> Cia402Drive<H> {
                 match m {
                     mode::PP => {
                         if rising4 {
-                            let mut t = od.load(io.target_position);
+                            let mut t = ld(od, io.target_position);
                             if cwv & cw::RELATIVE != 0 {
                                 t = self.pp_target.wrapping_add(t);
                             }
@@ -620,7 +727,7 @@ impl<H: JointHw> Cia402Drive<H> {
                     mode::PV => {
                         pos_control = false;
                         let target =
-                            (od.load(io.target_velocity) as f32).clamp(-vmax_motor, vmax_motor);
+                            (ld(od, io.target_velocity) as f32).clamp(-vmax_motor, vmax_motor);
                         self.prof.ramp_to(target, acc, dec, dt);
                         vel_dem = self.prof.vel;
                         self.prof.pos = pos;
@@ -629,14 +736,14 @@ impl<H: JointHw> Cia402Drive<H> {
                         oms12 = self.vel.abs() <= vel_window;
                     }
                     mode::PT => {
-                        let target = od.load(io.target_torque) as f32;
+                        let target = ld(od, io.target_torque) as f32;
                         let slope = t_slope * dt;
                         self.torque_dem += (target - self.torque_dem).clamp(-slope, slope);
                         torque_only = Some(self.torque_dem * 1e-3 * rated);
                         target_reached = self.torque_dem == target;
                     }
                     mode::HM => {
-                        self.homing_step(od, rising4, home_switch, raw, acc, dec, dt);
+                        self.homing_step(&io, od, rising4, home_switch, raw, acc, dec, dt);
                         // Homing may have moved the zero.
                         pos = raw.wrapping_sub(self.zero);
                         vff = self.prof.vel;
@@ -647,9 +754,7 @@ impl<H: JointHw> Cia402Drive<H> {
                                 && self.prof.vel == 0.0;
                     }
                     mode::CSP => {
-                        let t = od
-                            .load(io.target_position)
-                            .wrapping_add(od.load(io.position_offset));
+                        let t = ld(od, io.target_position).wrapping_add(ld(od, io.position_offset));
                         let t = self.clamp_limits(od, t);
                         let v = t.wrapping_sub(self.prof.pos) as f32 / dt;
                         self.prof = Profile {
@@ -658,19 +763,18 @@ impl<H: JointHw> Cia402Drive<H> {
                             vel: v,
                         };
                         // Velocity feed-forward: the set-point's own rate plus 0x60B1.
-                        vff = v + od.load(io.velocity_offset) as f32;
-                        tff = od.load(io.torque_offset) as f32 * 1e-3 * rated;
+                        vff = v + ld(od, io.velocity_offset) as f32;
+                        tff = ld(od, io.torque_offset) as f32 * 1e-3 * rated;
                         oms12 = true;
                         oms13 = self.fe_time > 0.0;
                     }
                     mode::CSV => {
                         pos_control = false;
-                        vel_dem = (od
-                            .load(io.target_velocity)
-                            .wrapping_add(od.load(io.velocity_offset))
+                        vel_dem = (ld(od, io.target_velocity)
+                            .wrapping_add(ld(od, io.velocity_offset))
                             as f32)
                             .clamp(-vmax_motor, vmax_motor);
-                        tff = od.load(io.torque_offset) as f32 * 1e-3 * rated;
+                        tff = ld(od, io.torque_offset) as f32 * 1e-3 * rated;
                         self.prof = Profile {
                             pos,
                             frac: 0.0,
@@ -679,7 +783,7 @@ impl<H: JointHw> Cia402Drive<H> {
                         oms12 = true;
                     }
                     mode::CST => {
-                        let t = od.load(io.target_torque) as f32 + od.load(io.torque_offset) as f32;
+                        let t = ld(od, io.target_torque) as f32 + ld(od, io.torque_offset) as f32;
                         torque_only = Some(t * 1e-3 * rated);
                         self.prof = Profile {
                             pos,
@@ -724,17 +828,25 @@ impl<H: JointHw> Cia402Drive<H> {
 
         // Actual values and statusword.
         let fe_now = self.prof.pos.wrapping_sub(pos);
-        od.store(io.position_actual, pos);
-        od.store(io.position_demand, self.prof.pos);
-        od.store(io.velocity_actual, self.vel as i32);
-        od.store(io.following_error, fe_now);
+        st(od, io.position_actual, pos);
+        st(od, io.position_demand, self.prof.pos);
+        st(od, io.velocity_actual, self.vel as i32);
+        st(od, io.following_error, fe_now);
         let t_act = self.iq_meas * self.params.kt;
-        od.store(io.torque_actual, (t_act / rated * 1000.0) as i16);
-        od.store(io.current_actual, (self.iq_meas / rated_i * 1000.0) as i16);
-        od.store(io.joint_torque, (self.hw.joint_torque() * 1000.0) as i32);
-        od.store(io.digital_inputs, if home_switch { 1 << 2 } else { 0 });
-        od.store(io.mode_display, self.active_mode);
-        od.store(io.error_code, self.fault.unwrap_or(0));
+        st(od, io.torque_actual, (t_act / rated * 1000.0) as i16);
+        st(
+            od,
+            io.current_actual,
+            (self.iq_meas / rated_i * 1000.0) as i16,
+        );
+        st(
+            od,
+            io.joint_torque,
+            (self.hw.joint_torque() * 1000.0) as i32,
+        );
+        st(od, io.digital_inputs, if home_switch { 1 << 2 } else { 0 });
+        st(od, io.mode_display, self.active_mode);
+        st(od, io.error_code, self.fault.unwrap_or(0));
         let mut s = state.statusword_bits() | sw::REMOTE;
         if state == State::OperationEnabled {
             if target_reached {
@@ -798,6 +910,7 @@ impl<H: JointHw> Cia402Drive<H> {
     #[allow(clippy::too_many_arguments)]
     fn homing_step<const N: usize>(
         &mut self,
+        io: &Io,
         od: &Od<N>,
         start: bool,
         switch: bool,
@@ -808,9 +921,9 @@ impl<H: JointHw> Cia402Drive<H> {
     ) {
         let method = od.get::<i8>(0x6098, 0).unwrap_or(37);
         let offset = od.get::<i32>(0x607C, 0).unwrap_or(0);
-        let v_switch = od.get::<u32>(0x6099, 1).unwrap_or(100_000) as f32;
-        let v_zero = od.get::<u32>(0x6099, 2).unwrap_or(20_000) as f32;
-        let hacc = od.get::<u32>(0x609A, 0).unwrap_or(1_000_000).max(1) as f32;
+        let v_switch = io.param(od, 0x6099, 1, 100_000) as f32;
+        let v_zero = io.param(od, 0x6099, 2, 20_000) as f32;
+        let hacc = io.param(od, 0x609A, 0, 1_000_000).max(1) as f32;
         if start {
             self.homing = match method {
                 35 | 37 => {

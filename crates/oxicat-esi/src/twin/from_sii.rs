@@ -425,6 +425,7 @@ pub fn from_sii(sii: &[u8], dictionary: Option<&[SavedObject]>) -> Result<Twin, 
             mailbox_bytes: 0,
             loopback: Vec::new(),
             left_out,
+            profile_no: None,
         });
     }
 
@@ -570,5 +571,8 @@ pub fn from_sii(sii: &[u8], dictionary: Option<&[SavedObject]>) -> Result<Twin, 
         mailbox_bytes: mailbox.rx_len.max(mailbox.tx_len),
         loopback: loopback_of(def),
         left_out,
+        // An SII has no profile number; the drive is recognised by its 0x1000 (device
+        // type) in the dictionary.
+        profile_no: None,
     })
 }
