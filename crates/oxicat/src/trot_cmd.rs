@@ -137,12 +137,12 @@ pub fn run_with(a: TrotArgs, runner: &mut TrotRunner<'_>) -> Result<String, CliE
     let rec_s = run.rows.len() as f64 * s.cycle_ns() as f64 * 1e-9;
     let speed = format!(
         "\nSimulated {:.1} s ({:.1} s recorded) in {:.2} s of wall-clock time ({:.2} s for the \
-         recorded part: {:.1}× real time; bring-up {:.2} s).\n",
+         recorded part: {}× real time; bring-up {:.2} s).\n",
         run.simulated_s,
         rec_s,
         run.wall.as_secs_f64(),
         run.wall_recorded.as_secs_f64(),
-        rec_s / run.wall_recorded.as_secs_f64().max(1e-9),
+        ratio(rec_s / run.wall_recorded.as_secs_f64().max(1e-9)),
         (run.wall - run.wall_recorded).as_secs_f64(),
     );
     md.push_str(&nodes_md);
@@ -164,6 +164,16 @@ pub fn run_with(a: TrotArgs, runner: &mut TrotRunner<'_>) -> Result<String, CliE
         t_out.elapsed().as_secs_f64()
     ));
     Ok(md)
+}
+
+/// A speed ratio: one decimal from 1× up, three below (board images run
+/// at a few hundredths of real time).
+fn ratio(x: f64) -> String {
+    if x >= 1.0 {
+        format!("{x:.1}")
+    } else {
+        format!("{x:.3}")
+    }
 }
 
 /// One line on the SPI bus time per cycle per node, when the nodes used a driver.

@@ -74,9 +74,13 @@ pub fn relaxed_config() -> ethercrab::MainDeviceConfig {
     }
 }
 
-/// The `oxicat` binary under test.
+/// The `oxicat` binary under test (`None` in another crate's tests, which include this
+/// module by path and name their own binary: [`NetnsSim::spawn_bin_in_ns`]).
 pub fn oxicat_bin() -> &'static str {
-    env!("CARGO_BIN_EXE_oxicat")
+    match option_env!("CARGO_BIN_EXE_oxicat") {
+        Some(bin) => bin,
+        None => panic!("the oxicat binary is the oxicat crate's; name yours (spawn_bin_in_ns)"),
+    }
 }
 
 fn is_root() -> bool {
@@ -201,9 +205,14 @@ impl NetnsSim {
     /// Runs `oxicat <args>` inside the namespace as the simulator process (one per bench);
     /// waits until it prints that it serves, panics (with its output) if it does not.
     pub fn spawn_in_ns(&mut self, args: &[&str]) {
+        self.spawn_bin_in_ns(oxicat_bin(), args)
+    }
+
+    /// [`NetnsSim::spawn_in_ns`] with another simulator binary (`oxicat-emu`).
+    pub fn spawn_bin_in_ns(&mut self, bin: &str, args: &[&str]) {
         assert!(self.child.is_none(), "one simulator per bench");
         let mut child = Command::new("ip")
-            .args(["netns", "exec", &self.ns, oxicat_bin()])
+            .args(["netns", "exec", &self.ns, bin])
             .args(args)
             .stdin(Stdio::null())
             .stdout(Stdio::null())

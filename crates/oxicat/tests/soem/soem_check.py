@@ -232,6 +232,11 @@ def main():
     want = spec["slaves"]
     cycles = spec["cycles"]
     cycle_ns = spec["cycle_ns"]
+    # A segment served slowed down (`--slowdown K`, emulated board images) runs its clock K
+    # times slower than real time: the script's own cycle and waits stretch by K so that
+    # they stay the same in the segment's time (SOEM's fixed timeouts do not; they are
+    # generous enough).
+    slow = spec.get("slowdown", 1)
 
     master = pysoem.Master()
     master.open(iface)
@@ -272,7 +277,7 @@ def main():
             slave.set_watchdog("processdata", WATCHDOG_MS)
         size = master.config_map()
         info(f"config_map: {size} bytes of process data, expected wkc {master.expected_wkc}")
-        state = master.state_check(pysoem.SAFEOP_STATE, STATE_TIMEOUT_US)
+        state = master.state_check(pysoem.SAFEOP_STATE, STATE_TIMEOUT_US * slow)
         master.read_state()
         for pos, slave in enumerate(master.slaves):
             check("to_safeop", pos, slave.state == pysoem.SAFEOP_STATE,
@@ -280,8 +285,8 @@ def main():
         if state != pysoem.SAFEOP_STATE:
             return
 
-        cycler = Cycler(master, cycle_ns / 1e9)
-        reach(master, cycler, pysoem.OP_STATE, 10.0)
+        cycler = Cycler(master, cycle_ns / 1e9 * slow)
+        reach(master, cycler, pysoem.OP_STATE, 10.0 * slow)
         for pos, slave in enumerate(master.slaves):
             check("to_op", pos, slave.state == pysoem.OP_STATE,
                   f"{state_name(slave.state)}, AL status 0x{slave.al_status:04X}")
@@ -308,9 +313,9 @@ def main():
         # The SM watchdog: no process data for three times its time, and longer (up to
         # 10 s) while the simulator, late on a loaded machine, has not got there yet.
         stopped = time.monotonic()
-        time.sleep(3 * WATCHDOG_MS / 1000)
+        time.sleep(3 * WATCHDOG_MS / 1000 * slow)
         while (not all_in(master, pysoem.SAFEOP_STATE | pysoem.STATE_ERROR)
-               and time.monotonic() - stopped < 10):
+               and time.monotonic() - stopped < 10 * slow):
             time.sleep(0.1)
         waited_ms = round((time.monotonic() - stopped) * 1000)
         for pos, slave in enumerate(master.slaves):
@@ -321,7 +326,7 @@ def main():
                   f"AL status 0x{slave.al_status:04X} (want SAFEOP+ERR 0x{AL_SM_WATCHDOG:04X})")
         # Acknowledge (SAFEOP + ack bit) until the error flag is gone (SOEM's state_check
         # ignores the flag, so read the states).
-        deadline = time.monotonic() + STATE_TIMEOUT_US / 1e6
+        deadline = time.monotonic() + STATE_TIMEOUT_US / 1e6 * slow
         while time.monotonic() < deadline:
             for slave in master.slaves:
                 slave.state = pysoem.SAFEOP_STATE | pysoem.STATE_ACK
@@ -331,7 +336,7 @@ def main():
                 break
         acked = [(s.state, s.al_status) for s in master.slaves]
         cycler.reset_counts()
-        reach(master, cycler, pysoem.OP_STATE, 10.0)
+        reach(master, cycler, pysoem.OP_STATE, 10.0 * slow)
         for pos, slave in enumerate(master.slaves):
             ok = acked[pos][0] == pysoem.SAFEOP_STATE and slave.state == pysoem.OP_STATE
             check("watchdog_ack_to_op", pos, ok,
@@ -340,7 +345,7 @@ def main():
 
         master.state = pysoem.INIT_STATE
         master.write_state()
-        master.state_check(pysoem.INIT_STATE, STATE_TIMEOUT_US)
+        master.state_check(pysoem.INIT_STATE, STATE_TIMEOUT_US * slow)
     finally:
         master.close()
     info("done")

@@ -1,0 +1,188 @@
+//! SOEM (pysoem), an independent master, against board images served by `oxicat-emu sim
+//! --firmware` on a veth pair in a network namespace — the same checks as the host-compiled
+//! devices get (`crates/oxicat/tests/soem_netns.rs`, `soem/soem_check.py`): scan (identity
+//! and name), SDOs (identity, strings, abort codes, a write read back), SAFEOP and OP,
+//! process data without a working-counter error, DC SYNC0 where the device has it, and the
+//! SM watchdog path (no process data → SAFEOP+ERR 0x001B → ack → OP).
+//!
+//! The demo board image (`firmware/stm32f446-lan9252`) and the Laelaps leg-node image
+//! (`firmware/laelaps-leg`, its leg on the pins), one node each. An emulated board does not
+//! keep real time here, so the segment is served `--slowdown` times slower than real time
+//! and the script stretches its own cycle and waits by the same factor; the boards boot
+//! (their 50 ms power-on wait and LAN9252 reset) before SOEM scans.
+//!
+//! Needs root and pysoem (as the host test); skipped with the reason elsewhere, mandatory
+//! in CI. The 10,000-cycle runs the issue asks for are `--ignored` (minutes of wall time
+//! slowed down); CI runs 300 cycles per image.
+
+#[path = "../../../crates/oxicat/tests/netns_common/mod.rs"]
+mod netns_common;
+#[path = "../../../crates/oxicat/tests/soem_common/mod.rs"]
+mod soem_common;
+
+mod common;
+
+use std::time::Duration;
+
+use netns_common::NetnsSim;
+use oxicat_devices::registry;
+use soem_common::{has_dc, python_with_pysoem, Drive, Results};
+
+/// One board image to drive.
+struct Case {
+    /// The registry device the image implements.
+    device: &'static str,
+    /// `firmware/<board>`.
+    board: &'static str,
+    /// Environment variable naming another image file.
+    env: &'static str,
+    /// How many times slower than real time the segment runs.
+    slowdown: u32,
+}
+
+const CASES: [Case; 2] = [
+    Case {
+        device: "demo",
+        board: "stm32f446-lan9252",
+        env: "OXICAT_BOARD_IMAGE",
+        // A polling main loop, emulated in full.
+        slowdown: 20,
+    },
+    Case {
+        device: "laelaps-leg",
+        board: "laelaps-leg",
+        env: "OXICAT_LAELAPS_IMAGE",
+        // Sleeps in WFI between its interrupts; the leg's plant runs beside it.
+        slowdown: 10,
+    },
+];
+
+/// Serves `case`'s image on a netns bench and runs soem_check.py for `cycles` cycles;
+/// `None` when skipped here (no root, no pysoem, no image).
+fn drive(case: &Case, cycles: u32) -> Option<Results> {
+    let img = common::image(case.board, case.env)?;
+    drop(NetnsSim::bare()?);
+    let py = match python_with_pysoem() {
+        Ok(p) => p,
+        Err(e) => {
+            assert!(!netns_common::in_ci(), "SOEM test cannot run in CI: {e}");
+            eprintln!("skipped: {e}");
+            return None;
+        }
+    };
+    let kit = registry::find(case.device).expect("a registry device");
+    let path = std::env::temp_dir().join(format!(
+        "oxicat-emu-soem-{}-{}.elf",
+        std::process::id(),
+        case.board
+    ));
+    std::fs::write(&path, img).expect("write the image");
+    let mut bench = NetnsSim::bare()?;
+    let fw = format!("{}={}", case.device, path.display());
+    let slow = case.slowdown.to_string();
+    let segment = format!("{}:1", case.device);
+    let iface = bench.sim_if().to_string();
+    bench.spawn_bin_in_ns(
+        env!("CARGO_BIN_EXE_oxicat-emu"),
+        &[
+            "sim",
+            "--iface",
+            &iface,
+            "--firmware",
+            &fw,
+            "--slowdown",
+            &slow,
+            &segment,
+        ],
+    );
+    // The boards boot first (power-on wait, then their LAN9252's reset, which would drop
+    // the addresses a master had set): 150 ms of the segment's time.
+    std::thread::sleep(Duration::from_millis(150 * u64::from(case.slowdown)));
+    let mut results = Results::new();
+    soem_common::drive(
+        &py,
+        &bench,
+        &format!("{segment} (board image)"),
+        kit,
+        Drive {
+            cycles,
+            cycle_ns: 1_000_000,
+            nodes: 1,
+            slowdown: case.slowdown,
+        },
+        &mut results,
+    );
+    let _ = std::fs::remove_file(&path);
+    Some(results)
+}
+
+/// Every check ran on the one slave and passed (`dc_sync0` where the device has DC).
+fn assert_all_pass(case: &Case, results: &Results) {
+    let kit = registry::find(case.device).expect("a registry device");
+    let mut checks = vec![
+        "scan_identity",
+        "scan_name",
+        "sdo_read_identity",
+        "sdo_read_strings",
+        "sdo_abort_missing_object",
+        "sdo_abort_read_only",
+        "to_safeop",
+        "to_op",
+        "pdo_exchange",
+        "watchdog_safeop_err",
+        "watchdog_ack_to_op",
+    ];
+    if has_dc((kit.def)(0)) {
+        checks.push("dc_sync0");
+    }
+    let mut bad = Vec::new();
+    for c in checks {
+        match results.get(c).and_then(|r| r.first()) {
+            Some((_, _, true, _)) => {}
+            Some((_, _, false, detail)) => bad.push(format!("{c}: {detail}")),
+            None => bad.push(format!("{c}: did not run")),
+        }
+    }
+    // Every check the script reported passed, also those not listed above.
+    for (c, rows) in results {
+        for (_, _, ok, detail) in rows {
+            if !ok && !bad.iter().any(|b| b.starts_with(c.as_str())) {
+                bad.push(format!("{c}: {detail}"));
+            }
+        }
+    }
+    assert!(
+        bad.is_empty(),
+        "SOEM on the {} image ({}):\n  {}",
+        case.board,
+        case.device,
+        bad.join("\n  ")
+    );
+}
+
+#[test]
+fn soem_runs_the_demo_board_image_over_a_veth() {
+    let case = &CASES[0];
+    if let Some(r) = drive(case, 300) {
+        assert_all_pass(case, &r);
+    }
+}
+
+#[test]
+fn soem_runs_the_leg_node_board_image_over_a_veth() {
+    let case = &CASES[1];
+    if let Some(r) = drive(case, 300) {
+        assert_all_pass(case, &r);
+    }
+}
+
+/// The issue's 10,000 cycles per image (about 3 and 2 minutes slowed down).
+#[test]
+#[ignore = "long: 10,000 cycles per image, slowed down"]
+fn soem_runs_each_board_image_for_10000_cycles() {
+    for case in &CASES {
+        if let Some(r) = drive(case, 10_000) {
+            assert_all_pass(case, &r);
+        }
+    }
+}
