@@ -1,0 +1,173 @@
+//! The shortest DC cycle the Laelaps leg-node image sustains, measured in the loop: one
+//! emulated leg node (`firmware/laelaps-leg`, LAN9252 on SPI1 at the image's 22.5 MHz, its
+//! leg on the pins), ethercrab in DC mode, SYNC0 every `cycle` for `n` cycles, for cycles
+//! from 400 µs down to the device's minimum (0x1C32:05, 100 µs). A cycle is sustained when
+//! every cycle has the right working counter, the image's SYNC0 handler (EXTI3) ran once for
+//! every SYNC0 pulse the segment delivered (a pulse that comes while the previous one is
+//! still pending is lost), and its longest run (entry to return, joint-loop ticks included)
+//! is shorter than the cycle; the answer is the shortest cycle sustained with every longer
+//! one.
+//!
+//! Printed per cycle: WKC errors, SYNC0 pulses and handler runs, the handler's mean and
+//! longest span at 180 MHz (with the joint-loop ticks that preempt it), its share of the
+//! cycle, and the share of the run the CPU was awake; then the shortest sustained cycle
+//! (the thesis' F28379D node: 200 µs minimum, 85 µs of stack time per cycle).
+//!
+//! `cargo run --release -p oxicat-emu --example min_cycle [elf] [cycles per step]`
+
+use std::sync::{Arc, Mutex};
+use std::time::Duration;
+
+use oxicat_devices::laelaps::rig::{LegId, RigConfig};
+use oxicat_devices::laelaps::{device, Side};
+use oxicat_emu::laelaps::LegBoardPlant;
+use oxicat_emu::node::EmulatedNode;
+use oxicat_emu::trot::EXC_SYNC0;
+use oxicat_emu::{HandlerStats, CPU_HZ};
+use oxicat_esc::{Esc, EscConfig};
+use oxicat_master::cyclic::CycleOptions;
+use oxicat_master::{Link, Master};
+use oxicat_sim::segment::Segment;
+
+/// What one cycle time gave.
+struct Step {
+    cycle_us: u64,
+    wkc_errors: u64,
+    pulses: u64,
+    handled: u64,
+    mean_us: f64,
+    max_us: f64,
+    awake: f64,
+}
+
+impl Step {
+    /// SYNC0 pulses without a handler run; the last pulse's handler may still be pending
+    /// when the counts are read (the segment delivers the pulse, the board enters the
+    /// handler after it), so one short is not a loss.
+    fn lost(&self) -> u64 {
+        self.pulses.saturating_sub(self.handled + 1)
+    }
+
+    /// Right WKC every cycle, no SYNC0 lost, and every handler done within its cycle (the
+    /// next pulse does not find it still running).
+    fn sustained(&self, cycles: u64) -> bool {
+        self.wkc_errors == 0
+            && self.lost() == 0
+            && self.pulses >= cycles
+            && self.max_us < self.cycle_us as f64
+    }
+}
+
+fn step(img: &[u8], cycle_us: u64, cycles: u64) -> Result<Step, String> {
+    let def = device::device(Side::Right);
+    let sii = oxicat_esi::sii::generate(def).map_err(|e| e.to_string())?;
+    let mut seg = Segment::new();
+    let id = seg.add(Esc::new(EscConfig::lan9252(), sii));
+    let leg = LegId::ForeRight;
+    let plant = LegBoardPlant::new(leg, RigConfig::laelaps(leg));
+    let node = EmulatedNode::with_plant(img.to_vec(), 100_000, Some(Box::new(plant)))
+        .map_err(|e| e.to_string())?;
+    let h = node.handle();
+    seg.attach(id, Box::new(node))
+        .map_err(|e| format!("{e:?}"))?;
+    // The board boots (power-on wait, LAN9252 reset) before the master starts.
+    seg.advance_to(100_000_000);
+    let mut m = Master::open(Link::Sim(Arc::new(Mutex::new(seg)))).map_err(|e| e.to_string())?;
+    h.reset_stats();
+    let before = h.report().ok_or("the board thread ended")?;
+    let pulses0 = h.sync0_events();
+    let taken0 = before.taken[usize::from(EXC_SYNC0)];
+    let stats = m
+        .run_cycles(
+            CycleOptions {
+                cycle: Duration::from_micros(cycle_us),
+                dc: true,
+            },
+            cycles,
+        )
+        .map_err(|e| e.to_string())?;
+    let r = h.report().ok_or("the board thread ended")?;
+    if let Some(f) = &r.fault {
+        return Err(f.to_string());
+    }
+    let s0 = r.handler(EXC_SYNC0);
+    let cyc = (r.cycles - before.cycles).max(1);
+    let slept = r.slept_cycles - before.slept_cycles;
+    Ok(Step {
+        cycle_us,
+        wkc_errors: stats.wkc_errors,
+        pulses: h.sync0_events() - pulses0,
+        handled: r.taken[usize::from(EXC_SYNC0)] - taken0,
+        mean_us: s0.mean_us(CPU_HZ),
+        max_us: HandlerStats::us(s0.max_cycles, CPU_HZ),
+        awake: 1.0 - slept as f64 / cyc as f64,
+    })
+}
+
+fn main() {
+    let mut args = std::env::args().skip(1);
+    let path = args.next().unwrap_or_else(|| {
+        concat!(
+            env!("CARGO_MANIFEST_DIR"),
+            "/../../firmware/laelaps-leg/target/thumbv7em-none-eabihf/release/oxicat-firmware-laelaps-leg"
+        )
+        .to_string()
+    });
+    let cycles: u64 = match args.next().map(|a| a.parse()) {
+        None => 2_000,
+        Some(Ok(n)) if n > 0 => n,
+        Some(_) => {
+            eprintln!("cycles per step: a positive number");
+            std::process::exit(2);
+        }
+    };
+    let img = match std::fs::read(&path) {
+        Ok(b) => b,
+        Err(e) => {
+            eprintln!("{path}: {e} (build it: cd firmware/laelaps-leg && cargo build --release)");
+            std::process::exit(2);
+        }
+    };
+    let min_us = u64::from(device::device(Side::Right).sync.min_cycle_ns) / 1000;
+    println!("Laelaps leg-node image, {cycles} DC cycles per step, one node:\n");
+    println!("| cycle [µs] | WKC errors | SYNC0 pulses | SYNC0 handler runs | lost | handler mean / max [µs] | max / cycle | CPU awake | sustained |");
+    println!("|---|---|---|---|---|---|---|---|---|");
+    // The shortest cycle with every longer one sustained too.
+    let mut shortest = None;
+    let mut all_ok = true;
+    for cycle_us in [400u64, 300, 250, 200, 175, 150, 140, 130, 125, 110, 100] {
+        if cycle_us < min_us {
+            break;
+        }
+        match step(&img, cycle_us, cycles) {
+            Ok(s) => {
+                let ok = s.sustained(cycles);
+                println!(
+                    "| {} | {} | {} | {} | {} | {:.1} / {:.1} | {:.0} % | {:.0} % | {} |",
+                    s.cycle_us,
+                    s.wkc_errors,
+                    s.pulses,
+                    s.handled,
+                    s.lost(),
+                    s.mean_us,
+                    s.max_us,
+                    100.0 * s.max_us / s.cycle_us as f64,
+                    100.0 * s.awake,
+                    if ok { "yes" } else { "no" }
+                );
+                all_ok &= ok;
+                if all_ok {
+                    shortest = Some(cycle_us);
+                }
+            }
+            Err(e) => {
+                all_ok = false;
+                println!("| {cycle_us} | – | – | – | – | – | – | – | no: {e} |")
+            }
+        }
+    }
+    match shortest {
+        Some(c) => println!("\nShortest sustained DC cycle: {c} µs (device minimum {min_us} µs)."),
+        None => println!("\nNo cycle sustained."),
+    }
+}
