@@ -612,6 +612,65 @@ impl Board {
         self.periph.borrow().stimuli.len()
     }
 
+    /// The lowest address the main stack may reach: the end of the image's static RAM
+    /// when the stack starts above it (cortex-m-rt's default layout), else the start of
+    /// SRAM (a bare program that declares no statics, or a stack placed below them, as
+    /// flip-link does).
+    pub fn stack_limit(&self) -> u32 {
+        if self.size.ram > 0 && self.stack.top > self.stack.bottom {
+            self.stack.bottom
+        } else {
+            SRAM.0 as u32
+        }
+    }
+
+    /// A main stack below its limit is a stack overflow: reported as a fault with the PC
+    /// (checked whenever the engine stops, and when it stops on an error, which a push below
+    /// SRAM is). On silicon without an MPU guard or flip-link the overflow would silently
+    /// overwrite the statics; here the image stops and says so.
+    fn check_stack(&self) -> Result<(), EmuError> {
+        let control = self.uc.reg_read(RegisterARM::CONTROL).unwrap_or(0);
+        if control & 2 != 0 {
+            return Ok(()); // the thread runs on the process stack: not the main stack's limit
+        }
+        let sp = self.uc.reg_read(RegisterARM::SP).unwrap_or(u64::MAX);
+        let limit = u64::from(self.stack_limit());
+        if sp < limit {
+            return Err(self.fault(format!(
+                "stack overflow: SP {sp:#010x} is below the main stack's limit {limit:#010x} \
+                 ({})",
+                if limit > SRAM.0 {
+                    "the end of .data/.bss, which it would overwrite"
+                } else {
+                    "the start of SRAM"
+                }
+            )));
+        }
+        Ok(())
+    }
+
+    /// The reason for an error of the engine: a failed access by an instruction with the
+    /// main stack within a frame (a push of every register with the FP context: 128 bytes)
+    /// of its limit is the stack overflowing (the faulting push did not move SP).
+    fn engine_error(&self, e: unicorn_engine::unicorn_const::uc_error) -> String {
+        let control = self.uc.reg_read(RegisterARM::CONTROL).unwrap_or(0);
+        let sp = self.uc.reg_read(RegisterARM::SP).unwrap_or(u64::MAX);
+        let limit = u64::from(self.stack_limit());
+        let access = matches!(
+            e,
+            unicorn_engine::unicorn_const::uc_error::WRITE_UNMAPPED
+                | unicorn_engine::unicorn_const::uc_error::WRITE_PROT
+        );
+        if access && control & 2 == 0 && sp < limit + 128 {
+            format!(
+                "stack overflow: a push below the main stack's limit {limit:#010x} (SP \
+                 {sp:#010x}): {e:?}"
+            )
+        } else {
+            format!("{e:?}")
+        }
+    }
+
     fn fault(&self, reason: impl Into<String>) -> EmuError {
         EmuError::Fault {
             pc: self.pc,
@@ -659,8 +718,10 @@ impl Board {
             let r = self.uc.emu_start(u64::from(self.pc | 1), u64::MAX, 0, 0);
             self.pc = self.uc.reg_read(RegisterARM::PC).unwrap_or(0) as u32;
             if let Err(e) = r {
-                return Err(self.fault(format!("{e:?}")));
+                self.check_stack()?;
+                return Err(self.fault(self.engine_error(e)));
             }
+            self.check_stack()?;
             self.check_fpu()?;
             let (intr, stopped, wait) = {
                 let p = self.periph.borrow();

@@ -229,6 +229,28 @@ fn an_fp_instruction_with_cpacr_off_is_a_nocp_fault() {
     }
 }
 
+/// Unbounded recursion runs the main stack off the bottom of SRAM: a fault that names the
+/// stack overflow, with the PC in the recursing function, not a hang or a bare
+/// "WRITE_UNMAPPED".
+#[test]
+fn unbounded_recursion_is_a_stack_overflow_fault_with_its_pc() {
+    let mut b = board(include_bytes!("asm/overflow.elf"));
+    assert_eq!(
+        b.stack_limit(),
+        0x2000_0000,
+        "a bare program's stack may use all SRAM"
+    );
+    match b.run(10_000_000) {
+        Err(EmuError::Fault { pc, reason }) => {
+            assert!(reason.contains("stack overflow"), "{reason}");
+            assert!(reason.contains("0x20000000"), "{reason}");
+            // reset (0x0800_0140) calls recurse right after it.
+            assert!((0x0800_0140..0x0800_0170).contains(&pc), "{pc:#x}");
+        }
+        other => panic!("expected a stack-overflow fault, got {other:?}"),
+    }
+}
+
 /// The committed ELF files are what the sources assemble to (checked where the tools are).
 #[test]
 fn the_test_programs_match_their_sources() {
