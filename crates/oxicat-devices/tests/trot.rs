@@ -11,8 +11,9 @@
 //! tests stay fast in a debug build; gains, ellipses, phases, filter and bus are Table 4-1's.
 
 use oxicat_devices::laelaps::experiment::{run_trot, var, TrotRun};
-use oxicat_devices::laelaps::hw::{U_MAX_HIP, U_MAX_KNEE};
-use oxicat_devices::laelaps::results::{csv, sample, steady_window, summarize, summary_markdown};
+use oxicat_devices::laelaps::results::{
+    csv, pv_bound_deg, sample, steady_window, summarize, summary_markdown,
+};
 use oxicat_devices::laelaps::rig::LegId;
 use oxicat_devices::laelaps::scenario::{ExecTime, PdiChip, Scenario, DEFAULT_TOML};
 use oxicat_sim::exec_time::{ExecTiming, Work};
@@ -221,28 +222,15 @@ fn tracks_and_keeps_the_gait(s: &Scenario, r: &TrotRun) {
     assert!(r.rows[0].state_machine);
 
     // Tracking bound, derived from the controller (DCL PID C1 structure, thesis §5.3) and
-    // the plant. Per joint, with r, y in revolutions:
-    //     v9 = Kp·(r − y − v4),  v4 = 20 Hz-filtered Kd·ẏ,  u = sat(v9, ±u_max).
-    // Whenever the output is not saturated, |v9| ≤ u_max, so
-    //     |r − y| ≤ u_max/Kp + |v4| ≤ u_max/Kp + Kd·max|ẏ|   (the filter's gain ≤ 1),
-    // i.e. in radians |e| ≤ 2π·u_max/Kp + Kd·max|θ̇|: the V path of a PV loop makes the
-    // error grow with the joint speed (Kd·θ̇ is the velocity lag; Ki = 0 removes nothing).
-    // max|θ̇| is the joint speed the plant reaches (the eQEP estimate ÷ gear ratio); we add
-    // the measurement resolution (0.01° PDO step + one encoder count 2π/(2000·ratio)) and
-    // 0.5° for the short intervals at the PWM limit, where the relation above does not hold
-    // but the motor current is only 8 % above the limit's equivalent (12 A × u_max).
+    // the plant (`results::pv_bound_deg`): |e| ≤ 2π·u_max/Kp + Kd·max|θ̇| — the V path of a
+    // PV loop makes the error grow with the joint speed (Kd·θ̇ is the velocity lag; Ki = 0
+    // removes nothing); max|θ̇| is the joint speed the plant reaches (the eQEP estimate ÷
+    // gear ratio); plus the measurement resolution and 0.5° for the short intervals at the
+    // PWM limit, where the motor current is only 8 % above the limit's equivalent.
     let sum = summarize(r);
-    let kp = s.control.knee.kp;
-    let kd = s.control.knee.kd;
-    assert_eq!((s.control.hip.kp, s.control.hip.kd), (kp, kd));
-    let tau = std::f64::consts::TAU;
-    let slack_deg = 0.01 + 0.01 + 0.5;
     for (li, leg) in LegId::TABLE.into_iter().enumerate() {
         let l = &sum.legs[li];
-        let knee_bound =
-            (tau * f64::from(U_MAX_KNEE) / kp + kd * l.knee_peak_speed).to_degrees() + slack_deg;
-        let hip_bound =
-            (tau * f64::from(U_MAX_HIP) / kp + kd * l.hip_peak_speed).to_degrees() + slack_deg;
+        let (knee_bound, hip_bound) = pv_bound_deg(s, l);
         eprintln!(
             "{}: knee max {:.2}° (bound {knee_bound:.2}°, RMS {:.2}°), hip max {:.2}° \
              (bound {hip_bound:.2}°, RMS {:.2}°), toe RMS {:.1} mm",

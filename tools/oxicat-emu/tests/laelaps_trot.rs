@@ -9,8 +9,7 @@
 //!   flash and RAM).
 
 use oxicat_devices::laelaps::experiment::TrotRun;
-use oxicat_devices::laelaps::hw::{U_MAX_HIP, U_MAX_KNEE};
-use oxicat_devices::laelaps::results::summarize;
+use oxicat_devices::laelaps::results::{pv_bound_deg, summarize};
 use oxicat_devices::laelaps::rig::LegId;
 use oxicat_devices::laelaps::scenario::{Scenario, DEFAULT_TOML};
 use oxicat_emu::trot::{markdown, run, LegImages, EXC_JOINT_LOOP, EXC_SYNC0};
@@ -111,15 +110,9 @@ fn four_leg_images_trot_within_the_host_bounds_without_losing_a_sync0() {
 /// Each joint within the host trot test's bound, the legs move, the diagonals in phase.
 fn tracks(s: &Scenario, r: &TrotRun) {
     let sum = summarize(r);
-    let (kp, kd) = (s.control.knee.kp, s.control.knee.kd);
-    let tau = std::f64::consts::TAU;
-    let slack_deg = 0.01 + 0.01 + 0.5;
     for (li, leg) in LegId::TABLE.into_iter().enumerate() {
         let l = &sum.legs[li];
-        let knee_bound =
-            (tau * f64::from(U_MAX_KNEE) / kp + kd * l.knee_peak_speed).to_degrees() + slack_deg;
-        let hip_bound =
-            (tau * f64::from(U_MAX_HIP) / kp + kd * l.hip_peak_speed).to_degrees() + slack_deg;
+        let (knee_bound, hip_bound) = pv_bound_deg(s, l);
         eprintln!(
             "{}: knee max {:.2}° (bound {knee_bound:.2}°, RMS {:.2}°), hip max {:.2}° \
              (bound {hip_bound:.2}°, RMS {:.2}°)",

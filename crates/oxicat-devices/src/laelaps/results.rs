@@ -346,6 +346,26 @@ pub fn summary_markdown(run: &TrotRun, s: &Summary) -> String {
     o
 }
 
+/// The bound a PV joint loop keeps the tracking error within, per joint of a leg's summary
+/// (knee, hip) \[deg\], for the scenario's gains. Per joint, with r, y in revolutions:
+/// v9 = Kp·(r − y − v4), v4 = the filtered Kd·ẏ, u = sat(v9, ±u_max). Whenever the output
+/// is not saturated |v9| ≤ u_max, so |r − y| ≤ u_max/Kp + Kd·max|ẏ| (the filter's gain ≤ 1),
+/// i.e. |e| ≤ 2π·u_max/Kp + Kd·max|θ̇| in radians: the V path makes the error grow with the
+/// joint speed. Added: the measurement resolution (the 0.01° PDO step and one encoder
+/// count) and 0.5° for the short intervals at the PWM limit, where the relation does not
+/// hold. The trot tests (host-compiled and board images) assert it.
+pub fn pv_bound_deg(s: &crate::laelaps::scenario::Scenario, l: &LegSummary) -> (f64, f64) {
+    let tau = std::f64::consts::TAU;
+    let slack_deg = 0.01 + 0.01 + 0.5;
+    let knee = &s.control.knee;
+    let hip = &s.control.hip;
+    (
+        (tau * f64::from(U_MAX_KNEE) / knee.kp + knee.kd * l.knee_peak_speed).to_degrees()
+            + slack_deg,
+        (tau * f64::from(U_MAX_HIP) / hip.kp + hip.kd * l.hip_peak_speed).to_degrees() + slack_deg,
+    )
+}
+
 /// A SYNC0 number, or `–` where the host does not know it.
 fn sync0_no(n: Option<u64>) -> String {
     n.map_or_else(|| "–".into(), |n| n.to_string())
