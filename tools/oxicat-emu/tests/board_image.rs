@@ -172,3 +172,76 @@ fn ethercrab_runs_two_emulated_demo_boards_in_op_with_the_right_wkc() {
         wall.elapsed().as_secs_f64()
     );
 }
+
+/// A firmware stuck in a loop, as a master sees it: the ESC keeps answering and the AL
+/// status stays where the firmware left it, but the PDI watchdog (0x0410, 100 ms by
+/// default) is no longer retriggered — DL status 0x0110 bit 1 clears and the PDI watchdog
+/// counter 0x0443 counts the expiry. (The SM watchdog 0x001B path needs a live firmware:
+/// the ESC's process-data watchdog is retriggered by the master's writes, not by the MCU.)
+/// The healthy demo image on the same segment keeps bit 1 set.
+#[test]
+fn a_stuck_firmware_shows_as_an_expired_pdi_watchdog() {
+    use oxicat_sim::segment::Segment;
+    use oxicat_wire::frame::FrameBuilder;
+    use oxicat_wire::{Command, DatagramHeader, EcatFrame, EthernetHeader};
+
+    let Some(healthy) = image() else { return };
+    let def = &oxicat_devices::demo::DEF;
+    let mut seg = Segment::new();
+    let stuck = include_bytes!("asm/stuck.elf").to_vec();
+    for img in [stuck, healthy] {
+        let sii = oxicat_esi::sii::generate(def).unwrap();
+        let id = seg.add(Esc::new(EscConfig::lan9252(), sii));
+        let node = oxicat_emu::node::EmulatedNode::new(img, 100_000).unwrap();
+        seg.attach(id, Box::new(node)).unwrap();
+    }
+    // A master's APRD of `len` bytes at `ado` of the slave at position `p`.
+    let aprd = |seg: &mut Segment, p: u16, ado: u16, len: u16| -> Vec<u8> {
+        let mut buf = vec![0u8; 128];
+        let eth = EthernetHeader {
+            dst: [0xFF; 6],
+            src: [0x10; 6],
+            vlan_tci: None,
+            payload_offset: 14,
+        };
+        let mut fb = FrameBuilder::new(&mut buf, &eth).unwrap();
+        fb.push(
+            DatagramHeader::physical(Command::Aprd, 0, 0u16.wrapping_sub(p), ado, len),
+            &vec![0; usize::from(len)],
+        )
+        .unwrap();
+        let n = fb.finish();
+        let back = seg.exchange(&buf[..n]).expect("the frame comes back");
+        let (_, f) = EcatFrame::parse_ethernet(&back).unwrap();
+        let d = f.datagrams().next().unwrap().unwrap();
+        assert_eq!(d.wkc, 1, "APRD {ado:#06x} of slave {p}");
+        d.data.to_vec()
+    };
+    // 60 ms: both boards have accessed their ESC (the demo image after its 50 ms power-on
+    // wait), within the first watchdog time of the stuck board's one access.
+    seg.advance_to(60_000_000);
+    assert_eq!(
+        aprd(&mut seg, 0, 0x0110, 2)[0] & 2,
+        2,
+        "reloaded by the one access"
+    );
+    assert_eq!(aprd(&mut seg, 1, 0x0110, 2)[0] & 2, 2);
+    seg.advance_to(250_000_000);
+    assert_eq!(
+        aprd(&mut seg, 0, 0x0110, 2)[0] & 2,
+        0,
+        "stuck: the PDI watchdog expired"
+    );
+    assert_eq!(aprd(&mut seg, 0, 0x0443, 1)[0], 1, "one expiry counted");
+    assert_eq!(
+        aprd(&mut seg, 1, 0x0110, 2)[0] & 2,
+        2,
+        "the healthy image keeps accessing its ESC"
+    );
+    assert_eq!(aprd(&mut seg, 1, 0x0443, 1)[0], 0);
+    assert_eq!(
+        aprd(&mut seg, 0, 0x0130, 2),
+        [1, 0],
+        "the AL status stays where the firmware left it"
+    );
+}
