@@ -37,7 +37,9 @@ fn ethercrab_runs_two_served_demo_board_images_in_op_over_udp() {
     // time out, so the master tries again, as one waits for a machine to power up.
     let options = || {
         let mut o = MasterOptions::for_link(&Link::Udp(addr.clone()));
-        o.timeouts.pdu = Duration::from_secs(2);
+        // 2 s (100 ms of the segment's time) was missed once in CI with the machine busy
+        // beside the slowed-down boards; a lost frame is not what this test is about.
+        o.timeouts.pdu = Duration::from_secs(10);
         o.timeouts.state_transition = Duration::from_secs(120);
         o.timeouts.mailbox_response = Duration::from_secs(30);
         o.mailbox_timeout = Duration::from_secs(30);
