@@ -1,7 +1,8 @@
 //! The shortest DC cycle the Laelaps leg-node image sustains, measured in the loop: one
 //! emulated leg node (`firmware/laelaps-leg`, LAN9252 on SPI1 at the image's 22.5 MHz, its
-//! leg on the pins), ethercrab in DC mode, SYNC0 every `cycle` for `n` cycles, for cycles
-//! from 400 µs down to the device's minimum (0x1C32:05, 100 µs). A cycle is sustained when
+//! leg on the pins), ethercrab in DC mode, SYNC0 every `cycle`, `n` cycles counted in steady
+//! OP (from 200 cycles after OP), for cycles from 400 µs down to the device's minimum
+//! (0x1C32:05, 100 µs). A cycle is sustained when
 //! every cycle has the right working counter, the image's SYNC0 handler (EXTI3) ran once for
 //! every SYNC0 pulse the segment delivered (a pulse that comes while the previous one is
 //! still pending is lost), and its longest run (entry to return, joint-loop ticks included)
@@ -25,9 +26,12 @@ use oxicat_emu::node::EmulatedNode;
 use oxicat_emu::trot::EXC_SYNC0;
 use oxicat_emu::{HandlerStats, CPU_HZ};
 use oxicat_esc::{Esc, EscConfig};
-use oxicat_master::cyclic::CycleOptions;
+use oxicat_master::cyclic::{CycleOptions, Flow};
 use oxicat_master::{Link, Master};
 use oxicat_sim::segment::Segment;
+
+/// Cycles in OP before the count starts.
+const WARM: u64 = 200;
 
 /// What one cycle time gave.
 struct Step {
@@ -53,7 +57,7 @@ impl Step {
     fn sustained(&self, cycles: u64) -> bool {
         self.wkc_errors == 0
             && self.lost() == 0
-            && self.pulses >= cycles
+            && self.pulses + 1 >= cycles
             && self.max_us < self.cycle_us as f64
     }
 }
@@ -73,30 +77,52 @@ fn step(img: &[u8], cycle_us: u64, cycles: u64) -> Result<Step, String> {
     // The board boots (power-on wait, LAN9252 reset) before the master starts.
     seg.advance_to(100_000_000);
     let mut m = Master::open(Link::Sim(Arc::new(Mutex::new(seg)))).map_err(|e| e.to_string())?;
-    h.reset_stats();
-    let before = h.report().ok_or("the board thread ended")?;
-    let pulses0 = h.sync0_events();
-    let taken0 = before.taken[usize::from(EXC_SYNC0)];
+    // Counted in steady OP: from WARM cycles after OP (the transitions before it run the
+    // stack's poll with the ESC handlers masked) to WARM + `cycles`, both inside the loop
+    // (after it the master takes the slave back to PRE-OP).
+    type Snap = (u64, oxicat_emu::node::NodeReport);
+    let mut snaps: Vec<Snap> = Vec::new();
+    let mut err = None;
     let stats = m
-        .run_cycles(
+        .run_cyclic(
             CycleOptions {
                 cycle: Duration::from_micros(cycle_us),
                 dc: true,
             },
-            cycles,
+            |io| {
+                if io.cycle == WARM {
+                    h.reset_stats();
+                }
+                if io.cycle == WARM || io.cycle == WARM + cycles {
+                    match h.report() {
+                        Some(r) => snaps.push((h.sync0_events(), r)),
+                        None => err = Some("the board thread ended".to_string()),
+                    }
+                }
+                Ok(if io.cycle >= WARM + cycles {
+                    Flow::Stop
+                } else {
+                    Flow::Continue
+                })
+            },
         )
         .map_err(|e| e.to_string())?;
-    let r = h.report().ok_or("the board thread ended")?;
+    if let Some(e) = err {
+        return Err(e);
+    }
+    let [(pulses0, before), (pulses1, r)] =
+        <[Snap; 2]>::try_from(snaps).map_err(|s| format!("{} snapshots", s.len()))?;
     if let Some(f) = &r.fault {
         return Err(f.to_string());
     }
+    let taken0 = before.taken[usize::from(EXC_SYNC0)];
     let s0 = r.handler(EXC_SYNC0);
     let cyc = (r.cycles - before.cycles).max(1);
     let slept = r.slept_cycles - before.slept_cycles;
     Ok(Step {
         cycle_us,
         wkc_errors: stats.wkc_errors,
-        pulses: h.sync0_events() - pulses0,
+        pulses: pulses1 - pulses0,
         handled: r.taken[usize::from(EXC_SYNC0)] - taken0,
         mean_us: s0.mean_us(CPU_HZ),
         max_us: HandlerStats::us(s0.max_cycles, CPU_HZ),
