@@ -51,6 +51,7 @@ const DRIVE: Drive = Drive {
     cycle_ns: CYCLE_NS,
     nodes: NODES,
     slowdown: 1,
+    watchdog_ms: None,
 };
 
 /// Serves `dev:NODES` and runs soem_check.py on it.

@@ -237,6 +237,9 @@ def main():
     # they stay the same in the segment's time (SOEM's fixed timeouts do not; they are
     # generous enough).
     slow = spec.get("slowdown", 1)
+    # The SM watchdog time (segment time); a slowed-down segment, which does not stall like a
+    # debug build, takes the ESC's default 100 ms so the wait for it stays short in wall time.
+    watchdog_ms = spec.get("watchdog_ms", WATCHDOG_MS)
 
     master = pysoem.Master()
     master.open(iface)
@@ -274,7 +277,7 @@ def main():
             for pos in dc_slaves:
                 master.slaves[pos].dc_sync(True, cycle_ns)
         for slave in master.slaves:
-            slave.set_watchdog("processdata", WATCHDOG_MS)
+            slave.set_watchdog("processdata", watchdog_ms)
         size = master.config_map()
         info(f"config_map: {size} bytes of process data, expected wkc {master.expected_wkc}")
         state = master.state_check(pysoem.SAFEOP_STATE, STATE_TIMEOUT_US * slow)
@@ -313,7 +316,7 @@ def main():
         # The SM watchdog: no process data for three times its time, and longer (up to
         # 10 s) while the simulator, late on a loaded machine, has not got there yet.
         stopped = time.monotonic()
-        time.sleep(3 * WATCHDOG_MS / 1000 * slow)
+        time.sleep(3 * watchdog_ms / 1000 * slow)
         while (not all_in(master, pysoem.SAFEOP_STATE | pysoem.STATE_ERROR)
                and time.monotonic() - stopped < 10 * slow):
             time.sleep(0.1)

@@ -38,6 +38,8 @@ pub struct Drive {
     pub nodes: usize,
     /// The segment's clock runs this many times slower than real time.
     pub slowdown: u32,
+    /// SM watchdog time in the segment's time, ms (`None`: the script's 500 ms).
+    pub watchdog_ms: Option<u32>,
 }
 
 /// Check results: check name → (device, slave position, passed, detail).
@@ -164,9 +166,12 @@ pub fn spec(dev: &Kit, drive: Drive) -> (String, u32) {
     let cycle_ns = cycle_ns.div_ceil(drive.cycle_ns) * drive.cycle_ns;
     (
         format!(
-            "{{\"cycles\": {}, \"cycle_ns\": {cycle_ns}, \"slowdown\": {}, \"slaves\": [{}]}}",
+            "{{\"cycles\": {}, \"cycle_ns\": {cycle_ns}, \"slowdown\": {}, {}\"slaves\": [{}]}}",
             drive.cycles,
             drive.slowdown,
+            drive
+                .watchdog_ms
+                .map_or(String::new(), |w| format!("\"watchdog_ms\": {w}, ")),
             slaves.join(", ")
         ),
         cycle_ns,
