@@ -181,8 +181,9 @@ impl Segment {
         let (shared, flag, names2) = (segment.clone(), stop.clone(), names.clone());
         let (address, thread) = match &iface {
             Some(name) => {
-                let port = oxicat_sim::net::raw::RawPort::open(name, RealtimeConfig::default().idle)
-                    .map_err(err)?;
+                let port =
+                    oxicat_sim::net::raw::RawPort::open(name, RealtimeConfig::default().idle)
+                        .map_err(err)?;
                 let h = std::thread::spawn(move || {
                     sim_cmd::serve_segment_until(&args, port, shared, &names2, flag)
                 });
@@ -336,7 +337,8 @@ impl Segment {
         }
         let mut at = 0;
         for (start, len) in areas {
-            esc.pdi_write(start, &data[at..at + len]).map_err(|e| err(format!("{e:?}")))?;
+            esc.pdi_write(start, &data[at..at + len])
+                .map_err(|e| err(format!("{e:?}")))?;
             at += len;
         }
         Ok(())
@@ -370,7 +372,12 @@ impl Segment {
 impl Drop for Segment {
     fn drop(&mut self) {
         self.stop.store(true, Ordering::Relaxed);
-        if let Some(h) = self.thread.get_mut().unwrap_or_else(|e| e.into_inner()).take() {
+        if let Some(h) = self
+            .thread
+            .get_mut()
+            .unwrap_or_else(|e| e.into_inner())
+            .take()
+        {
             let _ = h.join();
         }
     }

@@ -134,6 +134,13 @@ def test_udp_segment_and_errors():
         assert seg.al_state(0) == "INIT"
         with pytest.raises(IndexError):
             seg.read_outputs(5)
+        # No SyncManager is configured before a master does: no process data yet.
+        assert seg.read_inputs(0) == b""
+        with pytest.raises(ValueError, match="0 input byte"):
+            seg.write_inputs(0, b"x")
+        seg.drop_frames(1)
+        with pytest.raises(oxicat.OxicatError):
+            seg.set_cable(0, 7)
     assert not seg.running
     seg.stop()
     with pytest.raises(oxicat.OxicatError, match="nosuch"):
