@@ -907,22 +907,27 @@ pub fn serve_udp_until_with(
 ) -> Result<(), SimError> {
     let desc = describe(args)?;
     let (seg, names) = build_segment_with(&desc, &AtomicBool::new(false), add)?;
-    let n = seg.len();
+    serve_segment_until(args, port, Arc::new(Mutex::new(seg)), &names, stop)
+}
+
+/// Serves an already built `segment` on `port` until `stop` is set, with the options of
+/// `args` (spin, slowdown, quiet); `names` are its nodes' device names (for the log). The
+/// segment is shared: other threads (the Python package's process data and faults) lock it
+/// between frames.
+pub fn serve_segment_until<P: FramePort>(
+    args: &SimArgs,
+    port: P,
+    segment: Arc<Mutex<Segment>>,
+    names: &[String],
+    stop: Arc<AtomicBool>,
+) -> Result<(), SimError> {
+    let n = segment.lock().unwrap_or_else(|e| e.into_inner()).len();
     let config = RealtimeConfig {
         spin: args.spin,
         slowdown: args.slowdown,
         ..RealtimeConfig::default()
     };
-    let summary = summarize(&names);
-    run_port(
-        port,
-        Arc::new(Mutex::new(seg)),
-        &config,
-        stop,
-        args.quiet,
-        n,
-        &summary,
-    )
+    run_port(port, segment, &config, stop, args.quiet, n, &summarize(names))
 }
 
 fn summarize(names: &[String]) -> String {
