@@ -927,7 +927,15 @@ pub fn serve_segment_until<P: FramePort>(
         slowdown: args.slowdown,
         ..RealtimeConfig::default()
     };
-    run_port(port, segment, &config, stop, args.quiet, n, &summarize(names))
+    run_port(
+        port,
+        segment,
+        &config,
+        stop,
+        args.quiet,
+        n,
+        &summarize(names),
+    )
 }
 
 fn summarize(names: &[String]) -> String {
