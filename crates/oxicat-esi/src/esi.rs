@@ -20,9 +20,29 @@ use crate::model::{
 use crate::od::{objects, value_text, OdSnapshot};
 use crate::Error;
 
-/// Escapes text for XML element content and attribute values (all five of `&<>"'`).
+/// Escapes text for XML element content and attribute values (all five of `&<>"'`); a
+/// character XML 1.0 cannot carry at all (a control character but tab, newline and carriage
+/// return; U+FFFE, U+FFFF) becomes U+FFFD ([`xml_chars`]).
 pub fn escape(s: &str) -> String {
-    quick_xml::escape::escape(s).into_owned()
+    quick_xml::escape::escape(&*xml_chars(s)).into_owned()
+}
+
+/// `s` with every character XML 1.0 cannot carry replaced by U+FFFD: strings from a
+/// vendor's ESI or a slave's SII reach definitions as they are, and one control character
+/// would make the whole generated document unreadable.
+pub fn xml_chars(s: &str) -> std::borrow::Cow<'_, str> {
+    let ok = |c: char| {
+        matches!(c, '\t' | '\n' | '\r') || (c >= ' ' && c != '\u{FFFE}' && c != '\u{FFFF}')
+    };
+    if s.chars().all(ok) {
+        std::borrow::Cow::Borrowed(s)
+    } else {
+        std::borrow::Cow::Owned(
+            s.chars()
+                .map(|c| if ok(c) { c } else { '\u{FFFD}' })
+                .collect(),
+        )
+    }
 }
 
 /// An indenting XML writer on `quick-xml` (two spaces a level, one element a line, text
@@ -40,7 +60,11 @@ impl Default for Xml {
 }
 
 fn start<'a>(name: &'a str, attrs: &'a [(&str, String)]) -> BytesStart<'a> {
-    BytesStart::new(name).with_attributes(attrs.iter().map(|(k, v)| (*k, v.as_str())))
+    let mut b = BytesStart::new(name);
+    for (k, v) in attrs {
+        b.push_attribute((*k, &*xml_chars(v)));
+    }
+    b
 }
 
 impl Xml {
@@ -71,7 +95,7 @@ impl Xml {
     /// Writes `<name attrs>text</name>` on one line.
     pub fn leaf(&mut self, name: &str, attrs: &[(&str, String)], text: &str) {
         self.put(Event::Start(start(name, attrs)));
-        self.put(Event::Text(BytesText::new(text)));
+        self.put(Event::Text(BytesText::new(&xml_chars(text))));
         self.put(Event::End(BytesEnd::new(name)));
     }
     /// Writes `<name attrs/>`.

@@ -112,3 +112,22 @@ fn sii_general_points_at_order_code_and_name_like_beckhoff() {
         );
     }
 }
+
+/// A definition whose strings hold characters XML 1.0 cannot carry (a vendor ESI's name with
+/// U+0001, as one reference ESI has, reaches a twin's definition): the generated ESI is
+/// still XML — each such character becomes U+FFFD — and parses back with the name.
+#[test]
+fn control_characters_in_strings_do_not_break_the_generated_esi() {
+    let def: &'static DeviceDef = Box::leak(Box::new(DeviceDef {
+        name: "odd\u{1}name\u{7}",
+        ..oxicat_devices::demo::DEF
+    }));
+    let xml = oxicat_esi::esi::generate(def).expect("ESI");
+    assert!(!xml.contains('\u{1}') && !xml.contains('\u{7}'));
+    let models = oxicat_esi::esi::parse(&xml).expect("the generated ESI parses");
+    assert_eq!(
+        models[0].name.as_deref(),
+        Some("odd\u{FFFD}name\u{FFFD}"),
+        "the name, its control characters replaced"
+    );
+}
