@@ -977,18 +977,7 @@ fn build_device(esi: &Esi, d: Node, cand: Candidate) -> Result<Twin, TwinError> 
     // Sync managers: the stack serves SM0/SM1 mailbox, SM2 outputs, SM3 inputs.
     let kinds: Vec<SmKind> = m.sms.iter().map(|s| s.kind).collect();
     if served == Served::Stack {
-        let want = [
-            SmKind::MBoxOut,
-            SmKind::MBoxIn,
-            SmKind::Outputs,
-            SmKind::Inputs,
-        ];
-        if kinds.len() < 2 || kinds.iter().zip(want).any(|(k, w)| *k != w) {
-            return Err(TwinError::Unsupported(format!(
-                "the slave stack serves SM0 MBoxOut, SM1 MBoxIn, SM2 Outputs, SM3 Inputs; the \
-                 ESI has {kinds:?}"
-            )));
-        }
+        check_stack_sms(&kinds, "ESI")?;
         if kinds.len() > 4 {
             left_out.push(format!(
                 "sync managers 4..{} (unused by the stack)",
@@ -1769,6 +1758,25 @@ fn build_device(esi: &Esi, d: Node, cand: Candidate) -> Result<Twin, TwinError> 
         left_out,
         profile_no: m.profile_no,
     })
+}
+
+/// The sync managers of a twin the slave stack serves, in the order it serves them: SM0
+/// mailbox out, SM1 mailbox in, then SM2 outputs and SM3 inputs where there are any
+/// (`source` names where `kinds` came from, for the refusal).
+pub(crate) fn check_stack_sms(kinds: &[SmKind], source: &str) -> Result<(), TwinError> {
+    let want = [
+        SmKind::MBoxOut,
+        SmKind::MBoxIn,
+        SmKind::Outputs,
+        SmKind::Inputs,
+    ];
+    if kinds.len() < 2 || kinds.iter().zip(want).any(|(k, w)| *k != w) {
+        return Err(TwinError::Unsupported(format!(
+            "the slave stack serves SM0 MBoxOut, SM1 MBoxIn, SM2 Outputs, SM3 Inputs; the \
+             {source} has {kinds:?}"
+        )));
+    }
+    Ok(())
 }
 
 /// The loop-back of a stack twin's default mapping ([`loop_pairs`] of its assigned PDOs).

@@ -18,7 +18,10 @@ use oxicat_slave::{
 };
 use oxicat_wire::sii::SiiImage;
 
-use super::{hx, leak, loopback_of, stack_owned, Candidate, EscSpec, Served, Twin, TwinError};
+use super::{
+    check_stack_sms, hx, leak, loopback_of, stack_owned, Candidate, EscSpec, Served, Twin,
+    TwinError,
+};
 use super::{MAX_IMAGE, MAX_MAILBOX};
 use crate::model::SmKind;
 
@@ -430,18 +433,7 @@ pub fn from_sii(sii: &[u8], dictionary: Option<&[SavedObject]>) -> Result<Twin, 
     }
 
     let kinds: Vec<SmKind> = m.sms.iter().map(|s| s.kind).collect();
-    let want = [
-        SmKind::MBoxOut,
-        SmKind::MBoxIn,
-        SmKind::Outputs,
-        SmKind::Inputs,
-    ];
-    if kinds.len() < 2 || kinds.iter().zip(want).any(|(k, w)| *k != w) {
-        return Err(TwinError::Unsupported(format!(
-            "the slave stack serves SM0 MBoxOut, SM1 MBoxIn, SM2 Outputs, SM3 Inputs; the SII \
-             has {kinds:?}"
-        )));
-    }
+    check_stack_sms(&kinds, "SII")?;
     let mbx = im.mailbox();
     let mailbox = MailboxDef {
         rx_start: mbx.standard_rx.offset,
