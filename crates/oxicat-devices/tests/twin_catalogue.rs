@@ -7,7 +7,7 @@
 //!
 //! The test writes a report (`twin_catalogue.txt` in the test's target tmp directory: every
 //! type refused, with its reason, and what the served ones leave out) and fails on any type
-//! refused for a reason outside [`ALLOWED`], or any served type that misbehaves.
+//! refused for a reason outside [`ALLOWED`] (`oxicat_testkit::served::TWIN_REFUSALS_ALLOWED`), or any served type that misbehaves.
 
 use std::path::PathBuf;
 use std::sync::{Arc, Mutex};
@@ -20,55 +20,10 @@ use oxicat_master::cyclic::CycleOptions;
 use oxicat_master::{Link, Master};
 use oxicat_sim::pdi_path::PdiRoute;
 use oxicat_sim::segment::Segment;
-use oxicat_testkit::served::reference;
+use oxicat_testkit::served::{esi_files, TWIN_REFUSALS_ALLOWED as ALLOWED};
 
 const CYCLES: u64 = 100;
 const BATCH: usize = 32;
-
-/// Refusals that are limits of the no_std stack (sized for a microcontroller), each with why
-/// it is right to refuse rather than serve a device that is not what its ESI says.
-const ALLOWED: &[(&str, &str)] = &[
-    (
-        "in 64 entries",
-        "more than 64 mapped entries per direction (MAX_ITEMS): EL3008/48/58/68 map 8 \
-         channels × 9-10 entries, EL2258 224",
-    ),
-    (
-        "the stack maps at most 31",
-        "more than 31 entries in one PDO (MAX_PDO_ENTRIES, one mapping object in a 128-byte \
-         mailbox): EL2819's 64 diagnosis bits",
-    ),
-    (
-        "the stack assigns at most 8",
-        "more than 8 PDOs assigned by default (MAX_ASSIGN): the EaserCAT 3000 assigns 11",
-    ),
-    (
-        "twins do not model virtual sync managers",
-        "EL2252 maps DC registers (0x0981, 0x0990) through virtual SMs: a timestamped output \
-         whose registers no twin models",
-    ),
-    (
-        "PDO index is listed twice",
-        "the ESI lists one PDO index twice with different contents (EL2252 rev 0x00110000): \
-         no slave can serve both",
-    ),
-];
-
-fn esi_files() -> Vec<PathBuf> {
-    let mut v = Vec::new();
-    for dir in ["esi", "esi-vendor"] {
-        let d = reference().join(dir);
-        let rd = std::fs::read_dir(&d)
-            .unwrap_or_else(|e| panic!("reference dir {} missing: {e}", d.display()));
-        v.extend(
-            rd.filter_map(|e| e.ok())
-                .map(|e| e.path())
-                .filter(|p| p.extension().is_some_and(|x| x.eq_ignore_ascii_case("xml"))),
-        );
-    }
-    v.sort();
-    v
-}
 
 fn u32_of(b: &[u8]) -> Option<u32> {
     Some(u32::from_le_bytes(b.get(..4)?.try_into().ok()?))

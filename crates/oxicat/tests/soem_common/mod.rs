@@ -130,40 +130,85 @@ pub fn esi_model(def: &'static DeviceDef) -> DeviceModel {
 /// The device has DC SYNC0: an ESI DC op mode that activates SYNC0, and the definition
 /// supports the mode.
 pub fn has_dc(def: &'static DeviceDef) -> bool {
-    esi_model(def)
-        .dc
+    def.info
+        .dc_modes
         .iter()
         .any(|d| d.assign_activate & 0x0300 == 0x0300)
         && def.sync.supported & SyncMode::DcSync0.support_bit() != 0
 }
 
-/// What SOEM should find on the segment of `drive.nodes` nodes of `dev`, as the JSON
-/// soem_check.py reads; and the cycle it runs at.
-pub fn spec(dev: &Kit, drive: Drive) -> (String, u32) {
-    let mut cycle_ns = drive.cycle_ns;
-    let mut slaves = Vec::new();
-    for k in 0..drive.nodes {
-        let def = (dev.def)(k);
+/// One slave as soem_check.py checks it.
+#[derive(Debug, Clone)]
+pub struct Expect {
+    /// The definition it is served from.
+    pub def: &'static DeviceDef,
+    /// Served by the slave stack (mailbox, CoE, AL control by firmware): the SDO checks,
+    /// DC SYNC0 (where the device has it) and the SM watchdog path apply. `false`: the ESC
+    /// alone serves it (device emulation), and only the scan, the mapping and the process
+    /// data are checked.
+    pub stack: bool,
+    /// The ESI's `Type` (order code): the name SOEM shows (SII string of the general
+    /// category's name index).
+    pub order_code: String,
+    /// The ESI's device `Name`.
+    pub name: String,
+}
+
+impl Expect {
+    /// A slave of oxicat's own devices, served by the stack; its names from its ESI.
+    pub fn stack(def: &'static DeviceDef) -> Self {
         let m = esi_model(def);
-        let dc = has_dc(def);
-        cycle_ns = cycle_ns.max(def.sync.min_cycle_ns);
-        slaves.push(format!(
-            "{{\"vendor_id\": {}, \"product_code\": {}, \"revision\": {}, \
-             \"order_code\": {}, \"name\": {}, \"device_name\": {}, \"hw_version\": {}, \
-             \"sw_version\": {}, \"dc\": {dc}, \"missing_index\": {}, \"rw\": {}}}",
-            m.vendor_id,
-            m.product_code,
-            m.revision,
-            json_str(m.order_code.as_deref().unwrap_or_default()),
-            json_str(m.name.as_deref().unwrap_or_default()),
-            json_str(def.name),
-            json_str(def.hw_version),
-            json_str(def.sw_version),
-            missing_index(def),
-            writable_entry(def).unwrap_or_else(|| "null".into()),
-        ));
+        Self {
+            def,
+            stack: true,
+            order_code: m.order_code.unwrap_or_default(),
+            name: m.name.unwrap_or_default(),
+        }
     }
+}
+
+/// The JSON object soem_check.py reads for one slave.
+fn slave_json(e: &Expect) -> String {
+    let def = e.def;
+    let id = def.identity;
+    let dc = e.stack && has_dc(def);
+    let out_bytes = def.default_output_bits().div_ceil(8);
+    let in_bytes = def.default_input_bits().div_ceil(8);
+    // The SM watchdog guards the outputs' sync manager where its control byte enables it
+    // (bit 6), and it is the slave's firmware that leaves OP when it expires.
+    let watchdog = e.stack && out_bytes > 0 && def.info.sm_control.outputs & 0x40 != 0;
+    format!(
+        "{{\"vendor_id\": {}, \"product_code\": {}, \"revision\": {}, \
+         \"order_code\": {}, \"name\": {}, \"device_name\": {}, \"hw_version\": {}, \
+         \"sw_version\": {}, \"dc\": {dc}, \"stack\": {}, \"watchdog\": {watchdog}, \"out_bytes\": {out_bytes}, \
+         \"in_bytes\": {in_bytes}, \"rx_assign\": {:?}, \"tx_assign\": {:?}, \
+         \"missing_index\": {}, \"rw\": {}}}",
+        id.vendor_id,
+        id.product_code,
+        id.revision,
+        json_str(&e.order_code),
+        json_str(&e.name),
+        json_str(def.name),
+        json_str(def.hw_version),
+        json_str(def.sw_version),
+        e.stack,
+        def.rx_assign,
+        def.tx_assign,
+        missing_index(def),
+        writable_entry(def).unwrap_or_else(|| "null".into()),
+    )
+}
+
+/// What SOEM should find on a segment of `slaves` (in line order), as the JSON
+/// soem_check.py reads; and the cycle it runs at (`drive.cycle_ns`, or a multiple of it
+/// that every slave's minimum cycle allows). `drive.nodes` is not used.
+pub fn spec_of(slaves: &[Expect], drive: Drive) -> (String, u32) {
+    let cycle_ns = slaves
+        .iter()
+        .map(|e| e.def.sync.min_cycle_ns)
+        .fold(drive.cycle_ns, u32::max);
     let cycle_ns = cycle_ns.div_ceil(drive.cycle_ns) * drive.cycle_ns;
+    let slaves: Vec<String> = slaves.iter().map(slave_json).collect();
     (
         format!(
             "{{\"cycles\": {}, \"cycle_ns\": {cycle_ns}, \"slowdown\": {}, {}\"slaves\": [{}]}}",
@@ -178,6 +223,15 @@ pub fn spec(dev: &Kit, drive: Drive) -> (String, u32) {
     )
 }
 
+/// What SOEM should find on the segment of `drive.nodes` nodes of `dev`, as the JSON
+/// soem_check.py reads; and the cycle it runs at.
+pub fn spec(dev: &Kit, drive: Drive) -> (String, u32) {
+    let slaves: Vec<Expect> = (0..drive.nodes)
+        .map(|k| Expect::stack((dev.def)(k)))
+        .collect();
+    spec_of(&slaves, drive)
+}
+
 /// Runs soem_check.py with `py` on `bench` (serving `drive.nodes` nodes of `dev`, named
 /// `segment` in messages) and collects its CHECK lines into `results`.
 pub fn drive(
@@ -189,12 +243,31 @@ pub fn drive(
     results: &mut Results,
 ) {
     let (spec, _) = spec(dev, drive);
+    drive_spec(py, bench, segment, dev.name, &spec, results);
+}
+
+/// Runs soem_check.py with `py` on `bench` against `spec` (the JSON of [`spec_of`]) and
+/// collects its CHECK lines into `results` under the device name `device`; `segment`
+/// names the segment in messages.
+pub fn drive_spec(
+    py: &Path,
+    bench: &NetnsSim,
+    segment: &str,
+    device: &str,
+    spec: &str,
+    results: &mut Results,
+) {
     let spec_path = std::env::temp_dir().join(format!(
         "oxicat-soem-{}-{}.json",
         std::process::id(),
-        dev.name
+        device
+            .chars()
+            .rev()
+            .take(48)
+            .map(|c| if c.is_ascii_alphanumeric() { c } else { '_' })
+            .collect::<String>()
     ));
-    std::fs::write(&spec_path, &spec).expect("write the spec");
+    std::fs::write(&spec_path, spec).expect("write the spec");
     let out = Command::new(py)
         .arg(script())
         .arg(bench.master_if())
@@ -219,7 +292,7 @@ pub fn drive(
             panic!("malformed line from soem_check.py: {line}");
         };
         results.entry(check.to_string()).or_default().push((
-            dev.name.to_string(),
+            device.to_string(),
             pos.parse().expect("slave position"),
             verdict == "PASS",
             f.next().unwrap_or_default().to_string(),
