@@ -282,10 +282,23 @@ def main():
                   f"vendor/product/revision {tuple(hex(v) for v in got)}, "
                   f"want {tuple(hex(v) for v in exp)}")
             # SOEM names a slave by SII string 1 (cut at EC_MAXNAME = 40 characters).
-            name = slave.name
-            ok = name == s["order_code"][:40]
-            check("scan_name", pos, ok, f"SOEM name {name!r}, want the ESI Type "
-                  f"(order code) {s['order_code']!r}")
+            # SOEM copies at most 40 bytes and the C string ends at a NUL byte.
+            raw = s["order_code"].encode("latin-1", "replace")[:40].split(b"\0")[0]
+            try:
+                name = slave.name
+                ok = name == s["order_code"][:40]
+                check("scan_name", pos, ok, f"SOEM name {name!r}, want the ESI Type "
+                      f"(order code) {s['order_code']!r}")
+            except UnicodeDecodeError as e:
+                # pysoem decodes the name as UTF-8: a device whose string 1 is not text
+                # (HBM's ClipX keeps a bitmap there) fails so with the device itself.
+                try:
+                    raw.decode("utf-8")
+                    ok = False
+                except UnicodeDecodeError:
+                    ok = True
+                check("scan_name", pos, ok, f"pysoem cannot decode the name ({e}); "
+                      f"SII string 1 starts {raw!r}")
 
         # Slaves without a slave stack (served by their ESC alone, as simple terminals
         # are) have no mailbox: no SDO, DC-by-CoE or AL-status checks for them.
@@ -317,6 +330,16 @@ def main():
             check("to_safeop", pos, slave.state == pysoem.SAFEOP_STATE,
                   f"{state_name(slave.state)}, AL status 0x{slave.al_status:04X}")
         if state != pysoem.SAFEOP_STATE:
+            # What SOEM left in the process-data SMs (start, length, control, status,
+            # activate, PDI control), for the refusal's reason.
+            for pos, slave in enumerate(master.slaves):
+                for sm in (2, 3):
+                    try:
+                        r = slave._fprd(0x0800 + 8 * sm, 8)
+                        info(f"slave {pos} SM{sm}: start 0x{r[0] | r[1] << 8:04X} length "
+                             f"{r[2] | r[3] << 8} control 0x{r[4]:02X} activate 0x{r[6]:02X}")
+                    except Exception as e:  # noqa: BLE001
+                        info(f"slave {pos} SM{sm}: {type(e).__name__}: {e}")
             return
 
         # The working counter the slaves answer an LRW with: 2 for each slave with outputs

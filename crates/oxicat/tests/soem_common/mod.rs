@@ -152,6 +152,9 @@ pub struct Expect {
     pub order_code: String,
     /// The ESI's device `Name`.
     pub name: String,
+    /// Output and input bits SOEM should map, where not the definition's default PDO
+    /// assignment (a twin the ESC serves alone from an SII dump: its PDO categories).
+    pub pd_bits: Option<(u32, u32)>,
 }
 
 impl Expect {
@@ -163,6 +166,7 @@ impl Expect {
             stack: true,
             order_code: m.order_code.unwrap_or_default(),
             name: m.name.unwrap_or_default(),
+            pd_bits: None,
         }
     }
 }
@@ -172,8 +176,10 @@ fn slave_json(e: &Expect) -> String {
     let def = e.def;
     let id = def.identity;
     let dc = e.stack && has_dc(def);
-    let out_bytes = def.default_output_bits().div_ceil(8);
-    let in_bytes = def.default_input_bits().div_ceil(8);
+    let (out_bits, in_bits) = e
+        .pd_bits
+        .unwrap_or((def.default_output_bits(), def.default_input_bits()));
+    let (out_bytes, in_bytes) = (out_bits.div_ceil(8), in_bits.div_ceil(8));
     // The SM watchdog guards the outputs' sync manager where its control byte enables it
     // (bit 6), and it is the slave's firmware that leaves OP when it expires.
     let watchdog = e.stack && out_bytes > 0 && def.info.sm_control.outputs & 0x40 != 0;
