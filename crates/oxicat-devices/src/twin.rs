@@ -26,6 +26,7 @@ use crate::registry::NodeError;
 
 pub mod behaviour;
 pub mod firmware;
+pub mod pins;
 
 use behaviour::{Behaviour, Mode};
 
@@ -268,6 +269,15 @@ pub fn add_node(
     cfg.clock.drift_ppm = drift_ppm;
     let id = segment.add(Esc::new(cfg, t.esi.sii.clone()));
     if t.esi.served == Served::EscOnly {
+        // No firmware: the ESC's digital I/O, its input pins as the behaviour says (a
+        // behaviour a segment file gives was checked against the pins when it was read).
+        if let Ok(p) = pins::Pins::new(t.esi.def, &t.esi.sii, &t.behaviour) {
+            if !p.is_empty() {
+                segment
+                    .attach(id, Box::new(p))
+                    .expect("the ESC was added just now");
+            }
+        }
         return Ok(id);
     }
     let small_image = t.esi.image_bytes <= 4096;

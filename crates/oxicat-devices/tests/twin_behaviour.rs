@@ -396,3 +396,117 @@ fn hold_as_device_behaviour_leaves_the_inputs_at_their_esi_defaults() {
         .unwrap();
     });
 }
+
+/// A twin its ESC serves alone (no mailbox, no firmware): the AX58100 evaluation board's
+/// 16 digital outputs (SMs at 0x0F02 and 0x0F03) and 16 inputs (0x1000) on the ESC's
+/// digital-I/O pins. By default the output pins are wired to the input pins in pairs.
+#[test]
+fn an_esc_only_digital_io_twin_loops_its_output_pins_to_its_input_pins() {
+    big(|| {
+        let t = twin("esi-vendor/AX58100_EVB_DIO_ESI_00010200_00000001_20220323.xml");
+        assert_eq!(t.esi.served, oxicat_esi::twin::Served::EscOnly);
+        let (mut m, _seg, vars) = open(t);
+        let outs = [
+            var(&vars, Dir::Output, (0x3101, 1)),
+            var(&vars, Dir::Output, (0x3101, 2)),
+        ];
+        let ins = [
+            var(&vars, Dir::Input, (0x3001, 1)),
+            var(&vars, Dir::Input, (0x3001, 2)),
+        ];
+        let mut sent: Vec<[u8; 2]> = Vec::new();
+        let mut got: Vec<[u8; 2]> = Vec::new();
+        m.run_cyclic(CycleOptions::default(), |io| {
+            sent.push([io.get(&outs[0])[0], io.get(&outs[1])[0]]);
+            got.push([io.get(&ins[0])[0], io.get(&ins[1])[0]]);
+            let c = io.cycle as u8;
+            io.set(&outs[0], &[c.wrapping_mul(37).wrapping_add(1)])
+                .unwrap();
+            io.set(&outs[1], &[c.wrapping_mul(11) ^ 0x5A]).unwrap();
+            Ok(if io.cycle >= 60 {
+                Flow::Stop
+            } else {
+                Flow::Continue
+            })
+        })
+        .unwrap();
+        for k in 2..got.len() {
+            assert_eq!(got[k], sent[k - 1], "cycle {k}: {got:?} / {sent:?}");
+        }
+        assert!(got[2..].windows(2).all(|w| w[0] != w[1]), "{got:?}");
+    });
+}
+
+/// Per-entry rules on an ESC-only twin: a held value and a ramp on the input pins, the
+/// other byte's loop replaced; an entry not on the pins, and `drive`, are refused.
+#[test]
+fn an_esc_only_twin_takes_held_and_signal_inputs_and_refuses_what_its_pins_cannot() {
+    use oxicat_devices::twin::behaviour::RampSpec;
+    use oxicat_devices::twin::pins::Pins;
+    big(|| {
+        let base = twin("esi-vendor/AX58100_EVB_DIO_ESI_00010200_00000001_20220323.xml");
+        let b = Behaviour::compile(
+            None,
+            &[
+                EntrySpec {
+                    entry: "0x3001:1".into(),
+                    hold: Some(0xA5 as f64),
+                    ..Default::default()
+                },
+                EntrySpec {
+                    entry: "0x3001:2".into(),
+                    ramp: Some(RampSpec {
+                        slope_per_s: 1000.0,
+                        start: 0.0,
+                        min: Some(0.0),
+                        max: Some(256.0),
+                    }),
+                    ..Default::default()
+                },
+            ],
+            base.esi.def,
+            "device[0]",
+        )
+        .unwrap();
+        let t = with_behaviour(base, b);
+        let (mut m, seg, vars) = open(t);
+        let held = var(&vars, Dir::Input, (0x3001, 1));
+        let ramp = var(&vars, Dir::Input, (0x3001, 2));
+        let out = var(&vars, Dir::Output, (0x3101, 1));
+        let mut checked = 0;
+        m.run_cyclic(CycleOptions::default(), |io| {
+            io.set(&out, &[0x3C]).unwrap();
+            if io.cycle >= 2 {
+                let now = seg.lock().unwrap().now();
+                assert_eq!(io.get(&held)[0], 0xA5, "cycle {}", io.cycle);
+                // Sampled on the 50 µs grid before the frame: within one sample of now.
+                let v = io.get(&ramp)[0] as f64;
+                let hit = passes(now).any(|t| ((t * 1000.0).round() % 256.0) == v);
+                assert!(hit, "cycle {} at {now} ns: {v}", io.cycle);
+                checked += 1;
+            }
+            Ok(if io.cycle >= 300 {
+                Flow::Stop
+            } else {
+                Flow::Continue
+            })
+        })
+        .unwrap();
+        assert!(checked >= 299);
+
+        // An output entry is not an input pin; `drive` needs firmware.
+        let def = base.esi.def;
+        let out_rule = Behaviour {
+            entries: vec![((0x3101, 1), Rule::Hold(1.0))],
+            ..Default::default()
+        };
+        let e = Pins::new(def, &base.esi.sii, &out_rule).err().unwrap();
+        assert!(e.contains("not on the ESC's input pins"), "{e}");
+        let drive = Behaviour {
+            mode: oxicat_devices::twin::behaviour::Mode::Drive,
+            ..Default::default()
+        };
+        let e = Pins::new(def, &base.esi.sii, &drive).err().unwrap();
+        assert!(e.contains("needs firmware"), "{e}");
+    });
+}

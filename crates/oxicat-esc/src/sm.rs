@@ -122,10 +122,14 @@ impl Sm {
         self.start as u32 + self.len as u32
     }
 
-    /// Offset added to an address in the SM area for the physical buffer `b`.
+    /// Offset added to an address in the SM area for the physical buffer `b`. A mailbox
+    /// has one buffer; so has an SM over registers (below 0x1000, e.g. the digital outputs
+    /// at 0x0F00): its buffering lives inside the ESC, the registers after it belong to
+    /// others (a second SM over the next output byte, as the AX58100 DIO board's ESI lays
+    /// them out), so every buffer is the registers themselves.
     #[inline]
     pub fn buf_offset(&self, b: u8) -> u32 {
-        if self.is_mailbox() {
+        if self.is_mailbox() || self.start < crate::regs::PROCESS_RAM {
             0
         } else {
             b as u32 * self.len as u32

@@ -506,6 +506,31 @@ fn digital_outputs_and_watchdog() {
     assert_eq!(e.memory()[0x0440] & 1, 0);
 }
 
+/// Two buffered SMs of one byte each over neighbouring digital-output registers (the
+/// AX58100 DIO board's ESI: 0x0F02 and 0x0F03, control 0x44): each keeps its own byte. A
+/// buffered SM over registers does not spread its three buffers over the registers after
+/// it (0x0F02's second buffer would be 0x0F03): the registers are its one buffer.
+#[test]
+fn buffered_sms_over_neighbouring_output_registers_keep_their_own_bytes() {
+    let mut e = Esc::new(EscConfig::et1100(), eeprom(0x0104, 0));
+    sm(&mut e, 0, 0x0F02, 1, 0x44, 1);
+    sm(&mut e, 1, 0x0F03, 1, 0x44, 1);
+    fmmu(&mut e, 0, 0x100, 2, 0, 7, 0x0F02, 0, 2);
+    for (k, v) in [[0x12u8, 0x34], [0x56, 0x78], [0x9A, 0xBC], [0xDE, 0xF0]]
+        .iter()
+        .enumerate()
+    {
+        let mut f = frame(&[(DatagramHeader::logical(Command::Lwr, 0, 0x100, 2), &v[..])]);
+        e.forward(0, &mut f, 1000 * (k as u64 + 1), true);
+        assert_eq!(dg(&f, 0).1, 1, "frame {k}");
+        assert_eq!(
+            e.digital_outputs(),
+            u32::from(v[0]) << 16 | u32::from(v[1]) << 24,
+            "frame {k}"
+        );
+    }
+}
+
 #[test]
 fn sii_read_write_reload_and_ownership() {
     let mut e = esc();

@@ -214,9 +214,19 @@ impl Master {
             futures_lite::future::block_on(self.pdos_coe(position, model.as_ref()))
         } else {
             let m = model.ok_or(MasterError::NoCoe(position))?;
-            let conv = |list: &[oxicat_esi::model::PdoModel], sm: u8| -> Vec<Pdo> {
-                list.iter()
-                    .filter(|p| p.sm == Some(sm))
+            // The process-data SMs of this SII by kind, in SM order (a board may split
+            // its outputs over several SMs, as the AX58100 DIO board's 0x0F02 and 0x0F03).
+            let sms_of = |k: oxicat_esi::model::SmKind| -> Vec<u8> {
+                m.sms
+                    .iter()
+                    .enumerate()
+                    .filter(|(_, s)| s.kind == k)
+                    .map(|(i, _)| i as u8)
+                    .collect()
+            };
+            let conv = |list: &[oxicat_esi::model::PdoModel], sms: Vec<u8>| -> Vec<Pdo> {
+                sms.iter()
+                    .flat_map(|&sm| list.iter().filter(move |p| p.sm == Some(sm)))
                     .map(|p| Pdo {
                         index: p.index,
                         name: p.name.clone().unwrap_or_default(),
@@ -230,17 +240,14 @@ impl Master {
                     })
                     .collect()
             };
-            // The SM numbers of the process data in this SII.
-            let sm_of = |k: oxicat_esi::model::SmKind| {
-                m.sms.iter().position(|s| s.kind == k).map(|i| i as u8)
-            };
-            let out_sm = sm_of(oxicat_esi::model::SmKind::Outputs).unwrap_or(2);
-            let in_sm = sm_of(oxicat_esi::model::SmKind::Inputs).unwrap_or(3);
+            let or = |v: Vec<u8>, sm: u8| if v.is_empty() { vec![sm] } else { v };
+            let out_sms = or(sms_of(oxicat_esi::model::SmKind::Outputs), 2);
+            let in_sms = or(sms_of(oxicat_esi::model::SmKind::Inputs), 3);
             Ok(SlavePdos {
                 position,
                 source: PdoSource::Sii,
-                rx: conv(&m.rx_pdos, out_sm),
-                tx: conv(&m.tx_pdos, in_sm),
+                rx: conv(&m.rx_pdos, out_sms),
+                tx: conv(&m.tx_pdos, in_sms),
             })
         }
     }

@@ -745,15 +745,17 @@ fn with_behaviour(dev: Device, entry: &DeviceEntry, j: usize) -> Result<Device, 
         return Ok(dev);
     }
     let key = format!("device[{j}]");
-    if t.esi.served == oxicat_esi::twin::Served::EscOnly {
-        return Err(SimError::Twin(format!(
-            "{key}.behaviour: {} has no mailbox and is served by its ESC alone (no firmware \
-             to run a behaviour)",
-            t.spec
-        )));
-    }
     let b = Behaviour::compile(entry.behaviour.as_deref(), &entry.entries, t.esi.def, &key)
         .map_err(|e| SimError::Twin(format!("{} ({})", e, t.spec)))?;
+    if t.esi.served == oxicat_esi::twin::Served::EscOnly {
+        // Served by its ESC alone: the behaviour drives the digital-I/O input pins.
+        oxicat_devices::twin::pins::Pins::new(t.esi.def, &t.esi.sii, &b).map_err(|why| {
+            SimError::Twin(format!(
+                "{key}: {why} ({} has no mailbox and is served by its ESC alone)",
+                t.spec
+            ))
+        })?;
+    }
     Ok(Device::Twin(oxicat_devices::twin::with_behaviour(t, b)))
 }
 

@@ -156,12 +156,21 @@ fn bad_behaviour_is_refused_with_its_key() {
             "[[device]]\nname = \"demo\"\nbehaviour = \"loop\"\n".to_string(),
             "device[0].behaviour",
         ),
+        // Served by its ESC alone: no firmware to run a drive, and only input pins take
+        // a rule (EL2008 has outputs only).
         (
             format!(
-                "[[device]]\nesi = \"{}:EL2008\"\nbehaviour = \"loop\"\n",
+                "[[device]]\nesi = \"{}:EL2008\"\nbehaviour = \"drive\"\n",
                 esi("esi-vendor/Beckhoff-EL2xxx.xml")
             ),
             "device[0].behaviour",
+        ),
+        (
+            format!(
+                "[[device]]\nesi = \"{}:EL2008\"\n[[device.entry]]\nentry = \"0x7000:1\"\nhold = 1\n",
+                esi("esi-vendor/Beckhoff-EL2xxx.xml")
+            ),
+            "device[0].entry[0].entry",
         ),
     ];
     for (text, key) in cases {

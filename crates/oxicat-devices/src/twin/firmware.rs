@@ -149,7 +149,7 @@ fn active<const N: usize>(od: &Od<N>, assign: u16) -> Vec<PdoEntry> {
 
 /// The raw bits of `v` in an entry of type `dtype` and `bits`: REAL as IEEE bits, integers
 /// rounded and saturated to the type's range.
-fn encode(v: f64, dtype: DataType, bits: u16) -> u64 {
+pub(super) fn encode(v: f64, dtype: DataType, bits: u16) -> u64 {
     match dtype {
         DataType::Real32 => (v as f32).to_bits() as u64,
         DataType::Real64 => v.to_bits(),
