@@ -11,6 +11,20 @@ pub use oxicat_wire::regs::sii_control::{
     WRITE_ENABLE as CTL_WRITE_ENABLE,
 };
 
+/// How long the EEPROM interface stays busy after a write command (ns): the I²C EEPROM's
+/// internal write cycle t_WR, 5 ms maximum for the 24C-series parts ESCs are built with
+/// (Microchip/Atmel AT24C256B datasheet, AC characteristics: "t_WR Write Cycle Time 5 ms";
+/// the same figure for the 24C02/24C04 class). Beckhoff ESC datasheet section I, 11.2.1.1
+/// "Missing Acknowledge": after a write the EEPROM chip is "internally busy transferring data
+/// from input buffer to storage area" and "does not acknowledge any access until internal
+/// transfer has finished (may take up to several ms)"; a command issued then ends with
+/// 0x0502 bit 13 "Error Acknowledge/Command" (table 40: "Missing acknowledge from EEPROM
+/// chip ... EEPROM chip is busy performing operations internally"). The model shows the
+/// whole cycle as 0x0502 bit 15 (busy), so a master that waits for busy to clear before its
+/// next command never sees the error; silicon may clear busy after the I²C transfer and
+/// only then refuse the next command (the case 11.2.1.1 describes).
+pub const WRITE_CYCLE_NS: u64 = 5_000_000;
+
 /// Byte `i` of the EEPROM, 0xFF beyond its end (an erased EEPROM).
 #[inline]
 fn ee(eeprom: &[u8], i: usize) -> u8 {
@@ -88,9 +102,39 @@ pub enum SiiOutcome {
     Error,
 }
 
+/// A command written to 0x0502 (`written` = the value written) while a write cycle runs:
+/// not executed. A read, write, reload or invalid command ends with bit 13 (the EEPROM does
+/// not acknowledge, ESC datasheet section I table 40); writing 0 (no command) changes
+/// nothing. 0x0502 keeps showing busy (bit 15) and the write command in bits 8..10
+/// (section II, 0x0502 bits 8..10 read: "currently executed command").
+pub fn refuse_while_busy(regs: &mut [u8], written: u16) {
+    let mut ctl = read_ctl(regs) & !(CTL_CMD_MASK | CTL_WRITE_ENABLE);
+    ctl |= CTL_BUSY | CMD_WRITE;
+    if written & CTL_CMD_MASK != 0 {
+        ctl |= CTL_ACK_ERROR;
+    }
+    write_ctl(regs, ctl);
+}
+
+/// Starts the write cycle of a word just written: busy (bit 15) with the write command
+/// in bits 8..10 until [`end_write_cycle`].
+pub fn begin_write_cycle(regs: &mut [u8]) {
+    let ctl = read_ctl(regs) & !CTL_CMD_MASK;
+    write_ctl(regs, ctl | CTL_BUSY | CMD_WRITE);
+}
+
+/// The write cycle is over: the interface is idle (bits 15 and 8..10 clear); error bits
+/// set by commands refused meanwhile stay until the next command.
+pub fn end_write_cycle(regs: &mut [u8]) {
+    let ctl = read_ctl(regs) & !(CTL_CMD_MASK | CTL_BUSY);
+    write_ctl(regs, ctl);
+}
+
 /// Executes the command just written to 0x0502 (`written` = the value written, `we` =
-/// whether the write-enable bit was part of that write). Commands complete at once; the
-/// busy bit reads 0 afterwards. Words at or above `writable_words` do not acknowledge a
+/// whether the write-enable bit was part of that write). Commands complete at once and
+/// the busy bit reads 0 afterwards, except a write ([`SiiOutcome::Written`]), whose word is
+/// stored at once but whose write cycle the caller runs ([`begin_write_cycle`],
+/// [`WRITE_CYCLE_NS`]). Words at or above `writable_words` do not acknowledge a
 /// write (a write-protected or worn part): the command ends with 0x0502 bit 13 set.
 pub fn execute(
     regs: &mut [u8],

@@ -49,10 +49,29 @@ fn phys(cmd: Command, adp: u16, ado: u16, data: &[u8]) -> DatagramHeader {
 
 /// Runs one datagram through `e` entering port 0; returns (data, wkc).
 pub(crate) fn run(e: &mut Esc, cmd: Command, adp: u16, ado: u16, data: &[u8]) -> (Vec<u8>, u16) {
+    run_at(e, 0, cmd, adp, ado, data)
+}
+
+/// [`run`] with the frame arriving at virtual time `t` (ns).
+pub(crate) fn run_at(
+    e: &mut Esc,
+    t: u64,
+    cmd: Command,
+    adp: u16,
+    ado: u16,
+    data: &[u8],
+) -> (Vec<u8>, u16) {
     let mut f = frame(&[(phys(cmd, adp, ado, data), data)]);
-    e.forward(0, &mut f, 0, true);
+    e.forward(0, &mut f, t, true);
     let (d, w, _) = dg(&f, 0);
     (d, w)
+}
+
+/// Lets the EEPROM write cycle under way (if any) end.
+pub(crate) fn sii_wait(e: &mut Esc) {
+    if let Some(d) = e.sii_busy_until {
+        e.advance(d);
+    }
 }
 
 pub(crate) fn fpwr(e: &mut Esc, ado: u16, data: &[u8]) -> u16 {
@@ -547,10 +566,12 @@ fn sii_read_write_reload_and_ownership() {
     assert_ne!(fprd(&mut e, 0x0503, 1).0[0] & 0x40, 0);
     fpwr(&mut e, 0x0502, &[0x01, 0x02]);
     assert_eq!(&e.eeprom()[16..18], &[0x11, 0x22]);
+    sii_wait(&mut e);
     // Corrupt the config area (alias word 4) and reload: CRC error flagged.
     fpwr(&mut e, 0x0504, &[4, 0, 0, 0]);
     fpwr(&mut e, 0x0508, &[0x99, 0x99]);
     fpwr(&mut e, 0x0502, &[0x01, 0x02]);
+    sii_wait(&mut e);
     fpwr(&mut e, 0x0502, &[0x00, 0x04]);
     assert_ne!(fprd(&mut e, 0x0503, 1).0[0] & 0x08, 0);
     // PDI ownership: ECAT commands ignored.
@@ -564,6 +585,67 @@ fn sii_read_write_reload_and_ownership() {
     assert_eq!(b, [0x11, 0x22]);
 }
 
+/// An EEPROM write takes the EEPROM's write cycle (ESC datasheet section I 11.2.1.1, t_WR of
+/// the I²C EEPROM, [`crate::sii::WRITE_CYCLE_NS`]): 0x0502 shows busy with the write command
+/// meanwhile, a command issued then is not executed and ends with bit 13 (section I table
+/// 40: missing acknowledge, the EEPROM is busy internally), and when the cycle is over on
+/// the virtual clock the interface is idle and the retried command works. Before, every
+/// write completed at once.
+#[test]
+fn eeprom_write_cycle_keeps_the_interface_busy() {
+    use crate::sii::WRITE_CYCLE_NS;
+    let mut e = esc();
+    let sa = e.station_address();
+    let ctl = |e: &mut Esc, t: u64| {
+        let d = run_at(e, t, Command::Fprd, sa, 0x0502, &[0; 2]).0;
+        u16::from_le_bytes([d[0], d[1]])
+    };
+    let t0 = 1_000_000;
+    run_at(&mut e, t0, Command::Fpwr, sa, 0x0504, &[0x20, 0, 0, 0]);
+    run_at(&mut e, t0, Command::Fpwr, sa, 0x0508, &[0x11, 0x22]);
+    run_at(&mut e, t0, Command::Fpwr, sa, 0x0502, &[0x01, 0x02]);
+    assert_eq!(&e.eeprom()[0x40..0x42], &[0x11, 0x22]);
+    // Busy, the write command shown, no error.
+    let c = ctl(&mut e, t0 + 1_000);
+    assert_eq!(c & 0xE700, 0x8200, "0x0502 = {c:#06x}");
+    // A read of word 8 issued now: refused with bit 13, still busy, data register kept.
+    run_at(&mut e, t0 + 2_000, Command::Fpwr, sa, 0x0504, &[8, 0, 0, 0]);
+    run_at(&mut e, t0 + 2_000, Command::Fpwr, sa, 0x0502, &[0x00, 0x01]);
+    let c = ctl(&mut e, t0 + 3_000);
+    assert_eq!(c & 0xE700, 0xA200, "0x0502 = {c:#06x}");
+    let d = run_at(&mut e, t0 + 3_000, Command::Fprd, sa, 0x0508, &[0; 2]).0;
+    assert_eq!(d, [0x11, 0x22], "the read was not executed");
+    // Writing 0 while busy neither starts nor clears anything.
+    run_at(&mut e, t0 + 4_000, Command::Fpwr, sa, 0x0502, &[0x00, 0x00]);
+    assert_eq!(ctl(&mut e, t0 + 4_000) & 0xE700, 0xA200);
+    // Still busy just before the end of the cycle (on a frame or on the PDI side).
+    assert_ne!(ctl(&mut e, t0 + WRITE_CYCLE_NS - 1) & 0x8000, 0);
+    // Over: idle, the error of the refused command kept until the next command.
+    e.advance(t0 + WRITE_CYCLE_NS);
+    let mut b = [0u8; 2];
+    e.pdi_read(0x0502, &mut b).unwrap();
+    assert_eq!(u16::from_le_bytes(b) & 0xE700, 0x2000);
+    // The retried read is executed and clears the error.
+    let t1 = t0 + WRITE_CYCLE_NS + 1_000;
+    run_at(&mut e, t1, Command::Fpwr, sa, 0x0502, &[0x00, 0x01]);
+    assert_eq!(ctl(&mut e, t1) & 0xE700, 0);
+    let d = run_at(&mut e, t1, Command::Fprd, sa, 0x0508, &[0; 2]).0;
+    assert_eq!(d, [0xAA, 0x55]);
+    // The PDI owns the EEPROM: its writes run the same cycle.
+    run_at(&mut e, t1, Command::Fpwr, sa, 0x0500, &[1]);
+    e.pdi_write(0x0501, &[1]).unwrap();
+    e.pdi_write(0x0504, &[0x21, 0, 0, 0]).unwrap();
+    e.pdi_write(0x0508, &[0x33, 0x44]).unwrap();
+    e.pdi_write(0x0502, &[0x01, 0x02]).unwrap();
+    e.pdi_write(0x0502, &[0x00, 0x01]).unwrap();
+    e.pdi_read(0x0502, &mut b).unwrap();
+    assert_eq!(u16::from_le_bytes(b) & 0xE700, 0xA200);
+    e.advance(t1 + WRITE_CYCLE_NS);
+    e.pdi_read(0x0502, &mut b).unwrap();
+    assert_eq!(u16::from_le_bytes(b) & 0x8700, 0);
+    assert_eq!(&e.eeprom()[0x42..0x44], &[0x33, 0x44]);
+}
+
 #[test]
 fn write_protected_eeprom_area_does_not_acknowledge() {
     let mut e = esc();
@@ -574,6 +656,7 @@ fn write_protected_eeprom_area_does_not_acknowledge() {
     fpwr(&mut e, 0x0502, &[0x01, 0x02]);
     assert_eq!(fprd(&mut e, 0x0503, 1).0[0] & 0x20, 0);
     assert_eq!(&e.eeprom()[0x3E..0x40], &[0x11, 0x22]);
+    sii_wait(&mut e);
     // From word 0x20 on: missing acknowledge (bit 13), the word keeps its value.
     let before = [e.eeprom()[0x40], e.eeprom()[0x41]];
     fpwr(&mut e, 0x0504, &[0x20, 0, 0, 0]);

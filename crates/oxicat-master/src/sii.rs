@@ -56,6 +56,9 @@ pub fn image_identity(img: &[u8]) -> Result<(u32, u32, u32), MasterError> {
     Ok((id.vendor_id, id.product_code, id.revision))
 }
 
+/// Virtual time between two polls of a busy EEPROM interface (the real-time pause).
+const SII_POLL_NS: u64 = 200_000;
+
 impl Master {
     async fn sii_take(&self, position: usize) -> Result<u16, MasterError> {
         // The master owns the EEPROM when 0x0500 bit 0 is 0; the PDI may hold it (0x0501).
@@ -87,7 +90,15 @@ impl Master {
             if std::time::Instant::now() > deadline {
                 return Err(sii_err(position, "stays busy (0x0502 bit 15)"));
             }
-            self.pause().await;
+            if self.time.is_sim() {
+                // An EEPROM write cycle lasts milliseconds of the segment's virtual clock,
+                // which frames alone advance by microseconds: let the poll interval pass
+                // there, as it passes in real time on hardware.
+                let t = self.time.now();
+                self.time.wait_until(t + SII_POLL_NS);
+            } else {
+                self.pause().await;
+            }
         }
     }
 

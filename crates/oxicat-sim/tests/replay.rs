@@ -300,46 +300,14 @@ fn twincat_run_ek1100_el1004() {
         "twincat-run-ek1100-el1004.pcapng",
         ek1100_el1004,
         |bench, _| {
-            preroll(
-                bench,
-                &[
-                    (2, 0x0000, 0x0010, &[0xE9, 0x03]),
-                    (2, 0xFFFF, 0x0010, &[0xEA, 0x03]),
-                    (8, 0x0000, 0x0120, &[0x02, 0x00]),
-                ],
-            )
+            bench.preroll(&[
+                (2, 0x0000, 0x0010, &[0xE9, 0x03]),
+                (2, 0xFFFF, 0x0010, &[0xEA, 0x03]),
+                (8, 0x0000, 0x0120, &[0x02, 0x00]),
+            ])
         },
     );
 }
-
-/// Sends configuration datagrams (cmd, adp, ado, data) through the bench at t = 0.
-fn preroll(bench: &mut Bench, dgs: &[(u8, u16, u16, &[u8])]) {
-    use oxicat_wire::{Command, DatagramHeader, FrameBuilder};
-    for (i, (cmd, adp, ado, data)) in dgs.iter().enumerate() {
-        let mut buf = [0u8; 128];
-        let eth = EthernetHeader {
-            dst: [0xFF; 6],
-            src: [0; 6],
-            vlan_tci: None,
-            payload_offset: 14,
-        };
-        let mut b = FrameBuilder::new(&mut buf, &eth).expect("frame");
-        let c = Command::from_u8(*cmd).expect("command");
-        b.push(
-            DatagramHeader::physical(c, i as u8, *adp, *ado, data.len() as u16),
-            data,
-        )
-        .expect("datagram");
-        let n = b.finish();
-        let back = bench
-            .exchange(&buf[..n], 0)
-            .expect("pre-roll frame returned");
-        let d = datagrams(&back).expect("pre-roll reply");
-        assert!(d[0].wkc > 0, "pre-roll datagram {i} not acknowledged");
-    }
-}
-
-use oxicat_wire::EthernetHeader;
 
 // ---------------------------------------------------------------- µC-based slaves
 
@@ -428,12 +396,173 @@ fn soem_single_lan9252() {
     check_capture("soem-single-lan9252.pcapng", slaves, |bench, r| {
         // State the board kept from SOEM's previous run (it was not power-cycled): ECAT event
         // mask 0x0200 = 0x0004, so the DL-status-change event shows in the IRQ field from
-        // frame 1 on, before this run writes 0x0200 (frame 11).
-        preroll(bench, &[(8, 0x0000, 0x0200, &[0x04, 0x00])]);
+        // frame 1 on, before this run writes 0x0200 (frame 11). The event itself is pending
+        // (IRQ 0x0004 in reply 2): a link changed since the previous run read 0x0110.
+        bench.start_from(StartState::LeftByMaster(LeftByMaster {
+            event_mask: 0x0004,
+            dl_control: None,
+            dl_event_read: false,
+        }));
         // The SOES application had not read AL control at 8.1 ms (frames 5 and 29: the AL
         // control "mailbox" refuses BWR 0x0120 with WKC 0) but had by 81 ms (frame 275 is
         // accepted): its ESC polling starts in between (capture time + 1 ms offset).
         bench.firmware_from = 1_000_000 + 20_000_000;
         firmware_masks(r);
     });
+}
+
+// ---------------------------------------------------------------- bench options
+
+/// A valid 2 KiB image (µC configuration area) whose words 8.. hold `word ^ 0x5A5A`.
+fn patterned_sii() -> Vec<u8> {
+    let mut img = sii_image(&Default::default(), &MCU_CONFIG, 2048);
+    for w in 8..img.len() / 2 {
+        let v = (w as u16) ^ 0x5A5A;
+        img[2 * w..2 * w + 2].copy_from_slice(&v.to_le_bytes());
+    }
+    img
+}
+
+/// The IRQ field of a BRD 0x0000 sent through `bench` at 1 ms.
+fn irq_of_a_brd(bench: &mut Bench) -> u16 {
+    let back = bench
+        .exchange(&master_frame(0, 7, 0, 0x0000, &[0]), 1_000_000)
+        .expect("BRD returned");
+    datagrams(&back).expect("reply")[0].irq
+}
+
+/// The start state "segment not power-cycled": the ESCs start with the ECAT event mask,
+/// DL control and the acknowledged DL-status event a previous master left, instead of
+/// power-on values (where the DL-status event is pending and masked). Before, the bench
+/// had only the power-on state (and per-capture pre-rolls).
+#[test]
+fn bench_start_state_left_by_a_previous_master() {
+    let line = || {
+        Bench::new(vec![
+            spec("ET1100", EscConfig::et1100(), patterned_sii(), false),
+            spec("LAN9252", lan9252(), patterned_sii(), false),
+        ])
+    };
+    // Power-on: the DL-status-change event is pending but the mask is 0.
+    let mut b = line();
+    b.start_from(StartState::PowerOn);
+    assert_eq!(irq_of_a_brd(&mut b), 0);
+    assert_eq!(b.escs[0].ecat_event_request() & 0x0004, 0x0004);
+    // Mask left at 0x0004, a link changed since the last read of DL status: the event shows.
+    let mut b = line();
+    b.start_from(StartState::LeftByMaster(LeftByMaster {
+        event_mask: 0x0004,
+        dl_control: None,
+        dl_event_read: false,
+    }));
+    assert_eq!(irq_of_a_brd(&mut b), 0x0004);
+    // Mask and DL control left, the event acknowledged by the previous master's read.
+    let mut b = line();
+    b.start_from(StartState::LeftByMaster(LeftByMaster {
+        event_mask: 0x0004,
+        dl_control: Some(0x0007_F001),
+        dl_event_read: true,
+    }));
+    assert_eq!(irq_of_a_brd(&mut b), 0);
+    for e in &b.escs {
+        assert_eq!(&e.memory()[0x0200..0x0202], &[0x04, 0x00]);
+        assert_eq!(&e.memory()[0x0100..0x0104], &[0x01, 0xF0, 0x07, 0x00]);
+        assert_eq!(e.ecat_event_request() & 0x0004, 0);
+    }
+}
+
+/// One exchange of `bench` as a capture holds it (frame numbers from `n`).
+fn exchange_of(
+    bench: &mut Bench,
+    n: &mut usize,
+    cmd: u8,
+    adp: u16,
+    ado: u16,
+    data: &[u8],
+) -> Exchange {
+    let sent = master_frame(*n as u8, cmd, adp, ado, data);
+    let t = 1_000_000 + *n as u64 * 100_000;
+    let reply = bench.exchange(&sent, t).map(|data| CapFrame {
+        number: *n + 1,
+        ts: t,
+        data,
+    });
+    let sent = CapFrame {
+        number: *n,
+        ts: t,
+        data: sent,
+    };
+    *n += 2;
+    Exchange { sent, reply }
+}
+
+/// SII reconstruction from EEPROM reads that take control, address and data in one
+/// datagram (FPRD 0x0502..0x050F, as TwinCAT polls), not only from reads of 0x0508: the
+/// words come out as the EEPROM holds them; a read that shows busy (bit 15) or an error
+/// (bit 13) gives nothing; a chip with 4-byte reads (0x0502 bit 6 clear) gives two words
+/// a read, not the stale rest of the data register. No reference capture has this form
+/// (TwinCAT's capture has no EEPROM traffic), so the sequence is built here. Before, no
+/// word came out of it.
+#[test]
+fn sii_from_reads_of_control_address_and_data_in_one_datagram() {
+    let img = patterned_sii();
+    let word = |w: u32| [img[2 * w as usize], img[2 * w as usize + 1]];
+    let mut bench = Bench::new(vec![
+        spec("ET1100", EscConfig::et1100(), img.clone(), false),
+        spec("LAN9252", lan9252(), img.clone(), false),
+    ]);
+    let mut n = 1;
+    let mut ex = Vec::new();
+    // Station addresses 0x1001, 0x1002.
+    ex.push(exchange_of(
+        &mut bench,
+        &mut n,
+        2,
+        0x0000,
+        0x0010,
+        &[0x01, 0x10],
+    ));
+    ex.push(exchange_of(
+        &mut bench,
+        &mut n,
+        2,
+        0xFFFF,
+        0x0010,
+        &[0x02, 0x10],
+    ));
+    for (station, step) in [(0x1001u16, 4u32), (0x1002, 2)] {
+        for w in (8..0x40).step_by(step as usize) {
+            let a = (w as u32).to_le_bytes();
+            let cmd = [0x00, 0x01, a[0], a[1], a[2], a[3]];
+            ex.push(exchange_of(&mut bench, &mut n, 5, station, 0x0502, &cmd));
+            ex.push(exchange_of(
+                &mut bench, &mut n, 4, station, 0x0502, &[0; 14],
+            ));
+        }
+    }
+    // The same read of the ET1100 twice more, as a busy and as a failed poll: its data
+    // register bytes and address are not the EEPROM's.
+    for bits in [0x80u8, 0x20] {
+        let a = 0x0100u32.to_le_bytes();
+        let cmd = [0x00, 0x01, a[0], a[1], a[2], a[3]];
+        ex.push(exchange_of(&mut bench, &mut n, 5, 0x1001, 0x0502, &cmd));
+        let mut e = exchange_of(&mut bench, &mut n, 4, 0x1001, 0x0502, &[0; 14]);
+        let r = e.reply.as_mut().expect("reply");
+        // Ethernet 14 + EtherCAT header 2 + datagram header 10: 0x0502 at 26.
+        r.data[27] |= bits;
+        r.data[32..40].fill(0xEE);
+        ex.push(e);
+    }
+    let words = sii_from_capture(&ex);
+    for (pos, last) in [(0u16, 0x3F), (1, 0x3F)] {
+        let m = words.get(&pos).expect("words of each slave");
+        for w in 8..=last {
+            assert_eq!(m.get(&w), Some(&word(w)), "slave {pos} word {w:#x}");
+        }
+        assert!(
+            m.keys().all(|&w| (8..=last).contains(&w)),
+            "slave {pos}: {:?}",
+            m.keys()
+        );
+    }
 }

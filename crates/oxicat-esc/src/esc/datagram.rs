@@ -128,6 +128,7 @@ impl Esc {
     ) -> Forward {
         let port = port & 3;
         self.now = t;
+        self.sii_settle(t);
         self.dc.frame_arrival(&mut self.mem[..REG_END], port, t);
         self.forward_after_arrival(port, frame, frame_ok)
     }

@@ -199,6 +199,7 @@ impl Esc {
         if t > self.now {
             self.now = t;
         }
+        self.sii_settle(t);
         let dce = if self.dc.advance_quiet(t) {
             crate::dc::DcEvents::default()
         } else {

@@ -151,6 +151,9 @@ pub struct Esc {
     eeprom: Vec<u8>,
     /// Words below this acknowledge writes ([`Esc::protect_eeprom_from`]).
     eeprom_writable_words: usize,
+    /// End of the EEPROM write cycle under way ([`sii::WRITE_CYCLE_NS`] after the write
+    /// command): until then 0x0502 shows busy and refuses commands.
+    pub(crate) sii_busy_until: Option<u64>,
     dc: Dc,
     link: [bool; 4],
     /// SyncManagers; the chip has the first `cfg.sm_count` (the others stay disabled).
@@ -252,6 +255,7 @@ impl Esc {
             al_ctl_unread: false,
             eeprom,
             eeprom_writable_words: usize::MAX,
+            sii_busy_until: None,
             dc,
             link: [true, false, false, false],
             sms,
@@ -389,6 +393,7 @@ impl Esc {
     pub fn pdi_read(&mut self, addr: u16, buf: &mut [u8]) -> Result<(), PdiError> {
         self.memo.clear();
         self.pdi_range(addr, buf.len())?;
+        self.sii_settle(self.now);
         self.pdi_access();
         self.phys_read(Side::Pdi, addr as u32, buf, false);
         Ok(())
@@ -399,6 +404,7 @@ impl Esc {
     pub fn pdi_write(&mut self, addr: u16, data: &[u8]) -> Result<(), PdiError> {
         self.memo.clear();
         self.pdi_range(addr, data.len())?;
+        self.sii_settle(self.now);
         self.pdi_access();
         self.phys_write(Side::Pdi, addr as u32, data, None);
         Ok(())
@@ -447,6 +453,19 @@ impl Esc {
     /// (missing acknowledge), as on a chip whose EEPROM does not answer; reads still work.
     pub fn protect_eeprom_from(&mut self, word: u16) {
         self.eeprom_writable_words = usize::from(word);
+    }
+
+    /// Ends the EEPROM write cycle if it is over at `t` (0x0502 busy clears). Called where
+    /// 0x0502 can be seen or written (frames, PDI accesses, time passing), so the cycle
+    /// follows the virtual clock without an event of its own.
+    #[inline]
+    pub(super) fn sii_settle(&mut self, t: u64) {
+        if let Some(d) = self.sii_busy_until {
+            if t >= d {
+                self.sii_busy_until = None;
+                sii::end_write_cycle(&mut self.mem);
+            }
+        }
     }
 
     /// Current SII EEPROM content.

@@ -427,7 +427,10 @@ impl Esc {
                 Side::Ecat => !sii::pdi_owns(&self.mem),
                 Side::Pdi => sii::pdi_owns(&self.mem),
             };
-            if ok_owner {
+            if ok_owner && self.sii_busy_until.is_some() {
+                // A write cycle runs: the EEPROM acknowledges nothing (bit 13).
+                sii::refuse_while_busy(&mut self.mem, written);
+            } else if ok_owner {
                 let read8 = self.cfg.sii_read_8_bytes;
                 let out = sii::execute(
                     &mut self.mem,
@@ -436,8 +439,13 @@ impl Esc {
                     read8,
                     self.eeprom_writable_words,
                 );
-                if let sii::SiiOutcome::Reloaded(_) = out {
-                    self.update_dl_status(true);
+                match out {
+                    sii::SiiOutcome::Reloaded(_) => self.update_dl_status(true),
+                    sii::SiiOutcome::Written => {
+                        sii::begin_write_cycle(&mut self.mem);
+                        self.sii_busy_until = Some(self.now.saturating_add(sii::WRITE_CYCLE_NS));
+                    }
+                    _ => {}
                 }
             }
         }

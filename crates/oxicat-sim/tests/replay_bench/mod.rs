@@ -184,14 +184,50 @@ pub fn pair(frames: &[CapFrame]) -> Vec<Exchange> {
     out
 }
 
+/// An Ethernet frame as a master sends it, with one physical datagram (cmd, adp, ado, data)
+/// of index `idx`.
+pub fn master_frame(idx: u8, cmd: u8, adp: u16, ado: u16, data: &[u8]) -> Vec<u8> {
+    use oxicat_wire::{Command, DatagramHeader, FrameBuilder};
+    let mut buf = vec![0u8; 14 + 2 + 12 + data.len() + 64];
+    let eth = EthernetHeader {
+        dst: [0xFF; 6],
+        src: [0; 6],
+        vlan_tci: None,
+        payload_offset: 14,
+    };
+    let mut b = FrameBuilder::new(&mut buf, &eth).expect("frame");
+    let c = Command::from_u8(cmd).expect("command");
+    b.push(
+        DatagramHeader::physical(c, idx, adp, ado, data.len() as u16),
+        data,
+    )
+    .expect("datagram");
+    let n = b.finish();
+    buf.truncate(n);
+    buf
+}
+
 // ------------------------------------------------------------------ SII reconstruction
 
 /// Rebuilds per-slave SII images (indexed by ring position) from the EEPROM traffic of a
-/// capture: the address written to 0x0504 with a read command in 0x0502, then the data
-/// read from 0x0508. Words never read are 0xFFFF.
+/// capture. A read command (0x0502 bits 8..10 = 1) and the word address (0x0504) written by
+/// APWR/FPWR, in one datagram or in several, then the data register (0x0508..) read by
+/// APRD/FPRD: either a read of the data alone (ethercrab, SOEM read 0x0508) or one read
+/// of control, address and data together (0x0502..0x050F, as TwinCAT polls). In the
+/// second form the read itself shows whether the data is valid: not while 0x0502 shows busy
+/// (bit 15) or an error (bits 13/14); the address is the one it shows, and it shows how
+/// many bytes a read gives (bit 6: 8, else 4). A write command in between makes the data
+/// register hold the written word, not a read; writing 0 (clear errors) changes nothing.
+/// Words never read are absent.
 pub fn sii_from_capture(ex: &[Exchange]) -> BTreeMap<u16, BTreeMap<u32, [u8; 2]>> {
+    use oxicat_wire::regs::sii_control::{ACK_ERROR, BUSY, READ_8, WE_ERROR};
+    const CTL: usize = 0x0502;
+    const ADDR: usize = 0x0504;
+    const DATA: usize = 0x0508;
     let mut station_pos: HashMap<u16, u16> = HashMap::new();
+    // Per position: the word address last written, and whether the last command was a read.
     let mut addr: HashMap<u16, u32> = HashMap::new();
+    let mut reading: HashMap<u16, bool> = HashMap::new();
     let mut words: BTreeMap<u16, BTreeMap<u32, [u8; 2]>> = BTreeMap::new();
     for e in ex {
         let Some(r) = &e.reply else { continue };
@@ -214,25 +250,63 @@ pub fn sii_from_capture(ex: &[Exchange]) -> BTreeMap<u16, BTreeMap<u32, [u8; 2]>
                 );
             }
             let Some(pos) = pos else { continue };
-            let (lo, hi) = (a.ado() as usize, a.ado() as usize + a.data.len());
-            if matches!(a.cmd, 2 | 5)
-                && lo <= 0x0502
-                && hi >= 0x0508
-                && a.data[0x0503 - lo] & 0x07 == 1
-            {
-                let o = 0x0504 - lo;
-                addr.insert(
-                    pos,
-                    u32::from_le_bytes(a.data[o..o + 4].try_into().unwrap_or([0; 4])),
-                );
-            }
-            if matches!(a.cmd, 1 | 4) && a.ado() == 0x0508 {
-                if let Some(&w) = addr.get(&pos) {
-                    let m = words.entry(pos).or_default();
-                    for (i, c) in b.data.chunks_exact(2).enumerate() {
-                        m.insert(w + i as u32, [c[0], c[1]]);
+            let lo = usize::from(a.ado());
+            // Bytes `at..at + n` of a datagram's data, if the datagram covers them.
+            let part = |d: &[u8], at: usize, n: usize| -> Option<Vec<u8>> {
+                d.get(at.checked_sub(lo)?..at.checked_sub(lo)? + n)
+                    .map(<[u8]>::to_vec)
+            };
+            let le32 = |v: Vec<u8>| u32::from_le_bytes([v[0], v[1], v[2], v[3]]);
+            if matches!(a.cmd, 2 | 5) {
+                if let Some(c) = part(&a.data, CTL + 1, 1) {
+                    match c[0] & 0x07 {
+                        0 => {}
+                        c => {
+                            reading.insert(pos, c == 1);
+                        }
                     }
                 }
+                if let Some(v) = part(&a.data, ADDR, 4) {
+                    addr.insert(pos, le32(v));
+                }
+                continue;
+            }
+            if !matches!(a.cmd, 1 | 4) || reading.get(&pos) != Some(&true) {
+                continue;
+            }
+            // Where the data read starts (a word boundary inside the data register).
+            let from = lo.max(DATA);
+            if from >= DATA + 8 || !(from - DATA).is_multiple_of(2) || lo + b.data.len() <= from {
+                continue;
+            }
+            // Bytes a read gives: as the control word in this read shows, else the register.
+            let n = match part(&b.data, CTL, 2) {
+                Some(c) => {
+                    let c = u16::from_le_bytes([c[0], c[1]]);
+                    if c & (BUSY | ACK_ERROR | WE_ERROR) != 0 {
+                        continue;
+                    }
+                    if c & READ_8 != 0 {
+                        8
+                    } else {
+                        4
+                    }
+                }
+                None => 8,
+            };
+            // The word address: as this read shows it, else as last written.
+            let Some(w) = part(&b.data, ADDR, 4)
+                .map(le32)
+                .or_else(|| addr.get(&pos).copied())
+            else {
+                continue;
+            };
+            let m = words.entry(pos).or_default();
+            let mut at = from;
+            while at + 2 <= DATA + n {
+                let Some(c) = part(&b.data, at, 2) else { break };
+                m.insert(w.wrapping_add(((at - DATA) / 2) as u32), [c[0], c[1]]);
+                at += 2;
             }
         }
     }
@@ -286,6 +360,31 @@ pub struct SlaveSpec {
     pub out_port: u8,
     /// Firmware echo: a µC that acknowledges AL control in AL status (see [`firmware_echo`]).
     pub firmware_echo: bool,
+}
+
+/// The state a capture finds the segment in.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum StartState {
+    /// Power-on reset values: the segment was power-cycled before the capture.
+    #[default]
+    PowerOn,
+    /// Not power-cycled: a previous master's run left registers set. An ESC resets its
+    /// registers only at power-on or reset (ESC datasheet section I, 17.4 "ESC Reset"; a
+    /// master's new run does not reset them), so the next run starts from them.
+    LeftByMaster(LeftByMaster),
+}
+
+/// What a previous master left in every ESC of a segment that was not power-cycled.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct LeftByMaster {
+    /// ECAT event mask 0x0200 (which ECAT event requests reach the datagrams' IRQ field).
+    pub event_mask: u16,
+    /// DL control 0x0100..0x0103, when the previous master changed it from its reset value.
+    pub dl_control: Option<u32>,
+    /// The previous master read DL status 0x0110 after the last DL status change, which
+    /// acknowledges the DL-status-change event (0x0210 bit 2) power-on raised; false when a
+    /// link changed since (the event is pending again).
+    pub dl_event_read: bool,
 }
 
 /// A line of ESCs: slave i's `out_port` is wired to slave i+1's port 0.
@@ -364,6 +463,33 @@ impl Bench {
             }
         }
         None
+    }
+
+    /// Sends configuration datagrams (cmd, adp, ado, data), one frame each, through the line
+    /// at t = 0, before the capture's first frame (not compared); each must be acknowledged.
+    pub fn preroll(&mut self, dgs: &[(u8, u16, u16, &[u8])]) {
+        for (i, &(cmd, adp, ado, data)) in dgs.iter().enumerate() {
+            let f = master_frame(i as u8, cmd, adp, ado, data);
+            let back = self.exchange(&f, 0).expect("pre-roll frame returned");
+            let d = datagrams(&back).expect("pre-roll reply");
+            assert!(d[0].wkc > 0, "pre-roll datagram {i} not acknowledged");
+        }
+    }
+
+    /// Brings every ESC of the line to `start` (see [`StartState`]) before the capture's
+    /// first frame.
+    pub fn start_from(&mut self, start: StartState) {
+        let StartState::LeftByMaster(m) = start else {
+            return;
+        };
+        let mask = m.event_mask.to_le_bytes();
+        self.preroll(&[(8, 0, 0x0200, &mask)]);
+        if let Some(dl) = m.dl_control {
+            self.preroll(&[(8, 0, 0x0100, &dl.to_le_bytes())]);
+        }
+        if m.dl_event_read {
+            self.preroll(&[(7, 0, 0x0110, &[0, 0])]);
+        }
     }
 
     /// Runs the firmware echo of every µC slave (after each frame).
