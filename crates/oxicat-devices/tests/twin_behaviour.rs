@@ -510,3 +510,87 @@ fn an_esc_only_twin_takes_held_and_signal_inputs_and_refuses_what_its_pins_canno
         assert!(e.contains("needs firmware"), "{e}");
     });
 }
+
+/// The input of a counter by profile (EL5151's 0x6000:0x11 "Counter value") counts the
+/// encoder of a motor plant: by default the RE 30 at 2 V, which runs up to about 12 rev/s
+/// (2000 counts per turn). Per entry, the voltage can come from an output the master sets
+/// (`encoder = { from, volts_per_unit }`): at 0 V the count stands, at 6 V it runs about
+/// three times as fast as at 2 V.
+#[test]
+fn encoder_counts_come_from_a_motor_plant() {
+    use oxicat_devices::twin::behaviour::EncoderSpec;
+    /// Counts per second over the last `n` cycles (1 ms each) of `counts`.
+    fn rate(counts: &[u32], n: usize) -> f64 {
+        let w = &counts[counts.len() - n..];
+        w[n - 1].wrapping_sub(w[0]) as i32 as f64 / ((n - 1) as f64 * 1e-3)
+    }
+    big(|| {
+        let base = twin("esi-vendor/Beckhoff-EL5xxx.xml:EL5151");
+        // By profile.
+        let (mut m, _seg, vars) = open(base);
+        let cv = var(&vars, Dir::Input, (0x6000, 0x11));
+        let mut counts = Vec::new();
+        m.run_cyclic(CycleOptions::default(), |io| {
+            counts.push(u32::from_le_bytes(io.get(&cv)[..4].try_into().unwrap()));
+            Ok(if io.cycle >= 800 {
+                Flow::Stop
+            } else {
+                Flow::Continue
+            })
+        })
+        .unwrap();
+        let r = rate(&counts, 200);
+        // No-load speed at 2 V: (2 V − R·I₀)/k ≈ 75 rad/s ≈ 24,000 counts/s, less friction.
+        assert!((18_000.0..26_000.0).contains(&r), "{r} counts/s");
+        assert!(
+            counts.windows(2).skip(100).all(|w| w[1] > w[0]),
+            "{counts:?}"
+        );
+
+        // From the master's output.
+        let b = Behaviour::compile(
+            None,
+            &[EntrySpec {
+                entry: "0x6000:0x11".into(),
+                encoder: Some(EncoderSpec {
+                    volts: None,
+                    from: Some("0x7000:0x11".into()),
+                    volts_per_unit: Some(0.001),
+                    supply: None,
+                }),
+                ..Default::default()
+            }],
+            base.esi.def,
+            "device[0]",
+        )
+        .unwrap();
+        let t = with_behaviour(base, b);
+        let (mut m, _seg, vars) = open(t);
+        let cv = var(&vars, Dir::Input, (0x6000, 0x11));
+        let set = var(&vars, Dir::Output, (0x7000, 0x11));
+        let mut counts = Vec::new();
+        let mut at_rest = Vec::new();
+        m.run_cyclic(CycleOptions::default(), |io| {
+            let c = u32::from_le_bytes(io.get(&cv)[..4].try_into().unwrap());
+            if io.cycle < 300 {
+                at_rest.push(c);
+            } else {
+                counts.push(c);
+            }
+            let mv: u32 = if io.cycle < 300 { 0 } else { 6000 };
+            io.set(&set, &mv.to_le_bytes()).unwrap();
+            Ok(if io.cycle >= 1100 {
+                Flow::Stop
+            } else {
+                Flow::Continue
+            })
+        })
+        .unwrap();
+        assert!(at_rest.iter().all(|&c| c == at_rest[0]), "{at_rest:?}");
+        let r6 = rate(&counts, 200);
+        assert!(
+            (2.5 * r..3.2 * r).contains(&r6),
+            "{r6} counts/s at 6 V, {r} at 2 V"
+        );
+    });
+}

@@ -150,6 +150,22 @@ fn bad_behaviour_is_refused_with_its_key() {
             k64f("[[device.entry]]\nentry = \"0x6001:0\"\nloop = \"0x7000:0\"\n"),
             "device[0].entry[0].loop",
         ),
+        (
+            k64f("[[device.entry]]\nentry = \"0x6001:0\"\nencoder = { volts = 1, from = \"0x7000:0\" }\n"),
+            "device[0].entry[0].encoder",
+        ),
+        (
+            k64f("[[device.entry]]\nentry = \"0x6001:0\"\nencoder = { volts = nan }\n"),
+            "device[0].entry[0].encoder.volts",
+        ),
+        (
+            k64f("[[device.entry]]\nentry = \"0x6001:0\"\nencoder = { from = \"0x7FFF:0\" }\n"),
+            "device[0].entry[0].encoder.from",
+        ),
+        (
+            k64f("[[device.entry]]\nentry = \"0x6001:0\"\nencoder = { volts = 2, supply = 0 }\n"),
+            "device[0].entry[0].encoder.supply",
+        ),
         (k64f("behaviour = \"drive\"\n"), "device[0].behaviour"),
         (k64f("behaviour = \"dance\"\n"), "device[0].behaviour"),
         (

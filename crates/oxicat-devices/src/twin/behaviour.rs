@@ -73,6 +73,64 @@ pub struct EntrySpec {
     pub noise: Option<NoiseSpec>,
     /// Samples `time_s,value` from a CSV file, each held until the next.
     pub csv: Option<CsvSpec>,
+    /// The count of an encoder on a motor plant ([`EncoderSpec`]).
+    pub encoder: Option<EncoderSpec>,
+}
+
+/// See [`EntrySpec::encoder`]: an encoder count from a motor plant, a Maxon RE 30 (part
+/// 310007) with a HEDL 5540 encoder (500 lines, 2000 counts per turn;
+/// [`oxicat_plant::re30`]) on a full bridge, stepped every 50 µs of virtual time. Its
+/// terminal voltage is `volts`, or output entry `from` times `volts_per_unit` (what the
+/// master commands, held between cycles). The count wraps at the entry's width, as a
+/// hardware counter does.
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct EncoderSpec {
+    /// A constant terminal voltage \[V\].
+    pub volts: Option<f64>,
+    /// The output entry (`INDEX:SUB` or name) that sets the voltage.
+    pub from: Option<String>,
+    /// Volts per raw unit of `from` (default 1).
+    pub volts_per_unit: Option<f64>,
+    /// Bridge supply \[V\] (default 24, the motor's nominal voltage): the voltage saturates
+    /// at ± this.
+    pub supply: Option<f64>,
+}
+
+/// The terminal voltage of a checked encoder plant.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Volts {
+    /// Constant \[V\].
+    Constant(f64),
+    /// Output entry `(index, sub)` times volts per unit.
+    From(u16, u8, f64),
+}
+
+/// A checked encoder plant ([`EncoderSpec`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Encoder {
+    /// Terminal voltage.
+    pub volts: Volts,
+    /// Bridge supply \[V\].
+    pub supply: f64,
+}
+
+impl Encoder {
+    /// The plant of a twin's encoder input by default (an input named like a counter or a
+    /// position): the motor at 2 V, about 740 rpm, 24,700 counts per second.
+    pub const DEFAULT: Encoder = Encoder {
+        volts: Volts::Constant(2.0),
+        supply: 24.0,
+    };
+
+    /// Whether an input entry named `name` (object or entry name) is an encoder count by
+    /// profile: an integer of 16 bits or more whose name says counter value or position.
+    pub fn by_name(name: &str, dtype: DataType, bits: u16) -> bool {
+        let n = name.to_ascii_lowercase();
+        dtype.is_integer()
+            && bits >= 16
+            && (n.contains("counter value") || n.contains("position") || n.contains("encoder"))
+    }
 }
 
 /// See [`EntrySpec::sine`].
@@ -265,6 +323,8 @@ pub enum Rule {
     Hold(f64),
     /// Written from the signal every cycle.
     Signal(Signal),
+    /// The count of an encoder on a motor plant, every cycle.
+    Encoder(Encoder),
 }
 
 /// The checked behaviour of one twin device.
@@ -443,6 +503,7 @@ impl Behaviour {
                 s.ramp.is_some(),
                 s.noise.is_some(),
                 s.csv.is_some(),
+                s.encoder.is_some(),
             ]
             .iter()
             .filter(|&&b| b)
@@ -451,8 +512,8 @@ impl Behaviour {
                 return Err(BehaviourError {
                     key: k,
                     why: format!(
-                        "give exactly one of loop, hold, constant, sine, ramp, noise, csv \
-                         ({given} given)"
+                        "give exactly one of loop, hold, constant, sine, ramp, noise, csv, \
+                         encoder ({given} given)"
                     ),
                 });
             }
@@ -534,6 +595,54 @@ impl Behaviour {
                     why: format!("{}: {why}", x.file.display()),
                 })?;
                 Rule::Signal(Signal::Csv(samples.into(), x.repeat))
+            } else if let Some(x) = &s.encoder {
+                let k = format!("{k}.encoder");
+                if !e.dtype.is_integer() {
+                    return Err(BehaviourError {
+                        key: format!("{k}"),
+                        why: format!("{:?} is not an integer entry (a count)", s.entry),
+                    });
+                }
+                let supply = finite(&k, "supply", x.supply.unwrap_or(24.0))?;
+                if supply <= 0.0 {
+                    return Err(BehaviourError {
+                        key: format!("{k}.supply"),
+                        why: format!("{supply} is not above 0"),
+                    });
+                }
+                let volts = match (&x.volts, &x.from) {
+                    (Some(v), None) => {
+                        if x.volts_per_unit.is_some() {
+                            return Err(BehaviourError {
+                                key: format!("{k}.volts_per_unit"),
+                                why: "goes with from, not with volts".into(),
+                            });
+                        }
+                        Volts::Constant(finite(&k, "volts", *v)?)
+                    }
+                    (None, Some(src)) => {
+                        let (oi, os, oe) =
+                            find(def, src, output).map_err(|why| BehaviourError {
+                                key: format!("{k}.from"),
+                                why: format!("{src:?}: {why}"),
+                            })?;
+                        if !oe.dtype.is_integer() && !matches!(oe.dtype, DataType::Real32) {
+                            return Err(BehaviourError {
+                                key: format!("{k}.from"),
+                                why: format!("{src:?} is not a number"),
+                            });
+                        }
+                        let per = finite(&k, "volts_per_unit", x.volts_per_unit.unwrap_or(1.0))?;
+                        Volts::From(oi, os, per)
+                    }
+                    _ => {
+                        return Err(BehaviourError {
+                            key: k,
+                            why: "give volts or from (an output entry), one of them".into(),
+                        })
+                    }
+                };
+                Rule::Encoder(Encoder { volts, supply })
             } else {
                 unreachable!("exactly one behaviour was checked above")
             };

@@ -17,7 +17,9 @@ use oxicat_slave::{
     AlState, AlStatusCode, Application, DataType, DeviceDef, EntryRef, Od, Pdi, PdoEntry,
 };
 
-use super::behaviour::{range, Behaviour, Mode, Rule, Signal};
+use oxicat_plant::re30::{Re30Drive, Re30Params};
+
+use super::behaviour::{range, Behaviour, Encoder, Mode, Rule, Signal, Volts};
 use crate::cia402::rig::{new_app, BldcJointParams, JointApp, TICK_NS};
 use crate::cia402::{Cia402Drive, CURRENT_LOOP_TIMER};
 
@@ -28,6 +30,49 @@ enum Action {
     Copy(EntryRef),
     /// Writes the signal's value at the virtual time.
     Signal(Signal),
+    /// Writes the count of encoder plant `k` of [`TwinApp::plants`].
+    Encoder(usize),
+}
+
+/// An encoder on a motor plant ([`Encoder`]): the motor, and the voltage in force.
+#[derive(Debug, Clone)]
+pub struct Plant {
+    /// The input entry its count goes to.
+    pub at: (u16, u8),
+    /// What drives it.
+    pub encoder: Encoder,
+    /// The motor and its encoder.
+    pub motor: Re30Drive,
+    /// Terminal voltage commanded at the last cycle \[V\].
+    pub volts: f64,
+    /// The output entry the voltage comes from, resolved.
+    from: Option<(EntryRef, DataType)>,
+}
+
+impl Plant {
+    fn new(at: (u16, u8), encoder: Encoder) -> Self {
+        let volts = match encoder.volts {
+            Volts::Constant(v) => v,
+            Volts::From(..) => 0.0,
+        };
+        Self {
+            at,
+            encoder,
+            motor: Re30Drive::new(Re30Params::maxon_310007()),
+            volts,
+            from: None,
+        }
+    }
+
+    /// Advances the motor `h` seconds on the voltage in force (the bridge's duty pair
+    /// gives it, saturated at the supply).
+    pub fn step(&mut self, h: f64) {
+        let supply = self.encoder.supply;
+        let d = (self.volts / supply).clamp(-1.0, 1.0) / 2.0;
+        self.motor.bridge.duty_a = 0.5 + d;
+        self.motor.bridge.duty_b = 0.5 - d;
+        self.motor.step(h, supply);
+    }
 }
 
 /// One input entry the behaviour writes, resolved.
@@ -51,6 +96,8 @@ pub struct TwinApp {
     /// Virtual time of the previous application cycle \[ns\].
     last_cycle_ns: Option<u64>,
     places: Vec<Place>,
+    /// Encoder plants, kept across PDO layouts (a counter keeps counting).
+    pub plants: Vec<Plant>,
 }
 
 impl TwinApp {
@@ -63,6 +110,7 @@ impl TwinApp {
             now_ns: 0,
             last_cycle_ns: None,
             places: Vec::new(),
+            plants: Vec::new(),
         }
     }
 
@@ -97,6 +145,20 @@ impl TwinApp {
                 }
             }
         }
+        // The plant of input `at` (kept when it exists: a counter keeps counting).
+        let mut plant = |at: (u16, u8), enc: Encoder| -> usize {
+            match self
+                .plants
+                .iter()
+                .position(|p| p.at == at && p.encoder == enc)
+            {
+                Some(k) => k,
+                None => {
+                    self.plants.push(Plant::new(at, enc));
+                    self.plants.len() - 1
+                }
+            }
+        };
         if self.behaviour.mode == Mode::Auto && self.drive.is_none() {
             for i in ins.iter().filter(|i| i.index != 0 && i.bits >= 16) {
                 if self
@@ -109,7 +171,16 @@ impl TwinApp {
                 let Some(e) = def.entry_def(i.index, i.sub) else {
                     continue;
                 };
-                if e.dtype.is_integer() || matches!(e.dtype, DataType::Real32 | DataType::Real64) {
+                let object = def.object(i.index).map_or("", |o| o.name);
+                if Encoder::by_name(object, e.dtype, e.bits)
+                    || Encoder::by_name(e.name, e.dtype, e.bits)
+                {
+                    let k = plant((i.index, i.sub), Encoder::DEFAULT);
+                    self.places
+                        .extend(place((i.index, i.sub), Action::Encoder(k)));
+                } else if e.dtype.is_integer()
+                    || matches!(e.dtype, DataType::Real32 | DataType::Real64)
+                {
                     let s = Signal::default_for(e.dtype, e.bits);
                     self.places
                         .extend(place((i.index, i.sub), Action::Signal(s)));
@@ -125,8 +196,18 @@ impl TwinApp {
                 },
                 Rule::Hold(v) => Action::Signal(Signal::Constant(*v)),
                 Rule::Signal(s) => Action::Signal(s.clone()),
+                Rule::Encoder(enc) => Action::Encoder(plant(*at, *enc)),
             };
             self.places.extend(place(*at, action));
+        }
+        for p in &mut self.plants {
+            p.from = match p.encoder.volts {
+                Volts::From(i, s, _) => od
+                    .entry(i, s)
+                    .ok()
+                    .zip(def.entry_def(i, s).map(|e| e.dtype)),
+                Volts::Constant(_) => None,
+            };
         }
     }
 }
@@ -163,6 +244,19 @@ pub(super) fn encode(v: f64, dtype: DataType, bits: u16) -> u64 {
             };
             raw & mask(bits)
         }
+    }
+}
+
+/// The number in `raw`, an entry of type `dtype` and `bits` (sign-extended where signed).
+fn decode(raw: u64, dtype: DataType, bits: u16) -> f64 {
+    match dtype {
+        DataType::Real32 => f32::from_bits(raw as u32) as f64,
+        DataType::Real64 => f64::from_bits(raw),
+        _ if dtype.is_signed() && (1..64).contains(&bits) => {
+            let sh = 64 - bits as u32;
+            ((raw << sh) as i64 >> sh) as f64
+        }
+        _ => (raw & mask(bits)) as f64,
     }
 }
 
@@ -212,11 +306,18 @@ impl<const N: usize> Application<N> for TwinApp {
         }
         self.last_cycle_ns = Some(self.now_ns);
         let t = self.now_ns as f64 * 1e-9;
+        // The voltage the master commands now (held until the next cycle).
+        for p in &mut self.plants {
+            if let (Some((from, dtype)), Volts::From(_, _, per)) = (p.from, p.encoder.volts) {
+                p.volts = decode(od.read::<u64>(from), dtype, from.bits()) * per;
+            }
+        }
         for p in &self.places {
             let bits = p.to.bits();
             let raw = match &p.action {
                 Action::Copy(from) => od.read::<u64>(*from) & mask(bits),
                 Action::Signal(s) => encode(s.value(t), p.dtype, bits),
+                Action::Encoder(k) => self.plants[*k].motor.count() as i32 as u64 & mask(bits),
             };
             od.write::<u64>(p.to, raw);
         }
@@ -249,6 +350,9 @@ impl<Pd: Pdi, const N: usize, const M: usize> Bench<Stack<Pd, TwinApp, N, M>> fo
         image.app.now_ns = t;
         if let Some(d) = &mut image.app.drive {
             d.hw.joint.step(TICK_NS as f64 * 1e-9);
+        }
+        for p in &mut image.app.plants {
+            p.step(TICK_NS as f64 * 1e-9);
         }
     }
 

@@ -167,6 +167,13 @@ impl Pins {
                 }
                 Rule::Hold(v) => Source::Signal(Signal::Constant(*v), dtype),
                 Rule::Signal(s) => Source::Signal(s.clone(), dtype),
+                Rule::Encoder(_) => {
+                    return Err(format!(
+                        "{:#06x}:{:#04x}: an encoder plant needs firmware to count; the ESC \
+                         serves this device alone",
+                        at.0, at.1
+                    ))
+                }
             };
             wires.retain(|w| w.to != to);
             wires.push(Wire { to, from });
