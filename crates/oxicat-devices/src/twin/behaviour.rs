@@ -599,7 +599,7 @@ impl Behaviour {
                 let k = format!("{k}.encoder");
                 if !e.dtype.is_integer() {
                     return Err(BehaviourError {
-                        key: format!("{k}"),
+                        key: k.clone(),
                         why: format!("{:?} is not an integer entry (a count)", s.entry),
                     });
                 }
