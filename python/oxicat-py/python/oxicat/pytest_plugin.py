@@ -1,8 +1,8 @@
-"""The fixtures a test of an EtherCAT master imports: ``veth`` and ``segment``.
+"""The pytest plugin of the oxicat package: the ``veth`` and ``segment`` fixtures and the
+``segment`` marker, for tests of an EtherCAT master.
 
-``segment`` serves a virtual segment (``oxicat.Segment``) on one end of a fresh veth pair;
-the master under test opens the other end, ``veth[0]``. The devices are those of the
-``segment`` marker, ``demo:2`` without one::
+Installing the package registers it (entry point ``pytest11``: ``oxicat``), so a test
+needs no conftest::
 
     @pytest.mark.segment(esi=["EL2008.xml"])
     def test_my_master(segment, veth):
@@ -11,8 +11,12 @@ the master under test opens the other end, ``veth[0]``. The devices are those of
         assert master.config_init() == len(segment)
         ...
 
-Copy this file into your tests (or ``from oxicat.testing import veth_pair`` and write your
-own). Needs root for the veth pair: skipped without it, an error when ``CI`` is set.
+``segment`` serves a virtual segment (``oxicat.Segment``) on one end of a fresh veth pair;
+the master under test opens the other end, ``veth[0]``. The devices are those of the
+``segment`` marker (its keywords are ``Segment``'s: ``devices``, ``esi``,
+``segment_file``, ``slowdown``), ``demo:2`` without one. A fixture of the same name in a
+``conftest.py`` overrides the plugin's; ``-p no:oxicat`` switches it off. Needs root for
+the veth pair: skipped without it, an error when ``CI`` is set.
 """
 
 import os
@@ -25,7 +29,9 @@ from oxicat.testing import can_make_veth, veth_pair
 
 def pytest_configure(config):
     config.addinivalue_line(
-        "markers", "segment(devices=None, esi=None, slowdown=1): what the segment fixture serves"
+        "markers",
+        "segment(devices=None, esi=None, segment_file=None, slowdown=1): what the oxicat "
+        "segment fixture serves",
     )
 
 
