@@ -525,6 +525,30 @@ fn digital_outputs_and_watchdog() {
     assert_eq!(e.memory()[0x0440] & 1, 0);
 }
 
+/// The injected watchdog fault: not running before an output write, then the expiry at
+/// once with its effects, and the next write retriggers it.
+#[test]
+fn an_injected_pd_watchdog_expiry_acts_at_once() {
+    let mut e = Esc::new(EscConfig::et1100(), eeprom(0x0104, 0));
+    sm(&mut e, 2, 0x0F00, 1, 0x44, 1);
+    fmmu(&mut e, 0, 0x100, 1, 0, 7, 0x0F00, 0, 2);
+    assert!(!e.expire_pd_watchdog());
+    let mut f = frame(&[(DatagramHeader::logical(Command::Lrw, 0, 0x100, 1), &[0x0A])]);
+    e.forward(0, &mut f, 1000, true);
+    assert_eq!(e.digital_outputs(), 0x0A);
+    e.advance(2000);
+    assert!(e.expire_pd_watchdog());
+    let ev = e.advance(2000);
+    assert!(ev.pd_watchdog_expired);
+    assert_eq!(e.digital_outputs(), 0);
+    assert_eq!(e.memory()[0x0442], 1);
+    assert_eq!(e.memory()[0x0440] & 1, 0);
+    let mut f = frame(&[(DatagramHeader::logical(Command::Lrw, 0, 0x100, 1), &[0x0B])]);
+    e.forward(0, &mut f, 3000, true);
+    assert_eq!(e.memory()[0x0440] & 1, 1);
+    assert_eq!(e.next_event(), Some(3000 + 100_000_000));
+}
+
 /// Two buffered SMs of one byte each over neighbouring digital-output registers (the
 /// AX58100 DIO board's ESI: 0x0F02 and 0x0F03, control 0x44): each keeps its own byte. A
 /// buffered SM over registers does not spread its three buffers over the registers after

@@ -352,6 +352,27 @@ impl Segment {
         self.lock().set_cable(position, port, plugged).map_err(err)
     }
 
+    /// Fault: the process-data (SM) watchdog of the slave at `position` expires now, as
+    /// when the master's outputs stop for longer than the watchdog time: 0x0440 bit 0
+    /// clears, and a slave with firmware goes to SAFEOP+ERR 0x001B until the master
+    /// acknowledges. Raises OxicatError when its watchdog is not running (no outputs
+    /// written yet, or no watchdog).
+    fn expire_watchdog(&self, position: usize) -> PyResult<()> {
+        self.check(position)?;
+        let mut seg = self.lock();
+        let esc = seg
+            .esc_mut(position)
+            .ok_or_else(|| err(format!("no slave at {position}")))?;
+        if esc.expire_pd_watchdog() {
+            Ok(())
+        } else {
+            Err(err(format!(
+                "slave {position}: its process-data watchdog is not running (no outputs \
+                 written yet, or watchdog time 0)"
+            )))
+        }
+    }
+
     /// Fault: the next `n` frames are lost on the master link (never reach a slave).
     fn drop_frames(&self, n: u64) {
         self.lock().drop_next_frames(n);

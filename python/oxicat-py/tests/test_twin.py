@@ -107,6 +107,35 @@ def test_faults_frame_loss_link_down_watchdog(segment, veth):
         master.close()
 
 
+def test_injected_watchdog_expiry(segment, veth):
+    master = scan(veth[0])
+    try:
+        with pytest.raises(oxicat.OxicatError, match="not running"):
+            segment.expire_watchdog(0)
+        to_op(master)
+        good = cycle(master, 5)
+        segment.expire_watchdog(1)
+        cycle(master, 20)
+        master.read_state()
+        s = master.slaves[1]
+        assert s.state == pysoem.SAFEOP_STATE | pysoem.STATE_ERROR, hex(s.state)
+        assert s.al_status == 0x001B
+        assert segment.al_state(1) == "SAFEOP+ERR"
+        assert segment.al_state(0) == "OP"
+        # The master acknowledges and takes the slave back to OP.
+        s.state = pysoem.SAFEOP_STATE | pysoem.STATE_ACK
+        s.write_state()
+        cycle(master, 5)
+        s.state = pysoem.OP_STATE
+        s.write_state()
+        for _ in range(200):
+            if cycle(master) == good and segment.al_state(1) == "OP":
+                break
+        assert segment.al_state(1) == "OP"
+    finally:
+        master.close()
+
+
 def test_twin_of_a_vendor_esi(veth):
     esi = reference_esi("soes-xmc4300_slavedemo-esi.xml")
     text = esi.read_text(errors="replace")

@@ -93,6 +93,7 @@ impl Esc {
                 copy_small(&mut ram[to..to + l], &win[o..o + l]);
                 if st.wd {
                     self.pd_wd_last = Some(t);
+                    self.pd_wd_forced = None;
                     regs[regs::WD_STATUS_PD as usize] |= 1;
                 }
             } else {

@@ -172,7 +172,10 @@ impl Esc {
     pub(super) fn pd_wd_deadline(&self) -> Option<u64> {
         let t = self.reg16(regs::WD_TIME_PD) as u64;
         match self.pd_wd_last {
-            Some(l) if t != 0 => Some(l + t * self.wd_unit_ns()),
+            Some(l) if t != 0 => {
+                let d = l + t * self.wd_unit_ns();
+                Some(self.pd_wd_forced.map_or(d, |f| f.min(d)))
+            }
             _ => None,
         }
     }
@@ -211,6 +214,7 @@ impl Esc {
         if let Some(d) = self.pd_wd_deadline() {
             if t >= d {
                 self.pd_wd_last = None;
+                self.pd_wd_forced = None;
                 self.mem[regs::WD_STATUS_PD as usize] &= !1;
                 let a = regs::WD_COUNTER_PD as usize;
                 self.mem[a] = self.mem[a].saturating_add(1);

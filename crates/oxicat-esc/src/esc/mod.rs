@@ -192,6 +192,9 @@ pub struct Esc {
     al_ev: u32,
     dout: u32,
     pd_wd_last: Option<u64>,
+    /// An injected expiry ([`Esc::expire_pd_watchdog`]): the deadline, until it expires or
+    /// a write retriggers the watchdog.
+    pd_wd_forced: Option<u64>,
     pdi_wd_last: Option<u64>,
     latch_inputs: [bool; 2],
     /// Loop control (0x0101) as last written permanently (0x0100 bit 1 clear).
@@ -287,6 +290,7 @@ impl Esc {
             al_ev: 0,
             dout: 0,
             pd_wd_last: None,
+            pd_wd_forced: None,
             pdi_wd_last: None,
             latch_inputs: [false; 2],
             loop_permanent: 0,
@@ -466,6 +470,20 @@ impl Esc {
                 sii::end_write_cycle(&mut self.mem);
             }
         }
+    }
+
+    /// A fault: the process-data (SM) watchdog expires at the next time step, as when the
+    /// master's outputs stop for longer than the watchdog time (a late cycle), with what an
+    /// expiry does (0x0440 bit 0 cleared, 0x0442 counted, the AL event, digital outputs
+    /// cleared); the master's next output write retriggers it. `false` when it is not
+    /// running (no write to a watchdog-triggering SM yet, or watchdog time 0).
+    pub fn expire_pd_watchdog(&mut self) -> bool {
+        if self.pd_wd_deadline().is_none() {
+            return false;
+        }
+        self.pd_wd_forced = Some(self.now);
+        self.memo.clear();
+        true
     }
 
     /// Current SII EEPROM content.

@@ -644,6 +644,7 @@ impl Esc {
         self.events_dirty = true;
         if side == Side::Ecat && wd {
             self.pd_wd_last = Some(self.now);
+            self.pd_wd_forced = None;
             self.mem[regs::WD_STATUS_PD as usize] |= 1;
         }
         if start < 0x0F04 && end > 0x0F00 {

@@ -58,6 +58,8 @@ class Segment:
         """Writes the slave's inputs through its PDI, as its firmware would."""
     def set_cable(self, position: int, port: int = 0, plugged: bool = False) -> None:
         """Fault: pulls or re-plugs the cable at a port of the slave."""
+    def expire_watchdog(self, position: int) -> None:
+        """Fault: the slave's process-data watchdog expires now (SAFEOP+ERR 0x001B)."""
     def drop_frames(self, n: int) -> None:
         """Fault: the next ``n`` frames are lost on the master link."""
     def corrupt_next(self, position: int, port: int = 0, offset: int = 2) -> None:
