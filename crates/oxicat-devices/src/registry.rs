@@ -225,9 +225,25 @@ pub fn add_node_via(
     drift_ppm: f64,
     route: PdiRoute,
 ) -> Result<SlaveId, NodeError> {
-    add_node_on(segment, kit, k, (kit.esc)(), drift_ppm, |s, id| {
+    let def = (kit.def)(k);
+    let mut sii = oxicat_esi::sii::generate(def).map_err(NodeError::Sii)?;
+    if matches!(route, PdiRoute::Et1100 { .. }) {
+        spi_pdi(&mut sii).map_err(|e| NodeError::Sii(e.into()))?;
+    }
+    add_node_with_sii(segment, (kit.esc)(), sii, drift_ppm, |s, id| {
         (kit.attach)(s, id, k, route)
     })
+}
+
+/// The ET1100 route is the device's firmware on a board with an ET1100 on SPI, whose
+/// EEPROM selects the SPI PDI (PDI control 0x05; the ET1100 driver refuses anything else). A
+/// definition made for another chip says otherwise (the axis hub's LAN9252 needs 0x80, its
+/// on-chip bus), so the image gets the byte of that board (CRC recomputed); everything
+/// else stays the definition's.
+fn spi_pdi(sii: &mut [u8]) -> Result<(), oxicat_wire::WireError> {
+    let mut c = oxicat_wire::sii::SiiConfig::parse(sii)?;
+    c.pdi_control = (c.pdi_control & 0xFF00) | 0x0005;
+    c.write(sii).map(drop)
 }
 
 /// Adds node `k` of `kit` on an ESC configured as `esc` (with its oscillator off by
@@ -238,12 +254,22 @@ pub fn add_node_on(
     segment: &mut Segment,
     kit: &Kit,
     k: usize,
-    mut esc: EscConfig,
+    esc: EscConfig,
     drift_ppm: f64,
     boot: impl FnOnce(&mut Segment, SlaveId) -> Result<(), AttachError>,
 ) -> Result<SlaveId, NodeError> {
     let def = (kit.def)(k);
     let sii = oxicat_esi::sii::generate(def).map_err(NodeError::Sii)?;
+    add_node_with_sii(segment, esc, sii, drift_ppm, boot)
+}
+
+fn add_node_with_sii(
+    segment: &mut Segment,
+    mut esc: EscConfig,
+    sii: Vec<u8>,
+    drift_ppm: f64,
+    boot: impl FnOnce(&mut Segment, SlaveId) -> Result<(), AttachError>,
+) -> Result<SlaveId, NodeError> {
     esc.clock.drift_ppm = drift_ppm;
     let id = segment.add(Esc::new(esc, sii));
     boot(segment, id).map_err(NodeError::Attach)?;

@@ -183,3 +183,103 @@ fn txpdo_mapping_is_configurable_in_preop() {
         assert!(sizes.iter().all(|&n| n == 23), "{sizes:?}");
     });
 }
+
+/// The abort connection option code 0x6007 decides what an enabled drive does when its
+/// master goes away: the master brings the drive to Operation enabled in OP at 1 kHz DC,
+/// then stops cycling as if it had crashed (the drive stays in OP); 100 ms later the SM
+/// watchdog expires (SAFEOP + error 0x001B) and the drive reacts by its 0x6007: 0 no
+/// action (still enabled), 1 a fault (0x8100, communication), 2 Disable voltage
+/// (transition 9, coasting), 3 Quick stop (transition 11, ramp, then 12).
+#[test]
+fn abort_connection_option_code_0x6007_selects_the_reaction_to_a_lost_master() {
+    big(|| {
+        for code in [0i16, 1, 2, 3] {
+            let mut seg = Segment::new();
+            let sii = oxicat_esi::sii::generate(&oxicat_devices::cia402::DEF).unwrap();
+            let id = seg.add(oxicat_esc::Esc::new(oxicat_esc::EscConfig::et1100(), sii));
+            let h = attach(&mut seg, id, BldcJointParams::default()).unwrap();
+            let seg = Arc::new(Mutex::new(seg));
+            let mut m = Master::open(Link::Sim(seg.clone())).unwrap();
+            m.sdo_download(0, 0x6007, 0, &code.to_le_bytes()).unwrap();
+            assert_eq!(m.sdo_upload(0, 0x6007, 0).unwrap(), code.to_le_bytes());
+            m.stop_cycling_as_if_gone();
+            cia402::run(
+                &mut m,
+                &[0],
+                &[Action::ClearFault, Action::Enable],
+                Duration::from_millis(1),
+                true,
+            )
+            .unwrap();
+            assert_eq!(h.lock().app.state(), State::OperationEnabled, "code {code}");
+            // No more frames: the SM watchdog (100 ms) expires, SYNC0 cycles go on.
+            seg.lock().unwrap().advance_by(300_000_000);
+            let (al, al_code) = {
+                let s = seg.lock().unwrap();
+                let e = s.esc(id).unwrap();
+                let c = &e.memory()[0x0134..0x0136];
+                (e.al_status(), u16::from_le_bytes([c[0], c[1]]))
+            };
+            assert_eq!(
+                (al & 0x1F, al_code),
+                (0x14, 0x001B),
+                "code {code}: SAFEOP + ERR, SM watchdog"
+            );
+            let d = h.lock();
+            let (state, fault, t) = (d.app.state(), d.app.fault(), d.app.last_transition());
+            match code {
+                0 => assert_eq!((state, fault), (State::OperationEnabled, None)),
+                1 => assert_eq!(
+                    (state, fault),
+                    (
+                        State::Fault,
+                        Some(oxicat_devices::cia402::error::COMMUNICATION)
+                    )
+                ),
+                2 => assert_eq!((state, fault, t), (State::SwitchOnDisabled, None, Some(9))),
+                _ => assert_eq!((state, fault, t), (State::SwitchOnDisabled, None, Some(12))),
+            }
+        }
+        // Out of range: refused by the SDO server, not taken.
+        let (link, _hs) = segment(1);
+        let m = Master::open(link).unwrap();
+        assert!(m.sdo_download(0, 0x6007, 0, &7i16.to_le_bytes()).is_err());
+        assert_eq!(m.sdo_upload(0, 0x6007, 0).unwrap(), 3i16.to_le_bytes());
+    });
+}
+
+/// The paper's Experiment 2 (task period 1000 µs, analysed on the wire) on the virtual
+/// segment: the table has its rows, and on the deterministic clock the frame period and the
+/// drive's SYNC0 period are the configured cycle, every sample of them (the paper:
+/// "almost every sample"); the round trip is shorter than a cycle. The configured cycle is
+/// what comes out (500 µs too), and bad arguments are refused.
+#[test]
+fn task_period_table_reproduces_the_papers_1ms_experiment() {
+    use oxicat_devices::cia402::task_period::{self, FRAME_PERIOD, ROUND_TRIP, SYNC0_PERIOD};
+    big(|| {
+        for (cycle_us, cycles) in [(1000u64, 400u64), (500, 200)] {
+            let t = task_period::run(1, cycles, Duration::from_micros(cycle_us), true).unwrap();
+            let names: Vec<_> = t.rows.iter().map(|r| r.what).collect();
+            assert_eq!(names, [FRAME_PERIOD, SYNC0_PERIOD, ROUND_TRIP]);
+            for what in [FRAME_PERIOD, SYNC0_PERIOD] {
+                let r = t.row(what).unwrap();
+                assert!(r.samples + 5 >= cycles as usize, "{what}: {r:?}");
+                assert!((r.mean_us - cycle_us as f64).abs() < 1e-9, "{what}: {r:?}");
+                assert_eq!((r.min_us, r.max_us), (cycle_us as f64, cycle_us as f64));
+                assert_eq!(r.std_us, 0.0, "{what}");
+                assert_eq!(r.within_1us, Some(1.0), "{what}");
+            }
+            let rtt = t.row(ROUND_TRIP).unwrap();
+            assert!(rtt.samples + 5 >= cycles as usize, "{rtt:?}");
+            assert!(rtt.min_us > 0.0 && rtt.max_us < cycle_us as f64, "{rtt:?}");
+            let md = t.markdown();
+            eprintln!("{md}");
+            for what in [FRAME_PERIOD, SYNC0_PERIOD, ROUND_TRIP] {
+                assert!(md.contains(what), "{md}");
+            }
+            assert!(md.contains(&format!("| {cycle_us}.000 |")), "{md}");
+        }
+        assert!(task_period::run(0, 100, Duration::from_millis(1), true).is_err());
+        assert!(task_period::run(1, 5, Duration::from_millis(1), true).is_err());
+    });
+}

@@ -310,3 +310,68 @@ fn disable_operation_and_shutdown_ramps_then_switch_off() {
         assert!(b.app.hw.joint.motor_velocity.abs() < 1.0);
     }
 }
+
+/// Interpolated position mode (7), linear interpolation (0x60C0 = 0), interpolation period
+/// 0x60C2 = 4 × 10⁻³ s on a 1 ms drive cycle: the master hands over one set-point of a ramp
+/// in 0x60C1:01 per 4 ms; the drive interpolates between them, so its position demand
+/// 0x6062 moves by the same step every 1 ms cycle (no staircase), the joint follows the
+/// ramp, and statusword bit 12 says ip mode active while controlword bit 4 enables it.
+#[test]
+fn interpolated_position_mode_follows_a_ramp_with_linear_interpolation() {
+    let mut b = bench();
+    assert_ne!(
+        b.od.get::<u32>(0x6502, 0).unwrap() & (1 << 6),
+        0,
+        "IP supported"
+    );
+    b.od.set(0x6060, 0, mode::IP).unwrap();
+    b.od.set(0x60C0, 0, 0i16).unwrap();
+    b.od.set(0x60C2, 1, 4u8).unwrap();
+    b.od.set(0x60C2, 2, -3i8).unwrap();
+    enable(&mut b);
+    assert_eq!(b.od.get::<i8>(0x6061, 0).unwrap(), mode::IP);
+    let x0 = b.position();
+    b.od.set(0x60C1, 1, x0).unwrap();
+    // Ramp: 20 000 inc/s = 80 inc per 4 ms period, 20 inc per 1 ms cycle.
+    let v = 20_000i32;
+    let mut demand = Vec::new();
+    let mut max_err = 0i32;
+    for k in 0..2000i32 {
+        // The master's set-point generator runs at the interpolation period.
+        if k % 4 == 0 {
+            b.od.set(0x60C1, 1, x0 + v * k / 1000).unwrap();
+        }
+        b.command(0x1F); // enable operation + bit 4: enable ip mode
+        demand.push(b.od.get::<i32>(0x6062, 0).unwrap());
+        let s = b.statusword();
+        assert_ne!(s & sw::OMS12, 0, "ip mode active at cycle {k}: {s:#06x}");
+        if k > 100 {
+            // Behind the ramp by the interpolation delay (≤ 2 periods) at most, plus the loop.
+            let err = (x0 + v * k / 1000) - b.position();
+            max_err = max_err.max(err.abs());
+        }
+    }
+    // Linear interpolation: every cycle after the start moves the demand by 20 ± 1.
+    let steps: Vec<i32> = demand.windows(2).map(|w| w[1] - w[0]).collect();
+    for (k, d) in steps.iter().enumerate().skip(8) {
+        assert!(
+            (19..=21).contains(d),
+            "cycle {k}: demand step {d} (not interpolated)"
+        );
+    }
+    eprintln!("IP ramp: max distance to the ramp {max_err} counts");
+    assert!(max_err < 400, "max distance to the ramp {max_err} counts");
+    let end = b.position();
+    assert!(
+        (end - (x0 + 40_000)).abs() < 400,
+        "{end} vs {}",
+        x0 + 40_000
+    );
+    // Bit 4 off: ip mode inactive, the demand holds.
+    b.command(0x0F);
+    let held = b.od.get::<i32>(0x6062, 0).unwrap();
+    b.run(50);
+    assert_eq!(b.statusword() & sw::OMS12, 0);
+    assert_eq!(b.od.get::<i32>(0x6062, 0).unwrap(), held);
+    assert_eq!(State::decode(b.statusword()), Some(State::OperationEnabled));
+}

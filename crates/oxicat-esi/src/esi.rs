@@ -452,11 +452,30 @@ pub fn generate(def: &'static DeviceDef) -> Result<String, Error> {
     if let Some(c) = i.description {
         x.text("Comment", c);
     }
-    if i.ebus_current_ma != 0 {
+    if i.ebus_current_ma != 0 || i.timeouts.is_some() {
+        // ETG.2000 InfoType order: Electrical, StateMachine, Mailbox.
         x.open("Info", &[]);
-        x.open("Electrical", &[]);
-        x.text("EBusCurrent", &i.ebus_current_ma.to_string());
-        x.close();
+        if i.ebus_current_ma != 0 {
+            x.open("Electrical", &[]);
+            x.text("EBusCurrent", &i.ebus_current_ma.to_string());
+            x.close();
+        }
+        if let Some(t) = i.timeouts {
+            x.open("StateMachine", &[]);
+            x.open("Timeout", &[]);
+            x.text("PreopTimeout", &t.preop.to_string());
+            x.text("SafeopOpTimeout", &t.safeop_op.to_string());
+            x.text("BackToInitTimeout", &t.back_to_init.to_string());
+            x.text("BackToSafeopTimeout", &t.back_to_safeop.to_string());
+            x.close();
+            x.close();
+            x.open("Mailbox", &[]);
+            x.open("Timeout", &[]);
+            x.text("RequestTimeout", &t.mailbox_request.to_string());
+            x.text("ResponseTimeout", &t.mailbox_response.to_string());
+            x.close();
+            x.close();
+        }
         x.close();
     }
     x.text("GroupType", i.group.type_name);
@@ -824,6 +843,7 @@ pub(crate) fn device(
     if let Some(p) = child(d, "Profile").and_then(|p| text_of(child(p, "ProfileNo"))) {
         m.profile_no = Some(num_u32("Profile/ProfileNo", &p)?);
     }
+    m.timeouts = timeouts(d)?;
     if let Some(dict) = child(d, "Profile").and_then(|p| child(p, "Dictionary")) {
         if let Some(objs) = child(dict, "Objects") {
             let types = child(dict, "DataTypes");
@@ -842,6 +862,19 @@ pub(crate) fn device(
                     })
                     .unwrap_or_default();
                 let index = num("Object/Index", &idx)?;
+                if index == 0x1000 {
+                    // A default that is no UNSIGNED32 is not this model's business (a twin
+                    // reads it on its own terms).
+                    if let Some(b) = child(o, "Info")
+                        .and_then(|i| text_of(child(i, "DefaultData")))
+                        .and_then(|v| parse_hex_bytes(&v))
+                        .filter(|b| !b.is_empty() && b.len() <= 4)
+                    {
+                        let mut w = [0u8; 4];
+                        w[..b.len()].copy_from_slice(&b);
+                        m.device_type = Some(u32::from_le_bytes(w));
+                    }
+                }
                 if (0x1008..=0x100A).contains(&index) {
                     if let Some(v) =
                         child(o, "Info").and_then(|i| text_of(child(i, "DefaultString")))
@@ -863,6 +896,35 @@ pub(crate) fn device(
         }
     }
     Ok(m)
+}
+
+/// `Info/StateMachine/Timeout` and `Info/Mailbox/Timeout` of a `Device` element (ms); `None`
+/// without a state-machine timeout, a missing one of the six reads 0.
+fn timeouts(d: Node) -> Result<Option<oxicat_slave::device::Timeouts>, Error> {
+    let info = child(d, "Info");
+    let Some(sm) = info
+        .and_then(|i| child(i, "StateMachine"))
+        .and_then(|s| child(s, "Timeout"))
+    else {
+        return Ok(None);
+    };
+    let mbx = info
+        .and_then(|i| child(i, "Mailbox"))
+        .and_then(|m| child(m, "Timeout"));
+    let ms = |n: Option<Node>, name: &'static str| -> Result<u32, Error> {
+        match n.and_then(|n| text_of(child(n, name))) {
+            Some(s) => num_u32(name, &s),
+            None => Ok(0),
+        }
+    };
+    Ok(Some(oxicat_slave::device::Timeouts {
+        preop: ms(Some(sm), "PreopTimeout")?,
+        safeop_op: ms(Some(sm), "SafeopOpTimeout")?,
+        back_to_init: ms(Some(sm), "BackToInitTimeout")?,
+        back_to_safeop: ms(Some(sm), "BackToSafeopTimeout")?,
+        mailbox_request: ms(mbx, "RequestTimeout")?,
+        mailbox_response: ms(mbx, "ResponseTimeout")?,
+    }))
 }
 
 /// Parses ESI XML into one model per `Device` element.

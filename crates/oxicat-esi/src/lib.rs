@@ -82,15 +82,58 @@ pub fn check(def: &'static DeviceDef) -> Result<Vec<(Pair, Finding)>, Error> {
         .ok_or(Error::Missing("Device"))?;
     let s = sii::parse(&sii::generate(def)?)?;
     let mut out = Vec::new();
+    out.extend(profile_check(def).into_iter().map(|f| (Pair::Def, f)));
+    out.extend(model::self_check(&e).into_iter().map(|f| (Pair::Esi, f)));
     out.extend(compare(&d, &e).into_iter().map(|f| (Pair::DefEsi, f)));
     out.extend(compare(&d, &s).into_iter().map(|f| (Pair::DefSii, f)));
     out.extend(compare(&e, &s).into_iter().map(|f| (Pair::EsiSii, f)));
     Ok(out)
 }
 
-/// Which two descriptions a [`Finding`] of [`check`] compares (left, right).
+/// The definition's profile number (the low word of 0x1000, which the ESI's
+/// `Profile/ProfileNo` repeats) against the profile its dictionary implements: the
+/// controlword 0x6040 and statusword 0x6041 make a CiA402 drive (402), the object 0xF000 a
+/// modular device (5001; a dictionary with both is not judged). A drive whose 0x1000 says
+/// 5001 gets no drive tab in a configuration tool, and a non-drive that says 402 gets one.
+pub fn profile_check(def: &DeviceDef) -> Vec<Finding> {
+    let p = def.device_type & 0xFFFF;
+    let drive = def.object(0x6040).is_some() && def.object(0x6041).is_some();
+    let modular = def.object(0xF000).is_some();
+    let mut f = Vec::new();
+    let stated_by = "the low word of 0x1000 (and so the ESI's Profile/ProfileNo)";
+    if drive && !modular && p != 402 {
+        f.push(Finding::Profile {
+            stated: p,
+            stated_by,
+            implied: 402,
+            implied_by: "the dictionary's 0x6040 controlword and 0x6041 statusword",
+        });
+    } else if modular && !drive && p != 5001 {
+        f.push(Finding::Profile {
+            stated: p,
+            stated_by,
+            implied: 5001,
+            implied_by: "the dictionary's 0xF000 modular device profile object",
+        });
+    } else if p == 402 && !drive {
+        f.push(Finding::Profile {
+            stated: p,
+            stated_by,
+            implied: 0,
+            implied_by: "a dictionary without the 0x6040 controlword and 0x6041 statusword",
+        });
+    }
+    f
+}
+
+/// Which two descriptions a [`Finding`] of [`check`] compares (left, right), or the one
+/// that disagrees with itself.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Pair {
+    /// The definition on its own (its 0x1000 against its dictionary).
+    Def,
+    /// The generated ESI on its own (its `ProfileNo` against its 0x1000).
+    Esi,
     /// Definition vs generated ESI.
     DefEsi,
     /// Definition vs generated SII.

@@ -194,6 +194,11 @@ pub struct DeviceModel {
     /// CoE profile number: the low word of 0x1000 for a definition, `Profile/ProfileNo` in
     /// an ESI (SII images carry none).
     pub profile_no: Option<u32>,
+    /// The device type 0x1000: the definition's, the `DefaultData` of an ESI's object
+    /// 0x1000 (SII images carry none).
+    pub device_type: Option<u32>,
+    /// State-machine and mailbox timeouts (definition, ESI `Info`; SII images carry none).
+    pub timeouts: Option<oxicat_slave::device::Timeouts>,
 }
 
 /// A difference between two descriptions of a device (left vs right).
@@ -309,6 +314,84 @@ pub enum Finding {
         /// Right value.
         right: String,
     },
+    /// State-machine or mailbox timeouts differ.
+    Timeouts {
+        /// Left value.
+        left: Option<oxicat_slave::device::Timeouts>,
+        /// Right value.
+        right: Option<oxicat_slave::device::Timeouts>,
+    },
+    /// One description disagrees with itself on its CoE profile: the profile number it
+    /// states (`Profile/ProfileNo`, the low word of 0x1000) against the profile its
+    /// dictionary implements or the other place that states it.
+    Profile {
+        /// The profile number stated (ESI `ProfileNo`, or the low word of 0x1000).
+        stated: u32,
+        /// Where it is stated.
+        stated_by: &'static str,
+        /// The profile number the other place implies.
+        implied: u32,
+        /// What implies it.
+        implied_by: &'static str,
+    },
+}
+
+impl core::fmt::Display for Finding {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        match self {
+            Finding::Profile {
+                stated,
+                stated_by,
+                implied,
+                implied_by,
+            } => write!(
+                f,
+                "profile number: {stated_by} says {stated} ({}) but {implied_by} makes it {implied} \
+                 ({}); the low word of 0x1000 and the ESI's Profile/ProfileNo must name the \
+                 profile the dictionary implements",
+                profile_name(*stated),
+                profile_name(*implied)
+            ),
+            Finding::Identity { field, left, right } => {
+                write!(f, "{field}: {left} ({left:#x}) against {right} ({right:#x})")
+            }
+            Finding::Text { field, left, right }
+            | Finding::Eeprom { field, left, right }
+            | Finding::Pdo {
+                field, left, right, ..
+            } => write!(f, "{field}: {left:?} against {right:?} ({self:?})"),
+            other => write!(f, "{other:?}"),
+        }
+    }
+}
+
+/// The name of a CoE device profile number (ETG.1004 / CiA), for messages.
+pub fn profile_name(p: u32) -> &'static str {
+    match p {
+        0 => "no profile",
+        401 => "CiA401 generic I/O",
+        402 => "CiA402 drive",
+        404 => "CiA404 measuring device",
+        5001 => "ETG.5001 modular device",
+        _ => "another profile",
+    }
+}
+
+/// What a description says about its profile against itself: the ESI's `ProfileNo`
+/// against the low word of its own 0x1000 (`Finding::Profile`).
+pub fn self_check(m: &DeviceModel) -> Vec<Finding> {
+    let mut f = Vec::new();
+    if let (Some(p), Some(t)) = (m.profile_no, m.device_type) {
+        if p != t & 0xFFFF {
+            f.push(Finding::Profile {
+                stated: p,
+                stated_by: "Profile/ProfileNo",
+                implied: t & 0xFFFF,
+                implied_by: "the low word of 0x1000",
+            });
+        }
+    }
+    f
 }
 
 /// Compares two models. Fields one side does not carry (`None`, empty ESI PD SM sizes, no
@@ -344,6 +427,21 @@ pub fn compare(a: &DeviceModel, b: &DeviceModel) -> Vec<Finding> {
                 right: r,
             });
         }
+    }
+    if let (Some(l), Some(r)) = (a.device_type, b.device_type) {
+        if l != r {
+            f.push(Finding::Identity {
+                field: "device_type",
+                left: l,
+                right: r,
+            });
+        }
+    }
+    if a.timeouts.is_some() && b.timeouts.is_some() && a.timeouts != b.timeouts {
+        f.push(Finding::Timeouts {
+            left: a.timeouts,
+            right: b.timeouts,
+        });
     }
     // The k-th string of an index on one side against the k-th of that index on the other
     // (an image may list an index twice; matching each with the first on the other side
@@ -674,6 +772,8 @@ pub fn from_def(def: &DeviceDef) -> DeviceModel {
         revision: def.identity.revision,
         name: Some(def.name.to_string()),
         profile_no: crate::esi::profile_no(def),
+        device_type: Some(def.device_type),
+        timeouts: i.timeouts,
         id_strings: vec![
             (0x1008, def.name.to_string()),
             (0x1009, def.hw_version.to_string()),

@@ -1708,6 +1708,7 @@ fn build_device(esi: &Esi, d: Node, cand: Candidate) -> Result<Twin, TwinError> 
             eoe: false,
             dc_modes: Box::leak(dc_modes.into_boxed_slice()),
             ebus_current_ma: ebus,
+            timeouts: m.timeouts,
         },
     };
     let layout = SmLayout {

@@ -50,3 +50,78 @@ fn esi_profile_number_is_the_low_word_of_0x1000_and_check_compares_it() {
         "{f:#?}"
     );
 }
+
+/// A definition whose 0x1000 names another profile than its dictionary implements is
+/// refused by the check, with a message that says which and why: the joint with 0x1000 =
+/// 5001 (what its ESI used to say), and the hub (a modular device) with 0x1000 = 402.
+#[test]
+fn check_refuses_a_definition_whose_0x1000_disagrees_with_its_dictionary() {
+    let mut joint = oxicat_devices::cia402::DEF;
+    joint.device_type = 0x0000_1389;
+    let joint: &'static _ = Box::leak(Box::new(joint));
+    let f = oxicat_esi::check(joint).unwrap();
+    let (pair, finding) = f
+        .iter()
+        .find(|(_, f)| matches!(f, oxicat_esi::Finding::Profile { .. }))
+        .unwrap_or_else(|| panic!("no profile finding: {f:#?}"));
+    assert_eq!(*pair, oxicat_esi::Pair::Def);
+    assert!(matches!(
+        finding,
+        oxicat_esi::Finding::Profile {
+            stated: 5001,
+            implied: 402,
+            ..
+        }
+    ));
+    let msg = finding.to_string();
+    for part in ["5001", "402", "0x6040", "CiA402 drive", "ProfileNo"] {
+        assert!(msg.contains(part), "{part} missing from: {msg}");
+    }
+
+    let mut hub = oxicat_devices::axis_hub::device::DEF;
+    hub.device_type = 0x0002_0192;
+    let hub: &'static _ = Box::leak(Box::new(hub));
+    let f = oxicat_esi::check(hub).unwrap();
+    assert!(
+        f.iter().any(|(p, f)| *p == oxicat_esi::Pair::Def
+            && matches!(
+                f,
+                oxicat_esi::Finding::Profile {
+                    stated: 402,
+                    implied: 5001,
+                    ..
+                }
+            )),
+        "{f:#?}"
+    );
+    // The registered devices agree.
+    for def in [
+        &oxicat_devices::cia402::DEF,
+        &oxicat_devices::axis_hub::device::DEF,
+    ] {
+        assert!(oxicat_esi::profile_check(def).is_empty());
+    }
+}
+
+/// An ESI whose ProfileNo disagrees with its own 0x1000 default is found on its own.
+#[test]
+fn an_esi_whose_profile_no_disagrees_with_its_0x1000_is_found() {
+    let xml = oxicat_esi::esi::generate(&oxicat_devices::cia402::DEF).unwrap();
+    let m = &oxicat_esi::esi::parse(&xml).unwrap()[0];
+    assert_eq!(m.device_type, Some(0x0002_0192), "0x1000 read from the ESI");
+    assert!(oxicat_esi::model::self_check(m).is_empty());
+    let wrong = xml.replace("<ProfileNo>402</ProfileNo>", "<ProfileNo>5001</ProfileNo>");
+    let m = &oxicat_esi::esi::parse(&wrong).unwrap()[0];
+    let f = oxicat_esi::model::self_check(m);
+    assert!(
+        matches!(
+            f.as_slice(),
+            [oxicat_esi::Finding::Profile {
+                stated: 5001,
+                implied: 402,
+                ..
+            }]
+        ),
+        "{f:#?}"
+    );
+}

@@ -379,6 +379,39 @@ impl EscConfigArea {
         pdi_config2: 0x0000,
         station_alias: 0,
     };
+
+    /// Microchip LAN9252: PDI control 0x80 (the ESC core's PDI is the chip's on-chip bus;
+    /// SPI/HBI is the LAN9252's own host interface, chosen by strap pins, so 0x05 would
+    /// leave the core without a PDI), 0x0141 = 0x02 (enhanced link detection), SYNC0/1
+    /// push-pull active low outputs mapped to the AL event request (0x0151 = 0xCC), 50 µs
+    /// SYNC impulse, extended PDI configuration 0x00FF: the axis hub report's ConfigData
+    /// `800200cc8813ff00` (Listing D.1).
+    pub const LAN9252: EscConfigArea = EscConfigArea {
+        pdi_control: 0x0280,
+        pdi_config: 0xCC00,
+        sync_impulse_len: 5000,
+        pdi_config2: 0x00FF,
+        station_alias: 0,
+    };
+}
+
+/// ESI timeouts in ms (ETG.2000 `Info/StateMachine/Timeout`, `Info/Mailbox/Timeout`): how
+/// long a configuration tool waits for a state change or a mailbox answer. ESI only (the SII
+/// has no place for them).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Timeouts {
+    /// INIT → PREOP (`PreopTimeout`).
+    pub preop: u32,
+    /// PREOP → SAFEOP and SAFEOP → OP (`SafeopOpTimeout`).
+    pub safeop_op: u32,
+    /// Any state → INIT (`BackToInitTimeout`).
+    pub back_to_init: u32,
+    /// OP → SAFEOP (`BackToSafeopTimeout`).
+    pub back_to_safeop: u32,
+    /// Mailbox request: the slave takes the master's mailbox (`RequestTimeout`).
+    pub mailbox_request: u32,
+    /// Mailbox response: the slave answers (`ResponseTimeout`).
+    pub mailbox_response: u32,
 }
 
 /// CoE support details (ESI `Mailbox/CoE` attributes; SII general CoE details).
@@ -516,6 +549,9 @@ pub struct DeviceInfo {
     pub dc_modes: &'static [DcOpMode],
     /// Current consumption from the E-bus in mA (negative: feeds current).
     pub ebus_current_ma: i16,
+    /// State-machine and mailbox timeouts for the ESI (`None`: no `Info/StateMachine`,
+    /// `Info/Mailbox`; tools use their defaults).
+    pub timeouts: Option<Timeouts>,
 }
 
 impl DeviceInfo {
@@ -551,5 +587,6 @@ impl DeviceInfo {
         eoe: false,
         dc_modes: &[],
         ebus_current_ma: 0,
+        timeouts: None,
     };
 }

@@ -8,6 +8,9 @@
 //! - `mode <m>`: 0x6060 until 0x6061 shows it;
 //! - `move <target>`: CSP, enable, a smooth move of every drive, then per joint RMS and
 //!   max following error; `cia402.csv` (every cycle) and `following-error.png`/`.svg` in `--out`.
+//! - `task-period`: the paper's Experiment 2 (task period 1000 µs on the wire) on the virtual
+//!   segment: a table of the frame period, SYNC0 period and round trip
+//!   (`oxicat_devices::cia402::task_period`).
 //!
 //! A virtual segment starts fresh with each invocation, so `disable` and `mode` there
 //! first enable (to have something to disable / to show the mode in Operation enabled).
@@ -77,6 +80,13 @@ pub enum Cia402Verb {
         #[arg(long)]
         arm: bool,
     },
+    /// The paper's task-period experiment on the virtual segment: frame period, SYNC0
+    /// period and round trip as a table (virtual segment only).
+    TaskPeriod {
+        /// Cycles measured (10 … 1000000).
+        #[arg(long, default_value_t = 1000)]
+        cycles: u64,
+    },
 }
 
 /// Parses a mode name or number.
@@ -118,6 +128,24 @@ fn check_args(a: &Cia402Args) -> Result<(), UsageError> {
             value: a.cycle_us.to_string(),
             allowed: format!("{MIN_CYCLE_US} … {MAX_CYCLE_US} µs (below {MIN_CYCLE_US} µs the master cannot keep the cycle; above {MAX_CYCLE_US} µs the drive's 100 ms process-data watchdog comes close)"),
         });
+    }
+    if let Cia402Verb::TaskPeriod { cycles } = a.verb {
+        if !(10..=1_000_000).contains(&cycles) {
+            return Err(UsageError::OutOfRange {
+                option: "--cycles",
+                value: cycles.to_string(),
+                allowed: "10 … 1000000 cycles".into(),
+            });
+        }
+        if let Some(i) = &a.iface {
+            return Err(UsageError::OutOfRange {
+                option: "--iface",
+                value: i.clone(),
+                allowed:
+                    "none: task-period measures in the virtual segment's own capture and clock"
+                        .into(),
+            });
+        }
     }
     if let Cia402Verb::Move { duration_ms, .. } = a.verb {
         if !(1..=3_600_000).contains(&duration_ms) {
@@ -163,6 +191,15 @@ fn link(a: &Cia402Args) -> Result<Link, CliError> {
 /// Runs `oxicat cia402`; returns the text it printed.
 pub fn run(a: Cia402Args) -> Result<String, CliError> {
     check_args(&a)?;
+    if let Cia402Verb::TaskPeriod { cycles } = a.verb {
+        let t = oxicat_devices::cia402::task_period::run(
+            a.joints,
+            cycles,
+            Duration::from_micros(a.cycle_us),
+            !a.no_dc,
+        )?;
+        return Ok(t.markdown());
+    }
     let sim = a.iface.is_none();
     let mut m = Master::open(link(&a)?)?;
     let drives: Vec<usize> = (0..m.len()).collect();
@@ -181,6 +218,7 @@ pub fn run(a: Cia402Args) -> Result<String, CliError> {
                 actions.push(Action::Enable);
             }
         }
+        Cia402Verb::TaskPeriod { .. } => {}
         Cia402Verb::Move {
             target,
             relative,

@@ -175,6 +175,13 @@ pub enum CliError {
         /// Why.
         why: String,
     },
+    /// `device <name> check` found disagreements (listed on standard output).
+    CheckFailed {
+        /// The device.
+        device: String,
+        /// How many.
+        findings: usize,
+    },
     /// A recording could not be converted to Parquet.
     Parquet {
         /// The Parquet file.
@@ -234,6 +241,10 @@ impl std::fmt::Display for CliError {
                 "{failed} of {points} points failed (see {}): {first}",
                 table.display()
             ),
+            CliError::CheckFailed { device, findings } => write!(
+                f,
+                "{device}: {findings} finding(s): its definition, ESI and SII disagree (listed above)"
+            ),
             CliError::Parquet { path, error } => write!(f, "{}: {error}", path.display()),
             CliError::SaveDir { dir, why } => {
                 write!(f, "cannot save the scan in {}: {why}", dir.display())
@@ -271,14 +282,7 @@ pub fn device_output(name: &str, what: DeviceOutput) -> Result<Vec<u8>, CliError
         DeviceOutput::Esi => oxicat_esi::esi::generate(def).map(String::into_bytes),
         DeviceOutput::Sii => oxicat_esi::sii::generate(def),
         DeviceOutput::Od => oxicat_esi::od::table(def).map(String::into_bytes),
-        DeviceOutput::Check => oxicat_esi::check(def).map(|f| {
-            let mut s = String::new();
-            for (pair, finding) in &f {
-                s.push_str(&format!("{pair:?}: {finding:?}\n"));
-            }
-            s.push_str(&format!("{} findings\n", f.len()));
-            s.into_bytes()
-        }),
+        DeviceOutput::Check => oxicat_esi::check(def).map(|f| check_text(&f).into_bytes()),
     };
     r.map_err(CliError::Device)
 }
@@ -311,10 +315,33 @@ fn device_list() -> Result<(), CliError> {
     print_text(&igh_cmd::device_list())
 }
 
-/// `oxicat device <name> <what> [-o file]`.
+/// The text of `device <name> check`: one line per finding (which descriptions, what),
+/// then the count.
+pub fn check_text(f: &[(oxicat_esi::Pair, oxicat_esi::Finding)]) -> String {
+    let mut s = String::new();
+    for (pair, finding) in f {
+        s.push_str(&format!("{pair:?}: {finding}\n"));
+    }
+    s.push_str(&format!("{} findings\n", f.len()));
+    s
+}
+
+/// `oxicat device <name> <what> [-o file]`; `check` fails when it finds anything.
 fn device(a: DeviceArgs) -> Result<(), CliError> {
     let bytes = device_output(&a.name, a.what)?;
-    output::write_output(a.output.as_deref(), &bytes, &mut std::io::stdout().lock())
+    output::write_output(a.output.as_deref(), &bytes, &mut std::io::stdout().lock())?;
+    if a.what == DeviceOutput::Check {
+        let n = oxicat_esi::check(device_def(&a.name)?)
+            .map_err(CliError::Device)?
+            .len();
+        if n > 0 {
+            return Err(CliError::CheckFailed {
+                device: a.name,
+                findings: n,
+            });
+        }
+    }
+    Ok(())
 }
 
 /// `oxicat version`.

@@ -65,3 +65,31 @@ fn enable_prints_each_step_and_arm_move_writes_csv_png_and_svg() {
         let _ = std::fs::remove_dir_all(dir);
     });
 }
+
+/// `oxicat cia402 task-period`: the output is the table (the paper's 1 ms experiment), its
+/// mean period the configured cycle; bad counts and `--iface` are refused with the option
+/// named.
+#[test]
+fn task_period_prints_the_table_and_refuses_bad_arguments() {
+    big(|| {
+        let dir = std::env::temp_dir();
+        let text = run(args(Cia402Verb::TaskPeriod { cycles: 100 }, 1, dir.clone())).unwrap();
+        let rows: Vec<&str> = text.lines().filter(|l| l.starts_with("| ")).collect();
+        assert_eq!(rows.len(), 4, "header + 3 rows: {text}");
+        assert!(
+            rows[1].starts_with("| cyclic frame period, master link |"),
+            "{text}"
+        );
+        assert_eq!(rows[1].split('|').nth(3).map(str::trim), Some("1000.000"));
+        assert!(rows[2].starts_with("| SYNC0 period"), "{text}");
+        assert!(rows[3].starts_with("| frame round trip"), "{text}");
+        let e = run(args(Cia402Verb::TaskPeriod { cycles: 3 }, 1, dir.clone()))
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("--cycles 3"), "{e}");
+        let mut a = args(Cia402Verb::TaskPeriod { cycles: 100 }, 1, dir);
+        a.iface = Some("eth9".into());
+        let e = run(a).unwrap_err().to_string();
+        assert!(e.contains("--iface"), "{e}");
+    });
+}

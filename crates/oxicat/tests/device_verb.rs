@@ -69,3 +69,23 @@ fn device_check_reports_no_findings_and_unknown_device_fails() {
     assert!(!o.status.success());
     assert!(String::from_utf8_lossy(&o.stderr).contains("unknown device"));
 }
+
+/// The check's text names what disagrees in words; a definition whose 0x1000 disagrees with
+/// its dictionary gives a finding (the binary then exits 1: `CliError::CheckFailed`).
+#[test]
+fn check_text_explains_a_profile_disagreement() {
+    let mut joint = oxicat_devices::cia402::DEF;
+    joint.device_type = 0x0000_1389;
+    let joint: &'static _ = Box::leak(Box::new(joint));
+    let f = oxicat_esi::check(joint).unwrap();
+    let text = oxicat::check_text(&f);
+    assert!(text.contains("Def: profile number"), "{text}");
+    assert!(text.contains("0x6040"), "{text}");
+    assert!(!text.ends_with("0 findings\n"), "{text}");
+    let e = oxicat::CliError::CheckFailed {
+        device: "x".into(),
+        findings: f.len(),
+    }
+    .to_string();
+    assert!(e.contains("disagree"), "{e}");
+}

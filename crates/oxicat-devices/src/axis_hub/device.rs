@@ -10,7 +10,7 @@
 //! does not fit 16); EVENT is the last event code, ERROR the most severe *active* error
 //! code (0 once every error cleared).
 
-use oxicat_slave::device::{DcOpMode, DeviceInfo, Group};
+use oxicat_slave::device::{CoeInfo, DcOpMode, DeviceInfo, EscConfigArea, Group, Timeouts};
 use oxicat_slave::{
     Access, DataType, DeviceDef, EntryDef, Identity, MailboxDef, ObjectCode, ObjectDef, PdoDef,
     PdoEntry, PdoMapping, Scale, SyncDef, SyncMode,
@@ -173,7 +173,21 @@ pub const OUTPUT_BYTES: usize = oxicat_slave::pdo_bytes(RX_PDOS, RX_ASSIGN);
 /// Input (TxPDO) bytes of the default assignment.
 pub const INPUT_BYTES: usize = oxicat_slave::pdo_bytes(TX_PDOS, TX_ASSIGN);
 
-/// ESI/SII description data.
+/// The report's ESI timeouts (Listing D.1, "4 Times from original value" of the SSC
+/// defaults 2000/9000/5000/200 ms and 100/2000 ms), in ms.
+pub const TIMEOUTS: Timeouts = Timeouts {
+    preop: 8000,
+    safeop_op: 36000,
+    back_to_init: 20000,
+    back_to_safeop: 800,
+    mailbox_request: 400,
+    mailbox_response: 8000,
+};
+
+/// ESI/SII description data: the report's LAN9252 EEPROM settings (Listing D.1): PDI
+/// control 0x80 with the rest of its `ConfigData` ([`EscConfigArea::LAN9252`]), its
+/// state-machine and mailbox timeouts and its CoE flags (PdoUpload), except where the hub's
+/// README section says why not (EEPROM size, station alias, CompleteAccess, DC modes).
 pub const INFO: DeviceInfo = DeviceInfo {
     vendor_name: "Hans Robot Germany GmbH",
     group: Group {
@@ -185,9 +199,18 @@ pub const INFO: DeviceInfo = DeviceInfo {
         "Axis communication hub: 15 DS18B20 on 1-Wire, WS2812 LED rings, STM32F446 + LAN9252 (SPI)",
     ),
     physics: "YY",
+    esc: EscConfigArea::LAN9252,
+    // The report's 512 bytes cannot hold the image (870 bytes with the PDO entry names):
+    // the next size up (README).
+    eeprom_bytes: 1024,
     mailbox_size_range: Some((34, 128)),
+    coe: CoeInfo {
+        pdo_upload: true,
+        ..CoeInfo::STACK
+    },
     dc_modes: &[DcOpMode::SM_SYNCHRON, DcOpMode::DC_SYNC0],
     ebus_current_ma: 0,
+    timeouts: Some(TIMEOUTS),
     ..DeviceInfo::DEFAULT
 };
 

@@ -23,10 +23,14 @@ pub const DEVICE_TYPE: u32 = 0x0002_0192;
 /// Product code of the joint drive.
 pub const PRODUCT_CODE: u32 = 0x0402_0001;
 
-/// Supported drive modes 0x6502: PP (bit 0), PV (2), PT (3), HM (5), CSP (7), CSV (8),
-/// CST (9).
+/// Supported drive modes 0x6502: PP (bit 0), PV (2), PT (3), HM (5), IP (6), CSP (7),
+/// CSV (8), CST (9).
 pub const SUPPORTED_MODES: u32 =
-    (1 << 0) | (1 << 2) | (1 << 3) | (1 << 5) | (1 << 7) | (1 << 8) | (1 << 9);
+    (1 << 0) | (1 << 2) | (1 << 3) | (1 << 5) | (1 << 6) | (1 << 7) | (1 << 8) | (1 << 9);
+
+/// Abort connection option code 0x6007 at power-on: 3, quick stop (README: why not the
+/// 1 of CiA 402-2).
+pub const ABORT_CONNECTION_DEFAULT: i16 = 3;
 
 const SUB0: E = E::new(0, "SubIndex 000", T::Unsigned8, A::RO);
 
@@ -96,6 +100,13 @@ pub static OBJECTS: &[ObjectDef] = &[
         0x2002,
         "Joint torque sensor",
         v!("Joint torque sensor", Int32, RO, Tx, ["N m" / 1000]),
+    ),
+    var(
+        0x6007,
+        "Abort connection option code",
+        &[E::new(0, "Abort connection option code", T::Int16, A::RW)
+            .default_i64(ABORT_CONNECTION_DEFAULT as i64)
+            .range(0, 3)],
     ),
     var(0x603F, "Error code", v!("Error code", Unsigned16, RO, Tx)),
     var(0x6040, "Controlword", v!("Controlword", Unsigned16, RW, Rx)),
@@ -287,6 +298,36 @@ pub static OBJECTS: &[ObjectDef] = &[
         v!("Torque offset", Int16, RW, Rx, ["%" / 10]),
     ),
     var(
+        0x60C0,
+        "Interpolation sub mode select",
+        &[E::new(0, "Interpolation sub mode select", T::Int16, A::RW)
+            .default_i64(0)
+            .range(0, 0)],
+    ),
+    ObjectDef {
+        index: 0x60C1,
+        name: "Interpolation data record",
+        code: ObjectCode::Array,
+        entries: &[
+            SUB0,
+            E::new(1, "Interpolation data record 1", T::Int32, A::RW).pdo(M::Rx),
+        ],
+    },
+    ObjectDef {
+        index: 0x60C2,
+        name: "Interpolation time period",
+        code: ObjectCode::Record,
+        entries: &[
+            SUB0,
+            E::new(1, "Interpolation time period value", T::Unsigned8, A::RW)
+                .default_i64(1)
+                .range(1, 255),
+            E::new(2, "Interpolation time index", T::Int8, A::RW)
+                .default_i64(-3)
+                .range(-6, 0),
+        ],
+    },
+    var(
         0x60F4,
         "Following error actual value",
         v!("Following error actual value", Int32, RO, Tx, ["inc" / 1]),
@@ -360,7 +401,7 @@ pub const INFO: DeviceInfo = DeviceInfo {
     order_code: "CIA402-JOINT",
     description: Some(
         "CiA402 modular joint drive (BLDC, harmonic gear, joint torque sensor): PP, PV, PT, HM, \
-         CSP, CSV, CST",
+         IP, CSP, CSV, CST",
     ),
     mailbox_size_range: Some((34, 128)),
     dc_modes: &[DcOpMode::SM_SYNCHRON, DcOpMode::DC_SYNC0],

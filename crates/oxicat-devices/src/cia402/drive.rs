@@ -45,6 +45,9 @@ pub mod mode {
     pub const PT: i8 = 4;
     /// Homing.
     pub const HM: i8 = 6;
+    /// Interpolated position (sub mode 0x60C0 = 0: linear interpolation between the
+    /// set-points 0x60C1:01, one per interpolation period 0x60C2).
+    pub const IP: i8 = 7;
     /// Cyclic synchronous position.
     pub const CSP: i8 = 8;
     /// Cyclic synchronous velocity.
@@ -59,6 +62,8 @@ pub mod error {
     pub const FOLLOWING_ERROR: u16 = 0x8611;
     /// Over-current (short circuit / earth leakage, motor side).
     pub const OVERCURRENT: u16 = 0x2310;
+    /// Communication (the connection to the master was aborted and 0x6007 = 1).
+    pub const COMMUNICATION: u16 = 0x8100;
 }
 
 /// Hardware constants of the drive.
@@ -128,6 +133,7 @@ struct Io {
     position_offset: Option<Var<i32>>,
     velocity_offset: Option<Var<i32>>,
     torque_offset: Option<Var<i16>>,
+    ip_data: Option<Var<i32>>,
 }
 
 impl Io {
@@ -155,6 +161,7 @@ impl Io {
         position_offset: Some(Var::of(OBJECTS, 0x60B0, 0)),
         velocity_offset: Some(Var::of(OBJECTS, 0x60B1, 0)),
         torque_offset: Some(Var::of(OBJECTS, 0x60B2, 0)),
+        ip_data: Some(Var::of(OBJECTS, 0x60C1, 1)),
     };
 
     /// The handles for `od`: the build-time ones on the drive's own dictionary, else the
@@ -206,6 +213,7 @@ impl Io {
             position_offset: v(od, 0x60B0),
             velocity_offset: v(od, 0x60B1),
             torque_offset: v(od, 0x60B2),
+            ip_data: od.var(0x60C1, 1).ok(),
         })
     }
 
@@ -383,6 +391,22 @@ pub struct Cia402Drive<H: JointHw> {
     emcy: [Option<(u16, u8)>; 4],
     transitions: u32,
     last_transition: Option<u8>,
+    ip: Interpolator,
+    in_op: bool,
+}
+
+/// Linear interpolation of interpolated position mode: the demand goes from the previous
+/// set-point to the current one in `n` equal steps, one per drive cycle, `n` = the
+/// interpolation period 0x60C2 in drive cycles; a new set-point 0x60C1:01 is taken every
+/// `n` cycles.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+struct Interpolator {
+    /// Taking set-points (controlword bit 4 "enable ip mode").
+    active: bool,
+    prev: i32,
+    next: i32,
+    /// Cycles into the current period (1 ..= n).
+    k: u32,
 }
 
 impl<H: JointHw> Cia402Drive<H> {
@@ -421,6 +445,8 @@ impl<H: JointHw> Cia402Drive<H> {
             emcy: [None; 4],
             transitions: 0,
             last_transition: None,
+            ip: Interpolator::default(),
+            in_op: false,
         }
     }
 
@@ -464,7 +490,14 @@ impl<H: JointHw> Cia402Drive<H> {
         if self.fault.is_none() {
             self.fault = Some(code);
             self.fault_new = true;
-            let reg = if code & 0xF000 == 0x2000 { 0x03 } else { 0x01 };
+            // Error register 0x1001: generic, + current (0x2xxx), + communication (0x81xx).
+            let reg = if code & 0xF000 == 0x2000 {
+                0x03
+            } else if code & 0xFF00 == 0x8100 {
+                0x11
+            } else {
+                0x01
+            };
             self.queue_emergency(code, reg);
         }
     }
@@ -483,6 +516,45 @@ impl<H: JointHw> Cia402Drive<H> {
         match od.get::<u32>(0x1C32, 2) {
             Ok(ns) if ns > 0 => ns as f32 * 1e-9,
             _ => self.params.cycle_s,
+        }
+    }
+
+    /// The interpolation period 0x60C2 (sub 1 × 10^sub 2 s) in drive cycles of `dt`, at
+    /// least 1 (a period below the cycle interpolates nothing).
+    fn ip_cycles<const N: usize>(od: &Od<N>, dt: f32) -> u32 {
+        let units = od.get::<u8>(0x60C2, 1).unwrap_or(1).max(1) as f32;
+        let index = od.get::<i8>(0x60C2, 2).unwrap_or(-3).clamp(-6, 0);
+        let mut period = units;
+        for _ in 0..-index {
+            period *= 0.1;
+        }
+        let n = period / dt + 0.5;
+        if n >= 1.0 {
+            n.min(1_000_000.0) as u32
+        } else {
+            1
+        }
+    }
+
+    /// What the drive does when its connection to the master is aborted (leaving OP: the
+    /// SM watchdog expired, or the master took it down), by the abort connection option
+    /// code 0x6007: 0 nothing (the last set-points stay), 1 a fault ([`error::COMMUNICATION`],
+    /// then the fault reaction 0x605E), 2 the Disable voltage command (the motor coasts),
+    /// 3 the Quick stop command (ramp by 0x605A). A dictionary without 0x6007 (a twin) does
+    /// 3.
+    fn abort_connection<const N: usize>(&mut self, od: &mut Od<N>) {
+        match od
+            .get::<i16>(0x6007, 0)
+            .unwrap_or(super::device::ABORT_CONNECTION_DEFAULT)
+        {
+            0 => {}
+            1 => self.raise_fault(error::COMMUNICATION),
+            2 => {
+                let _ = od.set(0x6040, 0, cw::DISABLE_VOLTAGE);
+            }
+            _ => {
+                let _ = od.set(0x6040, 0, cw::QUICK_STOP_CMD);
+            }
         }
     }
 
@@ -569,7 +641,7 @@ impl<H: JointHw> Cia402Drive<H> {
 
         // Following error monitor (position modes, drive powered, not coasting).
         let fe = self.prof.pos.wrapping_sub(pos);
-        let position_mode = matches!(self.active_mode, mode::PP | mode::HM | mode::CSP);
+        let position_mode = matches!(self.active_mode, mode::PP | mode::HM | mode::IP | mode::CSP);
         let fe_window = io.param(od, 0x6065, 0, u32::MAX);
         let fe_timeout = od.get::<u16>(0x6066, 0).unwrap_or(0) as f32 * 1e-3;
         let fe_over = self.power
@@ -611,6 +683,7 @@ impl<H: JointHw> Cia402Drive<H> {
             self.pp_target = pos;
             self.pp_buffered = None;
             self.pp_done = true;
+            self.ip.active = false;
         }
 
         // Mode switch (takes effect at once; unsupported values are ignored).
@@ -618,7 +691,14 @@ impl<H: JointHw> Cia402Drive<H> {
         if want != self.active_mode
             && matches!(
                 want,
-                mode::PP | mode::PV | mode::PT | mode::HM | mode::CSP | mode::CSV | mode::CST
+                mode::PP
+                    | mode::PV
+                    | mode::PT
+                    | mode::HM
+                    | mode::IP
+                    | mode::CSP
+                    | mode::CSV
+                    | mode::CST
             )
         {
             self.active_mode = want;
@@ -626,6 +706,7 @@ impl<H: JointHw> Cia402Drive<H> {
             self.pp_buffered = None;
             self.pp_done = true;
             self.homing = Homing::Idle;
+            self.ip.active = false;
             self.torque_dem = ld(od, io.torque_actual) as f32;
         }
 
@@ -752,6 +833,46 @@ impl<H: JointHw> Cia402Drive<H> {
                         target_reached =
                             matches!(self.homing, Homing::Done | Homing::Error | Homing::Idle)
                                 && self.prof.vel == 0.0;
+                    }
+                    mode::IP => {
+                        // Controlword bit 4: enable ip mode; sub mode 0 (linear) only.
+                        let enabled = cwv & cw::NEW_SET_POINT != 0
+                            && od.get::<i16>(0x60C0, 0).unwrap_or(0) == 0;
+                        if enabled {
+                            let n = Self::ip_cycles(od, dt);
+                            let x = ld(od, io.ip_data);
+                            if !self.ip.active {
+                                // From where the demand is to the first set-point.
+                                self.ip = Interpolator {
+                                    active: true,
+                                    prev: self.prof.pos,
+                                    next: self.clamp_limits(od, x),
+                                    k: 0,
+                                };
+                            }
+                            self.ip.k += 1;
+                            if self.ip.k > n {
+                                self.ip.k = 1;
+                                self.ip.prev = self.ip.next;
+                                self.ip.next = self.clamp_limits(od, x);
+                            }
+                            let d = i64::from(self.ip.next.wrapping_sub(self.ip.prev));
+                            let num = d * i64::from(self.ip.k);
+                            let den = i64::from(n);
+                            self.prof = Profile {
+                                pos: self.ip.prev.wrapping_add((num / den) as i32),
+                                frac: (num % den) as f32 / den as f32,
+                                vel: d as f32 / (den as f32 * dt),
+                            };
+                            vff = self.prof.vel;
+                        } else {
+                            // Not enabled: hold the demand where it is.
+                            self.ip.active = false;
+                            self.prof.vel = 0.0;
+                        }
+                        // Statusword bit 12: ip mode active; bit 10: the demand is at rest.
+                        oms12 = self.ip.active;
+                        target_reached = !self.ip.active;
                     }
                     mode::CSP => {
                         let t = ld(od, io.target_position).wrapping_add(ld(od, io.position_offset));
@@ -1010,6 +1131,7 @@ impl<const N: usize, H: JointHw> Application<N> for Cia402Drive<H> {
         if to == AlState::SafeOp && self.io.is_none() {
             self.io = Io::resolve(od);
         }
+        self.in_op = to == AlState::Op;
         if matches!(to, AlState::Init | AlState::PreOp) {
             // No cycle runs below SAFEOP: the drive cannot control, so it lets go.
             self.power = false;
@@ -1020,10 +1142,16 @@ impl<const N: usize, H: JointHw> Application<N> for Cia402Drive<H> {
         Ok(())
     }
 
-    /// Leaving OP (or the SM watchdog): the controlword goes to Quick stop (0x0002), so
-    /// an enabled drive stops on its quick-stop ramp (0x605A) while SAFEOP cycles run.
+    /// Leaving OP (the SM watchdog, or the master): the connection is aborted, and the
+    /// abort connection option code 0x6007 says what the drive does while SAFEOP cycles
+    /// run (`Cia402Drive::abort_connection`). Entering SAFEOP from below: the controlword
+    /// is Quick stop (0x0002), as no master has sent one yet.
     fn safe_outputs(&mut self, od: &mut Od<N>) {
-        let _ = od.set(0x6040, 0, cw::QUICK_STOP_CMD);
+        if core::mem::take(&mut self.in_op) {
+            self.abort_connection(od);
+        } else {
+            let _ = od.set(0x6040, 0, cw::QUICK_STOP_CMD);
+        }
     }
 
     fn cycle(&mut self, od: &mut Od<N>) {

@@ -5,7 +5,8 @@
 //! - [`fsm`]: the state machine (transitions 0–16, command masks, statusword decoding,
 //!   option codes 0x605A–0x605E);
 //! - [`device`]: the object dictionary, 0x1000 = 0x00020192, default and configurable PDOs;
-//! - [`drive`]: modes PP/PV/PT/HM/CSP/CSV/CST and the cascaded loops on [`JointHw`]
+//! - [`drive`]: modes PP/PV/PT/HM/IP/CSP/CSV/CST, the abort connection option code 0x6007
+//!   and the cascaded loops on [`JointHw`]
 //!   (current at 20 kHz on a local timer, velocity and position each DC cycle).
 //!
 //! The joint torque sensor is reported in manufacturer object 0x2002 (mN·m).
@@ -19,6 +20,9 @@ pub mod fsm;
 pub mod master;
 #[cfg(feature = "bench")]
 pub mod rig;
+/// The paper's 1 ms task-period experiment on the virtual segment (feature `bench`).
+#[cfg(feature = "bench")]
+pub mod task_period;
 
 #[cfg(test)]
 mod tests;
