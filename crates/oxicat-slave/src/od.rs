@@ -459,13 +459,40 @@ pub const fn image_size(objects: &[ObjectDef]) -> usize {
     n
 }
 
+/// Capacities of the stack. A microcontroller build keeps them small (the `Slave` value lives
+/// in its RAM); the `twin-capacity` feature, which the std crates that serve twins of vendor
+/// devices turn on, raises them to what vendor catalogues declare (EL3008's 8 × 10 mapped
+/// entries, EL2819's 64-entry PDO, eleven PDOs assigned by default). Cargo features unify only
+/// within one build: a board image, built on its own, keeps the small capacities. What a
+/// device's dictionary *shows* does not depend on them (see [`MAP_SHOWN`], [`ASSIGN_SHOWN`]),
+/// so the ESI generated on a host describes the dictionary of the board image.
+#[cfg(not(feature = "twin-capacity"))]
+mod cap {
+    pub const PDOS: usize = 8;
+    pub const PDO_ENTRIES: usize = 31;
+    pub const ASSIGN: usize = 8;
+}
+#[cfg(feature = "twin-capacity")]
+mod cap {
+    pub const PDOS: usize = 32;
+    pub const PDO_ENTRIES: usize = 80;
+    pub const ASSIGN: usize = 32;
+}
+
 /// Maximum PDOs per direction.
-pub const MAX_PDOS: usize = 8;
+pub const MAX_PDOS: usize = cap::PDOS;
 /// Maximum entries per PDO mapping object (the TUeES030's 0x1A00 maps 28; 31 keeps a
 /// mapping object, 1 + 4 × 31 bytes, within a 128-byte mailbox).
-pub const MAX_PDO_ENTRIES: usize = 31;
+pub const MAX_PDO_ENTRIES: usize = cap::PDO_ENTRIES;
 /// Maximum PDOs in one assignment object.
-pub const MAX_ASSIGN: usize = 8;
+pub const MAX_ASSIGN: usize = cap::ASSIGN;
+/// Subindexes a configurable PDO mapping object shows and accepts (unless its default
+/// mapping has more): the same on every build, whatever [`MAX_PDO_ENTRIES`] is.
+pub const MAP_SHOWN: usize = 31;
+/// Subindexes a configurable assignment object (0x1C12/0x1C13) shows and accepts (unless
+/// its default assignment has more): the same on every build, whatever [`MAX_ASSIGN`] is.
+pub const ASSIGN_SHOWN: usize = 8;
+const _: () = assert!(MAP_SHOWN <= MAX_PDO_ENTRIES && ASSIGN_SHOWN <= MAX_ASSIGN);
 /// Maximum length in bytes of the 0x1008/0x1009/0x100A strings (the definition's name,
 /// hardware and software version). [`Od::new`] refuses a longer one rather than serving it
 /// cut, since ESI and SII carry the whole name.
@@ -479,7 +506,7 @@ const fn e(sub: u8, name: &'static str, t: DataType, a: Access) -> EntryDef {
     EntryDef::new(sub, name, t, a)
 }
 
-const MAP_NAMES: [&str; MAX_PDO_ENTRIES] = [
+const MAP_NAMES: [&str; 80] = [
     "Mapped object 1",
     "Mapped object 2",
     "Mapped object 3",
@@ -511,10 +538,62 @@ const MAP_NAMES: [&str; MAX_PDO_ENTRIES] = [
     "Mapped object 29",
     "Mapped object 30",
     "Mapped object 31",
+    "Mapped object 32",
+    "Mapped object 33",
+    "Mapped object 34",
+    "Mapped object 35",
+    "Mapped object 36",
+    "Mapped object 37",
+    "Mapped object 38",
+    "Mapped object 39",
+    "Mapped object 40",
+    "Mapped object 41",
+    "Mapped object 42",
+    "Mapped object 43",
+    "Mapped object 44",
+    "Mapped object 45",
+    "Mapped object 46",
+    "Mapped object 47",
+    "Mapped object 48",
+    "Mapped object 49",
+    "Mapped object 50",
+    "Mapped object 51",
+    "Mapped object 52",
+    "Mapped object 53",
+    "Mapped object 54",
+    "Mapped object 55",
+    "Mapped object 56",
+    "Mapped object 57",
+    "Mapped object 58",
+    "Mapped object 59",
+    "Mapped object 60",
+    "Mapped object 61",
+    "Mapped object 62",
+    "Mapped object 63",
+    "Mapped object 64",
+    "Mapped object 65",
+    "Mapped object 66",
+    "Mapped object 67",
+    "Mapped object 68",
+    "Mapped object 69",
+    "Mapped object 70",
+    "Mapped object 71",
+    "Mapped object 72",
+    "Mapped object 73",
+    "Mapped object 74",
+    "Mapped object 75",
+    "Mapped object 76",
+    "Mapped object 77",
+    "Mapped object 78",
+    "Mapped object 79",
+    "Mapped object 80",
 ];
 
-const ASSIGN_NAMES: [&str; MAX_ASSIGN] = [
-    "PDO 1", "PDO 2", "PDO 3", "PDO 4", "PDO 5", "PDO 6", "PDO 7", "PDO 8",
+const ASSIGN_NAMES: [&str; 32] = [
+    "PDO 1", "PDO 2", "PDO 3", "PDO 4", "PDO 5", "PDO 6", "PDO 7", "PDO 8", "PDO 9", "PDO 10",
+    "PDO 11", "PDO 12", "PDO 13", "PDO 14", "PDO 15", "PDO 16", "PDO 17", "PDO 18", "PDO 19",
+    "PDO 20", "PDO 21", "PDO 22", "PDO 23", "PDO 24", "PDO 25", "PDO 26", "PDO 27", "PDO 28",
+    "PDO 29", "PDO 30", "PDO 31", "PDO 32",
 ];
 
 const fn map_entries(a: Access) -> [EntryDef; MAX_PDO_ENTRIES + 1] {
@@ -1148,9 +1227,10 @@ impl<const N: usize> Od<N> {
                 } else {
                     &ASSIGN_RO
                 };
-                // A fixed assignment shows only its entries; a configurable one all slots.
+                // A fixed assignment shows only its entries; a configurable one
+                // ASSIGN_SHOWN slots, or as many as its default assignment fills.
                 r.entries = if d.assign_configurable {
-                    full
+                    &full[..len.clamp(ASSIGN_SHOWN, MAX_ASSIGN) + 1]
                 } else {
                     &full[..len + 1]
                 };
@@ -1190,7 +1270,7 @@ impl<const N: usize> Od<N> {
 
     fn map_obj(&self, p: &'static PdoDef, slot: usize, kind: Kind) -> Obj {
         let entries: &'static [EntryDef] = if p.configurable {
-            &MAP_RW
+            &MAP_RW[..p.entries.len().clamp(MAP_SHOWN, MAX_PDO_ENTRIES) + 1]
         } else {
             &MAP_RO[..p.entries.len() + 1]
         };

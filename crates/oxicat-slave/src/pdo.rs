@@ -6,10 +6,20 @@ use oxicat_wire::coe::SdoAbortCode;
 use crate::device::PdoEntry;
 use crate::od::{Area, Od, MAX_PDO_ENTRIES};
 
-/// Maximum process data bytes per direction.
-pub const MAX_PD_BYTES: usize = 256;
-/// Maximum mapped entries per direction.
-pub const MAX_ITEMS: usize = 64;
+/// Maximum process data bytes per direction (1024 with the `twin-capacity` feature; see
+/// [`crate::od::MAX_PDOS`] on capacities).
+pub const MAX_PD_BYTES: usize = if cfg!(feature = "twin-capacity") {
+    1024
+} else {
+    256
+};
+/// Maximum mapped entries per direction (256 with the `twin-capacity` feature: EL2258 maps
+/// 224).
+pub const MAX_ITEMS: usize = if cfg!(feature = "twin-capacity") {
+    256
+} else {
+    64
+};
 
 /// Direction of a mapping.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]

@@ -200,8 +200,9 @@ fn what_the_stack_cannot_represent_is_refused_with_the_limit() {
         matches!(&e, TwinError::Inconsistent(m) if m.contains("SM2")),
         "{e:?}"
     );
-    // More entries in one PDO than the stack maps.
-    let many: String = (1..=32)
+    // More entries in one PDO than the stack maps (its host capacity).
+    let n = oxicat_slave::od::MAX_PDO_ENTRIES + 1;
+    let many: String = (1..=n)
         .map(|k| {
             format!(
                 "<Entry><Index>#x7000</Index><SubIndex>{k}</SubIndex><BitLen>1</BitLen></Entry>"
@@ -217,7 +218,10 @@ fn what_the_stack_cannot_represent_is_refused_with_the_limit() {
     let e = build(&x, &Selector::default()).unwrap_err();
     assert_eq!(
         e.to_string(),
-        "cannot be served: PDO 0x1600 has 32 entries; the stack maps at most 31"
+        format!(
+            "cannot be served: PDO 0x1600 has {n} entries; the stack maps at most {}",
+            n - 1
+        )
     );
 }
 
