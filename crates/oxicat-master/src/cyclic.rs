@@ -349,122 +349,126 @@ impl Master {
         let mut stats = CycleStats::default();
         let mut left = false;
         // On the heap: ethercrab's cyclic futures are large (debug builds).
-        futures_lite::future::block_on(Box::pin(async {
-            if dc {
-                let group = group
-                    .configure_dc_sync(
-                        md,
-                        DcConfiguration {
-                            start_delay: Duration::from_millis(1).max(opts.cycle * 4),
-                            sync0_period: opts.cycle,
-                            sync0_shift: opts.cycle / 2,
-                        },
-                    )
-                    .await
-                    .map_err(e("DC configuration"))?;
-                let group = group
-                    .into_safe_op(md)
-                    .await
-                    .map_err(e("PRE-OP -> SAFE-OP"))?;
-                let group = group.request_into_op(md).await.map_err(e("request OP"))?;
-                for (p, sd) in group.iter(md).enumerate() {
-                    io.outputs[p] = vec![0; sd.outputs_raw().len()];
-                }
-                let deadline = std::time::Instant::now() + self.options.timeouts.state_transition;
-                let mut t0 = None;
-                loop {
+        crate::on_group_stack(|| {
+            futures_lite::future::block_on(Box::pin(async {
+                if dc {
+                    let group = group
+                        .configure_dc_sync(
+                            md,
+                            DcConfiguration {
+                                start_delay: Duration::from_millis(1).max(opts.cycle * 4),
+                                sync0_period: opts.cycle,
+                                sync0_shift: opts.cycle / 2,
+                            },
+                        )
+                        .await
+                        .map_err(e("DC configuration"))?;
+                    let group = group
+                        .into_safe_op(md)
+                        .await
+                        .map_err(e("PRE-OP -> SAFE-OP"))?;
+                    let group = group.request_into_op(md).await.map_err(e("request OP"))?;
                     for (p, sd) in group.iter(md).enumerate() {
-                        let mut o = sd.outputs_raw_mut();
-                        let l = o.len().min(io.outputs[p].len());
-                        o[..l].copy_from_slice(&io.outputs[p][..l]);
+                        io.outputs[p] = vec![0; sd.outputs_raw().len()];
                     }
-                    let t = time.now();
-                    let r = match group.tx_rx_dc(md).await {
-                        Ok(r) => r,
-                        Err(err) if t0.is_some() => {
-                            return Err(self.frames_lost(stats.cycles, err).await)
+                    let deadline =
+                        std::time::Instant::now() + self.options.timeouts.state_transition;
+                    let mut t0 = None;
+                    loop {
+                        for (p, sd) in group.iter(md).enumerate() {
+                            let mut o = sd.outputs_raw_mut();
+                            let l = o.len().min(io.outputs[p].len());
+                            o[..l].copy_from_slice(&io.outputs[p][..l]);
                         }
-                        Err(err) => {
-                            return Err(MasterError::Ethercrab("cyclic exchange".into(), err))
+                        let t = time.now();
+                        let r = match group.tx_rx_dc(md).await {
+                            Ok(r) => r,
+                            Err(err) if t0.is_some() => {
+                                return Err(self.frames_lost(stats.cycles, err).await)
+                            }
+                            Err(err) => {
+                                return Err(MasterError::Ethercrab("cyclic exchange".into(), err))
+                            }
+                        };
+                        let all_op = r.all_op();
+                        if all_op {
+                            // Row time: the DC system time of the cycle (the slaves' clock).
+                            let dct = r.extra.dc_system_time;
+                            let start = *t0.get_or_insert(dct);
+                            for (p, sd) in group.iter(md).enumerate() {
+                                io.inputs[p].clear();
+                                io.inputs[p].extend_from_slice(&sd.inputs_raw());
+                            }
+                            io.working_counter = r.working_counter;
+                            io.time_ns = dct.saturating_sub(start);
+                            stats.cycles += 1;
+                            let flow = step(&mut io)?;
+                            io.cycle += 1;
+                            if flow == Flow::Stop {
+                                break;
+                            }
+                        } else if t0.is_some() {
+                            stats.wkc_errors += 1;
+                            // A slave left OP under us: nothing in this run takes it back, so
+                            // say who changed what (another master, a watchdog) at once.
+                            if let Some(d) = self.disturbed(stats.cycles, None).await {
+                                return Err(d);
+                            }
+                        } else if std::time::Instant::now() > deadline {
+                            left = true;
+                            break;
                         }
-                    };
-                    let all_op = r.all_op();
-                    if all_op {
-                        // Row time: the DC system time of the cycle (the slaves' clock).
-                        let dct = r.extra.dc_system_time;
-                        let start = *t0.get_or_insert(dct);
+                        time.wait_until(t + r.extra.next_cycle_wait.as_nanos() as u64);
+                    }
+                } else {
+                    let group = group.into_op(md).await.map_err(e("PRE-OP -> OP"))?;
+                    for (p, sd) in group.iter(md).enumerate() {
+                        io.outputs[p] = vec![0; sd.outputs_raw().len()];
+                    }
+                    let t0 = time.now();
+                    let mut expected = None;
+                    loop {
+                        for (p, sd) in group.iter(md).enumerate() {
+                            let mut o = sd.outputs_raw_mut();
+                            let l = o.len().min(io.outputs[p].len());
+                            o[..l].copy_from_slice(&io.outputs[p][..l]);
+                        }
+                        let due = t0 + io.cycle * period;
+                        time.wait_until(due);
+                        let r = match group.tx_rx(md).await {
+                            Ok(r) => r,
+                            Err(err) => return Err(self.frames_lost(stats.cycles, err).await),
+                        };
                         for (p, sd) in group.iter(md).enumerate() {
                             io.inputs[p].clear();
                             io.inputs[p].extend_from_slice(&sd.inputs_raw());
                         }
                         io.working_counter = r.working_counter;
-                        io.time_ns = dct.saturating_sub(start);
+                        // ethercrab reads every slave's AL status with each exchange; the
+                        // working counter alone does not show a slave that left OP (its ESC
+                        // still counts the FMMU access).
+                        let wkc_bad =
+                            *expected.get_or_insert(r.working_counter) != r.working_counter;
+                        if wkc_bad {
+                            stats.wkc_errors += 1;
+                        }
+                        if wkc_bad || !r.all_op() {
+                            if let Some(d) = self.disturbed(stats.cycles, None).await {
+                                return Err(d);
+                            }
+                        }
+                        io.time_ns = time.now().saturating_sub(t0).max(io.cycle * period);
                         stats.cycles += 1;
                         let flow = step(&mut io)?;
                         io.cycle += 1;
                         if flow == Flow::Stop {
                             break;
                         }
-                    } else if t0.is_some() {
-                        stats.wkc_errors += 1;
-                        // A slave left OP under us: nothing in this run takes it back, so
-                        // say who changed what (another master, a watchdog) at once.
-                        if let Some(d) = self.disturbed(stats.cycles, None).await {
-                            return Err(d);
-                        }
-                    } else if std::time::Instant::now() > deadline {
-                        left = true;
-                        break;
-                    }
-                    time.wait_until(t + r.extra.next_cycle_wait.as_nanos() as u64);
-                }
-            } else {
-                let group = group.into_op(md).await.map_err(e("PRE-OP -> OP"))?;
-                for (p, sd) in group.iter(md).enumerate() {
-                    io.outputs[p] = vec![0; sd.outputs_raw().len()];
-                }
-                let t0 = time.now();
-                let mut expected = None;
-                loop {
-                    for (p, sd) in group.iter(md).enumerate() {
-                        let mut o = sd.outputs_raw_mut();
-                        let l = o.len().min(io.outputs[p].len());
-                        o[..l].copy_from_slice(&io.outputs[p][..l]);
-                    }
-                    let due = t0 + io.cycle * period;
-                    time.wait_until(due);
-                    let r = match group.tx_rx(md).await {
-                        Ok(r) => r,
-                        Err(err) => return Err(self.frames_lost(stats.cycles, err).await),
-                    };
-                    for (p, sd) in group.iter(md).enumerate() {
-                        io.inputs[p].clear();
-                        io.inputs[p].extend_from_slice(&sd.inputs_raw());
-                    }
-                    io.working_counter = r.working_counter;
-                    // ethercrab reads every slave's AL status with each exchange; the
-                    // working counter alone does not show a slave that left OP (its ESC
-                    // still counts the FMMU access).
-                    let wkc_bad = *expected.get_or_insert(r.working_counter) != r.working_counter;
-                    if wkc_bad {
-                        stats.wkc_errors += 1;
-                    }
-                    if wkc_bad || !r.all_op() {
-                        if let Some(d) = self.disturbed(stats.cycles, None).await {
-                            return Err(d);
-                        }
-                    }
-                    io.time_ns = time.now().saturating_sub(t0).max(io.cycle * period);
-                    stats.cycles += 1;
-                    let flow = step(&mut io)?;
-                    io.cycle += 1;
-                    if flow == Flow::Stop {
-                        break;
                     }
                 }
-            }
-            Ok(stats)
-        }))?;
+                Ok(stats)
+            }))
+        })?;
         if left {
             return Err(self.left_op());
         }

@@ -36,10 +36,12 @@ pub use al::{AlState, AlStatus};
 pub use error::MasterError;
 pub use value::ValueType;
 
-/// Most slaves a master handles.
-pub const MAX_SLAVES: usize = 64;
-/// Most process-data bytes (inputs + outputs) of all slaves.
-pub const MAX_PDI: usize = 4096;
+/// Most slaves a master handles (ethercrab's group capacity: a power of two). A segment of a
+/// thousand twins, as a machine's configuration lists them, fits.
+pub const MAX_SLAVES: usize = 1024;
+/// Most process-data bytes (inputs + outputs) of all slaves; ethercrab splits an image
+/// longer than a frame over several LRW frames per cycle.
+pub const MAX_PDI: usize = 65536;
 
 type Storage = PduStorage<16, { PduStorage::element_size(1100) }>;
 /// The ethercrab group of all slaves, in PRE-OP.
@@ -52,12 +54,27 @@ pub(crate) type PdiGroup = SubDeviceGroup<
     ethercrab::subdevice_group::PreOpPdi,
 >;
 
-/// Where ethercrab's group is.
+/// Stack that must be left for an operation on ethercrab's group (see [`on_group_stack`]).
+const GROUP_RED_ZONE: usize = 4 << 20;
+/// Stack given to such an operation when less is left: debug builds copy the ~300 KB group
+/// several times on the stack within one operation.
+const GROUP_STACK: usize = 32 << 20;
+
+/// Runs `f`, an operation on ethercrab's group, on the thread's own stack when at least
+/// [`GROUP_RED_ZONE`] of it is left (the main thread's 8 MB), else on a new stack of
+/// [`GROUP_STACK`] on the heap (spawned threads get 2 MB: a test's, a library user's).
+pub(crate) fn on_group_stack<R>(f: impl FnOnce() -> R) -> R {
+    stacker::maybe_grow(GROUP_RED_ZONE, GROUP_STACK, f)
+}
+
+/// Where ethercrab's group is. Boxed: a group holds [`MAX_SLAVES`] subdevices and the
+/// [`MAX_PDI`]-byte image inline (hundreds of KB), too much to carry in a `Master` or move
+/// on a thread's stack.
 pub(crate) enum Slot {
     /// PRE-OP (after ethercrab's discovery).
-    PreOp(Group),
+    PreOp(Box<Group>),
     /// PRE-OP with FMMUs and process-data SyncManagers configured.
-    Pdi(PdiGroup),
+    Pdi(Box<PdiGroup>),
 }
 
 /// What discovery found about one slave.
@@ -420,7 +437,7 @@ impl Master {
             ));
         }
         // On the heap: ethercrab's initialisation is a large future (debug builds).
-        let group = futures_lite::future::block_on(Box::pin(self.init()))?;
+        let group = on_group_stack(|| futures_lite::future::block_on(Box::pin(self.init())))?;
         let addresses: Vec<u16> = group
             .iter(&self.md)
             .map(|s| s.configured_address())
@@ -461,7 +478,7 @@ impl Master {
         }
     }
 
-    async fn init(&self) -> Result<Group, MasterError> {
+    async fn init(&self) -> Result<Box<Group>, MasterError> {
         if self.count_slaves().await? == 0 {
             return Err(MasterError::NoSlaves(self.link_name.clone()));
         }
@@ -480,7 +497,7 @@ impl Master {
         };
         match r {
             Ok(g) if g.is_empty() => Err(MasterError::NoSlaves(self.link_name.clone())),
-            Ok(g) => Ok(g),
+            Ok(g) => Ok(Box::new(g)),
             Err(e) => Err(MasterError::Ethercrab(
                 format!(
                     "discovery on {} (slaves answered but did not reach PRE-OP)",
@@ -801,10 +818,16 @@ impl Master {
         self.ensure_group()?;
         match self.slot.take() {
             Some(Slot::PreOp(g)) => {
-                let g =
-                    futures_lite::future::block_on(g.into_pre_op_pdi(&self.md)).map_err(|e| {
-                        MasterError::Ethercrab("configuring the process data (PRE-OP)".into(), e)
-                    })?;
+                let md = &self.md;
+                // The group moves out of its box inside a future on the heap.
+                let g = on_group_stack(|| {
+                    futures_lite::future::block_on(Box::pin(async move {
+                        (*g).into_pre_op_pdi(md).await.map(Box::new)
+                    }))
+                })
+                .map_err(|e| {
+                    MasterError::Ethercrab("configuring the process data (PRE-OP)".into(), e)
+                })?;
                 self.slot = Some(Slot::Pdi(g));
                 Ok(())
             }
@@ -817,7 +840,7 @@ impl Master {
     }
 
     /// The slot's PDI group, configuring it first; the master gives it up (cyclic use).
-    pub(crate) fn take_pdi_group(&mut self) -> Result<PdiGroup, MasterError> {
+    pub(crate) fn take_pdi_group(&mut self) -> Result<Box<PdiGroup>, MasterError> {
         self.configure_process_data()?;
         match self.slot.take() {
             Some(Slot::Pdi(g)) => {

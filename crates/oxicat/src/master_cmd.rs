@@ -418,12 +418,12 @@ pub fn parse_duration(s: &str) -> Result<Duration, UsageError> {
 }
 
 /// The in-process segment of `--sim`: the devices of `oxicat sim --list`, in the same syntax
-/// (`demo:2,tue-es030:1` or `"demo:2 tue-es030:1"`), at most
-/// [`oxicat_master::MAX_SLAVES`] in all (what the master's group holds), checked before
-/// anything is built.
+/// (`demo:2,tue-es030:1` or `"demo:2 tue-es030:1"`), at most what a served segment holds
+/// ([`crate::sim_cmd::MAX_SIM_SLAVES`]) and the master's group holds
+/// ([`oxicat_master::MAX_SLAVES`]), checked before anything is built.
 pub fn build_sim(spec: &str) -> Result<Arc<Mutex<oxicat_sim::segment::Segment>>, UsageError> {
-    let max = oxicat_master::MAX_SLAVES;
-    let range = format!("1 … {max} slaves in all (the master's group holds {max})");
+    let max = oxicat_master::MAX_SLAVES.min(crate::sim_cmd::MAX_SIM_SLAVES);
+    let range = format!("1 … {max} slaves in all");
     let desc = crate::sim_cmd::parse_specs_within(&[spec.to_string()], max, &range)
         .map_err(UsageError::Sim)?;
     if desc.devices.is_empty() {
