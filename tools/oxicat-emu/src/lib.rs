@@ -43,6 +43,9 @@
 
 #![warn(missing_docs)]
 
+pub mod adc;
+pub mod chip;
+pub mod cia402;
 mod cpu;
 mod exti;
 pub mod laelaps;
@@ -54,13 +57,13 @@ mod stats;
 mod timers;
 pub mod trot;
 
+pub use chip::{ChipKind, EscChip};
 pub use plant::BoardPlant;
 pub use stats::{image_size, HandlerStats, ImageSize, StackStats};
 
 use std::cell::RefCell;
 use std::rc::Rc;
 
-use oxicat_pdi::sim::{Handle, Lan9252Model};
 use unicorn_engine::unicorn_const::{Arch, Mode, Prot};
 use unicorn_engine::{ArmCpuModel, RegisterARM, Unicorn};
 
@@ -235,7 +238,7 @@ pub fn elf_symbol_bytes(elf: &[u8], name: &str) -> Result<Option<Vec<u8>>, EmuEr
 
 /// An input event a plant schedules at a time of the board's clock
 /// ([`Board::schedule`]): applied when the CPU's clock reaches it, between instructions.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[derive(Debug, Clone, Copy, PartialEq)]
 pub enum Stimulus {
     /// The shaft on timer `tim`'s encoder inputs is at `edges` quadrature edges
     /// ([`Board::set_encoder`]).
@@ -252,6 +255,13 @@ pub enum Stimulus {
         tim: u8,
         /// Input 1..=4.
         input: u8,
+    },
+    /// ADC input channel `channel` (IN0..IN18) at `volts` ([`Board::set_analog`]).
+    Analog {
+        /// Channel number (IN10 = 10).
+        channel: u8,
+        /// Voltage on the pin \[V\].
+        volts: f64,
     },
     /// Input pin `pin` of `port` ('A'..='H') driven to `level` ([`Board::set_input`]).
     Input {
@@ -310,7 +320,8 @@ fn intr_name(n: u32) -> &'static str {
     }
 }
 
-/// An STM32F446 running a board image, with a LAN9252 (the chip model `chip`) on SPI1.
+/// An STM32F446 running a board image, with an ESC chip (a LAN9252 or an ET1100 model) on
+/// SPI1.
 pub struct Board {
     uc: Unicorn<'static, ()>,
     periph: Rc<RefCell<Periph>>,
@@ -329,8 +340,10 @@ pub struct Board {
 
 impl Board {
     /// Loads the ELF `image` into flash/SRAM and resets the CPU (SP and PC from the vector
-    /// table at the start of flash). `chip` is the LAN9252 on SPI1.
-    pub fn new(image: &[u8], chip: Handle<Lan9252Model>) -> Result<Self, EmuError> {
+    /// table at the start of flash). `chip` is the ESC chip on SPI1 (a
+    /// `Handle<Lan9252Model>` or `Handle<Et1100Model>`).
+    pub fn new(image: &[u8], chip: impl Into<EscChip>) -> Result<Self, EmuError> {
+        let chip: EscChip = chip.into();
         let segs = elf_segments(image)?;
         let fault = |e: unicorn_engine::unicorn_const::uc_error| EmuError::Fault {
             pc: 0,
@@ -751,6 +764,10 @@ impl Board {
                 return Err(self.fault("SYSRESETREQ: the image requested a system reset"));
             }
             p.sync_all();
+            if let Some(e) = p.fault.take() {
+                drop(p);
+                return Err(self.fault(e));
+            }
             p.sample_pins();
             let lines = p.irq_lines();
             p.scs.assert_lines(lines);
@@ -903,6 +920,25 @@ impl Board {
         let b = 1u16 << (pin & 15);
         *mask |= b;
         *levels = if level { *levels | b } else { *levels & !b };
+    }
+
+    /// Drives ADC input channel `channel` (IN0..IN18; IN10 = PC0) to `volts` (a plant's
+    /// sensor); ADC1 samples it at its next trigger. A channel nothing drives cannot be
+    /// converted: the image stops with a fault naming it.
+    pub fn set_analog(&mut self, channel: u8, volts: f64) {
+        if let Some(a) = self
+            .periph
+            .borrow_mut()
+            .analog
+            .get_mut(usize::from(channel))
+        {
+            *a = Some(volts);
+        }
+    }
+
+    /// Injected sequences ADC1 has started so far.
+    pub fn adc_sequences(&self) -> u64 {
+        self.periph.borrow().adc.sequences
     }
 
     /// The duty (0..=1) of timer `tim`'s channel `ch` (TIM1 = 1, CH1 = 1) as a PWM output:

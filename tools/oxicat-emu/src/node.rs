@@ -14,9 +14,10 @@ use std::sync::mpsc::{channel, Receiver, Sender};
 use std::thread::JoinHandle;
 
 use oxicat_esc::{Esc, EscConfig};
-use oxicat_pdi::sim::{BusConfig, Handle, Lan9252Model};
+use oxicat_pdi::sim::{BusConfig, Et1100Model, Lan9252Model};
 use oxicat_sim::node::{EscEvent, Node};
 
+use crate::chip::{ChipKind, EscChip};
 use crate::plant::{run_with_plant, BoardPlant};
 use crate::{Board, EmuError, HandlerStats, ImageSize, SpiStats, StackStats};
 
@@ -110,7 +111,7 @@ fn report_of(board: &Board, since: u64, fault: &Option<EmuError>) -> NodeReport 
 pub struct NodeHandle {
     cmd: Sender<Cmd>,
     sync0: std::sync::Arc<std::sync::atomic::AtomicU64>,
-    chip: Handle<Lan9252Model>,
+    chip: EscChip,
 }
 
 impl NodeHandle {
@@ -132,13 +133,13 @@ impl NodeHandle {
         self.sync0.load(std::sync::atomic::Ordering::Relaxed)
     }
 
-    /// What the board's SPI bus carried, as the LAN9252 saw it (transactions, bytes, bus
-    /// time at SCLK, malformed frames) since the last [`NodeHandle::reset_bus_stats`].
+    /// What the board's SPI bus carried, as the ESC chip saw it (malformed frames) since
+    /// the last [`NodeHandle::reset_bus_stats`].
     pub fn bus_stats(&self) -> oxicat_pdi::sim::BusStats {
         self.chip.stats()
     }
 
-    /// Clears the LAN9252's bus counters.
+    /// Clears the chip's bus counters.
     pub fn reset_bus_stats(&self) {
         self.chip.reset_stats()
     }
@@ -159,7 +160,7 @@ pub struct Progress {
 
 /// A board image on the segment (see the module docs).
 pub struct EmulatedNode {
-    chip: Handle<Lan9252Model>,
+    chip: EscChip,
     run: Sender<Cmd>,
     sync0: std::sync::Arc<std::sync::atomic::AtomicU64>,
     done: Receiver<Progress>,
@@ -183,15 +184,35 @@ impl EmulatedNode {
     pub fn with_plant(
         image: Vec<u8>,
         slice_ns: u64,
+        plant: Option<Box<dyn BoardPlant>>,
+    ) -> Result<Self, EmuError> {
+        Self::with_chip(image, slice_ns, plant, ChipKind::Lan9252)
+    }
+
+    /// [`EmulatedNode::with_plant`] on a board whose SPI1 carries the ESC chip `kind`
+    /// (the segment's ESC for this node should be of that chip's configuration, e.g.
+    /// `EscConfig::et1100()`).
+    pub fn with_chip(
+        image: Vec<u8>,
+        slice_ns: u64,
         mut plant: Option<Box<dyn BoardPlant>>,
+        kind: ChipKind,
     ) -> Result<Self, EmuError> {
         crate::elf_segments(&image)?;
         // The chip's stand-in ESC until the segment lends it the real one. (Its bus
         // configuration times whole-frame transfers only; the emulated SPI1 clocks bytes.)
-        let chip = Lan9252Model::handle(
-            Esc::new(EscConfig::lan9252(), vec![0; 128]),
-            BusConfig::mhz(22),
-        );
+        let chip: EscChip = match kind {
+            ChipKind::Lan9252 => Lan9252Model::handle(
+                Esc::new(EscConfig::lan9252(), vec![0; 128]),
+                BusConfig::mhz(22),
+            )
+            .into(),
+            ChipKind::Et1100 => Et1100Model::handle(
+                Esc::new(EscConfig::et1100(), vec![0; 128]),
+                BusConfig::mhz(11),
+            )
+            .into(),
+        };
         let (run, runs) = channel::<Cmd>();
         let (report, done) = channel::<Progress>();
         let c = chip.clone();
