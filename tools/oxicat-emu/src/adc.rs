@@ -26,7 +26,7 @@ pub(crate) const CHANNELS: usize = 19;
 /// Analogue reference (VDDA) of the boards \[V\].
 pub const VREF: f64 = 3.3;
 /// NVIC line of ADC1..3.
-pub(crate) const IRQ: u16 = 18;
+pub const IRQ: u16 = 18;
 
 const SR: usize = 0x00;
 const CR1: usize = 0x04;
@@ -87,6 +87,11 @@ pub struct Adc {
     busy: Option<(u64, [u32; 4])>,
     /// Injected sequences started so far.
     pub sequences: u64,
+    /// The end of the first sequence whose JEOC the ADC handler has not been entered for.
+    pub jeoc_unhandled_since: Option<u64>,
+    /// Longest time from a JEOC to the entry of the ADC handler (interrupt latency, with
+    /// whatever held it back: masks, a handler of equal or higher priority) \[cycles\].
+    pub max_latency: u64,
 }
 
 /// Where an injected sequence's trigger comes from.
@@ -196,7 +201,15 @@ impl Adc {
                 }
                 self.regs[SR / 4] |= JEOC;
                 self.busy = None;
+                self.jeoc_unhandled_since.get_or_insert(end);
             }
+        }
+    }
+
+    /// The ADC handler is entered at `now`.
+    pub(crate) fn handler_entered(&mut self, now: u64) {
+        if let Some(t) = self.jeoc_unhandled_since.take() {
+            self.max_latency = self.max_latency.max(now.saturating_sub(t));
         }
     }
 

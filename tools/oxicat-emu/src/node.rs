@@ -29,6 +29,8 @@ enum Cmd {
     Report(Sender<NodeReport>),
     /// Clear the handler times and repaint the stack below the current SP.
     ResetStats,
+    /// Replace SPI1's clock (what-if study; `None`: the image's).
+    SpiClock(Option<u32>),
     /// End the board thread.
     Stop,
 }
@@ -60,6 +62,10 @@ pub struct NodeReport {
     pub spi: SpiStats,
     /// SPI1's clock as the image set it \[Hz\].
     pub spi_sclk_hz: u32,
+    /// ADC1 injected sequences started since reset.
+    pub adc_sequences: u64,
+    /// Longest JEOC → ADC handler entry since reset or [`NodeHandle::reset_stats`] \[cycles\] ([`Board::adc_irq_latency_max`]).
+    pub adc_irq_latency_max: u64,
     /// The fault that stopped the image, if it stopped.
     pub fault: Option<EmuError>,
 }
@@ -101,6 +107,8 @@ fn report_of(board: &Board, since: u64, fault: &Option<EmuError>) -> NodeReport 
         image: board.image_size(),
         spi: board.spi_stats(),
         spi_sclk_hz: board.spi_sclk_hz(),
+        adc_sequences: board.adc_sequences(),
+        adc_irq_latency_max: board.adc_irq_latency_max(),
         fault: fault.clone(),
     }
 }
@@ -126,6 +134,12 @@ impl NodeHandle {
     /// figures cover what runs from now on.
     pub fn reset_stats(&self) {
         let _ = self.cmd.send(Cmd::ResetStats);
+    }
+
+    /// A what-if study: the board's SPI1 bytes take 8 periods of `hz` from now on instead of
+    /// the clock the image sets ([`Board::set_spi_sclk_hz`]; `None`: the image's again).
+    pub fn set_spi_sclk_hz(&self, hz: Option<u32>) {
+        let _ = self.cmd.send(Cmd::SpiClock(hz));
     }
 
     /// SYNC0 events the segment delivered to this node so far.
@@ -240,6 +254,10 @@ impl EmulatedNode {
                             continue;
                         }
                         Cmd::Stop => return,
+                        Cmd::SpiClock(hz) => {
+                            board.set_spi_sclk_hz(hz);
+                            continue;
+                        }
                         Cmd::ResetStats => {
                             board.reset_handler_stats();
                             board.repaint_stack();

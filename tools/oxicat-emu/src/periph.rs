@@ -41,6 +41,8 @@ pub(crate) struct Periph {
     frame: Option<ChipFrame>,
     /// Cycle at which the last SPI byte finished (the bus idles from then on).
     spi_idle_from: u64,
+    /// SCLK replacing the image's prescaler setting (what-if studies) \[Hz\].
+    pub spi_sclk_override: Option<u32>,
     spi_rx: u8,
     rxne: bool,
     pub spi: SpiStats,
@@ -91,6 +93,7 @@ impl Periph {
             analog: [None; adc::CHANNELS],
             fault: None,
             spi_idle_from: 0,
+            spi_sclk_override: None,
             regs: vec![0; (PERIPH.1 / 4) as usize],
             scs: Scs::new(),
             exti: Exti::default(),
@@ -253,9 +256,12 @@ impl Periph {
             }
         };
         self.rxne = true;
-        // The byte takes 8 SCLK periods at PCLK2 (90 MHz) / 2^(BR+1).
-        let br = (self.reg(SPI1) >> 3) & 7;
-        self.cycles += 8 * 2 * (2u64 << br);
+        // The byte takes 8 SCLK periods at PCLK2 (90 MHz) / 2^(BR+1), or at the clock a
+        // what-if study set ([`crate::Board::set_spi_sclk_hz`]).
+        self.cycles += match self.spi_sclk_override {
+            Some(hz) => (8 * crate::CPU_HZ).div_ceil(u64::from(hz.max(1))),
+            None => 8 * 2 * (2u64 << ((self.reg(SPI1) >> 3) & 7)),
+        };
         self.spi_idle_from = self.cycles;
     }
 

@@ -194,6 +194,10 @@ fn dc_op(cycles: u64) {
         n.reset_stats();
         n.reset_bus_stats();
     }
+    let before: Vec<_> = nodes
+        .iter()
+        .map(|n| n.report().expect("the board thread runs"))
+        .collect();
     let stats = m
         .run_cycles(
             CycleOptions {
@@ -222,6 +226,22 @@ fn dc_op(cycles: u64) {
             n.bus_stats().protocol_errors,
             0,
             "node {k}: malformed SPI frames"
+        );
+        // The current loop runs once per ADC sequence: a tick held off past the next
+        // sequence's JEOC (the drive's critical sections) would be lost.
+        let seqs = r.adc_sequences - before[k].adc_sequences;
+        let ticks = r.taken[usize::from(ADC_IRQ)] - before[k].taken[usize::from(ADC_IRQ)];
+        eprintln!(
+            "node {k}: {seqs} ADC sequences, {ticks} current-loop ticks, JEOC → handler at \
+             most {:.1} µs",
+            r.adc_irq_latency_max as f64 / 180.0
+        );
+        assert!(seqs >= 20 * cycles, "node {k}: {seqs} sequences at 20 kHz");
+        assert!(ticks <= seqs, "node {k}: {ticks} ticks, {seqs} sequences");
+        assert!(
+            ticks + cycles + 1 >= seqs,
+            "node {k}: {seqs} ADC sequences, {ticks} current-loop ticks: more than one lost \
+             per SYNC0 cycle"
         );
     }
     eprintln!(
