@@ -14,8 +14,10 @@
 //! TRGO in mode CR2.MMS = 011 (compare pulse) pulses whenever CC1IF is set by a capture
 //! (an injected edge or EGR.CC1G); a timer whose SMCR.TS selects that master as ITR0..3
 //! sees the pulse on TRGI, and its channels in input-capture mode on TRC (CCxS = 11,
-//! enabled) capture. The other master modes (reset, enable, update, OCxREF) and the slave
-//! modes (reset, gated, trigger) do not produce or act on pulses here.
+//! enabled) capture. TRGO = OC1REF..OC4REF (MMS = 100..111) with the channel in PWM mode 1
+//! or 2 is ADC1's injected trigger: its rising edges are computed from the counter
+//! (`Timer::next_trgo_rise`), not pulsed. The other master modes (reset, enable, update)
+//! and the slave modes (reset, gated, trigger) do not produce or act on pulses here.
 
 /// Register offsets.
 const CR1: usize = 0x00;
@@ -870,6 +872,43 @@ mod tests {
     }
 
     #[test]
+    fn oc4ref_as_trgo_rises_where_the_pwm_mode_puts_it_in_the_counting_period() {
+        const CCMR2: usize = 0x1C;
+        let mut t = Timer::new(TIMERS[0]); // TIM1 at the CPU clock
+        t.write(ARR, 100, 0);
+        t.write(CCMR2, 7 << 12, 0); // OC4M: PWM mode 2
+        t.write(CCR1 + 12, 80, 0);
+        t.write(CR2, 7 << 4, 0); // MMS: OC4REF
+        assert_eq!(t.next_trgo_rise(0), None, "not counting");
+        // Centre-aligned: a period of 2 × ARR = 200 ticks; mode 2 rises counting up at 80.
+        t.write(CR1, CEN | (1 << 5), 1000);
+        assert!(t.trgo_edges_modelled());
+        assert_eq!(t.next_trgo_rise(1000), Some(1080));
+        assert_eq!(t.next_trgo_rise(1080), Some(1280));
+        t.sync(1150); // counting down at 50
+        assert_eq!(t.next_trgo_rise(1100), Some(1280));
+        // Mode 1 rises counting down at 80: 2 × 100 − 80 = 120 ticks into the period.
+        t.write(CCMR2, 6 << 12, 1150);
+        assert_eq!(t.next_trgo_rise(1150), Some(1120 + 200));
+        // Edge-aligned up-counting: a period of ARR + 1; mode 1 rises at the update (0),
+        // mode 2 at CCR.
+        let mut e = Timer::new(TIMERS[0]);
+        e.write(ARR, 99, 0);
+        e.write(CCMR2, 6 << 12, 0);
+        e.write(CCR1 + 12, 30, 0);
+        e.write(CR2, 7 << 4, 0);
+        e.write(CR1, CEN, 500);
+        assert_eq!(e.next_trgo_rise(500), Some(600));
+        e.write(CCMR2, 7 << 12, 500);
+        assert_eq!(e.next_trgo_rise(500), Some(530));
+        // CCR beyond ARR: OC4REF never changes; other master modes are not modelled.
+        e.write(CCR1 + 12, 200, 500);
+        assert_eq!(e.next_trgo_rise(500), None);
+        e.write(CR2, 2 << 4, 500);
+        assert!(!e.trgo_edges_modelled());
+    }
+
+    #[test]
     fn pwm_duty_follows_ccr_arr_mode_polarity_and_moe() {
         let mut t = Timer::new(TIMERS[0]); // TIM1
         t.write(ARR, 8999, 0);
@@ -890,6 +929,13 @@ mod tests {
         t.write(CCER, 1 | 2 | (1 << 4), 0);
         assert_eq!(t.pwm_duty(1), Some(0.75));
         assert_eq!(t.pwm_duty(3), None);
+        // CH3N alone (CC3E = 0, CC3NE = 1) outputs OC3REF itself; CC3NP inverts it.
+        t.write(0x1C, 6 << 4, 0); // CCMR2: OC3M PWM mode 1
+        t.write(CCR1 + 8, 900, 0);
+        t.write(CCER, 1 | (1 << 4) | (1 << 10), 0);
+        assert_eq!(t.pwm_duty(3), Some(0.1));
+        t.write(CCER, 1 | (1 << 4) | (1 << 10) | (1 << 11), 0);
+        assert_eq!(t.pwm_duty(3), Some(0.9));
         // Offsets past the register file read as zero and ignore writes.
         t.write(0x3FC, 7, 0);
         assert_eq!(t.read(0x3FC, 0), 0);
