@@ -926,8 +926,8 @@ impl Board {
     }
 
     /// Drives input pin `pin` of `port` ('A'..='H') to `level` (a plant's sensor, a
-    /// button); EXTI sees the edge at the next run. The LAN9252's pins (PA10, PB3, PB5)
-    /// stay the chip's.
+    /// button); EXTI sees the edge at the next run. The ESC chip's pins (PA10, PB3, PB5, and
+    /// an ET1100's PB4) stay the chip's.
     pub fn set_input(&mut self, port: char, pin: u8, level: bool) {
         let Some(p) = Self::port(port) else {
             return;

@@ -1,8 +1,8 @@
 //! The machine-code route: a board image as a node of oxicat-sim's virtual segment.
 //!
 //! The segment owns each ESC; a node runs the firmware against it. Here the firmware is
-//! the image on the emulated STM32F446, reaching the ESC through the LAN9252 model on its
-//! SPI1: at every segment event and every `slice_ns` of virtual time the node lends the
+//! the image on the emulated STM32F446, reaching the ESC through the board's chip model (a
+//! LAN9252, or an ET1100: [`EmulatedNode::with_chip`]) on its SPI1: at every segment event and every `slice_ns` of virtual time the node lends the
 //! segment's ESC to the chip, lets the CPU run until the board's clock reaches the
 //! segment's time, and takes the ESC back. Unicorn is not `Send`, so each board runs on a
 //! thread of its own and the node (which the segment needs `Send`) talks to it by channel.
