@@ -238,7 +238,7 @@ fn dc_op(cycles: u64) {
         );
         assert!(seqs >= 20 * cycles, "node {k}: {seqs} sequences at 20 kHz");
         assert!(ticks <= seqs, "node {k}: {ticks} ticks, {seqs} sequences");
-        // Found here: the drive's cycle hook runs in a critical section of about 120 µs
+        // Found here: the drive's cycle hook runs in a critical section of 120 µs or more
         // (JEOC → handler up to 79–111 µs here, by the node's SYNC0 phase; 121 µs at 20 MHz),
         // longer than the 50 µs PWM period: the JEOCs inside it meet one handler run, so
         // one or two ticks per SYNC0 cycle are lost (the image's README). Bounded here so a
