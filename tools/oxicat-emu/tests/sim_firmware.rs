@@ -17,6 +17,10 @@ use oxicat_testkit::served::{spawn_udp, Served};
 use oxicat_master::cyclic::CycleOptions;
 use oxicat_master::{Link, Master, MasterOptions};
 
+/// One served segment at a time: two slowed-down segments and their masters at once starve
+/// each other on a loaded 2-core machine (frames past the master's timeouts).
+static ONE_AT_A_TIME: std::sync::Mutex<()> = std::sync::Mutex::new(());
+
 /// Starts `oxicat-emu sim … --udp 127.0.0.1:0`; returns it and the address it serves on.
 fn serve(args: &[&str]) -> (Served, String) {
     let mut cmd = Command::new(env!("CARGO_BIN_EXE_oxicat-emu"));
@@ -30,6 +34,7 @@ fn ethercrab_runs_two_served_demo_board_images_in_op_over_udp() {
     let Some(img) = common::image("stm32f446-lan9252", "OXICAT_BOARD_IMAGE") else {
         return;
     };
+    let _one = ONE_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
     let path = std::env::temp_dir().join(format!("oxicat-emu-demo-{}.elf", std::process::id()));
     std::fs::write(&path, img).unwrap();
     let fw = format!("demo={}", path.display());
@@ -102,6 +107,7 @@ fn a_served_cia402_joint_image_runs_on_its_et1100_in_dc_op_over_udp() {
     let Some(img) = common::image("cia402-joint", "OXICAT_CIA402_IMAGE") else {
         return;
     };
+    let _one = ONE_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
     let path = std::env::temp_dir().join(format!("oxicat-emu-joint-{}.elf", std::process::id()));
     std::fs::write(&path, img).unwrap();
     let fw = format!("cia402-joint={}", path.display());
