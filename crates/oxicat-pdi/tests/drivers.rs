@@ -524,3 +524,65 @@ fn pins_follow_the_esc() {
     assert_eq!(h.pin(PinKind::EepromLoaded).is_low(), Ok(true));
     let _ = h.with(|m| m.pin(PinKind::Sync0));
 }
+
+/// The byte-clocked ET1100 (how an emulated MCU's SPI peripheral drives it, a byte per DR
+/// write): a write reaches the ESC when CS rises, a read fetches each byte as it is shifted
+/// out and stops at the termination 0xFF, a plain read needs its pause before the data phase —
+/// the same chip as whole frames (`Model::frame` is this over a frame).
+#[test]
+fn et1100_byte_clocked_frames_match_the_frame_model() {
+    use oxicat_pdi::sim::Et1100Frame;
+    let h = Et1100Model::handle(esc(EscConfig::et1100()), BusConfig::mhz(20));
+    let errors = |h: &Handle<Et1100Model>| h.stats().protocol_errors;
+    // Write 0x1400..0x1402 = 1, 2, 3: two-byte address A[12:5], A[4:0] 100.
+    let (a0, a1) = ((0x1400u16 >> 5) as u8, ((0x1400u16 & 0x1F) as u8) << 3);
+    let mut f = Et1100Frame::default();
+    h.with(|m| {
+        for b in [a0, a1 | 0b100, 1, 2, 3] {
+            m.clock_byte(&mut f, b, 0);
+        }
+    });
+    let mut b = [0u8; 3];
+    h.with_esc(|e| e.pdi_read(0x1400, &mut b)).unwrap();
+    assert_eq!(b, [0, 0, 0], "not before CS rises");
+    h.with(|m| m.end_frame(f));
+    h.with_esc(|e| e.pdi_read(0x1400, &mut b)).unwrap();
+    assert_eq!(b, [1, 2, 3]);
+    // Read with wait state, byte by byte: the data as each byte goes out.
+    let mut f = Et1100Frame::default();
+    let miso: Vec<u8> = h.with(|m| {
+        [a0, a1 | 0b011, 0xFF, 0x00, 0x00, 0xFF]
+            .into_iter()
+            .map(|b| m.clock_byte(&mut f, b, 0))
+            .collect()
+    });
+    h.with(|m| m.end_frame(f));
+    assert_eq!(miso[3..], [1, 2, 3]);
+    assert_eq!(errors(&h), 0);
+    // The same read as one frame gives the same bytes.
+    let mut d = [a0, a1 | 0b011, 0xFF, 0x00, 0x00, 0xFF];
+    h.spi()
+        .transaction(&mut [Operation::TransferInPlace(&mut d)])
+        .unwrap();
+    assert_eq!(d[3..], [1, 2, 3]);
+    // A plain read: the pause before the data phase decides.
+    for (pause, ok) in [(240, true), (100, false)] {
+        let mut f = Et1100Frame::default();
+        let before = errors(&h);
+        let miso: Vec<u8> = h.with(|m| {
+            [(a0, 0), (a1 | 0b010, 0), (0x00, pause), (0xFF, 0)]
+                .into_iter()
+                .map(|(b, p)| m.clock_byte(&mut f, b, p))
+                .collect()
+        });
+        h.with(|m| m.end_frame(f));
+        if ok {
+            assert_eq!((miso[2..].to_vec(), errors(&h) - before), (vec![1, 2], 0));
+        } else {
+            assert_eq!(
+                (miso[2..].to_vec(), errors(&h) - before),
+                (vec![0xFF, 0xFF], 1)
+            );
+        }
+    }
+}

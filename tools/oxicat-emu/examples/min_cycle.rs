@@ -1,8 +1,10 @@
-//! The shortest DC cycle the Laelaps leg-node image sustains, measured in the loop: one
-//! emulated leg node (`firmware/laelaps-leg`, LAN9252 on SPI1 at the image's 22.5 MHz, its
-//! leg on the pins), ethercrab in DC mode, SYNC0 every `cycle`, `n` cycles counted in steady
-//! OP (from 200 cycles after OP), for cycles from 400 µs down to the device's minimum
-//! (0x1C32:05, 100 µs). A cycle is sustained when
+//! The shortest DC cycle a board image sustains, measured in the loop: one emulated node —
+//! the Laelaps leg node (`firmware/laelaps-leg`, LAN9252 on SPI1 at the image's 22.5 MHz,
+//! its leg on the pins) or the CiA402 joint (`firmware/cia402-joint`, ET1100 on SPI1 at the
+//! image's 11.25 MHz or, with `--spi-mhz`, at another clock as a what-if; its joint on the
+//! pins) — ethercrab in DC mode, SYNC0 every `cycle`, `n` cycles counted in steady OP (from
+//! 200 cycles after OP), for cycles from the kit's down to the device's minimum (0x1C32:05:
+//! leg 100 µs, joint 250 µs). A cycle is sustained when
 //! every cycle has the right working counter, the image's SYNC0 handler (EXTI3) ran once for
 //! every SYNC0 pulse the segment delivered (a pulse that comes while the previous one is
 //! still pending is lost), and its longest run (entry to return, joint-loop ticks included)
@@ -14,16 +16,20 @@
 //! cycle, and the share of the run the CPU was awake; then the shortest sustained cycle
 //! (the thesis' F28379D node: 200 µs minimum, 85 µs of stack time per cycle).
 //!
-//! `cargo run --release -p oxicat-emu --example min_cycle [elf] [cycles per step]`
+//! `cargo run --release -p oxicat-emu --example min_cycle [laelaps-leg|cia402-joint] [elf]
+//! [cycles per step] [--spi-mhz MHZ]` (the master refuses cycles below a slave's
+//! 0x1C32:05, so the device's minimum is the floor).
 
 use std::sync::{Arc, Mutex};
 use std::time::Duration;
 
 use oxicat_devices::laelaps::rig::{LegId, RigConfig};
 use oxicat_devices::laelaps::{device, Side};
+use oxicat_emu::cia402::JointBoardPlant;
 use oxicat_emu::laelaps::LegBoardPlant;
 use oxicat_emu::node::EmulatedNode;
 use oxicat_emu::trot::EXC_SYNC0;
+use oxicat_emu::ChipKind;
 use oxicat_emu::{HandlerStats, CPU_HZ};
 use oxicat_esc::{Esc, EscConfig};
 use oxicat_master::cyclic::{CycleOptions, Flow};
@@ -42,6 +48,9 @@ struct Step {
     mean_us: f64,
     max_us: f64,
     awake: f64,
+    /// ADC sequences without a current-loop tick, and the longest JEOC → handler time
+    /// [µs] (the CiA402 joint's 20 kHz loop; none on the leg node).
+    current_loop: Option<(u64, f64)>,
 }
 
 impl Step {
@@ -62,20 +71,80 @@ impl Step {
     }
 }
 
-fn step(img: &[u8], cycle_us: u64, cycles: u64) -> Result<Step, String> {
-    let def = device::device(Side::Right);
-    let sii = oxicat_esi::sii::generate(def).map_err(|e| e.to_string())?;
+/// The board image under test.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Dev {
+    /// The Laelaps II leg node (LAN9252).
+    Leg,
+    /// The CiA402 joint (ET1100).
+    Joint,
+}
+
+impl Dev {
+    fn name(self) -> &'static str {
+        match self {
+            Dev::Leg => "laelaps-leg",
+            Dev::Joint => "cia402-joint",
+        }
+    }
+
+    fn def(self) -> &'static oxicat_slave::DeviceDef {
+        match self {
+            Dev::Leg => device::device(Side::Right),
+            Dev::Joint => &oxicat_devices::cia402::DEF,
+        }
+    }
+
+    /// The cycles tried, longest first (the kit's cycle down).
+    fn cycles_us(self) -> &'static [u64] {
+        match self {
+            Dev::Leg => &[400, 300, 250, 200, 175, 150, 140, 130, 125, 110, 100],
+            Dev::Joint => &[1000, 750, 500, 400, 350, 300, 275, 250],
+        }
+    }
+}
+
+fn step(
+    dev: Dev,
+    img: &[u8],
+    cycle_us: u64,
+    cycles: u64,
+    spi_hz: Option<u32>,
+) -> Result<Step, String> {
+    let sii = oxicat_esi::sii::generate(dev.def()).map_err(|e| e.to_string())?;
     let mut seg = Segment::new();
-    let id = seg.add(Esc::new(EscConfig::lan9252(), sii));
-    let leg = LegId::ForeRight;
-    let plant = LegBoardPlant::new(leg, RigConfig::laelaps(leg));
-    let node = EmulatedNode::with_plant(img.to_vec(), 100_000, Some(Box::new(plant)))
-        .map_err(|e| e.to_string())?;
+    let (node, boot_ns) = match dev {
+        Dev::Leg => {
+            let leg = LegId::ForeRight;
+            let plant = LegBoardPlant::new(leg, RigConfig::laelaps(leg));
+            let node = EmulatedNode::with_plant(img.to_vec(), 100_000, Some(Box::new(plant)));
+            // Power-on wait, LAN9252 reset.
+            (node, 100_000_000)
+        }
+        Dev::Joint => {
+            let plant = JointBoardPlant::new(Default::default());
+            let node = EmulatedNode::with_chip(
+                img.to_vec(),
+                100_000,
+                Some(Box::new(plant)),
+                ChipKind::Et1100,
+            );
+            // Current-sense calibration, 500 ms alignment, the ET1100's init.
+            (node, 800_000_000)
+        }
+    };
+    let esc = match dev {
+        Dev::Leg => EscConfig::lan9252(),
+        Dev::Joint => EscConfig::et1100(),
+    };
+    let id = seg.add(Esc::new(esc, sii));
+    let node = node.map_err(|e| e.to_string())?;
     let h = node.handle();
+    h.set_spi_sclk_hz(spi_hz);
     seg.attach(id, Box::new(node))
         .map_err(|e| format!("{e:?}"))?;
-    // The board boots (power-on wait, LAN9252 reset) before the master starts.
-    seg.advance_to(100_000_000);
+    // The board boots before the master starts.
+    seg.advance_to(boot_ns);
     let mut m = Master::open(Link::Sim(Arc::new(Mutex::new(seg)))).map_err(|e| e.to_string())?;
     // Counted in steady OP: from WARM cycles after OP (the transitions before it run the
     // stack's poll with the ESC handlers masked) to WARM + `cycles`, both inside the loop
@@ -127,17 +196,50 @@ fn step(img: &[u8], cycle_us: u64, cycles: u64) -> Result<Step, String> {
         mean_us: s0.mean_us(CPU_HZ),
         max_us: HandlerStats::us(s0.max_cycles, CPU_HZ),
         awake: 1.0 - slept as f64 / cyc as f64,
+        current_loop: (r.adc_sequences > before.adc_sequences).then(|| {
+            let adc = usize::from(16 + oxicat_emu::adc::IRQ);
+            let ticks = r.taken[adc] - before.taken[adc];
+            (
+                (r.adc_sequences - before.adc_sequences).saturating_sub(ticks),
+                HandlerStats::us(r.adc_irq_latency_max, CPU_HZ),
+            )
+        }),
     })
 }
 
 fn main() {
-    let mut args = std::env::args().skip(1);
+    let mut args: Vec<String> = std::env::args().skip(1).collect();
+    let mut spi_hz = None;
+    if let Some(k) = args.iter().position(|a| a == "--spi-mhz") {
+        let v = args.get(k + 1).and_then(|v| v.parse::<f64>().ok());
+        match v {
+            Some(mhz) if (0.1..=100.0).contains(&mhz) => spi_hz = Some((mhz * 1e6) as u32),
+            _ => {
+                eprintln!("--spi-mhz: a clock in MHz, 0.1..=100");
+                std::process::exit(2);
+            }
+        }
+        args.drain(k..k + 2);
+    }
+    let mut args = args.into_iter().peekable();
+    let dev = match args.peek().map(String::as_str) {
+        Some("cia402-joint") => {
+            args.next();
+            Dev::Joint
+        }
+        Some("laelaps-leg") => {
+            args.next();
+            Dev::Leg
+        }
+        _ => Dev::Leg,
+    };
     let path = args.next().unwrap_or_else(|| {
-        concat!(
+        format!(
+            "{}/../../firmware/{}/target/thumbv7em-none-eabihf/release/oxicat-firmware-{}",
             env!("CARGO_MANIFEST_DIR"),
-            "/../../firmware/laelaps-leg/target/thumbv7em-none-eabihf/release/oxicat-firmware-laelaps-leg"
+            dev.name(),
+            dev.name()
         )
-        .to_string()
     });
     let cycles: u64 = match args.next().map(|a| a.parse()) {
         None => 2_000,
@@ -150,26 +252,37 @@ fn main() {
     let img = match std::fs::read(&path) {
         Ok(b) => b,
         Err(e) => {
-            eprintln!("{path}: {e} (build it: cd firmware/laelaps-leg && cargo build --release)");
+            eprintln!(
+                "{path}: {e} (build it: cd firmware/{} && cargo build --release --locked)",
+                dev.name()
+            );
             std::process::exit(2);
         }
     };
-    let min_us = u64::from(device::device(Side::Right).sync.min_cycle_ns) / 1000;
-    println!("Laelaps leg-node image, {cycles} DC cycles per step, one node:\n");
-    println!("| cycle [µs] | WKC errors | SYNC0 pulses | SYNC0 handler runs | lost | handler mean / max [µs] | max / cycle | CPU awake | sustained |");
-    println!("|---|---|---|---|---|---|---|---|---|");
+    let min_us = u64::from(dev.def().sync.min_cycle_ns) / 1000;
+    let spi = match (dev, spi_hz) {
+        (_, Some(hz)) => format!("SPI1 at {:.2} MHz (what-if)", f64::from(hz) / 1e6),
+        (Dev::Leg, None) => "LAN9252, SPI1 at the image's 22.5 MHz".to_string(),
+        (Dev::Joint, None) => "ET1100, SPI1 at the image's 11.25 MHz".to_string(),
+    };
+    println!(
+        "{} image, {spi}, {cycles} DC cycles per step, one node:\n",
+        dev.name()
+    );
+    println!("| cycle [µs] | WKC errors | SYNC0 pulses | SYNC0 handler runs | lost | handler mean / max [µs] | max / cycle | CPU awake | sustained | current-loop ticks lost, JEOC → handler max |");
+    println!("|---|---|---|---|---|---|---|---|---|---|");
     // The shortest cycle with every longer one sustained too.
     let mut shortest = None;
     let mut all_ok = true;
-    for cycle_us in [400u64, 300, 250, 200, 175, 150, 140, 130, 125, 110, 100] {
+    for &cycle_us in dev.cycles_us() {
         if cycle_us < min_us {
             break;
         }
-        match step(&img, cycle_us, cycles) {
+        match step(dev, &img, cycle_us, cycles, spi_hz) {
             Ok(s) => {
                 let ok = s.sustained(cycles);
                 println!(
-                    "| {} | {} | {} | {} | {} | {:.1} / {:.1} | {:.0} % | {:.0} % | {} |",
+                    "| {} | {} | {} | {} | {} | {:.1} / {:.1} | {:.0} % | {:.0} % | {} | {} |",
                     s.cycle_us,
                     s.wkc_errors,
                     s.pulses,
@@ -179,7 +292,11 @@ fn main() {
                     s.max_us,
                     100.0 * s.max_us / s.cycle_us as f64,
                     100.0 * s.awake,
-                    if ok { "yes" } else { "no" }
+                    if ok { "yes" } else { "no" },
+                    match s.current_loop {
+                        Some((lost, lat)) => format!("{lost}, {lat:.1} µs"),
+                        None => "–".to_string(),
+                    }
                 );
                 all_ok &= ok;
                 if all_ok {
@@ -188,7 +305,7 @@ fn main() {
             }
             Err(e) => {
                 all_ok = false;
-                println!("| {cycle_us} | – | – | – | – | – | – | – | no: {e} |")
+                println!("| {cycle_us} | – | – | – | – | – | – | – | no: {e} | – |")
             }
         }
     }

@@ -190,6 +190,10 @@ impl Board {
         let mut p = self.periph.borrow_mut();
         p.scs.activate(e);
         p.cycles += cycles;
+        if e == 16 + crate::adc::IRQ {
+            let now = p.cycles;
+            p.adc.handler_entered(now);
+        }
         self.pc = vector & !1;
         self.event = true;
     }

@@ -3,13 +3,15 @@
 //! The bytes that would be flashed — a board firmware's ELF — run on a Cortex-M4 in the
 //! Unicorn engine; the STM32F446 peripherals the images use are modelled here at register
 //! level (from RM0390 and the ARMv7-M architecture reference), and its SPI1 is wired to
-//! `oxicat-pdi`'s LAN9252 chip model in front of a software ESC, so a master on the ECAT
-//! side talks to the *image*, not to host-compiled Rust.
+//! `oxicat-pdi`'s LAN9252 or ET1100 chip model (the board's choice, [`EscChip`]) in front
+//! of a software ESC, so a master on the ECAT side talks to the *image*, not to
+//! host-compiled Rust.
 //!
 //! This crate is GPL-2.0-or-later because Unicorn is GPL-2.0; nothing in the MIT/Apache
 //! workspace depends on it.
 //!
-//! What is modelled (what `firmware/stm32f446-lan9252` and `firmware/laelaps-leg` touch):
+//! What is modelled (what `firmware/stm32f446-lan9252`, `firmware/laelaps-leg` and
+//! `firmware/cia402-joint` touch):
 //!
 //! | block | model |
 //! |---|---|
@@ -18,11 +20,12 @@
 //! | PWR | VOSRDY set; over-drive ready flags follow ODEN/ODSWEN |
 //! | FLASH | ACR stored (latency reads back) |
 //! | bit-band alias | 0x4200_0000.. : a word per peripheral bit, read-modify-write of the register (through its read, as the bus does) |
-//! | GPIOA..H | registers stored (MODER, AFR …); BSRR sets/resets ODR; IDR: PA10 = LAN9252 IRQ, PB3/PB5 = SYNC0/SYNC1, then levels injected with [`Board::set_input`], PC13 = button released, ODR for outputs, pull-ups high |
-//! | SPI1 | a byte per DR write clocked through the chip (`Lan9252Model::clock_byte`) while PB6 (CS) is low; TXE always set, RXNE until DR is read; bus time counted at the CR1 baud rate |
+//! | GPIOA..H | registers stored (MODER, AFR …); BSRR sets/resets ODR; IDR: PA10 = the chip's IRQ, PB3/PB5 = SYNC0/SYNC1, PB4 = an ET1100's EEPROM_LOADED, then levels injected with [`Board::set_input`], PC13 = button released, ODR for outputs, pull-ups high |
+//! | SPI1 | a byte per DR write clocked through the chip (`Lan9252Model::clock_byte`, `Et1100Model::clock_byte` with the idle time before the byte) while PB6 (CS) is low; TXE always set, RXNE until DR is read; bus time counted at the CR1 baud rate (or a what-if clock, [`Board::set_spi_sclk_hz`]) |
+//! | ADC1 | the injected group ([`adc`]): JSQR/JL, SMPRx, RES, ALIGN, JOFRx; started by JSWSTART or TIM1_TRGO rising edges, every channel sampled at the trigger from [`Board::set_analog`], JEOC after Σ(SMP + resolution) ADCCLK cycles (PCLK2 / ADCPRE), IRQ 18 with JEOCIE; the regular group, other triggers, ADC2/3, and a channel nothing drives are faults |
 //! | EXTI, SYSCFG | EXTICR1..4 select the port of lines 0..15; RTSR/FTSR edges on IMR lines set PR (write-1-to-clear), SWIER; pins sampled after every engine run, SPI frame and GPIO write; IRQs EXTI0..4, EXTI9_5, EXTI15_10 |
-//! | TIM1..TIM14 | one model (`timers`): PSC/ARR (preloaded)/CNT from the cycle count at the APB timer clock, up/down/center-aligned, RCR (TIM1/8), UDIS/URS/OPM, UG; UIF → update IRQ; CCR/CCMR/CCER stored, PWM duty ([`Board::pwm_duty`]); encoder mode (SMS 1/2/3) from [`Board::set_encoder`]; input capture with CCxIF/CCxOF from [`Board::capture`]; timer links: TRGO in compare-pulse mode (CR2.MMS = 011) on a CH1 capture → the timers whose SMCR.TS selects it (ITR0..3, RM0390's table) capture on TRC (CCxS = 11). No output-compare match flags, no other master/slave modes |
-//! | plant | a [`BoardPlant`] stepped in lockstep with the CPU ([`plant::run_with_plant`], [`node::EmulatedNode::with_plant`]) schedules [`Stimulus`]es (encoder positions, capture edges, input levels) at their times of the board's clock; [`laelaps`]: the Laelaps II leg on the leg image's pins |
+//! | TIM1..TIM14 | one model (`timers`): PSC/ARR (preloaded)/CNT from the cycle count at the APB timer clock, up/down/center-aligned, RCR (TIM1/8), UDIS/URS/OPM, UG; UIF → update IRQ; CCR/CCMR/CCER stored, PWM duty ([`Board::pwm_duty`]); encoder mode (SMS 1/2/3) from [`Board::set_encoder`]; input capture with CCxIF/CCxOF from [`Board::capture`]; timer links: TRGO in compare-pulse mode (CR2.MMS = 011) on a CH1 capture → the timers whose SMCR.TS selects it (ITR0..3, RM0390's table) capture on TRC (CCxS = 11); TRGO = OC1REF..OC4REF (MMS = 1xx) in PWM mode 1/2 as ADC1's trigger, its rising edges computed from the counter; a complementary output alone (CCxE = 0, CCxNE = 1) as the channel's PWM. No output-compare match flags, no other master/slave modes |
+//! | plant | a [`BoardPlant`] stepped in lockstep with the CPU ([`plant::run_with_plant`], [`node::EmulatedNode::with_plant`]) schedules [`Stimulus`]es (encoder positions, capture edges, input levels, analogue voltages) at their times of the board's clock; [`laelaps`]: the Laelaps II leg on the leg image's pins; [`cia402`]: the CiA402 joint on the joint image's |
 //! | profile | handler time per exception from entry to return, preemption counted apart ([`Board::handler_stats`]); painted stack high-water mark ([`Board::stack_stats`]); flash/RAM from the ELF ([`Board::image_size`]) |
 //! | NVIC, SCB | ISER/ICER/ISPR/ICPR/IABR, IPR (4 bits), STIR; ICSR (VECTACTIVE/VECTPENDING/RETTOBASE, PENDSV/PENDST/NMIPEND set/clear), VTOR, AIRCR (PRIGROUP; SYSRESETREQ stops the image with a fault), SCR.SLEEPONEXIT, CCR, SHPR1..3, SHCSR enables, CPACR, FPCCR; the rest of the page stored |
 //! | exceptions | taken at translated-block boundaries by the board (`cpu`): 8-word frame, or 26 with S0..S15/FPSCR when CONTROL.FPCA (stacked eagerly although FPCCR resets with LSPEN/ASPEN set: same result for both sides), 8-byte alignment, EXC_RETURN, MSP/PSP, tail-chaining, preemption by group priority, PRIMASK/BASEPRI/FAULTMASK, SVC → SVCall, PendSV, SysTick. Inside the engine the core stays in thread mode: `mrs rX, ipsr` reads 0 (ICSR has the number); unprivileged thread mode is refused |
@@ -43,6 +46,9 @@
 
 #![warn(missing_docs)]
 
+pub mod adc;
+pub mod chip;
+pub mod cia402;
 mod cpu;
 mod exti;
 pub mod laelaps;
@@ -54,13 +60,13 @@ mod stats;
 mod timers;
 pub mod trot;
 
+pub use chip::{ChipKind, EscChip};
 pub use plant::BoardPlant;
 pub use stats::{image_size, HandlerStats, ImageSize, StackStats};
 
 use std::cell::RefCell;
 use std::rc::Rc;
 
-use oxicat_pdi::sim::{Handle, Lan9252Model};
 use unicorn_engine::unicorn_const::{Arch, Mode, Prot};
 use unicorn_engine::{ArmCpuModel, RegisterARM, Unicorn};
 
@@ -235,7 +241,7 @@ pub fn elf_symbol_bytes(elf: &[u8], name: &str) -> Result<Option<Vec<u8>>, EmuEr
 
 /// An input event a plant schedules at a time of the board's clock
 /// ([`Board::schedule`]): applied when the CPU's clock reaches it, between instructions.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[derive(Debug, Clone, Copy, PartialEq)]
 pub enum Stimulus {
     /// The shaft on timer `tim`'s encoder inputs is at `edges` quadrature edges
     /// ([`Board::set_encoder`]).
@@ -252,6 +258,13 @@ pub enum Stimulus {
         tim: u8,
         /// Input 1..=4.
         input: u8,
+    },
+    /// ADC input channel `channel` (IN0..IN18) at `volts` ([`Board::set_analog`]).
+    Analog {
+        /// Channel number (IN10 = 10).
+        channel: u8,
+        /// Voltage on the pin \[V\].
+        volts: f64,
     },
     /// Input pin `pin` of `port` ('A'..='H') driven to `level` ([`Board::set_input`]).
     Input {
@@ -310,7 +323,8 @@ fn intr_name(n: u32) -> &'static str {
     }
 }
 
-/// An STM32F446 running a board image, with a LAN9252 (the chip model `chip`) on SPI1.
+/// An STM32F446 running a board image, with an ESC chip (a LAN9252 or an ET1100 model) on
+/// SPI1.
 pub struct Board {
     uc: Unicorn<'static, ()>,
     periph: Rc<RefCell<Periph>>,
@@ -329,8 +343,10 @@ pub struct Board {
 
 impl Board {
     /// Loads the ELF `image` into flash/SRAM and resets the CPU (SP and PC from the vector
-    /// table at the start of flash). `chip` is the LAN9252 on SPI1.
-    pub fn new(image: &[u8], chip: Handle<Lan9252Model>) -> Result<Self, EmuError> {
+    /// table at the start of flash). `chip` is the ESC chip on SPI1 (a
+    /// `Handle<Lan9252Model>` or `Handle<Et1100Model>`).
+    pub fn new(image: &[u8], chip: impl Into<EscChip>) -> Result<Self, EmuError> {
+        let chip: EscChip = chip.into();
         let segs = elf_segments(image)?;
         let fault = |e: unicorn_engine::unicorn_const::uc_error| EmuError::Fault {
             pc: 0,
@@ -591,11 +607,13 @@ impl Board {
         self.periph.borrow().profile.get(number)
     }
 
-    /// Clears the handler times (a handler running now counts from now).
+    /// Clears the handler times (a handler running now counts from now) and ADC1's
+    /// interrupt latency.
     pub fn reset_handler_stats(&mut self) {
         let mut p = self.periph.borrow_mut();
         let now = p.cycles;
         p.profile.reset(now);
+        p.adc.max_latency = 0;
     }
 
     /// Schedules `s` at the board's time `at_ns` (applied when the CPU's clock reaches it,
@@ -751,6 +769,10 @@ impl Board {
                 return Err(self.fault("SYSRESETREQ: the image requested a system reset"));
             }
             p.sync_all();
+            if let Some(e) = p.fault.take() {
+                drop(p);
+                return Err(self.fault(e));
+            }
             p.sample_pins();
             let lines = p.irq_lines();
             p.scs.assert_lines(lines);
@@ -864,10 +886,22 @@ impl Board {
         self.periph.borrow().spi
     }
 
-    /// SCLK of SPI1 as the image configured it \[Hz\]: PCLK2 (90 MHz) / 2^(BR+1).
+    /// SCLK of SPI1 \[Hz\]: as the image configured it, PCLK2 (90 MHz) / 2^(BR+1), unless
+    /// [`Board::set_spi_sclk_hz`] replaced it.
     pub fn spi_sclk_hz(&self) -> u32 {
-        let br = (self.periph.borrow().reg(periph::SPI1) >> 3) & 7;
+        let p = self.periph.borrow();
+        if let Some(hz) = p.spi_sclk_override {
+            return hz;
+        }
+        let br = (p.reg(periph::SPI1) >> 3) & 7;
         90_000_000 / (2 << br)
+    }
+
+    /// A what-if study: SPI1's bytes take 8 periods of `hz` instead of the clock the image
+    /// sets (`None`: the image's again) — e.g. an ET1100 at 20 MHz, which SPI1's prescalers
+    /// from a 90 MHz PCLK2 cannot give (11.25 or 22.5 MHz).
+    pub fn set_spi_sclk_hz(&mut self, hz: Option<u32>) {
+        self.periph.borrow_mut().spi_sclk_override = hz.filter(|&h| h > 0);
     }
 
     /// Reads image memory (flash or SRAM) at `addr`.
@@ -892,8 +926,8 @@ impl Board {
     }
 
     /// Drives input pin `pin` of `port` ('A'..='H') to `level` (a plant's sensor, a
-    /// button); EXTI sees the edge at the next run. The LAN9252's pins (PA10, PB3, PB5)
-    /// stay the chip's.
+    /// button); EXTI sees the edge at the next run. The ESC chip's pins (PA10, PB3, PB5, and
+    /// an ET1100's PB4) stay the chip's.
     pub fn set_input(&mut self, port: char, pin: u8, level: bool) {
         let Some(p) = Self::port(port) else {
             return;
@@ -903,6 +937,32 @@ impl Board {
         let b = 1u16 << (pin & 15);
         *mask |= b;
         *levels = if level { *levels | b } else { *levels & !b };
+    }
+
+    /// Drives ADC input channel `channel` (IN0..IN18; IN10 = PC0) to `volts` (a plant's
+    /// sensor); ADC1 samples it at its next trigger. A channel nothing drives cannot be
+    /// converted: the image stops with a fault naming it.
+    pub fn set_analog(&mut self, channel: u8, volts: f64) {
+        if let Some(a) = self
+            .periph
+            .borrow_mut()
+            .analog
+            .get_mut(usize::from(channel))
+        {
+            *a = Some(volts);
+        }
+    }
+
+    /// Injected sequences ADC1 has started so far.
+    pub fn adc_sequences(&self) -> u64 {
+        self.periph.borrow().adc.sequences
+    }
+
+    /// The longest time from ADC1's JEOC to the entry of its interrupt handler since reset
+    /// or [`Board::reset_handler_stats`] \[cycles\]: what masks (PRIMASK critical sections) and handlers of equal or higher
+    /// priority held the conversion-complete interrupt back (entry cycles included).
+    pub fn adc_irq_latency_max(&self) -> u64 {
+        self.periph.borrow().adc.max_latency
     }
 
     /// The duty (0..=1) of timer `tim`'s channel `ch` (TIM1 = 1, CH1 = 1) as a PWM output:

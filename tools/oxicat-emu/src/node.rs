@@ -1,8 +1,8 @@
 //! The machine-code route: a board image as a node of oxicat-sim's virtual segment.
 //!
 //! The segment owns each ESC; a node runs the firmware against it. Here the firmware is
-//! the image on the emulated STM32F446, reaching the ESC through the LAN9252 model on its
-//! SPI1: at every segment event and every `slice_ns` of virtual time the node lends the
+//! the image on the emulated STM32F446, reaching the ESC through the board's chip model (a
+//! LAN9252, or an ET1100: [`EmulatedNode::with_chip`]) on its SPI1: at every segment event and every `slice_ns` of virtual time the node lends the
 //! segment's ESC to the chip, lets the CPU run until the board's clock reaches the
 //! segment's time, and takes the ESC back. Unicorn is not `Send`, so each board runs on a
 //! thread of its own and the node (which the segment needs `Send`) talks to it by channel.
@@ -14,9 +14,10 @@ use std::sync::mpsc::{channel, Receiver, Sender};
 use std::thread::JoinHandle;
 
 use oxicat_esc::{Esc, EscConfig};
-use oxicat_pdi::sim::{BusConfig, Handle, Lan9252Model};
+use oxicat_pdi::sim::{BusConfig, Et1100Model, Lan9252Model};
 use oxicat_sim::node::{EscEvent, Node};
 
+use crate::chip::{ChipKind, EscChip};
 use crate::plant::{run_with_plant, BoardPlant};
 use crate::{Board, EmuError, HandlerStats, ImageSize, SpiStats, StackStats};
 
@@ -28,6 +29,8 @@ enum Cmd {
     Report(Sender<NodeReport>),
     /// Clear the handler times and repaint the stack below the current SP.
     ResetStats,
+    /// Replace SPI1's clock (what-if study; `None`: the image's).
+    SpiClock(Option<u32>),
     /// End the board thread.
     Stop,
 }
@@ -59,6 +62,10 @@ pub struct NodeReport {
     pub spi: SpiStats,
     /// SPI1's clock as the image set it \[Hz\].
     pub spi_sclk_hz: u32,
+    /// ADC1 injected sequences started since reset.
+    pub adc_sequences: u64,
+    /// Longest JEOC → ADC handler entry since reset or [`NodeHandle::reset_stats`] \[cycles\] ([`Board::adc_irq_latency_max`]).
+    pub adc_irq_latency_max: u64,
     /// The fault that stopped the image, if it stopped.
     pub fault: Option<EmuError>,
 }
@@ -100,6 +107,8 @@ fn report_of(board: &Board, since: u64, fault: &Option<EmuError>) -> NodeReport 
         image: board.image_size(),
         spi: board.spi_stats(),
         spi_sclk_hz: board.spi_sclk_hz(),
+        adc_sequences: board.adc_sequences(),
+        adc_irq_latency_max: board.adc_irq_latency_max(),
         fault: fault.clone(),
     }
 }
@@ -110,7 +119,7 @@ fn report_of(board: &Board, since: u64, fault: &Option<EmuError>) -> NodeReport 
 pub struct NodeHandle {
     cmd: Sender<Cmd>,
     sync0: std::sync::Arc<std::sync::atomic::AtomicU64>,
-    chip: Handle<Lan9252Model>,
+    chip: EscChip,
 }
 
 impl NodeHandle {
@@ -127,18 +136,24 @@ impl NodeHandle {
         let _ = self.cmd.send(Cmd::ResetStats);
     }
 
+    /// A what-if study: the board's SPI1 bytes take 8 periods of `hz` from now on instead of
+    /// the clock the image sets ([`Board::set_spi_sclk_hz`]; `None`: the image's again).
+    pub fn set_spi_sclk_hz(&self, hz: Option<u32>) {
+        let _ = self.cmd.send(Cmd::SpiClock(hz));
+    }
+
     /// SYNC0 events the segment delivered to this node so far.
     pub fn sync0_events(&self) -> u64 {
         self.sync0.load(std::sync::atomic::Ordering::Relaxed)
     }
 
-    /// What the board's SPI bus carried, as the LAN9252 saw it (transactions, bytes, bus
-    /// time at SCLK, malformed frames) since the last [`NodeHandle::reset_bus_stats`].
+    /// What the board's SPI bus carried, as the ESC chip saw it (malformed frames) since
+    /// the last [`NodeHandle::reset_bus_stats`].
     pub fn bus_stats(&self) -> oxicat_pdi::sim::BusStats {
         self.chip.stats()
     }
 
-    /// Clears the LAN9252's bus counters.
+    /// Clears the chip's bus counters.
     pub fn reset_bus_stats(&self) {
         self.chip.reset_stats()
     }
@@ -159,7 +174,7 @@ pub struct Progress {
 
 /// A board image on the segment (see the module docs).
 pub struct EmulatedNode {
-    chip: Handle<Lan9252Model>,
+    chip: EscChip,
     run: Sender<Cmd>,
     sync0: std::sync::Arc<std::sync::atomic::AtomicU64>,
     done: Receiver<Progress>,
@@ -183,15 +198,35 @@ impl EmulatedNode {
     pub fn with_plant(
         image: Vec<u8>,
         slice_ns: u64,
+        plant: Option<Box<dyn BoardPlant>>,
+    ) -> Result<Self, EmuError> {
+        Self::with_chip(image, slice_ns, plant, ChipKind::Lan9252)
+    }
+
+    /// [`EmulatedNode::with_plant`] on a board whose SPI1 carries the ESC chip `kind`
+    /// (the segment's ESC for this node should be of that chip's configuration, e.g.
+    /// `EscConfig::et1100()`).
+    pub fn with_chip(
+        image: Vec<u8>,
+        slice_ns: u64,
         mut plant: Option<Box<dyn BoardPlant>>,
+        kind: ChipKind,
     ) -> Result<Self, EmuError> {
         crate::elf_segments(&image)?;
         // The chip's stand-in ESC until the segment lends it the real one. (Its bus
         // configuration times whole-frame transfers only; the emulated SPI1 clocks bytes.)
-        let chip = Lan9252Model::handle(
-            Esc::new(EscConfig::lan9252(), vec![0; 128]),
-            BusConfig::mhz(22),
-        );
+        let chip: EscChip = match kind {
+            ChipKind::Lan9252 => Lan9252Model::handle(
+                Esc::new(EscConfig::lan9252(), vec![0; 128]),
+                BusConfig::mhz(22),
+            )
+            .into(),
+            ChipKind::Et1100 => Et1100Model::handle(
+                Esc::new(EscConfig::et1100(), vec![0; 128]),
+                BusConfig::mhz(11),
+            )
+            .into(),
+        };
         let (run, runs) = channel::<Cmd>();
         let (report, done) = channel::<Progress>();
         let c = chip.clone();
@@ -219,6 +254,10 @@ impl EmulatedNode {
                             continue;
                         }
                         Cmd::Stop => return,
+                        Cmd::SpiClock(hz) => {
+                            board.set_spi_sclk_hz(hz);
+                            continue;
+                        }
                         Cmd::ResetStats => {
                             board.reset_handler_stats();
                             board.repaint_stack();

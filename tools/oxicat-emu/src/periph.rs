@@ -1,9 +1,12 @@
 //! The STM32F446's peripheral bus as the image sees it: RCC, PWR, FLASH, GPIOA..H, SPI1
-//! (wired to the LAN9252 model), EXTI/SYSCFG, the timers, and the Cortex-M4's System
-//! Control Space. One `Periph` is shared by the engine's MMIO callbacks and hooks and by
+//! (wired to the board's ESC chip model, LAN9252 or ET1100), EXTI/SYSCFG, the timers, ADC1,
+//! and the Cortex-M4's System Control Space. One `Periph` is shared by the engine's MMIO callbacks and hooks and by
 //! the board between engine runs.
 
-use oxicat_pdi::sim::{Handle, Lan9252Frame, Lan9252Model, Model, PinKind};
+use oxicat_pdi::sim::PinKind;
+
+use crate::adc::{self, Adc};
+use crate::chip::{ChipFrame, ChipKind, EscChip};
 
 use crate::exti::{Exti, EXTI_BASE, SYSCFG_BASE};
 use crate::nvic::{Masks, Scs, DWT_BASE};
@@ -30,12 +33,16 @@ const POLL_WINDOW: u64 = 64;
 
 /// Peripheral state of the STM32F446 board.
 pub(crate) struct Periph {
-    chip: Handle<Lan9252Model>,
+    chip: EscChip,
     regs: Vec<u32>,
     pub scs: Scs,
     pub exti: Exti,
     pub timers: Vec<Timer>,
-    frame: Option<Lan9252Frame>,
+    frame: Option<ChipFrame>,
+    /// Cycle at which the last SPI byte finished (the bus idles from then on).
+    spi_idle_from: u64,
+    /// SCLK replacing the image's prescaler setting (what-if studies) \[Hz\].
+    pub spi_sclk_override: Option<u32>,
     spi_rx: u8,
     rxne: bool,
     pub spi: SpiStats,
@@ -70,12 +77,23 @@ pub(crate) struct Periph {
     pub stimuli: std::collections::VecDeque<(u64, Stimulus)>,
     /// Exception profile (handler times).
     pub profile: crate::stats::Profile,
+    /// ADC1.
+    pub adc: Adc,
+    /// Voltages on the ADC input channels (`None`: nothing drives the pin).
+    pub analog: [Option<f64>; adc::CHANNELS],
+    /// An access or configuration the models cannot serve: the image stops with it.
+    pub fault: Option<String>,
 }
 
 impl Periph {
-    pub fn new(chip: Handle<Lan9252Model>) -> Self {
+    pub fn new(chip: EscChip) -> Self {
         let mut p = Periph {
             chip,
+            adc: Adc::default(),
+            analog: [None; adc::CHANNELS],
+            fault: None,
+            spi_idle_from: 0,
+            spi_sclk_override: None,
             regs: vec![0; (PERIPH.1 / 4) as usize],
             scs: Scs::new(),
             exti: Exti::default(),
@@ -129,7 +147,7 @@ impl Periph {
     }
 
     fn pin(&self, kind: PinKind) -> bool {
-        self.chip.with(|m| m.pin(kind))
+        self.chip.pin(kind)
     }
 
     /// Port index (0 = A) of a GPIO register address, if it is one.
@@ -138,14 +156,17 @@ impl Periph {
         (rel < PORTS * 0x400).then_some(rel / 0x400)
     }
 
-    /// The level of pin `pin` of port `port` (0 = A): the LAN9252's pins (PA10 IRQ, PB3
-    /// SYNC0, PB5 SYNC1), then injected inputs, PC13 (the button, released), outputs at
-    /// their ODR level, inputs with a pull-up high, else low.
+    /// The level of pin `pin` of port `port` (0 = A): the ESC chip's pins (PA10 IRQ, PB3
+    /// SYNC0, PB5 SYNC1; an ET1100's EEPROM_LOADED on PB4), then injected inputs, PC13 (the
+    /// button, released), outputs at their ODR level, inputs with a pull-up high, else low.
     pub fn pin_level(&self, port: u8, pin: u32) -> bool {
         match (port, pin) {
             (0, 10) => return self.pin(PinKind::Irq),
             (1, 3) => return self.pin(PinKind::Sync0),
             (1, 5) => return self.pin(PinKind::Sync1),
+            (1, 4) if self.chip.kind() == ChipKind::Et1100 => {
+                return self.pin(PinKind::EepromLoaded)
+            }
             _ => {}
         }
         let (mask, levels) = self
@@ -193,11 +214,12 @@ impl Periph {
     fn chip_select(&mut self, high: bool) {
         match (high, self.frame.take()) {
             (false, None) => {
-                self.frame = Some(Lan9252Frame::default());
+                self.frame = Some(self.chip.begin());
                 self.spi.frames += 1;
+                self.spi_idle_from = self.cycles;
             }
             (true, Some(f)) => {
-                self.chip.with(|m| m.end_frame(f));
+                self.chip.end(f);
                 // The chip's IRQ/SYNC pins may have changed with the frame.
                 if self.sample_pins() {
                     self.wake_at = 0;
@@ -221,17 +243,26 @@ impl Periph {
 
     fn spi_dr_write(&mut self, v: u8) {
         self.spi.bytes += 1;
+        // The time the bus idled since the last byte (or CS falling) [ns].
+        let pause_ns = u32::try_from(
+            self.cycles.saturating_sub(self.spi_idle_from) * 1_000_000_000 / crate::CPU_HZ,
+        )
+        .unwrap_or(u32::MAX);
         self.spi_rx = match self.frame.as_mut() {
-            Some(f) => self.chip.with(|m| m.clock_byte(f, v)),
+            Some(f) => self.chip.clock_byte(f, v, pause_ns),
             None => {
                 self.spi.bytes_without_cs += 1;
                 0xFF
             }
         };
         self.rxne = true;
-        // The byte takes 8 SCLK periods at PCLK2 (90 MHz) / 2^(BR+1).
-        let br = (self.reg(SPI1) >> 3) & 7;
-        self.cycles += 8 * 2 * (2u64 << br);
+        // The byte takes 8 SCLK periods at PCLK2 (90 MHz) / 2^(BR+1), or at the clock a
+        // what-if study set ([`crate::Board::set_spi_sclk_hz`]).
+        self.cycles += match self.spi_sclk_override {
+            Some(hz) => (8 * crate::CPU_HZ).div_ceil(u64::from(hz.max(1))),
+            None => 8 * 2 * (2u64 << ((self.reg(SPI1) >> 3) & 7)),
+        };
+        self.spi_idle_from = self.cycles;
     }
 
     /// CPU cycles per tick of the APB1 (or APB2) timer clock: TIMxCLK is PCLKx when the
@@ -289,13 +320,79 @@ impl Periph {
         for i in 0..self.timers.len() {
             self.timer_at(i).sync(now);
         }
+        self.adc_sync(now);
+    }
+
+    /// CPU cycles per ADCCLK: PCLK2 / (2 · (ADC_CCR.ADCPRE + 1)).
+    fn cycles_per_adcclk(&self) -> u64 {
+        let ppre2 = (self.reg(RCC_CFGR) >> 13) & 7;
+        let apb2: u64 = if ppre2 < 4 { 1 } else { 2 << (ppre2 - 4) };
+        apb2 * 2 * (u64::from((self.adc.ccr >> 16) & 3) + 1)
+    }
+
+    /// The next rising edge of ADC1's injected trigger after cycle `after`, if it listens
+    /// to one (an error: a trigger that is not modelled).
+    fn adc_trigger_after(&self, after: u64) -> Result<Option<u64>, String> {
+        match self.adc.trigger()? {
+            adc::Trigger::Off => Ok(None),
+            adc::Trigger::Tim1TrgoRising => {
+                let Some(t) = self.timers.iter().find(|t| t.kind.number == 1) else {
+                    return Ok(None);
+                };
+                if !t.counting() {
+                    return Ok(None);
+                }
+                if !t.trgo_edges_modelled() {
+                    return Err(format!(
+                        "ADC1 is triggered by TIM1_TRGO, and TIM1 CR2.MMS = {:#05b} as                          TRGO is not modelled (only OC1REF..OC4REF in PWM mode 1/2)",
+                        t.mms()
+                    ));
+                }
+                Ok(t.next_trgo_rise(after))
+            }
+        }
+    }
+
+    /// Brings ADC1 up to `now`: the sequences its trigger started, the conversions that
+    /// ended.
+    fn adc_sync(&mut self, now: u64) {
+        if let Some(t) = self.timer(1) {
+            t.sync(now);
+        }
+        // Bounded: the board stops at every trigger (next_event), so few are due here.
+        for _ in 0..10_000 {
+            let next = match self.adc_trigger_after(self.adc.last) {
+                Ok(n) => n,
+                Err(e) => {
+                    self.fault.get_or_insert(e);
+                    None
+                }
+            };
+            let Some(at) = next.filter(|&at| at <= now) else {
+                break;
+            };
+            self.adc.finish_by(at);
+            self.adc.last = at;
+            let cyc = self.cycles_per_adcclk();
+            if let Err(e) = self.adc.start(at, &self.analog, cyc) {
+                self.fault.get_or_insert(e);
+                break;
+            }
+        }
+        self.adc.last = self.adc.last.max(now);
+        self.adc.finish_by(now);
     }
 
     /// The interrupt lines the peripherals drive high.
     pub fn irq_lines(&self) -> u128 {
+        let adc = if self.adc.irq() {
+            crate::nvic::bit(16 + adc::IRQ)
+        } else {
+            0
+        };
         self.timers
             .iter()
-            .fold(self.exti.irq_lines(), |l, t| l | t.irq_lines())
+            .fold(self.exti.irq_lines() | adc, |l, t| l | t.irq_lines())
     }
 
     /// The cycle of the next timer or SysTick event that raises an interrupt, or of the
@@ -306,6 +403,8 @@ impl Periph {
             .filter_map(|t| t.next_event())
             .chain(self.scs.syst_next())
             .chain(self.stimuli.front().map(|s| s.0))
+            .chain(self.adc.busy_until())
+            .chain(self.adc_trigger_after(self.adc.last).ok().flatten())
             .min()
     }
 
@@ -337,6 +436,11 @@ impl Periph {
             }
             Stimulus::Capture { tim, input } => {
                 self.capture(tim, input);
+            }
+            Stimulus::Analog { channel, volts } => {
+                if let Some(a) = self.analog.get_mut(usize::from(channel)) {
+                    *a = Some(volts);
+                }
             }
             Stimulus::Input { port, pin, level } => {
                 let p = (port.to_ascii_uppercase() as u32).wrapping_sub('A' as u32);
@@ -410,6 +514,18 @@ impl Periph {
                 self.rxne = false;
                 u32::from(self.spi_rx)
             }
+            a if (adc::ADC1..adc::ADC_END).contains(&a) => {
+                let now = self.cycles;
+                self.adc_sync(now);
+                match self.adc.read((a - adc::ADC1) as usize) {
+                    Ok(v) => v,
+                    Err(e) => {
+                        self.fault.get_or_insert(e);
+                        self.wake_at = 0;
+                        0
+                    }
+                }
+            }
             a if (SYSCFG_BASE..EXTI_BASE + 0x400).contains(&a) => {
                 if !(SYSCFG_BASE + 0x30..EXTI_BASE).contains(&a) {
                     self.exti.read(a)
@@ -437,6 +553,29 @@ impl Periph {
         match addr {
             a if a == SPI1 + 0x0C => self.spi_dr_write(v as u8),
             a if a == SPI1 + 0x08 => {}
+            a if (adc::ADC1..adc::ADC_END).contains(&a) => {
+                let now = self.cycles;
+                self.adc_sync(now);
+                let before = self.adc.trigger();
+                match self.adc.write((a - adc::ADC1) as usize, v) {
+                    Ok(start) => {
+                        if self.adc.trigger() != before {
+                            // A new trigger source listens from now on.
+                            self.adc.last = now;
+                        }
+                        if start {
+                            let cyc = self.cycles_per_adcclk();
+                            if let Err(e) = self.adc.start(now, &self.analog, cyc) {
+                                self.fault.get_or_insert(e);
+                            }
+                        }
+                    }
+                    Err(e) => {
+                        self.fault.get_or_insert(e);
+                    }
+                }
+                self.wake_at = 0;
+            }
             a if a == RCC => {
                 // Ready flags follow their enables: HSE 16/17, PLL 24/25, PLLI2S 26/27,
                 // PLLSAI 28/29; HSI stays on.

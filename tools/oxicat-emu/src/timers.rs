@@ -14,8 +14,10 @@
 //! TRGO in mode CR2.MMS = 011 (compare pulse) pulses whenever CC1IF is set by a capture
 //! (an injected edge or EGR.CC1G); a timer whose SMCR.TS selects that master as ITR0..3
 //! sees the pulse on TRGI, and its channels in input-capture mode on TRC (CCxS = 11,
-//! enabled) capture. The other master modes (reset, enable, update, OCxREF) and the slave
-//! modes (reset, gated, trigger) do not produce or act on pulses here.
+//! enabled) capture. TRGO = OC1REF..OC4REF (MMS = 100..111) with the channel in PWM mode 1
+//! or 2 is ADC1's injected trigger: its rising edges are computed from the counter
+//! (`Timer::next_trgo_rise`), not pulsed. The other master modes (reset, enable, update)
+//! and the slave modes (reset, gated, trigger) do not produce or act on pulses here.
 
 /// Register offsets.
 const CR1: usize = 0x00;
@@ -135,6 +137,9 @@ pub(crate) struct Timer {
     enc: i64,
     /// TRGO pulses not yet routed to the linked timers.
     trgo_pending: u32,
+    /// Cycle from which the counter has run undisturbed (started, written, or
+    /// re-initialised by UG): computed OCxREF edges lie at or after it.
+    epoch: u64,
 }
 
 /// The timer whose TRGO drives internal trigger ITR`ts` of timer `number` (RM0390 tables
@@ -169,6 +174,7 @@ impl Timer {
             down: false,
             enc: 0,
             trgo_pending: 0,
+            epoch: 0,
         };
         let max = t.max();
         t.regs[ARR / 4] = max;
@@ -429,6 +435,7 @@ impl Timer {
                 }
                 if !was && self.running() {
                     self.last = now;
+                    self.epoch = now;
                 }
                 if self.r(CR1) & ARPE == 0 {
                     self.arr_sh = self.r(ARR);
@@ -454,6 +461,7 @@ impl Timer {
                     }
                     self.cnt = if down { self.arr_sh } else { 0 };
                     self.down = false;
+                    self.epoch = now;
                 }
                 for ch in 1..=self.kind.channels {
                     if v & (1 << ch) != 0 {
@@ -461,7 +469,10 @@ impl Timer {
                     }
                 }
             }
-            CNT => self.cnt = v & self.max(),
+            CNT => {
+                self.cnt = v & self.max();
+                self.epoch = now;
+            }
             PSC => self.regs[PSC / 4] = v & 0xFFFF,
             ARR => {
                 self.regs[ARR / 4] = v & self.max();
@@ -502,6 +513,84 @@ impl Timer {
         if ch == 1 && (self.r(CR2) >> 4) & 7 == 3 {
             self.trgo_pending += 1;
         }
+    }
+
+    /// Counting from its clock (enabled, not in encoder or external-clock mode).
+    pub fn counting(&self) -> bool {
+        self.running()
+    }
+
+    /// CR2.MMS: what TRGO carries.
+    pub fn mms(&self) -> u32 {
+        (self.r(CR2) >> 4) & 7
+    }
+
+    /// Whether [`Timer::next_trgo_rise`] models the master mode: MMS = 100..111, TRGO =
+    /// OC1REF..OC4REF, with that channel in PWM mode 1 or 2 on a centre-aligned or
+    /// up-counting timer.
+    pub fn trgo_edges_modelled(&self) -> bool {
+        let mms = self.mms();
+        if !(4..=7).contains(&mms) {
+            return false;
+        }
+        let ch = (mms - 3) as u8;
+        let ccmr = self.r(CCMR1 + 4 * usize::from((ch - 1) / 2));
+        let ocm = (ccmr >> (4 + 8 * u32::from((ch - 1) % 2))) & 7;
+        self.ccs(ch) == 0 && matches!(ocm, 6 | 7) && (self.cms() != 0 || self.r(CR1) & DIR == 0)
+    }
+
+    /// The cycle of the first rising edge of TRGO = OCxREF (see
+    /// [`Timer::trgo_edges_modelled`]) after cycle `after`, with the present PSC, ARR and
+    /// CCRx; `None` when the timer stands still or OCxREF never rises.
+    ///
+    /// RM0390 PWM modes: mode 1 is active while CNT < CCRx counting up, and from CNT =
+    /// CCRx on counting down; mode 2 the complement. Centre-aligned, the counter's
+    /// position in its period of 2 · ARR ticks is CNT counting up and 2 · ARR − CNT
+    /// counting down: OCxREF rises at CCRx (mode 2) or 2 · ARR − CCRx (mode 1). Counting
+    /// up (edge-aligned, period ARR + 1) it rises at CCRx (mode 2) or at 0 (mode 1).
+    pub fn next_trgo_rise(&self, after: u64) -> Option<u64> {
+        if !self.running() || !self.trgo_edges_modelled() {
+            return None;
+        }
+        let ch = (self.mms() - 3) as u8;
+        let ccmr = self.r(CCMR1 + 4 * usize::from((ch - 1) / 2));
+        let ocm = (ccmr >> (4 + 8 * u32::from((ch - 1) % 2))) & 7;
+        let ccr = u64::from(self.r(CCR1 + 4 * usize::from(ch - 1)));
+        let arr = u64::from(self.arr_sh);
+        let cnt = u64::from(self.cnt);
+        let (period, pos, rise) = if self.cms() != 0 {
+            let arr = arr.max(1);
+            let pos = if self.down {
+                2 * arr - cnt.min(arr)
+            } else {
+                cnt.min(arr)
+            };
+            let rise = match ocm {
+                7 if ccr <= arr => ccr,
+                6 if ccr <= arr => (2 * arr - ccr) % (2 * arr),
+                _ => return None, // never changes
+            };
+            (2 * arr, pos, rise)
+        } else {
+            let rise = match ocm {
+                7 if (1..=arr).contains(&ccr) => ccr,
+                6 if (1..=arr).contains(&ccr) => 0,
+                _ => return None, // always or never active
+            };
+            (arr + 1, cnt.min(arr), rise)
+        };
+        let div = self.clk_div.max(1);
+        let tick = (u64::from(self.psc_sh) + 1) * div;
+        // When the counter reached `pos`, and the last rise at or before that.
+        let at_pos = i128::from(self.last) - i128::from(self.phase * div);
+        let back = (pos + period - rise) % period;
+        let step = i128::from(period * tick);
+        let mut t = at_pos - i128::from(back * tick);
+        let lo = i128::from(after.saturating_add(1).max(self.epoch));
+        if t < lo {
+            t += (lo - t + step - 1) / step * step;
+        }
+        u64::try_from(t).ok()
     }
 
     /// TRGO pulses since the last call (the bus routes them to the linked timers).
@@ -594,7 +683,12 @@ impl Timer {
         if ch == 0 || ch > self.kind.channels || self.ccs(ch) != 0 || !self.running() {
             return None;
         }
-        let ccer = self.r(CCER) >> (4 * (ch - 1));
+        let mut ccer = self.r(CCER) >> (4 * (ch - 1));
+        if ccer & 1 == 0 && self.kind.advanced && ch < 4 && ccer & 4 != 0 {
+            // The complementary output alone (CCxE = 0, CCxNE = 1): OCxN = OCxREF xor
+            // CCxNP (RM0390 §17.4.9, output control bits), the channel's PWM itself.
+            ccer = 1 | ((ccer >> 2) & 2);
+        }
         if ccer & 1 == 0 || (self.kind.advanced && self.r(BDTR) & MOE == 0) {
             return None;
         }
@@ -778,6 +872,43 @@ mod tests {
     }
 
     #[test]
+    fn oc4ref_as_trgo_rises_where_the_pwm_mode_puts_it_in_the_counting_period() {
+        const CCMR2: usize = 0x1C;
+        let mut t = Timer::new(TIMERS[0]); // TIM1 at the CPU clock
+        t.write(ARR, 100, 0);
+        t.write(CCMR2, 7 << 12, 0); // OC4M: PWM mode 2
+        t.write(CCR1 + 12, 80, 0);
+        t.write(CR2, 7 << 4, 0); // MMS: OC4REF
+        assert_eq!(t.next_trgo_rise(0), None, "not counting");
+        // Centre-aligned: a period of 2 × ARR = 200 ticks; mode 2 rises counting up at 80.
+        t.write(CR1, CEN | (1 << 5), 1000);
+        assert!(t.trgo_edges_modelled());
+        assert_eq!(t.next_trgo_rise(1000), Some(1080));
+        assert_eq!(t.next_trgo_rise(1080), Some(1280));
+        t.sync(1150); // counting down at 50
+        assert_eq!(t.next_trgo_rise(1100), Some(1280));
+        // Mode 1 rises counting down at 80: 2 × 100 − 80 = 120 ticks into the period.
+        t.write(CCMR2, 6 << 12, 1150);
+        assert_eq!(t.next_trgo_rise(1150), Some(1120 + 200));
+        // Edge-aligned up-counting: a period of ARR + 1; mode 1 rises at the update (0),
+        // mode 2 at CCR.
+        let mut e = Timer::new(TIMERS[0]);
+        e.write(ARR, 99, 0);
+        e.write(CCMR2, 6 << 12, 0);
+        e.write(CCR1 + 12, 30, 0);
+        e.write(CR2, 7 << 4, 0);
+        e.write(CR1, CEN, 500);
+        assert_eq!(e.next_trgo_rise(500), Some(600));
+        e.write(CCMR2, 7 << 12, 500);
+        assert_eq!(e.next_trgo_rise(500), Some(530));
+        // CCR beyond ARR: OC4REF never changes; other master modes are not modelled.
+        e.write(CCR1 + 12, 200, 500);
+        assert_eq!(e.next_trgo_rise(500), None);
+        e.write(CR2, 2 << 4, 500);
+        assert!(!e.trgo_edges_modelled());
+    }
+
+    #[test]
     fn pwm_duty_follows_ccr_arr_mode_polarity_and_moe() {
         let mut t = Timer::new(TIMERS[0]); // TIM1
         t.write(ARR, 8999, 0);
@@ -798,6 +929,13 @@ mod tests {
         t.write(CCER, 1 | 2 | (1 << 4), 0);
         assert_eq!(t.pwm_duty(1), Some(0.75));
         assert_eq!(t.pwm_duty(3), None);
+        // CH3N alone (CC3E = 0, CC3NE = 1) outputs OC3REF itself; CC3NP inverts it.
+        t.write(0x1C, 6 << 4, 0); // CCMR2: OC3M PWM mode 1
+        t.write(CCR1 + 8, 900, 0);
+        t.write(CCER, 1 | (1 << 4) | (1 << 10), 0);
+        assert_eq!(t.pwm_duty(3), Some(0.1));
+        t.write(CCER, 1 | (1 << 4) | (1 << 10) | (1 << 11), 0);
+        assert_eq!(t.pwm_duty(3), Some(0.9));
         // Offsets past the register file read as zero and ignore writes.
         t.write(0x3FC, 7, 0);
         assert_eq!(t.read(0x3FC, 0), 0);

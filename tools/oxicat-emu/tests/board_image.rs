@@ -22,7 +22,7 @@ fn boot() -> Option<(Board, Master)> {
     let esc = Esc::new(EscConfig::lan9252(), oxicat_testkit::device::eeprom(def));
     let chip = Lan9252Model::handle(esc, BusConfig::mhz(22));
     let board = Board::new(&img, chip.clone()).expect("the image loads");
-    Some((board, Master { chip }))
+    Some((board, Master { chip: chip.into() }))
 }
 
 #[test]

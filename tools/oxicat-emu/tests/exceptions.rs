@@ -160,6 +160,46 @@ fn tim6_interrupts_at_each_update_of_its_90_mhz_clock_divided_by_psc_and_arr() {
 }
 
 #[test]
+fn tim1_oc4ref_as_trgo_starts_adc1s_injected_sequence_once_per_pwm_period() {
+    let mut b = board(include_bytes!("asm/adc.elf"));
+    b.set_analog(10, 1.65);
+    b.set_analog(11, 0.33);
+    b.run(2_000).unwrap();
+    let before = word(&b, 0x04);
+    // 20 kHz: 9,000 cycles per centre-aligned period of 2 × 4500 ticks at 180 MHz.
+    b.run(9_000 * 20).unwrap();
+    assert_eq!(word(&b, 0x04) - before, 20, "one sequence per PWM period");
+    assert_eq!(b.interrupts_taken()[18], u64::from(word(&b, 0x04)));
+    assert_eq!(b.adc_sequences(), u64::from(word(&b, 0x04)));
+    // OC4REF rises counting up through 4332, 168 ticks before the top; the sequence takes
+    // 2 × (15 + 12) ADCCLK at 8 cycles each = 432 cycles: JEOC counting down at 4500 −
+    // (432 − 168) = 4236; the handler reads CNT after the 12-cycle entry and its block's
+    // instructions (cycles are counted per block as it starts: about 30 here).
+    let cnt = word(&b, 0x08);
+    assert!(
+        (4_236 - 60..=4_236).contains(&cnt),
+        "CNT {cnt} on entry: just after JEOC"
+    );
+    assert_ne!(word(&b, 0x0C) & (1 << 4), 0, "counting down");
+    assert_eq!(word(&b, 0x10), 2048, "1.65 V on IN10: mid-scale");
+    assert_eq!(word(&b, 0x14), 409, "0.33 V on IN11");
+    assert_eq!(word(&b, 0x18) & 0x04, 0, "JEOC cleared (rc_w0)");
+    assert_ne!(word(&b, 0x18) & 0x08, 0, "JSTRT kept");
+    assert!(b.instructions() < 2_000, "asleep between the conversions");
+}
+
+#[test]
+fn converting_a_channel_nothing_drives_is_a_fault_naming_it() {
+    let mut b = board(include_bytes!("asm/adc.elf"));
+    b.set_analog(11, 0.0);
+    let e = b.run(9_000 * 2).unwrap_err();
+    let EmuError::Fault { reason, .. } = e else {
+        panic!("{e:?}")
+    };
+    assert!(reason.contains("IN10 (PC0)"), "{reason}");
+}
+
+#[test]
 fn dwt_cyccnt_counts_cycles_only_with_trcena_and_cyccntena() {
     let mut b = board(include_bytes!("asm/dwt.elf"));
     run_done(&mut b);

@@ -54,7 +54,7 @@ fn the_leg_image_boots_reaches_preop_and_answers_its_identity() {
     );
     let chip = Lan9252Model::handle(esc, BusConfig::mhz(22));
     let mut b = Board::new(&img, chip.clone()).expect("the image loads");
-    let m = Direct { chip };
+    let m = Direct { chip: chip.into() };
     // Boot: clocks, the 50 ms power-on wait, the LAN9252's init over SPI, the stack's
     // start-up, then the main loop polling every 400 µs (the SPI frame count keeps rising)
     // and the joint loop at 10 kHz.

@@ -3,7 +3,6 @@
 use super::{BusConfig, Core, Fault, Handle, Model, PinKind};
 use crate::et1100::cmd;
 use oxicat_esc::Esc;
-use std::vec;
 use std::vec::Vec;
 
 /// An ET1100 SPI PDI in front of a software ESC.
@@ -11,6 +10,30 @@ pub struct Et1100Model {
     core: Core,
     /// Minimum pause between address and data phase of a plain read (ns).
     pub read_delay_ns: u32,
+}
+
+/// One CS-low frame in progress on a byte-clocked bus (see [`Et1100Model::clock_byte`]).
+#[derive(Debug, Default, Clone)]
+pub struct Et1100Frame {
+    /// Bytes clocked so far.
+    n: usize,
+    /// The AL event request bytes the address phase shifts out (taken at its first byte).
+    ev: [u8; 3],
+    /// The address and the command, once the address phase is complete.
+    addr: u16,
+    command: u8,
+    /// Bytes of the address phase (2, or 3 with the address extension), 0 until known.
+    hdr: usize,
+    /// Read: the byte fetched for the next data byte (the ESC's prefetch).
+    next: Option<u8>,
+    /// Read: data bytes fetched so far.
+    fetched: u16,
+    /// Read: the termination byte was seen.
+    terminated: bool,
+    /// The frame is broken (counted once): the rest of it is ignored.
+    bad: bool,
+    /// Write: the data phase.
+    data: Vec<u8>,
 }
 
 impl Et1100Model {
@@ -30,6 +53,136 @@ impl Et1100Model {
     fn proto_err(&mut self) {
         self.core.stats.protocol_errors += 1;
     }
+
+    /// Marks `f` broken, counting one protocol error.
+    fn break_frame(&mut self, f: &mut Et1100Frame) {
+        if !f.bad {
+            f.bad = true;
+            self.proto_err();
+        }
+    }
+
+    /// Fetches the next read byte of `f` from the ESC.
+    fn fetch(&mut self, f: &mut Et1100Frame) {
+        let mut b = [0u8; 1];
+        let at = f.addr.wrapping_add(f.fetched);
+        if self.core.pdi_read(at, &mut b).is_err() {
+            f.next = None;
+            self.break_frame(f);
+            return;
+        }
+        f.fetched += 1;
+        f.next = Some(b[0]);
+    }
+
+    /// Clocks one byte of the frame `f` (CS low): MOSI in, MISO out, with the effects the
+    /// chip has at that byte — how an emulated MCU's SPI peripheral, which moves a byte at
+    /// a time and needs each read byte before it sends the next, drives the chip.
+    /// `pause_ns` is the time the bus idled before this byte (a plain read needs
+    /// [`Et1100Model::read_delay_ns`] before its data phase). The address phase shifts out
+    /// the AL event request; a read fetches each byte before it is shifted out and, unless
+    /// the master sends the termination 0xFF on it, the next one (the ESC's prefetch); a
+    /// write reaches the ESC when the frame ends. [`Model::frame`] is exactly this over a
+    /// whole frame; end it with [`Et1100Model::end_frame`] when CS goes high.
+    pub fn clock_byte(&mut self, f: &mut Et1100Frame, mosi: u8, pause_ns: u32) -> u8 {
+        let k = f.n;
+        f.n += 1;
+        if k == 0 {
+            let ev = self.core.esc.al_event_request().to_le_bytes();
+            f.ev = [ev[0], ev[1], ev[2]];
+            f.addr = u16::from(mosi) << 5;
+            return f.ev[0];
+        }
+        if k == 1 {
+            f.addr |= u16::from(mosi >> 3);
+            f.command = mosi & 7;
+            if f.command != cmd::ADDR_EXT {
+                f.hdr = 2;
+            }
+            return f.ev[1];
+        }
+        if f.hdr == 0 {
+            // Third byte of a three-byte address.
+            f.addr |= u16::from(mosi >> 5) << 13;
+            f.command = (mosi >> 2) & 7;
+            f.hdr = 3;
+            return f.ev[2];
+        }
+        if f.bad {
+            return 0xFF;
+        }
+        let i = k - f.hdr;
+        match f.command {
+            cmd::NOP => 0xFF,
+            cmd::READ | cmd::READ_WS => {
+                let j = if f.command == cmd::READ_WS {
+                    if i == 0 {
+                        if mosi != cmd::WAIT_STATE {
+                            self.proto_err();
+                        }
+                        return 0xFF;
+                    }
+                    i - 1
+                } else {
+                    if i == 0 && pause_ns < self.read_delay_ns {
+                        // Data not fetched in time: the bytes are garbage.
+                        self.break_frame(f);
+                        return 0xFF;
+                    }
+                    i
+                };
+                if f.terminated {
+                    // Bytes after the termination: the ESC has stopped reading.
+                    self.break_frame(f);
+                    return 0xFF;
+                }
+                if j == 0 {
+                    self.fetch(f);
+                }
+                let Some(out) = f.next.take() else {
+                    return 0xFF;
+                };
+                if mosi == cmd::READ_TERMINATION {
+                    f.terminated = true;
+                } else {
+                    self.fetch(f);
+                }
+                out
+            }
+            cmd::WRITE => {
+                f.data.push(mosi);
+                0xFF
+            }
+            _ => 0xFF,
+        }
+    }
+
+    /// CS goes high: a frame too short for its address, an unknown command or a read
+    /// without termination (the ESC prefetched a byte too many) counts as a protocol
+    /// error, as in [`Model::frame`]; a write's data reaches the ESC now.
+    pub fn end_frame(&mut self, f: Et1100Frame) {
+        if f.n < 2 || (f.command == cmd::ADDR_EXT && f.hdr == 0) {
+            self.proto_err();
+            return;
+        }
+        if f.bad {
+            return;
+        }
+        match f.command {
+            cmd::NOP => {}
+            cmd::READ | cmd::READ_WS => {
+                if f.fetched > 0 && !f.terminated {
+                    self.proto_err();
+                }
+            }
+            cmd::WRITE => {
+                if self.core.pdi_write(f.addr, &f.data).is_err() {
+                    self.proto_err();
+                }
+            }
+            _ => self.proto_err(),
+        }
+    }
 }
 
 impl Model for Et1100Model {
@@ -38,77 +191,20 @@ impl Model for Et1100Model {
     }
 
     fn frame(&mut self, mosi: &[u8], delays: &[(usize, u32)]) -> Vec<u8> {
-        let mut miso = vec![0xFFu8; mosi.len()];
-        let ev = self.core.esc.al_event_request().to_le_bytes();
-        for (i, m) in miso.iter_mut().enumerate().take(3) {
-            *m = ev[i];
-        }
-        if mosi.len() < 2 {
-            self.proto_err();
-            return miso;
-        }
-        let mut addr = u16::from(mosi[0]) << 5 | u16::from(mosi[1] >> 3);
-        let mut command = mosi[1] & 7;
-        let mut hdr = 2;
-        if command == cmd::ADDR_EXT {
-            if mosi.len() < 3 {
-                self.proto_err();
-                return miso;
-            }
-            addr |= u16::from(mosi[2] >> 5) << 13;
-            command = (mosi[2] >> 2) & 7;
-            hdr = 3;
-        } else if mosi.len() > 2 {
-            miso[2] = 0xFF;
-        }
-        match command {
-            cmd::NOP => {}
-            cmd::READ | cmd::READ_WS => {
-                let mut start = hdr;
-                if command == cmd::READ_WS {
-                    if mosi.get(hdr) != Some(&cmd::WAIT_STATE) {
-                        self.proto_err();
-                    }
-                    start += 1;
-                } else {
-                    let waited: u32 = delays
-                        .iter()
-                        .filter(|(p, _)| *p == hdr)
-                        .map(|(_, ns)| *ns)
-                        .sum();
-                    if waited < self.read_delay_ns {
-                        // Data not fetched in time: the first bytes are garbage.
-                        self.proto_err();
-                        return miso;
-                    }
-                }
-                if start >= mosi.len() {
-                    return miso;
-                }
-                let data = &mosi[start..];
-                // The ESC reads up to and including the byte where the master sent the
-                // termination 0xFF; without one it prefetches one byte too many.
-                let (len, fetch) = match data.iter().position(|&b| b == cmd::READ_TERMINATION) {
-                    Some(k) => (k + 1, k + 1),
-                    None => (data.len(), data.len() + 1),
-                };
-                if len != data.len() || fetch != len {
-                    self.proto_err();
-                }
-                let mut buf = vec![0u8; fetch];
-                if self.core.pdi_read(addr, &mut buf).is_err() {
-                    self.proto_err();
-                    return miso;
-                }
-                miso[start..start + len].copy_from_slice(&buf[..len]);
-            }
-            cmd::WRITE => {
-                if self.core.pdi_write(addr, &mosi[hdr..]).is_err() {
-                    self.proto_err();
-                }
-            }
-            _ => self.proto_err(),
-        }
+        let mut f = Et1100Frame::default();
+        let miso = mosi
+            .iter()
+            .enumerate()
+            .map(|(k, &b)| {
+                let pause: u32 = delays
+                    .iter()
+                    .filter(|(p, _)| *p == k)
+                    .map(|(_, ns)| *ns)
+                    .sum();
+                self.clock_byte(&mut f, b, pause)
+            })
+            .collect();
+        self.end_frame(f);
         miso
     }
 

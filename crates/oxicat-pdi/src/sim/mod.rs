@@ -11,7 +11,7 @@
 mod et1100;
 mod lan9252;
 
-pub use et1100::Et1100Model;
+pub use et1100::{Et1100Frame, Et1100Model};
 pub use lan9252::{Lan9252Frame, Lan9252Model};
 
 use core::convert::Infallible;

@@ -2,11 +2,13 @@
 //!
 //! `oxicat-emu sim --firmware NAME=ELF[,ELF…] [oxicat sim's options] DEVICES…` is
 //! `oxicat sim` with the nodes of device NAME running the board image ELF on an emulated
-//! STM32F446 + LAN9252 (instruction by instruction) instead of the host-compiled firmware;
+//! STM32F446 with its board's ESC chip — an ET1100 for `cia402-joint`, a LAN9252 for the
+//! others — (instruction by instruction) instead of the host-compiled firmware;
 //! node k of NAME runs the k-th image of the list, cycling (the Laelaps leg node is built
 //! per side: `--firmware laelaps-leg=left.elf,right.elf,right.elf,left.elf` for the chain
 //! HL HR FR FL). Devices without `--firmware` keep their host-compiled firmware, so one
-//! segment can mix both. A leg node's image gets its leg on the board's pins.
+//! segment can mix both. A leg node's image gets its leg on the board's pins, a CiA402
+//! joint's its joint (`oxicat_emu::cia402`).
 //!
 //! The MIT/Apache `oxicat` CLI cannot link this GPL tool, hence a binary of its own over
 //! the CLI's serving functions (`oxicat::sim_cmd::serve_until_with`).
@@ -22,9 +24,11 @@ use clap::{CommandFactory, FromArgMatches, Parser, Subcommand};
 use oxicat::sim_cmd::{host_node, serve_until_with, SimArgs};
 use oxicat_devices::laelaps::rig::{chain_legs, RigConfig};
 use oxicat_devices::registry::{add_node_on, Device, Kit, NodeError};
+use oxicat_emu::cia402::JointBoardPlant;
 use oxicat_emu::laelaps::LegBoardPlant;
 use oxicat_emu::node::EmulatedNode;
 use oxicat_emu::plant::BoardPlant;
+use oxicat_emu::ChipKind;
 use oxicat_esc::EscConfig;
 use oxicat_sim::firmware::AttachError;
 use oxicat_sim::pdi_path::PdiRoute;
@@ -115,10 +119,23 @@ fn images(specs: &[String]) -> Result<BTreeMap<String, Vec<Vec<u8>>>, String> {
 
 /// The plant a device's board image drives, where the emulator has an adapter for it.
 fn plant_for(kit: &Kit, k: usize) -> Option<Box<dyn BoardPlant>> {
-    (kit.name == "laelaps-leg").then(|| {
-        let leg = chain_legs()[k % 4];
-        Box::new(LegBoardPlant::new(leg, RigConfig::laelaps(leg))) as Box<dyn BoardPlant>
-    })
+    match kit.name {
+        "laelaps-leg" => {
+            let leg = chain_legs()[k % 4];
+            Some(Box::new(LegBoardPlant::new(leg, RigConfig::laelaps(leg))))
+        }
+        "cia402-joint" => Some(Box::new(JointBoardPlant::new(Default::default()))),
+        _ => None,
+    }
+}
+
+/// The ESC chip a device's board carries: the CiA402 joint's board an ET1100
+/// (`firmware/cia402-joint`), the others a LAN9252.
+fn chip_for(kit: &Kit) -> (ChipKind, EscConfig) {
+    match kit.name {
+        "cia402-joint" => (ChipKind::Et1100, EscConfig::et1100()),
+        _ => (ChipKind::Lan9252, EscConfig::lan9252()),
+    }
 }
 
 fn run(args: EmuSimArgs) -> Result<(), String> {
@@ -137,9 +154,10 @@ fn run(args: EmuSimArgs) -> Result<(), String> {
             Device::Twin(_) => return host_node(seg, dev, k, drift_ppm, route),
         };
         let image = list[k % list.len()].clone();
-        // The board carries a LAN9252, whatever the device's host bench uses.
-        add_node_on(seg, kit, k, EscConfig::lan9252(), drift_ppm, |seg, id| {
-            let node = EmulatedNode::with_plant(image, SLICE_NS, plant_for(kit, k))
+        // The board's own chip, whatever route the device's host bench uses.
+        let (chip, esc) = chip_for(kit);
+        add_node_on(seg, kit, k, esc, drift_ppm, |seg, id| {
+            let node = EmulatedNode::with_chip(image, SLICE_NS, plant_for(kit, k), chip)
                 .map_err(|e| AttachError::Image(e.to_string()))?;
             seg.attach(id, Box::new(node))
                 .map_err(AttachError::Topology)

@@ -3,8 +3,7 @@
 
 use std::path::PathBuf;
 
-use oxicat_emu::Board;
-use oxicat_pdi::sim::{Handle, Lan9252Model};
+use oxicat_emu::{Board, EscChip};
 use oxicat_wire::frame::FrameBuilder;
 use oxicat_wire::{Command, DatagramHeader, EcatFrame};
 
@@ -58,7 +57,7 @@ pub fn image_in(board: &str, sub: &str, env: &str) -> Option<Vec<u8>> {
 #[allow(dead_code)] // not every test binary uses it
 pub struct Direct {
     /// The chip whose ESC the frames walk through.
-    pub chip: Handle<Lan9252Model>,
+    pub chip: EscChip,
 }
 
 #[allow(dead_code)]
