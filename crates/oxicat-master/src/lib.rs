@@ -54,17 +54,16 @@ pub(crate) type PdiGroup = SubDeviceGroup<
     ethercrab::subdevice_group::PreOpPdi,
 >;
 
-/// Stack that must be left for an operation on ethercrab's group (see [`on_group_stack`]).
-const GROUP_RED_ZONE: usize = 4 << 20;
-/// Stack given to such an operation when less is left: debug builds copy the ~300 KB group
-/// several times on the stack within one operation.
-const GROUP_STACK: usize = 32 << 20;
+/// Stack given to an operation on ethercrab's group (see [`on_group_stack`]): debug builds
+/// copy the ~300 KB group many times within one poll (ethercrab's discovery of a 1,024-slot
+/// group took more than the main thread's 8 MB). Address space only: pages are touched as
+/// the operation uses them.
+const GROUP_STACK: usize = 64 << 20;
 
-/// Runs `f`, an operation on ethercrab's group, on the thread's own stack when at least
-/// [`GROUP_RED_ZONE`] of it is left (the main thread's 8 MB), else on a new stack of
-/// [`GROUP_STACK`] on the heap (spawned threads get 2 MB: a test's, a library user's).
+/// Runs `f`, an operation on ethercrab's group, on a stack of [`GROUP_STACK`] bytes
+/// allocated for it (unless the thread's own has that much left).
 pub(crate) fn on_group_stack<R>(f: impl FnOnce() -> R) -> R {
-    stacker::maybe_grow(GROUP_RED_ZONE, GROUP_STACK, f)
+    stacker::maybe_grow(GROUP_STACK, GROUP_STACK, f)
 }
 
 /// Where ethercrab's group is. Boxed: a group holds [`MAX_SLAVES`] subdevices and the

@@ -237,3 +237,51 @@ fn a_declared_unit_is_what_write_watch_and_record_speak() {
     }
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// Beyond 64 slaves (ethercrab's group was sized for 64): a segment of 130 twins — 100
+/// EL2008 (the ESC alone) and 30 EL3002 (CoE, the slave stack) — is scanned, brought to OP
+/// and cycled by the verbs, and the last slave's input is recorded every cycle.
+#[test]
+fn a_segment_of_130_slaves_is_scanned_brought_to_op_and_cycled() {
+    let r = oxicat_testkit::served::reference().join("esi-vendor");
+    let sim = format!(
+        "esi={}:EL2008*100 esi={}:EL3002*30",
+        r.join("Beckhoff-EL2xxx.xml").display(),
+        r.join("Beckhoff-EL30xx.xml").display()
+    );
+    let out = ok(&["slaves", "--sim", &sim]);
+    let lines: Vec<&str> = out.lines().skip(1).collect();
+    assert_eq!(lines.len(), 130, "{out}");
+    assert!(
+        lines[99].ends_with("EL2008") && lines[129].ends_with("EL3002"),
+        "{out}"
+    );
+    let out = ok(&["states", "op", "--sim", &sim]);
+    assert_eq!(
+        out.lines().filter(|l| l.contains(": OP")).count(),
+        130,
+        "{out}"
+    );
+    let dir = std::env::temp_dir().join(format!("oxicat-master-130-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let csv = dir.join("run.csv");
+    let out = ok(&[
+        "record",
+        "--free-run",
+        "--cycle",
+        "1ms",
+        "--duration",
+        "50ms",
+        "129.0x6010:11",
+        "-o",
+        csv.to_str().unwrap(),
+        "--sim",
+        &sim,
+    ]);
+    assert!(
+        out.starts_with("50 cycles of 1 variables") && out.contains("(0 working-counter errors)"),
+        "{out}"
+    );
+    let text = std::fs::read_to_string(&csv).unwrap();
+    assert_eq!(text.lines().count(), 51, "{text}");
+}
