@@ -1,7 +1,7 @@
 //! The axis communication hub end to end: firmware (`oxicat-devices`), plant
 //! (`oxicat-plant`) and an ethercrab master on the virtual segment.
 
-use oxicat_devices::axis_hub::rig::{run_scenario, HubSync, ScenarioConfig, SimOneWire};
+use oxicat_devices::axis_hub::rig::{run_scenario, HubSync, ScenarioConfig, Script, SimOneWire};
 use oxicat_devices::axis_hub::{codes, device, onewire, ws2812};
 use oxicat_plant::onewire::{ds18b20_rom, Ds18b20, OneWireNet};
 use oxicat_plant::ws2812::decode;
@@ -141,4 +141,178 @@ fn bring_up_sm_synchronous_and_dc() {
         let r = run_scenario(sii(), &cfg, &mut |l| lines.push(l.to_string())).expect("runs");
         assert!(r.ok(), "{sync:?}: {}", lines.join("\n"));
     }
+}
+
+fn scripted(script: Script) -> (oxicat_devices::axis_hub::rig::ScenarioReport, String) {
+    let cfg = ScenarioConfig {
+        script,
+        ..ScenarioConfig::default()
+    };
+    let mut lines = Vec::new();
+    let r = run_scenario(sii(), &cfg, &mut |l| lines.push(l.to_string())).expect("runs");
+    (r, lines.join("\n"))
+}
+
+#[test]
+fn master_commands_end_to_end_and_the_init_warning_colour() {
+    let (r, log) = scripted(Script::Commands);
+    assert!(r.ok(), "{log}");
+    for code in [
+        codes::ERR_ECAT_CMD_FAULT,
+        codes::ERR_ECAT_CMD_SOFTFAULT,
+        codes::ERR_TEMP_SENS_OVERHEAT,
+    ] {
+        assert!(r.errors_seen.contains(&code), "{code} at the master\n{log}");
+    }
+    for code in [
+        codes::EV_ECAT_CMD_ACK,
+        codes::EV_ECAT_CMD_LED_TOGGLE,
+        codes::EV_ECAT_APP_OP,
+    ] {
+        assert!(r.events_seen.contains(&code), "{code} at the master\n{log}");
+    }
+}
+
+#[test]
+fn led_faults_restart_the_channels_and_escalate_to_the_task_fault() {
+    let (r, log) = scripted(Script::LedFaults);
+    assert!(r.ok(), "{log}");
+    for code in [
+        codes::ERR_LED_OSTIM,
+        codes::ERR_LED_INIT,
+        codes::ERR_LED_TIMEOUT,
+        codes::ERR_LED_DSM_FAULT,
+    ] {
+        assert!(r.errors_seen.contains(&code), "{code} at the master\n{log}");
+    }
+}
+
+#[test]
+fn the_whole_sensor_bus_lost_is_the_temperature_task_fault() {
+    let (r, log) = scripted(Script::TempBusLost);
+    assert!(r.ok(), "{log}");
+    assert!(r.errors_seen.contains(&codes::ERR_TEMP_DSM_FAULT), "{log}");
+}
+
+#[test]
+fn an_esc_state_out_of_step_with_the_stack_is_the_ecat_task_fault() {
+    let (r, log) = scripted(Script::EscStateGlitch);
+    assert!(r.ok(), "{log}");
+    assert!(r.errors_seen.contains(&codes::ERR_ECAT_DSM_FAULT), "{log}");
+}
+
+#[test]
+fn dc_bring_up_err_1302_comes_from_a_sync0_start_time_in_the_past() {
+    // The rig's default start delay (two cycles): SYNC0 starts before OP, no 1302.
+    let cfg = ScenarioConfig {
+        sync: HubSync::Dc,
+        bring_up_only: true,
+        ..ScenarioConfig::default()
+    };
+    let mut lines = Vec::new();
+    let r = run_scenario(sii(), &cfg, &mut |l| lines.push(l.to_string())).expect("runs");
+    assert!(r.ok(), "{}", lines.join("\n"));
+    assert_eq!(r.errors_seen, Vec::<u16>::new(), "{}", lines.join("\n"));
+    // 0x0990 reads the next SYNC0 pulse: on the master's 10 ms grid.
+    let (next, now) = r.dc_start.expect("DC registers");
+    assert_eq!(next % cfg.cycle_ns, 0, "next pulse {next}");
+    assert!(
+        next > now && next - now <= cfg.cycle_ns,
+        "next {next} now {now}"
+    );
+    // 1 ms, under the 10 ms cycle (the value the rig used before): ethercrab rounds the
+    // start time down into the past, the ESC's 32-bit compare reaches it only after the
+    // wrap (start time moved by 2^32 ns), the node is in OP without SYNC0 and says 1302 —
+    // cleared once SYNC0 runs.
+    let cfg = ScenarioConfig {
+        dc_start_delay_ns: 1_000_000,
+        ..cfg
+    };
+    let mut lines = Vec::new();
+    let r = run_scenario(sii(), &cfg, &mut |l| lines.push(l.to_string())).expect("runs");
+    assert!(r.ok(), "{}", lines.join("\n"));
+    assert_eq!(r.errors_seen, vec![codes::ERR_ECAT_COMM_LOST]);
+    // The pulses are 2^32 ns after the master's grid: their phase is 2^32 mod 10 ms.
+    let (next, _) = r.dc_start.expect("DC registers");
+    assert_eq!(
+        next % cfg.cycle_ns,
+        (1u64 << 32) % cfg.cycle_ns,
+        "next pulse {next}"
+    );
+}
+
+#[test]
+fn an_esc_without_its_eeprom_is_err_ecat_init_until_the_master_writes_it() {
+    use oxicat_devices::axis_hub::rig::{attach_hub, hub_esc, HubConfig};
+    use oxicat_master::{AlState, Link, Master};
+    use oxicat_sim::segment::Segment;
+    use std::sync::{Arc, Mutex};
+    let good = sii();
+    let mut bad = good.clone();
+    bad[14] ^= 0xFF; // the configuration area's CRC: the ESC loads nothing
+    let mut seg = Segment::new();
+    let id = seg.add(hub_esc(bad));
+    let hub = attach_hub(&mut seg, id, &HubConfig::default()).expect("attach");
+    seg.advance_by(1_500_000_000);
+    {
+        let h = hub.lock();
+        assert!(h.slave().is_none(), "no stack on an unconfigured ESC");
+        assert!(h.app.sys.is_active(codes::ERR_ECAT_INIT));
+        assert!(
+            !h.app.sys.is_active(codes::ERR_ECAT_TIMEOUT),
+            "the ESC answers"
+        );
+    }
+    // The master (raw APWR datagrams: the slave has no station address yet) writes the
+    // configuration area's CRC word back (0x0502 write command, word 7) and reloads the
+    // area (command 0x04, as at power-up).
+    let apwr = |seg: &mut Segment, reg: u16, data: &[u8]| {
+        use oxicat_wire::{Command, DatagramHeader, EcatFrame, EthernetHeader, FrameBuilder};
+        let mut buf = [0u8; 64];
+        let eth = EthernetHeader {
+            dst: [0xFF; 6],
+            src: [0x10; 6],
+            vlan_tci: None,
+            payload_offset: 14,
+        };
+        let mut b = FrameBuilder::new(&mut buf, &eth).expect("frame");
+        b.push(
+            DatagramHeader::physical(Command::Apwr, 1, 0, reg, data.len() as u16),
+            data,
+        )
+        .expect("datagram");
+        let n = b.finish();
+        let back = seg.exchange(&buf[..n]).expect("frame back");
+        let (_, f) = EcatFrame::parse_ethernet(&back).expect("EtherCAT frame");
+        let wkc = f.datagrams().next().expect("datagram").expect("parses").wkc;
+        assert_eq!(wkc, 1, "APWR 0x{reg:04X}");
+    };
+    apwr(&mut seg, 0x0500, &[0]);
+    apwr(&mut seg, 0x0504, &7u32.to_le_bytes());
+    apwr(&mut seg, 0x0508, &[good[14], good[15]]);
+    apwr(&mut seg, 0x0502, &[0x01, 0x02]);
+    seg.advance_by(20_000_000);
+    apwr(&mut seg, 0x0502, &[0x00, 0x04]);
+    seg.advance_by(1_500_000_000);
+    assert!(
+        hub.lock().slave().is_some(),
+        "the stack started on the retry"
+    );
+    let seg = Arc::new(Mutex::new(seg));
+    let mut m = Master::open(Link::Sim(seg.clone())).expect("master");
+    m.request_state(&[0], AlState::PreOp).expect("PRE-OP");
+    let word = |b: Vec<u8>| b.iter().rev().fold(0u32, |a, &x| a << 8 | x as u32);
+    let status = word(m.sdo_upload(0, 0x6001, 1).expect("STATUS"));
+    let error = word(m.sdo_upload(0, 0x6001, 3).expect("ERROR"));
+    let event = word(m.sdo_upload(0, 0x6001, 2).expect("EVENT"));
+    assert_eq!(
+        (status >> 4) & 0x3FFF,
+        codes::ERR_ECAT_INIT as u32,
+        "last error"
+    );
+    assert_eq!(error, 0, "cleared once the ESC was configured");
+    assert!(
+        [codes::EV_SOES_RESPAWNED, codes::EV_ECAT_APP_INIT].contains(&(event as u16)),
+        "event {event}"
+    );
 }

@@ -285,3 +285,46 @@ fn tracks_and_keeps_the_gait(s: &Scenario, r: &TrotRun) {
         .fold((f64::MAX, f64::MIN), |(a, b), &y| (a.min(y), b.max(y)));
     assert!((hi - lo - 0.04).abs() < 0.003, "clearance {:.4} m", hi - lo);
 }
+
+/// The thesis' DC split (`bus.sync1`, §2.4.3 "SyncManager/Sync0/Sync1"): outputs mapped on
+/// the SM2 event, the application on SYNC0, the inputs latched on SYNC1. The trot runs and
+/// tracks as with SYNC0 alone; every node is in DC SYNC1 mode (0x1C33:01 = 3) with the
+/// shift in 0x1C33:03 and took a SYNC1 interrupt every cycle; the default has neither.
+#[test]
+fn thesis_dc_split_latches_the_inputs_on_sync1() {
+    for shift_us in [0u32, 100] {
+        let s = short(2.0).with_sync1(shift_us);
+        let r = run(&s);
+        tracks_and_keeps_the_gait(&s, &r);
+        for n in &r.pdi.nodes {
+            assert_eq!(
+                n.input_sync,
+                Some((3, shift_us * 1000)),
+                "shift {shift_us} µs"
+            );
+            assert!(n.sync1.unwrap_or(0) >= r.rows.len() as u64, "{:?}", n.sync1);
+        }
+    }
+    let r = run(&short(0.5));
+    for n in &r.pdi.nodes {
+        assert_eq!((n.input_sync, n.sync1), (Some((2, 0)), Some(0)));
+    }
+}
+
+#[test]
+fn a_sync1_shift_not_below_the_cycle_is_refused_with_its_key() {
+    let text = DEFAULT_TOML.replace(
+        "sync0_shift_us = 200",
+        "sync0_shift_us = 200\nsync1 = true\nsync1_shift_us = 400",
+    );
+    let e = Scenario::parse(&text)
+        .expect_err("shift = cycle")
+        .to_string();
+    assert!(e.contains("bus.sync1_shift_us") && e.contains("400"), "{e}");
+    let text = DEFAULT_TOML.replace(
+        "sync0_shift_us = 200",
+        "sync0_shift_us = 200\nsync1 = true\nsync1_shift_us = 150",
+    );
+    let s = Scenario::parse(&text).expect("a valid split");
+    assert!(s.bus.sync1 && s.bus.sync1_shift_us == 150);
+}

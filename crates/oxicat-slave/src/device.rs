@@ -152,7 +152,8 @@ pub enum SyncMode {
     SmSync = 1,
     /// DC SYNC0.
     DcSync0 = 2,
-    /// DC SYNC1 (SYNC0 for the application, SYNC1 for input latch).
+    /// DC SYNC1: outputs mapped on the SM2 event, the application on SYNC0, the inputs
+    /// latched on SYNC1 (0x1C33:03 = the SYNC1 delay).
     DcSync1 = 3,
 }
 

@@ -193,6 +193,8 @@ pub struct Slave<P: Pdi, const N: usize, const M: usize = 256> {
     diag: SyncDiag,
     /// The TxPDO mapping writes every bit of SM3 (no clearing needed).
     tx_full: bool,
+    /// DC SYNC1 mode: the PDI interrupt took a new SM2 buffer since the last SYNC0.
+    sm2_taken: bool,
 }
 
 type R<P> = Result<(), <P as Pdi>::Error>;
@@ -226,6 +228,7 @@ impl<P: Pdi, const N: usize, const M: usize> Slave<P, N, M> {
             stats: Stats::default(),
             diag,
             tx_full: false,
+            sm2_taken: false,
         };
         for n in 0..4 {
             Self::sm_enable(pdi, n, false).map_err(InitError::Pdi)?;
@@ -320,6 +323,16 @@ impl<P: Pdi, const N: usize, const M: usize> Slave<P, N, M> {
     }
 
     fn on_pdi_irq_inner<A: Application<N>>(&mut self, pdi: &mut P, app: &mut A) -> R<P> {
+        if self.sync == SyncMode::DcSync1 && self.state >= AlState::SafeOp {
+            // DC with SYNC1 (the SSC's and the Laelaps thesis' split): the outputs are
+            // mapped on the SM2 event, the application runs on SYNC0, the inputs on SYNC1.
+            let ev = pdi.al_event_request()?;
+            if self.rx_map.bytes() > 0 && ev & reg::ev_sm(2) != 0 {
+                self.read_outputs(pdi, ev)?;
+                self.sm2_taken = true;
+            }
+            return Ok(());
+        }
         if self.sync != SyncMode::SmSync || self.state < AlState::SafeOp {
             return Ok(());
         }
@@ -362,7 +375,8 @@ impl<P: Pdi, const N: usize, const M: usize> Slave<P, N, M> {
         }
         let ev = pdi.al_event_request()?;
         let sm_event = if self.rx_map.bytes() > 0 {
-            Some(ev & reg::ev_sm(2) != 0)
+            let taken = core::mem::take(&mut self.sm2_taken);
+            Some(ev & reg::ev_sm(2) != 0 || taken)
         } else if self.tx_map.bytes() > 0 {
             Some(ev & reg::ev_sm(3) != 0)
         } else {
@@ -380,8 +394,9 @@ impl<P: Pdi, const N: usize, const M: usize> Slave<P, N, M> {
                 d.publish(&mut self.od);
             }
         }
-        self.cycle_ev(pdi, app, ev, true, inputs)?;
-        if self.rx_map.bytes() > 0 {
+        // SYNC0 alone maps the outputs too; with SYNC1 the SM2 interrupt did.
+        self.cycle_ev(pdi, app, ev, inputs, inputs)?;
+        if inputs && self.rx_map.bytes() > 0 {
             self.check_exceeded(pdi)?;
         }
         Ok(())
@@ -784,6 +799,7 @@ impl<P: Pdi, const N: usize, const M: usize> Slave<P, N, M> {
         self.tx_map = tx;
         self.tx_full = tx.covers_all();
         self.sync = mode;
+        self.sm2_taken = false;
         self.diag.missed_count = 0;
         self.diag.exceeded_count = 0;
         self.diag.publish(&mut self.od);
@@ -791,7 +807,7 @@ impl<P: Pdi, const N: usize, const M: usize> Slave<P, N, M> {
         // mode the SM event that triggers the cycle (an AL control event still pending
         // would otherwise hold the line and hide the next edge); else AL control only.
         let mask = match mode {
-            SyncMode::SmSync if rx.bytes() > 0 => reg::ev_sm(2),
+            SyncMode::SmSync | SyncMode::DcSync1 if rx.bytes() > 0 => reg::ev_sm(2),
             SyncMode::SmSync => reg::ev_sm(3),
             _ => reg::EV_AL_CONTROL,
         };
@@ -836,6 +852,15 @@ impl<P: Pdi, const N: usize, const M: usize> Slave<P, N, M> {
             }
             let _ = self.od.set(0x1C32, 2, cyc);
             let _ = self.od.set(0x1C33, 2, cyc);
+            // ETG.1020: 0x1C33:03 shift time = from SYNC0 to the input latch, which with
+            // SYNC1 is the SYNC1 cycle time register (a delay after SYNC0 when shorter
+            // than the SYNC0 cycle); 0 without SYNC1.
+            let shift = if mode == SyncMode::DcSync1 {
+                pdi.read_u32(reg::DC_SYNC1_CYCLE)?
+            } else {
+                0
+            };
+            let _ = self.od.set(0x1C33, 3, shift);
         } else {
             match mode {
                 SyncMode::DcSync0 | SyncMode::DcSync1 => {

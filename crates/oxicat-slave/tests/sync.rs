@@ -146,10 +146,55 @@ fn dc_sm_event_missed_counter<P: Port>() {
     assert_eq!(up_u16(&mut b, 0x1C32, 0x0B), 0);
 }
 
+/// DC SYNC1 (ETG.1020 DC SYNC1 mode, the Laelaps thesis' split): the outputs are mapped on
+/// the SM2 event, the application runs on SYNC0, the inputs are written on SYNC1 only;
+/// 0x1C33:03 shows the SYNC1 delay (the shift time of the input latch).
+fn dc_sync1_split<P: Port>() {
+    let mut b = Bench::<P>::new();
+    b.enter_preop();
+    b.config_pd();
+    b.download(0x1C32, 1, false, &3u16.to_le_bytes()).unwrap();
+    b.wr(0x09A4, &50_000u32.to_le_bytes());
+    activate_dc(&mut b, 200_000, true);
+    assert_eq!(b.request(4), (4, 0));
+    assert_eq!(b.s.sync_mode(), SyncMode::DcSync1);
+    assert_eq!(b.upload(0x1C33, 1, false).unwrap(), 3u16.to_le_bytes());
+    assert_eq!(b.upload(0x1C33, 3, false).unwrap(), 50_000u32.to_le_bytes());
+    assert_eq!(b.request(8), (8, 0));
+    // The SM2 event maps the outputs at once; the application does not run.
+    let c0 = b.app.cycles;
+    b.wr(SM2, &[0, 7, 0, 0]);
+    b.s.on_pdi_irq(&mut b.drv, &mut b.app).unwrap();
+    assert_eq!(b.s.od().get::<i16>(0x7000, 2), Ok(7));
+    assert_eq!(b.app.cycles, c0);
+    // SYNC0: the application runs, the inputs are not written yet.
+    let s0 = b.sync0;
+    while b.sync0 == s0 {
+        b.advance(10_000);
+    }
+    assert_eq!(b.app.cycles, c0 + 1);
+    assert_eq!(b.s.od().get::<i16>(0x6000, 3), Ok(14));
+    let (d, _) = b.rd(SM3, 7);
+    assert_eq!(i16::from_le_bytes([d[1], d[2]]), 0, "inputs before SYNC1");
+    // SYNC1, 50 µs later: the inputs.
+    b.advance(60_000);
+    assert_eq!(b.app.cycles, c0 + 1);
+    let (d, _) = b.rd(SM3, 7);
+    assert_eq!(i16::from_le_bytes([d[1], d[2]]), 14, "inputs at SYNC1");
+    // Outputs taken by the interrupt count as seen: no SM event missed.
+    for k in 0..5u8 {
+        b.wr(SM2, &[0, k, 0, 0]);
+        b.s.on_pdi_irq(&mut b.drv, &mut b.app).unwrap();
+        b.advance(200_000);
+    }
+    assert_eq!(up_u16(&mut b, 0x1C32, 0x0B), 0);
+}
+
 oxicat_testkit::every_pdi!(
     sm_synchronous,
     dc_sync0,
     dc_cycle_too_small,
     dc_sync1_mode_needs_sync1,
     dc_sm_event_missed_counter,
+    dc_sync1_split,
 );

@@ -39,6 +39,12 @@ pub struct TrotArgs {
     /// delayed/lost SYNC0s per node (default: the scenario's `[pdi] exec_time`, off).
     #[arg(long)]
     pub bus_time: bool,
+    /// The thesis' DC split with SYNC1 this many µs after SYNC0 (0: with SYNC0, as the
+    /// thesis' delay times): the leg nodes map their outputs on the SM2 event, run the
+    /// application on SYNC0 and latch their inputs on SYNC1 (0x1C32:01 = 3, 0x1C33:03 =
+    /// the shift). Default: the scenario's `bus.sync1` (off: all three on SYNC0).
+    #[arg(long, value_name = "US")]
+    pub sync1: Option<u32>,
     /// Output directory.
     #[arg(long, default_value = "out/trot")]
     pub out: PathBuf,
@@ -101,6 +107,20 @@ pub fn run_with(a: TrotArgs, runner: &mut TrotRunner<'_>) -> Result<String, CliE
     }
     if a.bus_time {
         s = s.with_exec_time(ExecTime::Thesis);
+    }
+    if let Some(us) = a.sync1 {
+        if us >= s.bus.cycle_us {
+            return Err(UsageError::OutOfRange {
+                option: "--sync1",
+                value: us.to_string(),
+                allowed: format!(
+                    "0…{} µs (below bus.cycle_us)",
+                    s.bus.cycle_us.saturating_sub(1)
+                ),
+            }
+            .into());
+        }
+        s = s.with_sync1(us);
     }
     std::fs::create_dir_all(&a.out).map_err(|e| MasterError::File(a.out.clone(), e))?;
     let bar = if a.quiet {
@@ -249,5 +269,20 @@ mod tests {
         let a = trot(&["--pdi", "lan9252", "--bus-time"]);
         assert!(a.bus_time);
         assert_eq!(a.pdi.as_deref(), Some("lan9252"));
+    }
+
+    #[test]
+    fn sync1_is_opt_in_and_range_checked_before_anything_runs() {
+        assert_eq!(trot(&[]).sync1, None);
+        assert_eq!(trot(&["--sync1", "0"]).sync1, Some(0));
+        let mut a = trot(&["--sync1", "400", "--no-plots", "-q"]);
+        a.out = std::env::temp_dir().join(format!("oxicat-sync1-{}", std::process::id()));
+        let e = super::run_with(a, &mut |_, _| panic!("must not run"))
+            .expect_err("400 µs is the whole cycle")
+            .to_string();
+        assert!(
+            e.contains("--sync1") && e.contains("400") && e.contains("0…399"),
+            "{e}"
+        );
     }
 }

@@ -68,6 +68,7 @@ fn pandas_reads_the_parquet_recording_as_the_csv() {
         pdi: None,
         spi_mhz: None,
         bus_time: false,
+        sync1: None,
         out: out.clone(),
         no_plots: true,
         format: Format::Both,

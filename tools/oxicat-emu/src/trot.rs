@@ -141,6 +141,8 @@ impl TrotNode for ImageLeg {
                 pdi_errors: 0,
                 spi,
                 timing: None,
+                sync1: None,
+                input_sync: None,
             },
         }
     }

@@ -127,6 +127,8 @@ pub struct HubApp<B: OneWireBus, L: LedStrip> {
     last_cmd: [u16; 4],
     /// The master's custom colour, if one is commanded.
     pub custom: Option<Rgb>,
+    /// False while the master has toggled the LED rings off.
+    pub lit: bool,
     /// The node is in OP (kept by the state-change hook).
     pub op: bool,
     /// Application cycles run.
@@ -147,6 +149,7 @@ impl<B: OneWireBus, L: LedStrip> HubApp<B, L> {
             published: [TEMP_INVALID; SENSORS],
             last_cmd: [0; 4],
             custom: None,
+            lit: true,
             op: false,
             cycles: 0,
             io: None,
@@ -158,34 +161,45 @@ impl<B: OneWireBus, L: LedStrip> HubApp<B, L> {
         &self.published
     }
 
+    /// Executes a changed master command: `EV_ECAT_CMD_ACK` (or `EV_ECAT_CMD_LED_TOGGLE`)
+    /// when done, `ERR_ECAT_CMD_FAULT` when a known command's argument is out of range
+    /// (nothing changes), `ERR_ECAT_CMD_SOFTFAULT` for an unknown code (ignored).
     fn command(&mut self, cmd: [u16; 4]) {
         if cmd == self.last_cmd {
             return;
         }
         self.last_cmd = cmd;
         let [c, v0, v1, v2] = cmd;
-        let ok = match c {
+        let byte = |v: u16| u8::try_from(v).ok();
+        let code = match c {
             device::CMD_NONE => return,
-            device::CMD_LED_CUSTOM => {
-                let b = |v: u16| v.min(255) as u8;
-                self.custom = Some(Rgb::new(b(v0), b(v1), b(v2)));
-                true
-            }
+            device::CMD_LED_CUSTOM => match (byte(v0), byte(v1), byte(v2)) {
+                (Some(r), Some(g), Some(b)) => {
+                    self.custom = Some(Rgb::new(r, g, b));
+                    codes::EV_ECAT_CMD_ACK
+                }
+                _ => codes::ERR_ECAT_CMD_FAULT,
+            },
             device::CMD_LED_AUTO => {
                 self.custom = None;
-                true
+                codes::EV_ECAT_CMD_ACK
             }
             device::CMD_SET_THRESHOLD => {
-                self.temp.threshold = v0 as i16;
-                true
+                let t = v0 as i16;
+                if device::THRESHOLD_RANGE.contains(&t) {
+                    self.temp.threshold = t;
+                    codes::EV_ECAT_CMD_ACK
+                } else {
+                    codes::ERR_ECAT_CMD_FAULT
+                }
             }
-            _ => false,
+            device::CMD_LED_TOGGLE => {
+                self.lit = !self.lit;
+                codes::EV_ECAT_CMD_LED_TOGGLE
+            }
+            _ => codes::ERR_ECAT_CMD_SOFTFAULT,
         };
-        self.sys.post(if ok {
-            codes::EV_ECAT_CMD_ACK
-        } else {
-            codes::ERR_ECAT_CMD_SOFTFAULT
-        });
+        self.sys.post(code);
     }
 }
 
@@ -202,6 +216,7 @@ impl<const N: usize, B: OneWireBus, L: LedStrip> Application<N> for HubApp<B, L>
 
     fn safe_outputs(&mut self, _od: &mut Od<N>) {
         self.custom = None;
+        self.lit = true;
         self.last_cmd = [0; 4];
     }
 
@@ -223,12 +238,7 @@ impl<const N: usize, B: OneWireBus, L: LedStrip> Application<N> for HubApp<B, L>
             self.command(cmd);
         }
         self.sys.handle_events();
-        for (v, &t) in io.temps.iter().zip(self.published.iter()) {
-            od.store(*v, t);
-        }
-        od.store(io.status, self.sys.word().0);
-        od.store(io.event, self.sys.last_event());
-        od.store(io.error, self.sys.active_error());
+        self.publish(od);
     }
 
     fn timer(&mut self, id: u8, _od: &mut Od<N>) {
@@ -237,6 +247,24 @@ impl<const N: usize, B: OneWireBus, L: LedStrip> Application<N> for HubApp<B, L>
 }
 
 impl<B: OneWireBus, L: LedStrip> HubApp<B, L> {
+    /// Writes the temperatures and STATUS/EVENT/ERROR into the object dictionary (after
+    /// every process-data cycle, and after every task release so that an SDO upload of
+    /// 0x6001 in PRE-OP, where no cycle runs, reads the current state).
+    pub fn publish<const N: usize>(&mut self, od: &mut Od<N>) {
+        if self.io.is_none() {
+            self.io = HubIo::resolve(od);
+        }
+        let Some(io) = self.io else {
+            return;
+        };
+        for (v, &t) in io.temps.iter().zip(self.published.iter()) {
+            od.store(*v, t);
+        }
+        od.store(io.status, self.sys.word().0);
+        od.store(io.event, self.sys.last_event());
+        od.store(io.error, self.sys.active_error());
+    }
+
     /// One release of task `id` (temperature or LED), then the event handler.
     pub fn run_task(&mut self, id: u8) {
         match id {
@@ -247,7 +275,7 @@ impl<B: OneWireBus, L: LedStrip> HubApp<B, L> {
                 }
             }
             TIMER_LED => {
-                let shown = ws2812::choose(&self.sys, self.op, self.custom);
+                let shown = ws2812::choose(&self.sys, self.op, self.custom, self.lit);
                 self.led.run(&mut self.strip, &mut self.sys, shown);
             }
             _ => {}
@@ -280,7 +308,13 @@ pub struct Supervisor {
     pub losses: u32,
     /// Port 0 link as DL status last showed it.
     pub link_up: bool,
+    /// Times the stack was re-created because it was out of step with the ESC
+    /// (`ERR_ECAT_DSM_FAULT`).
+    pub dsm_faults: u32,
     consecutive: u32,
+    mismatch: u32,
+    init_seen: bool,
+    esc_init_fault: bool,
     fault_ms: u32,
     last_outputs: u32,
     quiet_ms: u32,
@@ -296,7 +330,11 @@ impl Default for Supervisor {
             restarts: 0,
             losses: 0,
             link_up: false,
+            dsm_faults: 0,
             consecutive: 0,
+            mismatch: 0,
+            init_seen: false,
+            esc_init_fault: false,
             fault_ms: 0,
             last_outputs: 0,
             quiet_ms: 0,
@@ -339,23 +377,57 @@ impl<P: Pdi, B: OneWireBus, L: LedStrip> HubFirmware<P, B, L> {
         fw
     }
 
+    /// `ec_config`: the ESC must answer (else `ERR_ECAT_TIMEOUT`) and be configured from its
+    /// EEPROM, DL status 0x0110 bit 0 (else `ERR_ECAT_INIT`: a blank or corrupt EEPROM, as on
+    /// the report's first bring-up), then the stack starts.
     fn start_stack(&mut self, pdi: &mut P) {
+        let first = self.sup.phase != EcatPhase::Fault || self.sup.restarts == 0;
+        match pdi.read_u16(0x0110) {
+            Ok(dl) if dl & 1 == 0 => {
+                if !self.sup.esc_init_fault {
+                    self.sup.esc_init_fault = true;
+                    self.app.sys.post(codes::ERR_ECAT_INIT);
+                }
+                self.enter_fault();
+                return;
+            }
+            Ok(_) => {}
+            Err(e) => {
+                self.last_pdi_error = Some(e);
+                self.sup.pdi_errors = self.sup.pdi_errors.saturating_add(1);
+                if first {
+                    self.app.sys.post(codes::ERR_ECAT_TIMEOUT);
+                }
+                self.enter_fault();
+                return;
+            }
+        }
         match HubSlave::<P>::new(&device::DEF, pdi) {
             Ok(s) => {
                 self.slave = Some(s);
                 self.sup.phase = EcatPhase::Connected;
                 self.sup.consecutive = 0;
                 self.sup.fault_ms = 0;
+                self.sup.mismatch = 0;
+                self.sup.init_seen = false;
+                self.sup.esc_init_fault = false;
                 self.app.op = false;
                 self.app.sys.post(codes::EV_ECAT_ESC_INIT);
             }
-            Err(e) => {
-                if let oxicat_slave::InitError::Pdi(e) = e {
-                    self.last_pdi_error = Some(e);
-                }
+            Err(oxicat_slave::InitError::Pdi(e)) => {
+                self.last_pdi_error = Some(e);
                 self.sup.pdi_errors = self.sup.pdi_errors.saturating_add(1);
-                if self.sup.phase != EcatPhase::Fault || self.sup.restarts == 0 {
+                if first {
                     self.app.sys.post(codes::ERR_ECAT_TIMEOUT);
+                }
+                self.enter_fault();
+            }
+            Err(_) => {
+                // The definition does not fit the stack: nothing a retry changes, but the
+                // node keeps running and says so.
+                if !self.sup.esc_init_fault {
+                    self.sup.esc_init_fault = true;
+                    self.app.sys.post(codes::ERR_ECAT_INIT);
                 }
                 self.enter_fault();
             }
@@ -433,6 +505,9 @@ impl<P: Pdi, B: OneWireBus, L: LedStrip> HubFirmware<P, B, L> {
             // The tasks run with or without the stack (their data waits for it).
             _ => self.app.run_task(id),
         }
+        if let Some(s) = self.slave.as_mut() {
+            self.app.publish(s.od_mut());
+        }
     }
 
     fn supervise(&mut self, pdi: &mut P) {
@@ -455,8 +530,10 @@ impl<P: Pdi, B: OneWireBus, L: LedStrip> HubFirmware<P, B, L> {
         let state = slave.state();
         let wd_error = slave.error_indicated() && slave.status_code() == AlStatusCode::SM_WATCHDOG;
         let outputs = slave.stats().outputs;
-        let dl = pdi.read_u16(0x0110);
-        let dl = match dl {
+        let regs = pdi
+            .read_u16(0x0110)
+            .and_then(|dl| pdi.read_u16(0x0130).map(|al| (dl, al)));
+        let (dl, al) = match regs {
             Ok(v) => {
                 self.note(Ok(()));
                 v
@@ -466,6 +543,25 @@ impl<P: Pdi, B: OneWireBus, L: LedStrip> HubFirmware<P, B, L> {
                 return;
             }
         };
+        // The ESM and the ESC must agree on the state; a stack out of step with its ESC
+        // (AL status changed behind its back, e.g. a corrupted PDI write) is re-created.
+        if AlState::from_code((al & 0x0F) as u8) != Some(state) {
+            self.sup.mismatch += 1;
+        } else {
+            self.sup.mismatch = 0;
+        }
+        if self.sup.mismatch >= 2 {
+            self.sup.dsm_faults += 1;
+            self.app.sys.post(codes::ERR_ECAT_DSM_FAULT);
+            self.enter_fault();
+            self.start_stack(pdi);
+            if self.slave.is_some() {
+                self.app.sys.post(codes::EV_SOES_RESPAWNED);
+            }
+            self.sup.was_op = false;
+            self.app.sys.handle_events();
+            return;
+        }
         self.sup.link_up = dl & (1 << 4) != 0;
         if state == AlState::Op && outputs != self.sup.last_outputs {
             self.sup.quiet_ms = 0;
@@ -491,13 +587,20 @@ impl<P: Pdi, B: OneWireBus, L: LedStrip> HubFirmware<P, B, L> {
             self.sup.op_reported = true;
             sys.post(codes::EV_ECAT_APP_OP);
         }
-        if self.sup.was_op && state != AlState::Op && self.sup.phase == EcatPhase::Connected {
-            self.sup.op_reported = false;
-            sys.post(if state == AlState::Init {
-                codes::EV_ECAT_APP_INIT
-            } else {
-                codes::EV_ECAT_APP_NOOP
-            });
+        if state == AlState::Init {
+            // The report's ec_connected: ESC in INIT → EV_ECAT_APP_INIT (warning colour),
+            // once per stay in INIT (at boot, after a restart, on the master's request).
+            if !self.sup.init_seen {
+                self.sup.init_seen = true;
+                self.sup.op_reported = false;
+                sys.post(codes::EV_ECAT_APP_INIT);
+            }
+        } else {
+            self.sup.init_seen = false;
+            if self.sup.was_op && state != AlState::Op && self.sup.phase == EcatPhase::Connected {
+                self.sup.op_reported = false;
+                sys.post(codes::EV_ECAT_APP_NOOP);
+            }
         }
         self.sup.was_op = state == AlState::Op;
         sys.handle_events();

@@ -6,6 +6,17 @@
 //! bit above 23 was used. Here a code is a value in a bounded queue ([`EventQueue`]): every
 //! code posted is handled, in order; a full queue is counted ([`SystemState::dropped`]) and
 //! raises `ERR_SYS_UNKNOWN`, never silently.
+//!
+//! Where a code is raised: the report's listings say it for some (`ERR_LED_INIT` in
+//! `L_config`, `ERR_LED_OSTIM` when an osTimer cannot be started, `ERR_ECAT_INIT` in
+//! `ec_config`, `ERR_ECAT_COMM_LOST` in `ec_connected`); for the others it only names the
+//! code or marks it "currently being implemented", and the condition here is the one a
+//! firmware engineer would choose, said at each constant: the `*_DSM_FAULT` codes mean a
+//! task whose own recovery failed (LED channels restarted 3 times without a frame, no
+//! sensor answering on 3 read-outs, the stack out of step with its ESC's AL status), as
+//! the report's task manager detected stuck threads and re-created them;
+//! `ERR_ECAT_CMD_FAULT` a command understood but not executable (argument out of range),
+//! against `ERR_ECAT_CMD_SOFTFAULT` for a command not understood.
 
 /// No error.
 pub const ERR_SYS_NONE: u16 = 0;
@@ -19,31 +30,39 @@ pub const ERR_TEMP_SENS_LOST: u16 = 1102;
 pub const ERR_TEMP_SENS_TIMEOUT: u16 = 1103;
 /// A sensor is over the overheat threshold (hard).
 pub const ERR_TEMP_SENS_OVERHEAT: u16 = 1104;
-/// The temperature task failed (hard).
+/// The temperature task failed: sensors were found but no read-out of any of them succeeded
+/// [`super::onewire::TEMP_DSM_FAULT_RUNS`] times in a row; the task restarts (ROM search).
+/// Hard.
 pub const ERR_TEMP_DSM_FAULT: u16 = 1105;
 /// oxicat addition: a scratchpad failed its CRC-8 (soft).
 pub const ERR_TEMP_SENS_CRC: u16 = 1106;
-/// LED driver could not be configured.
+/// An LED channel (PWM timer + DMA stream) could not be configured (`L_config`).
 pub const ERR_LED_INIT: u16 = 1201;
 /// An LED DMA transfer did not complete in time.
 pub const ERR_LED_TIMEOUT: u16 = 1202;
 /// An LED DMA transfer could not be started.
 pub const ERR_LED_SEND: u16 = 1203;
-/// LED timer error.
+/// The one-shot guard timer of the LED transfers could not be armed (the report's osTimer
+/// errors).
 pub const ERR_LED_OSTIM: u16 = 1204;
-/// The LED task failed (hard).
+/// The LED task failed: [`super::ws2812::LED_DSM_FAULT_RESTARTS`] channel restarts in a row
+/// without a frame delivered (hard).
 pub const ERR_LED_DSM_FAULT: u16 = 1205;
-/// The ESC could not be initialised (hard).
+/// The ESC answers on the PDI but cannot be used: DL status 0x0110 bit 0 clear (its EEPROM
+/// configuration not loaded: blank or CRC error), retried every [`super::app::RESTART_MS`]
+/// (hard).
 pub const ERR_ECAT_INIT: u16 = 1301;
 /// EtherCAT communication lost: link down, SM watchdog, or no process data (hard).
 pub const ERR_ECAT_COMM_LOST: u16 = 1302;
 /// A PDI (SPI) access to the ESC timed out (hard).
 pub const ERR_ECAT_TIMEOUT: u16 = 1303;
-/// The EtherCAT task failed (hard).
+/// The EtherCAT task is out of step with the ESC: AL status 0x0130 shows another state than
+/// the stack's ESM on two supervisor passes in a row; the stack is re-created (hard).
 pub const ERR_ECAT_DSM_FAULT: u16 = 1304;
-/// A master command failed (hard).
+/// A master command was understood but cannot be carried out: an argument out of its range
+/// (hard: the node is not in the state the master commanded).
 pub const ERR_ECAT_CMD_FAULT: u16 = 1305;
-/// A master command was not understood (soft).
+/// A master command was not understood: unknown COMMAND code, ignored (soft).
 pub const ERR_ECAT_CMD_SOFTFAULT: u16 = 1306;
 
 /// Temperature task initialised (sensors found).
@@ -70,7 +89,7 @@ pub const EV_ECAT_DSM_INIT: u16 = 2321;
 pub const EV_SOES_RESPAWNED: u16 = 2331;
 /// A master command was executed.
 pub const EV_ECAT_CMD_ACK: u16 = 2351;
-/// LED toggle command.
+/// The master's LED toggle command was executed (rings off, or on again).
 pub const EV_ECAT_CMD_LED_TOGGLE: u16 = 2352;
 
 /// Codes above this are errors (report `ERR_OFFSET`).
@@ -157,17 +176,28 @@ const fn bit(code: u16) -> u32 {
 /// the others follow the same rule for the conditions oxicat can see end).
 const fn clears(event: u16) -> u32 {
     match event {
-        EV_TEMP_DSM_INIT => bit(ERR_TEMP_SENS_INIT),
+        EV_TEMP_DSM_INIT => bit(ERR_TEMP_SENS_INIT) | bit(ERR_TEMP_DSM_FAULT),
         EV_TEMP_OVERHEAT_CLEARED => bit(ERR_TEMP_SENS_OVERHEAT),
         EV_TEMP_SENS_BACK => {
             bit(ERR_TEMP_SENS_LOST) | bit(ERR_TEMP_SENS_CRC) | bit(ERR_TEMP_SENS_TIMEOUT)
         }
         EV_LED_UPTD | EV_LED_DSM_INIT => {
-            bit(ERR_LED_INIT) | bit(ERR_LED_TIMEOUT) | bit(ERR_LED_SEND) | bit(ERR_LED_OSTIM)
+            bit(ERR_LED_INIT)
+                | bit(ERR_LED_TIMEOUT)
+                | bit(ERR_LED_SEND)
+                | bit(ERR_LED_OSTIM)
+                | bit(ERR_LED_DSM_FAULT)
         }
-        EV_ECAT_APP_OP => bit(ERR_ECAT_COMM_LOST) | bit(ERR_ECAT_TIMEOUT) | bit(ERR_ECAT_INIT),
+        EV_ECAT_APP_OP => {
+            bit(ERR_ECAT_COMM_LOST)
+                | bit(ERR_ECAT_TIMEOUT)
+                | bit(ERR_ECAT_INIT)
+                | bit(ERR_ECAT_DSM_FAULT)
+        }
         EV_ECAT_ESC_INIT | EV_SOES_RESPAWNED => bit(ERR_ECAT_TIMEOUT) | bit(ERR_ECAT_INIT),
-        EV_ECAT_CMD_ACK => bit(ERR_ECAT_CMD_SOFTFAULT) | bit(ERR_ECAT_CMD_FAULT),
+        EV_ECAT_CMD_ACK | EV_ECAT_CMD_LED_TOGGLE => {
+            bit(ERR_ECAT_CMD_SOFTFAULT) | bit(ERR_ECAT_CMD_FAULT)
+        }
         _ => 0,
     }
 }
@@ -278,6 +308,7 @@ pub struct SystemState {
     inits: u8,
     started: bool,
     was_op: bool,
+    ecat_init: bool,
     last_error: u16,
     last_event: u16,
     /// Codes that could not be queued (the report lost these silently).
@@ -310,8 +341,15 @@ impl SystemState {
                         EV_TEMP_DSM_INIT => self.inits |= 1,
                         EV_LED_DSM_INIT => self.inits |= 2,
                         EV_ECAT_DSM_INIT => self.inits |= 4,
-                        EV_ECAT_APP_OP => self.was_op = true,
-                        EV_ECAT_APP_INIT | EV_ECAT_APP_NOOP => self.was_op = false,
+                        EV_ECAT_APP_OP => {
+                            self.was_op = true;
+                            self.ecat_init = false;
+                        }
+                        EV_ECAT_APP_INIT => {
+                            self.was_op = false;
+                            self.ecat_init = true;
+                        }
+                        EV_ECAT_APP_NOOP => self.was_op = false,
                         _ => {}
                     }
                     if self.inits == 7 {
@@ -359,6 +397,12 @@ impl SystemState {
                 .find(|&c| self.active & bit(c) != 0 && (classify(c) == Kind::Hard) == hard)
         };
         pick(true).or_else(|| pick(false)).unwrap_or(ERR_SYS_NONE)
+    }
+
+    /// The report's INIT warning: the node's ESM was in INIT (`EV_ECAT_APP_INIT`) and has
+    /// not reached OP since (`EV_ECAT_APP_OP`); the LEDs show the warning colour.
+    pub fn ecat_init_warning(&self) -> bool {
+        self.ecat_init
     }
 
     /// True once every task reported its initialisation (`STATUS_STARTED`).

@@ -30,12 +30,21 @@ pub const PRODUCT_CODE: u32 = 0x1278_3456;
 
 /// COMMAND: no command.
 pub const CMD_NONE: u16 = 0;
-/// COMMAND: show a custom LED colour, TEST VALUE0/1/2 = red/green/blue (0–255).
+/// COMMAND: show a custom LED colour, TEST VALUE0/1/2 = red/green/blue (0–255; a value
+/// above 255 refuses the command with `ERR_ECAT_CMD_FAULT`).
 pub const CMD_LED_CUSTOM: u16 = 1;
 /// COMMAND: LEDs back to the state colours.
 pub const CMD_LED_AUTO: u16 = 2;
-/// COMMAND: overheat threshold = TEST VALUE0 in 0.01 °C.
+/// COMMAND: overheat threshold = TEST VALUE0 in 0.01 °C (as INT16; outside
+/// [`THRESHOLD_RANGE`] refuses the command with `ERR_ECAT_CMD_FAULT`).
 pub const CMD_SET_THRESHOLD: u16 = 3;
+/// COMMAND: toggle the LED rings off / on again (`EV_ECAT_CMD_LED_TOGGLE`); a hard error
+/// still shows red while they are off. Commands act when the four output words change, so
+/// a second toggle is COMMAND 0 then 4 again.
+pub const CMD_LED_TOGGLE: u16 = 4;
+/// The thresholds [`CMD_SET_THRESHOLD`] accepts: the DS18B20's range, −55 … 125 °C, in
+/// 0.01 °C.
+pub const THRESHOLD_RANGE: core::ops::RangeInclusive<i16> = -5500..=12500;
 
 const fn tx(sub: u8, name: &'static str, t: DataType) -> EntryDef {
     EntryDef::new(sub, name, t, Access::RO).pdo(PdoMapping::Tx)

@@ -294,7 +294,14 @@ pub struct TempStats {
     pub bus_errors: u32,
     /// ROM searches run.
     pub searches: u32,
+    /// Task restarts after `ERR_TEMP_DSM_FAULT`.
+    pub restarts: u32,
 }
+
+/// Read-outs in a row in which no sensor of the bus answered with a good scratchpad that
+/// make the temperature task itself faulty (`ERR_TEMP_DSM_FAULT`): not one sensor lost but
+/// the whole bus (cable pulled, bus shorted). The task then restarts from its ROM search.
+pub const TEMP_DSM_FAULT_RUNS: u32 = 3;
 
 /// The temperature task (the report's Temperature SDM + owApp): scan until sensors are found,
 /// then every period read the previous conversion of each sensor and start the next.
@@ -309,6 +316,7 @@ pub struct TempTask {
     overheat: bool,
     init_reported: bool,
     init_error: bool,
+    dead_runs: u32,
     seq: u32,
     /// Overheat threshold in 0.01 °C.
     pub threshold: i16,
@@ -328,6 +336,7 @@ impl Default for TempTask {
             overheat: false,
             init_reported: false,
             init_error: false,
+            dead_runs: 0,
             seq: 0,
             threshold: DEFAULT_THRESHOLD,
             stats: TempStats::default(),
@@ -369,8 +378,25 @@ impl TempTask {
         }
         let mut frame = None;
         if self.converting && self.since_convert_us >= self.longest_conversion_us() {
-            frame = Some(self.read_all(bus, sys));
+            let f = self.read_all(bus, sys);
             self.converting = false;
+            if f.values[..self.count].iter().all(|&v| v == TEMP_INVALID) {
+                self.dead_runs += 1;
+            } else {
+                self.dead_runs = 0;
+            }
+            frame = Some(f);
+            if self.dead_runs >= TEMP_DSM_FAULT_RUNS {
+                // The report's task manager re-created a faulty thread: start again from the
+                // ROM search (sensor errors stay active until the sensors answer again).
+                sys.post(codes::ERR_TEMP_DSM_FAULT);
+                self.dead_runs = 0;
+                self.count = 0;
+                self.init_reported = false;
+                self.init_error = true;
+                self.stats.restarts += 1;
+                return frame;
+            }
         }
         if !self.converting {
             match convert_all(bus) {

@@ -56,30 +56,85 @@ impl OneWireBus for SimOneWire {
     }
 }
 
-/// The PWM+DMA channels: the last duty buffer per ring and when its transfer ends.
+/// The PWM+DMA channels: the last duty buffer per ring and when its transfer ends, the
+/// guard timer, and fault injection (a channel that cannot be configured, a DMA stream
+/// that never completes, a timer queue that refuses the guard).
 #[derive(Debug, Clone, Default)]
 pub struct SimLeds {
     /// Last buffer sent per ring.
     pub buffers: [Vec<u16>; ws2812::RINGS],
     busy_until: [u64; ws2812::RINGS],
     now: u64,
+    guard_at: Option<u64>,
+    /// Fault injection: the next this many `configure` calls fail.
+    pub fail_configure: u32,
+    /// Fault injection: the next this many guard timers cannot be armed.
+    pub fail_guard: u32,
+    /// Fault injection: rings whose DMA transfers never complete (until restarted and
+    /// un-stalled).
+    pub stalled: [bool; ws2812::RINGS],
+    /// `configure` calls (per ring).
+    pub configured: [u32; ws2812::RINGS],
+    /// `restart` calls (per ring).
+    pub restarted: [u32; ws2812::RINGS],
 }
 
 impl LedStrip for SimLeds {
-    type Error = core::convert::Infallible;
+    type Error = &'static str;
+
+    fn configure(&mut self, ring: usize) -> Result<(), Self::Error> {
+        if self.fail_configure > 0 {
+            self.fail_configure -= 1;
+            return Err("PWM/DMA channel set-up failed");
+        }
+        if let Some(c) = self.configured.get_mut(ring) {
+            *c += 1;
+        }
+        Ok(())
+    }
+
+    fn restart(&mut self, ring: usize) {
+        if let Some(c) = self.restarted.get_mut(ring) {
+            *c += 1;
+        }
+        if let Some(b) = self.busy_until.get_mut(ring) {
+            *b = self.now;
+        }
+        self.guard_at = None;
+    }
 
     fn start(&mut self, ring: usize, duties: &[u16]) -> Result<(), Self::Error> {
+        let stalled = self.stalled.get(ring).copied().unwrap_or(false);
         if let Some(b) = self.buffers.get_mut(ring) {
-            b.clear();
-            b.extend_from_slice(duties);
             let t = ws2812::HUB_TIMING;
-            self.busy_until[ring] = self.now + duties.len() as u64 * t.ns(t.period);
+            self.busy_until[ring] = if stalled {
+                u64::MAX
+            } else {
+                // The bits go out as the DMA feeds them: a stalled stream sends nothing.
+                b.clear();
+                b.extend_from_slice(duties);
+                self.now + duties.len() as u64 * t.ns(t.period)
+            };
         }
         Ok(())
     }
 
     fn done(&mut self, ring: usize) -> bool {
         self.busy_until.get(ring).is_none_or(|&t| self.now >= t)
+    }
+
+    fn arm_guard(&mut self, ms: u32) -> Result<(), Self::Error> {
+        if self.fail_guard > 0 {
+            self.fail_guard -= 1;
+            self.guard_at = None;
+            return Err("timer queue full");
+        }
+        self.guard_at = Some(self.now + ms as u64 * 1_000_000);
+        Ok(())
+    }
+
+    fn guard_expired(&mut self) -> bool {
+        self.guard_at.is_some_and(|t| self.now >= t)
     }
 }
 
@@ -335,6 +390,38 @@ pub struct ScenarioConfig {
     pub hub: HubConfig,
     /// Current into motor 0 for the overheat \[A\].
     pub heat_amps: f64,
+    /// What runs after the bring-up (unless `bring_up_only`).
+    pub script: Script,
+    /// DC: the master's `start_delay` of the first SYNC0 \[ns\]. ethercrab rounds
+    /// `system time + start_delay` *down* to a whole cycle, so a delay under one cycle gives
+    /// a start time in the past, which the ESC (32-bit start-time compare) reaches only when
+    /// the lower 32 bits of the system time come round again, ≈4.29 s later: the node is in
+    /// OP without SYNC0, takes no outputs, and its supervisor reports `ERR_ECAT_COMM_LOST`
+    /// (1302) until SYNC0 starts. The default is two cycles.
+    pub dc_start_delay_ns: u64,
+}
+
+/// The steps [`run_scenario`] runs after the bring-up.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum Script {
+    /// Overheat, a sensor unplugged, a CRC fault, the cable open for 2 s.
+    #[default]
+    Faults,
+    /// Every COMMAND of 0x7000 (custom colour, LED toggle, state colours, threshold), a
+    /// refused argument (1305), an unknown code (1306), and the master taking the node to
+    /// INIT (warning colour, EVENT 2312) and back to OP.
+    Commands,
+    /// LED faults: a guard timer refused (1204) and a channel that cannot be configured
+    /// (1201), a DMA stream that stalls (1202) and keeps stalling (1205); the channel
+    /// restarts and the rings recover.
+    LedFaults,
+    /// Every sensor unplugged: 1102, then the temperature task faulty (1105) and restarting;
+    /// plugged back: cleared.
+    TempBusLost,
+    /// The ESC's AL status changed behind the stack's back (a corrupted PDI write): the
+    /// EtherCAT task is out of step (1304) and re-creates the stack; the master brings the
+    /// node back to OP.
+    EscStateGlitch,
 }
 
 impl Default for ScenarioConfig {
@@ -345,6 +432,8 @@ impl Default for ScenarioConfig {
             bring_up_only: false,
             hub: HubConfig::default(),
             heat_amps: 6.0,
+            script: Script::Faults,
+            dc_start_delay_ns: 20_000_000,
         }
     }
 }
@@ -406,6 +495,11 @@ pub struct ScenarioReport {
     pub sensors_found: usize,
     /// Error codes the master saw in 0x6001:03, in order of appearance.
     pub errors_seen: Vec<u16>,
+    /// Event codes the master saw in 0x6001:02, in order of appearance.
+    pub events_seen: Vec<u16>,
+    /// DC: the SYNC0 start time in the ESC (0x0990) at the end, and the system time then
+    /// (0x0910) \[ns\].
+    pub dc_start: Option<(u64, u64)>,
 }
 
 impl ScenarioReport {
@@ -418,6 +512,10 @@ impl ScenarioReport {
 enum Req {
     Cycle([u16; 4]),
     AckOp,
+    /// Writes AL control.
+    Al(u16),
+    /// SDO upload.
+    Sdo(u16, u8),
 }
 
 fn lock(s: &Arc<Mutex<Segment>>) -> MutexGuard<'_, Segment> {
@@ -449,6 +547,7 @@ fn probe(seg: &Arc<Mutex<Segment>>) -> Option<u16> {
 
 struct Run<'a> {
     seg: Arc<Mutex<Segment>>,
+    id: SlaveId,
     hub: HubHandle,
     cycle_ns: u64,
     out: [u16; 4],
@@ -519,6 +618,9 @@ impl Run<'_> {
         if i.error != 0 && self.report.errors_seen.last() != Some(&i.error) {
             self.report.errors_seen.push(i.error);
         }
+        if i.event != 0 && self.report.events_seen.last() != Some(&i.event) {
+            self.report.events_seen.push(i.event);
+        }
         self.last = *i;
     }
 }
@@ -547,12 +649,29 @@ where
     Ok(false)
 }
 
-async fn script<F>(run: &mut Run<'_>, xchg: &mut F, cfg: &ScenarioConfig) -> Result<(), String>
+async fn run_script<F>(run: &mut Run<'_>, xchg: &mut F, cfg: &ScenarioConfig) -> Result<(), String>
+where
+    F: AsyncFnMut(Req) -> Result<Vec<u8>, String>,
+{
+    bring_up(run, xchg, cfg).await?;
+    if cfg.bring_up_only {
+        return Ok(());
+    }
+    match cfg.script {
+        Script::Faults => faults(run, xchg, cfg).await,
+        Script::Commands => commands(run, xchg).await,
+        Script::LedFaults => led_faults(run, xchg).await,
+        Script::TempBusLost => temp_bus_lost(run, xchg, cfg).await,
+        Script::EscStateGlitch => esc_state_glitch(run, xchg).await,
+    }
+}
+
+async fn bring_up<F>(run: &mut Run<'_>, xchg: &mut F, cfg: &ScenarioConfig) -> Result<(), String>
 where
     F: AsyncFnMut(Req) -> Result<Vec<u8>, String>,
 {
     use codes::*;
-    use ws2812::{COLOR_ERROR, COLOR_NORMAL, COLOR_WARNING};
+    use ws2812::COLOR_NORMAL;
     let ambient = (cfg.hub.ambient * 100.0) as i32;
     let sensors = cfg.hub.sensors.min(device::SENSORS);
     let ok = cycles_until(run, xchg, 6.0, |r, i| {
@@ -571,9 +690,15 @@ where
         ),
         ok && run.report.sensors_found == sensors,
     );
-    if cfg.bring_up_only {
-        return Ok(());
-    }
+    Ok(())
+}
+
+async fn faults<F>(run: &mut Run<'_>, xchg: &mut F, cfg: &ScenarioConfig) -> Result<(), String>
+where
+    F: AsyncFnMut(Req) -> Result<Vec<u8>, String>,
+{
+    use codes::*;
+    use ws2812::{COLOR_ERROR, COLOR_NORMAL, COLOR_WARNING};
 
     // 1. A motor heats: overheat (hard) -> red, 1104 at the master; it cools -> cleared.
     run.hub.lock().set_motor_current(0, cfg.heat_amps);
@@ -699,6 +824,395 @@ where
     Ok(())
 }
 
+/// Runs cycles with outputs `out` until `until` holds (at most `max_s`), notes `what`.
+async fn expect<F>(
+    run: &mut Run<'_>,
+    xchg: &mut F,
+    what: &str,
+    out: [u16; 4],
+    max_s: f64,
+    until: impl FnMut(&Run<'_>, &HubInputs) -> bool,
+) -> Result<bool, String>
+where
+    F: AsyncFnMut(Req) -> Result<Vec<u8>, String>,
+{
+    run.out = out;
+    let ok = cycles_until(run, xchg, max_s, until).await?;
+    run.note(what, ok);
+    Ok(ok)
+}
+
+/// Walks the node INIT → PRE-OP → SAFE-OP → OP with AL control writes, cycling between them.
+async fn back_to_op<F>(run: &mut Run<'_>, xchg: &mut F) -> Result<(), String>
+where
+    F: AsyncFnMut(Req) -> Result<Vec<u8>, String>,
+{
+    for al in [0x0002, 0x0004, 0x0008] {
+        xchg(Req::Al(al)).await?;
+        cycles_until(run, xchg, 0.3, |_, _| false).await?;
+    }
+    Ok(())
+}
+
+async fn commands<F>(run: &mut Run<'_>, xchg: &mut F) -> Result<(), String>
+where
+    F: AsyncFnMut(Req) -> Result<Vec<u8>, String>,
+{
+    use codes::*;
+    use device::{CMD_LED_AUTO, CMD_LED_CUSTOM, CMD_LED_TOGGLE, CMD_SET_THRESHOLD};
+    use ws2812::{Rgb, COLOR_ERROR, COLOR_NORMAL, COLOR_WARNING};
+    let custom = Rgb::new(10, 20, 30);
+    let general = |i: &HubInputs| (i.status & 0xF) as u8;
+    expect(
+        run,
+        xchg,
+        "COMMAND 1 (10, 20, 30): EVENT 2351, rings show the custom colour",
+        [CMD_LED_CUSTOM, 10, 20, 30],
+        1.0,
+        |r, i| i.event == EV_ECAT_CMD_ACK && i.error == 0 && r.ring_is(custom),
+    )
+    .await?;
+    expect(
+        run,
+        xchg,
+        "COMMAND 4: EVENT 2352, rings off",
+        [CMD_LED_TOGGLE, 0, 0, 0],
+        1.0,
+        |r, i| i.event == EV_ECAT_CMD_LED_TOGGLE && r.ring_is(Rgb::new(0, 0, 0)),
+    )
+    .await?;
+    run.out = [0; 4];
+    cycles_until(run, xchg, 0.05, |_, _| false).await?;
+    expect(
+        run,
+        xchg,
+        "COMMAND 0 then 4 again: rings on again with the custom colour",
+        [CMD_LED_TOGGLE, 0, 0, 0],
+        1.0,
+        |r, i| i.event == EV_ECAT_CMD_LED_TOGGLE && r.ring_is(custom),
+    )
+    .await?;
+    expect(
+        run,
+        xchg,
+        "COMMAND 2: EVENT 2351, state colours (normal)",
+        [CMD_LED_AUTO, 0, 0, 0],
+        1.0,
+        |r, i| i.event == EV_ECAT_CMD_ACK && r.ring_is(COLOR_NORMAL),
+    )
+    .await?;
+    expect(
+        run,
+        xchg,
+        "COMMAND 1 (300, 0, 0): refused, ERROR 1305 (hard), rings red",
+        [CMD_LED_CUSTOM, 300, 0, 0],
+        1.0,
+        |r, i| {
+            i.error == ERR_ECAT_CMD_FAULT
+                && general(i) == STATUS_HARD_ERRORS
+                && r.ring_is(COLOR_ERROR)
+        },
+    )
+    .await?;
+    expect(
+        run,
+        xchg,
+        "COMMAND 2: acknowledged, 1305 cleared, rings normal",
+        [CMD_LED_AUTO, 0, 0, 0],
+        1.0,
+        |r, i| i.event == EV_ECAT_CMD_ACK && i.error == 0 && r.ring_is(COLOR_NORMAL),
+    )
+    .await?;
+    expect(
+        run,
+        xchg,
+        "COMMAND 99: not understood, ERROR 1306 (soft), rings warning",
+        [99, 0, 0, 0],
+        1.0,
+        |r, i| {
+            i.error == ERR_ECAT_CMD_SOFTFAULT
+                && general(i) == STATUS_SOFT_ERRORS
+                && r.ring_is(COLOR_WARNING)
+        },
+    )
+    .await?;
+    expect(
+        run,
+        xchg,
+        "COMMAND 3 (24.00 °C): acknowledged, the sensors at 25 °C overheat: ERROR 1104",
+        [CMD_SET_THRESHOLD, 2400, 0, 0],
+        3.0,
+        |r, i| i.error == ERR_TEMP_SENS_OVERHEAT && r.ring_is(COLOR_ERROR),
+    )
+    .await?;
+    expect(
+        run,
+        xchg,
+        "COMMAND 3 (80.00 °C): overheat cleared",
+        [CMD_SET_THRESHOLD, 8000, 0, 0],
+        3.0,
+        |r, i| i.error == 0 && r.ring_is(COLOR_NORMAL),
+    )
+    .await?;
+    expect(
+        run,
+        xchg,
+        "COMMAND 3 (200.00 °C, outside −55 … 125 °C): refused, ERROR 1305",
+        [CMD_SET_THRESHOLD, 20000, 0, 0],
+        1.0,
+        |_, i| i.error == ERR_ECAT_CMD_FAULT,
+    )
+    .await?;
+    let kept = run.hub.lock().app.temp.threshold;
+    run.note(
+        "the refused threshold was not taken (80.00 °C kept)",
+        kept == 8000,
+    );
+    expect(
+        run,
+        xchg,
+        "COMMAND 2: cleared",
+        [CMD_LED_AUTO, 0, 0, 0],
+        1.0,
+        |_, i| i.error == 0,
+    )
+    .await?;
+    // The master takes the node to INIT: the report's INIT warning colour.
+    xchg(Req::Al(0x0001)).await?;
+    let ok = cycles_until(run, xchg, 1.0, |r, _| {
+        let h = r.hub.lock();
+        h.slave().map(|s| s.state()) == Some(oxicat_slave::AlState::Init)
+            && h.app.sys.last_event() == EV_ECAT_APP_INIT
+    })
+    .await?;
+    let ok = ok && cycles_until(run, xchg, 0.2, |r, _| r.ring_is(COLOR_WARNING)).await?;
+    run.note(
+        "master requests INIT: the rings show the warning colour",
+        ok,
+    );
+    xchg(Req::Al(0x0002)).await?;
+    cycles_until(run, xchg, 0.3, |_, _| false).await?;
+    let ev = xchg(Req::Sdo(0x6001, 2)).await?;
+    let st = xchg(Req::Sdo(0x6001, 1)).await?;
+    let ev = ev.get(..2).map(|b| u16::from_le_bytes([b[0], b[1]]));
+    let st = st
+        .get(..4)
+        .map(|b| u32::from_le_bytes([b[0], b[1], b[2], b[3]]));
+    let warm = run.ring_is(COLOR_WARNING);
+    run.note(
+        &format!(
+            "PRE-OP: SDO 0x6001:02 EVENT = {ev:?} (2312), STATUS last event {:?}; still warning",
+            st.map(|s| s >> 18)
+        ),
+        ev == Some(EV_ECAT_APP_INIT)
+            && st.map(|s| s >> 18) == Some(EV_ECAT_APP_INIT as u32)
+            && warm,
+    );
+    for al in [0x0004, 0x0008] {
+        xchg(Req::Al(al)).await?;
+        cycles_until(run, xchg, 0.3, |_, _| false).await?;
+    }
+    expect(
+        run,
+        xchg,
+        "back in OP: EVENT 2311, rings normal",
+        [0; 4],
+        2.0,
+        |r, i| i.event == EV_ECAT_APP_OP && i.error == 0 && r.ring_is(COLOR_NORMAL),
+    )
+    .await?;
+    Ok(())
+}
+
+async fn led_faults<F>(run: &mut Run<'_>, xchg: &mut F) -> Result<(), String>
+where
+    F: AsyncFnMut(Req) -> Result<Vec<u8>, String>,
+{
+    use codes::*;
+    use ws2812::{COLOR_ERROR, COLOR_NORMAL};
+    let restarts = |r: &Run<'_>| r.hub.lock().app.strip.restarted;
+    let before = restarts(run);
+    {
+        let mut h = run.hub.lock();
+        h.app.strip.fail_guard = 1;
+        h.app.strip.fail_configure = 1;
+    }
+    (run.log)("LED guard timer refused once, then one channel set-up fails");
+    expect(
+        run,
+        xchg,
+        "ERROR 1204 (guard timer could not be armed)",
+        [0; 4],
+        1.0,
+        |_, i| i.error == ERR_LED_OSTIM,
+    )
+    .await?;
+    expect(
+        run,
+        xchg,
+        "ERROR 1201 (channel set-up failed on the restart)",
+        [0; 4],
+        1.0,
+        |_, i| i.error == ERR_LED_INIT,
+    )
+    .await?;
+    expect(
+        run,
+        xchg,
+        "configured again: EVENT 2211, error cleared, rings normal",
+        [0; 4],
+        1.0,
+        |r, i| i.event == EV_LED_UPTD && i.error == 0 && r.ring_is(COLOR_NORMAL),
+    )
+    .await?;
+    let after = restarts(run);
+    run.note(
+        &format!("both channels restarted twice ({before:?} → {after:?})"),
+        after.iter().zip(before.iter()).all(|(a, b)| *a == b + 2),
+    );
+    run.hub.lock().app.strip.stalled[1] = true;
+    (run.log)("ring 1's DMA stream stalls");
+    expect(
+        run,
+        xchg,
+        "ERROR 1202 (transfer not complete in 1 s)",
+        [0; 4],
+        2.0,
+        |_, i| i.error == ERR_LED_TIMEOUT,
+    )
+    .await?;
+    expect(
+        run,
+        xchg,
+        "still stalled after 3 restarts: ERROR 1205 (hard), ring 0 red",
+        [0; 4],
+        5.0,
+        |r, i| {
+            let d = r.hub.lock().ring(0);
+            i.error == ERR_LED_DSM_FAULT
+                && i.status & 0xF == STATUS_HARD_ERRORS as u32
+                && d.colors
+                    .iter()
+                    .all(|c| (c.r, c.g, c.b) == (COLOR_ERROR.r, COLOR_ERROR.g, COLOR_ERROR.b))
+        },
+    )
+    .await?;
+    run.hub.lock().app.strip.stalled[1] = false;
+    (run.log)("ring 1's DMA stream works again");
+    expect(
+        run,
+        xchg,
+        "next restart delivers: EVENT 2211, errors cleared, both rings normal",
+        [0; 4],
+        3.0,
+        |r, i| i.error == 0 && i.event == EV_LED_UPTD && r.ring_is(COLOR_NORMAL),
+    )
+    .await?;
+    Ok(())
+}
+
+async fn temp_bus_lost<F>(
+    run: &mut Run<'_>,
+    xchg: &mut F,
+    cfg: &ScenarioConfig,
+) -> Result<(), String>
+where
+    F: AsyncFnMut(Req) -> Result<Vec<u8>, String>,
+{
+    use codes::*;
+    use ws2812::{COLOR_ERROR, COLOR_NORMAL};
+    let n = cfg.hub.sensors;
+    for k in 0..n {
+        run.hub.lock().plug_sensor(k, false);
+    }
+    (run.log)("every sensor unplugged (the bus cable pulled)");
+    expect(
+        run,
+        xchg,
+        "ERROR 1102 (sensors lost, soft)",
+        [0; 4],
+        3.0,
+        |_, i| i.error == ERR_TEMP_SENS_LOST,
+    )
+    .await?;
+    expect(
+        run,
+        xchg,
+        "no sensor for 3 read-outs: ERROR 1105 (hard), rings red, task restarted",
+        [0; 4],
+        6.0,
+        |r, i| {
+            i.error == ERR_TEMP_DSM_FAULT
+                && r.ring_is(COLOR_ERROR)
+                && r.hub.lock().app.temp.stats.restarts == 1
+        },
+    )
+    .await?;
+    for k in 0..n {
+        run.hub.lock().plug_sensor(k, true);
+    }
+    (run.log)("sensors plugged back");
+    expect(
+        run,
+        xchg,
+        "ROM search finds them: errors cleared, temperatures valid, rings normal",
+        [0; 4],
+        6.0,
+        |r, i| {
+            i.error == 0
+                && i.temps[..n.min(device::SENSORS)]
+                    .iter()
+                    .all(|&t| t != device::TEMP_INVALID)
+                && r.ring_is(COLOR_NORMAL)
+        },
+    )
+    .await?;
+    Ok(())
+}
+
+async fn esc_state_glitch<F>(run: &mut Run<'_>, xchg: &mut F) -> Result<(), String>
+where
+    F: AsyncFnMut(Req) -> Result<Vec<u8>, String>,
+{
+    use codes::*;
+    use ws2812::COLOR_NORMAL;
+    {
+        let mut g = lock(&run.seg);
+        let esc = g.esc_mut(run.id).ok_or("no ESC")?;
+        esc.pdi_write(0x0130, &[0x01, 0x00])
+            .map_err(|e| format!("{e:?}"))?;
+    }
+    (run.log)("AL status 0x0130 overwritten with INIT behind the stack's back");
+    let ok = cycles_until(run, xchg, 1.0, |r, _| r.hub.lock().sup.dsm_faults == 1).await?;
+    let (state, active) = {
+        let h = run.hub.lock();
+        (
+            h.slave().map(|s| s.state()),
+            h.app.sys.is_active(ERR_ECAT_DSM_FAULT),
+        )
+    };
+    run.note(
+        "the EtherCAT task sees the mismatch and re-creates the stack (INIT)",
+        ok && state == Some(oxicat_slave::AlState::Init) && active,
+    );
+    back_to_op(run, xchg).await?;
+    let seen = run.report.errors_seen.contains(&ERR_ECAT_DSM_FAULT);
+    run.note(
+        "the master, walking the node back to OP, reads ERROR 1304",
+        seen,
+    );
+    expect(
+        run,
+        xchg,
+        "in OP again: EVENT 2311, error cleared, rings normal",
+        [0; 4],
+        2.0,
+        |r, i| i.error == 0 && i.event == EV_ECAT_APP_OP && r.ring_is(COLOR_NORMAL),
+    )
+    .await?;
+    Ok(())
+}
+
 /// Builds a segment with one hub (ESC from `sii`), brings it to OP with ethercrab in the
 /// same process and runs the scenario; `log` gets one line per step.
 pub fn run_scenario(
@@ -742,6 +1256,7 @@ pub fn run_scenario(
     let clock = lock(&seg).clock();
     let mut run = Run {
         seg: seg.clone(),
+        id,
         hub,
         cycle_ns: cfg.cycle_ns,
         out: [0; 4],
@@ -777,7 +1292,7 @@ pub fn run_scenario(
                 .configure_dc_sync(
                     &md,
                     DcConfiguration {
-                        start_delay: Duration::from_millis(1),
+                        start_delay: Duration::from_nanos(cfg.dc_start_delay_ns),
                         sync0_period: Duration::from_nanos(cfg.cycle_ns),
                         sync0_shift: Duration::from_nanos(cfg.cycle_ns / 2),
                     },
@@ -806,8 +1321,29 @@ pub fn run_scenario(
                     }
                     Ok(Vec::new())
                 }
+                Req::Al(v) => {
+                    for sd in group.iter(&md) {
+                        sd.register_write(0x0120u16, v)
+                            .await
+                            .map_err(e("AL control"))?;
+                    }
+                    Ok(Vec::new())
+                }
+                Req::Sdo(index, sub) => match group.iter(&md).next() {
+                    Some(sd) if sub == 1 => sd
+                        .sdo_read::<u32>(index, sub)
+                        .await
+                        .map(|v| v.to_le_bytes().to_vec())
+                        .map_err(e("SDO upload")),
+                    Some(sd) => sd
+                        .sdo_read::<u16>(index, sub)
+                        .await
+                        .map(|v| v.to_le_bytes().to_vec())
+                        .map_err(e("SDO upload")),
+                    None => Ok(Vec::new()),
+                },
             };
-            script(&mut run, &mut xchg, cfg).await
+            run_script(&mut run, &mut xchg, cfg).await
         } else {
             let group = group.into_op(&md).await.map_err(e("OP"))?;
             let mut xchg = async |r: Req| match r {
@@ -830,10 +1366,47 @@ pub fn run_scenario(
                     }
                     Ok(Vec::new())
                 }
+                Req::Al(v) => {
+                    for sd in group.iter(&md) {
+                        sd.register_write(0x0120u16, v)
+                            .await
+                            .map_err(e("AL control"))?;
+                    }
+                    Ok(Vec::new())
+                }
+                Req::Sdo(index, sub) => match group.iter(&md).next() {
+                    Some(sd) if sub == 1 => sd
+                        .sdo_read::<u32>(index, sub)
+                        .await
+                        .map(|v| v.to_le_bytes().to_vec())
+                        .map_err(e("SDO upload")),
+                    Some(sd) => sd
+                        .sdo_read::<u16>(index, sub)
+                        .await
+                        .map(|v| v.to_le_bytes().to_vec())
+                        .map_err(e("SDO upload")),
+                    None => Ok(Vec::new()),
+                },
             };
-            script(&mut run, &mut xchg, cfg).await
+            run_script(&mut run, &mut xchg, cfg).await
         }
     })?;
+    if cfg.sync == HubSync::Dc {
+        let mut g = lock(&seg);
+        if let Some(esc) = g.esc_mut(id) {
+            let mut b = [0u8; 16];
+            if esc.pdi_read(0x0990, &mut b[..8]).is_ok()
+                && esc.pdi_read(0x0910, &mut b[8..]).is_ok()
+            {
+                let w = |k: usize| {
+                    let mut x = [0u8; 8];
+                    x.copy_from_slice(&b[k..k + 8]);
+                    u64::from_le_bytes(x)
+                };
+                run.report.dc_start = Some((w(0), w(8)));
+            }
+        }
+    }
     Ok(run.report)
 }
 

@@ -124,7 +124,7 @@ fn ws2812_encoding_is_grb_msb_first_with_reset() {
 #[test]
 fn led_colour_priority() {
     let mut s = SystemState::default();
-    assert_eq!(choose(&s, true, None), Shown::PreOp);
+    assert_eq!(choose(&s, true, None, true), Shown::PreOp);
     for c in [
         EV_TEMP_DSM_INIT,
         EV_LED_DSM_INIT,
@@ -134,16 +134,16 @@ fn led_colour_priority() {
         s.post(c);
     }
     s.handle_events();
-    assert_eq!(choose(&s, false, None), Shown::PreOp);
-    assert_eq!(choose(&s, true, None), Shown::Normal);
+    assert_eq!(choose(&s, false, None, true), Shown::PreOp);
+    assert_eq!(choose(&s, true, None, true), Shown::Normal);
     let c = Rgb::new(1, 2, 3);
-    assert_eq!(choose(&s, true, Some(c)), Shown::Custom(c));
+    assert_eq!(choose(&s, true, Some(c), true), Shown::Custom(c));
     s.post(ERR_TEMP_SENS_LOST);
     s.handle_events();
-    assert_eq!(choose(&s, true, None), Shown::Warning);
+    assert_eq!(choose(&s, true, None, true), Shown::Warning);
     s.post(ERR_ECAT_COMM_LOST);
     s.handle_events();
-    assert_eq!(choose(&s, true, Some(c)), Shown::Error);
+    assert_eq!(choose(&s, true, Some(c), true), Shown::Error);
 }
 
 /// An SPI link to an ESC that can be unplugged: every access then fails (the driver's
@@ -208,6 +208,10 @@ struct Dma {
 }
 impl LedStrip for Dma {
     type Error = ();
+    fn configure(&mut self, _: usize) -> Result<(), ()> {
+        Ok(())
+    }
+    fn restart(&mut self, _: usize) {}
     fn start(&mut self, _: usize, _: &[u16]) -> Result<(), ()> {
         self.started += 1;
         Ok(())
@@ -215,12 +219,26 @@ impl LedStrip for Dma {
     fn done(&mut self, _: usize) -> bool {
         true
     }
+    fn arm_guard(&mut self, _: u32) -> Result<(), ()> {
+        Ok(())
+    }
+    fn guard_expired(&mut self) -> bool {
+        false
+    }
+}
+
+/// An EEPROM whose configuration area has the right CRC (so the ESC loads it).
+fn loaded_eeprom() -> std::vec::Vec<u8> {
+    let mut ee = std::vec![0u8; 2048];
+    ee[0] = 0x80; // PDI control: SPI
+    ee[14] = oxicat_esc::sii::crc8(&ee[..14]);
+    ee
 }
 
 #[test]
 fn a_missing_esc_never_hangs_and_the_stack_comes_back_without_a_reset() {
     let mut spi = FlakySpi {
-        esc: Esc::new(EscConfig::lan9252(), std::vec![0u8; 2048]),
+        esc: Esc::new(EscConfig::lan9252(), loaded_eeprom()),
         dead: true,
         accesses: 0,
     };
@@ -277,4 +295,30 @@ fn pdo_sizes_are_the_reports_and_temperatures_carry_their_unit() {
         .expect("temperatures are scaled");
     assert_eq!((s.unit, s.value(2512.0)), ("°C", 25.12));
     assert_eq!(device::DEF.scale(0x6001, 1), None);
+}
+
+#[test]
+fn an_esc_without_its_eeprom_configuration_is_err_ecat_init_and_retried() {
+    // Blank EEPROM: the ESC answers but DL status 0x0110 bit 0 (EEPROM loaded) is clear.
+    let mut spi = FlakySpi {
+        esc: Esc::new(EscConfig::lan9252(), std::vec![0u8; 2048]),
+        dead: false,
+        accesses: 0,
+    };
+    let mut fw = HubFirmware::new(&mut spi, NoBus, Dma::default());
+    assert!(fw.slave().is_none());
+    assert!(fw.app.sys.is_active(ERR_ECAT_INIT));
+    assert!(
+        !fw.app.sys.is_active(ERR_ECAT_TIMEOUT),
+        "the ESC did answer"
+    );
+    assert_eq!(fw.app.sys.active_error(), ERR_ECAT_INIT);
+    // Retried every RESTART_MS: still not loaded, reported once.
+    let handled = fw.app.sys.handled;
+    for _ in 0..3 * (app::RESTART_MS / app::SUPERVISOR_PERIOD_MS) {
+        fw.on_timer(TIMER_SUPERVISOR, &mut spi);
+    }
+    assert!(fw.slave().is_none());
+    assert!(fw.sup.restarts >= 3);
+    assert_eq!(fw.app.sys.handled, handled, "no second ERR_ECAT_INIT");
 }

@@ -111,22 +111,40 @@ pub fn encode(colors: &[Rgb], t: &PwmTiming, out: &mut [u16]) -> Option<usize> {
     Some(n)
 }
 
-/// PWM + DMA channels of the LED rings.
+/// PWM + DMA channels of the LED rings, and the one-shot guard timer of their transfers.
 pub trait LedStrip {
-    /// Why a transfer could not start.
+    /// Why a channel could not be set up, a transfer started or the guard timer armed.
     type Error: core::fmt::Debug;
+
+    /// Sets up ring `ring`'s PWM timer channel and DMA stream (the report's
+    /// `ledDMA_configCh`).
+    fn configure(&mut self, ring: usize) -> Result<(), Self::Error>;
+
+    /// Aborts ring `ring`'s transfer and resets its channel after a fault (the report's
+    /// `ledDMA_restartCH`); it is configured again before the next transfer.
+    fn restart(&mut self, ring: usize);
 
     /// Starts the DMA transfer of `duties` to ring `ring` (returns at once).
     fn start(&mut self, ring: usize, duties: &[u16]) -> Result<(), Self::Error>;
 
     /// True once the last transfer of `ring` completed (DMA transfer-complete flag).
     fn done(&mut self, ring: usize) -> bool;
+
+    /// Arms the one-shot timer that bounds the transfers just started to `ms` (the report's
+    /// `timeoutLed` osTimer; on the MCU an alarm of the timer queue, which can refuse).
+    fn arm_guard(&mut self, ms: u32) -> Result<(), Self::Error>;
+
+    /// True once the armed guard timer expired.
+    fn guard_expired(&mut self) -> bool;
 }
 
 /// The LED task's period (report Table 4.2): 33 ms.
 pub const LED_PERIOD_MS: u32 = 33;
 /// A transfer not complete after this long is `ERR_LED_TIMEOUT` (report: 1000 ms).
 pub const LED_TIMEOUT_MS: u32 = 1000;
+/// Channel restarts in a row without a frame delivered that make the LED task itself
+/// faulty (`ERR_LED_DSM_FAULT`, hard): the report's L_restart loop would spin for ever.
+pub const LED_DSM_FAULT_RESTARTS: u32 = 3;
 
 /// What the LEDs show.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -159,13 +177,26 @@ impl Shown {
     }
 }
 
-/// The report's colour priority (`L_updateColorState`): error, then init/pre-op, then the
-/// master's custom colour, then warning, then normal.
-pub fn choose(sys: &SystemState, op: bool, custom: Option<Rgb>) -> Shown {
+/// The report's colour priority (`L_updateColorState`): error, then init (the pre-op
+/// colour until every task started), then the master's commands (LEDs toggled off, a custom
+/// colour), then warning, then normal. The ESC side adds the report's INIT warning: once
+/// started, a node whose ESM is (or was, since it last reached OP) in INIT shows the
+/// warning colour (`EV_ECAT_APP_INIT` sets the report's `warningFlag`, `EV_ECAT_APP_OP`
+/// clears it); PRE-OP/SAFE-OP reached without passing INIT show the pre-op colour.
+/// `lit` is false while the master has toggled the rings off (hard errors still show).
+pub fn choose(sys: &SystemState, op: bool, custom: Option<Rgb>, lit: bool) -> Shown {
     if sys.hard() {
         Shown::Error
-    } else if !sys.started() || !op {
+    } else if !sys.started() {
         Shown::PreOp
+    } else if !op {
+        if sys.ecat_init_warning() {
+            Shown::Warning
+        } else {
+            Shown::PreOp
+        }
+    } else if !lit {
+        Shown::Off
     } else if let Some(c) = custom {
         Shown::Custom(c)
     } else if sys.soft() {
@@ -175,51 +206,113 @@ pub fn choose(sys: &SystemState, op: bool, custom: Option<Rgb>) -> Shown {
     }
 }
 
-/// The LED task (the report's LED SDM).
+/// The LED task (the report's LED SDM): `L_config` → `L_send` (arm the guard timer) →
+/// wait for the DMA → colour → … ; any fault goes through `L_restart` (every channel
+/// restarted, then configured again at the next release).
 #[derive(Debug, Clone)]
 pub struct LedTask {
     buf: [[u16; RING_SLOTS]; RINGS],
-    waiting_ms: u32,
+    configured: bool,
     in_flight: bool,
-    failed: bool,
     init: bool,
+    /// Codes posted in the current fault episode (each once), bit per code.
+    episode: u8,
+    faulted: bool,
+    consecutive: u32,
     /// What the rings were last sent.
     pub shown: Shown,
     /// Transfers started.
     pub sent: u32,
+    /// Channel restarts (`L_restart`) after a fault.
+    pub restarts: u32,
 }
 
 impl Default for LedTask {
     fn default() -> Self {
         Self {
             buf: [[0; RING_SLOTS]; RINGS],
-            waiting_ms: 0,
+            configured: false,
             in_flight: false,
-            failed: false,
             init: false,
+            episode: 0,
+            faulted: false,
+            consecutive: 0,
             shown: Shown::Off,
             sent: 0,
+            restarts: 0,
         }
     }
 }
 
 impl LedTask {
+    fn post_once(&mut self, sys: &mut SystemState, code: u16) {
+        let bit = match code {
+            codes::ERR_LED_INIT => 1,
+            codes::ERR_LED_SEND => 2,
+            codes::ERR_LED_OSTIM => 4,
+            codes::ERR_LED_TIMEOUT => 8,
+            _ => 16,
+        };
+        if self.episode & bit == 0 {
+            self.episode |= bit;
+            sys.post(code);
+        }
+    }
+
+    /// `L_restart`: every channel restarted and configured again at the next release; too
+    /// many restarts in a row make the task faulty.
+    fn restart<L: LedStrip>(&mut self, strip: &mut L, sys: &mut SystemState, code: u16) {
+        self.post_once(sys, code);
+        for r in 0..RINGS {
+            strip.restart(r);
+        }
+        self.configured = false;
+        self.in_flight = false;
+        self.faulted = true;
+        self.restarts = self.restarts.wrapping_add(1);
+        self.consecutive += 1;
+        if self.consecutive == LED_DSM_FAULT_RESTARTS {
+            sys.post(codes::ERR_LED_DSM_FAULT);
+        }
+    }
+
+    /// True while the task is between a fault and the next frame delivered.
+    pub fn faulted(&self) -> bool {
+        self.faulted
+    }
+
     /// One release (every [`LED_PERIOD_MS`]).
     pub fn run<L: LedStrip>(&mut self, strip: &mut L, sys: &mut SystemState, shown: Shown) {
+        if !self.configured {
+            // L_config: every ring, so that one bad channel does not hide another.
+            let failed = (0..RINGS).filter(|&r| strip.configure(r).is_err()).count();
+            let ok = failed == 0;
+            if !ok {
+                self.restart(strip, sys, codes::ERR_LED_INIT);
+                return;
+            }
+            self.configured = true;
+            if !self.init {
+                self.init = true;
+                sys.post(codes::EV_LED_DSM_INIT);
+            }
+        }
         if self.in_flight {
             if !(0..RINGS).all(|r| strip.done(r)) {
-                self.waiting_ms += LED_PERIOD_MS;
-                if self.waiting_ms >= LED_TIMEOUT_MS {
-                    // L_restart: give up on this transfer and start again.
-                    sys.post(codes::ERR_LED_TIMEOUT);
-                    self.failed = true;
-                    self.in_flight = false;
+                if strip.guard_expired() {
+                    self.restart(strip, sys, codes::ERR_LED_TIMEOUT);
                 }
                 return;
             }
             self.in_flight = false;
+            if self.faulted {
+                // A frame delivered after a fault: the channels work again.
+                self.faulted = false;
+                self.episode = 0;
+                self.consecutive = 0;
+                sys.post(codes::EV_LED_UPTD);
+            }
         }
-        self.waiting_ms = 0;
         let colors = [shown.color(); LEDS_PER_RING];
         let mut ok = true;
         for r in 0..RINGS {
@@ -230,21 +323,16 @@ impl LedTask {
             }
         }
         if !ok {
-            if !self.failed {
-                sys.post(codes::ERR_LED_SEND);
-            }
-            self.failed = true;
+            self.restart(strip, sys, codes::ERR_LED_SEND);
             return;
         }
         self.in_flight = true;
+        if strip.arm_guard(LED_TIMEOUT_MS).is_err() {
+            // The report's l_waitRefresh: a timer that cannot be started is L_restart.
+            self.restart(strip, sys, codes::ERR_LED_OSTIM);
+            return;
+        }
         self.sent = self.sent.wrapping_add(1);
         self.shown = shown;
-        if !self.init {
-            self.init = true;
-            sys.post(codes::EV_LED_DSM_INIT);
-        } else if self.failed {
-            sys.post(codes::EV_LED_UPTD);
-        }
-        self.failed = false;
     }
 }

@@ -380,6 +380,12 @@ pub struct NodePdi {
     pub spi: Option<SpiStats>,
     /// What the execution-time model saw, whole run (`None` when it is off).
     pub timing: Option<TimingStats>,
+    /// SYNC1 interrupts, whole run (0 unless `bus.sync1_shift_us`; `None` where the host
+    /// does not count them).
+    pub sync1: Option<u64>,
+    /// The node's input sync mode 0x1C33:01 and input shift 0x1C33:03 \[ns\] at the end
+    /// (`None` where the host cannot read its dictionary).
+    pub input_sync: Option<(u16, u32)>,
 }
 
 impl NodePdi {
@@ -492,6 +498,8 @@ impl TrotNode for AnyLegRigHandle {
                 pdi_errors: r.counters.pdi_errors,
                 spi: r.bus,
                 timing: r.timing,
+                sync1: Some(r.counters.sync1),
+                input_sync: r.sync_mode.zip(r.input_shift_ns),
             },
         }
     }
@@ -723,12 +731,20 @@ async fn run_master(
             group.len()
         )));
     }
+    let sync1_ns = u64::from(s.bus.sync1_shift_us) * 1000;
     for mut sd in group.iter_mut(md) {
-        // Sync type: DC SYNC0 (0x1C32:01 = 2), then SYNC0 in the DC unit.
-        sd.sdo_write(0x1C32, 1, 2u16)
+        // Sync type: DC SYNC0 (0x1C32:01 = 2), then SYNC0 in the DC unit; with a SYNC1
+        // `bus.sync1` the thesis' split, DC SYNC1 (3), SYNC1 `sync1_shift_us` after SYNC0.
+        let (mode, dc) = if s.bus.sync1 {
+            let sync1_period = Duration::from_nanos(sync1_ns);
+            (3u16, DcSync::Sync01 { sync1_period })
+        } else {
+            (2u16, DcSync::Sync0)
+        };
+        sd.sdo_write(0x1C32, 1, mode)
             .await
             .map_err(eth("0x1C32:01 (sync type)"))?;
-        sd.set_dc_sync(DcSync::Sync0);
+        sd.set_dc_sync(dc);
     }
     let group = group
         .into_pre_op_pdi(md)

@@ -444,6 +444,8 @@ impl<Pd: Pdi> Bench<LegImage<Pd>> for LegPlant {
 pub struct RigCounters {
     /// SYNC0 interrupts.
     pub sync0: u64,
+    /// SYNC1 interrupts (the thesis' DC split latches the inputs on them).
+    pub sync1: u64,
     /// Joint-loop ticks.
     pub joint_loops: u64,
     /// Plant ticks.
@@ -468,6 +470,7 @@ pub fn report<P: PdiPath>(rig: &LegRig<P>) -> LegReport {
         released_at_sync0: rig.bench.released_at_sync0,
         counters: RigCounters {
             sync0: c.sync0,
+            sync1: c.sync1,
             joint_loops: c.timers,
             plant_ticks: rig.bench.plant_ticks,
             polls: c.polls,
@@ -475,6 +478,8 @@ pub fn report<P: PdiPath>(rig: &LegRig<P>) -> LegReport {
         },
         bus: rig.bus_stats(),
         timing: rig.timing(),
+        sync_mode: rig.slave.od().get::<u16>(0x1C33, 1).ok(),
+        input_shift_ns: rig.slave.od().get::<u32>(0x1C33, 3).ok(),
     }
 }
 
@@ -493,6 +498,10 @@ pub struct LegReport {
     pub bus: Option<BusStats>,
     /// The execution-time model's figures (`None` when it is off).
     pub timing: Option<TimingStats>,
+    /// Input sync mode in its dictionary, 0x1C33:01 (2 DC SYNC0, 3 DC SYNC1).
+    pub sync_mode: Option<u16>,
+    /// Shift of the input latch after SYNC0 in its dictionary, 0x1C33:03 \[ns\].
+    pub input_shift_ns: Option<u32>,
 }
 
 /// Access to a rig node from outside the segment (tests, tools).

@@ -132,6 +132,16 @@ pub struct Bus {
     pub cycle_us: u32,
     /// Master frame after SYNC0 \[µs\].
     pub sync0_shift_us: u32,
+    /// The thesis' DC split (§2.4.3, "SyncManager/Sync0/Sync1"): the leg nodes map their
+    /// outputs on the SM2 event, run the application on SYNC0 and latch their inputs on
+    /// SYNC1 (0x1C32:01 = 3, ETG.1020 DC SYNC1 mode). `false` (default): outputs,
+    /// application and inputs on SYNC0.
+    #[serde(default)]
+    pub sync1: bool,
+    /// With `sync1`: SYNC1 this long after SYNC0 \[µs\] (0x1C33:03); 0 (default, the
+    /// thesis' delay times) fires it with SYNC0.
+    #[serde(default)]
+    pub sync1_shift_us: u32,
 }
 
 /// Phase lengths of the procedure \[s\].
@@ -215,6 +225,13 @@ pub struct LegTable {
 pub const LIMITS: &[(&str, f64, f64, &str, &str)] = &[
     ("bus.cycle_us", 100.0, 10_000.0, " µs", "DC SYNC0 period"),
     ("bus.sync0_shift_us", 0.0, 9_999.0, " µs", "below cycle_us"),
+    (
+        "bus.sync1_shift_us",
+        0.0,
+        9_999.0,
+        " µs",
+        "SYNC1 after SYNC0, below cycle_us",
+    ),
     ("procedure.settle_s", 0.0, 3600.0, " s", "phase length"),
     ("procedure.stand_s", 0.0, 3600.0, " s", "phase length"),
     (
@@ -309,6 +326,7 @@ impl Scenario {
         let mut v: Vec<(String, f64)> = vec![
             ("bus.cycle_us".into(), f64::from(b.cycle_us)),
             ("bus.sync0_shift_us".into(), f64::from(b.sync0_shift_us)),
+            ("bus.sync1_shift_us".into(), f64::from(b.sync1_shift_us)),
             ("procedure.settle_s".into(), p.settle_s),
             ("procedure.stand_s".into(), p.stand_s),
             (
@@ -359,6 +377,12 @@ impl Scenario {
                 return bad(format!("{key} = {v} is not in {lo} … {hi}{unit} ({why})"));
             }
         }
+        if self.bus.sync1_shift_us >= self.bus.cycle_us {
+            return bad(format!(
+                "bus.sync1_shift_us = {} must be below bus.cycle_us = {}",
+                self.bus.sync1_shift_us, self.bus.cycle_us
+            ));
+        }
         if self.bus.sync0_shift_us >= self.bus.cycle_us {
             return bad(format!(
                 "bus.sync0_shift_us = {} must be below bus.cycle_us = {}",
@@ -407,6 +431,14 @@ impl Scenario {
     /// Sets the PDI route of every leg node (`--pdi`).
     pub fn with_pdi(mut self, route: PdiChip) -> Self {
         self.pdi.route = route;
+        self
+    }
+
+    /// The thesis' DC split with SYNC1 `us` after SYNC0 (`bus.sync1 = true`,
+    /// `bus.sync1_shift_us`; `--sync1`). `us` must stay below `bus.cycle_us`.
+    pub fn with_sync1(mut self, us: u32) -> Self {
+        self.bus.sync1 = true;
+        self.bus.sync1_shift_us = us;
         self
     }
 
