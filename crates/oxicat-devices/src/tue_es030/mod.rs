@@ -48,6 +48,8 @@ pub mod device;
 #[cfg(feature = "bench")]
 pub mod experiment;
 #[cfg(feature = "bench")]
+pub mod ident;
+#[cfg(feature = "bench")]
 pub mod rig;
 pub mod ring;
 
@@ -55,7 +57,7 @@ pub use app::{
     Adcs, Board, Bridges, Encoders, Io, Mode, TuEs030, CURRENT_TIMER, MCOM_ENABLE, MCOM_FRF_ENABLE,
     MCOM_FRF_TRISTATE, MCOM_TRISTATE, SERVICE_TIMER,
 };
-pub use control::{Motor, MotorParams};
+pub use control::{BoardRev, Motor, MotorParams};
 
 #[cfg(test)]
 mod tests;
