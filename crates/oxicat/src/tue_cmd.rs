@@ -644,8 +644,25 @@ fn frf(a: &TueArgs, file: Option<Vec<i16>>) -> Result<String, CliError> {
         "TUeES030 closed current loop T = I_meas / I_set (model, RE 30 on M2)",
     )?);
     files.extend(plot_lrr(&curves, &a.out)?);
+    // The figure leaves out the lines a Welch estimate is unsure of (coherence < 0.5).
+    let shown: Vec<(String, tue::PlantPoints)> = plants
+        .iter()
+        .map(|(name, est)| {
+            let coh = curves
+                .iter()
+                .find(|c| &c.name == name)
+                .and_then(|c| c.coh.as_ref());
+            let pts = est
+                .iter()
+                .enumerate()
+                .filter(|(j, _)| coh.and_then(|c| c.get(*j)).is_none_or(|&g| g >= 0.5))
+                .map(|(_, p)| *p)
+                .collect();
+            (name.clone(), pts)
+        })
+        .collect();
     files.extend(tue::plot_plant(
-        &plants,
+        &shown,
         &model,
         &a.out,
         "plant",
