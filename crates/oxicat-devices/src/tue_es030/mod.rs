@@ -7,6 +7,9 @@
 //! - [`control`]: `currentPI`, `encoder_calculations`, `param2int`, fixed-point helpers and
 //!   the board constants;
 //! - [`ring`]: the FRF ring buffers;
+//! - `experiment` and `ident` (feature `bench`): the master side — mode switch, FRF
+//!   streaming, the manual's time-domain experiments, and identification (chirp, noise,
+//!   setpoint files, Welch with coherence, the plant model);
 //! - [`app`]: the [`Application`](oxicat_slave::Application) ([`TuEs030`]) and the hardware
 //!   traits ([`Board`]).
 //!
