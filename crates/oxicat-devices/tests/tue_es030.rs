@@ -5,6 +5,7 @@ use std::sync::{Arc, Mutex};
 
 use oxicat_devices::tue_es030::experiment::{self as tue, NormalOut, TueMode, TueParams};
 use oxicat_devices::tue_es030::rig::{attach, TueConfig, TueHandle};
+use oxicat_devices::tue_es030::BoardRev;
 use oxicat_master::{Link, Master};
 use oxicat_sim::segment::Segment;
 
@@ -19,10 +20,14 @@ fn big<F: FnOnce() + Send + 'static>(f: F) {
 }
 
 fn bench() -> (Link, Arc<Mutex<Segment>>, TueHandle) {
+    bench_with(&TueConfig::default())
+}
+
+fn bench_with(cfg: &TueConfig) -> (Link, Arc<Mutex<Segment>>, TueHandle) {
     let mut seg = Segment::new();
     let sii = oxicat_esi::sii::generate(&oxicat_devices::tue_es030::device::DEF).unwrap();
     let id = seg.add(oxicat_esc::Esc::new(oxicat_esc::EscConfig::et1200(), sii));
-    let h = attach(&mut seg, id, &TueConfig::default()).unwrap();
+    let h = attach(&mut seg, id, cfg).unwrap();
     let seg = Arc::new(Mutex::new(seg));
     (Link::Sim(seg.clone()), seg, h)
 }
@@ -195,7 +200,9 @@ fn parameters_written_and_read_back_change_the_firmware_body() {
     assert_eq!(tue::read_params(&m, 0).unwrap(), p);
     let b = h.lock();
     assert_eq!(b.app.params[0].pgain, 6.0);
-    assert_eq!(b.app.motors[0].par.pgain, 154);
+    // The default board revision converts P with the 42 mOhm scale: 25.6 * 6 / 4.2.
+    assert_eq!(b.app.board_rev, BoardRev::Sense42);
+    assert_eq!(b.app.motors[0].par.pgain, 37);
     assert_eq!(b.app.motors[0].par.encdir, -1);
     assert_eq!(b.app.motors[2].par.increments, 8000);
     assert_eq!(b.app.motors[2].par.czero, 2200);
@@ -231,8 +238,13 @@ fn mode_switch_to_frf_and_back_body() {
 
 /// Identifies the closed current loop of M2 with gains (P, I, limit) from a short
 /// multisine; returns the response and its margins.
-fn identify(p: f32, i: f32, lim: f32) -> (Vec<tue::FrfPoint>, tue::Margins, tue::FrfRun) {
-    let (link, _seg, _h) = bench();
+fn identify(
+    rev: BoardRev,
+    p: f32,
+    i: f32,
+    lim: f32,
+) -> (Vec<tue::FrfPoint>, tue::Margins, tue::FrfRun) {
+    let (link, _seg, _h) = bench_with(&TueConfig::default().rev(rev));
     let m = Master::open(link.clone()).unwrap();
     let par = TueParams {
         pgain: [p; 3],
@@ -260,11 +272,13 @@ fn frf_identifies_the_closed_current_loop() {
 }
 
 fn frf_body() {
+    let bins = BINS.with(|b| b.clone());
     // The manual's settings: P = 6, I = 4, limit 1 (feed-forward off, axis free).
-    let (pts, mg, run) = identify(6.0, 4.0, 1.0);
+    // Literal gains (V/A as labelled): stable but lightly damped, crossover of several kHz.
+    let (pts, mg, run) = identify(BoardRev::Literal, 6.0, 4.0, 1.0);
     assert!(run.complete(), "no sample lost");
-    let share = tue::unexcited_share(&run, 1000, &BINS.with(|b| b.clone()));
-    eprintln!("P=6: {mg:?}, unexcited share {share:.4}");
+    let share = tue::unexcited_share(&run, 1000, &bins);
+    eprintln!("literal P=6: {mg:?}, unexcited share {share:.4}");
     for p in &pts {
         eprintln!(
             "{:8.1} Hz  T {:6.2} dB {:7.1} deg  L {:6.2} dB",
@@ -274,33 +288,170 @@ fn frf_body() {
             p.l_db()
         );
     }
-    // Stable but lightly damped in the model: crossover of several kHz, small margin.
     let pm = mg.phase_margin.unwrap();
     let fc = mg.crossover.unwrap();
     assert!(pm > 0.0 && pm < 30.0, "PM {pm}");
     assert!(fc > 3000.0, "crossover {fc}");
     assert!(mg.peak_db > 6.0);
     assert!(share < 0.05, "linear: {share}");
-    // P = 6/4.2 (the hardware's loop gain if its current scaling was for 42 mOhm).
-    let (_, mg14, run14) = identify(6.0 / 4.2, 4.0, 1.0);
-    let share14 = tue::unexcited_share(&run14, 1000, &BINS.with(|b| b.clone()));
-    eprintln!("P=1.43: {mg14:?}, unexcited share {share14:.4}");
-    let pm14 = mg14.phase_margin.unwrap();
-    assert!(pm14 > 40.0 && pm14 < 70.0, "PM {pm14}");
-    // P = 10: the model's loop is unstable: it oscillates at the PWM limit, most of the
-    // current is at frequencies that were not excited.
-    let (_, mg10, run10) = identify(10.0, 4.0, 1.0);
-    let share10 = tue::unexcited_share(&run10, 1000, &BINS.with(|b| b.clone()));
+    // Literal P = 10: the model's loop is unstable: it oscillates at the PWM limit, most of
+    // the current is at frequencies that were not excited.
+    let (_, mg10, run10) = identify(BoardRev::Literal, 10.0, 4.0, 1.0);
+    let share10 = tue::unexcited_share(&run10, 1000, &bins);
     let peak10 = run10
         .currents
         .iter()
         .map(|c| c.unsigned_abs())
         .max()
         .unwrap_or(0);
-    eprintln!("P=10: {mg10:?}, unexcited share {share10:.4}, peak current {peak10} mA");
+    eprintln!("literal P=10: {mg10:?}, unexcited share {share10:.4}, peak current {peak10} mA");
     assert!(run10.complete());
     assert!(share10 > 0.3, "P=10 unstable: {share10}");
     assert!(peak10 > 2000);
+}
+
+#[test]
+fn board_revision_sense42_moves_the_p6_loop_towards_the_manual() {
+    big(board_revision_body);
+}
+
+fn board_revision_body() {
+    let bins = BINS.with(|b| b.clone());
+    // The default revision (PI gains / 4.2): P = 6 crosses over near the manual's 2.5 kHz
+    // with a margin of the manual's order (60 deg), where the literal one has < 30 deg.
+    let (_, mg, run) = identify(BoardRev::Sense42, 6.0, 4.0, 1.0);
+    let share = tue::unexcited_share(&run, 1000, &bins);
+    eprintln!("sense42 P=6: {mg:?}, unexcited share {share:.4}");
+    let pm = mg.phase_margin.unwrap();
+    let fc = mg.crossover.unwrap();
+    assert!((1000.0..3000.0).contains(&fc), "crossover {fc}");
+    assert!(pm > 50.0 && pm < 90.0, "PM {pm}");
+    assert!(mg.peak_db < 3.0, "well damped: {}", mg.peak_db);
+    // ... and P = 10 stays stable (the manual's "P = 10 unstable" is not reproduced).
+    let (_, mg10, run10) = identify(BoardRev::Sense42, 10.0, 4.0, 1.0);
+    let share10 = tue::unexcited_share(&run10, 1000, &bins);
+    eprintln!("sense42 P=10: {mg10:?}, unexcited share {share10:.4}");
+    assert!(share10 < 0.05, "stable: {share10}");
+    assert!(mg10.phase_margin.unwrap() > 30.0);
+}
+
+/// A current pulse (1 ms rest, 10 ms at `amp` mA, 3 ms rest) on locked M2 with `par`.
+fn pulse_run(rev: BoardRev, par: &TueParams, amp: i16) -> tue::StepMetrics {
+    let (link, _seg, h) = bench_with(&TueConfig::default().rev(rev).locked(true));
+    let m = Master::open(link.clone()).unwrap();
+    tue::write_params(&m, 0, par).unwrap();
+    let (mut m, _) = tue::set_mode(&link, m, 0, TueMode::Frf).unwrap();
+    let sp = tue::pulse(20, 200, 60, amp);
+    let run = tue::run_frf(&mut m, 0, 1, &sp, &mut |_, _| {}).unwrap();
+    assert!(run.complete());
+    assert_eq!(h.lock().app.board.drives[1].angle, 0.0, "axis locked");
+    tue::step_metrics(&run.setpoints, &run.currents).unwrap()
+}
+
+fn gains(p: f32, i: f32, r: f32, kv: f32) -> TueParams {
+    TueParams {
+        pgain: [p; 3],
+        igain: [i; 3],
+        ilimit: [1.0; 3],
+        r: [r; 3],
+        kv: [kv; 3],
+        ..params()
+    }
+}
+
+#[test]
+fn step_responses_order_with_p_as_the_manual_describes() {
+    big(step_body);
+}
+
+fn step_body() {
+    // Manual Fig. 6.5: "a higher gain results in better steady-state tracking, but also in
+    // a higher overshoot. A proportional gain of 10 already resulted in an unstable system".
+    let lit: Vec<tue::StepMetrics> = [1.0, 2.0, 4.0, 6.0, 10.0]
+        .iter()
+        .map(|&p| pulse_run(BoardRev::Literal, &gains(p, 0.0, 0.0, 0.0), 1000))
+        .collect();
+    for (p, m) in [1, 2, 4, 6, 10].iter().zip(&lit) {
+        eprintln!("literal P={p}: {m:?}");
+    }
+    for w in lit[..4].windows(2) {
+        assert!(
+            w[1].error_ma.abs() < w[0].error_ma.abs(),
+            "tracking improves"
+        );
+        assert!(w[1].overshoot_pct > w[0].overshoot_pct, "overshoot grows");
+        assert!(!w[1].unstable());
+    }
+    assert!(lit[4].unstable(), "P = 10 oscillates: {:?}", lit[4]);
+    // The default revision (loop gain / 4.2): tracking still improves with P and P = 10
+    // overshoots most, but stays stable.
+    let s42: Vec<tue::StepMetrics> = [2.0, 6.0, 10.0]
+        .iter()
+        .map(|&p| pulse_run(BoardRev::Sense42, &gains(p, 0.0, 0.0, 0.0), 1000))
+        .collect();
+    for w in s42.windows(2) {
+        assert!(w[1].error_ma.abs() < w[0].error_ma.abs());
+    }
+    assert!(
+        s42[2].overshoot_pct > s42[1].overshoot_pct && s42[2].overshoot_pct > s42[0].overshoot_pct
+    );
+    assert!(!s42[2].unstable());
+    // Fig. 6.6: I removes the steady-state error, a higher I is faster.
+    let i: Vec<tue::StepMetrics> = [0.0, 1.0, 4.0]
+        .iter()
+        .map(|&i| pulse_run(BoardRev::Sense42, &gains(2.0, i, 0.0, 0.0), 1000))
+        .collect();
+    assert!(i[0].error_ma > 300.0, "P only: {:?}", i[0]);
+    assert!(i[1].error_ma.abs() < 20.0 && i[2].error_ma.abs() < 20.0);
+    assert!(i[2].rise_s.unwrap() < i[1].rise_s.unwrap());
+}
+
+#[test]
+fn resistance_feed_forward_reduces_the_steady_state_error() {
+    big(ff_r_body);
+}
+
+fn ff_r_body() {
+    // Fig. 6.7: P = 0.2, increasing R raises the current; R = the motor's 0.611 Ohm makes
+    // it follow the setpoint.
+    let m: Vec<tue::StepMetrics> = [0.0, 0.3, 0.611, 1.5]
+        .iter()
+        .map(|&r| pulse_run(BoardRev::Sense42, &gains(0.2, 0.0, r, 0.0), 1000))
+        .collect();
+    for w in m.windows(2) {
+        assert!(w[1].final_ma > w[0].final_ma, "more R, more current");
+    }
+    assert!(m[0].error_ma > 700.0, "{:?}", m[0]);
+    assert!(
+        m[2].error_ma.abs() < 0.1 * m[0].error_ma.abs(),
+        "{:?}",
+        m[2]
+    );
+    assert!(
+        m[3].final_ma > 2000.0,
+        "R = 1.5 over-compensates the model's 0.611 Ohm"
+    );
+}
+
+#[test]
+fn back_emf_feed_forward_reduces_the_velocity_error() {
+    big(ff_emf_body);
+}
+
+fn ff_emf_body() {
+    // Fig. 6.8: velocity loop P_v = 1 (mA per 0.1 rad/s) over the current loop P = 1,
+    // I = 0, R = 0; KV feed-forward 0 against the manufacturer's 0.0259.
+    let run = |kv: f32| {
+        let (link, _seg, _h) = bench();
+        let mut m = Master::open(link).unwrap();
+        tue::write_params(&m, 0, &gains(1.0, 0.0, 0.0, kv)).unwrap();
+        let rows = tue::run_velocity_loop(&mut m, 0, 1, 1.0).unwrap();
+        assert_eq!(rows.len() as u64, tue::EMF_CYCLES);
+        tue::emf_rms_error(&rows, 1)
+    };
+    let (e0, e1) = (run(0.0), run(0.0259));
+    eprintln!("RMS velocity error: KV 0 {e0:.1} rad/s, KV 0.0259 {e1:.1} rad/s");
+    assert!(e1 < 0.7 * e0, "{e1} vs {e0}");
 }
 
 thread_local! {

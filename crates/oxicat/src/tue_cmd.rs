@@ -6,17 +6,29 @@
 //! - `frf`: switch to FRF mode, stream a multisine current excitation to M2 at 20 kHz (22
 //!   setpoints per 1 ms cycle with the manual's flow control), check that no sample was
 //!   lost, compute the closed-loop response, its bandwidth and phase margin, for the
-//!   manual's P = 6, I = 4, limit 1 and for P = 10; `frf.csv`, `bode.png`/`bode.svg`.
+//!   manual's P = 6, I = 4, limit 1 and for P = 10; `frf.csv`, `bode.png`/`bode.svg`;
+//!   with `--excitation chirp|noise|manual` or `--setpoints FILE` the response is a Welch
+//!   estimate with coherence; the plant estimate H = L/C against the manual's model
+//!   (`plant.png`/`.svg`) with R and L fitted from it.
+//! - `step`, `ff-r`, `ff-emf`: the manual's time-domain experiments (Figs. 6.5–6.8):
+//!   current steps on a locked axis for several P and I, the resistance feed-forward, the
+//!   back-EMF feed-forward under a velocity loop.
+//!
+//! `--board-rev` chooses how the firmware converts the PI gains (see
+//! [`oxicat_devices::tue_es030::BoardRev`]).
 
 use std::fmt::Write as _;
 use std::path::PathBuf;
 use std::sync::{Arc, Mutex};
 
 use indicatif::{ProgressBar, ProgressStyle};
+use oxicat_devices::tue_es030::control::{param2int_rev, MotorParams};
 use oxicat_devices::tue_es030::experiment::{
-    self as tue, FrfPoint, Margins, NormalOut, TueMode, TueParams,
+    self as tue, FrfPoint, FrfRun, Margins, NormalOut, Panel, Series, TueMode, TueParams,
 };
+use oxicat_devices::tue_es030::ident;
 use oxicat_devices::tue_es030::rig::{attach, TueConfig};
+use oxicat_devices::tue_es030::BoardRev;
 use oxicat_master::{Link, Master, MasterError};
 use oxicat_sim::segment::Segment;
 
@@ -32,6 +44,47 @@ pub enum TueExperiment {
     Normal,
     /// FRF mode: closed current-loop identification.
     Frf,
+    /// Current steps on a locked axis for several P (I = 0) and several I (P = 2): the
+    /// manual's Figs. 6.5 and 6.6.
+    Step,
+    /// Resistance feed-forward: P = 0.2, I = 0, steps for several R (Fig. 6.7).
+    FfR,
+    /// Back-EMF feed-forward: a velocity loop (P_v = 1) through the current loop
+    /// (P = 1, I = 0, R = 0) for several KV (Fig. 6.8).
+    FfEmf,
+}
+
+/// `--board-rev`: how the firmware converts the PI gains.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum BoardRevArg {
+    /// P and I in V/A as the dictionary labels them, on the 10 mΩ board.
+    Literal,
+    /// The PI gains converted with the original 42 mΩ current scale (loop gain / 4.2):
+    /// reproduces the manual's FRF.
+    Sense42,
+}
+
+impl From<BoardRevArg> for BoardRev {
+    fn from(a: BoardRevArg) -> Self {
+        match a {
+            BoardRevArg::Literal => BoardRev::Literal,
+            BoardRevArg::Sense42 => BoardRev::Sense42,
+        }
+    }
+}
+
+/// `--excitation` of `frf`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum Excitation {
+    /// 49-line multisine, response by DFT at its lines.
+    Multisine,
+    /// Logarithmic swept sine 10 Hz – 9.9 kHz, `--amp` mA, Welch estimate.
+    Chirp,
+    /// White Gaussian noise of σ = `--amp`/3 mA (clipped at 3σ), Welch estimate.
+    Noise,
+    /// The manual's five signals (Fig. 6.2): chirp low (200 mA) and high (600 mA), WGN of
+    /// σ 50, 100, 200 mA.
+    Manual,
 }
 
 /// Arguments of `oxicat tue-es030`.
@@ -43,18 +96,49 @@ pub struct TueArgs {
     /// Output directory.
     #[arg(long, default_value = "out/tue-es030")]
     pub out: PathBuf,
-    /// FRF: current-loop P gains to identify (the manual's 6 and 10 by default).
-    #[arg(long, value_delimiter = ',', default_values_t = vec![6.0, 10.0])]
+    /// Current-loop P gains [V/A]: `frf` identifies each (default 6, 10), `step` steps
+    /// each with I = 0 (default 1, 2, 4, 6, 10); `ff-r` (default 0.2) and `ff-emf`
+    /// (default 1) take the first.
+    #[arg(long, value_delimiter = ',')]
     pub p: Vec<f32>,
-    /// FRF: I gain.
-    #[arg(long, default_value_t = 4.0)]
-    pub i: f32,
-    /// FRF: integrator limit in A s.
+    /// Current-loop I gains: `frf` takes the first (default 4), `step` steps each with
+    /// P = 2 (default 0, 1, 2, 4, 8).
+    #[arg(long, value_delimiter = ',')]
+    pub i: Vec<f32>,
+    /// Integrator limit in A s.
     #[arg(long, default_value_t = 1.0)]
     pub limit: f32,
+    /// `ff-r`: resistance feed-forward values [Ω] (default 0, 0.3, 0.611 = the RE 30's,
+    /// 1, 1.5 = the manual's "expected").
+    #[arg(long, value_delimiter = ',')]
+    pub r: Vec<f32>,
+    /// `ff-emf`: KV feed-forward values [V s/rad] (default 0, 0.01, 0.02, 0.0259 = the
+    /// manufacturer's).
+    #[arg(long, value_delimiter = ',')]
+    pub kv: Vec<f32>,
+    /// `ff-emf`: velocity-loop gain in mA per 0.1 rad/s (the PDO's units).
+    #[arg(long, default_value_t = 1.0)]
+    pub pv: f32,
+    /// Amplitude [mA]: the step of `step`/`ff-r` (default 1000), the peak of the multisine
+    /// and chirp (default 400), 3σ of the noise (default 450).
+    #[arg(long)]
+    pub amp: Option<f32>,
     /// FRF: multisine periods (of 100 ms, 10 Hz resolution); the first is discarded.
     #[arg(long, default_value_t = 6)]
     pub periods: usize,
+    /// FRF: the excitation.
+    #[arg(long, value_enum, default_value = "multisine")]
+    pub excitation: Excitation,
+    /// FRF: length of a chirp or noise excitation [s].
+    #[arg(long, default_value_t = 2.0)]
+    pub duration: f32,
+    /// FRF: the user's own excitation, one current setpoint in mA per line (`#` comments);
+    /// replaces `--excitation`.
+    #[arg(long)]
+    pub setpoints: Option<PathBuf>,
+    /// How the firmware converts the PI gains (`sense42`: the manual's FRF).
+    #[arg(long, value_enum, default_value = "sense42")]
+    pub board_rev: BoardRevArg,
     /// No progress bar.
     #[arg(long, short)]
     pub quiet: bool,
@@ -64,7 +148,7 @@ pub struct TueArgs {
     pub format: crate::output::Format,
 }
 
-fn bench() -> Result<Link, CliError> {
+fn bench(cfg: &TueConfig) -> Result<Link, CliError> {
     let mut seg = Segment::new();
     let def = &oxicat_devices::tue_es030::device::DEF;
     let sii = oxicat_esi::sii::generate(def).map_err(|error| CliError::BenchSii {
@@ -72,7 +156,7 @@ fn bench() -> Result<Link, CliError> {
         error,
     })?;
     let id = seg.add(oxicat_esc::Esc::new(oxicat_esc::EscConfig::et1200(), sii));
-    attach(&mut seg, id, &TueConfig::default()).map_err(|error| CliError::BenchFirmware {
+    attach(&mut seg, id, cfg).map_err(|error| CliError::BenchFirmware {
         bench: BENCH,
         error,
     })?;
@@ -119,14 +203,57 @@ pub fn check_args(a: &TueArgs) -> Result<(), UsageError> {
             })
         }
     };
-    if a.p.is_empty() {
-        return Err(UsageError::NoGain);
-    }
+    let count = |option: &'static str, n: usize| {
+        if n <= 8 {
+            Ok(())
+        } else {
+            Err(UsageError::OutOfRange {
+                option,
+                value: format!("({n} values)"),
+                allowed: "at most 8 values (one run and one curve each)".into(),
+            })
+        }
+    };
     for &p in &a.p {
         range("--p", p, 0.01, 1000.0, "current-loop P gain, V/A")?;
     }
-    range("--i", a.i, 0.0, 1000.0, "current-loop I gain")?;
+    for &i in &a.i {
+        range("--i", i, 0.0, 1000.0, "current-loop I gain")?;
+    }
+    for &r in &a.r {
+        range("--r", r, 0.0, 10.0, "resistance feed-forward, ohm")?;
+    }
+    for &kv in &a.kv {
+        range("--kv", kv, 0.0, 1.0, "back-EMF feed-forward, V s/rad")?;
+    }
+    count("--p", a.p.len())?;
+    count("--i", a.i.len())?;
+    count("--r", a.r.len())?;
+    count("--kv", a.kv.len())?;
     range("--limit", a.limit, 0.0, 100.0, "integrator limit, A s")?;
+    range(
+        "--pv",
+        a.pv,
+        0.0,
+        100.0,
+        "velocity-loop gain, mA per 0.1 rad/s",
+    )?;
+    if let Some(amp) = a.amp {
+        range(
+            "--amp",
+            amp,
+            1.0,
+            7500.0,
+            "mA; the M2 sense reads -8.7 … +7.6 A",
+        )?;
+    }
+    range(
+        "--duration",
+        a.duration,
+        0.2,
+        100.0,
+        "s of chirp or noise at 20 kHz",
+    )?;
     if !(2..=1000).contains(&a.periods) {
         return Err(UsageError::OutOfBounds {
             option: "--periods",
@@ -139,18 +266,37 @@ pub fn check_args(a: &TueArgs) -> Result<(), UsageError> {
     Ok(())
 }
 
+/// Reads and checks a `--setpoints` file.
+pub fn read_setpoints(path: &std::path::Path) -> Result<Vec<i16>, UsageError> {
+    let text = std::fs::read_to_string(path).map_err(|error| UsageError::UnreadableFile {
+        path: path.to_path_buf(),
+        error,
+    })?;
+    ident::parse_setpoints(&text).map_err(|error| UsageError::Setpoints {
+        path: path.to_path_buf(),
+        error,
+    })
+}
+
 /// Runs `oxicat tue-es030`; returns the text it printed.
 pub fn run(a: TueArgs) -> Result<String, CliError> {
     check_args(&a)?;
+    let file = match &a.setpoints {
+        Some(p) => Some(read_setpoints(p)?),
+        None => None,
+    };
     std::fs::create_dir_all(&a.out).map_err(|e| MasterError::File(a.out.clone(), e))?;
     match a.experiment {
         TueExperiment::Normal => normal(&a),
-        TueExperiment::Frf => frf(&a),
+        TueExperiment::Frf => frf(&a, file),
+        TueExperiment::Step => step(&a),
+        TueExperiment::FfR => ff_r(&a),
+        TueExperiment::FfEmf => ff_emf(&a),
     }
 }
 
 fn normal(a: &TueArgs) -> Result<String, CliError> {
-    let link = bench()?;
+    let link = bench(&TueConfig::default().rev(a.board_rev.into()))?;
     let m = Master::open(link.clone())?;
     let (mut m, _) = tue::set_mode(&link, m, 0, TueMode::Normal)?;
     let back = tue::write_params(&m, 0, &bench_params())?;
@@ -217,104 +363,666 @@ fn normal(a: &TueArgs) -> Result<String, CliError> {
     Ok(out)
 }
 
-fn describe(p: f32, mg: &Margins, share: f64, complete: bool) -> String {
-    let f = |x: Option<f64>, unit: &str| {
-        x.map(|v| format!("{v:.0} {unit}"))
-            .unwrap_or_else(|| "beyond the lines".into())
-    };
-    format!(
-        "P = {p}: bandwidth (|T| = -3 dB) {}, peak |T| {:.1} dB, loop crossover {}, phase margin \
-         {}, energy outside the excited lines {:.1} %{}{}",
-        f(mg.bandwidth, "Hz"),
-        mg.peak_db,
-        f(mg.crossover, "Hz"),
-        mg.phase_margin
-            .map(|v| format!("{v:.1} deg"))
-            .unwrap_or_else(|| "-".into()),
-        share * 100.0,
-        if share > 0.3 {
-            " -> UNSTABLE (limit cycle; the margins above are not meaningful)"
-        } else {
-            ""
-        },
-        if complete {
-            ""
-        } else {
-            " (samples LOST: redo)"
-        }
-    )
+/// The gains of one run on the bench parameters, feed-forwards as given.
+fn gains(p: f32, i: f32, limit: f32, r: f32, kv: f32) -> TueParams {
+    TueParams {
+        pgain: [p; 3],
+        igain: [i; 3],
+        ilimit: [limit; 3],
+        r: [r; 3],
+        kv: [kv; 3],
+        ..bench_params()
+    }
 }
 
-fn frf(a: &TueArgs) -> Result<String, CliError> {
+/// A fresh bench `cfg` with parameters `par`, in FRF mode, streaming `sp` to M2.
+fn stream(
+    cfg: &TueConfig,
+    par: &TueParams,
+    sp: &[i16],
+    quiet: bool,
+    label: &str,
+) -> Result<FrfRun, CliError> {
+    let link = bench(cfg)?;
+    let m = Master::open(link.clone())?;
+    tue::write_params(&m, 0, par)?;
+    let (mut m, _) = tue::set_mode(&link, m, 0, TueMode::Frf)?;
+    let b = bar(quiet, label);
+    b.set_length(sp.len() as u64);
+    let run = tue::run_frf(&mut m, 0, 1, sp, &mut |got, _| b.set_position(got as u64))?;
+    b.finish_and_clear();
+    Ok(run)
+}
+
+fn rev_line(rev: BoardRev) -> String {
+    match rev {
+        BoardRev::Literal => "board revision literal (PI gains in V/A as labelled)".into(),
+        BoardRev::Sense42 => format!(
+            "board revision sense42 (PI gains converted with the 42 mOhm scale: loop gain x{:.3})",
+            rev.pi_scale()
+        ),
+    }
+}
+
+fn file_list(files: &[PathBuf]) -> String {
+    files
+        .iter()
+        .map(|f| f.display().to_string())
+        .collect::<Vec<_>>()
+        .join(", ")
+}
+
+/// A response curve: name, points, coherence per point (Welch), share of energy outside
+/// the excited lines (multisine).
+struct Curve {
+    name: String,
+    pts: Vec<FrfPoint>,
+    coh: Option<Vec<f64>>,
+    unstable: bool,
+}
+
+fn frf(a: &TueArgs, file: Option<Vec<i16>>) -> Result<String, CliError> {
+    let rev: BoardRev = a.board_rev.into();
+    let cfg = TueConfig::default().rev(rev);
+    let ps = if a.p.is_empty() {
+        vec![6.0, 10.0]
+    } else {
+        a.p.clone()
+    };
+    let i = a.i.first().copied().unwrap_or(4.0);
+    let n = (a.duration as f64 * 20_000.0).round() as usize;
     let period = 2000;
-    let periods = a.periods;
-    let (sp, bins) = tue::multisine(period, periods, 10.0, 9900.0, 60, 400.0);
+    let amp = |d: f32| a.amp.unwrap_or(d) as f64;
+    let mut bins = None;
     let mut out = String::new();
+    let signals: Vec<(String, Vec<i16>)> = match (file, a.excitation) {
+        (Some(v), _) => {
+            let _ = writeln!(
+                out,
+                "Excitation: {} setpoints from {} ({:.2} s), Welch estimate (Hann, 2048 samples, 50 % overlap).",
+                v.len(),
+                a.setpoints.as_deref().map(|p| p.display().to_string()).unwrap_or_default(),
+                v.len() as f64 / 20_000.0
+            );
+            vec![("file".into(), v)]
+        }
+        (None, Excitation::Multisine) => {
+            let (sp, b) = tue::multisine(period, a.periods, 10.0, 9900.0, 60, amp(400.0));
+            let _ = writeln!(
+                out,
+                "Multisine: {} lines 10 Hz..9.9 kHz, {} mA peak, {} periods of {} samples at 20 kHz \
+                 ({:.1} s).",
+                b.len(),
+                amp(400.0),
+                a.periods,
+                period,
+                sp.len() as f64 / 20_000.0,
+            );
+            bins = Some(b);
+            vec![("multisine".into(), sp)]
+        }
+        (None, Excitation::Chirp) => {
+            let _ = writeln!(
+                out,
+                "Chirp: log sweep 10 Hz..9.9 kHz, {} mA, {} s; Welch estimate (Hann, 2048, 50 %).",
+                amp(400.0),
+                a.duration
+            );
+            vec![("chirp".into(), ident::chirp(n, 10.0, 9900.0, amp(400.0)))]
+        }
+        (None, Excitation::Noise) => {
+            let _ = writeln!(
+                out,
+                "White Gaussian noise: sigma {} mA (clipped at 3 sigma), {} s; Welch estimate (Hann, 2048, 50 %).",
+                amp(450.0) / 3.0,
+                a.duration
+            );
+            vec![("noise".into(), ident::white_noise(n, amp(450.0) / 3.0, 1))]
+        }
+        (None, Excitation::Manual) => {
+            let _ = writeln!(
+                out,
+                "The manual's five signals (Fig. 6.2), {} s each: chirp low 200 mA, chirp high 600 mA, \
+                 WGN 1/2/3 of sigma 50/100/200 mA; Welch estimate (Hann, 2048, 50 %).",
+                a.duration
+            );
+            vec![
+                ("chirp low".into(), ident::chirp(n, 10.0, 9900.0, 200.0)),
+                ("chirp high".into(), ident::chirp(n, 10.0, 9900.0, 600.0)),
+                ("WGN 1".into(), ident::white_noise(n, 50.0, 1)),
+                ("WGN 2".into(), ident::white_noise(n, 100.0, 2)),
+                ("WGN 3".into(), ident::white_noise(n, 200.0, 3)),
+            ]
+        }
+    };
     let _ = writeln!(
         out,
-        "Multisine: {} lines 10 Hz..9.9 kHz, 400 mA peak, {} periods of {} samples at 20 kHz \
-         ({:.1} s), M2, I = {}, limit = {}, feed-forward off.",
-        bins.len(),
-        periods,
-        period,
-        sp.len() as f64 / 20_000.0,
-        a.i,
-        a.limit
+        "M2, I = {i}, limit = {}, feed-forward off, axis free; {}.",
+        a.limit,
+        rev_line(rev)
     );
-    let mut curves: Vec<(String, Vec<FrfPoint>)> = Vec::new();
-    let mut csv = String::from("f [Hz]");
-    for &p in &a.p {
-        let link = bench()?;
-        let m = Master::open(link.clone())?;
-        let par = TueParams {
-            pgain: [p; 3],
-            igain: [a.i; 3],
-            ilimit: [a.limit; 3],
-            r: [0.0; 3],
-            kv: [0.0; 3],
-            ..bench_params()
-        };
-        tue::write_params(&m, 0, &par)?;
-        let (mut m, _) = tue::set_mode(&link, m, 0, TueMode::Frf)?;
-        let b = bar(a.quiet, &format!("FRF P={p}"));
-        b.set_length(sp.len() as u64);
-        let run = tue::run_frf(&mut m, 0, 1, &sp, &mut |got, _| b.set_position(got as u64))?;
-        b.finish_and_clear();
-        let pts = tue::frequency_response(&run, period, &bins);
-        let mg = tue::margins(&pts);
-        let share = tue::unexcited_share(&run, period, &bins);
-        let _ = writeln!(
-            out,
-            "{} ({} setpoints sent, {} currents back)",
-            describe(p, &mg, share, run.complete()),
-            run.setpoints.len(),
-            run.currents.len()
+    let model = ident::PlantModel::of(&cfg.motors[1]);
+    let mut curves: Vec<Curve> = Vec::new();
+    let mut plants: Vec<(String, tue::PlantPoints)> = Vec::new();
+    for &p in &ps {
+        let ip = param2int_rev(
+            &MotorParams {
+                pgain: p,
+                igain: i,
+                ..MotorParams::DEFAULT
+            },
+            rev,
         );
-        let _ = write!(csv, ",|T| P={p} [dB],arg T P={p} [deg],|L| P={p} [dB]");
-        curves.push((format!("P = {p}"), pts));
+        for (sig, sp) in &signals {
+            let name = if signals.len() == 1 && bins.is_some() {
+                format!("P={p}")
+            } else {
+                format!("P={p} {sig}")
+            };
+            let run = stream(&cfg, &gains(p, i, a.limit, 0.0, 0.0), sp, a.quiet, &name)?;
+            let (pts, coh, unstable, mg, extra) = match &bins {
+                Some(b) => {
+                    let pts = tue::frequency_response(&run, period, b);
+                    let share = tue::unexcited_share(&run, period, b);
+                    let mg = tue::margins(&pts);
+                    (pts, None, share > 0.3, mg, share)
+                }
+                None => {
+                    let w = tue::welch_response(&run, 2048, 1024)
+                        .map_err(|e| MasterError::Usage(format!("{name}: Welch estimate: {e}")))?;
+                    let good: Vec<FrfPoint> =
+                        w.iter().filter(|x| x.1 >= 0.8).map(|x| x.0).collect();
+                    let mg = tue::margins(&good);
+                    let peak_sp = sp.iter().map(|v| v.unsigned_abs()).max().unwrap_or(0);
+                    let peak = run
+                        .currents
+                        .iter()
+                        .map(|v| v.unsigned_abs())
+                        .max()
+                        .unwrap_or(0);
+                    let mean_coh = w.iter().map(|x| x.1).sum::<f64>() / w.len().max(1) as f64;
+                    let (pts, coh): (Vec<FrfPoint>, Vec<f64>) = w.into_iter().unzip();
+                    (pts, Some(coh), peak > 3 * peak_sp.max(1), mg, mean_coh)
+                }
+            };
+            let _ = writeln!(
+                out,
+                "{} ({} setpoints sent, {} currents back){}",
+                describe_curve(&name, &mg, unstable, run.complete()),
+                run.setpoints.len(),
+                run.currents.len(),
+                match bins {
+                    Some(_) => format!("; energy outside the lines {:.1} %", extra * 100.0),
+                    None => format!("; mean coherence {extra:.3}"),
+                }
+            );
+            if !unstable {
+                let est = tue::plant_estimate(&pts, ip.pgain, ip.igain, 24.0);
+                let fit_pts: Vec<(f64, (f64, f64))> = match &coh {
+                    Some(c) => est
+                        .iter()
+                        .zip(c)
+                        .filter(|x| *x.1 >= 0.9)
+                        .map(|x| *x.0)
+                        .collect(),
+                    None => est.clone(),
+                };
+                if let Some((r, l)) = ident::fit_r_l(&fit_pts, &model, 200.0, 3000.0) {
+                    let _ = writeln!(
+                        out,
+                        "  plant H = L/C fitted 200 Hz..3 kHz: R = {r:.3} Ohm, L = {:.4} mH (model {:.3} Ohm, {:.4} mH)",
+                        l * 1e3,
+                        model.r,
+                        model.l * 1e3
+                    );
+                }
+                plants.push((name.clone(), est));
+            }
+            curves.push(Curve {
+                name,
+                pts,
+                coh,
+                unstable,
+            });
+        }
+    }
+    let mut csv = String::from("f [Hz]");
+    for c in &curves {
+        let n = &c.name;
+        let _ = write!(
+            csv,
+            ",|T| {n} [dB],arg T {n} [deg],|L| {n} [dB],coherence {n},|H| {n} [dB A/V],arg H {n} [deg]"
+        );
     }
     csv.push('\n');
-    for (j, &bin) in bins.iter().enumerate() {
-        let _ = write!(csv, "{:.1}", bin as f64 * 20_000.0 / period as f64);
-        for (_, pts) in &curves {
-            match pts.get(j) {
+    let grid: Vec<f64> = curves
+        .first()
+        .map(|c| c.pts.iter().map(|p| p.f).collect())
+        .unwrap_or_default();
+    for (j, f) in grid.iter().enumerate() {
+        let _ = write!(csv, "{f:.1}");
+        for c in &curves {
+            match c.pts.get(j) {
                 Some(q) => {
                     let _ = write!(csv, ",{:.3},{:.2},{:.3}", q.t_db(), q.t_deg(), q.l_db());
+                    match c.coh.as_ref().and_then(|v| v.get(j)) {
+                        Some(g) => {
+                            let _ = write!(csv, ",{g:.4}");
+                        }
+                        None => csv.push(','),
+                    }
+                    match plants
+                        .iter()
+                        .find(|p| p.0 == c.name)
+                        .and_then(|p| p.1.get(j))
+                    {
+                        Some(&(_, h)) if !c.unstable => {
+                            let _ = write!(
+                                csv,
+                                ",{:.3},{:.2}",
+                                20.0 * h.0.hypot(h.1).log10(),
+                                h.1.atan2(h.0).to_degrees()
+                            );
+                        }
+                        _ => csv.push_str(",,"),
+                    }
                 }
-                None => csv.push_str(",,,"),
+                None => csv.push_str(",,,,,"),
             }
         }
         csv.push('\n');
     }
     let mut files = crate::output::write_recording(&a.out, "frf", &csv, a.format)?;
-    let refs: Vec<(&str, &[FrfPoint])> = curves.iter().map(|(n, p)| (n.as_str(), &p[..])).collect();
+    let refs: Vec<(&str, &[FrfPoint])> = curves
+        .iter()
+        .map(|c| (c.name.as_str(), &c.pts[..]))
+        .collect();
     files.extend(tue::plot_bode(
         &refs,
         &a.out,
         "bode",
         "TUeES030 closed current loop T = I_meas / I_set (model, RE 30 on M2)",
     )?);
-    let names: Vec<String> = files.iter().map(|f| f.display().to_string()).collect();
-    let _ = writeln!(out, "Wrote {}", names.join(", "));
+    files.extend(plot_lrr(&curves, &a.out)?);
+    // The figure leaves out the lines a Welch estimate is unsure of (coherence < 0.5).
+    let shown: Vec<(String, tue::PlantPoints)> = plants
+        .iter()
+        .map(|(name, est)| {
+            let coh = curves
+                .iter()
+                .find(|c| &c.name == name)
+                .and_then(|c| c.coh.as_ref());
+            let pts = est
+                .iter()
+                .enumerate()
+                .filter(|(j, _)| coh.and_then(|c| c.get(*j)).is_none_or(|&g| g >= 0.5))
+                .map(|(_, p)| *p)
+                .collect();
+            (name.clone(), pts)
+        })
+        .collect();
+    files.extend(tue::plot_plant(
+        &shown,
+        &model,
+        &a.out,
+        "plant",
+        "TUeES030 plant H = L/C against the model M·LP (RE 30 on M2)",
+    )?);
+    let _ = writeln!(out, "Wrote {}", file_list(&files));
+    Ok(out)
+}
+
+fn describe_curve(name: &str, mg: &Margins, unstable: bool, complete: bool) -> String {
+    let f = |x: Option<f64>, unit: &str| {
+        x.map(|v| format!("{v:.0} {unit}"))
+            .unwrap_or_else(|| "beyond the lines".into())
+    };
+    format!(
+        "{name}: bandwidth (|T| = -3 dB) {}, peak |T| {:.1} dB, loop crossover {}, phase margin {}{}{}",
+        f(mg.bandwidth, "Hz"),
+        mg.peak_db,
+        f(mg.crossover, "Hz"),
+        mg.phase_margin
+            .map(|v| format!("{v:.1} deg"))
+            .unwrap_or_else(|| "-".into()),
+        if unstable {
+            " -> UNSTABLE (limit cycle; the margins above are not meaningful)"
+        } else {
+            ""
+        },
+        if complete { "" } else { " (samples LOST: redo)" }
+    )
+}
+
+/// The loop return ratio L = T/(1 − T) (manual Fig. 6.3): `lrr.png`/`.svg`.
+fn plot_lrr(curves: &[Curve], dir: &std::path::Path) -> Result<Vec<PathBuf>, CliError> {
+    let mut mag = Vec::new();
+    let mut ph = Vec::new();
+    for c in curves.iter().filter(|c| !c.unstable) {
+        mag.push(Series {
+            name: c.name.clone(),
+            points: c.pts.iter().map(|p| (p.f.log10(), p.l_db())).collect(),
+            reference: false,
+        });
+        let mut prev = 0.0f64;
+        ph.push(Series {
+            name: c.name.clone(),
+            points: c
+                .pts
+                .iter()
+                .map(|p| {
+                    let mut d = p.l.1.atan2(p.l.0).to_degrees();
+                    while d - prev > 180.0 {
+                        d -= 360.0;
+                    }
+                    while d - prev < -180.0 {
+                        d += 360.0;
+                    }
+                    prev = d;
+                    (p.f.log10(), d)
+                })
+                .collect(),
+            reference: false,
+        });
+    }
+    if mag.is_empty() {
+        return Ok(Vec::new());
+    }
+    let (lo, hi) = mag
+        .iter()
+        .flat_map(|s| s.points.iter().map(|p| p.0))
+        .fold((f64::MAX, f64::MIN), |a, x| (a.0.min(x), a.1.max(x)));
+    mag.push(Series {
+        name: "0 dB".into(),
+        points: vec![(lo, 0.0), (hi, 0.0)],
+        reference: true,
+    });
+    ph.push(Series {
+        name: "-180 deg".into(),
+        points: vec![(lo, -180.0), (hi, -180.0)],
+        reference: true,
+    });
+    Ok(tue::plot_time(
+        &[
+            Panel {
+                y_desc: "|L| [dB]".into(),
+                series: mag,
+            },
+            Panel {
+                y_desc: "phase L [deg]".into(),
+                series: ph,
+            },
+        ],
+        "log10(frequency [Hz])",
+        dir,
+        "lrr",
+        "TUeES030 loop return ratio L = T/(1 - T) (model, RE 30 on M2)",
+    )?)
+}
+
+/// Samples before the step, of the step, after it (20 kHz): 1 ms, 10 ms, 3 ms.
+const STEP_PRE: usize = 20;
+const STEP_ON: usize = 200;
+const STEP_POST: usize = 60;
+
+fn metrics_line(label: &str, m: &tue::StepMetrics) -> String {
+    format!(
+        "{label:>14}: final {:7.1} mA (error {:6.1} mA), peak {:7.1} mA, overshoot {:5.1} %, rise 10-90 % {}{}",
+        m.final_ma,
+        m.error_ma,
+        m.peak_ma,
+        m.overshoot_pct,
+        m.rise_s
+            .map(|r| format!("{:.0} us", r * 1e6))
+            .unwrap_or_else(|| "-".into()),
+        if m.unstable() { "  UNSTABLE (oscillates)" } else { "" }
+    )
+}
+
+fn step_panel(runs: &[(String, FrfRun)], title_y: &str) -> Panel {
+    let t = |k: usize| (k as f64 - STEP_PRE as f64) / 20_000.0;
+    let mut series = Vec::new();
+    if let Some((_, r)) = runs.first() {
+        series.push(Series {
+            name: "setpoint".into(),
+            points: r
+                .setpoints
+                .iter()
+                .enumerate()
+                .map(|(k, &v)| (t(k), v as f64 * 1e-3))
+                .collect(),
+            reference: true,
+        });
+    }
+    for (l, r) in runs {
+        series.push(Series {
+            name: l.clone(),
+            points: r
+                .currents
+                .iter()
+                .enumerate()
+                .map(|(k, &v)| (t(k), v as f64 * 1e-3))
+                .collect(),
+            reference: false,
+        });
+    }
+    Panel {
+        y_desc: title_y.into(),
+        series,
+    }
+}
+
+/// Runs each (label, params) with a current pulse on a locked M2; returns the runs and
+/// the lines describing them.
+fn pulses(
+    a: &TueArgs,
+    cfg: &TueConfig,
+    sets: &[(String, TueParams)],
+    out: &mut String,
+) -> Result<Vec<(String, FrfRun)>, CliError> {
+    let amp = a.amp.unwrap_or(1000.0).round() as i16;
+    let sp = tue::pulse(STEP_PRE, STEP_ON, STEP_POST, amp);
+    let mut runs = Vec::new();
+    for (label, par) in sets {
+        let run = stream(cfg, par, &sp, a.quiet, label)?;
+        if let Some(m) = tue::step_metrics(&run.setpoints, &run.currents) {
+            let _ = writeln!(out, "{}", metrics_line(label, &m));
+        }
+        runs.push((label.clone(), run));
+    }
+    Ok(runs)
+}
+
+fn step(a: &TueArgs) -> Result<String, CliError> {
+    let rev: BoardRev = a.board_rev.into();
+    let cfg = TueConfig::default().rev(rev).locked(true);
+    let ps = if a.p.is_empty() {
+        vec![1.0, 2.0, 4.0, 6.0, 10.0]
+    } else {
+        a.p.clone()
+    };
+    let is = if a.i.is_empty() {
+        vec![0.0, 1.0, 2.0, 4.0, 8.0]
+    } else {
+        a.i.clone()
+    };
+    let mut out = String::new();
+    let _ = writeln!(
+        out,
+        "Current steps of {} mA on M2, axis locked, feed-forward off, limit {}; {}.",
+        a.amp.unwrap_or(1000.0),
+        a.limit,
+        rev_line(rev)
+    );
+    let _ = writeln!(out, "Fig. 6.5, P with I = 0:");
+    let pset: Vec<(String, TueParams)> = ps
+        .iter()
+        .map(|&p| (format!("P={p} I=0"), gains(p, 0.0, a.limit, 0.0, 0.0)))
+        .collect();
+    let prun = pulses(a, &cfg, &pset, &mut out)?;
+    let _ = writeln!(out, "Fig. 6.6, I with P = 2:");
+    let iset: Vec<(String, TueParams)> = is
+        .iter()
+        .map(|&i| (format!("P=2 I={i}"), gains(2.0, i, a.limit, 0.0, 0.0)))
+        .collect();
+    let irun = pulses(a, &cfg, &iset, &mut out)?;
+    let all: Vec<(String, &FrfRun)> = prun
+        .iter()
+        .chain(&irun)
+        .map(|(l, r)| (l.clone(), r))
+        .collect();
+    let n = all.first().map(|r| r.1.setpoints.len()).unwrap_or(0);
+    let csv = tue::step_csv(&all, STEP_PRE, 0, n);
+    let mut files = crate::output::write_recording(&a.out, "step", &csv, a.format)?;
+    files.extend(tue::plot_time(
+        &[step_panel(&prun, "current [A]")],
+        "time [s]",
+        &a.out,
+        "step-p",
+        "Step response for different proportional gains (I = 0, axis locked; manual Fig. 6.5)",
+    )?);
+    files.extend(tue::plot_time(
+        &[step_panel(&irun, "current [A]")],
+        "time [s]",
+        &a.out,
+        "step-i",
+        "Step response for different integral gains (P = 2, axis locked; manual Fig. 6.6)",
+    )?);
+    let _ = writeln!(out, "Wrote {}", file_list(&files));
+    Ok(out)
+}
+
+fn ff_r(a: &TueArgs) -> Result<String, CliError> {
+    let rev: BoardRev = a.board_rev.into();
+    let cfg = TueConfig::default().rev(rev).locked(true);
+    let p = a.p.first().copied().unwrap_or(0.2);
+    let i = a.i.first().copied().unwrap_or(0.0);
+    let rs = if a.r.is_empty() {
+        vec![0.0, 0.3, 0.611, 1.0, 1.5]
+    } else {
+        a.r.clone()
+    };
+    let mut out = String::new();
+    let _ = writeln!(
+        out,
+        "Resistance feed-forward (Fig. 6.7): steps of {} mA on M2, axis locked, P = {p}, I = {i}, \
+         KV = 0; the motor's R is {} Ohm; {}.",
+        a.amp.unwrap_or(1000.0),
+        cfg.motors[1].resistance,
+        rev_line(rev)
+    );
+    let sets: Vec<(String, TueParams)> = rs
+        .iter()
+        .map(|&r| (format!("R={r}"), gains(p, i, a.limit, r, 0.0)))
+        .collect();
+    let runs = pulses(a, &cfg, &sets, &mut out)?;
+    let all: Vec<(String, &FrfRun)> = runs.iter().map(|(l, r)| (l.clone(), r)).collect();
+    let n = all.first().map(|r| r.1.setpoints.len()).unwrap_or(0);
+    let csv = tue::step_csv(&all, STEP_PRE, 0, n);
+    let mut files = crate::output::write_recording(&a.out, "ff-r", &csv, a.format)?;
+    files.extend(tue::plot_time(
+        &[step_panel(&runs, "current [A]")],
+        "time [s]",
+        &a.out,
+        "ff-r",
+        &format!("Step response for different resistance feed-forward (P = {p}; manual Fig. 6.7)"),
+    )?);
+    let _ = writeln!(out, "Wrote {}", file_list(&files));
+    Ok(out)
+}
+
+fn ff_emf(a: &TueArgs) -> Result<String, CliError> {
+    let rev: BoardRev = a.board_rev.into();
+    let cfg = TueConfig::default().rev(rev);
+    let p = a.p.first().copied().unwrap_or(1.0);
+    let i = a.i.first().copied().unwrap_or(0.0);
+    let kvs = if a.kv.is_empty() {
+        vec![0.0, 0.01, 0.02, 0.0259]
+    } else {
+        a.kv.clone()
+    };
+    let mut out = String::new();
+    let _ = writeln!(
+        out,
+        "Back-EMF feed-forward (Fig. 6.8): velocity loop P_v = {} mA per 0.1 rad/s on M2 (axis free) \
+         following 0 -> 200 rad/s -> 0; current loop P = {p}, I = {i}, R = 0; {}.",
+        a.pv,
+        rev_line(rev)
+    );
+    let mut runs = Vec::new();
+    for &kv in &kvs {
+        let link = bench(&cfg)?;
+        let m = Master::open(link.clone())?;
+        let (mut m, _) = tue::set_mode(&link, m, 0, TueMode::Normal)?;
+        tue::write_params(&m, 0, &gains(p, i, a.limit, 0.0, kv))?;
+        let label = format!("Kv={kv}");
+        let b = bar(a.quiet, &label);
+        b.set_length(tue::EMF_CYCLES);
+        let rows = tue::run_velocity_loop(&mut m, 0, 1, a.pv as f64)?;
+        b.finish_and_clear();
+        let peak = rows
+            .iter()
+            .map(|r| r.input.velocity[1] as f64 * 0.1)
+            .fold(f64::MIN, f64::max);
+        let _ = writeln!(
+            out,
+            "{label:>10}: RMS velocity error {:6.2} rad/s, top speed {peak:6.1} rad/s (reference 200)",
+            tue::emf_rms_error(&rows, 1)
+        );
+        runs.push((label, rows));
+    }
+    let refs: Vec<(String, &[tue::NormalRow])> =
+        runs.iter().map(|(l, r)| (l.clone(), &r[..])).collect();
+    let csv = tue::emf_csv(&refs, 1);
+    let mut files = crate::output::write_recording(&a.out, "ff-emf", &csv, a.format)?;
+    let t = |r: &tue::NormalRow| r.cycle as f64 * 1e-3;
+    let mut vel = vec![Series {
+        name: "reference".into(),
+        points: runs
+            .first()
+            .map(|(_, rows)| {
+                rows.iter()
+                    .map(|r| (t(r), tue::emf_trajectory(t(r))))
+                    .collect()
+            })
+            .unwrap_or_default(),
+        reference: true,
+    }];
+    let mut cur = Vec::new();
+    for (l, rows) in &runs {
+        vel.push(Series {
+            name: l.clone(),
+            points: rows
+                .iter()
+                .map(|r| (t(r), r.input.velocity[1] as f64 * 0.1))
+                .collect(),
+            reference: false,
+        });
+        cur.push(Series {
+            name: l.clone(),
+            points: rows
+                .iter()
+                .map(|r| (t(r), r.input.current[1] as f64 * 1e-3))
+                .collect(),
+            reference: false,
+        });
+    }
+    files.extend(tue::plot_time(
+        &[
+            Panel {
+                y_desc: "velocity [rad/s]".into(),
+                series: vel,
+            },
+            Panel {
+                y_desc: "current [A]".into(),
+                series: cur,
+            },
+        ],
+        "time [s]",
+        &a.out,
+        "ff-emf",
+        "Velocity loop with different back-EMF feed-forward (manual Fig. 6.8)",
+    )?);
+    let _ = writeln!(out, "Wrote {}", file_list(&files));
     Ok(out)
 }

@@ -141,6 +141,13 @@ pub enum UsageError {
     NoFoeName,
     /// An output path that names no file (`/`, `..`).
     NotAFileName(PathBuf),
+    /// A `--setpoints` file that is refused: the file and the line's problem.
+    Setpoints {
+        /// The file.
+        path: PathBuf,
+        /// What is wrong, with its line.
+        error: oxicat_devices::tue_es030::ident::SetpointError,
+    },
 }
 
 impl fmt::Display for UsageError {
@@ -227,6 +234,7 @@ impl fmt::Display for UsageError {
             NoImage => f.write_str("give an image file or --device <name>"),
             NoFoeName => f.write_str("give --name"),
             NotAFileName(p) => write!(f, "{} is not a file name", p.display()),
+            Setpoints { path, error } => write!(f, "--setpoints {}: {error}", path.display()),
         }
     }
 }

@@ -73,6 +73,80 @@ fn tue_es030_numbers_are_range_checked() {
     assert!(err.contains("--i NaN is not in 0 … 1000"), "{err}");
     let err = error_in(&d, &["tue-es030", "frf", "--periods", "1", "--out", "o"]);
     assert!(err.contains("--periods 1 is not in 2 … 1000"), "{err}");
+    let err = error_in(&d, &["tue-es030", "ff-r", "--r", "inf", "--out", "o"]);
+    assert!(err.contains("--r inf is not in 0 … 10"), "{err}");
+    let err = error_in(&d, &["tue-es030", "step", "--amp", "9000", "--out", "o"]);
+    assert!(err.contains("--amp 9000 is not in 1 … 7500"), "{err}");
+    let err = error_in(&d, &["tue-es030", "ff-emf", "--kv", "NaN", "--out", "o"]);
+    assert!(err.contains("--kv NaN is not in 0 … 1"), "{err}");
+}
+
+#[test]
+fn tue_es030_setpoints_file_errors_name_the_line() {
+    let d = work_dir("tue-setpoints");
+    let good: String = (0..4000).map(|k| format!("{}\n", (k % 40) * 10)).collect();
+    for (bad, want) in [
+        ("12abc", "line 3: \"12abc\" is not a number"),
+        ("NaN", "line 3: NaN is not a finite current"),
+        ("inf", "line 3: inf is not a finite current"),
+        ("-9000", "line 3: -9000 mA is not in -7500 … 7500 mA"),
+    ] {
+        std::fs::write(d.join("sp.txt"), format!("# mA\n100\n{bad}\n{good}")).expect("write");
+        let err = error_in(
+            &d,
+            &[
+                "tue-es030",
+                "frf",
+                "--setpoints",
+                "sp.txt",
+                "--out",
+                "o",
+                "-q",
+            ],
+        );
+        assert!(err.contains("--setpoints sp.txt: "), "{err}");
+        assert!(err.contains(want), "{err}");
+    }
+    std::fs::write(d.join("short.txt"), "1\n2\n3\n").expect("write");
+    let err = error_in(
+        &d,
+        &["tue-es030", "frf", "--setpoints", "short.txt", "--out", "o"],
+    );
+    assert!(err.contains("3 setpoints: give 3072 … 2000000"), "{err}");
+    let err = error_in(
+        &d,
+        &[
+            "tue-es030",
+            "frf",
+            "--setpoints",
+            "missing.txt",
+            "--out",
+            "o",
+        ],
+    );
+    assert!(err.contains("missing.txt"), "{err}");
+    // Nothing was written for a refused file.
+    assert!(!d.join("o").exists());
+    // A good file runs: its own excitation, a Welch estimate.
+    std::fs::write(d.join("ok.txt"), &good).expect("write");
+    let out = ok_in(
+        &d,
+        &[
+            "tue-es030",
+            "frf",
+            "--setpoints",
+            "ok.txt",
+            "--p",
+            "6",
+            "--out",
+            "o",
+            "-q",
+        ],
+    );
+    assert!(out.contains("4000 setpoints from ok.txt"), "{out}");
+    assert!(out.contains("4000 currents back"), "{out}");
+    let csv = std::fs::read_to_string(d.join("o/frf.csv")).expect("frf.csv");
+    assert!(csv.starts_with("f [Hz],|T| P=6 file [dB]"), "{csv}");
 }
 
 // --- item 10: what cannot work is refused, with the limit ---

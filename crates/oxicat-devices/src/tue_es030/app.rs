@@ -6,7 +6,8 @@ use oxicat_slave::{AlState, AlStatusCode, Application, Od, Var};
 
 use super::control::q8mul;
 use super::control::{
-    param2int, phases, u2pwm, Motor, MotorParams, KILLVOLTAGE, R2IGAINCH1_Q8, R2IGAIN_Q8, R2U_FP,
+    param2int_rev, phases, u2pwm, BoardRev, Motor, MotorParams, KILLVOLTAGE, R2IGAINCH1_Q8,
+    R2IGAIN_Q8, R2U_FP,
 };
 use super::device::{FRF_PER_CYCLE, OBJECTS};
 use super::ring::Ring;
@@ -203,6 +204,8 @@ pub struct TuEs030<B: Board> {
     pub icnt: u16,
     /// What ran.
     pub counters: Counters,
+    /// The current scaling the PI gains are converted with ([`BoardRev`]).
+    pub board_rev: BoardRev,
     u2pwm: i32,
     killed: bool,
     output: bool,
@@ -214,9 +217,15 @@ pub struct TuEs030<B: Board> {
 }
 
 impl<B: Board> TuEs030<B> {
-    /// The firmware on `board`, parameters at the manual's defaults, motors braked.
+    /// The firmware on `board`, parameters at the manual's defaults, motors braked, the
+    /// default board revision ([`BoardRev::Sense42`]).
     pub fn new(board: B) -> Self {
-        let par = param2int(&MotorParams::DEFAULT);
+        Self::with_rev(board, BoardRev::default())
+    }
+
+    /// [`TuEs030::new`] with the PI gains converted for the board revision `rev`.
+    pub fn with_rev(board: B, rev: BoardRev) -> Self {
+        let par = param2int_rev(&MotorParams::DEFAULT, rev);
         let mut motors = [Motor::default(); 3];
         for m in &mut motors {
             m.par = par;
@@ -232,6 +241,7 @@ impl<B: Board> TuEs030<B> {
             linevoltage: 2400,
             icnt: 0,
             counters: Counters::default(),
+            board_rev: rev,
             u2pwm: u2pwm(2400),
             killed: false,
             output: false,
@@ -264,7 +274,7 @@ impl<B: Board> TuEs030<B> {
             czero: od.get(i, 8).unwrap_or(d.czero),
         };
         self.params[k] = p;
-        self.motors[k].par = param2int(&p);
+        self.motors[k].par = param2int_rev(&p, self.board_rev);
     }
 
     /// Takes the build-time handles when `od` is the TUeES030's dictionary (checked once:

@@ -151,6 +151,45 @@ pub struct IntParams {
     pub czero: i32,
 }
 
+/// Which current scaling the firmware's PI gains are converted with: the manual's P = 6
+/// loop (≈ 2.5 kHz, ≈ 60°) is only reproduced with a loop gain ≈ 4.2× below the literal
+/// V/A, the ratio of the sense-resistor change of §2.10 (42 mΩ → 10 mΩ). The manual shows
+/// neither `param2int` nor `R2IGAIN`, so both readings are offered and the user chooses.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum BoardRev {
+    /// The PI gains in V/A as the dictionary labels them, on the 10 mΩ board
+    /// (`pgain = 25.6 P`).
+    Literal,
+    /// The hypothesis that reproduces the manual's FRF (the default): `param2int`
+    /// converts P and I with the original board's 42 mΩ current scale while the current
+    /// itself is read with the 10 mΩ one, so the loop sees P/4.2 and I/4.2. The
+    /// feed-forwards (R, KV) act on the setpoint and the velocity and are not affected.
+    #[default]
+    Sense42,
+}
+
+impl BoardRev {
+    /// The factor on the PI gains: 1 ([`BoardRev::Literal`]) or 10 mΩ / 42 mΩ.
+    pub const fn pi_scale(self) -> f32 {
+        match self {
+            BoardRev::Literal => 1.0,
+            BoardRev::Sense42 => RSENSE_M23 / RSENSE_ORIGINAL,
+        }
+    }
+}
+
+/// Sense resistor of the original board (manual §2.10: `3.3/(20·42·10⁻³) ≈ 4 A`) \[Ω\].
+pub const RSENSE_ORIGINAL: f32 = 0.042;
+
+/// [`param2int`] with the PI gains scaled for the board revision `rev`.
+pub fn param2int_rev(p: &MotorParams, rev: BoardRev) -> IntParams {
+    let k = rev.pi_scale();
+    let mut i = param2int(p);
+    i.pgain = round_i32(p.pgain * 25.6 * k);
+    i.igain = round_i32(p.igain * Q8F as f32 * k);
+    i
+}
+
 /// `param2int` (not listed in the manual; our reconstruction):
 ///
 /// - P \[V/A\] → q8 mA→10 mV: `P · (1 mA / 10 mV) · 256 = 25.6 P`;
@@ -272,12 +311,14 @@ pub fn u2pwm(linevoltage_10mv: i32) -> i32 {
 }
 
 /// Comparator values of the two phases for a PWM value, centred at 50/50 (PWM2ph3):
-/// phase A at `(PWMPER + pwm) / 2`, phase B at `PWMPER − A`; the bridge sees
-/// `(A − B) / PWMPER` of the line voltage.
+/// phase A at `(PWMPER + pwm + 1) / 2`, phase B at `A − pwm`; the bridge sees
+/// `(A − B) / PWMPER = pwm / PWMPER` of the line voltage, every PWM count (B at
+/// `PWMPER − A` would drop the odd counts: half the resolution).
 pub fn phases(pwm: i16) -> (u16, u16) {
     let top = PWMPER as i32;
-    let a = ((top + pwm as i32) / 2).clamp(0, top);
-    (a as u16, (top - a) as u16)
+    let p = (pwm as i32).clamp(-top, top);
+    let a = ((top + p + 1) / 2).clamp(0, top);
+    (a as u16, (a - p).clamp(0, top) as u16)
 }
 
 #[cfg(test)]
@@ -293,6 +334,25 @@ mod tests {
         assert_eq!(p.kv, 77);
         assert_eq!(p.increments, 4096);
         assert_eq!(p.ilimit, 4_000_000);
+    }
+
+    #[test]
+    fn board_revision_scales_only_the_pi_gains() {
+        let p = MotorParams {
+            pgain: 6.0,
+            igain: 4.0,
+            ..MotorParams::DEFAULT
+        };
+        let lit = param2int_rev(&p, BoardRev::Literal);
+        assert_eq!(lit, param2int(&p));
+        let s42 = param2int_rev(&p, BoardRev::Sense42);
+        assert_eq!(lit.pgain, 154);
+        assert_eq!(s42.pgain, 37, "25.6 * 6 / 4.2");
+        assert_eq!(s42.igain, 244, "256 * 4 / 4.2");
+        assert_eq!(
+            (s42.rm2u, s42.kv, s42.ilimit),
+            (lit.rm2u, lit.kv, lit.ilimit)
+        );
     }
 
     #[test]
@@ -338,6 +398,16 @@ mod tests {
         let (a, b) = phases(124);
         assert_eq!(a as i32 - b as i32, 124);
         assert_eq!(phases(i16::MAX), (250, 0));
+        assert_eq!(phases(i16::MIN), (0, 250));
+        for pwm in -240..=240i16 {
+            let (a, b) = phases(pwm);
+            assert_eq!(
+                a as i32 - b as i32,
+                pwm as i32,
+                "every count reaches the bridge"
+            );
+            assert!((a as i32 + b as i32 - 250).abs() <= 1, "centred");
+        }
     }
 
     #[test]

@@ -742,3 +742,421 @@ where
     root.present()?;
     Ok(())
 }
+
+// ---- Time domain (manual §6.3, Figs. 6.5–6.8) -------------------------------------------
+
+/// A current pulse at 20 kHz: `pre` samples at 0, `on` at `amp_ma`, `post` at 0 (the
+/// manual's "pulse signal ... a single part of this pulse ... seen as a step response").
+pub fn pulse(pre: usize, on: usize, post: usize, amp_ma: i16) -> Vec<i16> {
+    let mut v = vec![0; pre + on + post];
+    v[pre..pre + on].fill(amp_ma);
+    v
+}
+
+/// What a step response shows.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct StepMetrics {
+    /// Setpoint of the step \[mA\].
+    pub setpoint_ma: f64,
+    /// Mean current over the last quarter of the step \[mA\].
+    pub final_ma: f64,
+    /// Highest current during the step \[mA\].
+    pub peak_ma: f64,
+    /// (peak − final)/final \[%\].
+    pub overshoot_pct: f64,
+    /// 10 → 90 % of the final value \[s\] (None: never reached).
+    pub rise_s: Option<f64>,
+    /// Setpoint − final \[mA\]: the steady-state error.
+    pub error_ma: f64,
+    /// RMS deviation from the final value over the second half of the step \[mA\]: an
+    /// oscillating (unstable) loop has a large one.
+    pub ripple_ma: f64,
+}
+
+impl StepMetrics {
+    /// The loop oscillates: a ripple above 10 % of the setpoint in the step's second half.
+    pub fn unstable(&self) -> bool {
+        self.ripple_ma > 0.1 * self.setpoint_ma.abs()
+    }
+}
+
+/// The metrics of the first step (first non-zero setpoint to the next change) of a run.
+pub fn step_metrics(setpoints: &[i16], currents: &[i16]) -> Option<StepMetrics> {
+    let n = setpoints.len().min(currents.len());
+    let k0 = setpoints[..n].iter().position(|&s| s != 0)?;
+    let sp = setpoints[k0];
+    let k1 = k0
+        + setpoints[k0..n]
+            .iter()
+            .position(|&s| s != sp)
+            .unwrap_or(n - k0);
+    let on: Vec<f64> = currents[k0..k1].iter().map(|&c| c as f64).collect();
+    if on.len() < 8 {
+        return None;
+    }
+    let q = on.len() * 3 / 4;
+    let fin = on[q..].iter().sum::<f64>() / (on.len() - q) as f64;
+    let sign = if sp < 0 { -1.0 } else { 1.0 };
+    let peak = on.iter().map(|c| c * sign).fold(f64::MIN, f64::max) * sign;
+    let h = on.len() / 2;
+    let ripple =
+        (on[h..].iter().map(|c| (c - fin).powi(2)).sum::<f64>() / (on.len() - h) as f64).sqrt();
+    let first = |frac: f64| on.iter().position(|&c| c * sign >= frac * fin * sign);
+    let rise = match (first(0.1), first(0.9)) {
+        (Some(a), Some(b)) if fin * sign > 0.0 => Some((b - a) as f64 / 20_000.0),
+        _ => None,
+    };
+    Some(StepMetrics {
+        setpoint_ma: sp as f64,
+        final_ma: fin,
+        peak_ma: peak,
+        overshoot_pct: if fin != 0.0 {
+            (peak - fin) / fin * 100.0
+        } else {
+            0.0
+        },
+        rise_s: rise,
+        error_ma: sp as f64 - fin,
+        ripple_ma: ripple,
+    })
+}
+
+/// CSV of step responses: `time [s]` from the step, the setpoint, then one current column
+/// per run (named by its label), in A; `from`..`to` are sample indices of the runs.
+pub fn step_csv(runs: &[(String, &FrfRun)], step_at: usize, from: usize, to: usize) -> String {
+    use oxicat_master::value::format_scaled;
+    let cur = super::device::DEF
+        .scale(0x6000, 5)
+        .expect("the TUeES030 declares the current's unit");
+    let mut h = vec!["time [s]".to_string(), format!("setpoint [{}]", cur.unit)];
+    h.extend(
+        runs.iter()
+            .map(|(l, _)| format!("current {l} [{}]", cur.unit)),
+    );
+    let sp = runs.first().map(|r| &r.1.setpoints[..]).unwrap_or(&[]);
+    let body = (from..to).map(|k| {
+        let mut f = vec![
+            format!("{:.5}", (k as f64 - step_at as f64) / 20_000.0),
+            format_scaled(sp.get(k).copied().unwrap_or(0).into(), &cur),
+        ];
+        f.extend(runs.iter().map(|(_, r)| match r.currents.get(k) {
+            Some(&c) => format_scaled(c.into(), &cur),
+            None => String::new(),
+        }));
+        f
+    });
+    crate::csv_text(std::iter::once(h).chain(body)).expect("fixed columns")
+}
+
+/// The velocity trajectory of the back-EMF test \[rad/s\] at `t` seconds: 0.1 s at rest, a
+/// 0.4 s ramp to 200 rad/s, 0.8 s there, a 0.4 s ramp down, then rest.
+pub fn emf_trajectory(t: f64) -> f64 {
+    let v = 200.0;
+    if t < 0.1 {
+        0.0
+    } else if t < 0.5 {
+        v * (t - 0.1) / 0.4
+    } else if t < 1.3 {
+        v
+    } else if t < 1.7 {
+        v * (1.7 - t) / 0.4
+    } else {
+        0.0
+    }
+}
+
+/// Length of the back-EMF test \[cycles of 1 ms\].
+pub const EMF_CYCLES: u64 = 2000;
+
+/// The back-EMF feed-forward test (manual Fig. 6.8): a P velocity loop in the master
+/// (`pv` in mA per 0.1 rad/s, the PDO's units; the manual's P_v = 1.0) follows
+/// [`emf_trajectory`] on motor `channel` through current setpoints (clipped to ±3 A, the
+/// channel's rating); every 1 ms cycle recorded.
+pub fn run_velocity_loop(
+    m: &mut Master,
+    position: usize,
+    channel: usize,
+    pv: f64,
+) -> Result<Vec<NormalRow>, MasterError> {
+    let ch = channel.min(2);
+    run_normal(m, position, EMF_CYCLES, |k, inp| {
+        let mut o = NormalOut::default();
+        let t = k as f64 * 1e-3;
+        let e = emf_trajectory(t) * 10.0 - inp.velocity[ch] as f64;
+        o.mcom[ch] = super::MCOM_ENABLE;
+        o.setpoint[ch] = (pv * e).clamp(-3000.0, 3000.0) as i16;
+        o
+    })
+}
+
+/// RMS velocity error of a back-EMF run against [`emf_trajectory`] \[rad/s\] (the
+/// velocity each cycle reports against the reference its setpoint was computed for).
+pub fn emf_rms_error(rows: &[NormalRow], channel: usize) -> f64 {
+    let ch = channel.min(2);
+    let n = rows.len().max(1) as f64;
+    (rows
+        .iter()
+        .map(|r| {
+            (emf_trajectory(r.cycle as f64 * 1e-3) - r.input.velocity[ch] as f64 * 0.1).powi(2)
+        })
+        .sum::<f64>()
+        / n)
+        .sqrt()
+}
+
+/// CSV of back-EMF runs: `time [s]`, the reference velocity, then per run its velocity,
+/// current setpoint and current, in the device's units.
+pub fn emf_csv(runs: &[(String, &[NormalRow])], channel: usize) -> String {
+    use oxicat_master::value::format_scaled;
+    let ch = channel.min(2);
+    let sc = |index: u16, sub: u8| {
+        super::device::DEF
+            .scale(index, sub)
+            .expect("the TUeES030 declares this entry's unit")
+    };
+    let (sp, vel, cur) = (sc(0x7000, 2), sc(0x6000, 4), sc(0x6000, 5));
+    let mut h = vec![
+        "time [s]".to_string(),
+        format!("velocity reference [{}]", vel.unit),
+    ];
+    for (l, _) in runs {
+        h.extend([
+            format!("velocity {l} [{}]", vel.unit),
+            format!("setpoint {l} [{}]", sp.unit),
+            format!("current {l} [{}]", cur.unit),
+        ]);
+    }
+    let n = runs.iter().map(|r| r.1.len()).min().unwrap_or(0);
+    let body = (0..n).map(|k| {
+        let t = runs[0].1[k].cycle as f64 * 1e-3;
+        let mut f = vec![format!("{t:.3}"), format!("{:.1}", emf_trajectory(t))];
+        for (_, rows) in runs {
+            let r = &rows[k];
+            f.extend([
+                format_scaled(r.input.velocity[ch].into(), &vel),
+                format_scaled(r.output.setpoint[ch].into(), &sp),
+                format_scaled(r.input.current[ch].into(), &cur),
+            ]);
+        }
+        f
+    });
+    crate::csv_text(std::iter::once(h).chain(body)).expect("fixed columns")
+}
+
+/// One curve of a time plot.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Series {
+    /// Legend.
+    pub name: String,
+    /// (x, y) points.
+    pub points: Vec<(f64, f64)>,
+    /// Drawn thin and black (a reference or setpoint).
+    pub reference: bool,
+}
+
+/// One panel of a time plot: its y label and curves.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Panel {
+    /// y-axis label with unit.
+    pub y_desc: String,
+    /// Curves.
+    pub series: Vec<Series>,
+}
+
+/// Writes panels stacked over one x axis as `<stem>.png` and `<stem>.svg`.
+pub fn plot_time(
+    panels: &[Panel],
+    x_desc: &str,
+    dir: &Path,
+    stem: &str,
+    title: &str,
+) -> Result<Vec<PathBuf>, MasterError> {
+    crate::laelaps::plot::font_ready()?;
+    let png = dir.join(format!("{stem}.png"));
+    let svg = dir.join(format!("{stem}.svg"));
+    let err = |e: Box<dyn std::error::Error>| MasterError::Usage(format!("plot {stem}: {e}"));
+    let h = 120 + 330 * panels.len() as u32;
+    {
+        let root = plotters::prelude::BitMapBackend::new(&png, (1000, h));
+        draw_time(root, panels, x_desc, title).map_err(err)?;
+    }
+    {
+        let root = plotters::prelude::SVGBackend::new(&svg, (1000, h));
+        draw_time(root, panels, x_desc, title).map_err(err)?;
+    }
+    Ok(vec![png, svg])
+}
+
+fn draw_time<DB: plotters::prelude::DrawingBackend>(
+    backend: DB,
+    panels: &[Panel],
+    x_desc: &str,
+    title: &str,
+) -> Result<(), Box<dyn std::error::Error>>
+where
+    DB::ErrorType: 'static,
+{
+    use plotters::prelude::*;
+    let root = backend.into_drawing_area();
+    root.fill(&WHITE)?;
+    let root = root.titled(title, ("sans-serif", 22))?;
+    let areas = root.split_evenly((panels.len().max(1), 1));
+    let colors = [BLUE, RED, GREEN, MAGENTA, CYAN, RGBColor(255, 140, 0)];
+    for (panel, area) in panels.iter().zip(areas) {
+        let all = || panel.series.iter().flat_map(|s| s.points.iter());
+        let (x0, x1) = all().fold((f64::MAX, f64::MIN), |a, p| (a.0.min(p.0), a.1.max(p.0)));
+        let (y0, y1) = all().fold((f64::MAX, f64::MIN), |a, p| (a.0.min(p.1), a.1.max(p.1)));
+        if x0 >= x1 {
+            continue;
+        }
+        let pad = ((y1 - y0) * 0.08).max(1e-3);
+        let mut ch = ChartBuilder::on(&area)
+            .margin(10)
+            .x_label_area_size(35)
+            .y_label_area_size(60)
+            .build_cartesian_2d(x0..x1, (y0 - pad)..(y1 + pad))?;
+        ch.configure_mesh()
+            .x_desc(x_desc)
+            .y_desc(panel.y_desc.as_str())
+            .draw()?;
+        let mut k = 0;
+        for s in &panel.series {
+            let style = if s.reference {
+                BLACK.stroke_width(1)
+            } else {
+                k += 1;
+                colors[(k - 1) % colors.len()].stroke_width(2)
+            };
+            let c = style.color;
+            ch.draw_series(LineSeries::new(s.points.iter().copied(), style))?
+                .label(s.name.as_str())
+                .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], c));
+        }
+        ch.configure_series_labels()
+            .position(SeriesLabelPosition::LowerRight)
+            .background_style(WHITE.mix(0.8))
+            .border_style(BLACK)
+            .draw()?;
+    }
+    root.present()?;
+    Ok(())
+}
+
+/// A Welch estimate as closed-loop response points (T = H1, L = T/(1 − T)), with the
+/// coherence of each line.
+pub fn welch_response(
+    run: &FrfRun,
+    nfft: usize,
+    overlap: usize,
+) -> Result<Vec<(FrfPoint, f64)>, super::ident::WelchError> {
+    let n = run.currents.len().min(run.setpoints.len());
+    let r: Vec<f64> = run.setpoints[..n].iter().map(|&v| v as f64).collect();
+    let y: Vec<f64> = run.currents[..n].iter().map(|&v| v as f64).collect();
+    Ok(super::ident::welch(&r, &y, nfft, overlap, 20_000.0)?
+        .into_iter()
+        .map(|s| {
+            let t = s.h;
+            let l = cdiv(t, (1.0 - t.0, -t.1));
+            (FrfPoint { f: s.f, t, l }, s.coherence)
+        })
+        .collect())
+}
+
+/// A plant estimate: (frequency \[Hz\], H \[A/V\]) per line.
+pub type PlantPoints = Vec<(f64, (f64, f64))>;
+
+/// The plant estimate H = L/C (manual eq. 6.17) of response points, with C the firmware's
+/// PI of the integer gains `pgain`, `igain` at `line_v` volts.
+pub fn plant_estimate(
+    pts: &[FrfPoint],
+    pgain: i32,
+    igain: i32,
+    line_v: f64,
+) -> Vec<(f64, (f64, f64))> {
+    pts.iter()
+        .map(|p| {
+            let c = super::ident::controller(p.f, pgain, igain, line_v);
+            (p.f, cdiv(p.l, c))
+        })
+        .collect()
+}
+
+/// Bode plot of plant estimates against the model (manual Fig. 6.4): `<stem>.png/.svg`.
+pub fn plot_plant(
+    estimates: &[(String, PlantPoints)],
+    model: &super::ident::PlantModel,
+    dir: &Path,
+    stem: &str,
+    title: &str,
+) -> Result<Vec<PathBuf>, MasterError> {
+    let db = |h: (f64, f64)| 20.0 * h.0.hypot(h.1).log10();
+    let fs: Vec<f64> = estimates
+        .iter()
+        .flat_map(|e| e.1.iter().map(|p| p.0))
+        .collect();
+    let (f0, f1) = fs
+        .iter()
+        .fold((f64::MAX, f64::MIN), |a, &f| (a.0.min(f), a.1.max(f)));
+    if f0 >= f1 {
+        return Ok(Vec::new());
+    }
+    let grid: Vec<f64> = (0..200)
+        .map(|k| f0 * (f1 / f0).powf(k as f64 / 199.0))
+        .collect();
+    let unwrap = |pts: &mut dyn Iterator<Item = (f64, (f64, f64))>| {
+        let mut prev = 0.0f64;
+        pts.map(|(f, h)| {
+            let mut ph = h.1.atan2(h.0).to_degrees();
+            while ph - prev > 180.0 {
+                ph -= 360.0;
+            }
+            while ph - prev < -180.0 {
+                ph += 360.0;
+            }
+            prev = ph;
+            (f.log10(), ph)
+        })
+        .collect::<Vec<_>>()
+    };
+    let mut mag = Vec::new();
+    let mut ph = Vec::new();
+    for (name, e) in estimates {
+        mag.push(Series {
+            name: name.clone(),
+            points: e.iter().map(|&(f, h)| (f.log10(), db(h))).collect(),
+            reference: false,
+        });
+        ph.push(Series {
+            name: name.clone(),
+            points: unwrap(&mut e.iter().copied()),
+            reference: false,
+        });
+    }
+    let m: Vec<(f64, (f64, f64))> = grid.iter().map(|&f| (f, model.h(f))).collect();
+    mag.push(Series {
+        name: "model M·LP·delay".into(),
+        points: m.iter().map(|&(f, h)| (f.log10(), db(h))).collect(),
+        reference: true,
+    });
+    ph.push(Series {
+        name: "model M·LP·delay".into(),
+        points: unwrap(&mut m.iter().copied()),
+        reference: true,
+    });
+    plot_time(
+        &[
+            Panel {
+                y_desc: "|H| [dB A/V]".into(),
+                series: mag,
+            },
+            Panel {
+                y_desc: "phase H [deg]".into(),
+                series: ph,
+            },
+        ],
+        "log10(frequency [Hz])",
+        dir,
+        stem,
+        title,
+    )
+}

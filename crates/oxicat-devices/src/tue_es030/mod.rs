@@ -7,6 +7,9 @@
 //! - [`control`]: `currentPI`, `encoder_calculations`, `param2int`, fixed-point helpers and
 //!   the board constants;
 //! - [`ring`]: the FRF ring buffers;
+//! - `experiment` and `ident` (feature `bench`): the master side — mode switch, FRF
+//!   streaming, the manual's time-domain experiments, and identification (chirp, noise,
+//!   setpoint files, Welch with coherence, the plant model);
 //! - [`app`]: the [`Application`](oxicat_slave::Application) ([`TuEs030`]) and the hardware
 //!   traits ([`Board`]).
 //!
@@ -48,6 +51,8 @@ pub mod device;
 #[cfg(feature = "bench")]
 pub mod experiment;
 #[cfg(feature = "bench")]
+pub mod ident;
+#[cfg(feature = "bench")]
 pub mod rig;
 pub mod ring;
 
@@ -55,7 +60,7 @@ pub use app::{
     Adcs, Board, Bridges, Encoders, Io, Mode, TuEs030, CURRENT_TIMER, MCOM_ENABLE, MCOM_FRF_ENABLE,
     MCOM_FRF_TRISTATE, MCOM_TRISTATE, SERVICE_TIMER,
 };
-pub use control::{Motor, MotorParams};
+pub use control::{BoardRev, Motor, MotorParams};
 
 #[cfg(test)]
 mod tests;

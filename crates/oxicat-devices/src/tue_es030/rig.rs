@@ -13,6 +13,7 @@
 //! At equal times ESC events come first (the segment's rule), then the tick in the order
 //! above, so a run is a function of the frames and their virtual times only.
 
+use crate::tue_es030::control::BoardRev;
 use crate::tue_es030::{
     self, control, device, Adcs, Bridges, Encoders, Io, TuEs030, CURRENT_TIMER, SERVICE_TIMER,
 };
@@ -51,11 +52,30 @@ pub struct TueConfig {
     /// Plant steps per 50 µs tick (a multiple of 8 keeps the 6.25 µs PWM update on a step
     /// boundary).
     pub substeps: u32,
+    /// The board revision: which current scaling the firmware converts the PI gains with
+    /// (default [`BoardRev::Sense42`], the one that reproduces the manual's FRF).
+    pub board_rev: BoardRev,
+}
+
+impl TueConfig {
+    /// The default bench with every rotor held (the manual's "axis fixed" step tests).
+    pub fn locked(mut self, locked: bool) -> Self {
+        for m in &mut self.motors {
+            m.locked = locked;
+        }
+        self
+    }
+
+    /// The bench with board revision `rev`.
+    pub fn rev(mut self, rev: BoardRev) -> Self {
+        self.board_rev = rev;
+        self
+    }
 }
 
 impl Default for TueConfig {
     /// Maxon RE 30 310007 on every channel (M1 with its 5 mΩ sense), 24 V, 32 steps per
-    /// tick (1.5625 µs).
+    /// tick (1.5625 µs), board revision [`BoardRev::Sense42`].
     fn default() -> Self {
         Self {
             motors: [
@@ -65,6 +85,7 @@ impl Default for TueConfig {
             ],
             supply: 24.0,
             substeps: 32,
+            board_rev: BoardRev::default(),
         }
     }
 }
@@ -278,7 +299,7 @@ fn attach_with<P: PdiPath>(
         boot_stack(
             &device::DEF,
             esc,
-            TuEs030::new(BenchBoard::new(config)),
+            TuEs030::with_rev(BenchBoard::new(config), config.board_rev),
             path,
         )
     })
