@@ -8,8 +8,8 @@
 use core::ptr::{read_volatile, write_volatile};
 
 use oxicat_devices::axis_hub::ws2812::{HUB_TIMING, RING_SLOTS};
-use oxicat_devices::axis_hub::OneWireBus;
 use oxicat_devices::axis_hub::LedStrip;
+use oxicat_devices::axis_hub::OneWireBus;
 use oxicat_devices::demo::Leds;
 use stm32f4xx_hal::gpio::{Output, Pin};
 
@@ -211,8 +211,8 @@ impl DmaRings {
         wr(TIM8 + 0x14, 1); // UG: load PSC/ARR
         wr(TIM8 + 0x10, 0);
         wr(TIM8 + 0x0C, 1 << 8); // UDE
-        wr(TIM8 + 0x00, (1 << 7) | 1);
-        // TIM3: CH2, PSC 0.
+        wr(TIM8, (1 << 7) | 1); // CR1: ARPE, CEN
+                                // TIM3: CH2, PSC 0.
         wr(TIM3 + 0x28, 0);
         wr(TIM3 + 0x2C, arr);
         wr(TIM3 + 0x38, 0);
@@ -221,7 +221,7 @@ impl DmaRings {
         wr(TIM3 + 0x14, 1);
         wr(TIM3 + 0x10, 0);
         wr(TIM3 + 0x0C, 1 << 8);
-        wr(TIM3 + 0x00, (1 << 7) | 1);
+        wr(TIM3, (1 << 7) | 1); // CR1: ARPE, CEN
         Self {
             buf: [[0; RING_SLOTS]; 2],
         }
@@ -247,7 +247,7 @@ impl LedStrip for DmaRings {
         wr(r.scr() + 0x08, (r.tim + r.ccr) as u32); // PAR
         wr(r.scr() + 0x0C, buf.as_ptr() as u32); // M0AR
         wr(r.scr() + 0x14, 0); // FCR: direct mode
-        // CHSEL, MSIZE = PSIZE = 16 bit, MINC, memory to peripheral.
+                               // CHSEL, MSIZE = PSIZE = 16 bit, MINC, memory to peripheral.
         let cr = (r.channel << 25) | (1 << 13) | (1 << 11) | (1 << 10) | (1 << 6);
         wr(r.scr(), cr);
         wr(r.scr(), cr | 1);

@@ -212,6 +212,11 @@ fn the_hub_image_reads_the_sensors_over_usart_and_lights_the_rings_by_dma() {
     assert_eq!(r.fault, None);
     let st = view.lock().clone();
     eprintln!(
+        "with the plant: task tick handler max {:.1} ms (the 1-Wire read-out inside it), {} ticks",
+        r.handler(TIM6).max_cycles as f64 / 180_000.0,
+        r.taken[usize::from(TIM6)]
+    );
+    eprintln!(
         "1-Wire: {:?}, {} conversions; temperatures from cycle {first_valid:?}: {:?}; status \
          {:#010x} event {} error {}",
         st.onewire, st.conversions, last.temps, last.status, last.event, last.error
