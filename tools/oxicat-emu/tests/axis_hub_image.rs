@@ -11,12 +11,14 @@
 //!   DS18B20 on USART3's half-duplex line, the rings decoded from what DMA wrote into
 //!   TIM8 CCR1 / TIM3 CCR2), the temperatures in 0x6000 match the sensors' die
 //!   temperatures within the DS18B20's 12-bit resolution after the first conversion, and
-//!   both rings show the OP colour, decoded against the WS2812B timing.
+//!   both rings show the OP colour, decoded against the WS2812B timing;
+//! - a sensor unplugged on the board's bus in OP is ERROR 1102 in 0x6001:03, its slot in
+//!   0x6000 invalid, the others kept, and the rings turn to the warning colour.
 
 use std::sync::{Arc, Mutex};
 use std::time::Duration;
 
-use oxicat_devices::axis_hub::device::{DEF, SENSORS};
+use oxicat_devices::axis_hub::device::{DEF, SENSORS, TEMP_INVALID};
 use oxicat_devices::axis_hub::rig::HubInputs;
 use oxicat_devices::axis_hub::Shown;
 use oxicat_emu::axis_hub::{HubBoardPlant, HubView};
@@ -188,6 +190,7 @@ fn the_hub_image_reads_the_sensors_over_usart_and_lights_the_rings_by_dma() {
     let cycles = 400u64;
     let mut last = HubInputs::default();
     let mut first_valid: Option<u64> = None;
+    let mut in_op = oxicat_emu::axis_hub::HubState::default();
     let stats = m
         .run_cyclic(
             CycleOptions {
@@ -196,10 +199,13 @@ fn the_hub_image_reads_the_sensors_over_usart_and_lights_the_rings_by_dma() {
             },
             |io| {
                 last = HubInputs::parse(&io.inputs[0]);
-                if first_valid.is_none() && last.temps.iter().all(|&t| t != 0 && t < 8_500) {
+                if first_valid.is_none() && last.temps.iter().all(|&t| t != TEMP_INVALID) {
                     first_valid = Some(io.cycle);
                 }
                 Ok(if io.cycle + 1 >= cycles {
+                    // The plant as the last cycle in OP left it (after the run the master
+                    // takes the node back to PREOP, and the rings follow).
+                    in_op = view.lock().clone();
                     Flow::Stop
                 } else {
                     Flow::Continue
@@ -210,7 +216,7 @@ fn the_hub_image_reads_the_sensors_over_usart_and_lights_the_rings_by_dma() {
     assert_eq!(stats.wkc_errors, 0, "{stats:?}");
     let r = node.report().expect("the board thread runs");
     assert_eq!(r.fault, None);
-    let st = view.lock().clone();
+    let st = in_op;
     eprintln!(
         "with the plant: task tick handler max {:.1} ms (the 1-Wire read-out inside it), {} ticks",
         r.handler(TIM6).max_cycles as f64 / 180_000.0,
@@ -267,6 +273,83 @@ fn the_hub_image_reads_the_sensors_over_usart_and_lights_the_rings_by_dma() {
             st.transfers[k] > 10,
             "ring {k}: {} transfers",
             st.transfers[k]
+        );
+    }
+}
+
+/// A sensor unplugged on the board's bus while in OP: the image reports
+/// `ERR_TEMP_SENS_LOST` (1102) in 0x6001:03, that sensor's slot in 0x6000 becomes
+/// `TEMP_INVALID` while the others keep their values, and the rings switch to the warning
+/// colour.
+#[test]
+fn an_unplugged_sensor_on_the_board_is_error_1102_and_the_warning_colour() {
+    use oxicat_devices::axis_hub::codes::ERR_TEMP_SENS_LOST;
+    let Some(img) = image() else { return };
+    let temps = die_temps();
+    let plant = HubBoardPlant::new(&temps);
+    let view: HubView = plant.view();
+    let (seg, node) = segment(&img, Some(plant));
+    let mut m = Master::open(Link::Sim(Arc::new(Mutex::new(seg)))).expect("ethercrab scans");
+    // Unplugged 1 s after the first complete read-out; 3 s more for the next ones.
+    let mut unplug_at: Option<u64> = None;
+    let mut in_op = oxicat_emu::axis_hub::HubState::default();
+    let mut before = HubInputs::default();
+    let mut last = HubInputs::default();
+    let stats = m
+        .run_cyclic(
+            CycleOptions {
+                cycle: Duration::from_nanos(CYCLE_NS),
+                dc: false,
+            },
+            |io| {
+                last = HubInputs::parse(&io.inputs[0]);
+                if unplug_at.is_none() && last.temps.iter().all(|&t| t != TEMP_INVALID) {
+                    unplug_at = Some(io.cycle + 100);
+                }
+                if unplug_at == Some(io.cycle) {
+                    before = last;
+                    view.lock().plugged[4] = false;
+                }
+                let end = unplug_at.map_or(1_000, |u| u + 300);
+                Ok(if io.cycle + 1 >= end {
+                    in_op = view.lock().clone();
+                    Flow::Stop
+                } else {
+                    Flow::Continue
+                })
+            },
+        )
+        .unwrap_or_else(|e| panic!("{e}"));
+    assert!(
+        unplug_at.is_some(),
+        "no complete read-out in 10 s: {last:?}"
+    );
+    assert_eq!(stats.wkc_errors, 0, "{stats:?}");
+    assert_eq!(node.report().expect("the board runs").fault, None);
+    assert_eq!(before.error, 0, "no error before: {before:?}");
+    assert!(
+        before.temps.iter().all(|&t| t != TEMP_INVALID),
+        "{before:?}"
+    );
+    assert_eq!(last.error, ERR_TEMP_SENS_LOST, "{last:?}");
+    let invalid: Vec<usize> = (0..SENSORS)
+        .filter(|&i| last.temps[i] == TEMP_INVALID)
+        .collect();
+    assert_eq!(invalid.len(), 1, "one slot invalid: {:?}", last.temps);
+    for i in (0..SENSORS).filter(|i| !invalid.contains(i)) {
+        assert_eq!(last.temps[i], before.temps[i], "0x6000:{} kept", i + 1);
+    }
+    let want = Shown::Warning.color();
+    let st = in_op;
+    for (k, ring) in st.rings.iter().enumerate() {
+        let d = ring.as_ref().expect("a decoded stream");
+        assert!(d.bad_bits.is_empty() && d.latched, "ring {k}: {d:?}");
+        assert!(
+            d.colors
+                .iter()
+                .all(|c| (c.r, c.g, c.b) == (want.r, want.g, want.b)),
+            "ring {k}: {:?}, want {want:?}",
+            d.colors
         );
     }
 }
