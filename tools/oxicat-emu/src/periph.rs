@@ -1,5 +1,6 @@
 //! The STM32F446's peripheral bus as the image sees it: RCC, PWR, FLASH, GPIOA..H, SPI1
 //! (wired to the board's ESC chip model, LAN9252 or ET1100), EXTI/SYSCFG, the timers, ADC1,
+//! USART1..6 (`usart`), DMA1/2 (`dma`: streams on timer update requests),
 //! and the Cortex-M4's System Control Space. One `Periph` is shared by the engine's MMIO callbacks and hooks and by
 //! the board between engine runs.
 

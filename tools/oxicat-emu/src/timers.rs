@@ -18,6 +18,9 @@
 //! or 2 is ADC1's injected trigger: its rising edges are computed from the counter
 //! (`Timer::next_trgo_rise`), not pulsed. The other master modes (reset, enable, update)
 //! and the slave modes (reset, gated, trigger) do not produce or act on pulses here.
+//!
+//! Update events are counted (`Timer::updates`) and their times computed
+//! (`Timer::update_cycle`): with DIER.UDE each one is a DMA request (`crate::dma`).
 
 /// Register offsets.
 const CR1: usize = 0x00;
