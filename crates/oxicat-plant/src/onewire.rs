@@ -320,6 +320,28 @@ impl OneWireNet {
         }
     }
 
+    /// One time slot as the wire carries it, when the master cannot say whether it reads or
+    /// writes (a UART-driven master: a write-1 slot and a read slot are the same short low
+    /// pulse). `false`: a write-0 slot (every device takes the 0; returns 0). `true`: each
+    /// plugged device that has a bit to send drives it (a read slot for it), every other
+    /// one takes a written 1; returns the wired-AND (1 when none drives).
+    pub fn slot(&mut self, master: bool) -> bool {
+        if !master {
+            self.write_bit(false);
+            return false;
+        }
+        self.tick(SLOT_NS);
+        let now = self.now_ns;
+        let mut level = true;
+        for d in self.devices.iter_mut().filter(|d| d.plugged) {
+            match d.read_slot() {
+                Some(b) => level &= b,
+                None => d.write_slot(true, now),
+            }
+        }
+        level
+    }
+
     /// A read slot: the wired-AND of what the plugged devices drive (1 when none does).
     pub fn read_bit(&mut self) -> bool {
         self.tick(SLOT_NS);
@@ -373,5 +395,36 @@ mod tests {
         );
         net.devices[0].plugged = false;
         assert!(!net.reset());
+    }
+
+    #[test]
+    fn unified_slots_read_rom_and_scratchpad_as_split_slots_do() {
+        // A UART master only has 0-slots and 1-slots: the device decides what a 1 is.
+        let slot_byte = |net: &mut OneWireNet, b: u8| -> u8 {
+            (0..8).fold(0, |acc, i| acc | (net.slot(b >> i & 1 != 0) as u8) << i)
+        };
+        let rom = ds18b20_rom(0x00AB_CDEF);
+        let mut net = OneWireNet::new(vec![Ds18b20::new(rom)]);
+        net.devices[0].die_temp = -10.25;
+        assert!(net.reset());
+        assert_eq!(
+            slot_byte(&mut net, 0x33),
+            0x33,
+            "a written command reads back"
+        );
+        let got: Vec<u8> = (0..8).map(|_| slot_byte(&mut net, 0xFF)).collect();
+        assert_eq!(got, rom);
+        net.reset();
+        slot_byte(&mut net, 0xCC);
+        slot_byte(&mut net, 0x44);
+        assert!(!net.slot(true), "busy while converting");
+        net.set_time(750_000_000);
+        assert!(net.slot(true), "done");
+        net.reset();
+        slot_byte(&mut net, 0xCC);
+        slot_byte(&mut net, 0xBE);
+        let sp: Vec<u8> = (0..9).map(|_| slot_byte(&mut net, 0xFF)).collect();
+        assert_eq!(crc8(&sp), 0);
+        assert_eq!(i16::from_le_bytes([sp[0], sp[1]]), -164);
     }
 }

@@ -47,9 +47,11 @@
 #![warn(missing_docs)]
 
 pub mod adc;
+pub mod axis_hub;
 pub mod chip;
 pub mod cia402;
 mod cpu;
+pub mod dma;
 mod exti;
 pub mod laelaps;
 pub mod node;
@@ -59,6 +61,7 @@ pub mod plant;
 mod stats;
 mod timers;
 pub mod trot;
+pub mod usart;
 
 pub use chip::{ChipKind, EscChip};
 pub use plant::BoardPlant;
@@ -124,6 +127,27 @@ pub struct Segment {
     pub data: Vec<u8>,
     /// Size in memory.
     pub mem_size: u32,
+}
+
+/// Serves a DMA stream that was just enabled: its items from the engine's memory (an
+/// unmapped buffer is a fault with its address).
+fn dma_fetch(uc: &mut Unicorn<'_, ()>, p: &mut Periph) {
+    let Some(f) = p.dma_fetch.take() else {
+        return;
+    };
+    let (di, si, addr, items, size) = f;
+    let mut buf = vec![0u8; items * size];
+    match uc.mem_read(u64::from(addr), &mut buf) {
+        Ok(()) => p.dma_loaded(f, &buf),
+        Err(e) => {
+            p.fault.get_or_insert(format!(
+                "DMA{} stream {si}: fetch of {} bytes at {addr:#010x}: {e:?}",
+                di + 1,
+                buf.len()
+            ));
+            p.wake_at = 0;
+        }
+    }
 }
 
 /// The loadable segments of a 32-bit little-endian ARM ELF (`PT_LOAD`, at their load
@@ -372,11 +396,12 @@ impl Board {
                 read_sized(word, a, size)
             }),
             Some(
-                move |_: &mut Unicorn<'_, ()>, off: u64, size: usize, v: u64| {
+                move |uc: &mut Unicorn<'_, ()>, off: u64, size: usize, v: u64| {
                     let a = PERIPH.0 + off;
                     let mut p = w.borrow_mut();
                     let old = p.merge_base(a & !3);
                     p.write(a & !3, merge_sized(old, a, size, v));
+                    dma_fetch(uc, &mut p);
                 },
             ),
         )
@@ -392,11 +417,12 @@ impl Board {
                 u64::from((r.borrow_mut().read(a) >> bit) & 1)
             }),
             Some(
-                move |_: &mut Unicorn<'_, ()>, off: u64, _size: usize, v: u64| {
+                move |uc: &mut Unicorn<'_, ()>, off: u64, _size: usize, v: u64| {
                     let (a, bit) = target(off);
                     let mut p = w.borrow_mut();
                     let old = p.read(a);
                     p.write(a, (old & !(1 << bit)) | (u32::from(v & 1 != 0) << bit));
+                    dma_fetch(uc, &mut p);
                 },
             ),
         )
@@ -1019,6 +1045,45 @@ impl Board {
     /// The exception being handled (IPSR), 0 in thread mode.
     pub fn active_exception(&self) -> u16 {
         self.periph.borrow().scs.ipsr
+    }
+
+    /// Puts the 1-Wire bus `net` on U(S)ART `number`'s TX line (1..6; the image runs it
+    /// half-duplex): the bytes it sends become resets and slots at their baud rate
+    /// ([`usart`]). False if there is no such U(S)ART.
+    pub fn attach_onewire(
+        &mut self,
+        number: u8,
+        net: std::sync::Arc<std::sync::Mutex<oxicat_plant::onewire::OneWireNet>>,
+    ) -> bool {
+        let mut p = self.periph.borrow_mut();
+        match p.usarts.iter_mut().find(|u| u.number == number) {
+            Some(u) => {
+                u.line = Some(net);
+                true
+            }
+            None => false,
+        }
+    }
+
+    /// The last finished DMA transfer into timer `tim`'s register at offset `reg` (0x34
+    /// CCR1 … 0x40 CCR4): the items in the order the update events wrote them.
+    pub fn dma_burst(&self, tim: u8, reg: u64) -> Option<dma::DmaBurst> {
+        self.periph.borrow().dma_burst(tim, reg).cloned()
+    }
+
+    /// Timer `tim`'s counter clock \[Hz\] and ticks per period (ARR + 1).
+    pub fn timer_period(&self, tim: u8) -> Option<(f64, u32)> {
+        let mut p = self.periph.borrow_mut();
+        p.timer(tim).map(|t| t.period())
+    }
+
+    /// What U(S)ART `number` did on its 1-Wire line, and the bytes it sent.
+    pub fn onewire_stats(&self, number: u8) -> Option<(usart::OneWireStats, u64)> {
+        let p = self.periph.borrow();
+        p.usarts
+            .iter()
+            .find(|u| u.number == number)
+            .map(|u| (u.ow, u.sent))
     }
 }
 

@@ -1,5 +1,6 @@
 //! The STM32F446's peripheral bus as the image sees it: RCC, PWR, FLASH, GPIOA..H, SPI1
 //! (wired to the board's ESC chip model, LAN9252 or ET1100), EXTI/SYSCFG, the timers, ADC1,
+//! USART1..6 (`usart`), DMA1/2 (`dma`: streams on timer update requests),
 //! and the Cortex-M4's System Control Space. One `Periph` is shared by the engine's MMIO callbacks and hooks and by
 //! the board between engine runs.
 
@@ -8,9 +9,11 @@ use oxicat_pdi::sim::PinKind;
 use crate::adc::{self, Adc};
 use crate::chip::{ChipFrame, ChipKind, EscChip};
 
+use crate::dma::{self, Dma, DmaBurst, Run, DMAS};
 use crate::exti::{Exti, EXTI_BASE, SYSCFG_BASE};
 use crate::nvic::{Masks, Scs, DWT_BASE};
 use crate::timers::{Timer, TIMERS};
+use crate::usart::{Usart, USARTS};
 use crate::{SpiStats, Stimulus};
 
 /// Peripheral space modelled (APB1, APB2, AHB1).
@@ -83,6 +86,16 @@ pub(crate) struct Periph {
     pub analog: [Option<f64>; adc::CHANNELS],
     /// An access or configuration the models cannot serve: the image stops with it.
     pub fault: Option<String>,
+    /// USART1..3, UART4/5, USART6.
+    pub usarts: Vec<Usart>,
+    /// The last read of a USART's SR that found RXNE and TXE as they were: (access number,
+    /// cycle, address) — a polling loop, skipped forward like SysTick's.
+    usart_poll: Option<(u64, u64, u64)>,
+    /// DMA1, DMA2.
+    pub dmas: Vec<Dma>,
+    /// A stream just enabled whose items the engine fetches from memory: (DMA index,
+    /// stream, address, items, item size).
+    pub dma_fetch: Option<(usize, usize, u32, usize, usize)>,
 }
 
 impl Periph {
@@ -92,6 +105,13 @@ impl Periph {
             adc: Adc::default(),
             analog: [None; adc::CHANNELS],
             fault: None,
+            usarts: USARTS
+                .iter()
+                .map(|&(b, n, a)| Usart::new(b, n, a))
+                .collect(),
+            usart_poll: None,
+            dmas: DMAS.iter().map(|&(b, n)| Dma::new(b, n)).collect(),
+            dma_fetch: None,
             spi_idle_from: 0,
             spi_sclk_override: None,
             regs: vec![0; (PERIPH.1 / 4) as usize],
@@ -321,6 +341,7 @@ impl Periph {
             self.timer_at(i).sync(now);
         }
         self.adc_sync(now);
+        self.dma_sync();
     }
 
     /// CPU cycles per ADCCLK: PCLK2 / (2 · (ADC_CCR.ADCPRE + 1)).
@@ -390,9 +411,10 @@ impl Periph {
         } else {
             0
         };
+        let dma = self.dmas.iter().fold(0, |l, d| l | d.irq_lines());
         self.timers
             .iter()
-            .fold(self.exti.irq_lines() | adc, |l, t| l | t.irq_lines())
+            .fold(self.exti.irq_lines() | adc | dma, |l, t| l | t.irq_lines())
     }
 
     /// The cycle of the next timer or SysTick event that raises an interrupt, or of the
@@ -405,6 +427,7 @@ impl Periph {
             .chain(self.stimuli.front().map(|s| s.0))
             .chain(self.adc.busy_until())
             .chain(self.adc_trigger_after(self.adc.last).ok().flatten())
+            .chain(self.dma_next_event())
             .min()
     }
 
@@ -526,6 +549,8 @@ impl Periph {
                     }
                 }
             }
+            a if Self::usart_index(a).is_some() => self.usart_read(a),
+            a if Self::dma_index(a).is_some() => self.dma_read(a),
             a if (SYSCFG_BASE..EXTI_BASE + 0x400).contains(&a) => {
                 if !(SYSCFG_BASE + 0x30..EXTI_BASE).contains(&a) {
                     self.exti.read(a)
@@ -576,6 +601,8 @@ impl Periph {
                 }
                 self.wake_at = 0;
             }
+            a if Self::usart_index(a).is_some() => self.usart_write(a, v),
+            a if Self::dma_index(a).is_some() => self.dma_write(a, v),
             a if a == RCC => {
                 // Ready flags follow their enables: HSE 16/17, PLL 24/25, PLLI2S 26/27,
                 // PLLSAI 28/29; HSI stays on.
@@ -650,6 +677,238 @@ impl Periph {
                 self.set(a, v);
             }
         }
+    }
+
+    /// The U(S)ART whose register page holds `addr`.
+    fn usart_index(addr: u64) -> Option<usize> {
+        let base = addr & !0x3FF;
+        USARTS.iter().position(|u| u.0 == base)
+    }
+
+    /// CPU cycles per PCLK of the bus (APB1 or APB2).
+    fn pclk_div(&self, apb2: bool) -> u64 {
+        let cfgr = self.reg(RCC_CFGR);
+        let ppre = if apb2 {
+            (cfgr >> 13) & 7
+        } else {
+            (cfgr >> 10) & 7
+        };
+        if ppre < 4 {
+            1
+        } else {
+            2 << (ppre - 4)
+        }
+    }
+
+    /// A U(S)ART register read; a poll of SR that finds nothing new, right after the same
+    /// read, moves the clock to the end of the byte in flight (or the board's next stop),
+    /// the time the loop would have spun.
+    fn usart_read(&mut self, a: u64) -> u32 {
+        let Some(i) = Self::usart_index(a) else {
+            return 0;
+        };
+        let div = self.pclk_div(self.usarts[i].apb2);
+        let now = self.cycles;
+        if a & 0x3FF == 0 {
+            let spinning = self.usart_poll.is_some_and(|(seq, at, addr)| {
+                addr == a && seq + 1 == self.mmio_seq && now.saturating_sub(at) <= POLL_WINDOW
+            });
+            if spinning {
+                if let Some(end) = self.usarts[i].busy_until() {
+                    let to = end.min(self.wake_at).max(now);
+                    self.polled += to - now;
+                    self.cycles = to;
+                }
+            }
+        }
+        let now = self.cycles;
+        match self.usarts[i].read(a & 0x3FF, now, div) {
+            Ok(v) => {
+                self.usart_poll = (a & 0x3FF == 0).then_some((self.mmio_seq, now, a));
+                v
+            }
+            Err(e) => {
+                self.fault.get_or_insert(e);
+                self.wake_at = 0;
+                0
+            }
+        }
+    }
+
+    fn usart_write(&mut self, a: u64, v: u32) {
+        let Some(i) = Self::usart_index(a) else {
+            return;
+        };
+        let div = self.pclk_div(self.usarts[i].apb2);
+        let now = self.cycles;
+        if let Err(e) = self.usarts[i].write(a & 0x3FF, v, now, div) {
+            self.fault.get_or_insert(e);
+            self.wake_at = 0;
+        }
+    }
+
+    /// The DMA controller whose page holds `addr`.
+    fn dma_index(addr: u64) -> Option<usize> {
+        let base = addr & !0x3FF;
+        DMAS.iter().position(|d| d.0 == base)
+    }
+
+    fn dma_read(&mut self, a: u64) -> u32 {
+        self.dma_sync();
+        let Some(i) = Self::dma_index(a) else {
+            return 0;
+        };
+        match self.dmas[i].read(a & 0x3FF) {
+            Ok(v) => v,
+            Err(e) => {
+                self.fault.get_or_insert(e);
+                self.wake_at = 0;
+                0
+            }
+        }
+    }
+
+    fn dma_write(&mut self, a: u64, v: u32) {
+        self.dma_sync();
+        let Some(i) = Self::dma_index(a) else {
+            return;
+        };
+        match self.dmas[i].write(a & 0x3FF, v) {
+            Ok(Some((s, addr, items, size))) => self.dma_fetch = Some((i, s, addr, items, size)),
+            Ok(None) => {}
+            Err(e) => {
+                self.fault.get_or_insert(e);
+            }
+        }
+        self.wake_at = 0;
+    }
+
+    /// The engine fetched `bytes` for the stream [`Periph::dma_fetch`] named: the stream
+    /// runs from now, on its timer's update events.
+    pub fn dma_loaded(&mut self, fetch: (usize, usize, u32, usize, usize), bytes: &[u8]) {
+        let (di, si, _, _, size) = fetch;
+        let now = self.cycles;
+        let d = &self.dmas[di];
+        let s = &d.streams[si];
+        let n = s.ndtr as usize;
+        let par = u64::from(s.par);
+        let Some(tn) = d.request_timer(si) else {
+            return;
+        };
+        let Some(ti) = self.timers.iter().position(|t| t.kind.number == tn) else {
+            return;
+        };
+        let base = self.timers[ti].kind.base;
+        if !(base..base + 0x400).contains(&par) || n == 0 {
+            let e = format!(
+                "DMA{} stream {si}: PAR {par:#010x} / NDTR {n}: not modelled (only transfers \
+                 into the requesting TIM{tn}'s registers, {base:#010x}..)",
+                d.number
+            );
+            self.fault.get_or_insert(e);
+            self.wake_at = 0;
+            return;
+        }
+        let mut values: Vec<u32> = bytes
+            .chunks(size)
+            .map(|c| c.iter().rev().fold(0u32, |v, b| (v << 8) | u32::from(*b)))
+            .collect();
+        if values.len() == 1 && n > 1 {
+            values = vec![values[0]; n];
+        }
+        self.timer_at(ti).sync(now);
+        let start_updates = self.timers[ti].updates;
+        self.dmas[di].streams[si].run = Some(Run {
+            tim: ti,
+            off: (par - base) as usize,
+            values,
+            done: 0,
+            start_updates,
+            start: now,
+        });
+        self.wake_at = 0;
+    }
+
+    /// Brings the running streams up to now: an item per update event of their timer.
+    fn dma_sync(&mut self) {
+        let now = self.cycles;
+        for di in 0..self.dmas.len() {
+            for si in 0..8 {
+                let Some(mut run) = self.dmas[di].streams[si].run.take() else {
+                    continue;
+                };
+                let t = self.timer_at(run.tim);
+                t.sync(now);
+                let n = run.values.len();
+                if !t.update_dma() {
+                    // No requests while UDE is off.
+                    run.start_updates = t.updates.saturating_sub(run.done as u64);
+                }
+                let avail = (t.updates - run.start_updates).min(n as u64) as usize;
+                let tim_number = t.kind.number;
+                for k in run.done..avail {
+                    self.timer_at(run.tim).write(run.off, run.values[k], now);
+                }
+                let half = run.done < n / 2 && avail >= n / 2;
+                run.done = avail;
+                let dma = &mut self.dmas[di];
+                dma.streams[si].ndtr = (n - avail) as u32;
+                if half {
+                    dma.flag(si, dma::HTIF);
+                }
+                if avail == n {
+                    dma.flag(si, dma::TCIF);
+                    dma.streams[si].cr &= !dma::CR_EN;
+                    dma.bursts[si] = Some(DmaBurst {
+                        dma: dma.number,
+                        stream: si as u8,
+                        tim: tim_number,
+                        reg: run.off as u64,
+                        values: run.values,
+                        start: run.start,
+                        end: now,
+                    });
+                } else {
+                    dma.streams[si].run = Some(run);
+                }
+            }
+        }
+    }
+
+    /// The cycle a running stream with an enabled interrupt raises it.
+    fn dma_next_event(&self) -> Option<u64> {
+        let mut next: Option<u64> = None;
+        for d in &self.dmas {
+            for s in &d.streams {
+                let Some(run) = &s.run else { continue };
+                if s.cr & (dma::CR_TCIE | dma::CR_HTIE) == 0 {
+                    continue;
+                }
+                let t = &self.timers[run.tim];
+                if !t.update_dma() {
+                    continue;
+                }
+                let n = run.values.len();
+                let left = if s.cr & dma::CR_HTIE != 0 && run.done < n / 2 {
+                    n / 2 - run.done
+                } else {
+                    n - run.done
+                };
+                if let Some(c) = t.update_cycle(left as u64) {
+                    next = Some(next.map_or(c, |x| x.min(c)));
+                }
+            }
+        }
+        next
+    }
+
+    /// The last finished DMA transfer into timer `tim`'s register at offset `reg`.
+    pub fn dma_burst(&self, tim: u8, reg: u64) -> Option<&DmaBurst> {
+        self.dmas
+            .iter()
+            .flat_map(|d| d.bursts.iter().flatten())
+            .filter(|b| b.tim == tim && b.reg == reg)
+            .max_by_key(|b| b.end)
     }
 
     /// A read of the SCS page or the DWT.

@@ -18,6 +18,9 @@
 //! or 2 is ADC1's injected trigger: its rising edges are computed from the counter
 //! (`Timer::next_trgo_rise`), not pulsed. The other master modes (reset, enable, update)
 //! and the slave modes (reset, gated, trigger) do not produce or act on pulses here.
+//!
+//! Update events are counted (`Timer::updates`) and their times computed
+//! (`Timer::update_cycle`): with DIER.UDE each one is a DMA request (`crate::dma`).
 
 /// Register offsets.
 const CR1: usize = 0x00;
@@ -140,6 +143,8 @@ pub(crate) struct Timer {
     /// Cycle from which the counter has run undisturbed (started, written, or
     /// re-initialised by UG): computed OCxREF edges lie at or after it.
     epoch: u64,
+    /// Update events so far (a DMA stream on the update request counts them).
+    pub updates: u64,
 }
 
 /// The timer whose TRGO drives internal trigger ITR`ts` of timer `number` (RM0390 tables
@@ -175,6 +180,7 @@ impl Timer {
             enc: 0,
             trgo_pending: 0,
             epoch: 0,
+            updates: 0,
         };
         let max = t.max();
         t.regs[ARR / 4] = max;
@@ -277,6 +283,7 @@ impl Timer {
         }
         self.psc_sh = self.r(PSC) & 0xFFFF;
         self.arr_sh = self.r(ARR);
+        self.updates += 1;
         if self.kind.advanced {
             self.rep = self.r(RCR) & 0xFF;
         }
@@ -346,10 +353,12 @@ impl Timer {
                 };
                 let cycle = 2 * reps * period * psc;
                 if pt >= cycle {
-                    pt %= cycle;
                     if self.r(CR1) & UDIS == 0 {
                         self.regs[SR / 4] |= UIF;
+                        // Two update events per skipped cycle (one per RCR + 1 periods).
+                        self.updates += 2 * (pt / cycle);
                     }
+                    pt %= cycle;
                 }
             }
         }
@@ -373,6 +382,41 @@ impl Timer {
         };
         let pt = self.pticks_to_event() + u64::from(self.rep) * period * psc;
         Some(self.last + pt * self.clk_div.max(1))
+    }
+
+    /// The cycle of the `k`-th update event from now (k ≥ 1), if the counter runs and
+    /// updates are enabled (edge-aligned counting: one every (ARR + 1)·(PSC + 1)·(RCR + 1)
+    /// timer ticks once the preloaded values are in).
+    pub fn update_cycle(&self, k: u64) -> Option<u64> {
+        if !self.running() || self.r(CR1) & UDIS != 0 || k == 0 {
+            return None;
+        }
+        let psc = u64::from(self.psc_sh) + 1;
+        let period = if self.cms() != 0 {
+            u64::from(self.arr_sh).max(1)
+        } else {
+            u64::from(self.arr_sh) + 1
+        };
+        let reps = if self.kind.advanced {
+            u64::from(self.r(RCR) & 0xFF) + 1
+        } else {
+            1
+        };
+        let first = self.pticks_to_event() + u64::from(self.rep) * period * psc;
+        let pt = first + (k - 1) * reps * period * psc;
+        Some(self.last + pt * self.clk_div.max(1))
+    }
+
+    /// DIER.UDE: the update event requests DMA.
+    pub fn update_dma(&self) -> bool {
+        self.r(DIER) & (1 << 8) != 0
+    }
+
+    /// Counter clock \[Hz\] and ticks per period (ARR + 1), as the preloaded values stand.
+    pub fn period(&self) -> (f64, u32) {
+        let tick =
+            crate::CPU_HZ as f64 / (self.clk_div.max(1) as f64 * (f64::from(self.psc_sh) + 1.0));
+        (tick, self.arr_sh.saturating_add(1))
     }
 
     /// The IRQ lines this timer drives high (exception-number bit set).

@@ -334,3 +334,32 @@ fn the_test_programs_match_their_sources() {
     }
     let _ = std::fs::remove_dir_all(&tmp);
 }
+
+#[test]
+fn dma_feeds_a_timer_compare_register_one_item_per_update_and_raises_transfer_complete() {
+    let mut b = board(include_bytes!("asm/dma.elf"));
+    // 8 updates of 1 µs (180 cycles each), then well past.
+    b.run(180 * 30).unwrap();
+    assert_eq!(word(&b, 0x04), 1, "one transfer-complete interrupt");
+    let at_tc = word(&b, 0x08);
+    assert!(
+        (7..=8).contains(&at_tc),
+        "TC after the 8th update request: {at_tc} updates counted by then"
+    );
+    assert_eq!(word(&b, 0x0C), 0, "NDTR at TC");
+    assert_eq!(word(&b, 0x10) & 1, 0, "EN cleared at the end");
+    let lisr = word(&b, 0x14);
+    assert_ne!(lisr & (1 << 21), 0, "TCIF2: {lisr:#010x}");
+    assert_ne!(lisr & (1 << 20), 0, "HTIF2: {lisr:#010x}");
+    let burst = b
+        .dma_burst(3, 0x38)
+        .expect("a finished transfer into TIM3 CCR2");
+    assert_eq!((burst.dma, burst.stream), (1, 2));
+    assert_eq!(burst.values, [10, 20, 30, 40, 50, 60, 70, 0]);
+    assert_eq!(b.pwm_duty(3, 2), Some(0.0), "the last item stays in CCR2");
+    // No more transfers: the stream is off.
+    let n = word(&b, 0x18);
+    b.run(180 * 20).unwrap();
+    assert!(word(&b, 0x18) > n, "the timer runs on");
+    assert_eq!(word(&b, 0x04), 1);
+}

@@ -1,0 +1,284 @@
+//! The hub board's peripherals behind the application's seams: the 1-Wire master on USART3
+//! (half-duplex, AN214's reset at 9600 baud and bit slots at 115200), and the two WS2812
+//! rings fed by DMA into a timer's compare register (TIM8 CH1 on PC6 through DMA2 stream 1
+//! channel 7 on TIM8_UP, TIM3 CH2 on PC7 through DMA1 stream 2 channel 5 on TIM3_UP;
+//! RM0390 tables 28/29). Register-level: the HAL has no half-duplex USART or timer-DMA
+//! burst for these parts, and the emulator models exactly these registers.
+
+use core::ptr::{read_volatile, write_volatile};
+
+use oxicat_devices::axis_hub::ws2812::{HUB_TIMING, RING_SLOTS};
+use oxicat_devices::axis_hub::LedStrip;
+use oxicat_devices::axis_hub::OneWireBus;
+use oxicat_devices::demo::Leds;
+use stm32f4xx_hal::gpio::{Output, Pin};
+
+const RCC: usize = 0x4002_3800;
+const RCC_AHB1ENR: usize = RCC + 0x30;
+const RCC_APB1ENR: usize = RCC + 0x40;
+const RCC_APB2ENR: usize = RCC + 0x44;
+
+const USART3: usize = 0x4000_4800;
+const SR: usize = 0x00;
+const DR: usize = 0x04;
+const BRR: usize = 0x08;
+const CR1: usize = 0x0C;
+const CR3: usize = 0x14;
+const SR_RXNE: u32 = 1 << 5;
+const SR_TXE: u32 = 1 << 7;
+
+const TIM3: usize = 0x4000_0400;
+const TIM8: usize = 0x4001_0400;
+const DMA1: usize = 0x4002_6000;
+const DMA2: usize = 0x4002_6400;
+
+fn rd(addr: usize) -> u32 {
+    // SAFETY: a peripheral register of the STM32F446 (addresses above, RM0390).
+    unsafe { read_volatile(addr as *const u32) }
+}
+
+fn wr(addr: usize, v: u32) {
+    // SAFETY: as `rd`; only this module owns these peripherals.
+    unsafe { write_volatile(addr as *mut u32, v) }
+}
+
+fn set_bits(addr: usize, bits: u32) {
+    wr(addr, rd(addr) | bits);
+}
+
+/// Busy-wait bound of one UART byte: well above a byte at 9600 baud (≈ 1.04 ms, 187,500
+/// cycles at 180 MHz; one loop pass is several cycles).
+const SPIN: u32 = 200_000;
+
+/// Why a 1-Wire slot failed.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum OwError {
+    /// TXE did not come up: the USART does not run.
+    TxTimeout,
+    /// The byte did not come back on the half-duplex line (no echo).
+    NoEcho,
+}
+
+/// 1-Wire master on USART3, single wire on TX (PB10, open drain, external 4.7 kΩ pull-up):
+/// a reset is 0xF0 at 9600 baud (a presence pulse pulls the echo's upper bits low), a slot
+/// is one byte at 115200 baud (0xFF writes a 1 / samples the bus, 0x00 writes a 0).
+pub struct UartOneWire {
+    brr_reset: u32,
+    brr_bits: u32,
+}
+
+impl UartOneWire {
+    /// Enables USART3 on an APB1 clock of `pclk1` Hz: 8 data bits, no parity, one stop
+    /// bit, half-duplex (CR3.HDSEL), TX and RX on.
+    pub fn new(pclk1: u32) -> Self {
+        set_bits(RCC_APB1ENR, 1 << 18);
+        let _ = rd(RCC_APB1ENR);
+        let s = Self {
+            brr_reset: (pclk1 + 4800) / 9600,
+            brr_bits: (pclk1 + 57_600) / 115_200,
+        };
+        wr(USART3 + CR1, 0);
+        wr(USART3 + CR3, 1 << 3);
+        wr(USART3 + BRR, s.brr_bits);
+        wr(USART3 + CR1, (1 << 13) | (1 << 3) | (1 << 2));
+        s
+    }
+
+    fn baud(&mut self, brr: u32) {
+        if rd(USART3 + BRR) != brr {
+            // UE off while the rate changes.
+            wr(USART3 + CR1, (1 << 3) | (1 << 2));
+            wr(USART3 + BRR, brr);
+            wr(USART3 + CR1, (1 << 13) | (1 << 3) | (1 << 2));
+        }
+    }
+
+    /// Sends `b` and returns what the line read back.
+    fn xfer(&mut self, b: u8) -> Result<u8, OwError> {
+        // Drop a stale byte (RXNE cleared by reading DR).
+        if rd(USART3 + SR) & SR_RXNE != 0 {
+            let _ = rd(USART3 + DR);
+        }
+        let mut n = 0;
+        while rd(USART3 + SR) & SR_TXE == 0 {
+            n += 1;
+            if n > SPIN {
+                return Err(OwError::TxTimeout);
+            }
+        }
+        wr(USART3 + DR, u32::from(b));
+        let mut n = 0;
+        while rd(USART3 + SR) & SR_RXNE == 0 {
+            n += 1;
+            if n > SPIN {
+                return Err(OwError::NoEcho);
+            }
+        }
+        Ok(rd(USART3 + DR) as u8)
+    }
+}
+
+impl OneWireBus for UartOneWire {
+    type Error = OwError;
+
+    fn reset(&mut self) -> Result<bool, OwError> {
+        self.baud(self.brr_reset);
+        let echo = self.xfer(0xF0);
+        self.baud(self.brr_bits);
+        Ok(echo? != 0xF0)
+    }
+
+    fn write_bit(&mut self, bit: bool) -> Result<(), OwError> {
+        self.xfer(if bit { 0xFF } else { 0x00 }).map(|_| ())
+    }
+
+    fn read_bit(&mut self) -> Result<bool, OwError> {
+        Ok(self.xfer(0xFF)? == 0xFF)
+    }
+}
+
+/// One ring's timer and DMA stream.
+struct Ring {
+    tim: usize,
+    /// Offset of the compare register the duties go to.
+    ccr: usize,
+    dma: usize,
+    stream: usize,
+    channel: u32,
+}
+
+const RINGS: [Ring; 2] = [
+    Ring {
+        tim: TIM8,
+        ccr: 0x34,
+        dma: DMA2,
+        stream: 1,
+        channel: 7,
+    },
+    Ring {
+        tim: TIM3,
+        ccr: 0x38,
+        dma: DMA1,
+        stream: 2,
+        channel: 5,
+    },
+];
+
+impl Ring {
+    fn scr(&self) -> usize {
+        self.dma + 0x10 + 0x18 * self.stream
+    }
+
+    /// Bit position of the stream's flag group in LISR/LIFCR (streams 0..3).
+    fn flag_shift(&self) -> u32 {
+        [0, 6, 16, 22][self.stream]
+    }
+}
+
+/// Why a ring could not start.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum LedError {
+    /// No such ring.
+    NoRing,
+    /// More duties than the ring's buffer holds.
+    TooLong,
+    /// The previous transfer still runs.
+    Busy,
+}
+
+/// Two WS2812 rings: each bit is one PWM period of the ring's timer (HUB_TIMING at a
+/// 90 MHz counter clock), its duty written into CCRx by DMA on every update event.
+pub struct DmaRings {
+    buf: [[u16; RING_SLOTS]; 2],
+}
+
+impl DmaRings {
+    /// Sets up TIM8 (APB2, 180 MHz timer clock, prescaler 2) and TIM3 (APB1, 90 MHz) as
+    /// PWM mode 1 with preload, duty 0 (line low), update DMA request on; the DMA clocks.
+    pub fn new() -> Self {
+        set_bits(RCC_AHB1ENR, (1 << 21) | (1 << 22));
+        set_bits(RCC_APB1ENR, 1 << 1);
+        set_bits(RCC_APB2ENR, 1 << 1);
+        let _ = rd(RCC_APB2ENR);
+        let arr = u32::from(HUB_TIMING.period) - 1;
+        // TIM8: CH1, PSC 1 (180 -> 90 MHz).
+        wr(TIM8 + 0x28, 1);
+        wr(TIM8 + 0x2C, arr);
+        wr(TIM8 + 0x34, 0);
+        wr(TIM8 + 0x18, (0b110 << 4) | (1 << 3));
+        wr(TIM8 + 0x20, 1);
+        wr(TIM8 + 0x44, 1 << 15); // BDTR.MOE
+        wr(TIM8 + 0x14, 1); // UG: load PSC/ARR
+        wr(TIM8 + 0x10, 0);
+        wr(TIM8 + 0x0C, 1 << 8); // UDE
+        wr(TIM8, (1 << 7) | 1); // CR1: ARPE, CEN
+                                // TIM3: CH2, PSC 0.
+        wr(TIM3 + 0x28, 0);
+        wr(TIM3 + 0x2C, arr);
+        wr(TIM3 + 0x38, 0);
+        wr(TIM3 + 0x18, (0b110 << 12) | (1 << 11));
+        wr(TIM3 + 0x20, 1 << 4);
+        wr(TIM3 + 0x14, 1);
+        wr(TIM3 + 0x10, 0);
+        wr(TIM3 + 0x0C, 1 << 8);
+        wr(TIM3, (1 << 7) | 1); // CR1: ARPE, CEN
+        Self {
+            buf: [[0; RING_SLOTS]; 2],
+        }
+    }
+}
+
+impl LedStrip for DmaRings {
+    type Error = LedError;
+
+    fn start(&mut self, ring: usize, duties: &[u16]) -> Result<(), LedError> {
+        let r = RINGS.get(ring).ok_or(LedError::NoRing)?;
+        let buf = self.buf.get_mut(ring).ok_or(LedError::NoRing)?;
+        if duties.len() > buf.len() {
+            return Err(LedError::TooLong);
+        }
+        if rd(r.scr()) & 1 != 0 {
+            return Err(LedError::Busy);
+        }
+        buf[..duties.len()].copy_from_slice(duties);
+        // Clear the stream's flags (TCIF, HTIF, TEIF, DMEIF, FEIF).
+        wr(r.dma + 0x08, 0x3D << r.flag_shift());
+        wr(r.scr() + 0x04, duties.len() as u32); // NDTR
+        wr(r.scr() + 0x08, (r.tim + r.ccr) as u32); // PAR
+        wr(r.scr() + 0x0C, buf.as_ptr() as u32); // M0AR
+        wr(r.scr() + 0x14, 0); // FCR: direct mode
+                               // CHSEL, MSIZE = PSIZE = 16 bit, MINC, memory to peripheral.
+        let cr = (r.channel << 25) | (1 << 13) | (1 << 11) | (1 << 10) | (1 << 6);
+        wr(r.scr(), cr);
+        wr(r.scr(), cr | 1);
+        Ok(())
+    }
+
+    fn done(&mut self, ring: usize) -> bool {
+        let Some(r) = RINGS.get(ring) else {
+            return false;
+        };
+        rd(r.dma) & (1 << (r.flag_shift() + 5)) != 0
+    }
+}
+
+/// Status LEDs on PC8 (green: stack running) and PC9 (red: ESC fault), active high.
+pub struct BoardLeds {
+    pub green: Pin<'C', 8, Output>,
+    pub red: Pin<'C', 9, Output>,
+}
+
+impl Leds for BoardLeds {
+    fn set(&mut self, green: bool, red: bool) {
+        self.green.set_state(green.into());
+        self.red.set_state(red.into());
+    }
+}
+
+/// Rings dark from any context (panic, fault): both DMA streams and the compares off.
+pub fn rings_off() {
+    for r in &RINGS {
+        wr(r.scr(), rd(r.scr()) & !1);
+        wr(r.tim + r.ccr, 0);
+    }
+}

@@ -1,0 +1,319 @@
+//! The axis communication hub (`oxicat_devices::axis_hub::HubFirmware`, the same firmware
+//! main the virtual segment hosts in `axis_hub::rig`) on an STM32F446 with a LAN9252 on
+//! SPI1, 15 DS18B20 on a 1-Wire bus over USART3 and two WS2812 rings on TIM8/TIM3 + DMA.
+//! This file and `board.rs` are board glue only. Wiring, pin map, priorities: README.md.
+//!
+//! What runs where:
+//!
+//! | event | handler | priority | runs |
+//! |---|---|---|---|
+//! | TIM6 update, 1 kHz | `TIM6_DAC` | 0x20 | the report's tasks when due (time from TIM2, 1 MHz), in priority order: APP 10 ms, LED 33 ms, supervisor 100 ms, temperature 1 s (`HubFirmware::on_timer`) |
+//! | PDI IRQ falling (PA10) | `EXTI15_10` | 0x20 | `HubFirmware::on_pdi_irq` (SM-synchronous cycle, ESM) |
+//! | SYNC0 rising (PB3) | `EXTI3` | 0x20 | `HubFirmware::on_sync0` |
+//! | — | thread | — | re-pends the PDI IRQ while the line stays low, then WFI |
+//!
+//! Every handler that touches the firmware runs at the one level 0x20, so none preempts
+//! another and the firmware needs no lock: it lives in [`FwCell`], accessed only there.
+#![no_std]
+#![no_main]
+
+mod board;
+
+use core::cell::UnsafeCell;
+use core::mem::MaybeUninit;
+use core::sync::atomic::{AtomicU32, Ordering};
+
+use board::{BoardLeds, DmaRings, UartOneWire};
+use cortex_m::peripheral::NVIC;
+use cortex_m_rt::{entry, exception, ExceptionFrame};
+use embedded_hal_bus::spi::{ExclusiveDevice, NoDelay};
+use oxicat_devices::axis_hub::{HubFirmware, TASKS};
+use oxicat_devices::demo::Leds;
+use oxicat_pdi::{Lan9252, Lan9252Config};
+use stm32f4xx_hal::{
+    gpio::{Edge, ExtiPin, Output, Pin},
+    pac::{self, interrupt, Interrupt},
+    prelude::*,
+    spi::{Mode, Phase, Polarity, Spi},
+    timer::Event,
+};
+
+/// Task tick (TIM6): 1 kHz, the resolution of the report's periods.
+const TICK_HZ: u32 = 1_000;
+/// The one NVIC level of everything that touches the firmware (upper nibble).
+const PRIO_FW: u8 = 0x20;
+
+type EscSpi = ExclusiveDevice<Spi<pac::SPI1>, Pin<'B', 6, Output>, NoDelay>;
+type Esc = Lan9252<EscSpi>;
+type Fw = HubFirmware<Esc, UartOneWire, DmaRings>;
+
+/// The firmware and its ESC driver.
+struct Hub {
+    fw: Fw,
+    esc: Esc,
+    leds: BoardLeds,
+    clock: TaskClock,
+}
+
+/// The tasks' time base: TIM2, free running at 1 MHz (32 bits), read at every tick. A tick
+/// held back by a long task (the 1-Wire read-out blocks for up to ~0.2 s at 115200 baud)
+/// loses no time: a task whose period boundary passed meanwhile runs once at the next tick.
+struct TaskClock {
+    last_cnt: u32,
+    us: u64,
+    last_ms: u64,
+}
+
+impl TaskClock {
+    fn now_us() -> u32 {
+        // SAFETY: a read of TIM2's counter, which only `start_time_base` configures.
+        unsafe { (*pac::TIM2::ptr()).cnt().read().bits() }
+    }
+
+    /// (ms before, ms now) since the start.
+    fn advance(&mut self) -> (u64, u64) {
+        let cnt = Self::now_us();
+        self.us += u64::from(cnt.wrapping_sub(self.last_cnt));
+        self.last_cnt = cnt;
+        let before = self.last_ms;
+        self.last_ms = self.us / 1000;
+        (before, self.last_ms)
+    }
+}
+
+/// TIM2 as a free-running 1 MHz counter (APB1 timer clock `timclk` Hz).
+fn start_time_base(timclk: u32) {
+    // SAFETY: TIM2 is used for nothing else; RCC bit set read-modify-write before the
+    // interrupts run.
+    unsafe {
+        let rcc = &*pac::RCC::ptr();
+        rcc.apb1enr().modify(|r, w| w.bits(r.bits() | 1));
+        let _ = rcc.apb1enr().read();
+        let t = &*pac::TIM2::ptr();
+        t.psc().write(|w| w.bits(timclk / 1_000_000 - 1));
+        t.arr().write(|w| w.bits(u32::MAX));
+        t.egr().write(|w| w.bits(1));
+        t.cr1().write(|w| w.bits(1));
+    }
+}
+
+/// Storage for [`Hub`], shared by priority rather than by a lock: see [`FwCell::get`].
+struct FwCell(UnsafeCell<MaybeUninit<Hub>>);
+
+// SAFETY: access is serialised by interrupt priority (FwCell::get's contract).
+unsafe impl Sync for FwCell {}
+
+impl FwCell {
+    /// # Safety
+    /// The caller runs at priority [`PRIO_FW`], does not keep the reference beyond that,
+    /// and [`FwCell::init`] ran before those interrupts were unmasked.
+    #[allow(clippy::mut_from_ref)]
+    unsafe fn get(&self) -> &mut Hub {
+        unsafe { (*self.0.get()).assume_init_mut() }
+    }
+
+    /// # Safety
+    /// Called once, before the interrupts at [`PRIO_FW`] are unmasked.
+    unsafe fn init(&self, hub: Hub) {
+        unsafe { (*self.0.get()).write(hub) };
+    }
+}
+
+static HUB: FwCell = FwCell(UnsafeCell::new(MaybeUninit::uninit()));
+/// Milliseconds since the tick started.
+static MS: AtomicU32 = AtomicU32::new(0);
+
+fn clear_exti(line: u8) {
+    // SAFETY: PR is write-1-to-clear; only this line's bit is written.
+    unsafe { (*pac::EXTI::ptr()).pr().write(|w| w.bits(1 << line)) };
+}
+
+/// 1 kHz task tick: runs every task of [`TASKS`] whose period has elapsed, higher
+/// priority first (TASKS is in priority order), as the report's scheduler would.
+#[interrupt]
+fn TIM6_DAC() {
+    // SAFETY: TIM6 SR: clearing UIF is this handler's only access after set-up.
+    unsafe { (*pac::TIM6::ptr()).sr().write(|w| w.bits(0)) };
+    MS.fetch_add(1, Ordering::Relaxed);
+    // SAFETY: handler at PRIO_FW.
+    let h = unsafe { HUB.get() };
+    let (before, now) = h.clock.advance();
+    for t in &TASKS {
+        let period_ms = t.period_ns / 1_000_000;
+        if period_ms != 0 && now / period_ms > before / period_ms {
+            h.fw.on_timer(t.id, &mut h.esc);
+        }
+    }
+    // Green: the stack runs; red: the ESC does not answer.
+    let up = h.fw.slave().is_some();
+    h.leds.set(up, !up);
+}
+
+/// SYNC0 (DC-synchronous cycle).
+#[interrupt]
+fn EXTI3() {
+    clear_exti(3);
+    // SAFETY: handler at PRIO_FW.
+    let h = unsafe { HUB.get() };
+    h.fw.on_sync0(&mut h.esc);
+}
+
+/// PDI IRQ (PA10, the only line enabled in 10..15).
+#[interrupt]
+fn EXTI15_10() {
+    clear_exti(10);
+    // SAFETY: handler at PRIO_FW.
+    let h = unsafe { HUB.get() };
+    h.fw.on_pdi_irq(&mut h.esc);
+}
+
+/// Builds the firmware into [`HUB`] in a frame of its own: the stack (several KB) and its
+/// moves live here, gone when it returns (in `main`, which never returns, they would hold
+/// that stack for good).
+#[inline(never)]
+fn start(mut esc: Esc, bus: UartOneWire, rings: DmaRings, leds: BoardLeds) {
+    let fw = Fw::new(&mut esc, bus, rings);
+    let clock = TaskClock {
+        last_cnt: TaskClock::now_us(),
+        us: 0,
+        last_ms: 0,
+    };
+    // SAFETY: once, before any PRIO_FW interrupt is unmasked (main enables them afterwards).
+    unsafe {
+        HUB.init(Hub {
+            fw,
+            esc,
+            leds,
+            clock,
+        })
+    };
+}
+
+#[entry]
+fn main() -> ! {
+    let Some(dp) = pac::Peripherals::take() else {
+        loop {
+            cortex_m::asm::wfi();
+        }
+    };
+    let Some(cp) = cortex_m::Peripherals::take() else {
+        loop {
+            cortex_m::asm::wfi();
+        }
+    };
+    // 8 MHz HSE -> 180 MHz SYSCLK; APB1 45 MHz (its timers 90 MHz), APB2 90 MHz (180).
+    let rcc = dp.RCC.constrain();
+    let clocks = rcc
+        .cfgr
+        .use_hse(8.MHz())
+        .sysclk(180.MHz())
+        .pclk1(45.MHz())
+        .pclk2(90.MHz())
+        .freeze();
+    let mut delay = cp.SYST.delay(&clocks);
+    dp.DBGMCU.cr().modify(|_, w| w.dbg_sleep().set_bit());
+
+    let gpioa = dp.GPIOA.split();
+    let gpiob = dp.GPIOB.split();
+    let gpioc = dp.GPIOC.split();
+
+    let leds = BoardLeds {
+        green: gpioc.pc8.into_push_pull_output(),
+        red: gpioc.pc9.into_push_pull_output(),
+    };
+
+    // 1-Wire: USART3 TX on PB10 (AF7), open drain, half-duplex.
+    let _ow_pin = gpiob.pb10.into_alternate::<7>().set_open_drain();
+    let bus = UartOneWire::new(clocks.pclk1().raw());
+    // LED rings: PC6 = TIM8_CH1 (AF3), PC7 = TIM3_CH2 (AF2).
+    let _ring1 = gpioc.pc6.into_alternate::<3>();
+    let _ring2 = gpioc.pc7.into_alternate::<2>();
+    let rings = DmaRings::new();
+
+    // LAN9252 on SPI1: SCK PA5, MISO PA6, MOSI PA7, mode 0, 90 MHz / 4 = 22.5 MHz; CS PB6.
+    let spi = Spi::new(
+        dp.SPI1,
+        (gpioa.pa5, gpioa.pa6, gpioa.pa7),
+        Mode {
+            polarity: Polarity::IdleLow,
+            phase: Phase::CaptureOnFirstTransition,
+        },
+        22500.kHz(),
+        &clocks,
+    );
+    let cs = gpiob.pb6.into_push_pull_output_in_state(true.into());
+    let Ok(spi) = ExclusiveDevice::new_no_delay(spi, cs);
+    let mut esc = Lan9252::new(spi, oxicat_pdi::NoLines, Lan9252Config::default());
+    // The LAN9252 needs ~ 30 ms after power-on before the SPI answers. A failed init is
+    // not fatal: the firmware's supervisor retries the stack every second.
+    delay.delay_ms(50);
+    let _ = esc.init();
+    start_time_base(clocks.timclk1().raw());
+    start(esc, bus, rings, leds);
+
+    // ESC lines on EXTI: IRQ PA10 falling (open drain, pull-up), SYNC0 PB3 rising.
+    let mut syscfg = dp.SYSCFG.constrain();
+    let mut exti = dp.EXTI;
+    let mut irq_pin = gpioa.pa10.into_pull_up_input();
+    let mut sync0 = gpiob.pb3.into_floating_input();
+    irq_pin.make_interrupt_source(&mut syscfg);
+    irq_pin.trigger_on_edge(&mut exti, Edge::Falling);
+    irq_pin.enable_interrupt(&mut exti);
+    sync0.make_interrupt_source(&mut syscfg);
+    sync0.trigger_on_edge(&mut exti, Edge::Rising);
+    sync0.enable_interrupt(&mut exti);
+    for line in [3, 10] {
+        clear_exti(line);
+    }
+
+    let mut tick = dp.TIM6.counter_hz(&clocks);
+    if tick.start(TICK_HZ.Hz()).is_err() {
+        loop {
+            cortex_m::asm::wfi();
+        }
+    }
+    tick.listen(Event::Update);
+
+    // SAFETY: priorities are set before unmasking; the shared state is initialised.
+    unsafe {
+        let mut nvic = cp.NVIC;
+        for i in [Interrupt::TIM6_DAC, Interrupt::EXTI3, Interrupt::EXTI15_10] {
+            nvic.set_priority(i, PRIO_FW);
+        }
+        NVIC::unmask(Interrupt::TIM6_DAC);
+        NVIC::unmask(Interrupt::EXTI3);
+        NVIC::unmask(Interrupt::EXTI15_10);
+    }
+
+    let mut last_kick = MS.load(Ordering::Relaxed);
+    loop {
+        // The IRQ line is a level: a cause that arrives while it is still low from another
+        // gives no new falling edge. Re-run the handler while the line stays low, once per
+        // tick.
+        let now = MS.load(Ordering::Relaxed);
+        if irq_pin.is_low() && now != last_kick {
+            last_kick = now;
+            NVIC::pend(Interrupt::EXTI15_10);
+        }
+        cortex_m::asm::wfi();
+    }
+}
+
+/// Panics darken the rings, then halt.
+#[panic_handler]
+fn panic(_: &core::panic::PanicInfo) -> ! {
+    cortex_m::interrupt::disable();
+    board::rings_off();
+    loop {
+        cortex_m::asm::nop();
+    }
+}
+
+/// So do hard faults.
+#[exception]
+unsafe fn HardFault(_: &ExceptionFrame) -> ! {
+    board::rings_off();
+    loop {
+        cortex_m::asm::nop();
+    }
+}

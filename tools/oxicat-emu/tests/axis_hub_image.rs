@@ -1,0 +1,355 @@
+//! The axis hub board image (`firmware/axis-hub`), the bytes that would be flashed, in the
+//! loop: executed instruction by instruction on the emulated STM32F446 with its LAN9252 on
+//! SPI1.
+//!
+//! - it boots, reaches PREOP and answers SDO uploads of 0x1018:01..03 with the hub's
+//!   identity;
+//! - ethercrab (through `oxicat-master`) brings it to OP in free run (the hub's default
+//!   sync mode, 10 ms cycle) and runs 1,000 cycles with the right working counter every
+//!   cycle, the image's task tick running all along;
+//! - with the hub's plant on its pins (`oxicat_emu::axis_hub::HubBoardPlant`: the rig's 15
+//!   DS18B20 on USART3's half-duplex line, the rings decoded from what DMA wrote into
+//!   TIM8 CCR1 / TIM3 CCR2), the temperatures in 0x6000 match the sensors' die
+//!   temperatures within the DS18B20's 12-bit resolution after the first conversion, and
+//!   both rings show the OP colour, decoded against the WS2812B timing;
+//! - a sensor unplugged on the board's bus in OP is ERROR 1102 in 0x6001:03, its slot in
+//!   0x6000 invalid, the others kept, and the rings turn to the warning colour.
+
+use std::sync::{Arc, Mutex};
+use std::time::Duration;
+
+use oxicat_devices::axis_hub::device::{DEF, SENSORS, TEMP_INVALID};
+use oxicat_devices::axis_hub::rig::HubInputs;
+use oxicat_devices::axis_hub::Shown;
+use oxicat_emu::axis_hub::{HubBoardPlant, HubView};
+use oxicat_emu::node::{EmulatedNode, NodeHandle};
+use oxicat_emu::Board;
+use oxicat_esc::{Esc, EscConfig};
+use oxicat_master::cyclic::{CycleOptions, Flow};
+use oxicat_master::{Link, Master};
+use oxicat_pdi::sim::{BusConfig, Lan9252Model};
+use oxicat_sim::segment::Segment;
+
+mod common;
+
+use common::Direct;
+
+/// The task tick of the image: TIM6_DAC, IRQ 54.
+const TIM6: u16 = 16 + 54;
+/// The hub's free-run cycle (its rig's default).
+const CYCLE_NS: u64 = 10_000_000;
+
+/// The board image (`firmware/axis-hub`, or `OXICAT_AXIS_HUB_IMAGE`).
+fn image() -> Option<Vec<u8>> {
+    common::image("axis-hub", "OXICAT_AXIS_HUB_IMAGE")
+}
+
+#[test]
+fn the_hub_image_boots_reaches_preop_and_answers_its_identity() {
+    let Some(img) = image() else { return };
+    let esc = Esc::new(
+        EscConfig::lan9252(),
+        oxicat_esi::sii::generate(&DEF).expect("SII of the hub"),
+    );
+    let chip = Lan9252Model::handle(esc, BusConfig::mhz(22));
+    let mut b = Board::new(&img, chip.clone()).expect("the image loads");
+    let m = Direct { chip: chip.into() };
+    // Boot: clocks, the 50 ms power-on wait, the LAN9252's init over SPI, the stack's
+    // start-up, then the task tick at 1 kHz (the application task polls every 10 ms).
+    let up = b
+        .run_until(200_000, 300_000_000, |b| {
+            b.spi_stats().frames > 200 && b.exceptions_taken(TIM6) > 100
+        })
+        .unwrap_or_else(|e| panic!("{e}"));
+    let s = b.spi_stats();
+    assert!(
+        up,
+        "the image did not reach its main loop: {s:?}, TIM6 {} ticks, PC {:#010x}",
+        b.exceptions_taken(TIM6),
+        b.pc()
+    );
+    assert_eq!(s.bytes_without_cs, 0, "every byte inside a CS frame");
+    assert!(b.time_ns() >= 50_000_000, "the 50 ms power-on wait ran");
+    assert_eq!(m.chip.stats().protocol_errors, 0);
+    assert_eq!(m.al_status(&b) & 0x1F, 0x01, "INIT after start-up");
+    assert!(b.output('C', 8), "green LED: the stack runs");
+    assert!(!b.output('C', 9), "red LED off: the ESC answered");
+    // The task tick is 1 kHz: 100 ms of board time, 100 ticks.
+    let t0 = b.exceptions_taken(TIM6);
+    b.run_to_ns(b.time_ns() + 100_000_000)
+        .unwrap_or_else(|e| panic!("{e}"));
+    let dt = b.exceptions_taken(TIM6) - t0;
+    assert!((99..=101).contains(&dt), "100 ms: {dt} task ticks");
+
+    let sm = |start: u16, ctrl: u8| {
+        let mut r = [0u8; 8];
+        r[..2].copy_from_slice(&start.to_le_bytes());
+        r[2..4].copy_from_slice(&128u16.to_le_bytes());
+        r[4] = ctrl;
+        r[6] = 1;
+        r
+    };
+    m.wr(&b, 0x0800, &sm(0x1000, 0x26));
+    m.wr(&b, 0x0808, &sm(0x1080, 0x22));
+    m.wr(&b, 0x0120, &2u16.to_le_bytes());
+    let preop = b
+        .run_until(50_000, 50_000_000, |b| m.al_status(b) & 0x1F == 0x02)
+        .unwrap_or_else(|e| panic!("{e}"));
+    assert!(preop, "AL status {:#06x}", m.al_status(&b));
+
+    let id = DEF.identity;
+    assert_eq!(m.sdo_u32(&mut b, 1, 0x1018, 1), id.vendor_id);
+    assert_eq!(m.sdo_u32(&mut b, 2, 0x1018, 2), id.product_code);
+    assert_eq!(m.sdo_u32(&mut b, 3, 0x1018, 3), id.revision);
+    eprintln!(
+        "hub image: {} instructions, {:.1} ms simulated, SPI {:?}, TIM6 {} ticks",
+        b.instructions(),
+        b.time_ns() as f64 * 1e-6,
+        b.spi_stats(),
+        b.exceptions_taken(TIM6)
+    );
+}
+
+/// One emulated hub (a LAN9252 ESC with the hub's SII) on a segment, with its plant if
+/// given.
+fn segment(img: &[u8], plant: Option<HubBoardPlant>) -> (Segment, NodeHandle) {
+    let mut seg = Segment::new();
+    let sii = oxicat_esi::sii::generate(&DEF).expect("SII of the hub");
+    let id = seg.add(Esc::new(EscConfig::lan9252(), sii));
+    let plant = plant.map(|p| Box::new(p) as Box<dyn oxicat_emu::plant::BoardPlant>);
+    let node = EmulatedNode::with_plant(img.to_vec(), 1_000_000, plant).expect("the image loads");
+    let h = node.handle();
+    seg.attach(id, Box::new(node)).expect("attach");
+    (seg, h)
+}
+
+#[test]
+fn ethercrab_runs_the_emulated_hub_in_free_run_op() {
+    free_run_op(1_000);
+}
+
+/// The issue's long run: 10,000 cycles of 10 ms (100 s of board time),
+/// `cargo test -p oxicat-emu --test axis_hub_image -- --ignored`.
+#[test]
+#[ignore = "long: 10,000 cycles of an emulated board"]
+fn ethercrab_runs_the_emulated_hub_for_10000_free_run_cycles() {
+    free_run_op(10_000);
+}
+
+/// The emulated hub in OP in free run at 10 ms for `cycles` cycles: the right working
+/// counter every cycle, no fault, the task tick running at 1 kHz.
+fn free_run_op(cycles: u64) {
+    let Some(img) = image() else { return };
+    let (seg, node) = segment(&img, None);
+    let wall = std::time::Instant::now();
+    let mut m = Master::open(Link::Sim(Arc::new(Mutex::new(seg)))).expect("ethercrab scans");
+    node.reset_stats();
+    let stats = m
+        .run_cycles(
+            CycleOptions {
+                cycle: Duration::from_nanos(CYCLE_NS),
+                dc: false,
+            },
+            cycles,
+        )
+        .unwrap_or_else(|e| panic!("{e}"));
+    assert_eq!((stats.cycles, stats.wkc_errors), (cycles, 0), "{stats:?}");
+    let r = node.report().expect("the board thread runs");
+    assert_eq!(r.fault, None);
+    let ticks = r.taken[usize::from(TIM6)];
+    // 1 kHz over the cycles run (10 per cycle), give or take the edges of the window.
+    assert!(
+        ticks + 20 >= cycles * 10,
+        "{ticks} task ticks in {cycles} cycles of 10 ms"
+    );
+    eprintln!(
+        "emulated hub: {cycles} free-run cycles of 10 ms in OP, {ticks} task ticks, tick handler \
+         max {:.1} µs, stack {} B deepest, {:.1} s wall",
+        r.handler(TIM6).max_cycles as f64 / 180.0,
+        r.stack.max_depth,
+        wall.elapsed().as_secs_f64()
+    );
+}
+
+/// Die temperatures of the 15 sensors: distinct, some below zero, none a multiple of the
+/// 12-bit step.
+fn die_temps() -> Vec<f64> {
+    (0..SENSORS).map(|i| -7.3 + 4.71 * i as f64).collect()
+}
+
+#[test]
+fn the_hub_image_reads_the_sensors_over_usart_and_lights_the_rings_by_dma() {
+    let Some(img) = image() else { return };
+    let temps = die_temps();
+    let plant = HubBoardPlant::new(&temps);
+    let view: HubView = plant.view();
+    let (seg, node) = segment(&img, Some(plant));
+    let mut m = Master::open(Link::Sim(Arc::new(Mutex::new(seg)))).expect("ethercrab scans");
+    // 4 s in OP: the temperature task runs every second (search, CONVERT T, then the
+    // read-out of the previous conversion a second later).
+    let cycles = 400u64;
+    let mut last = HubInputs::default();
+    let mut first_valid: Option<u64> = None;
+    let mut in_op = oxicat_emu::axis_hub::HubState::default();
+    let stats = m
+        .run_cyclic(
+            CycleOptions {
+                cycle: Duration::from_nanos(CYCLE_NS),
+                dc: false,
+            },
+            |io| {
+                last = HubInputs::parse(&io.inputs[0]);
+                if first_valid.is_none() && last.temps.iter().all(|&t| t != TEMP_INVALID) {
+                    first_valid = Some(io.cycle);
+                }
+                Ok(if io.cycle + 1 >= cycles {
+                    // The plant as the last cycle in OP left it (after the run the master
+                    // takes the node back to PREOP, and the rings follow).
+                    in_op = view.lock().clone();
+                    Flow::Stop
+                } else {
+                    Flow::Continue
+                })
+            },
+        )
+        .unwrap_or_else(|e| panic!("{e}"));
+    assert_eq!(stats.wkc_errors, 0, "{stats:?}");
+    let r = node.report().expect("the board thread runs");
+    assert_eq!(r.fault, None);
+    let st = in_op;
+    eprintln!(
+        "with the plant: task tick handler max {:.1} ms (the 1-Wire read-out inside it), {} ticks",
+        r.handler(TIM6).max_cycles as f64 / 180_000.0,
+        r.taken[usize::from(TIM6)]
+    );
+    eprintln!(
+        "1-Wire: {:?}, {} conversions; temperatures from cycle {first_valid:?}: {:?}; status \
+         {:#010x} event {} error {}",
+        st.onewire, st.conversions, last.temps, last.status, last.event, last.error
+    );
+    assert!(
+        st.onewire.presences > 0,
+        "the sensors answered: {:?}",
+        st.onewire
+    );
+    assert!(st.conversions >= SENSORS as u64, "every sensor converted");
+    assert!(
+        first_valid.is_some(),
+        "no complete read-out: {:?}",
+        last.temps
+    );
+    // 0x6000 is in the order the ROM search found the sensors: each value is one sensor's
+    // die temperature at 12 bits (1/16 °C, truncated; 0.01 °C in the PDO), each sensor once.
+    let mut seen = [false; SENSORS];
+    for (i, &got) in last.temps.iter().enumerate() {
+        let got = f64::from(got) / 100.0;
+        let k = temps
+            .iter()
+            .position(|&t| got <= t + 0.01 && got >= t - 0.0625 - 0.01)
+            .unwrap_or_else(|| panic!("0x6000:{} = {got} °C matches no sensor {temps:?}", i + 1));
+        assert!(!seen[k], "sensor {k} reported twice");
+        seen[k] = true;
+    }
+    assert_eq!(last.error, 0, "no error in 0x6001:03");
+    let want = Shown::Normal.color();
+    for (k, ring) in st.rings.iter().enumerate() {
+        let d = ring.as_ref().unwrap_or_else(|| {
+            panic!(
+                "ring {k}: no stream decoded ({} transfers)",
+                st.transfers[k]
+            )
+        });
+        assert!(
+            d.bad_bits.is_empty(),
+            "ring {k}: bits out of tolerance {:?}",
+            d.bad_bits
+        );
+        assert!(d.latched, "ring {k}: no reset after the stream");
+        assert_eq!(d.colors.len(), 5, "ring {k}: {:?}", d.colors);
+        for c in &d.colors {
+            assert_eq!((c.r, c.g, c.b), (want.r, want.g, want.b), "ring {k}");
+        }
+        assert!(
+            st.transfers[k] > 10,
+            "ring {k}: {} transfers",
+            st.transfers[k]
+        );
+    }
+}
+
+/// A sensor unplugged on the board's bus while in OP: the image reports
+/// `ERR_TEMP_SENS_LOST` (1102) in 0x6001:03, that sensor's slot in 0x6000 becomes
+/// `TEMP_INVALID` while the others keep their values, and the rings switch to the warning
+/// colour.
+#[test]
+fn an_unplugged_sensor_on_the_board_is_error_1102_and_the_warning_colour() {
+    use oxicat_devices::axis_hub::codes::ERR_TEMP_SENS_LOST;
+    let Some(img) = image() else { return };
+    let temps = die_temps();
+    let plant = HubBoardPlant::new(&temps);
+    let view: HubView = plant.view();
+    let (seg, node) = segment(&img, Some(plant));
+    let mut m = Master::open(Link::Sim(Arc::new(Mutex::new(seg)))).expect("ethercrab scans");
+    // Unplugged 1 s after the first complete read-out; 3 s more for the next ones.
+    let mut unplug_at: Option<u64> = None;
+    let mut in_op = oxicat_emu::axis_hub::HubState::default();
+    let mut before = HubInputs::default();
+    let mut last = HubInputs::default();
+    let stats = m
+        .run_cyclic(
+            CycleOptions {
+                cycle: Duration::from_nanos(CYCLE_NS),
+                dc: false,
+            },
+            |io| {
+                last = HubInputs::parse(&io.inputs[0]);
+                if unplug_at.is_none() && last.temps.iter().all(|&t| t != TEMP_INVALID) {
+                    unplug_at = Some(io.cycle + 100);
+                }
+                if unplug_at == Some(io.cycle) {
+                    before = last;
+                    view.lock().plugged[4] = false;
+                }
+                let end = unplug_at.map_or(1_000, |u| u + 300);
+                Ok(if io.cycle + 1 >= end {
+                    in_op = view.lock().clone();
+                    Flow::Stop
+                } else {
+                    Flow::Continue
+                })
+            },
+        )
+        .unwrap_or_else(|e| panic!("{e}"));
+    assert!(
+        unplug_at.is_some(),
+        "no complete read-out in 10 s: {last:?}"
+    );
+    assert_eq!(stats.wkc_errors, 0, "{stats:?}");
+    assert_eq!(node.report().expect("the board runs").fault, None);
+    assert_eq!(before.error, 0, "no error before: {before:?}");
+    assert!(
+        before.temps.iter().all(|&t| t != TEMP_INVALID),
+        "{before:?}"
+    );
+    assert_eq!(last.error, ERR_TEMP_SENS_LOST, "{last:?}");
+    let invalid: Vec<usize> = (0..SENSORS)
+        .filter(|&i| last.temps[i] == TEMP_INVALID)
+        .collect();
+    assert_eq!(invalid.len(), 1, "one slot invalid: {:?}", last.temps);
+    for i in (0..SENSORS).filter(|i| !invalid.contains(i)) {
+        assert_eq!(last.temps[i], before.temps[i], "0x6000:{} kept", i + 1);
+    }
+    let want = Shown::Warning.color();
+    let st = in_op;
+    for (k, ring) in st.rings.iter().enumerate() {
+        let d = ring.as_ref().expect("a decoded stream");
+        assert!(d.bad_bits.is_empty() && d.latched, "ring {k}: {d:?}");
+        assert!(
+            d.colors
+                .iter()
+                .all(|c| (c.r, c.g, c.b) == (want.r, want.g, want.b)),
+            "ring {k}: {:?}, want {want:?}",
+            d.colors
+        );
+    }
+}
