@@ -190,7 +190,13 @@ pub enum LedError {
 /// 90 MHz counter clock), its duty written into CCRx by DMA on every update event.
 pub struct DmaRings {
     buf: [[u16; RING_SLOTS]; 2],
+    /// The LED task's guard timer (the report's `timeoutLed`): when it was armed (TIM2, the
+    /// tasks' 1 MHz time base) and for how long, in µs.
+    guard: Option<(u32, u32)>,
 }
+
+/// TIM2's counter: the tasks' free-running 1 MHz time base (`main::start_time_base`).
+const TIM2_CNT: usize = 0x4000_0024;
 
 impl DmaRings {
     /// Sets up TIM8 (APB2, 180 MHz timer clock, prescaler 2) and TIM3 (APB1, 90 MHz) as
@@ -224,12 +230,42 @@ impl DmaRings {
         wr(TIM3, (1 << 7) | 1); // CR1: ARPE, CEN
         Self {
             buf: [[0; RING_SLOTS]; 2],
+            guard: None,
         }
     }
 }
 
 impl LedStrip for DmaRings {
     type Error = LedError;
+
+    /// The timers and DMA clocks are set up once in [`DmaRings::new`]; a ring is ready when
+    /// its stream is off (after [`LedStrip::restart`] or a completed transfer).
+    fn configure(&mut self, ring: usize) -> Result<(), LedError> {
+        let r = RINGS.get(ring).ok_or(LedError::NoRing)?;
+        if rd(r.scr()) & 1 != 0 {
+            return Err(LedError::Busy);
+        }
+        Ok(())
+    }
+
+    /// Stops the ring's stream, clears its flags and drives the line low (duty 0).
+    fn restart(&mut self, ring: usize) {
+        if let Some(r) = RINGS.get(ring) {
+            wr(r.scr(), rd(r.scr()) & !1);
+            wr(r.dma + 0x08, 0x3D << r.flag_shift());
+            wr(r.tim + r.ccr, 0);
+        }
+    }
+
+    fn arm_guard(&mut self, ms: u32) -> Result<(), LedError> {
+        self.guard = Some((rd(TIM2_CNT), ms.saturating_mul(1000)));
+        Ok(())
+    }
+
+    fn guard_expired(&mut self) -> bool {
+        self.guard
+            .is_some_and(|(t0, us)| rd(TIM2_CNT).wrapping_sub(t0) >= us)
+    }
 
     fn start(&mut self, ring: usize, duties: &[u16]) -> Result<(), LedError> {
         let r = RINGS.get(ring).ok_or(LedError::NoRing)?;
