@@ -33,7 +33,7 @@ pub struct Cia402Args {
     /// What to do.
     #[command(subcommand)]
     pub verb: Cia402Verb,
-    /// CiA402 joint drives on the virtual segment (1 … 64).
+    /// CiA402 joint drives on the virtual segment (1 … 1000).
     #[arg(long, default_value_t = 1)]
     pub joints: usize,
     /// A network interface instead of the virtual segment.
@@ -114,12 +114,12 @@ pub const MAX_CYCLE_US: u64 = 50_000;
 
 /// Refuses arguments that cannot work, before a segment is built.
 fn check_args(a: &Cia402Args) -> Result<(), UsageError> {
-    let max = oxicat_master::MAX_SLAVES;
+    let max = oxicat_master::MAX_SLAVES.min(crate::sim_cmd::MAX_SIM_SLAVES);
     if a.iface.is_none() && !(1..=max).contains(&a.joints) {
         return Err(UsageError::OutOfRange {
             option: "--joints",
             value: a.joints.to_string(),
-            allowed: format!("1 … {max} drives (the master's group holds {max})"),
+            allowed: format!("1 … {max} drives (what a virtual segment holds)"),
         });
     }
     if !(MIN_CYCLE_US..=MAX_CYCLE_US).contains(&a.cycle_us) {

@@ -163,7 +163,7 @@ fn has_lrw(frame: &[u8]) -> bool {
     false
 }
 
-/// The experiment: `joints` drives (1 … 64), `cycles` process-data cycles (10 …
+/// The experiment: `joints` drives (1 … 1024), `cycles` process-data cycles (10 …
 /// 1,000,000) of `cycle`, DC SYNC0 when `dc`; the drives are enabled (0x06, 0x07, 0x0F) and
 /// follow a CSP move of one motor turn over `cycles` cycles, then settle for 100; the table
 /// covers both.
