@@ -44,6 +44,47 @@ fn same_scenario_same_csv_bytes() {
     );
 }
 
+/// The DCL C4 PID as the joint law (`[control] law = "dcl-pid"`) with the README's tuned
+/// gains: every node reaches OP, the gait is kept and each joint tracks within
+/// `results::pv_bound_deg` for the parallel form (2π·u_max/Kp doubled for the integrator
+/// plus (Kd/Kp)·max|θ̇|), and its RMS error is not worse than 1.5 × the PIV run's.
+#[test]
+fn trot_with_the_dcl_pid_tracks_and_keeps_the_gait() {
+    let piv = short(2.0);
+    let text = DEFAULT_TOML
+        .replace("settle_s = 3.5", "settle_s = 1.1")
+        .replace("stand_s = 1.0", "stand_s = 0.2")
+        .replace("transition_time_s = 3", "transition_time_s = 1")
+        .replace("stop_s = 0.5", "stop_s = 0.1")
+        .replace("filter_hz = 20", "filter_hz = 20\nlaw = \"dcl-pid\"")
+        .replace("knee = { kp = 80.0, kd = 0.05, ki = 0.0 }", DCL_KNEE)
+        .replace("hip = { kp = 80.0, kd = 0.05, ki = 0.0 }", DCL_HIP);
+    let s = Scenario::parse(&text)
+        .expect("dcl-pid scenario")
+        .with_trot(2.0);
+    assert_eq!(s.control.law(), oxicat_devices::laelaps::ControlLaw::DclPid);
+    let r = run(&s);
+    tracks_and_keeps_the_gait(&s, &r);
+    let (a, b) = (summarize(&run(&piv)), summarize(&r));
+    for li in 0..4 {
+        let (p, d) = (&a.legs[li], &b.legs[li]);
+        eprintln!(
+            "leg {li}: PIV knee RMS {:.2}° max {:.2}°, hip RMS {:.2}° max {:.2}° | DCL PID knee RMS {:.2}° max {:.2}°, hip RMS {:.2}° max {:.2}°",
+            p.knee_rms_deg, p.knee_max_deg, p.hip_rms_deg, p.hip_max_deg,
+            d.knee_rms_deg, d.knee_max_deg, d.hip_rms_deg, d.hip_max_deg
+        );
+        assert!(
+            d.knee_rms_deg <= 1.5 * p.knee_rms_deg + 0.05,
+            "leg {li} knee"
+        );
+        assert!(d.hip_rms_deg <= 1.5 * p.hip_rms_deg + 0.05, "leg {li} hip");
+    }
+}
+
+/// The tuned DCL PID gains (README, "The Laelaps trot").
+const DCL_KNEE: &str = "knee = { kp = 80.0, kd = 2.0, ki = 20.0 }";
+const DCL_HIP: &str = "hip = { kp = 80.0, kd = 2.0, ki = 20.0 }";
+
 #[test]
 fn trot_tracks_and_keeps_the_gait() {
     let s = short(2.0);

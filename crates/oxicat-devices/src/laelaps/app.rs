@@ -25,7 +25,7 @@ use super::hw::{
     JOINT_LOOP_TIMER,
 };
 use super::kinematics::{Ik, LegAngles, Side};
-use super::piv::{Gains, JointController, PwmCommand};
+use super::piv::{ControlLaw, Gains, JointController, PwmCommand};
 use super::trajectory::{Ellipse, TrajectoryClock};
 use super::transition::Ramp;
 use crate::demo::Leds;
@@ -54,7 +54,7 @@ pub struct JointState {
     pub encoder: JointEncoder,
     /// eQEP capture speed estimate.
     pub speed: SpeedEstimator,
-    /// PIV controller.
+    /// Joint controller (PIV or the DCL C4 PID).
     pub controller: JointController,
     /// Measured angle \[rev\], joint frame.
     pub angle_rev: f32,
@@ -178,6 +178,19 @@ impl<P: PwmOut, E: EncoderIn, L: Leds> LegNode<P, E, L> {
             hip: JointState::new(h, capture),
             io: None,
         }
+    }
+
+    /// Builds the node with another joint control law (default: the thesis' PIV); both
+    /// controllers start from their default states.
+    pub fn with_law(mut self, law: ControlLaw) -> Self {
+        self.knee.controller = JointController::with_law(law);
+        self.hip.controller = JointController::with_law(law);
+        self
+    }
+
+    /// The joint control law this node runs.
+    pub fn law(&self) -> ControlLaw {
+        self.knee.controller.law
     }
 
     /// Re-zeroes both encoders at their current counts (the LaunchPad Reset button).

@@ -455,6 +455,7 @@ pub fn rig_config(s: &Scenario, leg: LegId, phases: &Phases) -> RigConfig {
     let (a0, a1) = (phases.ramp_a as f64 * cyc, phases.back_a as f64 * cyc);
     let mut c = RigConfig::laelaps(leg).belt_depth(s.rig.belt_depth_m);
     c.plant_period_ns = 1_000_000_000 / u64::from(s.rig.plant_rate_hz);
+    c.law = s.control.law();
     c.belt = BeltProfile {
         points: vec![(a0, 0.0), (a0 + tr, v), (a1, v), (a1 + tr, 0.0)],
     };

@@ -63,7 +63,7 @@ pub use app::{LegNode, Mode, PwmOut};
 pub use encoder::{CaptureConfig, EncoderIn, QepSample};
 pub use hw::{Joint, JOINT_LOOP_TIMER};
 pub use kinematics::{LegAngles, Side};
-pub use piv::{Gains, PwmCommand};
+pub use piv::{ControlLaw, Gains, PwmCommand};
 pub use trajectory::Ellipse;
 
 #[cfg(test)]

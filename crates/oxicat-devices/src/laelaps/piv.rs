@@ -193,18 +193,186 @@ impl PwmCommand {
     }
 }
 
+/// Which control law the joint loop runs (a firmware build choice, like the thesis'
+/// compile-time output limits; the gains still come through the PDO).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum ControlLaw {
+    /// The thesis' PIV: `DCL_runPID_C1` (series form, `Kp` multiplies `Ki` and `Kd`).
+    #[default]
+    Piv,
+    /// `DCL_runPID_C4`-style parallel ideal PID ([`PidC4`]).
+    DclPid,
+}
+
+impl ControlLaw {
+    /// `"piv"` or `"dcl-pid"`.
+    pub fn parse(s: &str) -> Option<Self> {
+        match s {
+            "piv" => Some(Self::Piv),
+            "dcl-pid" => Some(Self::DclPid),
+            _ => None,
+        }
+    }
+
+    /// The scenario spelling.
+    pub const fn name(self) -> &'static str {
+        match self {
+            Self::Piv => "piv",
+            Self::DclPid => "dcl-pid",
+        }
+    }
+}
+
+/// The DCL "C4" PID: parallel ideal form, derivative of the feedback through the same
+/// Tustin first-order filter as [`PidC1`], integrator clamped (frozen) while the output
+/// saturates. Per call, with `T` the loop period:
+///
+/// ```text
+/// v5  = Kr·r − y                                   proportional error
+/// v8  = Ki·T·i14·(r − y) + i10;   i10 = v8          integrator [Ki in 1/s], frozen while saturated
+/// v1  = Kd·c1·y;  v4 = v1 − d2 − d3;  d2 = v1;  d3 = c2·v4
+///                                                   filtered derivative of the feedback
+/// v9  = Kp·v5 + v8 − v4                             parallel sum (Ki, Kd not scaled by Kp)
+/// u   = sat(v9, Umin, Umax);   i14 = lk·(u == v9)
+/// ```
+///
+/// Units (joint frame, PWM fraction per revolution): `Kp` [1/rev], `Ki` [1/(rev·s)],
+/// `Kd` [s/rev]. With `c1 = 2/(T + 2τ)`, `c2 = (T − 2τ)/(T + 2τ)` the derivative path is
+/// `Kd·s/(τs + 1)` discretised by Tustin.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PidC4 {
+    /// Proportional gain.
+    pub kp: f32,
+    /// Integral gain per second.
+    pub ki: f32,
+    /// Derivative gain.
+    pub kd: f32,
+    /// Reference weight of the proportional path.
+    pub kr: f32,
+    /// Derivative filter coefficient c1.
+    pub c1: f32,
+    /// Derivative filter coefficient c2.
+    pub c2: f32,
+    /// Loop period \[s\].
+    pub period_s: f32,
+    /// Upper output limit.
+    pub umax: f32,
+    /// Lower output limit.
+    pub umin: f32,
+    /// Derivative path: previous `v1`.
+    pub d2: f32,
+    /// Derivative path: `c2 ×` previous `v4`.
+    pub d3: f32,
+    /// Integrator state.
+    pub i10: f32,
+    /// Anti-windup flag from the previous call (0 or `lk`).
+    pub i14: f32,
+}
+
+impl Default for PidC4 {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+impl PidC4 {
+    /// Gains zero, `Kr = 1`, limits ±1, states zero, the 10 kHz period; the anti-windup
+    /// flag starts at 1 so the integrator runs from the first call.
+    pub const fn new() -> Self {
+        Self {
+            kp: 0.0,
+            ki: 0.0,
+            kd: 0.0,
+            kr: 1.0,
+            c1: 0.0,
+            c2: 0.0,
+            period_s: CONTROL_PERIOD_S,
+            umax: 1.0,
+            umin: -1.0,
+            d2: 0.0,
+            d3: 0.0,
+            i10: 0.0,
+            i14: 1.0,
+        }
+    }
+
+    /// Loads gains (`Ki = 0` clears the integrator, as the firmware does for the PIV).
+    pub fn set_gains(&mut self, g: Gains) {
+        self.kp = g.kp;
+        self.kd = g.kd;
+        self.ki = g.ki;
+        if self.ki == 0.0 {
+            self.i10 = 0.0;
+        }
+    }
+
+    /// Sets the derivative filter for bandwidth `hz` at period `period_s`.
+    pub fn set_filter(&mut self, hz: f32, period_s: f32) {
+        let (c1, c2) = filter_coefficients(hz, period_s);
+        self.c1 = c1;
+        self.c2 = c2;
+        self.period_s = period_s;
+    }
+
+    /// Symmetric output limits ±`umax`.
+    pub fn set_limit(&mut self, umax: f32) {
+        self.umax = umax;
+        self.umin = -umax;
+    }
+
+    /// One controller step with reference `rk`, feedback `yk`, anti-windup input `lk`.
+    pub fn run(&mut self, rk: f32, yk: f32, lk: f32) -> f32 {
+        let v5 = self.kr * rk - yk;
+        let v8 = (rk - yk) * self.ki * self.period_s * self.i14 + self.i10;
+        self.i10 = v8;
+        let v1 = yk * self.kd * self.c1;
+        let v4 = v1 - self.d2 - self.d3;
+        self.d2 = v1;
+        self.d3 = v4 * self.c2;
+        let v9 = self.kp * v5 + v8 - v4;
+        let v10 = if v9 > self.umax {
+            self.umax
+        } else if v9 < self.umin {
+            self.umin
+        } else {
+            v9
+        };
+        let v12 = if v10 == v9 { 1.0 } else { 0.0 };
+        self.i14 = v12 * lk;
+        v10
+    }
+}
+
 /// One joint's controller as the thesis ISR runs it: reload gains, filter and limit, run
-/// `DCL_runPID_C1` with `lk = 1`, return the signed output.
+/// `DCL_runPID_C1` (or, by [`ControlLaw`], the C4 PID) with `lk = 1`, return the signed
+/// output.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub struct JointController {
     /// The controller.
     pub pid: PidC1,
+    /// The C4 PID, used when `law` is [`ControlLaw::DclPid`].
+    pub c4: PidC4,
+    /// Which of the two runs.
+    pub law: ControlLaw,
 }
 
 impl JointController {
     /// A controller in the DCL default state.
     pub const fn new() -> Self {
-        Self { pid: PidC1::new() }
+        Self {
+            pid: PidC1::new(),
+            c4: PidC4::new(),
+            law: ControlLaw::Piv,
+        }
+    }
+
+    /// A controller running `law`.
+    pub const fn with_law(law: ControlLaw) -> Self {
+        Self {
+            pid: PidC1::new(),
+            c4: PidC4::new(),
+            law,
+        }
     }
 
     /// One 10 kHz step: `desired` and `measured` in revolutions (joint frame).
@@ -216,10 +384,20 @@ impl JointController {
         filter_hz: f32,
         umax: f32,
     ) -> f32 {
-        self.pid.set_gains(gains);
-        self.pid.set_filter(filter_hz, CONTROL_PERIOD_S);
-        self.pid.set_limit(umax);
-        self.pid.run(desired, measured, 1.0)
+        match self.law {
+            ControlLaw::Piv => {
+                self.pid.set_gains(gains);
+                self.pid.set_filter(filter_hz, CONTROL_PERIOD_S);
+                self.pid.set_limit(umax);
+                self.pid.run(desired, measured, 1.0)
+            }
+            ControlLaw::DclPid => {
+                self.c4.set_gains(gains);
+                self.c4.set_filter(filter_hz, CONTROL_PERIOD_S);
+                self.c4.set_limit(umax);
+                self.c4.run(desired, measured, 1.0)
+            }
+        }
     }
 }
 
@@ -432,5 +610,132 @@ mod tests {
         );
         assert!(!PwmCommand::from_output(0.0).reverse);
         assert_eq!(PwmCommand::from_output(-0.2).signed(), -0.2);
+    }
+
+    fn c4(kp: f32, ki: f32, kd: f32, umax: f32) -> PidC4 {
+        let mut p = PidC4::new();
+        p.set_gains(Gains { kp, kd, ki });
+        p.set_limit(umax);
+        p
+    }
+
+    fn close(a: f32, b: f32) -> bool {
+        (a - b).abs() <= 1e-6 * (1.0 + b.abs())
+    }
+
+    #[test]
+    fn c4_steps_match_the_hand_computed_parallel_form() {
+        // Kp = 0.5, Ki = 10 /s (× T = 1e-4 per call), Kd = 0.01 s, filter c1 = 100, c2 = −0.5.
+        let mut p = c4(0.5, 10.0, 0.01, 1.0);
+        p.c1 = 100.0;
+        p.c2 = -0.5;
+        p.period_s = 1e-4;
+        // r = 1, y = 0: v5 = 1, v8 = 1·10·1e-4 = 0.001, v1 = v4 = 0 → u = 0.5 + 0.001.
+        assert!(close(p.run(1.0, 0.0, 1.0), 0.501));
+        // y = 0.1: v5 = 0.9, v8 = 0.001 + 0.9·1e-3 = 0.0019, v1 = 0.1·0.01·100 = 0.1,
+        // v4 = 0.1, d2 = 0.1, d3 = −0.05 → u = 0.45 + 0.0019 − 0.1 = 0.3519.
+        assert!(close(p.run(1.0, 0.1, 1.0), 0.3519));
+        assert!(close(p.d3, -0.05));
+        // y = 0.1 again: v8 = 0.0028, v4 = 0.1 − 0.1 + 0.05 = 0.05 → u = 0.45 + 0.0028 − 0.05.
+        assert!(close(p.run(1.0, 0.1, 1.0), 0.4028));
+        assert!(close(p.i10, 0.0028));
+        // Kr weights only the proportional path: Kr = 0, r = 1, y = 0.1 → v5 = −0.1.
+        p.kr = 0.0;
+        let i = p.i10 + 0.9e-3;
+        let v4 = 0.1 - 0.1 + 0.025;
+        assert!(close(p.run(1.0, 0.1, 1.0), -0.05 + i - v4));
+    }
+
+    #[test]
+    fn c4_anti_windup_clamp_holds_the_integrator() {
+        let mut p = c4(1.0, 100.0, 0.0, 0.5);
+        p.set_filter(20.0, 1e-4);
+        // First call unsaturated flag (i14 = 1): integrates once, then saturates.
+        assert_eq!(p.run(1.0, 0.0, 1.0), 0.5);
+        let held = p.i10;
+        assert!(close(held, 0.01));
+        assert_eq!(p.i14, 0.0);
+        for _ in 0..1000 {
+            assert_eq!(p.run(1.0, 0.0, 1.0), 0.5);
+        }
+        assert_eq!(
+            p.i10, held,
+            "the clamp froze the integrator while saturated"
+        );
+        // Back inside the limits (e = 0.1): the first call still uses the flag of the
+        // saturated call, then integration resumes.
+        assert!(close(p.run(1.0, 0.9, 1.0), 0.1 + held));
+        assert_eq!(p.i10, held);
+        assert_eq!(p.i14, 1.0);
+        p.run(1.0, 0.9, 1.0);
+        assert!(close(p.i10, held + 0.1 * 100.0 * 1e-4));
+        // lk = 0 holds the integrator too, from the next call on; Ki = 0 clears it.
+        p.run(1.0, 0.9, 0.0);
+        let before = p.i10;
+        p.run(1.0, 0.9, 0.0);
+        p.run(1.0, 0.9, 0.0);
+        assert_eq!(p.i10, before);
+        p.set_gains(Gains {
+            kp: 1.0,
+            kd: 0.0,
+            ki: 0.0,
+        });
+        assert_eq!(p.i10, 0.0);
+        // The lower limit clamps too.
+        let mut n = c4(1.0, 100.0, 0.0, 0.5);
+        assert_eq!(n.run(-1.0, 0.0, 1.0), -0.5);
+    }
+
+    #[test]
+    fn c4_derivative_filter_is_a_first_order_lag_of_the_feedback_rate() {
+        // Kp = Ki = 0, Kd = 0.02 s: a unit step of y gives u = −v4 with v4 = Kd·c1 first,
+        // then decaying by −c2 each call, and Σ v4·T = Kd·Δy (Tustin keeps the DC gain).
+        let (t, hz, kd) = (1e-4_f32, 20.0_f32, 0.02_f32);
+        let mut p = c4(0.0, 0.0, kd, 1e6);
+        p.set_filter(hz, t);
+        let (c1, c2) = filter_coefficients(hz, t);
+        let tau = 1.0 / (TAU * hz);
+        assert!(close(c1, 2.0 / (t + 2.0 * tau)));
+        let u0 = p.run(0.0, 1.0, 1.0);
+        assert!(close(u0, -kd * c1));
+        let mut prev = u0;
+        let mut sum = f64::from(-u0) * f64::from(t);
+        for _ in 0..20_000 {
+            let u = p.run(0.0, 1.0, 1.0);
+            assert!(close(u, -c2 * prev), "{u} vs {}", -c2 * prev);
+            sum += f64::from(-u) * f64::from(t);
+            prev = u;
+        }
+        assert!((sum - f64::from(kd)).abs() < 1e-4, "{sum}");
+        // The derivative acts on the feedback only: a reference step gives no kick.
+        let mut q = c4(0.0, 0.0, kd, 1e6);
+        q.set_filter(hz, t);
+        assert_eq!(q.run(1.0, 0.0, 1.0), 0.0);
+    }
+
+    #[test]
+    fn joint_controller_runs_the_selected_law() {
+        let g = Gains {
+            kp: 40.0,
+            kd: 0.01,
+            ki: 0.0,
+        };
+        let mut piv = JointController::new();
+        let mut pid = JointController::with_law(ControlLaw::DclPid);
+        assert_eq!(piv.law, ControlLaw::Piv);
+        // Same P action on the first call (no derivative yet, Ki = 0).
+        let a = piv.step(0.001, 0.0, g, 20.0, 0.4);
+        let b = pid.step(0.001, 0.0, g, 20.0, 0.4);
+        assert!(close(a, 0.04) && close(b, 0.04), "{a} {b}");
+        // The derivative path: C1 multiplies Kd by Kp, C4 does not.
+        let a = piv.step(0.001, 0.0001, g, 20.0, 0.4);
+        let b = pid.step(0.001, 0.0001, g, 20.0, 0.4);
+        let (c1, _) = filter_coefficients(20.0, CONTROL_PERIOD_S);
+        let d = 0.0001 * 0.01 * c1;
+        assert!(close(a, 40.0 * (0.0009 - d)), "{a}");
+        assert!(close(b, 40.0 * 0.0009 - d), "{b}");
+        assert_eq!(ControlLaw::parse("dcl-pid"), Some(ControlLaw::DclPid));
+        assert_eq!(ControlLaw::parse("PID"), None);
+        assert_eq!(ControlLaw::DclPid.name(), "dcl-pid");
     }
 }

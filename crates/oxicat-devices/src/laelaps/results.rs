@@ -354,15 +354,27 @@ pub fn summary_markdown(run: &TrotRun, s: &Summary) -> String {
 /// joint speed. Added: the measurement resolution (the 0.01° PDO step and one encoder
 /// count) and 0.5° for the short intervals at the PWM limit, where the relation does not
 /// hold. The trot tests (host-compiled and board images) assert it.
+///
+/// With `[control] law = "dcl-pid"` (the parallel C4 PID) v9 = Kp·(r − y) + i − v4 with v4
+/// the filtered Kd·ẏ, not multiplied by Kp: the velocity lag is (Kd/Kp)·max|θ̇|. With
+/// Ki > 0 the integrator `i` adds |i|/Kp; the clamp integrates only while |v9| ≤ u_max and
+/// an |i| above u_max + Kd·|ẏ| would need an opposite Kp·e that drains it, so |i| ≤ u_max
+/// outside the PWM-limit intervals and the bound doubles the u_max/Kp term.
 pub fn pv_bound_deg(s: &crate::laelaps::scenario::Scenario, l: &LegSummary) -> (f64, f64) {
     let tau = std::f64::consts::TAU;
     let slack_deg = 0.01 + 0.01 + 0.5;
-    let knee = &s.control.knee;
-    let hip = &s.control.hip;
+    let pid = s.control.law() == crate::laelaps::piv::ControlLaw::DclPid;
+    let one = |g: &crate::laelaps::scenario::GainSet, u_max: f32, speed: f64| {
+        let (lag, windup) = if pid {
+            (g.kd / g.kp, if g.ki > 0.0 { 2.0 } else { 1.0 })
+        } else {
+            (g.kd, 1.0)
+        };
+        (windup * tau * f64::from(u_max) / g.kp + lag * speed).to_degrees() + slack_deg
+    };
     (
-        (tau * f64::from(U_MAX_KNEE) / knee.kp + knee.kd * l.knee_peak_speed).to_degrees()
-            + slack_deg,
-        (tau * f64::from(U_MAX_HIP) / hip.kp + hip.kd * l.hip_peak_speed).to_degrees() + slack_deg,
+        one(&s.control.knee, U_MAX_KNEE, l.knee_peak_speed),
+        one(&s.control.hip, U_MAX_HIP, l.hip_peak_speed),
     )
 }
 

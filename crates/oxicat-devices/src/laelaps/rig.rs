@@ -59,8 +59,8 @@
 
 use crate::demo::Leds;
 use crate::laelaps::{
-    self, device, CaptureConfig, EncoderIn, Joint, LegNode, Mode, PwmCommand, PwmOut, QepSample,
-    Side, JOINT_LOOP_TIMER,
+    self, device, CaptureConfig, ControlLaw, EncoderIn, Joint, LegNode, Mode, PwmCommand, PwmOut,
+    QepSample, Side, JOINT_LOOP_TIMER,
 };
 use oxicat_esc::Esc;
 use oxicat_plant::{Leg, LegParams, Treadmill};
@@ -215,6 +215,8 @@ pub struct RigConfig {
     /// The execution-time model ([`oxicat_sim::exec_time`]); `None` (the default): the firmware
     /// runs in zero virtual time.
     pub timing: Option<ExecTiming>,
+    /// The joint control law the firmware is built with (default: the thesis' PIV).
+    pub law: ControlLaw,
 }
 
 impl RigConfig {
@@ -229,6 +231,7 @@ impl RigConfig {
             poll_every: 4,
             belt: BeltProfile::default(),
             timing: None,
+            law: ControlLaw::Piv,
         }
     }
 
@@ -583,6 +586,7 @@ pub fn attach_leg_with<P: PdiPath>(
     let mut schedule = FirmwareConfig::default().timer(JOINT_LOOP_TIMER, JOINT_LOOP_NS);
     schedule.poll_after_timer_instants = Some(config.poll_every);
     schedule.timing = config.timing;
+    let law = config.law;
     let plant = LegPlant {
         leg_id: leg,
         plant: Leg::new(params),
@@ -599,7 +603,8 @@ pub fn attach_leg_with<P: PdiPath>(
         PwmLatch::default(),
         QepRegisters::default(),
         NoLeds::default(),
-    );
+    )
+    .with_law(law);
     attach_host(segment, id, &schedule, plant, path, |esc, path| {
         boot_stack(def, esc, app, path)
     })

@@ -3,6 +3,7 @@
 
 use serde::Deserialize;
 
+use crate::laelaps::piv::ControlLaw;
 use crate::laelaps::rig::LegId;
 use oxicat_master::MasterError;
 use oxicat_sim::exec_time::ExecTiming;
@@ -182,6 +183,21 @@ pub struct Control {
     pub hip: GainSet,
     /// Derivative filter bandwidth \[Hz\].
     pub filter_hz: u16,
+    /// Joint control law: `"piv"` (the thesis' `DCL_runPID_C1`, the default) or
+    /// `"dcl-pid"` (the parallel C4 PID: `kp` [1/rev], `ki` [1/(rev·s)], `kd` [s/rev], not
+    /// multiplied by `kp`). Same PDO gains, filter and output limits either way.
+    #[serde(default)]
+    pub law: Option<String>,
+}
+
+impl Control {
+    /// The law of `law` (PIV when absent or unknown; [`Scenario::parse`] refuses unknown).
+    pub fn law(&self) -> ControlLaw {
+        self.law
+            .as_deref()
+            .and_then(ControlLaw::parse)
+            .unwrap_or_default()
+    }
 }
 
 /// Treadmill and plant.
@@ -375,6 +391,13 @@ impl Scenario {
             };
             if !(v.is_finite() && (lo..=hi).contains(&v)) {
                 return bad(format!("{key} = {v} is not in {lo} … {hi}{unit} ({why})"));
+            }
+        }
+        if let Some(l) = &self.control.law {
+            if ControlLaw::parse(l).is_none() {
+                return bad(format!(
+                    "control.law = {l:?} is not a control law (\"piv\" or \"dcl-pid\")"
+                ));
             }
         }
         if self.bus.sync1_shift_us >= self.bus.cycle_us {
@@ -624,6 +647,46 @@ mod tests {
             ),
         ] {
             let e = Scenario::parse(&DEFAULT_TOML.replacen(from, to, 1)).expect_err(to);
+            assert!(e.to_string().contains(want), "{to}: {e}");
+        }
+    }
+
+    #[test]
+    fn control_law_from_the_scenario_and_its_gains_range_checked() {
+        use crate::laelaps::piv::ControlLaw;
+        assert_eq!(Scenario::thesis().control.law(), ControlLaw::Piv);
+        let pid = |text: &str| text.replace("filter_hz = 20", "filter_hz = 20\nlaw = \"dcl-pid\"");
+        let s = Scenario::parse(&pid(DEFAULT_TOML)).expect("dcl-pid");
+        assert_eq!(s.control.law(), ControlLaw::DclPid);
+        let s = Scenario::parse(
+            &DEFAULT_TOML.replace("filter_hz = 20", "filter_hz = 20\nlaw = \"piv\""),
+        )
+        .expect("piv");
+        assert_eq!(s.control.law(), ControlLaw::Piv);
+        for (from, to, want) in [
+            (
+                "knee = { kp = 80.0, kd = 0.05, ki = 0.0 }",
+                "knee = { kp = 80.0, kd = 4.0, ki = 400.0 }",
+                "control.knee.ki = 400 is not in 0 … 327",
+            ),
+            (
+                "hip = { kp = 80.0, kd = 0.05, ki = 0.0 }",
+                "hip = { kp = 80.0, kd = 40.0, ki = 20.0 }",
+                "control.hip.kd = 40 is not in 0 … 32",
+            ),
+            (
+                "hip = { kp = 80.0, kd = 0.05, ki = 0.0 }",
+                "hip = { kp = -1.0, kd = 4.0, ki = 20.0 }",
+                "control.hip.kp = -1 is not in 0 … 327",
+            ),
+            (
+                "law = \"dcl-pid\"",
+                "law = \"pid\"",
+                "control.law = \"pid\" is not a control law (\"piv\" or \"dcl-pid\")",
+            ),
+        ] {
+            let text = pid(DEFAULT_TOML).replacen(from, to, 1);
+            let e = Scenario::parse(&text).expect_err(to);
             assert!(e.to_string().contains(want), "{to}: {e}");
         }
     }
