@@ -7,6 +7,7 @@ use std::time::Instant;
 
 use indicatif::{ProgressBar, ProgressStyle};
 use oxicat_devices::laelaps::experiment::{run_trot, Progress, TrotRun};
+use oxicat_devices::laelaps::frame::FramePlan;
 use oxicat_devices::laelaps::plot;
 use oxicat_devices::laelaps::results::{csv, summarize, summary_markdown};
 use oxicat_devices::laelaps::scenario::{ExecTime, PdiChip, Scenario};
@@ -154,6 +155,8 @@ pub fn run_with(a: TrotArgs, runner: &mut TrotRunner<'_>) -> Result<String, CliE
             md.push_str(&format!("- {}\n", w.line()));
         }
     }
+    // The thesis' Table 2-4: what the master sends each cycle, beside the thesis' frame.
+    md.push_str(&FramePlan::of(&run.scenario).markdown());
     let rec_s = run.rows.len() as f64 * s.cycle_ns() as f64 * 1e-9;
     let speed = format!(
         "\nSimulated {:.1} s ({:.1} s recorded) in {:.2} s of wall-clock time ({:.2} s for the \
