@@ -8,9 +8,9 @@ use std::time::Instant;
 use indicatif::{ProgressBar, ProgressStyle};
 use oxicat_devices::laelaps::experiment::{run_trot, Progress, TrotRun};
 use oxicat_devices::laelaps::frame::FramePlan;
-use oxicat_devices::laelaps::plot;
 use oxicat_devices::laelaps::results::{csv, summarize, summary_markdown};
 use oxicat_devices::laelaps::scenario::{ExecTime, PdiChip, Scenario};
+use oxicat_devices::laelaps::{legs, plot};
 use oxicat_master::MasterError;
 use oxicat_sim::exec_time::Work;
 
@@ -174,6 +174,10 @@ pub fn run_with(a: TrotArgs, runner: &mut TrotRunner<'_>) -> Result<String, CliE
     files.push(sum_path);
     if !a.no_plots {
         files.extend(plot::write_figures(&run, &a.out)?);
+        // The desired and measured legs over two steps of the steady trot, animated.
+        let legs_path = a.out.join("legs.svg");
+        crate::output::write_file(&legs_path, legs::run_svg(&run).as_bytes())?;
+        files.push(legs_path);
     }
     md.push_str(&speed);
     if let Some(line) = spi_line(&run) {

@@ -49,6 +49,8 @@ pub mod experiment;
 #[cfg(feature = "bench")]
 pub mod frame;
 #[cfg(feature = "bench")]
+pub mod legs;
+#[cfg(feature = "bench")]
 pub mod plot;
 #[cfg(feature = "bench")]
 pub mod results;
