@@ -7,9 +7,10 @@ use std::time::Instant;
 
 use indicatif::{ProgressBar, ProgressStyle};
 use oxicat_devices::laelaps::experiment::{run_trot, Progress, TrotRun};
-use oxicat_devices::laelaps::plot;
+use oxicat_devices::laelaps::frame::FramePlan;
 use oxicat_devices::laelaps::results::{csv, summarize, summary_markdown};
 use oxicat_devices::laelaps::scenario::{ExecTime, PdiChip, Scenario};
+use oxicat_devices::laelaps::{legs, plot};
 use oxicat_master::MasterError;
 use oxicat_sim::exec_time::Work;
 
@@ -154,6 +155,8 @@ pub fn run_with(a: TrotArgs, runner: &mut TrotRunner<'_>) -> Result<String, CliE
             md.push_str(&format!("- {}\n", w.line()));
         }
     }
+    // The thesis' Table 2-4: what the master sends each cycle, beside the thesis' frame.
+    md.push_str(&FramePlan::of(&run.scenario).markdown());
     let rec_s = run.rows.len() as f64 * s.cycle_ns() as f64 * 1e-9;
     let speed = format!(
         "\nSimulated {:.1} s ({:.1} s recorded) in {:.2} s of wall-clock time ({:.2} s for the \
@@ -171,6 +174,10 @@ pub fn run_with(a: TrotArgs, runner: &mut TrotRunner<'_>) -> Result<String, CliE
     files.push(sum_path);
     if !a.no_plots {
         files.extend(plot::write_figures(&run, &a.out)?);
+        // The desired and measured legs over two steps of the steady trot, animated.
+        let legs_path = a.out.join("legs.svg");
+        crate::output::write_file(&legs_path, legs::run_svg(&run).as_bytes())?;
+        files.push(legs_path);
     }
     md.push_str(&speed);
     if let Some(line) = spi_line(&run) {

@@ -47,6 +47,10 @@ pub mod transition;
 #[cfg(feature = "bench")]
 pub mod experiment;
 #[cfg(feature = "bench")]
+pub mod frame;
+#[cfg(feature = "bench")]
+pub mod legs;
+#[cfg(feature = "bench")]
 pub mod plot;
 #[cfg(feature = "bench")]
 pub mod results;
