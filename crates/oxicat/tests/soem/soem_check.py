@@ -223,16 +223,20 @@ def reach(master, cycler, want, timeout_s):
     return all_in(master, want)
 
 
-def dc_checks(pos, slave, cycle_ns):
+def dc_checks(pos, slave, cycle_ns, slow=1):
     """SYNC0 on: 0x1C32:01 = DC SYNC0, 0x1C32:02 = the SYNC0 cycle, the ESC's SYNC0 unit
-    activated with our cycle and its next-pulse time advancing by whole cycles."""
+    activated with our cycle and its next-pulse time advancing by whole cycles. The wait
+    between the two reads of the next pulse is at least three cycles of the segment's time
+    (a segment slowed down K times needs K times the wall time: 20 ms at K = 30 was less
+    than one 1 ms cycle, so the pulse sometimes had not moved)."""
+    wait_s = max(0.02, 3 * cycle_ns * 1e-9 * slow)
     try:
         mode = struct.unpack("<H", slave.sdo_read(0x1C32, 1))[0]
         cyc = struct.unpack("<I", slave.sdo_read(0x1C32, 2))[0]
         act = slave._fprd(REG_DC_ACTIVATION, 2)
         sync0_cycle = struct.unpack("<I", slave._fprd(REG_DC_SYNC0_CYCLE, 4))[0]
         t0 = struct.unpack("<Q", slave._fprd(REG_DC_NEXT_SYNC0, 8))[0]
-        time.sleep(0.02)
+        time.sleep(wait_s)
         t1 = struct.unpack("<Q", slave._fprd(REG_DC_NEXT_SYNC0, 8))[0]
         adv = t1 - t0
         ok = (mode == 2 and cyc == cycle_ns and act[1] & 0x03 == 0x03
@@ -240,7 +244,7 @@ def dc_checks(pos, slave, cycle_ns):
         check("dc_sync0", pos, ok,
               f"0x1C32:01 = {mode} (want 2), 0x1C32:02 = {cyc} (want {cycle_ns}), "
               f"0x0981 = 0x{act[1]:02X}, 0x09A0 = {sync0_cycle}, next SYNC0 advanced {adv} ns "
-              f"in 20 ms")
+              f"in {wait_s * 1000:.0f} ms")
     except Exception as e:  # noqa: BLE001
         check("dc_sync0", pos, False, f"{type(e).__name__}: {e}")
 
@@ -375,7 +379,7 @@ def main():
                   f"AL status 0x{slave.al_status:04X}")
 
         for pos in dc_slaves:
-            dc_checks(pos, master.slaves[pos], cycle_ns)
+            dc_checks(pos, master.slaves[pos], cycle_ns, slow)
             for _ in range(20):
                 cycler.cycle()
 
