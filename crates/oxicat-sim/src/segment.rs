@@ -641,12 +641,7 @@ impl<E: SegmentEsc> Segment<E> {
             };
             self.slots[i].read_due();
         }
-        self.horizon = self
-            .slots
-            .iter()
-            .filter_map(|s| s.due.min())
-            .min()
-            .unwrap_or(u64::MAX);
+        self.horizon_from_due();
     }
 
     /// [`run_events_until`](Self::run_events_until) for large segments (hundreds of nodes,
@@ -691,6 +686,12 @@ impl<E: SegmentEsc> Segment<E> {
             self.slots[i].read_due();
             push(&mut heap, &self.slots[i], i, gen[i]);
         }
+        self.horizon_from_due();
+    }
+
+    /// The horizon from the slots' next times as last read (`due`), after a pass of either
+    /// pick.
+    fn horizon_from_due(&mut self) {
         self.horizon = self
             .slots
             .iter()
