@@ -114,7 +114,7 @@ pub const MAX_CYCLE_US: u64 = 50_000;
 
 /// Refuses arguments that cannot work, before a segment is built.
 fn check_args(a: &Cia402Args) -> Result<(), UsageError> {
-    let max = oxicat_master::MAX_SLAVES.min(crate::sim_cmd::MAX_SIM_SLAVES);
+    let max = crate::master_cmd::MAX_IN_PROCESS_SLAVES;
     if a.iface.is_none() && !(1..=max).contains(&a.joints) {
         return Err(UsageError::OutOfRange {
             option: "--joints",

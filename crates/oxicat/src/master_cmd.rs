@@ -417,12 +417,21 @@ pub fn parse_duration(s: &str) -> Result<Duration, UsageError> {
     Ok(Duration::from_nanos(ns.round() as u64))
 }
 
+/// Most slaves of an in-process segment with the master beside it: what a served segment
+/// holds and what the master's group holds.
+pub const MAX_IN_PROCESS_SLAVES: usize =
+    if oxicat_master::MAX_SLAVES < crate::sim_cmd::MAX_SIM_SLAVES {
+        oxicat_master::MAX_SLAVES
+    } else {
+        crate::sim_cmd::MAX_SIM_SLAVES
+    };
+
 /// The in-process segment of `--sim`: the devices of `oxicat sim --list`, in the same syntax
 /// (`demo:2,tue-es030:1` or `"demo:2 tue-es030:1"`), at most what a served segment holds
 /// ([`crate::sim_cmd::MAX_SIM_SLAVES`]) and the master's group holds
 /// ([`oxicat_master::MAX_SLAVES`]), checked before anything is built.
 pub fn build_sim(spec: &str) -> Result<Arc<Mutex<oxicat_sim::segment::Segment>>, UsageError> {
-    let max = oxicat_master::MAX_SLAVES.min(crate::sim_cmd::MAX_SIM_SLAVES);
+    let max = MAX_IN_PROCESS_SLAVES;
     let range = format!("1 … {max} slaves in all");
     let desc = crate::sim_cmd::parse_specs_within(&[spec.to_string()], max, &range)
         .map_err(UsageError::Sim)?;
