@@ -18,4 +18,5 @@ pub mod node;
 pub mod pcapng;
 pub mod pdi_path;
 pub mod realtime;
+pub mod rt;
 pub mod segment;

@@ -10,6 +10,13 @@ use std::time::Duration;
 /// A serving child process, killed when dropped.
 pub struct Served(Child);
 
+impl Served {
+    /// The child's process id (to look at its threads in `/proc`).
+    pub fn id(&self) -> u32 {
+        self.0.id()
+    }
+}
+
 impl Drop for Served {
     fn drop(&mut self) {
         let _ = self.0.kill();

@@ -8,7 +8,9 @@
 //! cargo run --release -p oxicat --example rt_cycle -- veth0 400 60
 //! ```
 //!
-//! Arguments: interface, cycle in µs (default 400), duration in s (default 10). The master
+//! Arguments: interface, cycle in µs (default 400), duration in s (default 10), then
+//! optionally `--rt[=PRIO]` (the cycle thread and the tx/rx thread under SCHED_FIFO, memory
+//! locked; `oxicat_sim::rt`) and `--rt-cpu A[,B]` (pin the cycle thread to A, tx/rx to B). The master
 //! brings the slaves to OP in free run, then sends one LRW (ethercrab's `tx_rx`) per cycle
 //! at absolute deadlines (sleep to the deadline; no catch-up bursts after an overrun).
 //! Needs CAP_NET_RAW.
@@ -17,6 +19,7 @@ use std::time::{Duration, Instant};
 
 use ethercrab::std::{ethercat_now, tx_rx_task};
 use ethercrab::{MainDevice, MainDeviceConfig, PduStorage, Timeouts};
+use oxicat_sim::rt::RtOptions;
 
 static PDU_STORAGE: PduStorage<16, { PduStorage::element_size(1100) }> = PduStorage::new();
 
@@ -38,11 +41,61 @@ fn percentiles(name: &str, v: &mut [u64]) {
     );
 }
 
+/// `--rt[=PRIO]` and `--rt-cpu A[,B]`: the options of the cycle thread and the tx/rx thread.
+fn rt_options(flags: &[String]) -> (Option<RtOptions>, Option<RtOptions>) {
+    let mut prio = None;
+    let mut cpus: Vec<usize> = Vec::new();
+    let mut it = flags.iter();
+    while let Some(f) = it.next() {
+        if f == "--rt" {
+            prio = Some(oxicat_sim::rt::DEFAULT_PRIORITY);
+        } else if let Some(p) = f.strip_prefix("--rt=") {
+            prio = Some(
+                p.parse()
+                    .unwrap_or_else(|_| fail(&format!("--rt={p}: not 1..=99"))),
+            );
+        } else if f == "--rt-cpu" {
+            let list = it.next().map(String::as_str).unwrap_or_default();
+            cpus = list
+                .split(',')
+                .map(|c| {
+                    c.parse()
+                        .unwrap_or_else(|_| fail(&format!("--rt-cpu {list}")))
+                })
+                .collect();
+        } else {
+            fail(&format!("unknown option {f}"));
+        }
+    }
+    let at = |cpu: Option<usize>| {
+        prio.map(|p| RtOptions {
+            cpu,
+            ..RtOptions::fifo(p)
+        })
+    };
+    (at(cpus.first().copied()), at(cpus.get(1).copied()))
+}
+
+fn fail(msg: &str) -> ! {
+    eprintln!("rt_cycle: {msg}");
+    std::process::exit(2)
+}
+
+fn enter_rt(what: &str, opts: Option<RtOptions>) {
+    if let Some(o) = opts {
+        match oxicat_sim::rt::enter(&o) {
+            Ok(r) => println!("{what}: {r}"),
+            Err(e) => fail(&format!("{what}: {e}")),
+        }
+    }
+}
+
 fn main() {
     let mut args = std::env::args().skip(1);
     let iface = args.next().unwrap_or_else(|| "veth0".into());
     let cycle_us: u64 = args.next().and_then(|a| a.parse().ok()).unwrap_or(400);
     let seconds: u64 = args.next().and_then(|a| a.parse().ok()).unwrap_or(10);
+    let (rt_cycle, rt_txrx) = rt_options(&args.collect::<Vec<_>>());
     let cycle = Duration::from_micros(cycle_us);
 
     let (tx, rx, pdu_loop) = PDU_STORAGE.try_split().expect("split once");
@@ -55,8 +108,12 @@ fn main() {
     };
     std::thread::Builder::new()
         .name("ethercrab-txrx".into())
-        .spawn(move || futures_lite::future::block_on(task))
+        .spawn(move || {
+            enter_rt("tx/rx thread", rt_txrx);
+            futures_lite::future::block_on(task)
+        })
         .expect("tx/rx thread");
+    enter_rt("cycle thread", rt_cycle);
     let md = MainDevice::new(
         pdu_loop,
         Timeouts {

@@ -151,6 +151,14 @@ pub struct SimArgs {
     /// timers stretch by K), for firmware that cannot keep real time on this host.
     #[arg(long, value_name = "K", default_value_t = 1, value_parser = clap::value_parser!(u32).range(1..=10_000))]
     pub slowdown: u32,
+    /// Serve from a SCHED_FIFO thread at priority PRIO (1–99; 49 when no value is given) with
+    /// the process's memory locked; needs root or CAP_SYS_NICE. Written `--rt` or `--rt=PRIO`.
+    #[arg(long, value_name = "PRIO", num_args = 0..=1, require_equals = true,
+          default_missing_value = "49", value_parser = clap::value_parser!(u8).range(1..=99))]
+    pub rt: Option<u8>,
+    /// Pin the serving thread to CPU N (with --rt; isolate that core for the best figures).
+    #[arg(long, value_name = "N", requires = "rt")]
+    pub rt_cpu: Option<usize>,
 }
 
 /// Puts node `k` of a registered device on the segment (with its oscillator off by
@@ -176,6 +184,14 @@ pub fn host_node(
 }
 
 impl SimArgs {
+    /// The real-time options of `--rt` and `--rt-cpu`, if asked.
+    pub fn rt_options(&self) -> Option<oxicat_sim::rt::RtOptions> {
+        self.rt.map(|priority| oxicat_sim::rt::RtOptions {
+            cpu: self.rt_cpu,
+            ..oxicat_sim::rt::RtOptions::fifo(priority)
+        })
+    }
+
     /// DEVICES, then one `esi=…` per `--esi`.
     pub fn all_devices(&self) -> Vec<String> {
         let mut v = self.devices.clone();
@@ -223,6 +239,8 @@ pub enum SimError {
     Topology(TopologyError),
     /// The network transport failed.
     Net(NetError),
+    /// The serving thread could not be made real-time (`--rt`).
+    Rt(oxicat_sim::rt::RtError),
     /// A number of the segment description is out of its range.
     Range {
         /// The key (`device[1].drift_ppm`, or `demo:100000` for a command-line count).
@@ -272,6 +290,7 @@ impl std::fmt::Display for SimError {
             } => write!(f, "node {position} ({device}): {error}"),
             Self::Topology(e) => write!(f, "{e}"),
             Self::Net(e) => write!(f, "{e}"),
+            Self::Rt(e) => write!(f, "--rt: {e}"),
             Self::Range { key, value, range } => {
                 write!(f, "{key} = {value} is not in {range}")
             }
@@ -876,7 +895,7 @@ pub fn serve_until_with(
         #[cfg(unix)]
         {
             let port = oxicat_sim::net::raw::RawPort::open(iface, wait).map_err(SimError::Net)?;
-            run_port(port, segment, &config, stop, args.quiet, n, &summary)
+            run_port(port, segment, &config, args, stop, n, &summary)
         }
         #[cfg(not(unix))]
         {
@@ -886,7 +905,7 @@ pub fn serve_until_with(
     } else {
         let addr = args.udp.as_deref().unwrap_or_default();
         let port = oxicat_sim::net::udp::UdpPort::bind(addr).map_err(SimError::Net)?;
-        run_port(port, segment, &config, stop, args.quiet, n, &summary)
+        run_port(port, segment, &config, args, stop, n, &summary)
     }
 }
 
@@ -929,15 +948,7 @@ pub fn serve_segment_until<P: FramePort>(
         slowdown: args.slowdown,
         ..RealtimeConfig::default()
     };
-    run_port(
-        port,
-        segment,
-        &config,
-        stop,
-        args.quiet,
-        n,
-        &summarize(names),
-    )
+    run_port(port, segment, &config, args, stop, n, &summarize(names))
 }
 
 fn summarize(names: &[String]) -> String {
@@ -959,8 +970,8 @@ fn run_port<P: FramePort>(
     mut port: P,
     segment: Arc<Mutex<Segment>>,
     config: &RealtimeConfig,
+    args: &SimArgs,
     stop: Arc<AtomicBool>,
-    quiet: bool,
     n: usize,
     summary: &str,
 ) -> Result<(), SimError> {
@@ -970,8 +981,18 @@ fn run_port<P: FramePort>(
         if n == 1 { "" } else { "s" },
         port.describe()
     );
-    let status = (!quiet).then(|| status_thread(segment.clone(), stats.clone(), stop.clone()));
-    let r = serve(&segment, &mut port, config, &stats, &stop);
+    // The status thread is started first so that it stays a normal thread: threads
+    // inherit their creator's scheduling policy.
+    let status = (!args.quiet).then(|| status_thread(segment.clone(), stats.clone(), stop.clone()));
+    let r = match args.rt_options().map(|o| oxicat_sim::rt::enter(&o)) {
+        Some(Err(e)) => Err(SimError::Rt(e)),
+        entered => {
+            if let Some(Ok(report)) = entered {
+                eprintln!("oxicat sim: serving thread: {report}");
+            }
+            serve(&segment, &mut port, config, &stats, &stop).map_err(SimError::Net)
+        }
+    };
     stop.store(true, Ordering::Relaxed);
     if let Some(h) = status {
         let _ = h.join();
@@ -983,7 +1004,7 @@ fn run_port<P: FramePort>(
         stats.lost.load(Ordering::Relaxed),
         stats.max_turnaround_ns.load(Ordering::Relaxed) / 1000
     );
-    r.map_err(SimError::Net)
+    r
 }
 
 /// `oxicat sim`: lists devices, or serves until Ctrl-C.

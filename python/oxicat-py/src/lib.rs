@@ -169,6 +169,8 @@ impl Segment {
             spin: false,
             quiet,
             slowdown,
+            rt: None,
+            rt_cpu: None,
         };
         let (seg, names) = py
             .allow_threads(|| {

@@ -52,6 +52,8 @@ fn serve_with(segment: Option<std::path::PathBuf>, devices: &[&str]) -> Served {
         spin: false,
         quiet: true,
         slowdown: 1,
+        rt: None,
+        rt_cpu: None,
     };
     let stop = Arc::new(AtomicBool::new(false));
     let s = stop.clone();
