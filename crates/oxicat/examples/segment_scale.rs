@@ -1,0 +1,299 @@
+//! Segment scale in real time (issue 18 item 1): N slaves served over UDP on the loopback
+//! (`oxicat sim`'s own serving, on a thread of this process) and an `oxicat-master`
+//! (ethercrab) cycling them in free run; one table row per (kind, N).
+//!
+//! ```text
+//! cargo run --release -p oxicat --example segment_scale -- [--kind demo,twin] \
+//!     [--n 16,64,256,1000] [--seconds 10] [--cycle-us 1000] [--rt]
+//! ```
+//!
+//! Columns: late cycles (an exchange that ended after the next cycle was due), the round
+//! trip of each exchange as the master sees it (from its start — the due time, or the end
+//! of a late predecessor — to its end; includes ethercrab's own work), the serving thread's
+//! CPU time per cycle (`/proc/self/task/TID/stat`, 10 ms ticks, so read it over ≥ 10 s),
+//! and the resident memory the segment added per slave. `demo` is the firmware-hosting
+//! demo device; `twin` an EL2008 twin built from Beckhoff's ESI (an ESC with its SII and
+//! SM/FMMU set-up, no firmware), from `../shared/reference/esi-vendor` or
+//! `OXICAT_REFERENCE`. `--rt` serves from a SCHED_FIFO thread (root).
+
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::{Arc, Mutex};
+use std::time::Duration;
+
+use oxicat::sim_cmd::{self, SimArgs};
+use oxicat_master::cyclic::{CycleOptions, Flow};
+use oxicat_master::{Link, Master};
+
+fn fail(msg: &str) -> ! {
+    eprintln!("segment_scale: {msg}");
+    std::process::exit(2)
+}
+
+fn status_kb(path: &str, key: &str) -> u64 {
+    std::fs::read_to_string(path)
+        .ok()
+        .and_then(|s| {
+            s.lines()
+                .find(|l| l.starts_with(key))
+                .and_then(|l| l.split_whitespace().nth(1).map(str::to_string))
+        })
+        .and_then(|v| v.parse().ok())
+        .unwrap_or(0)
+}
+
+/// utime + stime of thread `tid` of this process, in clock ticks (100 per second).
+fn thread_ticks(tid: &str) -> u64 {
+    let stat = std::fs::read_to_string(format!("/proc/self/task/{tid}/stat")).unwrap_or_default();
+    let rest = stat.rsplit_once(')').map(|(_, r)| r).unwrap_or_default();
+    let f: Vec<&str> = rest.split_whitespace().collect();
+    // Fields 14 and 15 (utime, stime), counted from 1 with the state as field 3.
+    let get = |n: usize| {
+        f.get(n - 3)
+            .and_then(|v| v.parse::<u64>().ok())
+            .unwrap_or(0)
+    };
+    get(14) + get(15)
+}
+
+fn pct(v: &mut [u64], q: f64) -> f64 {
+    if v.is_empty() {
+        return f64::NAN;
+    }
+    v.sort_unstable();
+    v[((v.len() - 1) as f64 * q).round() as usize] as f64 / 1000.0
+}
+
+struct Row {
+    kind: String,
+    n: usize,
+    cycles: u64,
+    wkc_errors: u64,
+    late: u64,
+    rtt: Vec<u64>,
+    cpu_us_per_cycle: f64,
+    kb_per_slave: f64,
+    note: String,
+}
+
+fn devices(kind: &str, n: usize) -> Vec<String> {
+    match kind {
+        "demo" => vec![format!("demo:{n}")],
+        "twin" => {
+            let r = std::env::var_os("OXICAT_REFERENCE")
+                .map(std::path::PathBuf::from)
+                .unwrap_or_else(|| {
+                    std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+                        .join("../../../shared/reference")
+                });
+            let esi = r.join("esi-vendor/Beckhoff-EL2xxx.xml");
+            if !esi.exists() {
+                fail(&format!(
+                    "{} not found (set OXICAT_REFERENCE)",
+                    esi.display()
+                ));
+            }
+            vec![format!("esi={}:EL2008*{n}", esi.display())]
+        }
+        k => fail(&format!("--kind {k}: demo or twin")),
+    }
+}
+
+fn run(kind: &str, n: usize, seconds: u64, cycle_us: u64, rt: bool) -> Row {
+    let args = SimArgs {
+        iface: None,
+        udp: Some("127.0.0.1:0".into()),
+        segment: None,
+        eni: None,
+        esi_dir: Vec::new(),
+        devices: devices(kind, n),
+        esi: Vec::new(),
+        list: false,
+        spin: false,
+        quiet: true,
+        slowdown: 1,
+        rt: rt.then_some(oxicat_sim::rt::DEFAULT_PRIORITY),
+        rt_cpu: None,
+    };
+    let rss0 = status_kb("/proc/self/status", "VmRSS:");
+    let desc = sim_cmd::describe(&args).unwrap_or_else(|e| fail(&e.to_string()));
+    sim_cmd::check_segment(&desc).unwrap_or_else(|e| fail(&e.to_string()));
+    let (seg, names) = sim_cmd::build_segment(&desc).unwrap_or_else(|e| fail(&e.to_string()));
+    let kb_per_slave =
+        status_kb("/proc/self/status", "VmRSS:").saturating_sub(rss0) as f64 / n as f64;
+    let port =
+        oxicat_sim::net::udp::UdpPort::bind("127.0.0.1:0").unwrap_or_else(|e| fail(&e.to_string()));
+    let addr = port.local_addr().to_string();
+    let stop = Arc::new(AtomicBool::new(false));
+    let (tid_tx, tid_rx) = std::sync::mpsc::channel();
+    let server = {
+        let stop = stop.clone();
+        std::thread::spawn(move || {
+            let tid = std::fs::read_link("/proc/thread-self")
+                .ok()
+                .and_then(|p| p.file_name().map(|f| f.to_string_lossy().into_owned()))
+                .unwrap_or_default();
+            let _ = tid_tx.send(tid);
+            sim_cmd::serve_segment_until(&args, port, Arc::new(Mutex::new(seg)), &names, stop)
+        })
+    };
+    let tid = tid_rx.recv().unwrap_or_default();
+    let period = cycle_us * 1000;
+    let cycles = seconds * 1_000_000 / cycle_us;
+    let (mut late, mut prev_end) = (0u64, 0u64);
+    let mut rtt = Vec::with_capacity(cycles as usize);
+    let mut ticks0 = 0;
+    let run = std::thread::Builder::new()
+        .stack_size(64 << 20)
+        .spawn(move || {
+            let mut m = Master::open(Link::Udp(addr))?;
+            let _ = m.scan()?;
+            let stats = m.run_cyclic(
+                CycleOptions {
+                    cycle: Duration::from_nanos(period),
+                    dc: false,
+                },
+                |io| {
+                    if io.cycle == 0 {
+                        ticks0 = thread_ticks(&tid);
+                    }
+                    let due = io.cycle * period;
+                    let end = io.time_ns;
+                    rtt.push(end.saturating_sub(due.max(prev_end)));
+                    if end > due + period {
+                        late += 1;
+                    }
+                    prev_end = end;
+                    Ok(if io.cycle + 1 >= cycles {
+                        Flow::Stop
+                    } else {
+                        Flow::Continue
+                    })
+                },
+            );
+            let ticks = thread_ticks(&tid).saturating_sub(ticks0);
+            stats.map(|s| (s, late, rtt, ticks))
+        })
+        .unwrap_or_else(|e| fail(&e.to_string()));
+    let result = run
+        .join()
+        .unwrap_or_else(|_| fail("master thread panicked"));
+    stop.store(true, Ordering::Relaxed);
+    let _ = server.join();
+    match result {
+        Ok((s, late, rtt, ticks)) => Row {
+            kind: kind.into(),
+            n,
+            cycles: s.cycles,
+            wkc_errors: s.wkc_errors,
+            late,
+            rtt,
+            cpu_us_per_cycle: ticks as f64 * 10_000.0 / s.cycles.max(1) as f64,
+            kb_per_slave,
+            note: String::new(),
+        },
+        Err(e) => Row {
+            kind: kind.into(),
+            n,
+            cycles: 0,
+            wkc_errors: 0,
+            late: 0,
+            rtt: Vec::new(),
+            cpu_us_per_cycle: f64::NAN,
+            kb_per_slave,
+            // The first clause says what failed; a list of every slave does not fit a row.
+            note: e.to_string().chars().take(140).collect(),
+        },
+    }
+}
+
+fn main() {
+    let mut kinds = vec!["demo".to_string(), "twin".to_string()];
+    let mut ns = vec![16usize, 64, 256, 1000];
+    let (mut seconds, mut cycle_us, mut rt, mut one) = (10u64, 1000u64, false, false);
+    let mut it = std::env::args().skip(1);
+    while let Some(a) = it.next() {
+        let mut val = || {
+            it.next()
+                .unwrap_or_else(|| fail(&format!("{a} needs a value")))
+        };
+        match a.as_str() {
+            "--kind" => kinds = val().split(',').map(str::to_string).collect(),
+            "--n" => {
+                ns = val()
+                    .split(',')
+                    .map(|v| v.parse().unwrap_or_else(|_| fail(&format!("--n {v}"))))
+                    .collect()
+            }
+            "--seconds" => seconds = val().parse().unwrap_or_else(|_| fail("--seconds")),
+            "--cycle-us" => cycle_us = val().parse().unwrap_or_else(|_| fail("--cycle-us")),
+            "--rt" => rt = true,
+            // One row in this process (each row runs in a process of its own, so that the
+            // memory a segment adds is not hidden by what the previous one freed).
+            "--one" => one = true,
+            _ => fail(&format!("unknown argument {a}")),
+        }
+    }
+    if seconds == 0 || cycle_us == 0 {
+        fail("--seconds and --cycle-us must be above 0");
+    }
+    if one {
+        let (kind, n) = (&kinds[0], ns[0]);
+        let mut r = run(kind, n, seconds, cycle_us, rt);
+        let (p50, p99, max) = (
+            pct(&mut r.rtt, 0.5),
+            pct(&mut r.rtt, 0.99),
+            pct(&mut r.rtt, 1.0),
+        );
+        println!(
+            "| {} | {} | {} | {} | {} | {:.0} / {:.0} / {:.0} | {:.1} | {:.0} |{}",
+            r.kind,
+            r.n,
+            r.cycles,
+            r.wkc_errors,
+            r.late,
+            p50,
+            p99,
+            max,
+            r.cpu_us_per_cycle,
+            r.kb_per_slave,
+            if r.note.is_empty() {
+                String::new()
+            } else {
+                format!(" {}", r.note)
+            }
+        );
+        return;
+    }
+    let exe = std::env::current_exe().unwrap_or_else(|e| fail(&e.to_string()));
+    println!(
+        "| kind | N | cycles | WKC errors | late cycles | RTT p50 / p99 / max [µs] | sim CPU per cycle [µs] | memory per slave [KiB] |"
+    );
+    println!("|---|---|---|---|---|---|---|---|");
+    for kind in &kinds {
+        for &n in &ns {
+            let mut cmd = std::process::Command::new(&exe);
+            cmd.args(["--one", "--kind", kind, "--n", &n.to_string()]);
+            cmd.args([
+                "--seconds",
+                &seconds.to_string(),
+                "--cycle-us",
+                &cycle_us.to_string(),
+            ]);
+            if rt {
+                cmd.arg("--rt");
+            }
+            let out = cmd
+                .stderr(std::process::Stdio::null())
+                .output()
+                .unwrap_or_else(|e| fail(&e.to_string()));
+            let text = String::from_utf8_lossy(&out.stdout);
+            match text.lines().find(|l| l.starts_with("| ")) {
+                Some(row) => println!("{row}"),
+                None => println!(
+                    "| {kind} | {n} | – | – | – | – | – | – | failed: {}",
+                    out.status
+                ),
+            }
+        }
+    }
+}
