@@ -1,21 +1,30 @@
-//! Profiling driver for the lrw_chain benchmark: `lrw_profile <escs> <iterations>` sends
-//! a 64-byte LRW through a chain (for callgrind / perf; prints nothing but a checksum).
+//! Profiling driver for the lrw_chain benchmark: `lrw_profile <escs> <iterations> [checks]`
+//! sends a 64-byte LRW through a chain (for callgrind / perf; prints nothing but a
+//! checksum); with `checks`, the frame also carries that many FPRDs of AL status, one per
+//! slave, as ethercrab's `tx_rx` sends them.
 
 #[path = "../benches/common/lrw.rs"]
 mod lrw;
-use lrw::{lrw_frame, Line};
+use lrw::{lrw_frame, lrw_with_state_checks, Line};
 
 fn main() {
     let mut args = std::env::args().skip(1);
     let n: usize = args.next().and_then(|a| a.parse().ok()).unwrap_or(256);
     let iters: u64 = args.next().and_then(|a| a.parse().ok()).unwrap_or(1000);
+    let checks: Option<usize> = args.next().and_then(|a| a.parse().ok());
     let mut line = Line::new(n.max(1));
     let mut frame = lrw_frame();
     line.check(&mut frame, 1000);
+    if let Some(c) = checks {
+        frame = lrw_with_state_checks(c);
+    }
     let mut t = 1000u64;
     for _ in 0..iters {
         t += 1000;
         std::hint::black_box(line.cycle(std::hint::black_box(&mut frame), t));
+    }
+    if checks.is_some() {
+        frame = lrw_frame();
     }
     line.check(&mut frame, t + 1000);
     println!(

@@ -734,6 +734,54 @@ fn irq_field_ored() {
     assert_eq!(dg(&f, 0).2.irq, 0x08);
 }
 
+/// Datagrams addressed to other stations (a master's per-slave state checks) pass with the
+/// IRQ field ORed and nothing else touched; an FRMW for another station is still written,
+/// and one for this station read.
+#[test]
+fn configured_datagrams_for_other_stations_only_carry_the_irq() {
+    let mut e = esc();
+    let me = e.station_address();
+    fpwr(&mut e, 0x0200, &[0x08, 0]);
+    e.pdi_write(0x0130, &[0x02, 0]).unwrap();
+    let other = me.wrapping_add(1);
+    let mut f = frame(&[
+        (
+            phys(Command::Fprd, other, 0x0130, &[0xAA, 0xBB]),
+            &[0xAA, 0xBB],
+        ),
+        (phys(Command::Fpwr, other, 0x0F80, &[1, 2]), &[1, 2]),
+        (phys(Command::Fprw, other, 0x0F80, &[3, 4]), &[3, 4]),
+        (phys(Command::Fprd, me, 0x0130, &[0, 0]), &[0, 0]),
+    ]);
+    e.forward(0, &mut f, 0, true);
+    for k in 0..3 {
+        let (data, wkc, h) = dg(&f, k);
+        assert_eq!(
+            h.irq, 0x08,
+            "datagram {k}: the ESC's event in the IRQ field"
+        );
+        assert_eq!(wkc, 0, "datagram {k}: not counted");
+        assert_eq!(
+            data,
+            [[0xAA, 0xBB], [1, 2], [3, 4]][k],
+            "datagram {k}: data untouched"
+        );
+    }
+    let (data, wkc, _) = dg(&f, 3);
+    assert_eq!(
+        (data, wkc),
+        (vec![0x02, 0], 1),
+        "its own FPRD reads AL status"
+    );
+    assert_eq!(fprd(&mut e, 0x0F80, 2).0, [0, 0], "no write landed");
+    // FRMW: the addressed station reads, every other one writes.
+    e.pdi_write(0x0F80, &[0x11, 0x22]).unwrap();
+    let mut f = frame(&[(phys(Command::Frmw, other, 0x0F80, &[5, 6]), &[5, 6])]);
+    e.forward(0, &mut f, 0, true);
+    assert_eq!(dg(&f, 0).1, 1, "FRMW for another station writes here");
+    assert_eq!(fprd(&mut e, 0x0F80, 2).0, [5, 6]);
+}
+
 /// The benchmark's configuration (SM2/SM3 3-buffer, two FMMUs mapping a 64-byte LRW's
 /// halves) takes the fused path, and it gives the generic path's results.
 #[test]

@@ -170,3 +170,25 @@ pub fn lrw_frame() -> Vec<u8> {
     buf.truncate(n);
     buf
 }
+
+/// The frame ethercrab's `tx_rx` sends each cycle: the LRW, then one FPRD of AL status
+/// (0x0130, 2 bytes) per slave (`checks` of them, stations 0x1000 + k) — so every ESC of
+/// the line also walks `checks` datagrams addressed to the others.
+pub fn lrw_with_state_checks(checks: usize) -> Vec<u8> {
+    let mut buf = vec![0u8; 14 + 64 + 16 * checks + 64];
+    let mut b = FrameBuilder::new_bare(&mut buf).unwrap();
+    let mut data = [0u8; 64];
+    data[..32].fill(OUT);
+    b.push(
+        DatagramHeader::logical(Command::Lrw, 0, 0x0001_0000, 64),
+        &data,
+    )
+    .unwrap();
+    for k in 0..checks {
+        let h = DatagramHeader::physical(Command::Fprd, 1, 0x1000 + k as u16, 0x0130, 2);
+        b.push(h, &[0, 0]).unwrap();
+    }
+    let n = b.finish();
+    buf.truncate(n);
+    buf
+}

@@ -214,6 +214,16 @@ impl Esc {
             let cmd = dg.command_raw();
             if (CMD_LRD..=CMD_LRW).contains(&cmd) {
                 self.logical_datagram(dg, cmd);
+            } else if (CMD_FPRD..=CMD_FPRW).contains(&cmd) && !self.configured_match(dg.adp()) {
+                // FPRD/FPWR/FPRW for another slave (a master's per-slave state checks: every
+                // ESC of the line sees every one): only the IRQ field passes this ESC, as
+                // `process_datagram` would leave it (FRMW, which all ESCs but the addressed
+                // one write, takes the full path).
+                if self.events_dirty && self.ecat_mask != 0 {
+                    self.refresh_events();
+                }
+                let mut dg = dg;
+                dg.or_irq(self.ecat_irq);
             } else if let Ok((mut d, _)) = DatagramMut::parse(dg.into_inner()) {
                 self.process_datagram(&mut d);
             }

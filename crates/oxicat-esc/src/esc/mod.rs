@@ -93,6 +93,8 @@ const DG_HEADER_LEN: usize = oxicat_wire::datagram::DATAGRAM_HEADER_LEN;
 const CMD_LRD: u8 = Command::Lrd as u8;
 const CMD_LWR: u8 = Command::Lwr as u8;
 const CMD_LRW: u8 = Command::Lrw as u8;
+const CMD_FPRD: u8 = Command::Fprd as u8;
+const CMD_FPRW: u8 = Command::Fprw as u8;
 /// PDI control 0x0140 value of the digital I/O PDI.
 const PDI_DIGITAL_IO: u8 = 0x04;
 
