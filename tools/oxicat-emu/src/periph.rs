@@ -365,7 +365,9 @@ impl Periph {
                 }
                 if !t.trgo_edges_modelled() {
                     return Err(format!(
-                        "ADC1 is triggered by TIM1_TRGO, and TIM1 CR2.MMS = {:#05b} as                          TRGO is not modelled (only OC1REF..OC4REF in PWM mode 1/2)",
+                        "ADC1 is triggered by TIM1_TRGO, and TIM1 CR2.MMS = {:#05b} as \
+                         TRGO is not modelled (only the update event, 010, and OC1REF..OC4REF \
+                         in PWM mode 1/2)",
                         t.mms()
                     ));
                 }
@@ -402,6 +404,21 @@ impl Periph {
         }
         self.adc.last = self.adc.last.max(now);
         self.adc.finish_by(now);
+    }
+
+    /// TIM1's EGR.UG with CR2.MMS = 010: the update event it generates pulses TRGO, which
+    /// starts ADC1's injected sequence when it listens to TIM1_TRGO (RM0390 TIMx_CR2: "the
+    /// update event is selected as trigger output").
+    fn tim1_ug_trgo(&mut self, now: u64) {
+        self.adc_sync(now);
+        if self.adc.trigger() == Ok(adc::Trigger::Tim1TrgoRising) {
+            let cyc = self.cycles_per_adcclk();
+            if let Err(e) = self.adc.start(now, &self.analog, cyc) {
+                self.fault.get_or_insert(e);
+            }
+            self.adc.last = self.adc.last.max(now);
+            self.wake_at = 0;
+        }
     }
 
     /// The interrupt lines the peripherals drive high.
@@ -664,9 +681,14 @@ impl Periph {
                 if let Some(i) = Self::timer_index(a) {
                     let now = self.cycles;
                     let off = (a & 0x3FF) as usize;
-                    self.timer_at(i).write(off, v, now);
+                    let t = self.timer_at(i);
+                    let ug_trgo = off == 0x14 && v & 1 != 0 && t.kind.number == 1 && t.mms() == 2;
+                    t.write(off, v, now);
                     if off == 0x14 {
                         self.route_trgo(); // EGR.CC1G on a compare-pulse master
+                    }
+                    if ug_trgo {
+                        self.tim1_ug_trgo(now);
                     }
                     // Compare registers change no event; anything else may.
                     if !(0x34..0x44).contains(&off) {
