@@ -339,7 +339,8 @@ fn setup_timestamp(t: &pac::TIM5) {
 
 /// TIM1 and TIM8: centre-aligned mode 1 at 80 kHz (ARR = TIMCLK / (2 · 80 kHz) = 1125),
 /// PWM mode 1 on TIM1 CH1..CH4 and TIM8 CH3/CH4, compares unbuffered (OCxPE = 0: the
-/// current loop's new duty acts at once, ≈ 6 µs after the sample as the FPGA's at its
+/// current loop's new duty acts at once, ≈ 7–11 µs after the sample (the 3.2 µs sequence
+/// and the handler) where the FPGA's acts 6.25 µs after it, at its
 /// counter bottom; with preload it would wait for the next update event, 50 µs), all at
 /// 50 % (bridges braked). TIM1: repetition counter 7, one update event per 50 µs, as
 /// TRGO (MMS = 010, update) ADC1's injected trigger. Main outputs enabled. Both

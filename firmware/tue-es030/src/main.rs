@@ -178,7 +178,7 @@ fn ADC() {
     let n = TICKS.load(Ordering::Relaxed);
     with_fw(|f| {
         f.board.ack_conversion();
-        if n % TICKS_PER_SERVICE == 0 {
+        if n.is_multiple_of(TICKS_PER_SERVICE) {
             f.service();
         }
         f.current_loop();
