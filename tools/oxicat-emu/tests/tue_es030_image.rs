@@ -198,6 +198,7 @@ fn sm_sync_op(cycles: u64) {
     // From the first cycle in OP to the last: handler times, the painted stack, ticks.
     let mut before = None;
     let mut r = None;
+    let mut inputs = (tue::NormalIn::default(), tue::NormalIn::default());
     let stats = m
         .run_cyclic(
             CycleOptions {
@@ -205,12 +206,19 @@ fn sm_sync_op(cycles: u64) {
                 dc: false,
             },
             |io| {
+                let inp = tue::NormalIn::decode(&io.inputs[0]);
                 if io.cycle == 0 {
                     node.reset_stats();
                     before = node.report();
                 }
+                // A cycle's inputs are those the board wrote at the previous cycle's SM2
+                // event: the first cycle's are older than OP.
+                if io.cycle == 1 {
+                    inputs.0 = inp;
+                }
                 Ok(if io.cycle + 1 >= cycles {
                     r = node.report();
+                    inputs.1 = inp;
                     oxicat_master::cyclic::Flow::Stop
                 } else {
                     oxicat_master::cyclic::Flow::Continue
@@ -261,6 +269,20 @@ fn sm_sync_op(cycles: u64) {
     assert!(
         ticks.abs_diff(seqs) <= 1,
         "{seqs} sequences, {ticks} ticks: a tick was lost"
+    );
+    // The TxPDO is the firmware's: the 1 kHz tick counter advanced with the cycles, the
+    // line voltage through the ADC (24 V in 10 mV, one count is 2.2 of them).
+    let (first, last) = inputs;
+    let ticks_1k = last.ectime.wrapping_sub(first.ectime);
+    assert!(
+        u64::from(ticks_1k).abs_diff(cycles - 2) <= 1,
+        "ectime advanced by {ticks_1k} in {} cycles",
+        cycles - 2
+    );
+    assert!(
+        last.linevoltage.abs_diff(2400) <= 5,
+        "line voltage {} × 10 mV",
+        last.linevoltage
     );
     // Outputs at zero (the master's defaults: mcom 0, braked): nothing moved.
     let s = motors.lock().unwrap().clone();
