@@ -24,6 +24,18 @@ pub const FREE_RUN: u16 = 0;
 /// SM2-synchronous (0x1C32:01 = 1): what `states` uses for a slave that does not run free.
 pub const SM_SYNC: u16 = 1;
 
+/// The sync mode without DC for a slave whose 0x1C32:04 (sync modes supported, ETG.1020)
+/// reads `supported`: free run where offered (or not told: no 0x1C32:04, or 0), else
+/// SM2-synchronous where offered; `Err(supported)` when neither is (DC only).
+pub(crate) fn plain_mode_for(supported: Option<u16>) -> Result<u16, u16> {
+    match supported {
+        None | Some(0) => Ok(FREE_RUN),
+        Some(s) if s & 0x0001 != 0 => Ok(FREE_RUN),
+        Some(s) if s & 0x0002 != 0 => Ok(SM_SYNC),
+        Some(s) => Err(s),
+    }
+}
+
 impl Master {
     async fn write_sm(
         &self,
@@ -129,12 +141,9 @@ impl Master {
         if read(1).await?.is_none() {
             return Ok(None);
         }
-        match read(4).await? {
-            // Not told (no 0x1C32:04, or 0): free run, as before.
-            None | Some(0) => Ok(Some(FREE_RUN)),
-            Some(s) if s & 0x0001 != 0 => Ok(Some(FREE_RUN)),
-            Some(s) if s & 0x0002 != 0 => Ok(Some(SM_SYNC)),
-            Some(s) => Err(MasterError::SyncUnsupported {
+        match plain_mode_for(read(4).await?) {
+            Ok(mode) => Ok(Some(mode)),
+            Err(s) => Err(MasterError::SyncUnsupported {
                 position,
                 name: self.name_async(position).await.unwrap_or_default(),
                 supported: s,
@@ -271,5 +280,21 @@ impl Master {
         }
         // No cyclic master keeps the SM watchdog fed once the command has ended.
         self.fpwr(position, regs::WD_TIME_PD, &[0, 0]).await
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn without_dc_a_slave_runs_free_where_it_can_else_sm_synchronous() {
+        assert_eq!(plain_mode_for(None), Ok(FREE_RUN), "not told");
+        assert_eq!(plain_mode_for(Some(0)), Ok(FREE_RUN));
+        assert_eq!(plain_mode_for(Some(0x000F)), Ok(FREE_RUN));
+        // The TUeES030: SM-synchronous only (0x1C32:04 = 0x0002).
+        assert_eq!(plain_mode_for(Some(0x0002)), Ok(SM_SYNC));
+        assert_eq!(plain_mode_for(Some(0x000E)), Ok(SM_SYNC));
+        assert_eq!(plain_mode_for(Some(0x000C)), Err(0x000C), "DC only");
     }
 }

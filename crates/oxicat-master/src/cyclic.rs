@@ -17,7 +17,8 @@ use crate::{Master, MasterError, Slot};
 pub struct CycleOptions {
     /// Cycle time.
     pub cycle: Duration,
-    /// DC SYNC0-synchronous (every slave with DC support), otherwise free run.
+    /// DC SYNC0-synchronous (every slave with DC support); otherwise each slave free run,
+    /// or SM-synchronous (0x1C32:01 = 1) where its 0x1C32:04 offers that and not free run.
     pub dc: bool,
 }
 
@@ -290,10 +291,19 @@ impl Master {
         self.check_watchdogs(opts.cycle)?;
         let mut dc = opts.dc;
         if !dc {
-            // Free run: a DC recording left 0x1C32:01 = 2 (DC SYNC0), with which the slave
-            // would wait for SYNC0 pulses that never come and not reach OP.
+            // Without DC: free run, or SM-synchronous (0x1C32:01 = 1) on a slave whose
+            // 0x1C32:04 offers that and not free run (the TUeES030), as `states` does. A DC
+            // recording left 0x1C32:01 = 2 (DC SYNC0), with which the slave would wait for
+            // SYNC0 pulses that never come and not reach OP.
             for p in 0..n {
-                if let Err(e) = futures_lite::future::block_on(self.set_free_run(p)) {
+                let r = futures_lite::future::block_on(async {
+                    match self.plain_sync_mode(p).await? {
+                        Some(mode) => self.set_sync_mode(p, mode).await,
+                        // No CoE or no 0x1C32: SYNC0 generation off all the same.
+                        None => self.set_free_run(p).await,
+                    }
+                });
+                if let Err(e) = r {
                     log::warn!("slave {p}: sync mode not checked ({e})");
                 }
             }

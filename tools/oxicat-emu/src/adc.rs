@@ -5,7 +5,8 @@
 //!   JEXTEN/JEXTSEL, JSWSTART; SMPR1/SMPR2 sampling times; JSQR (JL, JSQ1..4); JOFR1..4.
 //! - An injected sequence starts on JSWSTART or on the rising edge of its external
 //!   trigger — modelled: JEXTSEL = 0001, TIM1_TRGO, with TIM1 in a master mode whose
-//!   edges the timer model computes (CR2.MMS = OC1REF..OC4REF in PWM mode 1/2). A trigger
+//!   edges the timer model computes (CR2.MMS = 010, the update event, with the repetition
+//!   counter; or OC1REF..OC4REF in PWM mode 1/2). A trigger
 //!   while a sequence converts is ignored (RM0390 §13.3.10).
 //! - Every channel of the sequence is sampled at the trigger (the plant holds its
 //!   voltages over its period, see [`crate::plant`]); the sequence lasts Σ (SMPx +

@@ -10,8 +10,8 @@
 //! This crate is GPL-2.0-or-later because Unicorn is GPL-2.0; nothing in the MIT/Apache
 //! workspace depends on it.
 //!
-//! What is modelled (what `firmware/stm32f446-lan9252`, `firmware/laelaps-leg` and
-//! `firmware/cia402-joint` touch):
+//! What is modelled (what `firmware/stm32f446-lan9252`, `firmware/laelaps-leg`,
+//! `firmware/cia402-joint`, `firmware/axis-hub` and `firmware/tue-es030` touch):
 //!
 //! | block | model |
 //! |---|---|
@@ -22,10 +22,10 @@
 //! | bit-band alias | 0x4200_0000.. : a word per peripheral bit, read-modify-write of the register (through its read, as the bus does) |
 //! | GPIOA..H | registers stored (MODER, AFR …); BSRR sets/resets ODR; IDR: PA10 = the chip's IRQ, PB3/PB5 = SYNC0/SYNC1, PB4 = an ET1100's EEPROM_LOADED, then levels injected with [`Board::set_input`], PC13 = button released, ODR for outputs, pull-ups high |
 //! | SPI1 | a byte per DR write clocked through the chip (`Lan9252Model::clock_byte`, `Et1100Model::clock_byte` with the idle time before the byte) while PB6 (CS) is low; TXE always set, RXNE until DR is read; bus time counted at the CR1 baud rate (or a what-if clock, [`Board::set_spi_sclk_hz`]) |
-//! | ADC1 | the injected group ([`adc`]): JSQR/JL, SMPRx, RES, ALIGN, JOFRx; started by JSWSTART or TIM1_TRGO rising edges, every channel sampled at the trigger from [`Board::set_analog`], JEOC after Σ(SMP + resolution) ADCCLK cycles (PCLK2 / ADCPRE), IRQ 18 with JEOCIE; the regular group, other triggers, ADC2/3, and a channel nothing drives are faults |
+//! | ADC1 | the injected group ([`adc`]): JSQR/JL, SMPRx, RES, ALIGN, JOFRx; started by JSWSTART or TIM1_TRGO rising edges (OCxREF or update event), every channel sampled at the trigger from [`Board::set_analog`], JEOC after Σ(SMP + resolution) ADCCLK cycles (PCLK2 / ADCPRE), IRQ 18 with JEOCIE; the regular group, other triggers, ADC2/3, and a channel nothing drives are faults |
 //! | EXTI, SYSCFG | EXTICR1..4 select the port of lines 0..15; RTSR/FTSR edges on IMR lines set PR (write-1-to-clear), SWIER; pins sampled after every engine run, SPI frame and GPIO write; IRQs EXTI0..4, EXTI9_5, EXTI15_10 |
-//! | TIM1..TIM14 | one model (`timers`): PSC/ARR (preloaded)/CNT from the cycle count at the APB timer clock, up/down/center-aligned, RCR (TIM1/8), UDIS/URS/OPM, UG; UIF → update IRQ; CCR/CCMR/CCER stored, PWM duty ([`Board::pwm_duty`]); encoder mode (SMS 1/2/3) from [`Board::set_encoder`]; input capture with CCxIF/CCxOF from [`Board::capture`]; timer links: TRGO in compare-pulse mode (CR2.MMS = 011) on a CH1 capture → the timers whose SMCR.TS selects it (ITR0..3, RM0390's table) capture on TRC (CCxS = 11); TRGO = OC1REF..OC4REF (MMS = 1xx) in PWM mode 1/2 as ADC1's trigger, its rising edges computed from the counter; a complementary output alone (CCxE = 0, CCxNE = 1) as the channel's PWM. No output-compare match flags, no other master/slave modes |
-//! | plant | a [`BoardPlant`] stepped in lockstep with the CPU ([`plant::run_with_plant`], [`node::EmulatedNode::with_plant`]) schedules [`Stimulus`]es (encoder positions, capture edges, input levels, analogue voltages) at their times of the board's clock; [`laelaps`]: the Laelaps II leg on the leg image's pins; [`cia402`]: the CiA402 joint on the joint image's |
+//! | TIM1..TIM14 | one model (`timers`): PSC/ARR (preloaded)/CNT from the cycle count at the APB timer clock, up/down/center-aligned, RCR (TIM1/8), UDIS/URS/OPM, UG; UIF → update IRQ; CCR/CCMR/CCER stored, PWM duty ([`Board::pwm_duty`]); encoder mode (SMS 1/2/3) from [`Board::set_encoder`]; input capture with CCxIF/CCxOF from [`Board::capture`]; timer links: TRGO in compare-pulse mode (CR2.MMS = 011) on a CH1 capture → the timers whose SMCR.TS selects it (ITR0..3, RM0390's table) capture on TRC (CCxS = 11); TRGO = OC1REF..OC4REF (MMS = 1xx) in PWM mode 1/2 or the update event (MMS = 010, with RCR) as ADC1's trigger, its rising edges computed from the counter (UG's pulse included); a complementary output alone (CCxE = 0, CCxNE = 1) as the channel's PWM. No output-compare match flags, no other master/slave modes |
+//! | plant | a [`BoardPlant`] stepped in lockstep with the CPU ([`plant::run_with_plant`], [`node::EmulatedNode::with_plant`]) schedules [`Stimulus`]es (encoder positions, capture edges, input levels, analogue voltages) at their times of the board's clock; [`laelaps`]: the Laelaps II leg on the leg image's pins; [`cia402`]: the CiA402 joint on the joint image's; [`tue_es030`]: the TUeES030's three RE 30 channels on its image's |
 //! | profile | handler time per exception from entry to return, preemption counted apart ([`Board::handler_stats`]); painted stack high-water mark ([`Board::stack_stats`]); flash/RAM from the ELF ([`Board::image_size`]) |
 //! | NVIC, SCB | ISER/ICER/ISPR/ICPR/IABR, IPR (4 bits), STIR; ICSR (VECTACTIVE/VECTPENDING/RETTOBASE, PENDSV/PENDST/NMIPEND set/clear), VTOR, AIRCR (PRIGROUP; SYSRESETREQ stops the image with a fault), SCR.SLEEPONEXIT, CCR, SHPR1..3, SHCSR enables, CPACR, FPCCR; the rest of the page stored |
 //! | exceptions | taken at translated-block boundaries by the board (`cpu`): 8-word frame, or 26 with S0..S15/FPSCR when CONTROL.FPCA (stacked eagerly although FPCCR resets with LSPEN/ASPEN set: same result for both sides), 8-byte alignment, EXC_RETURN, MSP/PSP, tail-chaining, preemption by group priority, PRIMASK/BASEPRI/FAULTMASK, SVC → SVCall, PendSV, SysTick. Inside the engine the core stays in thread mode: `mrs rX, ipsr` reads 0 (ICSR has the number); unprivileged thread mode is refused |
@@ -61,6 +61,7 @@ pub mod plant;
 mod stats;
 mod timers;
 pub mod trot;
+pub mod tue_es030;
 pub mod usart;
 
 pub use chip::{ChipKind, EscChip};

@@ -365,7 +365,9 @@ impl Periph {
                 }
                 if !t.trgo_edges_modelled() {
                     return Err(format!(
-                        "ADC1 is triggered by TIM1_TRGO, and TIM1 CR2.MMS = {:#05b} as                          TRGO is not modelled (only OC1REF..OC4REF in PWM mode 1/2)",
+                        "ADC1 is triggered by TIM1_TRGO, and TIM1 CR2.MMS = {:#05b} as \
+                         TRGO is not modelled (only the update event, 010, and OC1REF..OC4REF \
+                         in PWM mode 1/2)",
                         t.mms()
                     ));
                 }
@@ -402,6 +404,21 @@ impl Periph {
         }
         self.adc.last = self.adc.last.max(now);
         self.adc.finish_by(now);
+    }
+
+    /// TIM1's EGR.UG with CR2.MMS = 010: the update event it generates pulses TRGO, which
+    /// starts ADC1's injected sequence when it listens to TIM1_TRGO (RM0390 TIMx_CR2: "the
+    /// update event is selected as trigger output").
+    fn tim1_ug_trgo(&mut self, now: u64) {
+        self.adc_sync(now);
+        if self.adc.trigger() == Ok(adc::Trigger::Tim1TrgoRising) {
+            let cyc = self.cycles_per_adcclk();
+            if let Err(e) = self.adc.start(now, &self.analog, cyc) {
+                self.fault.get_or_insert(e);
+            }
+            self.adc.last = self.adc.last.max(now);
+            self.wake_at = 0;
+        }
     }
 
     /// The interrupt lines the peripherals drive high.
@@ -664,9 +681,14 @@ impl Periph {
                 if let Some(i) = Self::timer_index(a) {
                     let now = self.cycles;
                     let off = (a & 0x3FF) as usize;
-                    self.timer_at(i).write(off, v, now);
+                    let t = self.timer_at(i);
+                    let ug_trgo = off == 0x14 && v & 1 != 0 && t.kind.number == 1 && t.mms() == 2;
+                    t.write(off, v, now);
                     if off == 0x14 {
                         self.route_trgo(); // EGR.CC1G on a compare-pulse master
+                    }
+                    if ug_trgo {
+                        self.tim1_ug_trgo(now);
                     }
                     // Compare registers change no event; anything else may.
                     if !(0x34..0x44).contains(&off) {
@@ -961,5 +983,65 @@ impl Periph {
         if self.scs.write(addr, v, self.cycles, active) {
             self.wake_at = 0;
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use oxicat_esc::{Esc, EscConfig};
+    use oxicat_pdi::sim::{BusConfig, Lan9252Model};
+
+    const TIM1: u64 = 0x4001_0000;
+
+    fn periph() -> Periph {
+        let chip = Lan9252Model::handle(
+            Esc::new(EscConfig::lan9252(), vec![0; 128]),
+            BusConfig::mhz(22),
+        );
+        Periph::new(chip.into())
+    }
+
+    /// ADC1: one injected channel (IN10, 3 cycles) on TIM1_TRGO rising edges.
+    fn listen(p: &mut Periph) {
+        p.analog[10] = Some(1.0);
+        p.write(adc::ADC1 + 0x38, 10 << 15); // JSQR: JL = 0, JSQ4 = IN10
+        p.write(adc::ADC1 + 0x08, 1 | (1 << 16) | (1 << 20)); // ADON, TIM1_TRGO, rising
+    }
+
+    #[test]
+    fn tim1s_update_event_as_trgo_starts_adc1_at_ug_and_every_rcr_plus_one_half_periods() {
+        let mut p = periph();
+        p.write(TIM1 + 0x2C, 100); // ARR
+        p.write(TIM1 + 0x30, 7); // RCR
+        p.write(TIM1 + 0x04, 2 << 4); // CR2.MMS = update
+        listen(&mut p);
+        assert_eq!(p.adc.sequences, 0);
+        p.write(TIM1 + 0x14, 1); // UG: an update event, a TRGO pulse
+        assert_eq!(p.adc.sequences, 1, "UG's pulse");
+        p.cycles = 1000;
+        p.write(TIM1, 1 | (1 << 5)); // CEN, centre-aligned
+                                     // 8 over/underflows of 100 ticks at the CPU clock: 1800, 2600, 3400.
+        p.cycles = 1799;
+        p.sync_all();
+        assert_eq!(p.adc.sequences, 1);
+        assert_eq!(p.next_event(), Some(1800));
+        p.cycles = 3400;
+        p.sync_all();
+        assert_eq!(p.adc.sequences, 4);
+        assert_eq!(p.fault, None);
+    }
+
+    #[test]
+    fn a_tim1_master_mode_the_model_has_no_edges_for_stops_the_image_naming_it() {
+        let mut p = periph();
+        p.write(TIM1 + 0x2C, 100);
+        p.write(TIM1 + 0x04, 1 << 4); // CR2.MMS = enable
+        p.write(TIM1, 1);
+        listen(&mut p);
+        p.cycles = 500;
+        p.sync_all();
+        let f = p.fault.clone().expect("a fault");
+        assert!(f.contains("MMS = 0b001"), "{f}");
     }
 }

@@ -15,9 +15,11 @@
 //! (an injected edge or EGR.CC1G); a timer whose SMCR.TS selects that master as ITR0..3
 //! sees the pulse on TRGI, and its channels in input-capture mode on TRC (CCxS = 11,
 //! enabled) capture. TRGO = OC1REF..OC4REF (MMS = 100..111) with the channel in PWM mode 1
-//! or 2 is ADC1's injected trigger: its rising edges are computed from the counter
-//! (`Timer::next_trgo_rise`), not pulsed. The other master modes (reset, enable, update)
-//! and the slave modes (reset, gated, trigger) do not produce or act on pulses here.
+//! or 2, or TRGO = the update event (MMS = 010, with the repetition counter of TIM1/TIM8
+//! one per RCR + 1 over/underflows), is ADC1's injected trigger: its rising edges are
+//! computed from the counter (`Timer::next_trgo_rise`), not pulsed; UG's own update pulse
+//! is routed by the bus (`Periph::write`). The other master modes (reset, enable) and the
+//! slave modes (reset, gated, trigger) do not produce or act on pulses here.
 //!
 //! Update events are counted (`Timer::updates`) and their times computed
 //! (`Timer::update_cycle`): with DIER.UDE each one is a DMA request (`crate::dma`).
@@ -569,11 +571,14 @@ impl Timer {
         (self.r(CR2) >> 4) & 7
     }
 
-    /// Whether [`Timer::next_trgo_rise`] models the master mode: MMS = 100..111, TRGO =
-    /// OC1REF..OC4REF, with that channel in PWM mode 1 or 2 on a centre-aligned or
-    /// up-counting timer.
+    /// Whether [`Timer::next_trgo_rise`] models the master mode: MMS = 010, TRGO = the
+    /// update event; or MMS = 100..111, TRGO = OC1REF..OC4REF, with that channel in PWM
+    /// mode 1 or 2 on a centre-aligned or up-counting timer.
     pub fn trgo_edges_modelled(&self) -> bool {
         let mms = self.mms();
+        if mms == 2 {
+            return true;
+        }
         if !(4..=7).contains(&mms) {
             return false;
         }
@@ -595,6 +600,9 @@ impl Timer {
     pub fn next_trgo_rise(&self, after: u64) -> Option<u64> {
         if !self.running() || !self.trgo_edges_modelled() {
             return None;
+        }
+        if self.mms() == 2 {
+            return self.next_update_after(after);
         }
         let ch = (self.mms() - 3) as u8;
         let ccmr = self.r(CCMR1 + 4 * usize::from((ch - 1) / 2));
@@ -635,6 +643,21 @@ impl Timer {
             t += (lo - t + step - 1) / step * step;
         }
         u64::try_from(t).ok()
+    }
+
+    /// The cycle of the first update event after cycle `after` (MMS = 010: TRGO pulses at
+    /// each update event, RM0390 TIMx_CR2). The counter may already have run past `after`:
+    /// the update events since then lie on the same grid as the next ones (one every
+    /// (RCR + 1) over/underflows), back to the cycle it started from undisturbed.
+    fn next_update_after(&self, after: u64) -> Option<u64> {
+        let u1 = self.update_cycle(1)?;
+        let period = self.update_cycle(2)?.checked_sub(u1).filter(|&p| p > 0)?;
+        let lo = after.saturating_add(1).max(self.epoch.saturating_add(1));
+        Some(if u1 >= lo {
+            u1 - (u1 - lo) / period * period
+        } else {
+            u1 + (lo - u1).div_ceil(period) * period
+        })
     }
 
     /// TRGO pulses since the last call (the bus routes them to the linked timers).
@@ -948,8 +971,32 @@ mod tests {
         // CCR beyond ARR: OC4REF never changes; other master modes are not modelled.
         e.write(CCR1 + 12, 200, 500);
         assert_eq!(e.next_trgo_rise(500), None);
-        e.write(CR2, 2 << 4, 500);
-        assert!(!e.trgo_edges_modelled());
+        e.write(CR2, 1 << 4, 500);
+        assert!(!e.trgo_edges_modelled(), "MMS = 001 (enable)");
+    }
+
+    #[test]
+    fn the_update_event_as_trgo_rises_every_rcr_plus_one_half_periods_centre_aligned() {
+        let mut t = Timer::new(TIMERS[0]); // TIM1 at the CPU clock
+        t.write(ARR, 100, 0);
+        t.write(RCR, 7, 0);
+        t.write(CR2, 2 << 4, 0); // MMS: update
+        t.write(EGR, 1, 0);
+        assert!(t.trgo_edges_modelled());
+        assert_eq!(t.next_trgo_rise(0), None, "not counting");
+        t.write(CR1, CEN | (1 << 5), 1000);
+        // Eight over/underflows of 100 ticks: the 8th, an underflow, is the update.
+        assert_eq!(t.next_trgo_rise(1000), Some(1800));
+        assert_eq!(t.next_trgo_rise(1800), Some(2600));
+        assert_eq!(t.read(CNT, 1800), 0, "at the bottom");
+        // The counter ran past two updates: the one after 1000 is still found.
+        t.sync(3000);
+        assert_eq!(t.next_trgo_rise(1000), Some(1800));
+        assert_eq!(t.next_trgo_rise(2599), Some(2600));
+        assert_eq!(t.next_trgo_rise(2600), Some(3400));
+        // UDIS: no update event, no pulse.
+        t.write(CR1, CEN | (1 << 5) | UDIS, 3000);
+        assert_eq!(t.next_trgo_rise(3000), None);
     }
 
     #[test]

@@ -4,8 +4,9 @@
 //! ethercrab master in this process reaches it over the socket, brings both to OP and
 //! exchanges process data with the right working counter every cycle; the CiA402 joint
 //! image is served with its ET1100 and its joint (the board's own chip, not the LAN9252 of
-//! the other boards): the master reads its identity and runs it in DC OP; bad
-//! `--firmware` arguments are refused with the reason.
+//! the other boards): the master reads its identity and runs it in DC OP; the TUeES030
+//! image is served with its three motors and runs SM-synchronous; bad `--firmware`
+//! arguments are refused with the reason.
 
 mod common;
 
@@ -133,6 +134,45 @@ fn a_served_cia402_joint_image_runs_on_its_et1100_in_dc_op_over_udp() {
         )
         .unwrap_or_else(|e| panic!("{e}"));
     assert_eq!((stats.cycles, stats.wkc_errors), (cycles, 0), "{stats:?}");
+}
+
+#[test]
+fn a_served_tue_es030_image_runs_sm_synchronous_over_udp() {
+    let Some(img) = common::image("tue-es030", "OXICAT_TUE_ES030_IMAGE") else {
+        return;
+    };
+    let _one = ONE_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
+    let path = std::env::temp_dir().join(format!("oxicat-emu-tue-{}.elf", std::process::id()));
+    std::fs::write(&path, img).unwrap();
+    let fw = format!("tue-es030={}", path.display());
+    // Its 20 kHz current loop and the motors' 6.25 µs plant step run about 5 times slower
+    // than real time here (debug): 20 times slower is ample.
+    let (_served, addr) = serve(&["--firmware", &fw, "--slowdown", "20", "tue-es030:1"]);
+    let mut m = open_served(&addr);
+    let _ = std::fs::remove_file(&path);
+    let id = oxicat_devices::tue_es030::device::DEF.identity;
+    let product = m.sdo_upload(0, 0x1018, 2).unwrap_or_else(|e| panic!("{e}"));
+    assert_eq!(
+        product,
+        id.product_code.to_le_bytes(),
+        "the board's identity"
+    );
+    let cycles = 100;
+    let stats = m
+        .run_cycles(
+            CycleOptions {
+                cycle: Duration::from_millis(1),
+                dc: false,
+            },
+            cycles,
+        )
+        .unwrap_or_else(|e| panic!("{e}"));
+    assert_eq!((stats.cycles, stats.wkc_errors), (cycles, 0), "{stats:?}");
+    assert_eq!(
+        m.sdo_upload(0, 0x1C32, 1).unwrap_or_else(|e| panic!("{e}")),
+        vec![1, 0],
+        "SM-synchronous"
+    );
 }
 
 #[test]

@@ -8,7 +8,8 @@
 //! per side: `--firmware laelaps-leg=left.elf,right.elf,right.elf,left.elf` for the chain
 //! HL HR FR FL). Devices without `--firmware` keep their host-compiled firmware, so one
 //! segment can mix both. A leg node's image gets its leg on the board's pins, a CiA402
-//! joint's its joint (`oxicat_emu::cia402`).
+//! joint's its joint (`oxicat_emu::cia402`), a TUeES030's its three motors
+//! (`oxicat_emu::tue_es030`).
 //!
 //! The MIT/Apache `oxicat` CLI cannot link this GPL tool, hence a binary of its own over
 //! the CLI's serving functions (`oxicat::sim_cmd::serve_until_with`).
@@ -28,6 +29,7 @@ use oxicat_emu::cia402::JointBoardPlant;
 use oxicat_emu::laelaps::LegBoardPlant;
 use oxicat_emu::node::EmulatedNode;
 use oxicat_emu::plant::BoardPlant;
+use oxicat_emu::tue_es030::{TueBoardPlant, TueConfig};
 use oxicat_emu::ChipKind;
 use oxicat_esc::EscConfig;
 use oxicat_sim::firmware::AttachError;
@@ -125,6 +127,7 @@ fn plant_for(kit: &Kit, k: usize) -> Option<Box<dyn BoardPlant>> {
             Some(Box::new(LegBoardPlant::new(leg, RigConfig::laelaps(leg))))
         }
         "cia402-joint" => Some(Box::new(JointBoardPlant::new(Default::default()))),
+        "tue-es030" => Some(Box::new(TueBoardPlant::new(&TueConfig::default()))),
         _ => None,
     }
 }

@@ -1,0 +1,423 @@
+//! The TUeES030 motor I/O board (`oxicat_devices::tue_es030::TuEs030`, the same firmware
+//! the virtual segment hosts in `tue_es030::rig`) on the oxicat slave stack, on an
+//! STM32F446 with a LAN9252 on SPI1, three H-bridges on TIM1/TIM8, the motor currents and
+//! line voltage on ADC1 and three encoders on TIM2/TIM3/TIM4. This file and `board.rs` are
+//! board glue only. Wiring, pin map, what maps to the manual's ET1200 + Spartan-6:
+//! README.md.
+//!
+//! What runs where (the rig's table, on interrupts):
+//!
+//! | event | handler | priority | runs |
+//! |---|---|---|---|
+//! | ADC1 injected sequence done, 20 kHz (TIM1 update event, RCR = 7) | `ADC` | 0x10 | every 20th tick first `TuEs030::service` (1 kHz: encoders, line voltage), then `TuEs030::current_loop` (currents → three PIs → duties) |
+//! | PDI IRQ falling (PA10) | `EXTI15_10` | 0x20 | `Slave::on_pdi_irq` (SM-synchronous: RxPDO → application → TxPDO) |
+//! | SYNC0 rising (PB3) | `EXTI3` | 0x20 | `Slave::on_sync0` (not used by the board's SM-synchronous mode) |
+//! | SYNC1 rising (PB5) | `EXTI9_5` | 0x20 | `Slave::on_sync1` |
+//! | every 20th current-loop tick (1 ms) | thread | — | `Slave::poll` (ESM, mailbox, watchdog), then WFI |
+//!
+//! Sharing: the stack and the ESC driver are used only at priority 0x20 — the three ESC
+//! handlers, which cannot preempt one another — and by the thread with BASEPRI raised to
+//! 0x20 ([`with_esc_from_thread`]), so their SPI transactions never interleave and never
+//! hold off the current loop. The firmware is shared between the current loop and the
+//! stack's hooks: it lives in a `cortex_m::interrupt::Mutex`, and every hook the stack
+//! calls ([`FwHooks`]) takes it in a short critical section (the firmware's own code, no
+//! SPI).
+#![no_std]
+#![no_main]
+
+mod board;
+
+use core::cell::{RefCell, UnsafeCell};
+use core::mem::MaybeUninit;
+use core::sync::atomic::{compiler_fence, AtomicU32, Ordering};
+
+use board::TueBoard;
+use cortex_m::interrupt::{self as irq, Mutex};
+use cortex_m::peripheral::NVIC;
+use cortex_m::register::{basepri, basepri_max};
+use cortex_m_rt::{entry, exception, ExceptionFrame};
+use embedded_hal_bus::spi::{ExclusiveDevice, NoDelay};
+use oxicat_devices::tue_es030::{device, TuEs030};
+use oxicat_pdi::{Lan9252, Lan9252Config};
+use oxicat_slave::{AlState, AlStatusCode, Application, Od, Slave};
+use stm32f4xx_hal::{
+    gpio::{Edge, ExtiPin, Output, Pin},
+    pac::{self, interrupt, Interrupt},
+    prelude::*,
+    spi::{Mode, Phase, Polarity, Spi},
+};
+
+/// Mailbox buffer size of the stack: the board's mailboxes are 128 bytes.
+const MBX: usize = 128;
+/// Current-loop ticks per service-routine run (20 kHz / 1 kHz).
+const TICKS_PER_SERVICE: u32 = board::CURRENT_LOOP_HZ / 1000;
+/// The main loop polls the stack every 20 current-loop ticks (1 ms).
+const POLL_EVERY_TICKS: u32 = TICKS_PER_SERVICE;
+
+/// NVIC priorities (upper nibble: the F446 implements 4 bits; lower = more urgent).
+const PRIO_CURRENT_LOOP: u8 = 0x10;
+/// SYNC0, SYNC1 and the PDI IRQ share one level so they never preempt one another.
+const PRIO_ESC: u8 = 0x20;
+
+type EscSpi = ExclusiveDevice<Spi<pac::SPI1>, Pin<'B', 6, Output>, NoDelay>;
+type Esc = Lan9252<EscSpi>;
+type TueSlave = Slave<Esc, { device::IMAGE }, MBX>;
+type Firmware = TuEs030<TueBoard>;
+
+/// The stack and its ESC driver.
+struct EscSide {
+    slave: TueSlave,
+    esc: Esc,
+}
+
+/// Storage for [`EscSide`], shared by priority rather than by a lock: see [`EscCell::get`].
+struct EscCell(UnsafeCell<MaybeUninit<EscSide>>);
+
+// SAFETY: access is serialised by interrupt priority (EscCell::get's contract).
+unsafe impl Sync for EscCell {}
+
+impl EscCell {
+    /// The ESC side.
+    ///
+    /// # Safety
+    /// The caller runs at priority [`PRIO_ESC`] (one of the three ESC handlers) or has
+    /// BASEPRI at `PRIO_ESC` or more urgent ([`with_esc_from_thread`]), it does not keep
+    /// the reference beyond that, and [`EscCell::init`] ran before the ESC interrupts were
+    /// unmasked.
+    #[allow(clippy::mut_from_ref)]
+    unsafe fn get(&self) -> &mut EscSide {
+        unsafe { (*self.0.get()).assume_init_mut() }
+    }
+
+    /// Stores the ESC side.
+    ///
+    /// # Safety
+    /// Called once, before the ESC interrupts are unmasked.
+    unsafe fn init(&self, side: EscSide) {
+        unsafe { (*self.0.get()).write(side) };
+    }
+}
+
+static ESC: EscCell = EscCell(UnsafeCell::new(MaybeUninit::uninit()));
+/// The board's firmware, shared by the current loop and the stack's hooks.
+static FW: Mutex<RefCell<Option<Firmware>>> = Mutex::new(RefCell::new(None));
+/// Current-loop ticks since start (service schedule, the main loop's poll schedule).
+static TICKS: AtomicU32 = AtomicU32::new(0);
+
+/// Runs `f` on the firmware in a critical section.
+fn with_fw<R>(f: impl FnOnce(&mut Firmware) -> R) -> R {
+    irq::free(|cs| {
+        let mut fw = FW.borrow(cs).borrow_mut();
+        f(fw.as_mut()
+            .expect("the firmware is set before interrupts are enabled"))
+    })
+}
+
+/// Runs `f` on the stack from the thread, with the ESC handlers masked (BASEPRI) and the
+/// current loop still running.
+fn with_esc_from_thread<R>(f: impl FnOnce(&mut EscSide) -> R) -> R {
+    let old = basepri::read();
+    basepri_max::write(PRIO_ESC);
+    compiler_fence(Ordering::SeqCst);
+    // SAFETY: BASEPRI masks every ESC handler; `main` stored the ESC side first.
+    let r = f(unsafe { ESC.get() });
+    compiler_fence(Ordering::SeqCst);
+    // SAFETY: restores the level this function found.
+    unsafe { basepri::write(old) };
+    r
+}
+
+/// The firmware as the stack sees it: every hook forwards to the shared [`TuEs030`]
+/// inside a critical section, so the SPI work of the stack's handlers runs with the
+/// current loop enabled and only the firmware's own computation excludes it. (`foe` keeps
+/// the default `None`: this image has no FoE, README.)
+struct FwHooks;
+
+impl<const N: usize> Application<N> for FwHooks {
+    fn state_change(
+        &mut self,
+        from: AlState,
+        to: AlState,
+        od: &mut Od<N>,
+    ) -> Result<(), AlStatusCode> {
+        with_fw(|f| f.state_change(from, to, od))
+    }
+
+    fn safe_outputs(&mut self, od: &mut Od<N>) {
+        with_fw(|f| Application::<N>::safe_outputs(f, od))
+    }
+
+    fn cycle(&mut self, od: &mut Od<N>) {
+        with_fw(|f| Application::<N>::cycle(f, od))
+    }
+
+    fn timer(&mut self, id: u8, od: &mut Od<N>) {
+        with_fw(|f| Application::<N>::timer(f, id, od))
+    }
+
+    fn sdo_written(&mut self, index: u16, sub: u8, od: &mut Od<N>) {
+        with_fw(|f| Application::<N>::sdo_written(f, index, sub, od))
+    }
+
+    fn next_emergency(&mut self) -> Option<(u16, u8, [u8; 5])> {
+        with_fw(Application::<N>::next_emergency)
+    }
+}
+
+/// Clears EXTI line `line`'s pending bit.
+fn clear_exti(line: u8) {
+    // SAFETY: PR is write-1-to-clear; only this line's bit is written.
+    unsafe { (*pac::EXTI::ptr()).pr().write(|w| w.bits(1 << line)) };
+}
+
+/// 20 kHz: ADC1's injected sequence (triggered by TIM1's update event) is done. Every
+/// 20th tick the 1 kHz service routine first (as the host rig orders them), then the
+/// current loop: currents → PI → duties.
+#[interrupt]
+fn ADC() {
+    let n = TICKS.load(Ordering::Relaxed);
+    with_fw(|f| {
+        f.board.ack_conversion();
+        if n.is_multiple_of(TICKS_PER_SERVICE) {
+            f.service();
+        }
+        f.current_loop();
+    });
+    TICKS.store(n.wrapping_add(1), Ordering::Relaxed);
+}
+
+/// SYNC0 (the board runs SM-synchronous; a master that configures DC gets the stack's
+/// DC handling).
+#[interrupt]
+fn EXTI3() {
+    clear_exti(3);
+    // SAFETY: ESC handler at PRIO_ESC.
+    let e = unsafe { ESC.get() };
+    let _ = e.slave.on_sync0(&mut e.esc, &mut FwHooks);
+}
+
+/// SYNC1 (PB5, the only line enabled in 5..9).
+#[interrupt]
+fn EXTI9_5() {
+    clear_exti(5);
+    // SAFETY: ESC handler at PRIO_ESC.
+    let e = unsafe { ESC.get() };
+    let _ = e.slave.on_sync1(&mut e.esc, &mut FwHooks);
+}
+
+/// PDI IRQ (PA10, the only line enabled in 10..15): the process data on the SM2 event.
+#[interrupt]
+fn EXTI15_10() {
+    clear_exti(10);
+    // SAFETY: ESC handler at PRIO_ESC.
+    let e = unsafe { ESC.get() };
+    let _ = e.slave.on_pdi_irq(&mut e.esc, &mut FwHooks);
+}
+
+/// Blinks the FRUN LED fast forever: the ESC did not answer at start-up.
+fn fail(led: &mut Pin<'D', 14, Output>, delay: &mut impl embedded_hal::delay::DelayNs) -> ! {
+    board::bridges_emergency_off();
+    loop {
+        led.set_high();
+        delay.delay_ms(100);
+        led.set_low();
+        delay.delay_ms(100);
+    }
+}
+
+/// Starts the slave stack on the LAN9252 and stores it with the driver in [`ESC`]. A
+/// function of its own, not inlined: the `Slave` (several KB) and the moves of it live in
+/// this frame, gone when it returns (built in `main`, which never returns, they would hold
+/// that stack for good under every interrupt: the Laelaps image's finding).
+#[inline(never)]
+fn start_stack(mut esc: Esc) -> Result<(), ()> {
+    let slave = TueSlave::new(&device::DEF, &mut esc).map_err(|_| ())?;
+    // SAFETY: once, before any ESC interrupt is unmasked (main enables them afterwards).
+    unsafe { ESC.init(EscSide { slave, esc }) };
+    Ok(())
+}
+
+/// Builds the firmware into [`FW`], in a frame of its own as [`start_stack`].
+#[inline(never)]
+fn start_firmware(board: TueBoard) {
+    let fw = TuEs030::new(board);
+    irq::free(|cs| *FW.borrow(cs).borrow_mut() = Some(fw));
+}
+
+#[entry]
+fn main() -> ! {
+    let dp = pac::Peripherals::take().unwrap();
+    let cp = cortex_m::Peripherals::take().unwrap();
+    // 8 MHz HSE -> 180 MHz SYSCLK; APB1 45 MHz (its timers 90 MHz), APB2 90 MHz (TIM1 and
+    // TIM8 180 MHz, ADC 90 MHz / 4).
+    let rcc = dp.RCC.constrain();
+    let clocks = rcc
+        .cfgr
+        .use_hse(8.MHz())
+        .sysclk(180.MHz())
+        .pclk1(45.MHz())
+        .pclk2(90.MHz())
+        .freeze();
+    let mut delay = cp.SYST.delay(&clocks);
+    // Keep the debug port alive through WFI (probe-rs attach while running).
+    dp.DBGMCU.cr().modify(|_, w| w.dbg_sleep().set_bit());
+
+    let gpioa = dp.GPIOA.split();
+    let gpiob = dp.GPIOB.split();
+    let gpioc = dp.GPIOC.split();
+    let gpiod = dp.GPIOD.split();
+    let gpioe = dp.GPIOE.split();
+
+    // Driver enables first, low (tristate) before TIM1/TIM8 drive anything.
+    let _en1 = gpioc.pc10.into_push_pull_output_in_state(false.into());
+    let _en2 = gpioc.pc11.into_push_pull_output_in_state(false.into());
+    let _en3 = gpioc.pc12.into_push_pull_output_in_state(false.into());
+    // Bridges: M1 PA8/PA9 (TIM1_CH1/CH2, AF1), M2 PE13/PE14 (TIM1_CH3/CH4, AF1), M3
+    // PC8/PC9 (TIM8_CH3/CH4, AF3).
+    let _m1a = gpioa.pa8.into_alternate::<1>();
+    let _m1b = gpioa.pa9.into_alternate::<1>();
+    let _m2a = gpioe.pe13.into_alternate::<1>();
+    let _m2b = gpioe.pe14.into_alternate::<1>();
+    let _m3a = gpioc.pc8.into_alternate::<3>();
+    let _m3b = gpioc.pc9.into_alternate::<3>();
+    // Encoders: M1 PA0/PA1 (TIM2, AF1), M2 PC6/PC7 (TIM3, AF2), M3 PD12/PD13 (TIM4, AF2).
+    let _e1a = gpioa.pa0.into_alternate::<1>();
+    let _e1b = gpioa.pa1.into_alternate::<1>();
+    let _e2a = gpioc.pc6.into_alternate::<2>();
+    let _e2b = gpioc.pc7.into_alternate::<2>();
+    let _e3a = gpiod.pd12.into_alternate::<2>();
+    let _e3b = gpiod.pd13.into_alternate::<2>();
+    // Analog: PC0..PC2 the three current-sense outputs, PC3 the line-voltage divider.
+    let _i1 = gpioc.pc0.into_analog();
+    let _i2 = gpioc.pc1.into_analog();
+    let _i3 = gpioc.pc2.into_analog();
+    let _line = gpioc.pc3.into_analog();
+    // DRV8412 FAULT#/OTW# (open drain): PB12..PB15 with pull-ups; digital inputs PD0..PD3
+    // (pull-downs), outputs PD4..PD7, FRUN LED PD14.
+    let _flt1 = gpiob.pb12.into_pull_up_input();
+    let _otw1 = gpiob.pb13.into_pull_up_input();
+    let _flt23 = gpiob.pb14.into_pull_up_input();
+    let _otw23 = gpiob.pb15.into_pull_up_input();
+    let _di0 = gpiod.pd0.into_pull_down_input();
+    let _di1 = gpiod.pd1.into_pull_down_input();
+    let _di2 = gpiod.pd2.into_pull_down_input();
+    let _di3 = gpiod.pd3.into_pull_down_input();
+    let _do0 = gpiod.pd4.into_push_pull_output();
+    let _do1 = gpiod.pd5.into_push_pull_output();
+    let _do2 = gpiod.pd6.into_push_pull_output();
+    let _do3 = gpiod.pd7.into_push_pull_output();
+    let mut frun = gpiod.pd14.into_push_pull_output();
+
+    let board = TueBoard::new(
+        dp.TIM1,
+        dp.TIM8,
+        dp.TIM2,
+        dp.TIM3,
+        dp.TIM4,
+        dp.TIM5,
+        dp.ADC1,
+        clocks.timclk2().raw(),
+    );
+
+    // LAN9252 on SPI1: SCK PA5, MISO PA6, MOSI PA7, mode 0, 90 MHz / 4 = 22.5 MHz; CS PB6.
+    let spi = Spi::new(
+        dp.SPI1,
+        (gpioa.pa5, gpioa.pa6, gpioa.pa7),
+        Mode {
+            polarity: Polarity::IdleLow,
+            phase: Phase::CaptureOnFirstTransition,
+        },
+        22500.kHz(),
+        &clocks,
+    );
+    let cs = gpiob.pb6.into_push_pull_output_in_state(true.into());
+    let Ok(spi) = ExclusiveDevice::new_no_delay(spi, cs);
+    // The lines go to EXTI below, not to the driver.
+    let mut esc = Lan9252::new(spi, oxicat_pdi::NoLines, Lan9252Config::default());
+    // The LAN9252 needs ~ 30 ms after power-on before the SPI answers.
+    delay.delay_ms(50);
+    if esc.init().is_err() {
+        fail(&mut frun, &mut delay);
+    }
+    if start_stack(esc).is_err() {
+        fail(&mut frun, &mut delay);
+    }
+    // The firmware brakes the three motors (50/50, drivers enabled) as it starts.
+    start_firmware(board);
+
+    // ESC lines on EXTI: IRQ PA10 falling (open drain, active low: pull-up), SYNC0 PB3 and
+    // SYNC1 PB5 rising (push-pull, active high).
+    let mut syscfg = dp.SYSCFG.constrain();
+    let mut exti = dp.EXTI;
+    let mut irq_pin = gpioa.pa10.into_pull_up_input();
+    let mut sync0 = gpiob.pb3.into_floating_input();
+    let mut sync1 = gpiob.pb5.into_floating_input();
+    irq_pin.make_interrupt_source(&mut syscfg);
+    irq_pin.trigger_on_edge(&mut exti, Edge::Falling);
+    irq_pin.enable_interrupt(&mut exti);
+    sync0.make_interrupt_source(&mut syscfg);
+    sync0.trigger_on_edge(&mut exti, Edge::Rising);
+    sync0.enable_interrupt(&mut exti);
+    sync1.make_interrupt_source(&mut syscfg);
+    sync1.trigger_on_edge(&mut exti, Edge::Rising);
+    sync1.enable_interrupt(&mut exti);
+    for line in [3, 5, 10] {
+        clear_exti(line);
+    }
+
+    // SAFETY: priorities are set before unmasking; the shared state is initialised. The
+    // ADC line may be pending from the sequences since TIM1 started: unpended first.
+    unsafe {
+        let mut nvic = cp.NVIC;
+        nvic.set_priority(Interrupt::ADC, PRIO_CURRENT_LOOP);
+        for i in [Interrupt::EXTI3, Interrupt::EXTI9_5, Interrupt::EXTI15_10] {
+            nvic.set_priority(i, PRIO_ESC);
+        }
+        (*pac::ADC1::ptr()).sr().write(|w| w.bits(!(1 << 2)));
+        NVIC::unpend(Interrupt::ADC);
+        NVIC::unmask(Interrupt::ADC);
+        NVIC::unmask(Interrupt::EXTI3);
+        NVIC::unmask(Interrupt::EXTI9_5);
+        NVIC::unmask(Interrupt::EXTI15_10);
+    }
+
+    let mut last_poll = TICKS.load(Ordering::Relaxed);
+    let mut last_irq_kick = last_poll;
+    loop {
+        let now = TICKS.load(Ordering::Relaxed);
+        if now.wrapping_sub(last_poll) >= POLL_EVERY_TICKS {
+            last_poll = now;
+            with_esc_from_thread(|e| {
+                let _ = e.slave.poll(&mut e.esc, &mut FwHooks);
+            });
+        }
+        // The IRQ line is a level: a cause that arrives while it is still low from another
+        // gives no new falling edge. Re-run the handler while the line stays low, once per
+        // current-loop tick (a cause only `poll` clears would otherwise make this spin).
+        if irq_pin.is_low() && now != last_irq_kick {
+            last_irq_kick = now;
+            NVIC::pend(Interrupt::EXTI15_10);
+        }
+        // Every event is an interrupt (the current loop at least every 50 µs): sleep.
+        cortex_m::asm::wfi();
+    }
+}
+
+/// Panics switch the bridges off, then halt.
+#[panic_handler]
+fn panic(_: &core::panic::PanicInfo) -> ! {
+    cortex_m::interrupt::disable();
+    board::bridges_emergency_off();
+    loop {
+        cortex_m::asm::nop();
+    }
+}
+
+/// So do hard faults.
+#[exception]
+unsafe fn HardFault(_: &ExceptionFrame) -> ! {
+    board::bridges_emergency_off();
+    loop {
+        cortex_m::asm::nop();
+    }
+}
