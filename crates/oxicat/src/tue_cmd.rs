@@ -81,6 +81,26 @@ impl From<BoardRevArg> for BoardRev {
     }
 }
 
+/// `--line`: what feeds the board's 24 V line.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum LineArg {
+    /// A stiff source that also takes braking energy back (a battery): the line stays at
+    /// 24 V.
+    Battery,
+    /// A lab supply that cannot sink: braking energy charges the board's 470 µF bulk
+    /// capacitor (`LineParams::tue_es030`).
+    Lab,
+}
+
+impl LineArg {
+    fn params(self) -> Option<LineParams> {
+        match self {
+            LineArg::Battery => None,
+            LineArg::Lab => Some(LineParams::tue_es030()),
+        }
+    }
+}
+
 /// `--excitation` of `frf`.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
 pub enum Excitation {
@@ -147,6 +167,9 @@ pub struct TueArgs {
     /// How the firmware converts the PI gains (`sense42`: the manual's FRF).
     #[arg(long, value_enum, default_value = "sense42")]
     pub board_rev: BoardRevArg,
+    /// What feeds the line (every experiment but `regen`, which always runs on `lab`).
+    #[arg(long, value_enum, default_value = "battery")]
+    pub line: LineArg,
     /// No progress bar.
     #[arg(long, short)]
     pub quiet: bool,
@@ -429,7 +452,7 @@ fn regen(a: &TueArgs) -> Result<String, CliError> {
 }
 
 fn normal(a: &TueArgs) -> Result<String, CliError> {
-    let link = bench(&TueConfig::default().rev(a.board_rev.into()))?;
+    let link = bench(&TueConfig::default().rev(a.board_rev.into()).line(a.line.params()))?;
     let m = Master::open(link.clone())?;
     let (mut m, _) = tue::set_mode(&link, m, 0, TueMode::Normal)?;
     let back = tue::write_params(&m, 0, &bench_params())?;
@@ -486,11 +509,12 @@ fn normal(a: &TueArgs) -> Result<String, CliError> {
     let _ = writeln!(
         out,
         "{} cycles at 1 kHz; M2 followed 0 -> 10 rev -> 0 with max error {:.3} rad, peak current \
-         {} mA; line voltage {:.2} V.\nWrote {}",
+         {} mA; line voltage {:.2} V (highest {:.2} V).\nWrote {}",
         rows.len(),
         err,
         imax,
         rows.last().map(|r| r.input.linevoltage).unwrap_or(0) as f64 * 0.01,
+        rows.iter().map(|r| r.input.linevoltage).max().unwrap_or(0) as f64 * 0.01,
         csv
     );
     Ok(out)
@@ -556,7 +580,7 @@ struct Curve {
 
 fn frf(a: &TueArgs, file: Option<Vec<i16>>) -> Result<String, CliError> {
     let rev: BoardRev = a.board_rev.into();
-    let cfg = TueConfig::default().rev(rev);
+    let cfg = TueConfig::default().rev(rev).line(a.line.params());
     let ps = if a.p.is_empty() {
         vec![6.0, 10.0]
     } else {
@@ -968,7 +992,10 @@ fn pulses(
 
 fn step(a: &TueArgs) -> Result<String, CliError> {
     let rev: BoardRev = a.board_rev.into();
-    let cfg = TueConfig::default().rev(rev).locked(true);
+    let cfg = TueConfig::default()
+        .rev(rev)
+        .locked(true)
+        .line(a.line.params());
     let ps = if a.p.is_empty() {
         vec![1.0, 2.0, 4.0, 6.0, 10.0]
     } else {
@@ -1027,7 +1054,10 @@ fn step(a: &TueArgs) -> Result<String, CliError> {
 
 fn ff_r(a: &TueArgs) -> Result<String, CliError> {
     let rev: BoardRev = a.board_rev.into();
-    let cfg = TueConfig::default().rev(rev).locked(true);
+    let cfg = TueConfig::default()
+        .rev(rev)
+        .locked(true)
+        .line(a.line.params());
     let p = a.p.first().copied().unwrap_or(0.2);
     let i = a.i.first().copied().unwrap_or(0.0);
     let rs = if a.r.is_empty() {
@@ -1066,7 +1096,7 @@ fn ff_r(a: &TueArgs) -> Result<String, CliError> {
 
 fn ff_emf(a: &TueArgs) -> Result<String, CliError> {
     let rev: BoardRev = a.board_rev.into();
-    let cfg = TueConfig::default().rev(rev);
+    let cfg = TueConfig::default().rev(rev).line(a.line.params());
     let p = a.p.first().copied().unwrap_or(1.0);
     let i = a.i.first().copied().unwrap_or(0.0);
     let kvs = if a.kv.is_empty() {
