@@ -452,7 +452,11 @@ fn regen(a: &TueArgs) -> Result<String, CliError> {
 }
 
 fn normal(a: &TueArgs) -> Result<String, CliError> {
-    let link = bench(&TueConfig::default().rev(a.board_rev.into()).line(a.line.params()))?;
+    let link = bench(
+        &TueConfig::default()
+            .rev(a.board_rev.into())
+            .line(a.line.params()),
+    )?;
     let m = Master::open(link.clone())?;
     let (mut m, _) = tue::set_mode(&link, m, 0, TueMode::Normal)?;
     let back = tue::write_params(&m, 0, &bench_params())?;

@@ -58,12 +58,15 @@ fn internal_voltages_are_four_read_only_10mv_words_and_foe_is_declared() {
     let od = Od::<{ device::IMAGE }>::new(&DEF).expect("definition is consistent");
     assert_eq!(od.get::<u8>(0x8040, 0), Ok(4));
     assert!(DEF.info.foe, "the firmware runs ESC_foeprocess");
-    assert!(DEF.boot_mailbox.is_some(), "firmware.bin is written in BOOT");
+    assert!(
+        DEF.boot_mailbox.is_some(),
+        "firmware.bin is written in BOOT"
+    );
 }
 
 #[test]
 fn a_kill_is_reported_in_mstate_bit_3_once() {
-    use super::app::{MSTATE_KILLED, ADC2_LINE};
+    use super::app::{ADC2_LINE, MSTATE_KILLED};
     use super::{Adcs, Bridges, Encoders, Io, TuEs030};
     use oxicat_slave::{AlState, Application};
 
