@@ -19,6 +19,14 @@
 //!   current's step average; the ADC (12 bit, 0–3.3 V) samples the filter output.
 //! - **Encoder**: 4 × lines counts per revolution, and the time of the last edge (the
 //!   FPGA's 40 MHz capture timestamp).
+//! - **Line** ([`Line`], optional): the board's 24 V line as its bulk capacitance, fed by a
+//!   supply that sources but cannot sink current (a lab supply; the manual §2.1: "no
+//!   overvoltage protection … most power supplies" cannot sink braking energy). The
+//!   bridges' step-average line current ([`Re30Drive::bus_current`]: the power balance
+//!   `u · i = V · I` of the averaged bridge, or the body diodes returning the winding current
+//!   when the driver is off) and the board's own draw charge or drain the capacitor; the
+//!   supply holds the line at its set voltage from below. Without it the line is the
+//!   supply, which then also takes energy back (a battery).
 //!
 //! # Parameters ([`Re30Params::maxon_310007`])
 //!
@@ -109,6 +117,59 @@ pub const DIODE_DROP: f64 = 0.7;
 /// Encoder timestamp clock \[Hz\] (the FPGA's 40 MHz).
 pub const TIMESTAMP_HZ: f64 = 40.0e6;
 
+/// The line's constants.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct LineParams {
+    /// Bulk capacitance on the bridges' supply \[F\].
+    pub capacitance: f64,
+    /// Current the board draws from the line itself (12 V LDO, 5 V DC/DC) \[A\].
+    pub quiescent: f64,
+}
+
+impl LineParams {
+    /// The TUeES030 bench's line (chosen; the manual gives neither): 470 µF of bulk
+    /// capacitance (a usual electrolytic on a 24 V, 6 A motor board) and 0.1 A of own draw
+    /// (the 5 V DC/DC, rated 0.5 A at 5 V, lightly loaded, plus the 12 V LDO).
+    pub const fn tue_es030() -> Self {
+        Self {
+            capacitance: 470e-6,
+            quiescent: 0.1,
+        }
+    }
+}
+
+/// The line voltage over a bulk capacitor fed by a supply that cannot sink current.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Line {
+    /// Constants.
+    pub params: LineParams,
+    /// Capacitor (= line) voltage \[V\].
+    pub voltage: f64,
+    /// Highest line voltage so far \[V\].
+    pub peak: f64,
+}
+
+impl Line {
+    /// A line charged to `supply` \[V\].
+    pub fn new(params: LineParams, supply: f64) -> Self {
+        Self {
+            params,
+            voltage: supply,
+            peak: supply,
+        }
+    }
+
+    /// Advances `h` seconds: the bridges draw `bridges` \[A\] (negative: regenerate), the
+    /// board its own draw; the supply (`supply` \[V\]) sources whatever keeps the line at
+    /// its voltage, and nothing above it.
+    pub fn step(&mut self, h: f64, supply: f64, bridges: f64) {
+        let p = self.params;
+        let c = p.capacitance.max(1e-12);
+        self.voltage = (self.voltage - h * (bridges + p.quiescent) / c).max(supply);
+        self.peak = self.peak.max(self.voltage);
+    }
+}
+
 /// What the firmware drives: the two phase duties and the driver enable.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct BridgeCommand {
@@ -153,6 +214,10 @@ pub struct Re30Drive {
     pub otw: bool,
     /// Virtual time \[s\].
     pub time: f64,
+    /// Current the bridge drew from the line over the last step, step average \[A\]:
+    /// `(duty_a − duty_b) · i` with the driver on, `−|i|` through the body diodes with it
+    /// off; negative = regenerated into the line.
+    pub bus_current: f64,
     count: i64,
     edge_time: f64,
 }
@@ -171,6 +236,7 @@ impl Re30Drive {
             fault: false,
             otw: false,
             time: 0.0,
+            bus_current: 0.0,
             count: 0,
             edge_time: 0.0,
         }
@@ -205,6 +271,11 @@ impl Re30Drive {
             0.5 * (i0 + i1)
         } else {
             iss + (i0 - iss) * (1.0 - a) * p.inductance / (p.resistance * h)
+        };
+        self.bus_current = if floating {
+            -i_avg.abs()
+        } else {
+            (self.bridge.duty_a - self.bridge.duty_b).clamp(-1.0, 1.0) * i_avg
         };
         self.current = i1;
         if self.current.abs() > p.overcurrent {
@@ -296,6 +367,40 @@ mod tests {
         assert!((rpm - 8830.0).abs() < 100.0, "{rpm}");
         assert!((d.current - 0.113).abs() < 0.03, "{}", d.current);
         assert!(d.count() > 0 && d.edge_timestamp() > 0);
+    }
+
+    #[test]
+    fn braking_returns_energy_to_the_line_and_the_supply_does_not_take_it() {
+        // A spinning free rotor braked at -5 A through a bridge at the duty that holds it:
+        // the bridge current is negative (regenerating) and charges the line above the
+        // supply; motor power u·i equals line power V·I each step.
+        let mut d = Re30Drive::new(Re30Params::maxon_310007());
+        d.speed = 400.0;
+        d.current = -5.0;
+        let emf = d.params.torque_constant * d.speed;
+        let u = emf - 5.0 * d.params.resistance;
+        let duty = u / 24.0;
+        d.bridge = BridgeCommand {
+            duty_a: 0.5 + duty / 2.0,
+            duty_b: 0.5 - duty / 2.0,
+            enabled: true,
+        };
+        let mut line = Line::new(LineParams::tue_es030(), 24.0);
+        for _ in 0..100 {
+            d.step(1e-6, line.voltage);
+            line.step(1e-6, 24.0, d.bus_current);
+        }
+        assert!(d.bus_current < -1.0, "{}", d.bus_current);
+        assert!(line.voltage > 24.0 && line.peak == line.voltage);
+        // With the bridge braking at 50/50 nothing reaches the line: the own draw brings it
+        // back to the supply, and the supply holds it there.
+        d.bridge = BridgeCommand::default();
+        for _ in 0..200_000 {
+            d.step(1e-6, line.voltage);
+            line.step(1e-6, 24.0, d.bus_current);
+        }
+        assert_eq!(d.bus_current, 0.0);
+        assert_eq!(line.voltage, 24.0);
     }
 
     #[test]

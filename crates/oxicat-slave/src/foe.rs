@@ -1016,6 +1016,21 @@ pub struct WithFoe<A, F> {
     pub files: F,
 }
 
+/// The application's fields and methods through the wrapper (a bench reaches its board
+/// as `image.app.board` with or without FoE).
+impl<A, F> core::ops::Deref for WithFoe<A, F> {
+    type Target = A;
+    fn deref(&self) -> &A {
+        &self.app
+    }
+}
+
+impl<A, F> core::ops::DerefMut for WithFoe<A, F> {
+    fn deref_mut(&mut self) -> &mut A {
+        &mut self.app
+    }
+}
+
 impl<const N: usize, A: Application<N>, F: FoeFiles> Application<N> for WithFoe<A, F> {
     fn state_change(
         &mut self,

@@ -13,6 +13,9 @@
 //! - `step`, `ff-r`, `ff-emf`: the manual's time-domain experiments (Figs. 6.5–6.8):
 //!   current steps on a locked axis for several P and I, the resistance feed-forward, the
 //!   back-EMF feed-forward under a velocity loop.
+//! - `regen`: hard braking of M2 (400 rad/s at −5 A) on a line whose supply cannot sink:
+//!   the regenerated energy charges the board's bulk capacitor; once with the firmware's
+//!   over-voltage kill, once without; `regen-kill.csv`, `regen-nokill.csv`.
 //!
 //! `--board-rev` chooses how the firmware converts the PI gains (see
 //! [`oxicat_devices::tue_es030::BoardRev`]).
@@ -22,12 +25,14 @@ use std::path::PathBuf;
 use std::sync::{Arc, Mutex};
 
 use indicatif::{ProgressBar, ProgressStyle};
+use oxicat_devices::tue_es030::app::MSTATE_KILLED;
 use oxicat_devices::tue_es030::control::{param2int_rev, MotorParams};
 use oxicat_devices::tue_es030::experiment::{
     self as tue, FrfPoint, FrfRun, Margins, NormalOut, Panel, Series, TueMode, TueParams,
 };
 use oxicat_devices::tue_es030::ident;
-use oxicat_devices::tue_es030::rig::{attach, TueConfig};
+use oxicat_devices::tue_es030::rig::LineParams;
+use oxicat_devices::tue_es030::rig::{attach, TueConfig, TueHandle};
 use oxicat_devices::tue_es030::BoardRev;
 use oxicat_master::{Link, Master, MasterError};
 use oxicat_sim::segment::Segment;
@@ -52,6 +57,9 @@ pub enum TueExperiment {
     /// Back-EMF feed-forward: a velocity loop (P_v = 1) through the current loop
     /// (P = 1, I = 0, R = 0) for several KV (Fig. 6.8).
     FfEmf,
+    /// Hard braking on a supply that cannot sink (manual §2.1): the line rises; with and
+    /// without the firmware's over-voltage kill.
+    Regen,
 }
 
 /// `--board-rev`: how the firmware converts the PI gains.
@@ -69,6 +77,26 @@ impl From<BoardRevArg> for BoardRev {
         match a {
             BoardRevArg::Literal => BoardRev::Literal,
             BoardRevArg::Sense42 => BoardRev::Sense42,
+        }
+    }
+}
+
+/// `--line`: what feeds the board's 24 V line.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum LineArg {
+    /// A stiff source that also takes braking energy back (a battery): the line stays at
+    /// 24 V.
+    Battery,
+    /// A lab supply that cannot sink: braking energy charges the board's 470 µF bulk
+    /// capacitor (`LineParams::tue_es030`).
+    Lab,
+}
+
+impl LineArg {
+    fn params(self) -> Option<LineParams> {
+        match self {
+            LineArg::Battery => None,
+            LineArg::Lab => Some(LineParams::tue_es030()),
         }
     }
 }
@@ -139,6 +167,9 @@ pub struct TueArgs {
     /// How the firmware converts the PI gains (`sense42`: the manual's FRF).
     #[arg(long, value_enum, default_value = "sense42")]
     pub board_rev: BoardRevArg,
+    /// What feeds the line (every experiment but `regen`, which always runs on `lab`).
+    #[arg(long, value_enum, default_value = "battery")]
+    pub line: LineArg,
     /// No progress bar.
     #[arg(long, short)]
     pub quiet: bool,
@@ -149,6 +180,11 @@ pub struct TueArgs {
 }
 
 fn bench(cfg: &TueConfig) -> Result<Link, CliError> {
+    bench_handle(cfg).map(|(link, _)| link)
+}
+
+/// [`bench`] and the board's handle (the plant's side of the experiment).
+fn bench_handle(cfg: &TueConfig) -> Result<(Link, TueHandle), CliError> {
     let mut seg = Segment::new();
     let def = &oxicat_devices::tue_es030::device::DEF;
     let sii = oxicat_esi::sii::generate(def).map_err(|error| CliError::BenchSii {
@@ -156,11 +192,11 @@ fn bench(cfg: &TueConfig) -> Result<Link, CliError> {
         error,
     })?;
     let id = seg.add(oxicat_esc::Esc::new(oxicat_esc::EscConfig::et1200(), sii));
-    attach(&mut seg, id, cfg).map_err(|error| CliError::BenchFirmware {
+    let h = attach(&mut seg, id, cfg).map_err(|error| CliError::BenchFirmware {
         bench: BENCH,
         error,
     })?;
-    Ok(Link::Sim(Arc::new(Mutex::new(seg))))
+    Ok((Link::Sim(Arc::new(Mutex::new(seg))), h))
 }
 
 fn bar(quiet: bool, msg: &str) -> ProgressBar {
@@ -292,11 +328,135 @@ pub fn run(a: TueArgs) -> Result<String, CliError> {
         TueExperiment::Step => step(&a),
         TueExperiment::FfR => ff_r(&a),
         TueExperiment::FfEmf => ff_emf(&a),
+        TueExperiment::Regen => regen(&a),
     }
 }
 
+/// One braking run and what it measured.
+struct RegenRun {
+    rows: Vec<tue::NormalRow>,
+    /// The plant's line peak \[V\] (every 1.5625 µs step).
+    plant_peak: f64,
+    /// 0x8040 after the run \[10 mV\].
+    volts: [u16; 4],
+    /// Current-loop runs with the line above the threshold.
+    kills: u64,
+}
+
+fn regen_run(a: &TueArgs, kill: bool, plan: tue::Braking) -> Result<RegenRun, CliError> {
+    let cfg = TueConfig::default()
+        .rev(a.board_rev.into())
+        .line(Some(LineParams::tue_es030()))
+        .kill(kill);
+    let (link, h) = bench_handle(&cfg)?;
+    let mut m = Master::open(link)?;
+    tue::write_params(&m, 0, &bench_params())?;
+    let b = bar(
+        a.quiet,
+        if kill {
+            "regen (kill)"
+        } else {
+            "regen (no kill)"
+        },
+    );
+    b.set_length(plan.cycles);
+    let mut control = plan.control();
+    let rows = tue::run_normal(&mut m, 0, plan.cycles, |k, inp| {
+        b.set_position(k);
+        control(k, inp)
+    })?;
+    b.finish_and_clear();
+    let volts = tue::internal_voltages(&m, 0)?;
+    let g = h.lock();
+    Ok(RegenRun {
+        rows,
+        plant_peak: g
+            .app
+            .board
+            .line
+            .map(|l| l.peak)
+            .unwrap_or(g.app.board.supply),
+        volts,
+        kills: g.app.counters.kills,
+    })
+}
+
+fn regen(a: &TueArgs) -> Result<String, CliError> {
+    let plan = tue::Braking::default();
+    let line = LineParams::tue_es030();
+    let mut out = String::new();
+    let re30 = TueConfig::default().motors[1];
+    let _ = writeln!(
+        out,
+        "Line: {:.0} uF bulk capacitor, {:.2} A own draw, 24 V supply that cannot sink; M2 \
+         spun to {} rad/s, braked at {} mA from cycle {}.",
+        line.capacitance * 1e6,
+        line.quiescent,
+        plan.speed,
+        plan.brake_ma,
+        plan.brake_at
+    );
+    let mut files = Vec::new();
+    for kill in [true, false] {
+        let r = regen_run(a, kill, plan)?;
+        let name = if kill { "regen-kill" } else { "regen-nokill" };
+        files.extend(crate::output::write_recording(
+            &a.out,
+            name,
+            &tue::regen_csv(&r.rows),
+            a.format,
+        )?);
+        let w0 = r
+            .rows
+            .get(plan.brake_at as usize)
+            .map(|x| x.input.velocity[1] as f64 * 0.1)
+            .unwrap_or(0.0);
+        let pdo_peak = r
+            .rows
+            .iter()
+            .map(|x| x.input.linevoltage)
+            .max()
+            .unwrap_or(0) as f64
+            * 0.01;
+        let killed: Vec<u64> = r
+            .rows
+            .iter()
+            .filter(|x| x.input.mstate[1] & MSTATE_KILLED != 0)
+            .map(|x| x.cycle)
+            .collect();
+        let _ = writeln!(
+            out,
+            "{}: speed at the brake {w0:.1} rad/s (rotor energy {:.3} J); line peak {:.3} V \
+             (plant), {:.2} V (0x8040:03, 20 kHz), {:.2} V (PDO, 1 kHz); kill threshold \
+             {:.2} V; {} current loops killed, mstate kill bit in {} cycles{}",
+            if kill {
+                "with the kill"
+            } else {
+                "without the kill"
+            },
+            0.5 * re30.inertia * w0 * w0,
+            r.plant_peak,
+            r.volts[2] as f64 * 0.01,
+            pdo_peak,
+            r.volts[3] as f64 * 0.01,
+            r.kills,
+            killed.len(),
+            match (killed.first(), killed.last()) {
+                (Some(f), Some(l)) => format!(" ({f}..{l})"),
+                _ => String::new(),
+            }
+        );
+    }
+    let _ = writeln!(out, "Wrote {}", file_list(&files));
+    Ok(out)
+}
+
 fn normal(a: &TueArgs) -> Result<String, CliError> {
-    let link = bench(&TueConfig::default().rev(a.board_rev.into()))?;
+    let link = bench(
+        &TueConfig::default()
+            .rev(a.board_rev.into())
+            .line(a.line.params()),
+    )?;
     let m = Master::open(link.clone())?;
     let (mut m, _) = tue::set_mode(&link, m, 0, TueMode::Normal)?;
     let back = tue::write_params(&m, 0, &bench_params())?;
@@ -353,11 +513,12 @@ fn normal(a: &TueArgs) -> Result<String, CliError> {
     let _ = writeln!(
         out,
         "{} cycles at 1 kHz; M2 followed 0 -> 10 rev -> 0 with max error {:.3} rad, peak current \
-         {} mA; line voltage {:.2} V.\nWrote {}",
+         {} mA; line voltage {:.2} V (highest {:.2} V).\nWrote {}",
         rows.len(),
         err,
         imax,
         rows.last().map(|r| r.input.linevoltage).unwrap_or(0) as f64 * 0.01,
+        rows.iter().map(|r| r.input.linevoltage).max().unwrap_or(0) as f64 * 0.01,
         csv
     );
     Ok(out)
@@ -423,7 +584,7 @@ struct Curve {
 
 fn frf(a: &TueArgs, file: Option<Vec<i16>>) -> Result<String, CliError> {
     let rev: BoardRev = a.board_rev.into();
-    let cfg = TueConfig::default().rev(rev);
+    let cfg = TueConfig::default().rev(rev).line(a.line.params());
     let ps = if a.p.is_empty() {
         vec![6.0, 10.0]
     } else {
@@ -835,7 +996,10 @@ fn pulses(
 
 fn step(a: &TueArgs) -> Result<String, CliError> {
     let rev: BoardRev = a.board_rev.into();
-    let cfg = TueConfig::default().rev(rev).locked(true);
+    let cfg = TueConfig::default()
+        .rev(rev)
+        .locked(true)
+        .line(a.line.params());
     let ps = if a.p.is_empty() {
         vec![1.0, 2.0, 4.0, 6.0, 10.0]
     } else {
@@ -894,7 +1058,10 @@ fn step(a: &TueArgs) -> Result<String, CliError> {
 
 fn ff_r(a: &TueArgs) -> Result<String, CliError> {
     let rev: BoardRev = a.board_rev.into();
-    let cfg = TueConfig::default().rev(rev).locked(true);
+    let cfg = TueConfig::default()
+        .rev(rev)
+        .locked(true)
+        .line(a.line.params());
     let p = a.p.first().copied().unwrap_or(0.2);
     let i = a.i.first().copied().unwrap_or(0.0);
     let rs = if a.r.is_empty() {
@@ -933,7 +1100,7 @@ fn ff_r(a: &TueArgs) -> Result<String, CliError> {
 
 fn ff_emf(a: &TueArgs) -> Result<String, CliError> {
     let rev: BoardRev = a.board_rev.into();
-    let cfg = TueConfig::default().rev(rev);
+    let cfg = TueConfig::default().rev(rev).line(a.line.params());
     let p = a.p.first().copied().unwrap_or(1.0);
     let i = a.i.first().copied().unwrap_or(0.0);
     let kvs = if a.kv.is_empty() {

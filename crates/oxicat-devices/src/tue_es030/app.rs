@@ -6,8 +6,8 @@ use oxicat_slave::{AlState, AlStatusCode, Application, Od, Var};
 
 use super::control::q8mul;
 use super::control::{
-    param2int_rev, phases, u2pwm, BoardRev, Motor, MotorParams, KILLVOLTAGE, R2IGAINCH1_Q8,
-    R2IGAIN_Q8, R2U_FP,
+    line_10mv, param2int_rev, phases, u2pwm, vref5_10mv, BoardRev, Motor, MotorParams, KILLVOLTAGE,
+    R2IGAINCH1_Q8, R2IGAIN_Q8, R2U_FP,
 };
 use super::device::{FRF_PER_CYCLE, OBJECTS};
 use super::ring::Ring;
@@ -35,6 +35,9 @@ pub const MSTATE_ENABLED: u8 = 0x01;
 pub const MSTATE_FAULT: u8 = 0x02;
 /// `mstate` bit 2: driver over-temperature warning.
 pub const MSTATE_OTW: u8 = 0x04;
+/// `mstate` bit 3 (oxicat; the manual's firmware reports nothing): the over-voltage kill
+/// disabled the motors at least once since the previous TxPDO.
+pub const MSTATE_KILLED: u8 = 0x08;
 /// Digital input bit of `M1_FAULT` (derived from the firmware's shifts).
 pub const DI_M1_FAULT: u8 = 0x10;
 /// Digital input bit of `M1_OTW`.
@@ -49,6 +52,8 @@ pub const DO_FRUN: u8 = 0x10;
 
 /// ADC2 channel of the line voltage.
 pub const ADC2_LINE: usize = 2;
+/// ADC2 channel of the 5 V reference (chosen; the manual says ADC2 checks it).
+pub const ADC2_VREF5: usize = 1;
 /// ADC2 channels of the motor currents 1..3.
 pub const ADC2_CURRENT: [usize; 3] = [3, 4, 5];
 /// ADC1 channels: hall positions 1..3 (0–2), forces 1..3 (3–5), analog 1..2 (6–7); the
@@ -134,6 +139,19 @@ struct FrfIo {
     cur: [Var<i16>; FRF_PER_CYCLE],
 }
 
+/// The handles of 0x8040 "Internal voltages" (line, 5 V reference, line peak, kill
+/// threshold).
+#[derive(Debug, Clone, Copy)]
+struct VoltIo {
+    volts: [Var<u16>; 4],
+}
+
+impl VoltIo {
+    const VARS: Self = Self {
+        volts: Var::subs(OBJECTS, 0x8040, 1),
+    };
+}
+
 impl NormalIo {
     /// The normal-mode handles, from the declaration ([`OBJECTS`]): offsets and types
     /// checked when the crate builds.
@@ -206,14 +224,21 @@ pub struct TuEs030<B: Board> {
     pub counters: Counters,
     /// The current scaling the PI gains are converted with ([`BoardRev`]).
     pub board_rev: BoardRev,
+    /// Over-voltage kill threshold on the raw ADC2_CH2 counts (`KILLVOLTAGE`; a bench
+    /// sets `u16::MAX` to run the firmware without the kill).
+    pub kill_counts: u16,
+    /// Highest ADC2_CH2 count the current loop saw since reset (0x8040:03).
+    pub line_peak_counts: u16,
     u2pwm: i32,
     killed: bool,
+    kill_seen: bool,
     output: bool,
     input: bool,
     dostate: u8,
     ledcnt: u16,
     normal: Option<NormalIo>,
     frf: Option<FrfIo>,
+    volts: Option<VoltIo>,
 }
 
 impl<B: Board> TuEs030<B> {
@@ -242,14 +267,18 @@ impl<B: Board> TuEs030<B> {
             icnt: 0,
             counters: Counters::default(),
             board_rev: rev,
+            kill_counts: KILLVOLTAGE,
+            line_peak_counts: 0,
             u2pwm: u2pwm(2400),
             killed: false,
+            kill_seen: false,
             output: false,
             input: false,
             dostate: 0,
             ledcnt: 0,
             normal: None,
             frf: None,
+            volts: None,
         };
         s.clear_pwm();
         s
@@ -283,6 +312,7 @@ impl<B: Board> TuEs030<B> {
         if self.normal.is_none() && od.built_on(OBJECTS) {
             self.normal = Some(NormalIo::VARS);
             self.frf = Some(FrfIo::VARS);
+            self.volts = Some(VoltIo::VARS);
         }
     }
 
@@ -310,6 +340,30 @@ impl<B: Board> TuEs030<B> {
     fn mstate_bits(di: u8, fault: u8, otw: u8) -> u8 {
         (if di & fault != 0 { MSTATE_FAULT } else { 0 })
             | if di & otw != 0 { MSTATE_OTW } else { 0 }
+    }
+
+    /// [`MSTATE_KILLED`] if the kill acted since the last TxPDO (and forgets it).
+    fn take_kill(&mut self) -> u8 {
+        if core::mem::take(&mut self.kill_seen) {
+            MSTATE_KILLED
+        } else {
+            0
+        }
+    }
+
+    /// 0x8040 "Internal voltages" from the last readings.
+    fn store_voltages<const N: usize>(&mut self, od: &mut Od<N>) {
+        let Some(io) = self.volts else { return };
+        let vref = vref5_10mv(self.board.adc2(ADC2_VREF5));
+        let v = [
+            self.linevoltage.max(0) as u16,
+            vref,
+            line_10mv(self.line_peak_counts),
+            line_10mv(self.kill_counts),
+        ];
+        for (var, x) in io.volts.iter().zip(v) {
+            od.store(*var, x);
+        }
     }
 
     /// `handle_RXPDO` (normal mode: `update_actuators`).
@@ -357,10 +411,11 @@ impl<B: Board> TuEs030<B> {
     /// `handle_TXPDO` (normal mode).
     fn handle_tx_normal<const N: usize>(&mut self, od: &mut Od<N>, io: &NormalIo) {
         let di = self.board.digin();
+        let kill = self.take_kill();
         let drv = [
-            Self::mstate_bits(di, DI_M1_FAULT, DI_M1_OTW),
-            Self::mstate_bits(di, DI_M23_FAULT, DI_M23_OTW),
-            Self::mstate_bits(di, DI_M23_FAULT, DI_M23_OTW),
+            Self::mstate_bits(di, DI_M1_FAULT, DI_M1_OTW) | kill,
+            Self::mstate_bits(di, DI_M23_FAULT, DI_M23_OTW) | kill,
+            Self::mstate_bits(di, DI_M23_FAULT, DI_M23_OTW) | kill,
         ];
         for (k, (m, d)) in self.motors.iter().zip(drv).enumerate() {
             od.store(io.mstate[k], m.enabled as u8 | d);
@@ -402,10 +457,12 @@ impl<B: Board> TuEs030<B> {
         od.store(io.entries_out, n as u8);
         let di = self.board.digin();
         let en = self.motors.iter().any(|m| m.enabled) as u8;
+        let kill = self.take_kill();
         od.store(
             io.mstate,
             en | Self::mstate_bits(di, DI_M1_FAULT, DI_M1_OTW)
-                | Self::mstate_bits(di, DI_M23_FAULT, DI_M23_OTW),
+                | Self::mstate_bits(di, DI_M23_FAULT, DI_M23_OTW)
+                | kill,
         );
         od.store(io.buffer, self.rx.len().min(255) as u8);
         od.store(io.ectime, self.icnt);
@@ -434,8 +491,11 @@ impl<B: Board> TuEs030<B> {
         for m in &mut self.motors {
             m.current_pi(u2pwm);
         }
-        self.killed = self.board.adc2(ADC2_LINE) > KILLVOLTAGE;
+        let line = self.board.adc2(ADC2_LINE);
+        self.line_peak_counts = self.line_peak_counts.max(line);
+        self.killed = line > self.kill_counts;
         if self.killed {
+            self.kill_seen = true;
             self.counters.kills += 1;
             for m in &mut self.motors {
                 m.enabled = false;
@@ -547,10 +607,14 @@ impl<const N: usize, B: Board> Application<N> for TuEs030<B> {
         }
     }
 
-    fn timer(&mut self, id: u8, _od: &mut Od<N>) {
+    fn timer(&mut self, id: u8, od: &mut Od<N>) {
         match id {
             CURRENT_TIMER => self.current_loop(),
-            SERVICE_TIMER => self.service(),
+            SERVICE_TIMER => {
+                self.service();
+                self.resolve(od);
+                self.store_voltages(od);
+            }
             _ => {}
         }
     }

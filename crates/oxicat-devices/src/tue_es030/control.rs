@@ -40,6 +40,20 @@ pub const R2U_FP: i16 = 227;
 /// Over-voltage kill threshold on the raw ADC2_CH2 counts (`KILLVOLTAGE`): 30 V
 /// (chosen: above the 24 V supply, below the DRV8412's 52 V and the 36.3 V ADC range).
 pub const KILLVOLTAGE: u16 = (30.0 / (ADC_VREF * LINE_DIVIDER) * ADC_COUNTS) as u16;
+/// 5 V reference divider onto its ADC2 channel: 1/2 (chosen: 2.5 V, inside the 3.3 V
+/// range; the manual names the check, not the channel or the divider).
+pub const VREF5_DIVIDER: f32 = 2.0;
+
+/// ADC2 counts of the 5 V reference → 10 mV: `raw · 3.3 · 2 / 4096 / 0.01 = raw · 165/1024`.
+pub fn vref5_10mv(raw: u16) -> u16 {
+    (raw as u32 * 165 / 1024) as u16
+}
+
+/// ADC2_CH2 counts → line voltage in 10 mV (`q8mul(ADC2_CH2, R2U_FP)`), 0 and up.
+pub fn line_10mv(raw: u16) -> u16 {
+    q8mul(raw as i32, R2U_FP as i32).max(0) as u16
+}
+
 /// LT1999 gain (manual §2.10).
 pub const LT1999_GAIN: f32 = 20.0;
 /// Sense resistor of M2/M3 after the board change (manual §2.10: 10 mΩ) \[Ω\].

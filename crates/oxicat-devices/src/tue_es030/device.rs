@@ -15,7 +15,17 @@
 //! resistance \[Ω\] (REAL32, 0.61), KV \[V s/rad\] (REAL32, 0.03), CC p gain \[V/A\]
 //! (REAL32, 2.0), CC i gain \[V/As\] (REAL32, 2.0), CC i limit \[As\] (REAL32, 0.2),
 //! encoder direction (INT8, 1), encoder resolution (UINT16, 1024), current zero (INT16,
-//! 2168). 0x8040 "Internal voltages" has undocumented content and is left out.
+//! 2168).
+//!
+//! 0x8040 "Internal voltages" (Fig. 7.4 lists it with 4 entries, the manual does not
+//! describe them): oxicat fills it with the four voltages the firmware knows, UINT16 in
+//! 10 mV as `linevoltage`: 1 line voltage (ADC2_CH2, 1 kHz), 2 the 5 V reference (the
+//! ADC2 check of §2.5), 3 the line's peak since reset (20 kHz samples of the kill test),
+//! 4 the kill threshold (`KILLVOLTAGE`). Read-only.
+//!
+//! FoE: the firmware runs `foe_init()`/`ESC_foeprocess()` (Listing 4.1); the board takes
+//! `firmware.bin` in BOOT (bootstrap mailbox = the standard one) through oxicat's
+//! firmware update flow (`oxicat_slave::foe`).
 
 use oxicat_slave::device::{DeviceInfo, Group};
 use oxicat_slave::{
@@ -164,6 +174,14 @@ const fn params() -> [E; 9] {
 }
 static PARAMS: [E; 9] = params();
 
+static VOLTAGES: [E; 5] = [
+    SUB0.default_bits(4),
+    E::new(1, "Line voltage", T::Unsigned16, A::RO).with_scale(&CENTI_V),
+    E::new(2, "5V reference", T::Unsigned16, A::RO).with_scale(&CENTI_V),
+    E::new(3, "Line peak", T::Unsigned16, A::RO).with_scale(&CENTI_V),
+    E::new(4, "Kill threshold", T::Unsigned16, A::RO).with_scale(&CENTI_V),
+];
+
 const fn rec(index: u16, name: &'static str, entries: &'static [E]) -> ObjectDef {
     ObjectDef {
         index,
@@ -173,7 +191,8 @@ const fn rec(index: u16, name: &'static str, entries: &'static [E]) -> ObjectDef
     }
 }
 
-/// Application objects: inputs 0x60xx, outputs 0x70xx, parameters 0x800x.
+/// Application objects: inputs 0x60xx, outputs 0x70xx, parameters 0x800x, internal
+/// voltages 0x8040.
 pub static OBJECTS: &[ObjectDef] = &[
     rec(0x6000, "TXPDO motor 1", &MOTOR_TX),
     rec(0x6001, "TXPDO motor 2", &MOTOR_TX),
@@ -189,6 +208,7 @@ pub static OBJECTS: &[ObjectDef] = &[
     rec(0x8000, "Motor 1 parameters", &PARAMS),
     rec(0x8001, "Motor 2 parameters", &PARAMS),
     rec(0x8002, "Motor 3 parameters", &PARAMS),
+    rec(0x8040, "Internal voltages", &VOLTAGES),
 ];
 
 /// Object image size of [`OBJECTS`].
@@ -322,6 +342,8 @@ pub const INFO: DeviceInfo = DeviceInfo {
     mailbox_size_range: Some((34, 128)),
     dc_modes: &[],
     ebus_current_ma: 0,
+    // FoE: `firmware.bin` in BOOT, `version.txt` (see `oxicat_slave::foe`).
+    foe: true,
     ..DeviceInfo::DEFAULT
 };
 
@@ -339,7 +361,7 @@ pub static DEF: DeviceDef = DeviceDef {
     hw_version: "TUeES030 (Spartan-6 soft core, ET1200)",
     sw_version: env!("CARGO_PKG_VERSION"),
     mailbox: MailboxDef::STANDARD,
-    boot_mailbox: None,
+    boot_mailbox: Some(MailboxDef::STANDARD),
     sm2_start: 0x1100,
     sm3_start: 0x1180,
     objects: OBJECTS,

@@ -1160,3 +1160,127 @@ pub fn plot_plant(
         title,
     )
 }
+
+/// Hard braking of M2 (the manual's §2.1 warning: "back EMF caused by braking can damage
+/// the electronics"): from cycle 20 a velocity PI loop in the master (current setpoint
+/// −1…3 A) spins M2 up to `speed`; at `brake_at` the setpoint jumps to `brake_ma` and
+/// stays there until the measured speed is below `stop_speed`, then 0.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Braking {
+    /// Speed before braking \[rad/s\].
+    pub speed: f64,
+    /// Braking current setpoint \[mA\] (negative: against the rotation).
+    pub brake_ma: i16,
+    /// Cycle of the brake command.
+    pub brake_at: u64,
+    /// Speed below which the brake is released \[rad/s\].
+    pub stop_speed: f64,
+    /// Cycles in all.
+    pub cycles: u64,
+}
+
+impl Default for Braking {
+    /// 400 rad/s, −5 A at cycle 300, released below 80 rad/s (the measured speed is a
+    /// cycle or two late: lower would reverse the rotor), 500 cycles.
+    fn default() -> Self {
+        Self {
+            speed: 400.0,
+            brake_ma: -5000,
+            brake_at: 300,
+            stop_speed: 80.0,
+            cycles: 500,
+        }
+    }
+}
+
+impl Braking {
+    /// The master's control law of this experiment, for [`run_normal`].
+    pub fn control(self) -> impl FnMut(u64, &NormalIn) -> NormalOut {
+        // PI on the velocity: 0.02 A per rad/s (crossover ≈ 150 rad/s with the RE 30's
+        // inertia, well inside the 1 kHz loop), integral 25 rad/s.
+        let (kp, ki) = (0.02, 0.5);
+        let mut integral = 0.0f64;
+        let mut released = false;
+        move |k, inp| {
+            let mut o = NormalOut::default();
+            if k < 20 {
+                return o;
+            }
+            let w = inp.velocity[1] as f64 * 0.1;
+            o.mcom[1] = MCOM_CONTROLLED;
+            let i = if k < self.brake_at {
+                let e = self.speed - w;
+                integral = (integral + e * 1e-3).clamp(-2.0, 2.0);
+                (kp * e + ki * integral).clamp(-1.0, 3.0)
+            } else {
+                released |= w < self.stop_speed;
+                if released {
+                    0.0
+                } else {
+                    self.brake_ma as f64 * 1e-3
+                }
+            };
+            o.setpoint[1] = (i * 1000.0).round() as i16;
+            o
+        }
+    }
+}
+
+/// Normal-mode `mcom`: controlled.
+const MCOM_CONTROLLED: u8 = super::MCOM_ENABLE;
+
+/// Reads 0x8040 "Internal voltages" (line, 5 V reference, line peak since reset, kill
+/// threshold), in 10 mV.
+pub fn internal_voltages(m: &Master, position: usize) -> Result<[u16; 4], MasterError> {
+    let mut v = [0u16; 4];
+    for (k, x) in v.iter_mut().enumerate() {
+        let b = m.sdo_upload(position, 0x8040, k as u8 + 1)?;
+        if b.len() < 2 {
+            return Err(MasterError::Usage(format!(
+                "0x8040:{}: short reply ({} bytes)",
+                k + 1,
+                b.len()
+            )));
+        }
+        *x = u16at(&b, 0);
+    }
+    Ok(v)
+}
+
+/// CSV of a braking run (M2): cycle, time, mcom, setpoint, velocity, current, the line
+/// voltage, mstate and its kill bit, in the units the device declares.
+pub fn regen_csv(rows: &[NormalRow]) -> String {
+    use oxicat_master::value::format_scaled;
+    let sc = |index: u16, sub: u8| {
+        super::device::DEF
+            .scale(index, sub)
+            .expect("the TUeES030 declares this entry's unit")
+    };
+    let (setpoint, velocity, current) = (sc(0x7001, 2), sc(0x6001, 4), sc(0x6001, 5));
+    let line = sc(0x6010, 12);
+    let h = vec![
+        "cycle".to_string(),
+        "time [s]".into(),
+        "mcom2".into(),
+        format!("setpoint2 [{}]", setpoint.unit),
+        format!("velocity2 [{}]", velocity.unit),
+        format!("current2 [{}]", current.unit),
+        format!("linevoltage [{}]", line.unit),
+        "mstate2".into(),
+        "killed".into(),
+    ];
+    let body = rows.iter().map(|r| {
+        vec![
+            r.cycle.to_string(),
+            format!("{:.6}", r.time),
+            r.output.mcom[1].to_string(),
+            format_scaled(r.output.setpoint[1].into(), &setpoint),
+            format_scaled(r.input.velocity[1].into(), &velocity),
+            format_scaled(r.input.current[1].into(), &current),
+            format_scaled(r.input.linevoltage.into(), &line),
+            r.input.mstate[1].to_string(),
+            u8::from(r.input.mstate[1] & super::app::MSTATE_KILLED != 0).to_string(),
+        ]
+    });
+    crate::csv_text(std::iter::once(h).chain(body)).expect("fixed columns")
+}

@@ -3,12 +3,14 @@
 //! 20 kHz current loops (M1 6 A on a parallel-mode DRV8412, M2/M3 3 A each) and serves
 //! encoders, ADCs, two DAC outputs and digital I/O to a 1 kHz master.
 //!
-//! - [`device`]: process data of the normal and FRF modes, motor parameters, [`device::DEF`];
+//! - [`device`]: process data of the normal and FRF modes, motor parameters, the internal
+//!   voltages 0x8040, FoE (`firmware.bin` in BOOT), [`device::DEF`];
 //! - [`control`]: `currentPI`, `encoder_calculations`, `param2int`, fixed-point helpers and
 //!   the board constants;
 //! - [`ring`]: the FRF ring buffers;
 //! - `experiment` and `ident` (feature `bench`): the master side — mode switch, FRF
-//!   streaming, the manual's time-domain experiments, and identification (chirp, noise,
+//!   streaming, the manual's time-domain experiments, hard braking against the
+//!   over-voltage kill, and identification (chirp, noise,
 //!   setpoint files, Welch with coherence, the plant model);
 //! - [`app`]: the [`Application`](oxicat_slave::Application) ([`TuEs030`]) and the hardware
 //!   traits ([`Board`]).

@@ -10,6 +10,15 @@
 //! | ESC PDI IRQ (SM2 written) | `Slave::on_pdi_irq`: RxPDO → application → TxPDO (SM-synchronous) |
 //! | tick every 50 µs (20 kHz, the PWM counter's top), on the firmware host's schedule | 1. the plants catch up ([`TuePlant`]) to now in [`TueConfig::substeps`] exact steps; the bridge duties the firmware wrote at the previous tick took effect at its counter bottom, 6.25 µs after it; 2. every 20th tick the 1 kHz service routine (encoders latched with their timestamps, line voltage); 3. the current loop (ADC2 sampled now) → new duties, effective 6.25 µs later; 4. the main loop (`Slave::poll`: ESM, mailbox, watchdog) |
 //!
+//! The line ([`TueConfig::line`]): by default the supply is stiff and also takes energy
+//! back (a battery); with [`LineParams`] it is the board's bulk capacitor on a supply
+//! that cannot sink current (`oxicat_plant::re30::Line`), so braking raises it, which the
+//! firmware's over-voltage kill watches at 20 kHz.
+//!
+//! FoE: the firmware serves `firmware.bin` (BOOT only) and `version.txt` from two RAM
+//! slots of [`SLOT_BYTES`] through `oxicat_slave::foe`'s update flow ([`files`]), the
+//! factory image bootable in slot 0.
+//!
 //! At equal times ESC events come first (the segment's rule), then the tick in the order
 //! above, so a run is a function of the frames and their virtual times only.
 
@@ -19,7 +28,9 @@ use crate::tue_es030::{
 };
 use oxicat_esc::Esc;
 use oxicat_plant::re30::{BridgeCommand, Re30Drive, Re30Params};
-use oxicat_slave::Slave;
+pub use oxicat_plant::re30::{Line, LineParams};
+use oxicat_slave::foe::{FirmwareUpdate, RamStore, UpdateConfig, WithFoe};
+use oxicat_slave::{DeviceDef, Slave};
 
 use oxicat_sim::firmware::{
     attach_host, boot_stack, AttachError, Bench, FirmwareConfig, Host, HostHandle, Stack,
@@ -31,8 +42,33 @@ use oxicat_sim::segment::{Segment, SlaveId};
 pub const MBX: usize = 128;
 /// The board's stack on the firmware's `Pdi` of path `P` (the software ESC by default).
 pub type TueSlave<P = Direct> = Slave<<P as PdiPath>::Pdi, { device::IMAGE }, MBX>;
-/// The firmware on the bench hardware.
-pub type TueApp = TuEs030<BenchBoard>;
+/// Bytes per firmware slot of the simulated board.
+pub const SLOT_BYTES: usize = 64 * 1024;
+/// Name of the firmware file the board takes in BOOT.
+pub const FIRMWARE_FILE: &str = "firmware.bin";
+/// The board's FoE files: the update flow on two RAM slots.
+pub type TueFiles = FirmwareUpdate<RamStore<2, SLOT_BYTES>>;
+/// The firmware on the bench hardware, with its FoE files (`app.board`, `app.motors`, …
+/// through `Deref`; `app.files` the FoE side).
+pub type TueApp = WithFoe<TuEs030<BenchBoard>, TueFiles>;
+
+/// The FoE files of the simulated board: two RAM slots, the factory image (payload
+/// `oxicat tue-es030 firmware <sw_version>`) bootable in slot 0, [`FIRMWARE_FILE`]
+/// writable in BOOT, `version.txt` readable always.
+pub fn files(def: &'static DeviceDef) -> TueFiles {
+    let payload = format!("oxicat tue-es030 firmware {}", def.sw_version);
+    let img = oxicat_esi::fwimage::build(def, payload.as_bytes());
+    let store = RamStore::with_image(&img).unwrap_or_default();
+    FirmwareUpdate::new(
+        store,
+        UpdateConfig {
+            identity: def.identity,
+            file_name: FIRMWARE_FILE,
+            password: 0,
+            read_back: true,
+        },
+    )
+}
 
 /// Current-loop tick \[ns\] (20 kHz).
 pub const TICK_NS: u64 = 50_000;
@@ -55,6 +91,11 @@ pub struct TueConfig {
     /// The board revision: which current scaling the firmware converts the PI gains with
     /// (default [`BoardRev::Sense42`], the one that reproduces the manual's FRF).
     pub board_rev: BoardRev,
+    /// The line: `None` (default) a stiff supply that also sinks (a battery); `Some` the
+    /// bulk capacitor on a supply that cannot sink ([`Line`]).
+    pub line: Option<LineParams>,
+    /// The firmware's over-voltage kill is active (default; `false` runs it without).
+    pub kill: bool,
 }
 
 impl TueConfig {
@@ -69,6 +110,18 @@ impl TueConfig {
     /// The bench with board revision `rev`.
     pub fn rev(mut self, rev: BoardRev) -> Self {
         self.board_rev = rev;
+        self
+    }
+
+    /// The bench with the line `line` (see [`TueConfig::line`]).
+    pub fn line(mut self, line: Option<LineParams>) -> Self {
+        self.line = line;
+        self
+    }
+
+    /// The bench with the firmware's over-voltage kill on or off.
+    pub fn kill(mut self, kill: bool) -> Self {
+        self.kill = kill;
         self
     }
 }
@@ -86,6 +139,8 @@ impl Default for TueConfig {
             supply: 24.0,
             substeps: 32,
             board_rev: BoardRev::default(),
+            line: None,
+            kill: true,
         }
     }
 }
@@ -97,6 +152,10 @@ pub struct BenchBoard {
     pub drives: [Re30Drive; 3],
     /// Supply voltage \[V\] (tests raise it to trip the kill threshold).
     pub supply: f64,
+    /// The line's capacitor when the supply cannot sink ([`TueConfig::line`]).
+    pub line: Option<Line>,
+    /// The 5 V rail \[V\] (read back through ADC2 as the reference check).
+    pub rail_5v: f64,
     /// ADC1 inputs (hall positions, forces, spare analog) in counts.
     pub adc1: [u16; 8],
     /// Digital inputs 0–3 from the outside.
@@ -116,6 +175,8 @@ impl BenchBoard {
         Self {
             drives: cfg.motors.map(Re30Drive::new),
             supply: cfg.supply,
+            line: cfg.line.map(|p| Line::new(p, cfg.supply)),
+            rail_5v: 5.0,
             adc1: [0; 8],
             digin_low: 0,
             digout: 0,
@@ -125,9 +186,17 @@ impl BenchBoard {
         }
     }
 
+    /// The line voltage now \[V\]: the supply, or the capacitor above it.
+    pub fn line_voltage(&self) -> f64 {
+        match &self.line {
+            None => self.supply,
+            Some(l) => l.voltage.max(self.supply),
+        }
+    }
+
     /// ADC2 counts of the line voltage (1/11 divider).
     pub fn line_counts(&self) -> u16 {
-        (self.supply / control::LINE_DIVIDER as f64 / control::ADC_VREF as f64
+        (self.line_voltage() / control::LINE_DIVIDER as f64 / control::ADC_VREF as f64
             * control::ADC_COUNTS as f64)
             .clamp(0.0, 4095.0) as u16
     }
@@ -153,6 +222,11 @@ impl Adcs for BenchBoard {
     fn adc2(&mut self, ch: usize) -> u16 {
         match ch {
             tue_es030::app::ADC2_LINE => self.line_counts(),
+            tue_es030::app::ADC2_VREF5 => {
+                (self.rail_5v / control::VREF5_DIVIDER as f64 / control::ADC_VREF as f64
+                    * control::ADC_COUNTS as f64)
+                    .clamp(0.0, 4095.0) as u16
+            }
             3..=5 => self.drives[ch - 3].adc_counts(),
             _ => 0,
         }
@@ -237,9 +311,13 @@ impl<Pd: oxicat_slave::Pdi> Bench<Stack<Pd, TueApp, { device::IMAGE }, MBX>> for
                     d.bridge = p;
                 }
             }
-            let supply = b.supply;
+            let supply = b.line_voltage();
             for d in &mut b.drives {
                 d.step(h_ns as f64 * 1e-9, supply);
+            }
+            if let Some(line) = &mut b.line {
+                let bridges = b.drives.iter().map(|d| d.bus_current).sum();
+                line.step(h_ns as f64 * 1e-9, b.supply, bridges);
             }
             *plant_ns += h_ns;
         }
@@ -296,12 +374,15 @@ fn attach_with<P: PdiPath>(
 ) -> Result<TueHandle<P>, AttachError> {
     let plant = TuePlant::new(config);
     attach_host(segment, id, &schedule(), plant, path, |esc, path| {
-        boot_stack(
-            &device::DEF,
-            esc,
-            TuEs030::with_rev(BenchBoard::new(config), config.board_rev),
-            path,
-        )
+        let mut app = TuEs030::with_rev(BenchBoard::new(config), config.board_rev);
+        if !config.kill {
+            app.kill_counts = u16::MAX;
+        }
+        let app = WithFoe {
+            app,
+            files: files(&device::DEF),
+        };
+        boot_stack(&device::DEF, esc, app, path)
     })
 }
 
