@@ -9,7 +9,8 @@
 //!   joint's identity;
 //! - ethercrab (through `oxicat-master`) runs two emulated joints in OP in DC mode (the
 //!   joint's sync mode, SYNC0 every 1 ms, its kit cycle) for 1,000 cycles with the right
-//!   working counter every cycle, and the image's SYNC0 handler ran once per SYNC0 pulse;
+//!   working counter every cycle, the image's SYNC0 handler ran once per SYNC0 pulse and
+//!   its current loop once per ADC sequence, never held off more than 5 µs after JEOC;
 //! - with its joint (`oxicat_emu::cia402::JointBoardPlant`) on the board's pins, the image
 //!   walks the enable sequence (0x06, 0x07, 0x0F, each checked on the statusword) and
 //!   follows a CSP move within the host rig's following error plus a third.
