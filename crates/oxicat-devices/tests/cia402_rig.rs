@@ -1,9 +1,15 @@
 //! The CiA402 joint drive on its joint (firmware + plant, 1 kHz cycles, 20 kHz current
 //! loop): the paper's experiment, the modes, the following-error fault and its reset.
 
-use oxicat_devices::cia402::rig::JointBench;
-use oxicat_devices::cia402::{error, fsm::sw, mode, State};
-use oxicat_plant::bldc_joint::BldcJointParams;
+use std::cell::RefCell;
+use std::rc::Rc;
+
+use oxicat_devices::cia402::rig::{drive_params, JointBench, JointBoard, TICK_NS};
+use oxicat_devices::cia402::{
+    device, error, fsm::sw, mode, Cia402Drive, CurrentLoop, DriveParams, State,
+};
+use oxicat_plant::bldc_joint::{BldcJoint, BldcJointParams};
+use oxicat_slave::Od;
 
 fn bench() -> JointBench {
     JointBench::new(BldcJointParams::default())
@@ -374,4 +380,169 @@ fn interpolated_position_mode_follows_a_ramp_with_linear_interpolation() {
     assert_eq!(b.statusword() & sw::OMS12, 0);
     assert_eq!(b.od.get::<i32>(0x6062, 0).unwrap(), held);
     assert_eq!(State::decode(b.statusword()), Some(State::OperationEnabled));
+}
+
+/// The joint seen as a board with its current loop split off: the drive's sensors alone
+/// (the image's `Sensors`), and the power stage the [`CurrentLoop`] runs on (its
+/// `Bridge`), one plant behind both.
+mod split {
+    use std::cell::RefCell;
+    use std::rc::Rc;
+
+    use oxicat_devices::cia402::{JointHw, NoPowerStage, PowerStage};
+    use oxicat_plant::bldc_joint::BldcJoint;
+
+    /// The sensors: the drive's hardware, without a power stage.
+    pub struct Sensors(pub Rc<RefCell<BldcJoint>>);
+
+    impl JointHw for Sensors {
+        type Power = NoPowerStage;
+        fn encoder(&mut self) -> i32 {
+            self.0.borrow().encoder_count()
+        }
+        fn index_latch(&mut self) -> Option<i32> {
+            self.0.borrow_mut().take_index_latch()
+        }
+        fn home_switch(&mut self) -> bool {
+            self.0.borrow().home_switch()
+        }
+        fn joint_torque(&mut self) -> f32 {
+            self.0.borrow().gear_torque() as f32
+        }
+        fn power_stage(&mut self) -> Option<&mut NoPowerStage> {
+            None
+        }
+    }
+
+    /// The power stage, the current loop's.
+    pub struct Bridge(pub Rc<RefCell<BldcJoint>>);
+
+    impl PowerStage for Bridge {
+        fn current(&mut self) -> f32 {
+            self.0.borrow().current as f32
+        }
+        fn set_voltage(&mut self, enable: bool, volts: f32) {
+            self.0.borrow_mut().set_voltage(enable, volts as f64);
+        }
+    }
+}
+
+/// Runs `cycles` 1 ms cycles of the drive twice on the same joint and script: as the rig
+/// runs it (the current loop inside the drive, `run_current_loop` on the drive's power
+/// stage) and as the board image does (the drive on the sensors alone, a separate
+/// [`CurrentLoop`] stepping the power stage, the command handed to it after each cycle
+/// and its feedback taken before). Asserts every cycle that both give the same
+/// dictionary values, the same joint state and the same emergencies, bit for bit;
+/// returns the one-context drive's dictionary and the emergencies it sent.
+fn run_split_and_whole(
+    params: DriveParams,
+    cycles: usize,
+    script: impl Fn(usize, &mut Od<{ device::IMAGE }>),
+) -> (Od<{ device::IMAGE }>, Vec<(u16, u8)>) {
+    let p = BldcJointParams::default();
+    let mut whole = Cia402Drive::new(
+        JointBoard {
+            joint: BldcJoint::new(p),
+        },
+        params,
+    );
+    let mut od_w = Od::new(&device::DEF).unwrap();
+    let joint = Rc::new(RefCell::new(BldcJoint::new(p)));
+    let mut drive = Cia402Drive::new(split::Sensors(joint.clone()), params);
+    let mut current = CurrentLoop::new(&params);
+    let mut bridge = split::Bridge(joint.clone());
+    let mut od_s = Od::new(&device::DEF).unwrap();
+    let mut emergencies = Vec::new();
+    for k in 0..cycles {
+        script(k, &mut od_w);
+        script(k, &mut od_s);
+        for _ in 0..20 {
+            whole.hw.joint.step(TICK_NS as f64 * 1e-9);
+            whole.run_current_loop();
+            joint.borrow_mut().step(TICK_NS as f64 * 1e-9);
+            current.step(&mut bridge);
+        }
+        whole.run_cycle(&mut od_w);
+        drive.current_feedback(current.take_feedback());
+        drive.run_cycle(&mut od_s);
+        current.set_command(drive.current_command());
+        assert_eq!(
+            whole.current_command(),
+            drive.current_command(),
+            "cycle {k}"
+        );
+        for (i, s) in [
+            (0x6041u16, 0u8),
+            (0x6064, 0),
+            (0x6062, 0),
+            (0x606C, 0),
+            (0x6077, 0),
+            (0x6078, 0),
+            (0x603F, 0),
+            (0x60F4, 0),
+            (0x2002, 0),
+        ] {
+            assert_eq!(
+                od_w.bytes(i, s).expect("the drive's object"),
+                od_s.bytes(i, s).expect("the drive's object"),
+                "cycle {k}: {i:#06x}:{s}"
+            );
+        }
+        assert_eq!(whole.hw.joint, *joint.borrow(), "cycle {k}: the joint");
+        let e = whole.take_emergency();
+        assert_eq!(e, drive.take_emergency(), "cycle {k}: emergency");
+        emergencies.extend(e);
+    }
+    (od_w, emergencies)
+}
+
+/// The board image's split (the current loop in its ADC interrupt, command and feedback
+/// handed over around the drive's hooks) is the rig's drive, not an approximation of it:
+/// enable and a 40,000-count CSP move give the same values every cycle.
+#[test]
+fn the_current_loop_split_off_as_on_the_board_runs_exactly_as_the_rig() {
+    let (od, emergencies) =
+        run_split_and_whole(drive_params(&BldcJointParams::default()), 1_000, |k, od| {
+            let cw: u16 = match k {
+                0..=9 => 0x06,
+                10..=19 => 0x07,
+                _ => 0x0F,
+            };
+            od.set(0x6040, 0, cw).unwrap();
+            // A cosine move of 40,000 counts over 800 ms from cycle 50.
+            let t = (k.saturating_sub(50) as f64 / 800.0).min(1.0);
+            let x = 20_000.0 * (1.0 - (std::f64::consts::PI * t).cos());
+            od.set(0x607A, 0, x.round() as i32).unwrap();
+        });
+    assert_eq!(emergencies, []);
+    let s = od.get::<u16>(0x6041, 0).unwrap();
+    assert_eq!(State::decode(s), Some(State::OperationEnabled), "{s:#06x}");
+    let pos = od.get::<i32>(0x6064, 0).unwrap();
+    assert!((pos - 40_000).abs() < 50, "at {pos}");
+}
+
+/// An over-current found by the split-off loop becomes the same fault and emergency in
+/// the same cycle as when the drive runs the loop itself: CST at the rated torque (4 A)
+/// with the trip lowered to 2 A.
+#[test]
+fn an_over_current_in_the_split_off_loop_faults_the_drive_as_on_the_rig() {
+    let params = DriveParams {
+        max_current: 2.0,
+        ..drive_params(&BldcJointParams::default())
+    };
+    let (od, emergencies) = run_split_and_whole(params, 200, |k, od| {
+        let cw: u16 = match k {
+            0..=9 => 0x06,
+            10..=19 => 0x07,
+            _ => 0x0F,
+        };
+        od.set(0x6040, 0, cw).unwrap();
+        od.set(0x6060, 0, mode::CST).unwrap();
+        od.set(0x6071, 0, if k >= 50 { 1000i16 } else { 0 })
+            .unwrap();
+    });
+    assert_eq!(emergencies, [(error::OVERCURRENT, 0x03)]);
+    assert_eq!(od.get::<u16>(0x603F, 0).unwrap(), error::OVERCURRENT);
+    let s = od.get::<u16>(0x6041, 0).unwrap();
+    assert_eq!(State::decode(s), Some(State::Fault), "{s:#06x}");
 }

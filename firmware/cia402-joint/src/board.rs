@@ -1,14 +1,16 @@
-//! The joint drive's power stage and sensors as the drive's [`JointHw`]: TIM1 three-phase
-//! centre-aligned PWM, ADC1 injected conversions of the phase currents, joint torque and
-//! bus voltage at the PWM centre, TIM2 encoder with a hardware index latch, home switch,
-//! bridge enable; and the RUN/ERR LEDs.
+//! The joint drive's hardware, split by priority: the power stage ([`Bridge`], the drive's
+//! `PowerStage`: TIM1 three-phase centre-aligned PWM, ADC1 injected conversions of the
+//! phase currents and bus voltage at the PWM centre, bridge enable), used by the current
+//! loop in the ADC interrupt; the sensors ([`Sensors`], the drive's `JointHw`: TIM2 encoder
+//! with a hardware index latch, home switch, the joint torque conversion), used by the
+//! drive's cycle at the ESC priority. And the RUN/ERR LEDs.
 //!
 //! Register set-up is done here with the PAC, not the HAL's PWM/ADC drivers: the HAL has
 //! no centre-aligned PWM with an ADC trigger, and naming every register written keeps the
 //! image's peripheral use explicit (README, "Peripherals and registers").
 
 use crate::foc::{self, ElecAngle};
-use oxicat_devices::cia402::JointHw;
+use oxicat_devices::cia402::{JointHw, NoPowerStage, PowerStage};
 use stm32f4xx_hal::{
     gpio::{Input, Output, Pin},
     pac,
@@ -71,12 +73,20 @@ pub mod ch {
     pub const VBUS: u8 = 13;
 }
 
-/// The joint's hardware.
-pub struct JointBoard {
+/// TIM2's counter: the encoder count. Read by both sides — the bridge for the electrical
+/// angle, the sensors for the position — as a read of CNT has no side effect; every other
+/// TIM2 register is the sensors'.
+fn encoder_count() -> u32 {
+    // SAFETY: a read of CNT, which changes nothing (TIM2 is set up before either side
+    // exists).
+    unsafe { (*pac::TIM2::ptr()).cnt().read().bits() }
+}
+
+/// The power stage: TIM1's PWM, the bridge enable and ADC1 (phase currents, bus voltage).
+/// Owned by the current loop (the `ADC` interrupt) once running.
+pub struct Bridge {
     tim1: pac::TIM1,
-    tim2: pac::TIM2,
     adc: pac::ADC1,
-    home: Pin<'C', 10, Input>,
     enable: Pin<'C', 11, Output>,
     /// TIM1 auto-reload: duty 1.0 = `arr`.
     arr: u32,
@@ -92,6 +102,13 @@ pub struct JointBoard {
     enabled: bool,
 }
 
+/// The sensors the drive's cycle reads: TIM2 (encoder, index capture), the home switch
+/// and the joint torque conversion (ADC1 JDR3).
+pub struct Sensors {
+    tim2: pac::TIM2,
+    home: Pin<'C', 10, Input>,
+}
+
 /// What the board needs from the drive's parameters.
 #[derive(Debug, Clone, Copy)]
 pub struct Motor {
@@ -103,54 +120,53 @@ pub struct Motor {
     pub bus_voltage: f32,
 }
 
-impl JointBoard {
-    /// Sets up TIM1 (PWM running, outputs at 50 %, bridge disabled), TIM2 (encoder, index
-    /// capture) and ADC1 (injected sequence on TIM1's trigger, JEOC interrupt enabled in
-    /// the ADC; the NVIC line stays masked). `timclk2_hz`: TIM1's clock.
-    ///
-    /// The pins must already be in their modes (main.rs): PA8/PA9/PB15 AF1, PA0/PA1/PB10
-    /// AF1, PC0..PC3 analog.
-    pub fn new(
-        tim1: pac::TIM1,
-        tim2: pac::TIM2,
-        adc: pac::ADC1,
-        home: Pin<'C', 10, Input>,
-        mut enable: Pin<'C', 11, Output>,
-        timclk2_hz: u32,
-        motor: Motor,
-    ) -> Self {
-        enable.set_low();
-        // SAFETY: the peripherals are owned (passed in by value); enabling and resetting
-        // their clocks touches only their own RCC bits.
-        unsafe {
-            pac::TIM1::enable_unchecked();
-            pac::TIM1::reset_unchecked();
-            pac::TIM2::enable_unchecked();
-            pac::TIM2::reset_unchecked();
-            pac::ADC1::enable_unchecked();
-            pac::ADC1::reset_unchecked();
-        }
-        let arr = timclk2_hz / (2 * PWM_HZ);
-        setup_encoder(&tim2);
-        setup_adc(&adc);
-        setup_pwm(&tim1, arr);
-        let count = tim2.cnt().read().bits();
-        Self {
-            tim1,
-            tim2,
-            adc,
-            home,
-            enable,
-            arr,
-            angle: ElecAngle::new(count, motor.counts_per_rev, motor.pole_pairs),
-            sc: (0.0, 1.0),
-            zero: (ADC_FULL / 2.0, ADC_FULL / 2.0),
-            vbus: motor.bus_voltage,
-            motor,
-            enabled: false,
-        }
+/// Sets up TIM1 (PWM running, outputs at 50 %, bridge disabled), TIM2 (encoder, index
+/// capture) and ADC1 (injected sequence on TIM1's trigger, JEOC interrupt enabled in the
+/// ADC; the NVIC line stays masked), and splits them into the power stage and the
+/// sensors. `timclk2_hz`: TIM1's clock.
+///
+/// The pins must already be in their modes (main.rs): PA8/PA9/PB15 AF1, PA0/PA1/PB10
+/// AF1, PC0..PC3 analog.
+pub fn setup(
+    tim1: pac::TIM1,
+    tim2: pac::TIM2,
+    adc: pac::ADC1,
+    home: Pin<'C', 10, Input>,
+    mut enable: Pin<'C', 11, Output>,
+    timclk2_hz: u32,
+    motor: Motor,
+) -> (Bridge, Sensors) {
+    enable.set_low();
+    // SAFETY: the peripherals are owned (passed in by value); enabling and resetting
+    // their clocks touches only their own RCC bits.
+    unsafe {
+        pac::TIM1::enable_unchecked();
+        pac::TIM1::reset_unchecked();
+        pac::TIM2::enable_unchecked();
+        pac::TIM2::reset_unchecked();
+        pac::ADC1::enable_unchecked();
+        pac::ADC1::reset_unchecked();
     }
+    let arr = timclk2_hz / (2 * PWM_HZ);
+    setup_encoder(&tim2);
+    setup_adc(&adc);
+    setup_pwm(&tim1, arr);
+    let bridge = Bridge {
+        tim1,
+        adc,
+        enable,
+        arr,
+        angle: ElecAngle::new(encoder_count(), motor.counts_per_rev, motor.pole_pairs),
+        sc: (0.0, 1.0),
+        zero: (ADC_FULL / 2.0, ADC_FULL / 2.0),
+        vbus: motor.bus_voltage,
+        motor,
+        enabled: false,
+    };
+    (bridge, Sensors { tim2, home })
+}
 
+impl Bridge {
     /// Waits for the next injected sequence (JEOC, polled; bounded) and clears the flag.
     fn wait_conversion(&mut self) -> bool {
         // One PWM period is 9,000 core cycles; a loop pass is > 10.
@@ -204,8 +220,11 @@ impl JointBoard {
             delay.delay_ms(1);
         }
         self.disable();
-        let count = self.tim2.cnt().read().bits();
-        self.angle = ElecAngle::new(count, self.motor.counts_per_rev, self.motor.pole_pairs);
+        self.angle = ElecAngle::new(
+            encoder_count(),
+            self.motor.counts_per_rev,
+            self.motor.pole_pairs,
+        );
     }
 
     fn write_duties(&mut self, d: [f32; 3]) {
@@ -233,9 +252,42 @@ impl JointBoard {
     }
 }
 
-impl JointHw for JointBoard {
+impl PowerStage for Bridge {
+    /// Called first in each current-loop tick (the ADC interrupt, right after the
+    /// injected sequence): phase currents → Clarke/Park at the encoder's electrical angle.
+    fn current(&mut self) -> f32 {
+        let ra = (self.adc.jdr1().read().bits() & 0xFFF) as f32;
+        let rb = (self.adc.jdr2().read().bits() & 0xFFF) as f32;
+        self.read_vbus();
+        let ia = (ra - self.zero.0) * AMPS_PER_COUNT;
+        let ib = (rb - self.zero.1) * AMPS_PER_COUNT;
+        let theta = self.angle.update(encoder_count());
+        self.sc = foc::sin_cos(theta);
+        foc::iq_from_phases(ia, ib, self.sc)
+    }
+
+    fn set_voltage(&mut self, enable: bool, volts: f32) {
+        if !enable {
+            if self.enabled || self.enable.is_set_high() {
+                self.disable();
+            }
+            return;
+        }
+        let v = foc::phase_voltages(volts, self.sc);
+        self.write_duties(foc::svpwm(v, self.vbus, MAX_DUTY));
+        if !self.enabled {
+            self.enabled = true;
+            self.enable.set_high();
+        }
+    }
+}
+
+impl JointHw for Sensors {
+    /// The current loop runs in the ADC interrupt with the [`Bridge`], not in the drive.
+    type Power = NoPowerStage;
+
     fn encoder(&mut self) -> i32 {
-        self.tim2.cnt().read().bits() as i32
+        encoder_count() as i32
     }
 
     fn index_latch(&mut self) -> Option<i32> {
@@ -256,37 +308,17 @@ impl JointHw for JointBoard {
         self.home.is_low() == HOME_ACTIVE_LOW
     }
 
-    /// Called first in each current-loop tick (the ADC interrupt, right after the
-    /// injected sequence): phase currents → Clarke/Park at the encoder's electrical angle.
-    fn current(&mut self) -> f32 {
-        let ra = (self.adc.jdr1().read().bits() & 0xFFF) as f32;
-        let rb = (self.adc.jdr2().read().bits() & 0xFFF) as f32;
-        self.read_vbus();
-        let ia = (ra - self.zero.0) * AMPS_PER_COUNT;
-        let ib = (rb - self.zero.1) * AMPS_PER_COUNT;
-        let theta = self.angle.update(self.tim2.cnt().read().bits());
-        self.sc = foc::sin_cos(theta);
-        foc::iq_from_phases(ia, ib, self.sc)
-    }
-
+    /// The torque channel of the last injected sequence.
     fn joint_torque(&mut self) -> f32 {
-        let v = (self.adc.jdr3().read().bits() & 0xFFF) as f32 * (VREF / ADC_FULL);
+        // SAFETY: a read of JDR3, which changes nothing; ADC1 is the bridge's, which
+        // never writes JDR3.
+        let raw = unsafe { (*pac::ADC1::ptr()).jdr3().read().bits() };
+        let v = (raw & 0xFFF) as f32 * (VREF / ADC_FULL);
         (v - TORQUE_ZERO_V) * TORQUE_NM_PER_V
     }
 
-    fn set_voltage(&mut self, enable: bool, volts: f32) {
-        if !enable {
-            if self.enabled || self.enable.is_set_high() {
-                self.disable();
-            }
-            return;
-        }
-        let v = foc::phase_voltages(volts, self.sc);
-        self.write_duties(foc::svpwm(v, self.vbus, MAX_DUTY));
-        if !self.enabled {
-            self.enabled = true;
-            self.enable.set_high();
-        }
+    fn power_stage(&mut self) -> Option<&mut NoPowerStage> {
+        None
     }
 }
 

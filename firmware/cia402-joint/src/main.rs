@@ -8,36 +8,39 @@
 //!
 //! | event | handler | priority | runs |
 //! |---|---|---|---|
-//! | ADC1 injected sequence done, 20 kHz (TIM1 PWM centre) | `ADC` | 0x10 | `Cia402Drive::run_current_loop` (currents → i_q, PI, SVPWM) |
+//! | ADC1 injected sequence done, 20 kHz (TIM1 PWM centre) | `ADC` | 0x10 | `CurrentLoop::step` on the [`board::Bridge`] (currents → i_q, PI, SVPWM) |
 //! | SYNC0 rising (PB3) | `EXTI3` | 0x20 | `Slave::on_sync0` (outputs, application cycle: `run_cycle`, inputs) |
 //! | SYNC1 rising (PB5) | `EXTI9_5` | 0x20 | `Slave::on_sync1` |
 //! | PDI IRQ falling (PA10) | `EXTI15_10` | 0x20 | `Slave::on_pdi_irq` |
 //! | every 20th current-loop tick (1 ms) | thread | — | `Slave::poll` (ESM, mailbox, emergencies; free run: the cycle), LEDs, then WFI |
 //!
-//! Sharing: the stack and the ESC driver are used only at priority 0x20 — the three ESC
-//! handlers, which cannot preempt one another — and by the thread with BASEPRI raised to
-//! 0x20 ([`with_esc_from_thread`]), so their SPI transactions never interleave and never
-//! hold off the current loop. The drive is shared between the current loop and the
-//! stack's hooks: it lives in a `cortex_m::interrupt::Mutex`, and every hook the stack
-//! calls ([`DriveHooks`]) takes it in a short critical section (the drive's own code, no
-//! SPI).
+//! Sharing, by priority: the stack, the ESC driver and the drive (with the joint's
+//! [`board::Sensors`]) are used only at priority 0x20 — the three ESC handlers, which
+//! cannot preempt one another — and by the thread with BASEPRI raised to 0x20
+//! ([`with_esc_from_thread`]), so their SPI transactions never interleave and never hold
+//! off the current loop. The current loop and the [`board::Bridge`] belong to the `ADC`
+//! interrupt alone. The two sides share only [`HANDOVER`]: the drive's current command
+//! and the loop's feedback, a few words copied in a critical section at each end
+//! ([`DriveHooks`] around every hook, the `ADC` handler around every tick).
 #![no_std]
 #![no_main]
 
 mod board;
 mod foc;
 
-use core::cell::{RefCell, UnsafeCell};
+use core::cell::{Cell, UnsafeCell};
 use core::mem::MaybeUninit;
 use core::sync::atomic::{compiler_fence, AtomicU32, Ordering};
 
-use board::{BoardLeds, JointBoard, Motor};
+use board::{BoardLeds, Bridge, Motor, Sensors};
 use cortex_m::interrupt::{self as irq, Mutex};
 use cortex_m::peripheral::NVIC;
 use cortex_m::register::{basepri, basepri_max};
 use cortex_m_rt::{entry, exception, ExceptionFrame};
 use embedded_hal_bus::spi::{ExclusiveDevice, NoDelay};
-use oxicat_devices::cia402::{device, Cia402Drive, DriveParams, CURRENT_LOOP_HZ};
+use oxicat_devices::cia402::{
+    device, Cia402Drive, CurrentCommand, CurrentFeedback, CurrentLoop, DriveParams, CURRENT_LOOP_HZ,
+};
 use oxicat_pdi::{Et1100Config, Et1100Spi};
 use oxicat_slave::{AlState, AlStatusCode, Application, Od, Slave};
 use stm32f4xx_hal::{
@@ -64,56 +67,123 @@ const PRIO_ESC: u8 = 0x20;
 type EscSpi = ExclusiveDevice<Spi<pac::SPI1>, Pin<'B', 6, Output>, NoDelay>;
 type Esc = Et1100Spi<EscSpi>;
 type JointSlave = Slave<Esc, { device::IMAGE }, MBX>;
-type Drive = Cia402Drive<JointBoard>;
+type Drive = Cia402Drive<Sensors>;
 
-/// The stack and its ESC driver.
+/// The stack, its ESC driver and the drive (the application the stack's hooks call).
 struct EscSide {
     slave: JointSlave,
     esc: Esc,
+    drive: Drive,
 }
 
-/// Storage for [`EscSide`], shared by priority rather than by a lock: see [`EscCell::get`].
-struct EscCell(UnsafeCell<MaybeUninit<EscSide>>);
+/// The current loop on its power stage.
+struct LoopSide {
+    current: CurrentLoop,
+    bridge: Bridge,
+}
 
-// SAFETY: access is serialised by interrupt priority (EscCell::get's contract).
-unsafe impl Sync for EscCell {}
+/// Storage shared by priority rather than by a lock: one priority level uses it, see
+/// [`PrioCell::get`].
+struct PrioCell<T>(UnsafeCell<MaybeUninit<T>>);
 
-impl EscCell {
-    /// The ESC side.
+// SAFETY: access is serialised by interrupt priority (PrioCell::get's contract).
+unsafe impl<T: Send> Sync for PrioCell<T> {}
+
+impl<T> PrioCell<T> {
+    /// An empty cell.
+    const fn new() -> Self {
+        Self(UnsafeCell::new(MaybeUninit::uninit()))
+    }
+
+    /// The value.
     ///
     /// # Safety
-    /// The caller runs at priority [`PRIO_ESC`] (one of the three ESC handlers) or has
-    /// BASEPRI at `PRIO_ESC` or more urgent ([`with_esc_from_thread`]), it does not keep
-    /// the reference beyond that, and [`EscCell::init`] ran before the ESC interrupts were
-    /// unmasked.
+    /// The caller runs at the cell's priority — [`ESC`]: [`PRIO_ESC`] (one of the three ESC
+    /// handlers) or BASEPRI at `PRIO_ESC` or more urgent ([`with_esc_from_thread`]);
+    /// [`LOOP`]: the `ADC` handler — it does not keep the reference beyond that, and
+    /// [`PrioCell::init`] ran before those interrupts were unmasked.
     #[allow(clippy::mut_from_ref)]
-    unsafe fn get(&self) -> &mut EscSide {
+    unsafe fn get(&self) -> &mut T {
         unsafe { (*self.0.get()).assume_init_mut() }
     }
 
-    /// Stores the ESC side.
+    /// Stores the value.
     ///
     /// # Safety
-    /// Called once, before the ESC interrupts are unmasked.
-    unsafe fn init(&self, side: EscSide) {
-        unsafe { (*self.0.get()).write(side) };
+    /// Called once, before the interrupts that use the cell are unmasked.
+    unsafe fn init(&self, value: T) {
+        unsafe { (*self.0.get()).write(value) };
     }
 }
 
-static ESC: EscCell = EscCell(UnsafeCell::new(MaybeUninit::uninit()));
-/// The drive application, shared by the current loop and the stack's hooks.
-static DRIVE: Mutex<RefCell<Option<Drive>>> = Mutex::new(RefCell::new(None));
+/// The ESC side, at priority [`PRIO_ESC`].
+static ESC: PrioCell<EscSide> = PrioCell::new();
+/// The current loop, the `ADC` handler's alone.
+static LOOP: PrioCell<LoopSide> = PrioCell::new();
 /// Current-loop ticks since start (the main loop's poll schedule and LED clock).
 static TICKS: AtomicU32 = AtomicU32::new(0);
 
-/// Runs `f` on the drive in a critical section.
-fn with_drive<R>(f: impl FnOnce(&mut Drive) -> R) -> R {
-    irq::free(|cs| {
-        let mut d = DRIVE.borrow(cs).borrow_mut();
-        f(d.as_mut()
-            .expect("the drive is set before interrupts are enabled"))
-    })
+/// What the drive's hooks and the current loop share: the command the drive last left
+/// and the loop's feedback since the drive last took it. Each side copies its part in or
+/// out in a critical section of a few words; neither side's computation is inside one,
+/// so the current loop is held off for a copy, never for a drive cycle.
+struct Handover {
+    cmd: Mutex<Cell<CurrentCommand>>,
+    fb: Mutex<Cell<CurrentFeedback>>,
 }
+
+impl Handover {
+    /// The drive's command (the `ADC` handler, before its tick).
+    fn command(&self) -> CurrentCommand {
+        irq::free(|cs| self.cmd.borrow(cs).get())
+    }
+
+    /// Stores the drive's command (a hook, after the drive ran).
+    fn put_command(&self, c: CurrentCommand) {
+        irq::free(|cs| self.cmd.borrow(cs).set(c));
+    }
+
+    /// Adds a tick's feedback: its current replaces the last, an over-current is kept
+    /// until taken (the `ADC` handler, after its tick).
+    fn publish(&self, f: CurrentFeedback) {
+        irq::free(|cs| {
+            let cell = self.fb.borrow(cs);
+            let old = cell.get();
+            cell.set(CurrentFeedback {
+                iq: f.iq,
+                overcurrent: old.overcurrent || f.overcurrent,
+            });
+        });
+    }
+
+    /// The feedback since the last take; clears the over-current (a hook, before the
+    /// drive runs).
+    fn take_feedback(&self) -> CurrentFeedback {
+        irq::free(|cs| {
+            let cell = self.fb.borrow(cs);
+            let f = cell.get();
+            cell.set(CurrentFeedback {
+                overcurrent: false,
+                ..f
+            });
+            f
+        })
+    }
+}
+
+/// The command and feedback between the drive's hooks and the current loop.
+static HANDOVER: Handover = Handover {
+    cmd: Mutex::new(Cell::new(CurrentCommand {
+        power: false,
+        iq_ref: 0.0,
+        kp: device::gains::CURRENT_KP,
+        ki: device::gains::CURRENT_KI,
+    })),
+    fb: Mutex::new(Cell::new(CurrentFeedback {
+        iq: 0.0,
+        overcurrent: false,
+    })),
+};
 
 /// Runs `f` on the stack from the thread, with the ESC handlers masked (BASEPRI) and the
 /// current loop still running.
@@ -129,40 +199,51 @@ fn with_esc_from_thread<R>(f: impl FnOnce(&mut EscSide) -> R) -> R {
     r
 }
 
-/// The application as the stack sees it: every hook forwards to the shared
-/// [`Cia402Drive`] inside a critical section, so the SPI work of the stack's handlers runs
-/// with the current loop enabled and only the drive's own computation excludes it.
+/// The application as the stack sees it: every hook runs the drive (at the ESC priority,
+/// the current loop running) between a take of the current loop's feedback and a
+/// hand-over of the drive's current command ([`HANDOVER`]).
 /// (`foe` keeps the default `None`: the drive has no FoE files.)
-struct DriveHooks;
+struct DriveHooks<'a>(&'a mut Drive);
 
-impl<const N: usize> Application<N> for DriveHooks {
+impl DriveHooks<'_> {
+    /// Runs `f` on the drive with the current loop's latest feedback, then hands the
+    /// command over.
+    fn with<R>(&mut self, f: impl FnOnce(&mut Drive) -> R) -> R {
+        self.0.current_feedback(HANDOVER.take_feedback());
+        let r = f(self.0);
+        HANDOVER.put_command(self.0.current_command());
+        r
+    }
+}
+
+impl<const N: usize> Application<N> for DriveHooks<'_> {
     fn state_change(
         &mut self,
         from: AlState,
         to: AlState,
         od: &mut Od<N>,
     ) -> Result<(), AlStatusCode> {
-        with_drive(|d| d.state_change(from, to, od))
+        self.with(|d| d.state_change(from, to, od))
     }
 
     fn safe_outputs(&mut self, od: &mut Od<N>) {
-        with_drive(|d| Application::<N>::safe_outputs(d, od))
+        self.with(|d| Application::<N>::safe_outputs(d, od))
     }
 
     fn cycle(&mut self, od: &mut Od<N>) {
-        with_drive(|d| Application::<N>::cycle(d, od))
+        self.with(|d| Application::<N>::cycle(d, od))
     }
 
     fn timer(&mut self, id: u8, od: &mut Od<N>) {
-        with_drive(|d| Application::<N>::timer(d, id, od))
+        self.with(|d| Application::<N>::timer(d, id, od))
     }
 
     fn sdo_written(&mut self, index: u16, sub: u8, od: &mut Od<N>) {
-        with_drive(|d| Application::<N>::sdo_written(d, index, sub, od))
+        self.with(|d| Application::<N>::sdo_written(d, index, sub, od))
     }
 
     fn next_emergency(&mut self) -> Option<(u16, u8, [u8; 5])> {
-        with_drive(Application::<N>::next_emergency)
+        self.with(Application::<N>::next_emergency)
     }
 }
 
@@ -173,13 +254,16 @@ fn clear_exti(line: u8) {
 }
 
 /// 20 kHz current loop: ADC1's injected sequence (triggered by TIM1 at the PWM centre)
-/// is done; currents → i_q → PI → duties for the next PWM period.
+/// is done; the drive's command in, currents → i_q → PI → duties for the next PWM
+/// period, the feedback out.
 #[interrupt]
 fn ADC() {
-    with_drive(|d| {
-        d.hw.ack_conversion();
-        d.run_current_loop();
-    });
+    // SAFETY: the ADC handler, LOOP's only user; main stored it before unmasking ADC.
+    let l = unsafe { LOOP.get() };
+    l.bridge.ack_conversion();
+    l.current.set_command(HANDOVER.command());
+    l.current.step(&mut l.bridge);
+    HANDOVER.publish(l.current.take_feedback());
     TICKS.fetch_add(1, Ordering::Relaxed);
 }
 
@@ -189,7 +273,7 @@ fn EXTI3() {
     clear_exti(3);
     // SAFETY: ESC handler at PRIO_ESC.
     let e = unsafe { ESC.get() };
-    let _ = e.slave.on_sync0(&mut e.esc, &mut DriveHooks);
+    let _ = e.slave.on_sync0(&mut e.esc, &mut DriveHooks(&mut e.drive));
 }
 
 /// SYNC1 (PB5, the only line enabled in 5..9).
@@ -198,7 +282,7 @@ fn EXTI9_5() {
     clear_exti(5);
     // SAFETY: ESC handler at PRIO_ESC.
     let e = unsafe { ESC.get() };
-    let _ = e.slave.on_sync1(&mut e.esc, &mut DriveHooks);
+    let _ = e.slave.on_sync1(&mut e.esc, &mut DriveHooks(&mut e.drive));
 }
 
 /// PDI IRQ (PA10, the only line enabled in 10..15).
@@ -207,7 +291,9 @@ fn EXTI15_10() {
     clear_exti(10);
     // SAFETY: ESC handler at PRIO_ESC.
     let e = unsafe { ESC.get() };
-    let _ = e.slave.on_pdi_irq(&mut e.esc, &mut DriveHooks);
+    let _ = e
+        .slave
+        .on_pdi_irq(&mut e.esc, &mut DriveHooks(&mut e.drive));
 }
 
 /// Blinks ERR forever: the ESC did not come up at start-up.
@@ -233,24 +319,33 @@ fn run_led(state: AlState, ms: u32) -> bool {
     }
 }
 
-/// Starts the slave stack on the ET1100 and stores it with the driver in [`ESC`]. A
-/// function of its own, not inlined: the `Slave` (several KB) and the moves of it live in
-/// this frame, gone when it returns; built in `main`, which never returns, they held about
-/// 22 KB of stack for good under every interrupt (the Laelaps image's painted stack in
-/// `tools/oxicat-emu` showed it; `sub sp` in this ELF's `main` was 22,144 B).
+/// Starts the slave stack on the ET1100 and stores it with the driver and the drive on
+/// `sensors` in [`ESC`]. A function of its own, not inlined: the `Slave` (several KB),
+/// the drive and the moves of them live in this frame, gone when it returns; built in
+/// `main`, which never returns, they held about 22 KB of stack for good under every
+/// interrupt (the Laelaps image's painted stack in `tools/oxicat-emu` showed it; `sub sp`
+/// in this ELF's `main` was 22,144 B).
 #[inline(never)]
-fn start_stack(mut esc: Esc) -> Result<(), ()> {
+fn start_stack(mut esc: Esc, sensors: Sensors, params: DriveParams) -> Result<(), ()> {
     let slave = JointSlave::new(&device::DEF, &mut esc).map_err(|_| ())?;
+    let drive = Cia402Drive::new(sensors, params);
+    HANDOVER.put_command(drive.current_command());
     // SAFETY: once, before any ESC interrupt is unmasked (main enables them afterwards).
-    unsafe { ESC.init(EscSide { slave, esc }) };
+    unsafe { ESC.init(EscSide { slave, esc, drive }) };
     Ok(())
 }
 
-/// Builds the drive into [`DRIVE`], in a frame of its own as [`start_stack`].
+/// Stores the current loop on `bridge` in [`LOOP`], in a frame of its own as
+/// [`start_stack`].
 #[inline(never)]
-fn start_drive(hw: JointBoard, params: DriveParams) {
-    let drive = Cia402Drive::new(hw, params);
-    irq::free(|cs| *DRIVE.borrow(cs).borrow_mut() = Some(drive));
+fn start_current_loop(bridge: Bridge, params: &DriveParams) {
+    // SAFETY: once, before the ADC interrupt is unmasked (main enables it afterwards).
+    unsafe {
+        LOOP.init(LoopSide {
+            current: CurrentLoop::new(params),
+            bridge,
+        })
+    };
 }
 
 #[entry]
@@ -297,7 +392,7 @@ fn main() -> ! {
     let home = gpioc.pc10.into_pull_up_input();
 
     let params = DriveParams::default();
-    let mut hw = JointBoard::new(
+    let (mut bridge, sensors) = board::setup(
         dp.TIM1,
         dp.TIM2,
         dp.ADC1,
@@ -311,8 +406,8 @@ fn main() -> ! {
         },
     );
     // Current-sense offsets with the bridge off, then the rotor's electrical zero.
-    let _ = hw.calibrate();
-    hw.align(&mut delay);
+    let _ = bridge.calibrate();
+    bridge.align(&mut delay);
 
     // ET1100 on SPI1: SCK PA5, MISO PA6, MOSI PA7, mode 0 (PDI config 0x0150 = 0x00 in
     // the drive's SII), 90 MHz / 8 = 11.25 MHz; CS PB6.
@@ -341,10 +436,10 @@ fn main() -> ! {
     if esc.init(&mut eeprom_loaded).is_err() {
         fail(&mut leds, &mut delay);
     }
-    if start_stack(esc).is_err() {
+    if start_stack(esc, sensors, params).is_err() {
         fail(&mut leds, &mut delay);
     }
-    start_drive(hw, params);
+    start_current_loop(bridge, &params);
 
     // ESC lines on EXTI: SPI_IRQ PA10 falling (active low; pull-up for an open-drain
     // configuration), SYNC0 PB3 and SYNC1 PB5 rising (push-pull, active high).
@@ -388,7 +483,7 @@ fn main() -> ! {
         if now.wrapping_sub(last_poll) >= POLL_EVERY_TICKS {
             last_poll = now;
             let (state, err) = with_esc_from_thread(|e| {
-                let _ = e.slave.poll(&mut e.esc, &mut DriveHooks);
+                let _ = e.slave.poll(&mut e.esc, &mut DriveHooks(&mut e.drive));
                 (e.slave.state(), e.slave.error_indicated())
             });
             let ms = now / (CURRENT_LOOP_HZ / 1000);

@@ -7,9 +7,9 @@
 //! leg 100 µs, joint 250 µs). A cycle is sustained when
 //! every cycle has the right working counter, the image's SYNC0 handler (EXTI3) ran once for
 //! every SYNC0 pulse the segment delivered (a pulse that comes while the previous one is
-//! still pending is lost), and its longest run (entry to return, joint-loop ticks included)
-//! is shorter than the cycle; the answer is the shortest cycle sustained with every longer
-//! one.
+//! still pending is lost), its longest run (entry to return, joint-loop ticks included)
+//! is shorter than the cycle, and — the joint — its 20 kHz current loop ran once per ADC
+//! sequence; the answer is the shortest cycle sustained with every longer one.
 //!
 //! Printed per cycle: WKC errors, SYNC0 pulses and handler runs, the handler's mean and
 //! longest span at 180 MHz (with the joint-loop ticks that preempt it), its share of the
@@ -61,13 +61,15 @@ impl Step {
         self.pulses.saturating_sub(self.handled + 1)
     }
 
-    /// Right WKC every cycle, no SYNC0 lost, and every handler done within its cycle (the
-    /// next pulse does not find it still running).
+    /// Right WKC every cycle, no SYNC0 lost, every handler done within its cycle (the
+    /// next pulse does not find it still running), and on the joint no current-loop tick
+    /// lost (a sequence still converting when the counts are read is not a loss).
     fn sustained(&self, cycles: u64) -> bool {
         self.wkc_errors == 0
             && self.lost() == 0
             && self.pulses + 1 >= cycles
             && self.max_us < self.cycle_us as f64
+            && self.current_loop.is_none_or(|(lost, _)| lost <= 1)
     }
 }
 

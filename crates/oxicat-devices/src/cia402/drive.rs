@@ -3,7 +3,7 @@
 //!
 //! | event | what runs |
 //! |---|---|
-//! | local timer [`CURRENT_LOOP_TIMER`], 20 kHz | current (q-axis) PI loop: `i_q` reference → voltage; over-current monitor |
+//! | local timer [`CURRENT_LOOP_TIMER`], 20 kHz | [`CurrentLoop`]: current (q-axis) PI loop, `i_q` reference → voltage; over-current monitor — on the drive's [`PowerStage`] when [`JointHw::power_stage`] gives one (the host rig); a board runs the same loop in its ADC interrupt and hands [`CurrentCommand`] and [`CurrentFeedback`] over |
 //! | DC SYNC0 (or the free-run / SM cycle) | encoder → position/velocity actual; state machine; mode set-point generation; position P loop → velocity PI loop → `i_q` reference; following-error and limit monitors; statusword and actual values |
 //!
 //! The joint torque sensor is sampled each cycle and reported in 0x2002 (mN·m, output
@@ -13,21 +13,151 @@ use super::device::OBJECTS;
 use super::fsm::{cw, sw, Events, Fsm, Options, Ramp, State};
 use oxicat_slave::{AlState, AlStatusCode, Application, Od, Var};
 
-/// The hardware the drive runs on.
+/// The joint's sensors, read in the drive's cycle, and where its power stage is.
 pub trait JointHw {
+    /// The power stage's type ([`NoPowerStage`] when the current loop runs elsewhere).
+    type Power: PowerStage;
     /// The motor encoder counter (increments; wraps).
     fn encoder(&mut self) -> i32;
     /// The counter value latched at the last index pulse since the previous call.
     fn index_latch(&mut self) -> Option<i32>;
     /// The home switch input.
     fn home_switch(&mut self) -> bool;
-    /// The measured q-axis current \[A\].
-    fn current(&mut self) -> f32;
     /// The joint torque sensor \[N·m\].
     fn joint_torque(&mut self) -> f32;
+    /// The power stage, when the drive runs its current loop itself on its local timer
+    /// ([`Cia402Drive::run_current_loop`]: the host rig, one context). `None` when the
+    /// loop runs elsewhere with the power stage (a board's ADC interrupt, at a higher
+    /// priority than the cycle): the drive then hands its [`CurrentCommand`] over
+    /// ([`Cia402Drive::current_command`]) and takes the loop's [`CurrentFeedback`]
+    /// ([`Cia402Drive::current_feedback`]).
+    fn power_stage(&mut self) -> Option<&mut Self::Power>;
+}
+
+/// The bridge and its current sensing: what the current loop runs on, every tick.
+pub trait PowerStage {
+    /// The measured q-axis current \[A\].
+    fn current(&mut self) -> f32;
     /// Drives the bridge: `enable` false switches it off (motor coasts), else applies `volts`
     /// on the q axis.
     fn set_voltage(&mut self, enable: bool, volts: f32);
+}
+
+/// The power stage of a drive whose current loop runs elsewhere: uninhabited, so
+/// [`JointHw::power_stage`] can only return `None`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum NoPowerStage {}
+
+impl PowerStage for NoPowerStage {
+    fn current(&mut self) -> f32 {
+        match *self {}
+    }
+    fn set_voltage(&mut self, _enable: bool, _volts: f32) {
+        match *self {}
+    }
+}
+
+/// What the drive's cycle asks of the current loop (a few words: a board hands it to its
+/// current-loop interrupt in a short critical section).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct CurrentCommand {
+    /// The bridge is driven; false: off (the motor coasts), the integrator reset.
+    pub power: bool,
+    /// q-axis current reference \[A\].
+    pub iq_ref: f32,
+    /// Proportional gain \[V/A\] (0x2000:01).
+    pub kp: f32,
+    /// Integral gain \[V/(A·s)\] (0x2000:02).
+    pub ki: f32,
+}
+
+impl Default for CurrentCommand {
+    /// Bridge off, no reference, the drive's default gains.
+    fn default() -> Self {
+        Self {
+            power: false,
+            iq_ref: 0.0,
+            kp: super::device::gains::CURRENT_KP,
+            ki: super::device::gains::CURRENT_KI,
+        }
+    }
+}
+
+/// What the current loop hands back to the cycle.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct CurrentFeedback {
+    /// The last measured q-axis current \[A\].
+    pub iq: f32,
+    /// A tick since the last hand-over measured more than the trip level
+    /// ([`DriveParams::max_current`]).
+    pub overcurrent: bool,
+}
+
+/// The 20 kHz q-axis current loop: PI from the [`CurrentCommand`] and the measured current
+/// to the q-axis voltage, and the over-current monitor. Its own value, so that it runs
+/// where the power stage is: inside the drive on the host rig
+/// ([`Cia402Drive::run_current_loop`]), in the ADC interrupt on a board, the same
+/// [`CurrentLoop::step`] in both.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct CurrentLoop {
+    cmd: CurrentCommand,
+    integral: f32,
+    feedback: CurrentFeedback,
+    max_current: f32,
+    bus_voltage: f32,
+}
+
+impl CurrentLoop {
+    /// A loop at rest (bridge off) with the trip level and voltage limit of `params`.
+    pub fn new(params: &DriveParams) -> Self {
+        Self {
+            cmd: CurrentCommand::default(),
+            integral: 0.0,
+            feedback: CurrentFeedback::default(),
+            max_current: params.max_current,
+            bus_voltage: params.bus_voltage,
+        }
+    }
+
+    /// The command the loop runs on.
+    pub fn command(&self) -> CurrentCommand {
+        self.cmd
+    }
+
+    /// Replaces the command (takes effect at the next [`CurrentLoop::step`]).
+    pub fn set_command(&mut self, cmd: CurrentCommand) {
+        self.cmd = cmd;
+    }
+
+    /// One tick on `stage`: measures the current, flags an over-current, and drives the
+    /// bridge — off (integrator reset) without power, else the PI output clamped to the
+    /// bus voltage.
+    pub fn step(&mut self, stage: &mut impl PowerStage) {
+        let dt = 1.0 / CURRENT_LOOP_HZ as f32;
+        let i = stage.current();
+        self.feedback.iq = i;
+        if i.abs() > self.max_current {
+            self.feedback.overcurrent = true;
+        }
+        if !self.cmd.power {
+            self.integral = 0.0;
+            stage.set_voltage(false, 0.0);
+            return;
+        }
+        let vb = self.bus_voltage;
+        let e = self.cmd.iq_ref - i;
+        self.integral = (self.integral + self.cmd.ki * e * dt).clamp(-vb, vb);
+        let v = (self.cmd.kp * e + self.integral).clamp(-vb, vb);
+        stage.set_voltage(true, v);
+    }
+
+    /// The measurement since the last take: the last current, and whether a tick since
+    /// tripped (the flag is cleared).
+    pub fn take_feedback(&mut self) -> CurrentFeedback {
+        let f = self.feedback;
+        self.feedback.overcurrent = false;
+        f
+    }
 }
 
 /// Local timer of the current loop.
@@ -361,13 +491,9 @@ pub struct Cia402Drive<H: JointHw> {
     pub params: DriveParams,
     fsm: Fsm,
     io: Option<Io>,
-    // Current loop (timer context).
-    power: bool,
-    iq_ref: f32,
-    iq_int: f32,
-    iq_meas: f32,
-    kp_i: f32,
-    ki_i: f32,
+    /// The current loop: run here on the host rig; on a board, its command and the last
+    /// feedback, handed to and from the loop in the ADC interrupt.
+    current: CurrentLoop,
     // Position / velocity (cycle context).
     zero: i32,
     last_raw: Option<i32>,
@@ -417,12 +543,7 @@ impl<H: JointHw> Cia402Drive<H> {
             params,
             fsm: Fsm::new(),
             io: None,
-            power: false,
-            iq_ref: 0.0,
-            iq_int: 0.0,
-            iq_meas: 0.0,
-            kp_i: super::device::gains::CURRENT_KP,
-            ki_i: super::device::gains::CURRENT_KI,
+            current: CurrentLoop::new(&params),
             zero: 0,
             last_raw: None,
             vel: 0.0,
@@ -467,7 +588,25 @@ impl<H: JointHw> Cia402Drive<H> {
 
     /// The current reference of the current loop \[A\].
     pub fn current_reference(&self) -> f32 {
-        self.iq_ref
+        self.current.cmd.iq_ref
+    }
+
+    /// What the current loop is to do, as the last hook left it: a board whose loop runs
+    /// in an interrupt hands it over after each hook ([`JointHw::power_stage`]).
+    pub fn current_command(&self) -> CurrentCommand {
+        self.current.command()
+    }
+
+    /// Takes the current loop's measurement (the host rig after each tick, a board before
+    /// each hook): the q-axis current for the actual values, an over-current as a fault.
+    pub fn current_feedback(&mut self, fb: CurrentFeedback) {
+        self.current.feedback = CurrentFeedback {
+            iq: fb.iq,
+            overcurrent: false,
+        };
+        if fb.overcurrent {
+            self.raise_fault(error::OVERCURRENT);
+        }
     }
 
     /// Takes the next queued emergency `(error code, error register)` (the stack takes them
@@ -624,8 +763,8 @@ impl<H: JointHw> Cia402Drive<H> {
         let kp_v = f32o(3, super::device::gains::VELOCITY_KP);
         let ki_v = f32o(4, super::device::gains::VELOCITY_KI);
         let kp_p = f32o(5, super::device::gains::POSITION_KP);
-        self.kp_i = f32o(1, super::device::gains::CURRENT_KP);
-        self.ki_i = f32o(2, super::device::gains::CURRENT_KI);
+        self.current.cmd.kp = f32o(1, super::device::gains::CURRENT_KP);
+        self.current.cmd.ki = f32o(2, super::device::gains::CURRENT_KI);
 
         // Feedback.
         let raw = self.hw.encoder();
@@ -644,7 +783,7 @@ impl<H: JointHw> Cia402Drive<H> {
         let position_mode = matches!(self.active_mode, mode::PP | mode::HM | mode::IP | mode::CSP);
         let fe_window = io.param(od, 0x6065, 0, u32::MAX);
         let fe_timeout = od.get::<u16>(0x6066, 0).unwrap_or(0) as f32 * 1e-3;
-        let fe_over = self.power
+        let fe_over = self.current.cmd.power
             && position_mode
             && fe_window != u32::MAX
             && fe.unsigned_abs() > fe_window
@@ -727,10 +866,10 @@ impl<H: JointHw> Cia402Drive<H> {
         let mut oms13 = false;
 
         if !state.powered() || self.fault_coasting() {
-            self.power = false;
+            self.current.cmd.power = false;
             self.prof = Profile::at(pos);
             self.vel_int = 0.0;
-            self.iq_ref = 0.0;
+            self.current.cmd.iq_ref = 0.0;
         } else if let Some(stop) = self.fsm.stopping() {
             self.stop_ramp(
                 stop.ramp,
@@ -918,11 +1057,11 @@ impl<H: JointHw> Cia402Drive<H> {
                     }
                 }
             }
-            self.power = true;
+            self.current.cmd.power = true;
         }
 
         // Cascade.
-        if self.power {
+        if self.current.cmd.power {
             let torque = match torque_only {
                 Some(t) => {
                     self.vel_int = 0.0;
@@ -944,7 +1083,7 @@ impl<H: JointHw> Cia402Drive<H> {
             if (torque - torque_limit).abs() < 1e-9 || (torque + torque_limit).abs() < 1e-9 {
                 self.limit_active = true;
             }
-            self.iq_ref = torque / self.params.kt;
+            self.current.cmd.iq_ref = torque / self.params.kt;
         }
 
         // Actual values and statusword.
@@ -953,12 +1092,12 @@ impl<H: JointHw> Cia402Drive<H> {
         st(od, io.position_demand, self.prof.pos);
         st(od, io.velocity_actual, self.vel as i32);
         st(od, io.following_error, fe_now);
-        let t_act = self.iq_meas * self.params.kt;
+        let t_act = self.current.feedback.iq * self.params.kt;
         st(od, io.torque_actual, (t_act / rated * 1000.0) as i16);
         st(
             od,
             io.current_actual,
-            (self.iq_meas / rated_i * 1000.0) as i16,
+            (self.current.feedback.iq / rated_i * 1000.0) as i16,
         );
         st(
             od,
@@ -1025,7 +1164,7 @@ impl<H: JointHw> Cia402Drive<H> {
             }
             Ramp::Coast => {}
         }
-        self.power = true;
+        self.current.cmd.power = true;
     }
 
     #[allow(clippy::too_many_arguments)]
@@ -1096,24 +1235,14 @@ impl<H: JointHw> Cia402Drive<H> {
         }
     }
 
-    /// The 20 kHz current loop.
+    /// The 20 kHz current loop on the drive's own power stage ([`JointHw::power_stage`];
+    /// nothing without one): one [`CurrentLoop::step`], then its feedback.
     pub fn run_current_loop(&mut self) {
-        let dt = 1.0 / CURRENT_LOOP_HZ as f32;
-        let i = self.hw.current();
-        self.iq_meas = i;
-        if i.abs() > self.params.max_current {
-            self.raise_fault(error::OVERCURRENT);
+        if let Some(stage) = self.hw.power_stage() {
+            self.current.step(stage);
+            let fb = self.current.take_feedback();
+            self.current_feedback(fb);
         }
-        if !self.power {
-            self.iq_int = 0.0;
-            self.hw.set_voltage(false, 0.0);
-            return;
-        }
-        let vb = self.params.bus_voltage;
-        let e = self.iq_ref - i;
-        self.iq_int = (self.iq_int + self.ki_i * e * dt).clamp(-vb, vb);
-        let v = (self.kp_i * e + self.iq_int).clamp(-vb, vb);
-        self.hw.set_voltage(true, v);
     }
 }
 
@@ -1134,9 +1263,11 @@ impl<const N: usize, H: JointHw> Application<N> for Cia402Drive<H> {
         self.in_op = to == AlState::Op;
         if matches!(to, AlState::Init | AlState::PreOp) {
             // No cycle runs below SAFEOP: the drive cannot control, so it lets go.
-            self.power = false;
-            self.iq_ref = 0.0;
-            self.hw.set_voltage(false, 0.0);
+            self.current.cmd.power = false;
+            self.current.cmd.iq_ref = 0.0;
+            if let Some(stage) = self.hw.power_stage() {
+                stage.set_voltage(false, 0.0);
+            }
             let _ = od.set(0x6040, 0, 0u16);
         }
         Ok(())

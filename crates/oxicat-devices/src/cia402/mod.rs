@@ -6,8 +6,9 @@
 //!   option codes 0x605A–0x605E);
 //! - [`device`]: the object dictionary, 0x1000 = 0x00020192, default and configurable PDOs;
 //! - [`drive`]: modes PP/PV/PT/HM/IP/CSP/CSV/CST, the abort connection option code 0x6007
-//!   and the cascaded loops on [`JointHw`]
-//!   (current at 20 kHz on a local timer, velocity and position each DC cycle).
+//!   and the cascaded loops on [`JointHw`] (velocity and position each DC cycle) and
+//!   [`PowerStage`] (the [`CurrentLoop`] at 20 kHz: on a local timer in the drive on the
+//!   host, in the ADC interrupt on the board, command and feedback handed over).
 //!
 //! The joint torque sensor is reported in manufacturer object 0x2002 (mN·m).
 
@@ -29,6 +30,7 @@ mod tests;
 
 pub use device::DEF;
 pub use drive::{
-    error, mode, Cia402Drive, DriveParams, JointHw, CURRENT_LOOP_HZ, CURRENT_LOOP_TIMER,
+    error, mode, Cia402Drive, CurrentCommand, CurrentFeedback, CurrentLoop, DriveParams, JointHw,
+    NoPowerStage, PowerStage, CURRENT_LOOP_HZ, CURRENT_LOOP_TIMER,
 };
 pub use fsm::{Command, Events, Fsm, Options, Ramp, State};

@@ -17,7 +17,7 @@
 //! [`JointBench`] is the same firmware and plant without an ESC, for tests of the drive
 //! itself at exactly 1 kHz.
 
-use crate::cia402::{device, Cia402Drive, DriveParams, JointHw, CURRENT_LOOP_TIMER};
+use crate::cia402::{device, Cia402Drive, DriveParams, JointHw, PowerStage, CURRENT_LOOP_TIMER};
 use oxicat_esc::Esc;
 pub use oxicat_plant::bldc_joint::{BldcJoint, BldcJointParams};
 use oxicat_slave::{Od, Slave};
@@ -46,6 +46,7 @@ pub struct JointBoard {
 }
 
 impl JointHw for JointBoard {
+    type Power = Self;
     fn encoder(&mut self) -> i32 {
         self.joint.encoder_count()
     }
@@ -55,11 +56,18 @@ impl JointHw for JointBoard {
     fn home_switch(&mut self) -> bool {
         self.joint.home_switch()
     }
-    fn current(&mut self) -> f32 {
-        self.joint.current as f32
-    }
     fn joint_torque(&mut self) -> f32 {
         self.joint.gear_torque() as f32
+    }
+    /// The drive runs the current loop itself, on its local timer: one context.
+    fn power_stage(&mut self) -> Option<&mut Self> {
+        Some(self)
+    }
+}
+
+impl PowerStage for JointBoard {
+    fn current(&mut self) -> f32 {
+        self.joint.current as f32
     }
     fn set_voltage(&mut self, enable: bool, volts: f32) {
         self.joint.set_voltage(enable, volts as f64);
