@@ -53,6 +53,31 @@ impl Board {
             .map_err(|e| fault(pc, format!("register write: {e:?}")))
     }
 
+    /// The core after a system reset (ARMv7-M TakeReset): thread mode on the main stack,
+    /// PRIMASK/BASEPRI/FAULTMASK clear, no FP context, flags and IT state clear, LR
+    /// 0xFFFF_FFFF; SP and PC from the vector table at the start of flash (the boot memory;
+    /// SYSCFG's remap is back at its reset value). R0..R12 keep what they held (UNKNOWN).
+    pub(crate) fn reset_core(&mut self) -> Result<(), EmuError> {
+        self.set_control(0)?;
+        for r in [
+            RegisterARM::PRIMASK,
+            RegisterARM::BASEPRI,
+            RegisterARM::FAULTMASK,
+            RegisterARM::FPSCR,
+        ] {
+            self.set_reg(r, 0)?;
+        }
+        let cpsr = self.reg(RegisterARM::CPSR)?;
+        self.set_reg(RegisterARM::CPSR, cpsr & !IT_BITS)?;
+        self.set_reg(RegisterARM::APSR_NZCV, 0)?;
+        let mut vt = [0u32; 2];
+        self.read_words(FLASH.0 as u32, &mut vt)?;
+        self.set_reg(RegisterARM::SP, vt[0] & !3)?;
+        self.set_reg(RegisterARM::LR, 0xFFFF_FFFF)?;
+        self.pc = vt[1];
+        Ok(())
+    }
+
     /// PRIMASK, BASEPRI, FAULTMASK as the core has them.
     pub(crate) fn masks(&self) -> Result<Masks, EmuError> {
         Ok(Masks {

@@ -53,6 +53,7 @@ pub mod cia402;
 mod cpu;
 pub mod dma;
 mod exti;
+pub mod iwdg;
 pub mod laelaps;
 pub mod node;
 mod nvic;
@@ -800,6 +801,15 @@ impl Board {
                 drop(p);
                 return Err(self.fault(e));
             }
+            if p.iwdg.expires().is_some_and(|t| t <= p.cycles) {
+                // The IWDG ran out: a system reset of the MCU, the board's clock running on.
+                p.watchdog_reset();
+                drop(p);
+                self.sleeping = false;
+                self.event = false;
+                self.fpca = false;
+                return self.reset_core();
+            }
             p.sample_pins();
             let lines = p.irq_lines();
             p.scs.assert_lines(lines);
@@ -875,6 +885,25 @@ impl Board {
             }
         }
         Ok(false)
+    }
+
+    /// System resets the independent watchdog caused so far ([`iwdg`]).
+    pub fn watchdog_resets(&self) -> u64 {
+        self.periph.borrow().watchdog_resets
+    }
+
+    /// The LSI frequency that clocks the IWDG \[Hz\] ([`iwdg::LSI_HZ`] unless set).
+    pub fn lsi_hz(&self) -> u32 {
+        self.periph.borrow().iwdg.lsi_hz
+    }
+
+    /// Sets the LSI frequency \[Hz\] from now on (17–47 kHz on silicon; 32 kHz nominal,
+    /// the default): the IWDG's count so far stays, the rest runs at the new rate.
+    pub fn set_lsi_hz(&mut self, hz: u32) {
+        let mut p = self.periph.borrow_mut();
+        let now = p.cycles;
+        p.iwdg.set_lsi_hz(hz, now);
+        p.wake_at = 0;
     }
 
     /// Instructions executed so far (counted per translated block, like the cycles).

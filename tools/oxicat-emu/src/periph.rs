@@ -11,6 +11,7 @@ use crate::chip::{ChipFrame, ChipKind, EscChip};
 
 use crate::dma::{self, Dma, DmaBurst, Run, DMAS};
 use crate::exti::{Exti, EXTI_BASE, SYSCFG_BASE};
+use crate::iwdg::{self, Iwdg, IWDG_BASE, WWDG_BASE};
 use crate::nvic::{Masks, Scs, DWT_BASE};
 use crate::timers::{Timer, TIMERS};
 use crate::usart::{Usart, USARTS};
@@ -22,6 +23,15 @@ pub(crate) const PERIPH: (u64, u64) = (0x4000_0000, 0x8_0000);
 pub(crate) const RCC: u64 = 0x4002_3800;
 const RCC_CFGR: u64 = RCC + 0x08;
 const RCC_DCKCFGR: u64 = RCC + 0x8C;
+/// RCC_CSR: LSION/LSIRDY, RMVF and the reset flags.
+pub(crate) const RCC_CSR: u64 = RCC + 0x74;
+/// RCC_CSR reset flags (bits 25..31: BOR, PIN, POR, SFT, IWDG, WWDG, LPWR) and RMVF.
+const CSR_FLAGS: u32 = 0xFE00_0000;
+const CSR_RMVF: u32 = 1 << 24;
+/// RCC_CSR.IWDGRSTF.
+pub(crate) const CSR_IWDGRSTF: u32 = 1 << 29;
+/// RCC_CSR.PINRSTF: set with every reset, as an internal reset drives NRST low.
+pub(crate) const CSR_PINRSTF: u32 = 1 << 26;
 const FLASH_R: u64 = 0x4002_3C00;
 const PWR: u64 = 0x4000_7000;
 /// GPIOA; ports B..H follow every 0x400.
@@ -96,6 +106,10 @@ pub(crate) struct Periph {
     /// A stream just enabled whose items the engine fetches from memory: (DMA index,
     /// stream, address, items, item size).
     pub dma_fetch: Option<(usize, usize, u32, usize, usize)>,
+    /// The independent watchdog.
+    pub iwdg: Iwdg,
+    /// System resets the IWDG caused.
+    pub watchdog_resets: u64,
 }
 
 impl Periph {
@@ -112,6 +126,8 @@ impl Periph {
             usart_poll: None,
             dmas: DMAS.iter().map(|&(b, n)| Dma::new(b, n)).collect(),
             dma_fetch: None,
+            iwdg: Iwdg::default(),
+            watchdog_resets: 0,
             spi_idle_from: 0,
             spi_sclk_override: None,
             regs: vec![0; (PERIPH.1 / 4) as usize],
@@ -154,11 +170,54 @@ impl Periph {
     fn reset(&mut self) {
         self.set(RCC, 0x0000_0083); // HSION, HSIRDY
         self.set(RCC + 0x04, 0x2400_3010); // PLLCFGR
-        self.set(RCC + 0x74, 0x0E00_0000); // CSR: reset flags
+        self.set(RCC_CSR, 0x0E00_0000); // CSR: reset flags (power-on: POR, PIN, BOR)
         self.set(PWR + 0x04, 1 << 14); // CSR: VOSRDY
         self.set(GPIOA, 0xA800_0000);
         self.set(GPIOA + 0x400, 0x0000_0280);
         self.set(SPI1 + 0x08, 0x0002); // SR: TXE
+    }
+
+    /// A system reset by the IWDG (RM0390 §6.1.2): every peripheral back to its reset
+    /// values, RCC_CSR's flags kept with IWDGRSTF and PINRSTF added. What is not the MCU's
+    /// stays: the ESC chip (a CS-low frame in flight ends, as CS goes high), the pins the
+    /// board's world drives, scheduled stimuli, the 1-Wire lines, the board's clock and
+    /// counters, DBGMCU (reset by power-on only) and the LSI frequency.
+    pub fn watchdog_reset(&mut self) {
+        let flags = self.reg(RCC_CSR) & CSR_FLAGS;
+        if let Some(f) = self.frame.take() {
+            self.chip.end(f);
+        }
+        let taken = self.scs.taken;
+        let lines: Vec<_> = self.usarts.iter_mut().map(|u| u.line.take()).collect();
+        self.regs.iter_mut().for_each(|r| *r = 0);
+        self.reset();
+        self.set(RCC_CSR, flags | CSR_IWDGRSTF | CSR_PINRSTF);
+        self.scs = Scs::new();
+        self.scs.taken = taken;
+        self.exti = Exti::default();
+        self.timers = TIMERS.iter().map(|k| Timer::new(*k)).collect();
+        self.adc = Adc::default();
+        self.usarts = USARTS
+            .iter()
+            .zip(lines)
+            .map(|(&(b, n, a), line)| {
+                let mut u = Usart::new(b, n, a);
+                u.line = line;
+                u
+            })
+            .collect();
+        self.usart_poll = None;
+        self.dmas = DMAS.iter().map(|&(b, n)| Dma::new(b, n)).collect();
+        self.dma_fetch = None;
+        self.iwdg.reset();
+        self.spi_rx = 0xFF;
+        self.rxne = false;
+        self.spi_idle_from = self.cycles;
+        self.syst_poll = None;
+        self.watch = None;
+        self.profile.abandon();
+        self.wake_at = 0;
+        self.watchdog_resets += 1;
     }
 
     /// Cycles the core ran (not asleep): what DWT CYCCNT counts.
@@ -445,6 +504,7 @@ impl Periph {
             .chain(self.adc.busy_until())
             .chain(self.adc_trigger_after(self.adc.last).ok().flatten())
             .chain(self.dma_next_event())
+            .chain(self.iwdg.expires())
             .min()
     }
 
@@ -568,6 +628,23 @@ impl Periph {
             }
             a if Self::usart_index(a).is_some() => self.usart_read(a),
             a if Self::dma_index(a).is_some() => self.dma_read(a),
+            a if (IWDG_BASE..IWDG_BASE + 0x400).contains(&a) => {
+                match self.iwdg.read(a - IWDG_BASE, self.cycles) {
+                    Ok(v) => v,
+                    Err(e) => {
+                        self.fault.get_or_insert(e);
+                        self.wake_at = 0;
+                        0
+                    }
+                }
+            }
+            a if (WWDG_BASE..WWDG_BASE + 0x400).contains(&a) => {
+                self.fault.get_or_insert(iwdg::wwdg_fault(a));
+                self.wake_at = 0;
+                0
+            }
+            // LSI is forced on while the IWDG runs.
+            a if a == RCC_CSR && self.iwdg.running() => self.reg(a) | 2,
             a if (SYSCFG_BASE..EXTI_BASE + 0x400).contains(&a) => {
                 if !(SYSCFG_BASE + 0x30..EXTI_BASE).contains(&a) {
                     self.exti.read(a)
@@ -620,6 +697,17 @@ impl Periph {
             }
             a if Self::usart_index(a).is_some() => self.usart_write(a, v),
             a if Self::dma_index(a).is_some() => self.dma_write(a, v),
+            a if (IWDG_BASE..IWDG_BASE + 0x400).contains(&a) => {
+                if let Err(e) = self.iwdg.write(a - IWDG_BASE, v, self.cycles) {
+                    self.fault.get_or_insert(e);
+                }
+                // A start or a reload may bring the expiry before the engine's next stop.
+                self.wake_at = self.wake_at.min(self.iwdg.expires().unwrap_or(u64::MAX));
+            }
+            a if (WWDG_BASE..WWDG_BASE + 0x400).contains(&a) => {
+                self.fault.get_or_insert(iwdg::wwdg_fault(a));
+                self.wake_at = 0;
+            }
             a if a == RCC => {
                 // Ready flags follow their enables: HSE 16/17, PLL 24/25, PLLI2S 26/27,
                 // PLLSAI 28/29; HSI stays on.
@@ -646,7 +734,15 @@ impl Periph {
                 self.wake_at = 0;
             }
             a if a == RCC + 0x70 => self.set(a, (v & !2) | ((v & 1) << 1)),
-            a if a == RCC + 0x74 => self.set(a, (v & !2) | ((v & 1) << 1)),
+            a if a == RCC_CSR => {
+                // LSIRDY follows LSION; the reset flags are read-only, RMVF clears them.
+                let flags = if v & CSR_RMVF != 0 {
+                    0
+                } else {
+                    self.reg(a) & CSR_FLAGS
+                };
+                self.set(a, flags | (v & 1) | ((v & 1) << 1));
+            }
             a if a == PWR => {
                 self.set(a, v);
                 let csr = (self.reg(PWR + 4) & !(3 << 16)) | (v & (3 << 16));

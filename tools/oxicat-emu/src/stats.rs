@@ -115,6 +115,11 @@ impl Profile {
             .unwrap_or_default()
     }
 
+    /// The handlers in progress will never return (a system reset): dropped uncounted.
+    pub fn abandon(&mut self) {
+        self.frames.clear();
+    }
+
     /// Clears the figures (invocations in progress count from `now`).
     pub fn reset(&mut self, now: u64) {
         self.stats = vec![HandlerStats::default(); NUM_EXC];

@@ -363,3 +363,97 @@ fn dma_feeds_a_timer_compare_register_one_item_per_update_and_raises_transfer_co
     assert!(word(&b, 0x18) > n, "the timer runs on");
     assert_eq!(word(&b, 0x04), 1);
 }
+
+/// The IWDG starved (`iwdg_starve.s`: PR /4, RLR 79, i.e. 80 ticks of 125 µs at the
+/// nominal 32 kHz LSI = 10 ms): the MCU is reset the configured time after the last
+/// reload, restarts from its vector table with SRAM intact, and RCC_CSR tells it why.
+#[test]
+fn a_starved_iwdg_resets_the_mcu_after_its_timeout_with_iwdgrstf_set() {
+    let mut b = board(include_bytes!("asm/iwdg_starve.elf"));
+    assert_eq!(b.lsi_hz(), 32_000, "the nominal LSI");
+    let fed = b
+        .run_until(20, 1_000_000, |b| word(b, 0x20) == 1)
+        .unwrap_or_else(|e| panic!("{e}"));
+    assert!(fed, "the program did not start its IWDG");
+    let fed_ns = b.time_ns();
+    let reset = b
+        .run_until(1_000, 5_000_000, |b| b.watchdog_resets() == 1)
+        .unwrap_or_else(|e| panic!("{e}"));
+    assert!(reset, "no reset in 5 M cycles: PC {:#010x}", b.pc());
+    let after = b.time_ns() - fed_ns;
+    assert!(
+        (10_000_000..10_100_000).contains(&after),
+        "reset {after} ns after the reload, not 10 ms"
+    );
+    run_done(&mut b);
+    assert_eq!(
+        word(&b, 0x04),
+        2,
+        "booted twice, SRAM kept across the reset"
+    );
+    assert_eq!(
+        word(&b, 0x08),
+        0x0E00_0000,
+        "power-on: PORRSTF, PINRSTF, BORRSTF"
+    );
+    assert_eq!(word(&b, 0x10), 0, "RMVF cleared them");
+    assert_eq!(
+        word(&b, 0x0C),
+        (1 << 29) | (1 << 26),
+        "after the watchdog: IWDGRSTF (and PINRSTF, NRST driven low)"
+    );
+    assert_eq!(word(&b, 0x14), 0);
+    // The reset stopped the IWDG: the second boot sleeps on without another.
+    b.run_to_ns(b.time_ns() + 50_000_000).unwrap();
+    assert_eq!(b.watchdog_resets(), 1);
+    assert_eq!(word(&b, 0x04), 2);
+}
+
+/// The same IWDG reloaded every 1 ms from SysTick: no reset in 100 ms; and a slower LSI
+/// (17 kHz, the datasheet's minimum) only stretches a starved one's timeout.
+#[test]
+fn a_fed_iwdg_never_resets_and_the_lsi_frequency_sets_the_timeout() {
+    let mut b = board(include_bytes!("asm/iwdg_feed.elf"));
+    b.run_to_ns(100_000_000).unwrap();
+    assert_eq!(b.watchdog_resets(), 0);
+    assert_eq!(word(&b, 0x04), 1, "one boot");
+    assert!(
+        word(&b, 0x08) >= 99,
+        "fed every ms: {} ticks",
+        word(&b, 0x08)
+    );
+
+    let mut b = board(include_bytes!("asm/iwdg_starve.elf"));
+    b.set_lsi_hz(17_000);
+    b.run_until(20, 1_000_000, |b| word(b, 0x20) == 1).unwrap();
+    let fed_ns = b.time_ns();
+    b.run_until(1_000, 10_000_000, |b| b.watchdog_resets() == 1)
+        .unwrap();
+    let after = b.time_ns() - fed_ns;
+    // 320 LSI periods at 17 kHz: 18.8 ms.
+    assert!(
+        (18_820_000..18_900_000).contains(&after),
+        "reset {after} ns after the reload"
+    );
+}
+
+/// The window watchdog is not modelled: an image that touches it stops, naming the
+/// register, instead of running on a watchdog that never fires.
+#[test]
+fn the_window_watchdog_is_a_fault_naming_its_register() {
+    // The starve program with its first IWDG key write moved to WWDG_CR (0x4000_2C00).
+    let mut elf = include_bytes!("asm/iwdg_starve.elf").to_vec();
+    let key = 0x4000_3000u32.to_le_bytes();
+    let at = elf
+        .windows(4)
+        .position(|w| w == key)
+        .expect("IWDG_KR in the literal pool");
+    elf[at..at + 4].copy_from_slice(&0x4000_2C00u32.to_le_bytes());
+    let mut b = board(&elf);
+    match b.run(100_000) {
+        Err(EmuError::Fault { reason, .. }) => {
+            assert!(reason.contains("WWDG_CR (0x40002c00)"), "{reason}")
+        }
+        other => panic!("expected a fault, got {other:?}"),
+    }
+}
