@@ -5,6 +5,12 @@
 //! Main loop as on the seeds' boards: the LAN9252 IRQ (active low, open drain), SYNC0 and
 //! SYNC1 pins are polled; SYNC0/SYNC1 act on their rising edge, the IRQ while asserted;
 //! `poll` runs the ESM and the mailbox every pass.
+//!
+//! The independent watchdog runs from boot with a 200 ms timeout and is fed once per pass
+//! of the main loop (every handler runs from it): a firmware that hangs is reset into INIT.
+//! After such a reset (RCC_CSR.IWDGRSTF) the image reports it to the master with a CoE
+//! emergency 0x6010 once its mailbox runs (PREOP). The hang jumper (PC0 to GND, pull-up on)
+//! makes the image hang in OP on purpose, to try that path on a bench or in the emulator.
 #![no_std]
 #![no_main]
 
@@ -13,17 +19,25 @@ use embedded_hal::digital::InputPin;
 use embedded_hal_bus::spi::ExclusiveDevice;
 use oxicat_devices::demo::{self, Buttons, Demo, Leds};
 use oxicat_pdi::{Lan9252, Lan9252Config, Pins};
-use oxicat_slave::{Pdi, Slave};
+use oxicat_slave::{AlState, Pdi, Slave};
 use panic_halt as _;
 use stm32f4xx_hal::{
     gpio::{Output, Pin},
     pac,
     prelude::*,
     spi::{Mode, Phase, Polarity, Spi},
+    watchdog::IndependentWatchdog,
 };
 
 /// Mailbox buffer size of the stack: the demo's mailboxes are 128 bytes.
 const MBX: usize = 128;
+
+/// IWDG timeout: a hang resets the MCU this long after the last feed (at the LSI's nominal
+/// 32 kHz; the LSI's 17–47 kHz spread makes it 136..376 ms on a given part).
+const WATCHDOG_MS: u32 = 200;
+
+/// CoE emergency error code after a watchdog reset (CiA 301: "software reset (watchdog)").
+const EMCY_WATCHDOG_RESET: u16 = 0x6010;
 
 /// LD2-style indicator LEDs on PC8 (blue) and PC9 (red), active high.
 struct BoardLeds {
@@ -61,6 +75,14 @@ fn fail(leds: &mut BoardLeds, delay: &mut impl embedded_hal::delay::DelayNs) -> 
 fn main() -> ! {
     let dp = pac::Peripherals::take().unwrap();
     let cp = cortex_m::Peripherals::take().unwrap();
+    // Why the MCU (re)started: RCC_CSR's reset flags, cleared (RMVF) for the next reset.
+    let csr = dp.RCC.csr().read();
+    let (reset_flags, watchdog_reset) = (csr.bits(), csr.wdgrstf().bit_is_set()); // IWDGRSTF
+    dp.RCC.csr().modify(|_, w| w.rmvf().set_bit());
+    // The watchdog from here on: /256 and RLR 24, 25 LSI ticks of 8 ms. Start counts down
+    // from 0xFFF (RM0390 §20.3.1: 32.8 s), the first feed below loads the 200 ms.
+    let mut watchdog = IndependentWatchdog::new(dp.IWDG);
+    watchdog.start(WATCHDOG_MS.millis());
     // 8 MHz HSE (ST-LINK MCO on the Nucleo) -> 180 MHz SYSCLK, APB2 90 MHz.
     let rcc = dp.RCC.constrain();
     let clocks = rcc
@@ -81,6 +103,8 @@ fn main() -> ! {
         red: gpioc.pc9.into_push_pull_output(),
     };
     let buttons = BoardButtons(gpioc.pc13.into_floating_input());
+    // The hang jumper: PC0 (A5: CN8-6, CN7-38) pulled to GND makes the image hang in OP.
+    let hang = gpioc.pc0.into_pull_up_input();
 
     // SPI1: SCK PA5, MISO PA6, MOSI PA7, mode 0 (the LAN9252 also accepts mode 3),
     // 90 MHz / 4 = 22.5 MHz (the LAN9252's read 0x03 allows up to 30 MHz).
@@ -110,6 +134,9 @@ fn main() -> ! {
     // The LAN9252 needs ~ 30 ms after power-on before the SPI answers; init's BYTE_TEST
     // polling covers the rest.
     delay.delay_ms(50);
+    // From here a hang resets the MCU within 200 ms (an ESC that does not answer too:
+    // `fail` does not feed, so the image retries the chip every ~250 ms).
+    watchdog.feed();
     if esc.init().is_err() {
         fail(&mut leds, &mut delay);
     }
@@ -121,7 +148,14 @@ fn main() -> ! {
     };
 
     let (mut sync0_was, mut sync1_was) = (false, false);
+    let mut report_reset = watchdog_reset;
     loop {
+        watchdog.feed();
+        if slave.state() == AlState::Op && hang.is_low() {
+            // On purpose: no more ESC access, no more feeding; the IWDG resets the MCU.
+            #[allow(clippy::empty_loop)]
+            loop {}
+        }
         let lines = esc.irq_lines();
         if lines.pdi_irq {
             let _ = slave.on_pdi_irq(&mut esc, &mut app);
@@ -135,5 +169,11 @@ fn main() -> ! {
         sync0_was = lines.sync0;
         sync1_was = lines.sync1;
         let _ = slave.poll(&mut esc, &mut app);
+        // Queued once the mailbox runs (PREOP and up); the data carry RCC_CSR's reset
+        // flags (bits 31..24). The error register stays 0: the fault is past.
+        if report_reset {
+            let data = [(reset_flags >> 24) as u8, 0, 0, 0, 0];
+            report_reset = !slave.emergency(EMCY_WATCHDOG_RESET, 0, data);
+        }
     }
 }

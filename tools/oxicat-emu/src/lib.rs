@@ -16,7 +16,8 @@
 //! | block | model |
 //! |---|---|
 //! | flash, SRAM | 512 KiB at 0x0800_0000 (the ELF's load segments at their load addresses), 128 KiB at 0x2000_0000 |
-//! | RCC | reset values; HSE/PLL/PLLI2S/PLLSAI/LSE/LSI ready flags follow their enables, SWS follows SW; CFGR's APB prescalers (and DCKCFGR.TIMPRE) set the timer clocks |
+//! | RCC | reset values; HSE/PLL/PLLI2S/PLLSAI/LSE/LSI ready flags follow their enables, SWS follows SW; CFGR's APB prescalers (and DCKCFGR.TIMPRE) set the timer clocks; CSR's reset flags read-only (power-on: POR, PIN, BOR; a watchdog reset adds IWDGRSTF and PINRSTF), RMVF clears them |
+//! | IWDG | [`iwdg`]: KR keys (0xCCCC start from 0xFFF, 0xAAAA reload from RLR, 0x5555 unlock), PR /4../256, RLR, SR PVU/RVU for 5 LSI periods after a write; counts at the LSI ([`iwdg::LSI_HZ`] = 32 kHz unless [`Board::set_lsi_hz`]); on expiry a system reset: the core restarts from the vector table (SP, reset vector, thread mode, masks clear), every peripheral returns to its reset values, SRAM, the ESC chip, the board's clock and what the board's world drives stay ([`Board::watchdog_resets`]). WWDG: any access is a fault |
 //! | PWR | VOSRDY set; over-drive ready flags follow ODEN/ODSWEN |
 //! | FLASH | ACR stored (latency reads back) |
 //! | bit-band alias | 0x4200_0000.. : a word per peripheral bit, read-modify-write of the register (through its read, as the bus does) |
@@ -27,7 +28,7 @@
 //! | TIM1..TIM14 | one model (`timers`): PSC/ARR (preloaded)/CNT from the cycle count at the APB timer clock, up/down/center-aligned, RCR (TIM1/8), UDIS/URS/OPM, UG; UIF → update IRQ; CCR/CCMR/CCER stored, PWM duty ([`Board::pwm_duty`]); encoder mode (SMS 1/2/3) from [`Board::set_encoder`]; input capture with CCxIF/CCxOF from [`Board::capture`]; timer links: TRGO in compare-pulse mode (CR2.MMS = 011) on a CH1 capture → the timers whose SMCR.TS selects it (ITR0..3, RM0390's table) capture on TRC (CCxS = 11); TRGO = OC1REF..OC4REF (MMS = 1xx) in PWM mode 1/2 or the update event (MMS = 010, with RCR) as ADC1's trigger, its rising edges computed from the counter (UG's pulse included); a complementary output alone (CCxE = 0, CCxNE = 1) as the channel's PWM. No output-compare match flags, no other master/slave modes |
 //! | plant | a [`BoardPlant`] stepped in lockstep with the CPU ([`plant::run_with_plant`], [`node::EmulatedNode::with_plant`]) schedules [`Stimulus`]es (encoder positions, capture edges, input levels, analogue voltages) at their times of the board's clock; [`laelaps`]: the Laelaps II leg on the leg image's pins; [`cia402`]: the CiA402 joint on the joint image's; [`tue_es030`]: the TUeES030's three RE 30 channels on its image's |
 //! | profile | handler time per exception from entry to return, preemption counted apart ([`Board::handler_stats`]); painted stack high-water mark ([`Board::stack_stats`]); flash/RAM from the ELF ([`Board::image_size`]) |
-//! | NVIC, SCB | ISER/ICER/ISPR/ICPR/IABR, IPR (4 bits), STIR; ICSR (VECTACTIVE/VECTPENDING/RETTOBASE, PENDSV/PENDST/NMIPEND set/clear), VTOR, AIRCR (PRIGROUP; SYSRESETREQ stops the image with a fault), SCR.SLEEPONEXIT, CCR, SHPR1..3, SHCSR enables, CPACR, FPCCR; the rest of the page stored |
+//! | NVIC, SCB | ISER/ICER/ISPR/ICPR/IABR, IPR (4 bits), STIR; ICSR (VECTACTIVE/VECTPENDING/RETTOBASE, PENDSV/PENDST/NMIPEND set/clear), VTOR, AIRCR (PRIGROUP; SYSRESETREQ stops the image with a fault: only the IWDG resets the MCU), SCR.SLEEPONEXIT, CCR, SHPR1..3, SHCSR enables, CPACR, FPCCR; the rest of the page stored |
 //! | exceptions | taken at translated-block boundaries by the board (`cpu`): 8-word frame, or 26 with S0..S15/FPSCR when CONTROL.FPCA (stacked eagerly although FPCCR resets with LSPEN/ASPEN set: same result for both sides), 8-byte alignment, EXC_RETURN, MSP/PSP, tail-chaining, preemption by group priority, PRIMASK/BASEPRI/FAULTMASK, SVC → SVCall, PendSV, SysTick. Inside the engine the core stays in thread mode: `mrs rX, ipsr` reads 0 (ICSR has the number); unprivileged thread mode is refused |
 //! | SysTick | CSR/RVR/CVR/CALIB from the cycle count (processor clock or HCLK/8); COUNTFLAG; TICKINT pends SysTick at each wrap |
 //! | DWT | CTRL (CYCCNTENA), CYCCNT counting the cycles the core runs (not sleeps) while DEMCR.TRCENA; other registers stored |
@@ -890,6 +891,12 @@ impl Board {
     /// System resets the independent watchdog caused so far ([`iwdg`]).
     pub fn watchdog_resets(&self) -> u64 {
         self.periph.borrow().watchdog_resets
+    }
+
+    /// The board's time of the last IWDG reset \[ns\].
+    pub fn last_watchdog_reset_ns(&self) -> Option<u64> {
+        let c = self.periph.borrow().last_watchdog_reset?;
+        Some((u128::from(c) * 1_000_000_000 / u128::from(CPU_HZ)) as u64)
     }
 
     /// The LSI frequency that clocks the IWDG \[Hz\] ([`iwdg::LSI_HZ`] unless set).

@@ -31,6 +31,8 @@ enum Cmd {
     ResetStats,
     /// Replace SPI1's clock (what-if study; `None`: the image's).
     SpiClock(Option<u32>),
+    /// Drive an input pin (port, pin, level).
+    Input(char, u8, bool),
     /// End the board thread.
     Stop,
 }
@@ -66,6 +68,10 @@ pub struct NodeReport {
     pub adc_sequences: u64,
     /// Longest JEOC → ADC handler entry since reset or [`NodeHandle::reset_stats`] \[cycles\] ([`Board::adc_irq_latency_max`]).
     pub adc_irq_latency_max: u64,
+    /// System resets by the independent watchdog so far ([`Board::watchdog_resets`]).
+    pub watchdog_resets: u64,
+    /// The board's time of the last of them \[ns\].
+    pub last_watchdog_reset_ns: Option<u64>,
     /// The fault that stopped the image, if it stopped.
     pub fault: Option<EmuError>,
 }
@@ -109,6 +115,8 @@ fn report_of(board: &Board, since: u64, fault: &Option<EmuError>) -> NodeReport 
         spi_sclk_hz: board.spi_sclk_hz(),
         adc_sequences: board.adc_sequences(),
         adc_irq_latency_max: board.adc_irq_latency_max(),
+        watchdog_resets: board.watchdog_resets(),
+        last_watchdog_reset_ns: board.last_watchdog_reset_ns(),
         fault: fault.clone(),
     }
 }
@@ -140,6 +148,12 @@ impl NodeHandle {
     /// the clock the image sets ([`Board::set_spi_sclk_hz`]; `None`: the image's again).
     pub fn set_spi_sclk_hz(&self, hz: Option<u32>) {
         let _ = self.cmd.send(Cmd::SpiClock(hz));
+    }
+
+    /// Drives input pin `pin` of `port` ('A'..='H') to `level` from the board's next run on
+    /// ([`Board::set_input`]): a jumper, a button, a sensor line.
+    pub fn set_input(&self, port: char, pin: u8, level: bool) {
+        let _ = self.cmd.send(Cmd::Input(port, pin, level));
     }
 
     /// SYNC0 events the segment delivered to this node so far.
@@ -256,6 +270,10 @@ impl EmulatedNode {
                         Cmd::Stop => return,
                         Cmd::SpiClock(hz) => {
                             board.set_spi_sclk_hz(hz);
+                            continue;
+                        }
+                        Cmd::Input(port, pin, level) => {
+                            board.set_input(port, pin, level);
                             continue;
                         }
                         Cmd::ResetStats => {

@@ -108,8 +108,9 @@ pub(crate) struct Periph {
     pub dma_fetch: Option<(usize, usize, u32, usize, usize)>,
     /// The independent watchdog.
     pub iwdg: Iwdg,
-    /// System resets the IWDG caused.
+    /// System resets the IWDG caused, and the cycle of the last.
     pub watchdog_resets: u64,
+    pub last_watchdog_reset: Option<u64>,
 }
 
 impl Periph {
@@ -128,6 +129,7 @@ impl Periph {
             dma_fetch: None,
             iwdg: Iwdg::default(),
             watchdog_resets: 0,
+            last_watchdog_reset: None,
             spi_idle_from: 0,
             spi_sclk_override: None,
             regs: vec![0; (PERIPH.1 / 4) as usize],
@@ -218,6 +220,7 @@ impl Periph {
         self.profile.abandon();
         self.wake_at = 0;
         self.watchdog_resets += 1;
+        self.last_watchdog_reset = Some(self.cycles);
     }
 
     /// Cycles the core ran (not asleep): what DWT CYCCNT counts.

@@ -1,7 +1,9 @@
 //! The STM32F446 + LAN9252 board image (`firmware/stm32f446-lan9252`, the demo device), the
 //! bytes that would be flashed, executed instruction by instruction: it boots, brings the
 //! LAN9252 up over the emulated SPI1, and its slave stack answers a master on the ECAT side
-//! (INIT → PREOP, an SDO upload of 0x1018:01).
+//! (INIT → PREOP, an SDO upload of 0x1018:01); hung in OP on purpose (its hang jumper), its
+//! independent watchdog resets it into INIT, it reports the reset with a CoE emergency, and
+//! a master brings it back to OP.
 
 use oxicat_emu::{Board, EmuError};
 use oxicat_esc::{Esc, EscConfig};
@@ -243,5 +245,118 @@ fn a_stuck_firmware_shows_as_an_expired_pdi_watchdog() {
         aprd(&mut seg, 0, 0x0130, 2),
         [1, 0],
         "the AL status stays where the firmware left it"
+    );
+}
+
+/// The demo image's independent watchdog, as a master sees it: in OP with the hang jumper
+/// (PC0 to GND) the image stops in a loop that neither feeds the IWDG nor touches the ESC;
+/// 200 ms later (25 ticks of 8 ms at the LSI's nominal 32 kHz) the IWDG resets the MCU — the
+/// ESC, a chip of its own, is not reset and keeps its station address — and the restarted
+/// image puts the ESC back in INIT. With the jumper off the master requests PREOP, finds the
+/// emergency 0x6010 "software reset (watchdog)" (RCC_CSR's IWDGRSTF and PINRSTF in its
+/// data) in SM1, and brings the board back to OP.
+#[test]
+fn a_demo_image_hung_in_op_is_reset_by_its_watchdog_and_the_master_brings_it_back() {
+    use oxicat_master::{AlState, Link, Master};
+    use oxicat_sim::segment::Segment;
+    use std::sync::{Arc, Mutex};
+
+    let Some(img) = image() else { return };
+    let def = &oxicat_devices::demo::DEF;
+    let seg = Arc::new(Mutex::new(Segment::new()));
+    let node = oxicat_emu::node::EmulatedNode::new(img, 100_000).unwrap();
+    let board = node.handle();
+    {
+        let mut s = seg.lock().unwrap();
+        let id = s.add(Esc::new(
+            EscConfig::lan9252(),
+            oxicat_esi::sii::generate(def).unwrap(),
+        ));
+        s.attach(id, Box::new(node)).unwrap();
+        // Booted (the image resets its LAN9252 at start-up) before the master scans.
+        s.advance_to(100_000_000);
+    }
+    let now = || seg.lock().unwrap().now();
+    let wall = std::time::Instant::now();
+    let advance = |dt: u64| {
+        let mut s = seg.lock().unwrap();
+        let t = s.now() + dt;
+        s.advance_to(t);
+    };
+    let mut m = Master::open(Link::Sim(seg.clone())).expect("the master scans");
+    let op = |m: &mut Master| {
+        let st = m.request_state(&[0], AlState::Op).expect("OP requested");
+        assert_eq!(st[0].1.state(), Some(AlState::Op), "{:?}", st[0].1);
+    };
+    op(&mut m);
+    advance(50_000_000);
+    assert_eq!(m.al_status(0).unwrap().state(), Some(AlState::Op));
+    assert_eq!(board.report().unwrap().watchdog_resets, 0, "fed in OP");
+
+    board.set_input('C', 0, false); // the hang jumper on
+    let hung_at = now();
+    for _ in 0..30 {
+        advance(10_000_000);
+        if board.report().unwrap().watchdog_resets > 0 {
+            break;
+        }
+    }
+    let r = board.report().unwrap();
+    assert_eq!(r.fault, None);
+    assert_eq!(r.watchdog_resets, 1, "the IWDG reset the hung image once");
+    let after = r.last_watchdog_reset_ns.unwrap() - hung_at;
+    assert!(
+        (199_900_000..200_100_000).contains(&after),
+        "reset {after} ns after the hang, not the 200 ms the image configured"
+    );
+    board.set_input('C', 0, true); // the jumper off
+    advance(100_000_000);
+    let st = m.al_status(0).unwrap();
+    assert_eq!(
+        st.state(),
+        Some(AlState::Init),
+        "the restarted image is in INIT: {st:?}"
+    );
+
+    // PREOP: the mailbox runs and the image's first message is the emergency.
+    let st = m.request_state(&[0], AlState::PreOp).unwrap();
+    assert_eq!(st[0].1.state(), Some(AlState::PreOp), "{:?}", st[0].1);
+    let mut full = false;
+    for _ in 0..100 {
+        advance(1_000_000);
+        full = m.reg_read(0, 0x080D, 1).unwrap()[0] & 0x08 != 0;
+        if full {
+            break;
+        }
+    }
+    assert!(full, "nothing in SM1 within 100 ms of PREOP");
+    let mbx = m.reg_read(0, 0x1080, 128).unwrap();
+    assert_eq!(mbx[5] & 0x0F, 0x03, "a CoE message: {:02x?}", &mbx[..16]);
+    assert_eq!(
+        u16::from_le_bytes([mbx[6], mbx[7]]) >> 12,
+        1,
+        "an emergency"
+    );
+    assert_eq!(
+        u16::from_le_bytes([mbx[8], mbx[9]]),
+        0x6010,
+        "software reset (watchdog)"
+    );
+    assert_eq!(mbx[11], 0x24, "RCC_CSR flags: IWDGRSTF | PINRSTF");
+
+    op(&mut m);
+    advance(250_000_000);
+    assert_eq!(m.al_status(0).unwrap().state(), Some(AlState::Op));
+    let r = board.report().unwrap();
+    assert_eq!(
+        (r.watchdog_resets, r.fault),
+        (1, None),
+        "back in OP and fed"
+    );
+    eprintln!(
+        "hung at {:.1} ms, reset {:.3} ms later, back in OP: {:.1} s wall",
+        hung_at as f64 * 1e-6,
+        after as f64 * 1e-6,
+        wall.elapsed().as_secs_f64()
     );
 }
