@@ -428,6 +428,11 @@ pub struct TrotRun {
     pub final_clock_ns: [u64; 4],
     /// How the leg nodes reached their ESCs, PDI errors and SPI traffic.
     pub pdi: PdiReport,
+    /// With `[robot] body`: body steps a leg asked for before every leg had reported what
+    /// they depend on (0: the coupling was exact lock-step); `None`: hips fixed.
+    pub body_late: Option<u64>,
+    /// With `[robot] body`: the legs' loads, the body's heave and pitch (Table 4-1 order).
+    pub body_stats: Option<oxicat_plant::BodyStats>,
 }
 
 /// Progress of a run, for a progress bar.
@@ -454,6 +459,7 @@ pub fn rig_config(s: &Scenario, leg: LegId, phases: &Phases) -> RigConfig {
     let v = s.rig.belt_speed_m_s;
     let (a0, a1) = (phases.ramp_a as f64 * cyc, phases.back_a as f64 * cyc);
     let mut c = RigConfig::laelaps(leg).belt_depth(s.rig.belt_depth_m);
+    c.leg = crate::laelaps::robot::leg_params(&s.robot, leg, c.leg);
     c.plant_period_ns = 1_000_000_000 / u64::from(s.rig.plant_rate_hz);
     c.law = s.control.law();
     c.belt = BeltProfile {
@@ -549,11 +555,15 @@ pub fn run_trot_on(
     // build's definition, each driving the opposite leg.
     let mut seg = Segment::new();
     let mut handles: Vec<(LegId, Box<dyn TrotNode>)> = Vec::new();
+    // With `[robot] body`, the four hips on one body (`crate::laelaps::robot`).
+    let body = crate::laelaps::robot::body(&s.robot);
     for leg in chain_legs() {
         let def = device::device(leg.side());
         let sii = oxicat_esi::sii::generate(def)
             .map_err(|e| MasterError::Usage(format!("SII of the leg node: {e}")))?;
-        let h = attach(&mut seg, leg, sii, rig_config(s, leg, &phases))?;
+        let mut rig = rig_config(s, leg, &phases);
+        rig.body = body.as_ref().map(|b| crate::laelaps::robot::link(b, leg));
+        let h = attach(&mut seg, leg, sii, rig)?;
         handles.push((leg, h));
     }
     debug_assert_eq!(TOWER_CHAIN.len(), handles.len());
@@ -599,6 +609,10 @@ pub fn run_trot_on(
     ))));
     let (rows, mut bus, wall_recorded) = out?;
     let end_ns = segment.lock().unwrap_or_else(|e| e.into_inner()).now();
+    let body_report = body.and_then(|b| {
+        let b = b.lock().unwrap_or_else(|e| e.into_inner());
+        (b.steps() > 0).then(|| (b.late(), b.stats()))
+    });
     let mut final_clock_ns = [0u64; 4];
     let mut pdi = pdi;
     for (leg, h) in &handles {
@@ -621,6 +635,9 @@ pub fn run_trot_on(
         simulated_s: end_ns as f64 * 1e-9,
         final_clock_ns,
         pdi,
+        // A body no leg stepped (board images keep their hips fixed): `None`.
+        body_late: body_report.map(|b| b.0),
+        body_stats: body_report.map(|b| b.1),
     })
 }
 
