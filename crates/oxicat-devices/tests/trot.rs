@@ -191,6 +191,9 @@ fn lan9252_trot_with_bus_time() {
     assert_eq!(s.pdi.exec_time.timing(), Some(ExecTiming::thesis()));
     let r = run(&s);
     assert_eq!(r.pdi.route, PdiRoute::lan9252(20));
+    // The joint-loop ticks the SYNC0 handler delays cover uneven spans: the body still
+    // steps in lock-step.
+    assert_eq!(r.body_late, Some(0));
     // OP reached: the trajectory clocks were released and ran; no WKC errors (in the helper).
     tracks_and_keeps_the_gait(&s, &r);
 

@@ -280,6 +280,44 @@ impl Body {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::leg::{Leg, LegParams, Side};
+
+    /// A hip falling with gravity leaves the leg weightless: tilted, it does not swing; a
+    /// fixed hip lets it swing. A hip lowered by z meets the belt z earlier.
+    #[test]
+    fn the_hip_s_motion_reaches_the_leg() {
+        let mut p = LegParams::laelaps(Side::Left);
+        p.initial_angles = [0.3, 0.3];
+        p.treadmill.height = 0.7;
+        p.hip = p.hip.ideal();
+        p.knee = p.knee.ideal();
+        let swing = |az: f64| {
+            let mut leg = Leg::new(p);
+            leg.set_hip_motion(HipMotion {
+                z: 0.0,
+                vz: 0.0,
+                az,
+            });
+            leg.advance(0.1);
+            (leg.joint_angles()[0] - 0.3).abs()
+        };
+        assert!(swing(0.0) > 1e-3, "{}", swing(0.0));
+        assert!(swing(GRAVITY) < 1e-9, "{}", swing(GRAVITY));
+        let mut leg = Leg::new(LegParams::laelaps(Side::Left));
+        leg.set_treadmill(crate::leg::Treadmill {
+            speed: 0.0,
+            height: 0.605,
+        });
+        leg.advance(1e-4);
+        assert_eq!(leg.contact_force(), [0.0, 0.0]);
+        leg.set_hip_motion(HipMotion {
+            z: 0.01,
+            vz: 0.0,
+            az: 0.0,
+        });
+        leg.advance(1e-4);
+        assert!(leg.contact_force()[1] < -100.0, "{:?}", leg.contact_force());
+    }
 
     fn params() -> BodyParams {
         BodyParams::laelaps(20.0, 0.35, -0.35)

@@ -340,11 +340,6 @@ impl Leg {
         t.mass * (-t.com * s1 * v1) + s.mass * (-t.length * s1 * v1 - s.com * s2 * v2)
     }
 
-    /// Mass of the two links \[kg\].
-    pub fn link_mass(&self) -> f64 {
-        self.p.thigh.mass + self.p.shank.mass
-    }
-
     /// The parameters this leg was built with (treadmill as last set).
     pub fn params(&self) -> &LegParams {
         &self.p

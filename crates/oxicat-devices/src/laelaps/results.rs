@@ -629,3 +629,54 @@ fn pdi_markdown(o: &mut String, run: &TrotRun) {
         );
     }
 }
+
+#[cfg(test)]
+mod observation_tests {
+    use super::*;
+
+    fn summary(toe: [f64; 4], knee: [f64; 4], hip: [f64; 4]) -> Summary {
+        let mut legs = [LegSummary::default(); 4];
+        for (i, l) in legs.iter_mut().enumerate() {
+            l.toe_rms_mm = toe[i];
+            l.knee_at_limit_pct = knee[i];
+            l.hip_at_limit_pct = hip[i];
+            l.knee_rms_deg = 2.0;
+            l.hip_rms_deg = 3.0;
+            l.knee_peak_speed = 1.0;
+            l.hip_peak_speed = 1.0;
+        }
+        Summary {
+            legs,
+            toe_height_correlation: Vec::new(),
+            window: (0, 1),
+        }
+    }
+
+    fn agrees(s: &Summary) -> Vec<bool> {
+        thesis_observations(s).iter().map(|o| o.agrees).collect()
+    }
+
+    /// The thesis' pattern (hind legs track worst, knee PWM limit in the fore legs, hip PWM
+    /// limit in the hind legs) agrees on every line; the mirror image on none of the three.
+    #[test]
+    fn observations_compare_fore_and_hind() {
+        let thesis = summary(
+            [12.0, 12.0, 17.0, 17.0],
+            [9.0, 9.0, 0.0, 0.0],
+            [4.0, 4.0, 21.0, 21.0],
+        );
+        assert_eq!(agrees(&thesis), [true, true, true, true, true]);
+        let mirror = summary(
+            [17.0, 17.0, 12.0, 12.0],
+            [0.0, 0.0, 9.0, 9.0],
+            [21.0, 21.0, 4.0, 4.0],
+        );
+        assert_eq!(agrees(&mirror), [false, true, false, false, true]);
+        let o = thesis_observations(&thesis);
+        assert_eq!(o[0].run, "toe RMS 12.0 / 12.0 / 17.0 / 17.0 mm");
+        // A joint faster than its motor's limit is reported.
+        let mut fast = thesis.clone();
+        fast.legs[2].hip_peak_speed = HIP_MAX_SPEED + 0.1;
+        assert!(!agrees(&fast)[4]);
+    }
+}
