@@ -126,6 +126,43 @@ mod tests {
         assert_eq!(masses.len(), 4, "{masses:?}");
     }
 
+    /// A centre of mass outside the hips is refused with both keys; NaN with key and range;
+    /// no `[robot]` table is the fixed-hip robot with nominal legs.
+    #[test]
+    fn robot_numbers_are_checked() {
+        use crate::laelaps::scenario::DEFAULT_TOML;
+        let e =
+            Scenario::parse(&DEFAULT_TOML.replace("com_behind_cm = 5.0", "com_behind_cm = 35.0"))
+                .expect_err("outside the hips")
+                .to_string();
+        assert!(
+            e.contains("robot.com_behind_cm = 35") && e.contains("robot.hip_spacing_cm"),
+            "{e}"
+        );
+        let e =
+            Scenario::parse(&DEFAULT_TOML.replace("support_share = 0.5", "support_share = nan"))
+                .expect_err("NaN")
+                .to_string();
+        assert!(
+            e.contains("robot.support_share = NaN is not in 0 … 1"),
+            "{e}"
+        );
+        let i = DEFAULT_TOML
+            .find("[robot]")
+            .expect("[robot] in the shipped file");
+        let j = DEFAULT_TOML[i..]
+            .find("[pdi]")
+            .expect("[pdi] after [robot]")
+            + i;
+        let s = Scenario::parse(&format!("{}{}", &DEFAULT_TOML[..i], &DEFAULT_TOML[j..]))
+            .expect("no [robot]");
+        assert!(!s.robot.body);
+        assert_eq!(
+            (s.robot.mass_tolerance_pct, s.robot.motor_tolerance_pct),
+            (0.0, 0.0)
+        );
+    }
+
     /// The centre of mass behind the hips' midpoint puts the hind hips nearer to it.
     #[test]
     fn body_hips_from_the_scenario() {
