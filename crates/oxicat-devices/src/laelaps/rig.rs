@@ -31,6 +31,15 @@
 //! at rest (zero error, zero duty), which leaves the firmware in the same state however
 //! many there were.
 //!
+//! # The whole robot (optional)
+//!
+//! With [`RigConfig::body`] the leg's hip is on a body the four rigs share
+//! ([`BodyLink`], `crate::laelaps::robot`): the catch-up then runs
+//! [`advance_on_body`], substep by substep, with the hip's motion of each 100 µs body step
+//! (times since the release, which is the same SYNC0 for all four) and the impulse the leg
+//! puts into its hip handed back. A body step waits for all four legs' impulses of two
+//! steps before, so nothing depends on which node the segment wakes first.
+//!
 //! # Towers and legs
 //!
 //! Network order follows the towers (thesis §3.1): the chain starts at the tower by the
