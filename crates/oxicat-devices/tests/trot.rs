@@ -423,8 +423,9 @@ const FIXED_HIP_FNV: u64 = 0x2e8a_13f0_9a77_d778;
 /// its gait, the body's weight is shared as its statics say (the hind legs, nearer the
 /// centre of mass, carry more: fore / hind = (L − e) / (L + e)), no two legs are alike,
 /// and of the thesis' per-leg observations (§4.1) the knee PWM is at its limit more in the
-/// fore legs. The hip-PWM and toe-tracking observations are reported in the summary, not
-/// asserted: this model does not reproduce them (README, "The whole robot").
+/// fore legs and the hip PWM more in the hind legs. The toe-tracking observation (hind legs
+/// worst) is reported in the summary, not asserted: this model does not reproduce it
+/// (README, "The whole robot").
 #[test]
 fn the_body_couples_the_legs_as_the_thesis_observed() {
     let s = robot(4.0, true, 5.0);
@@ -460,12 +461,19 @@ fn the_body_couples_the_legs_as_the_thesis_observed() {
             > hl.knee_at_limit_pct.max(hr.knee_at_limit_pct),
         "knee PWM at its limit more in the fore legs"
     );
+    // … and the hip PWM at its limit more in the hind legs.
+    assert!(
+        hl.hip_at_limit_pct + hr.hip_at_limit_pct > fl.hip_at_limit_pct + fr.hip_at_limit_pct,
+        "hip PWM at its limit more in the hind legs"
+    );
     let obs = thesis_observations(&sum);
-    let knee = obs
-        .iter()
-        .find(|o| o.what.starts_with("knee PWM"))
-        .expect("the knee observation");
-    assert!(knee.agrees && md.contains(&knee.run), "{md}");
+    for what in ["knee PWM", "hip PWM"] {
+        let o = obs
+            .iter()
+            .find(|o| o.what.starts_with(what))
+            .expect("the observation");
+        assert!(o.agrees && md.contains(&o.run), "{what}: {md}");
+    }
 
     // Left and right differ (tolerances, and the legs load each other through the body).
     assert_ne!(fl, fr);

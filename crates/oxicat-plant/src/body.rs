@@ -79,8 +79,8 @@ pub struct BodyParams {
 impl BodyParams {
     /// Laelaps II on its treadmill support with `mass` kg, fore hips `fore_x` m and hind
     /// hips `hind_x` m (negative) from the centre of mass; the other values are the
-    /// **assumptions** the crate README lists (support carrying half the weight, soft in
-    /// heave and pitch, 100 µs steps, 200 µs delay).
+    /// **assumptions** the crate README lists (support carrying a fifth of the weight, soft
+    /// in heave and pitch, 100 µs steps, 200 µs delay).
     pub fn laelaps(mass: f64, fore_x: f64, hind_x: f64) -> Self {
         let half_length = 0.5 * (fore_x - hind_x);
         BodyParams {
@@ -88,7 +88,7 @@ impl BodyParams {
             // A uniform box as long as the hip spacing plus 20 %: m·(1.2·2L)²/12.
             pitch_inertia: mass * (2.4 * half_length).powi(2) / 12.0,
             hip_x: [fore_x, fore_x, hind_x, hind_x],
-            support_share: 0.5,
+            support_share: 0.2,
             support_stiffness: 2.0e3,
             support_damping: 400.0,
             pitch_stiffness: 200.0,
@@ -181,6 +181,15 @@ impl Body {
     /// Loads, heave and pitch so far.
     pub fn stats(&self) -> BodyStats {
         self.stats
+    }
+
+    /// Starts the figures of [`Body::stats`] afresh from the present pose.
+    pub fn reset_stats(&mut self) {
+        self.stats = BodyStats {
+            z_range: (self.z, self.z),
+            phi_range: (self.phi, self.phi),
+            ..BodyStats::default()
+        };
     }
 
     /// Body steps computed so far.
@@ -333,7 +342,10 @@ mod tests {
         let share = -(1.0 - p.support_share) * p.mass * p.gravity / 4.0;
         for (push, want_z) in [
             (1.0, 0.0),
-            (0.5, 0.5 * 0.5 * p.mass * p.gravity / p.support_stiffness),
+            (
+                0.5,
+                0.5 * (1.0 - p.support_share) * p.mass * p.gravity / p.support_stiffness,
+            ),
         ] {
             let mut b = Body::new(p);
             for j in 0..200_000u64 {

@@ -47,6 +47,7 @@ use ethercrab::subdevice_group::DcConfiguration;
 use ethercrab::{DcSync, MainDevice, MainDeviceConfig, PduStorage};
 use oxicat_esc::{Esc, EscConfig};
 use oxicat_master::inprocess::{inprocess_task, InProcessConfig};
+use oxicat_plant::{Body, BodyStats};
 use oxicat_sim::exec_time::TimingStats;
 use oxicat_sim::pdi_path::{BusStats as SpiStats, PdiRoute};
 use oxicat_sim::segment::Segment;
@@ -431,8 +432,9 @@ pub struct TrotRun {
     /// With `[robot] body`: body steps a leg asked for before every leg had reported what
     /// they depend on (0: the coupling was exact lock-step); `None`: hips fixed.
     pub body_late: Option<u64>,
-    /// With `[robot] body`: the legs' loads, the body's heave and pitch (Table 4-1 order).
-    pub body_stats: Option<oxicat_plant::BodyStats>,
+    /// With `[robot] body`: the legs' loads, the body's heave and pitch over the steady trot
+    /// (cycles [`Phases::trot`] to [`Phases::back_a`]; the whole run if it has none).
+    pub body_stats: Option<BodyStats>,
 }
 
 /// Progress of a run, for a progress bar.
@@ -592,7 +594,16 @@ pub fn run_trot_on(
             frame_gap_ns: oxicat_master::SIM_FRAME_GAP_NS,
         },
     );
-    let master = run_master(s, &phases, &md, &segment, &handles, progress);
+    let mut steady_body = None;
+    let master = run_master(
+        s,
+        &phases,
+        &md,
+        &segment,
+        &handles,
+        progress,
+        (body.as_ref(), &mut steady_body),
+    );
     // async-io's executor: ethercrab's PDU timers live in its reactor, which then runs on
     // this thread instead of waking a reactor thread for every frame. `SelfWoken` re-polls
     // in place while the master and the transport wake each other (every frame), so the
@@ -611,7 +622,7 @@ pub fn run_trot_on(
     let end_ns = segment.lock().unwrap_or_else(|e| e.into_inner()).now();
     let body_report = body.and_then(|b| {
         let b = b.lock().unwrap_or_else(|e| e.into_inner());
-        (b.steps() > 0).then(|| (b.late(), b.stats()))
+        (b.steps() > 0).then(|| (b.late(), steady_body.unwrap_or_else(|| b.stats())))
     });
     let mut final_clock_ns = [0u64; 4];
     let mut pdi = pdi;
@@ -735,6 +746,7 @@ async fn run_master(
     segment: &Arc<Mutex<Segment>>,
     handles: &[(LegId, Box<dyn TrotNode>)],
     progress: &mut dyn FnMut(Progress),
+    (body, steady_body): (Option<&Arc<Mutex<Body>>>, &mut Option<BodyStats>),
 ) -> Result<(Vec<Row>, BusStats, Duration), MasterError> {
     let lock = || segment.lock().unwrap_or_else(|e| e.into_inner());
     let clock = lock().clock();
@@ -874,6 +886,15 @@ async fn run_master(
     for k in 0..settle + total {
         let recording = k >= settle;
         let j = k.saturating_sub(settle);
+        // The body's figures over the steady trot (a and b at their values).
+        if let Some(b) = body.filter(|_| recording) {
+            let mut b = b.lock().unwrap_or_else(|e| e.into_inner());
+            if j == phases.trot {
+                b.reset_stats();
+            } else if j == phases.back_a {
+                *steady_body = Some(b.stats());
+            }
+        }
         if k == settle {
             rec_start = Instant::now();
             // SPI traffic is reported over the recorded cycles.

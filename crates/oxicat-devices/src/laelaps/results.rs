@@ -481,7 +481,7 @@ fn thesis_markdown(o: &mut String, run: &TrotRun, s: &Summary) {
         let l = b.mean_load();
         let _ = writeln!(
             o,
-            "\nThe body over the run: mean load carried FL / FR / HL / HR {:.1} / {:.1} / {:.1} / \
+            "\nThe body over the steady trot: mean load carried FL / FR / HL / HR {:.1} / {:.1} / {:.1} / \
              {:.1} N, heave {:.2} … {:.2} mm (down), pitch {:.3} … {:.3}° (nose up); {late} body \
              steps asked for before every leg had reported (0: exact lock-step).",
             l[0],

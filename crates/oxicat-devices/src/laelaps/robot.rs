@@ -140,7 +140,7 @@ mod tests {
             "{e}"
         );
         let e =
-            Scenario::parse(&DEFAULT_TOML.replace("support_share = 0.5", "support_share = nan"))
+            Scenario::parse(&DEFAULT_TOML.replace("support_share = 0.2", "support_share = nan"))
                 .expect_err("NaN")
                 .to_string();
         assert!(

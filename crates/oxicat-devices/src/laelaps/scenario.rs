@@ -71,7 +71,7 @@ impl Default for Robot {
             mass_kg: 40.0,
             hip_spacing_cm: 70.0,
             com_behind_cm: 5.0,
-            support_share: 0.5,
+            support_share: 0.2,
             mass_tolerance_pct: 0.0,
             motor_tolerance_pct: 0.0,
             seed: 0,
