@@ -12,7 +12,7 @@
 
 use oxicat_devices::laelaps::experiment::{run_trot, var, TrotRun};
 use oxicat_devices::laelaps::results::{
-    csv, pv_bound_deg, sample, steady_window, summarize, summary_markdown,
+    csv, pv_bound_deg, sample, steady_window, summarize, summary_markdown, thesis_observations,
 };
 use oxicat_devices::laelaps::rig::LegId;
 use oxicat_devices::laelaps::scenario::{ExecTime, PdiChip, Scenario, DEFAULT_TOML};
@@ -191,6 +191,9 @@ fn lan9252_trot_with_bus_time() {
     assert_eq!(s.pdi.exec_time.timing(), Some(ExecTiming::thesis()));
     let r = run(&s);
     assert_eq!(r.pdi.route, PdiRoute::lan9252(20));
+    // The joint-loop ticks the SYNC0 handler delays cover uneven spans: the body still
+    // steps in lock-step.
+    assert_eq!(r.body_late, Some(0));
     // OP reached: the trajectory clocks were released and ran; no WKC errors (in the helper).
     tracks_and_keeps_the_gait(&s, &r);
 
@@ -368,4 +371,114 @@ fn a_sync1_shift_not_below_the_cycle_is_refused_with_its_key() {
     );
     let s = Scenario::parse(&text).expect("a valid split");
     assert!(s.bus.sync1 && s.bus.sync1_shift_us == 150);
+}
+
+/// `short(trot_s)` with `[robot]` as `body`, tolerances `tol_pct` for masses and motors.
+fn robot(trot_s: f64, body: bool, tol_pct: f64) -> Scenario {
+    let text = DEFAULT_TOML
+        .replace("settle_s = 3.5", "settle_s = 1.1")
+        .replace("stand_s = 1.0", "stand_s = 0.2")
+        .replace("transition_time_s = 3", "transition_time_s = 1")
+        .replace("stop_s = 0.5", "stop_s = 0.1")
+        .replace("body = true", &format!("body = {body}"))
+        .replace(
+            "mass_tolerance_pct = 5.0",
+            &format!("mass_tolerance_pct = {tol_pct:?}"),
+        )
+        .replace(
+            "motor_tolerance_pct = 5.0",
+            &format!("motor_tolerance_pct = {tol_pct:?}"),
+        );
+    Scenario::parse(&text).expect("scenario").with_trot(trot_s)
+}
+
+/// FNV-1a, 64 bits.
+fn fnv(bytes: &[u8]) -> u64 {
+    bytes.iter().fold(0xcbf2_9ce4_8422_2325u64, |h, &b| {
+        (h ^ u64::from(b)).wrapping_mul(0x0000_0100_0000_01b3)
+    })
+}
+
+/// With `[robot] body = false` and zero tolerances each leg is the fixed-hip leg of before
+/// the body existed: the CSV is the bytes that code wrote for this scenario (its FNV-1a
+/// taken from the commit before the body, f3db65d), and FL's figures equal FR's.
+#[test]
+fn without_the_body_the_legs_are_the_fixed_hip_legs() {
+    let s = robot(0.5, false, 0.0);
+    let r = run(&s);
+    assert_eq!(r.body_late, None);
+    let bytes = csv(&r);
+    assert_eq!(
+        fnv(bytes.as_bytes()),
+        FIXED_HIP_FNV,
+        "the fixed-hip CSV changed"
+    );
+}
+
+/// FNV-1a of `csv(run(short(0.5)))` at f3db65d (before `[robot]`).
+const FIXED_HIP_FNV: u64 = 0x2e8a_13f0_9a77_d778;
+
+/// The whole robot (the shipped `[robot]`: the hips on one body on its support, per-leg
+/// tolerances, seeded): the coupling is exact lock-step, the run still tracks and keeps
+/// its gait, the body's weight is shared as its statics say (the hind legs, nearer the
+/// centre of mass, carry more: fore / hind = (L − e) / (L + e)), no two legs are alike,
+/// and of the thesis' per-leg observations (§4.1) the knee PWM is at its limit more in the
+/// fore legs and the hip PWM more in the hind legs. The toe-tracking observation (hind legs
+/// worst) is reported in the summary, not asserted: this model does not reproduce it
+/// (README, "The whole robot").
+#[test]
+fn the_body_couples_the_legs_as_the_thesis_observed() {
+    let s = robot(4.0, true, 5.0);
+    let r = run(&s);
+    assert_eq!(r.body_late, Some(0), "every body step in lock-step");
+    tracks_and_keeps_the_gait(&s, &r);
+    let sum = summarize(&r);
+    let md = summary_markdown(&r, &sum);
+    eprintln!("{md}");
+    let [fl, fr, hl, hr] = sum.legs;
+
+    // Statics: the legs carry what the support does not, fore and hind by the lever rule.
+    let b = r.body_stats.expect("body statistics");
+    let load = b.mean_load();
+    let rb = &s.robot;
+    let weight = rb.mass_kg * oxicat_plant::GRAVITY * (1.0 - rb.support_share);
+    let total: f64 = load.iter().sum();
+    assert!(
+        (total / weight - 1.0).abs() < 0.1,
+        "{load:?} against {weight} N"
+    );
+    let (half, e) = (rb.hip_spacing_cm / 2.0, rb.com_behind_cm);
+    let want = (half + e) / (half - e);
+    let got = (load[2] + load[3]) / (load[0] + load[1]);
+    assert!(
+        (got / want - 1.0).abs() < 0.1,
+        "hind/fore {got}, lever rule {want}"
+    );
+
+    // The thesis: knee PWM at its limit in the fore legs, the hind legs (nearly) within.
+    assert!(
+        fl.knee_at_limit_pct.min(fr.knee_at_limit_pct)
+            > hl.knee_at_limit_pct.max(hr.knee_at_limit_pct),
+        "knee PWM at its limit more in the fore legs"
+    );
+    // … and the hip PWM at its limit more in the hind legs.
+    assert!(
+        hl.hip_at_limit_pct + hr.hip_at_limit_pct > fl.hip_at_limit_pct + fr.hip_at_limit_pct,
+        "hip PWM at its limit more in the hind legs"
+    );
+    let obs = thesis_observations(&sum);
+    for what in ["knee PWM", "hip PWM"] {
+        let o = obs
+            .iter()
+            .find(|o| o.what.starts_with(what))
+            .expect("the observation");
+        assert!(o.agrees && md.contains(&o.run), "{what}: {md}");
+    }
+
+    // Left and right differ (tolerances, and the legs load each other through the body).
+    assert_ne!(fl, fr);
+    assert_ne!(hl, hr);
+    let cols = |leg: usize| -> Vec<[i32; 9]> { r.rows.iter().map(|row| row.inputs[leg]).collect() };
+    assert_ne!(cols(0), cols(1), "FL and FR record different bytes");
+    assert_ne!(cols(2), cols(3), "HL and HR record different bytes");
 }

@@ -1,6 +1,7 @@
 //! The leg: two drives (amplifier, motor, gearhead, coupler, pulley, encoder), the planar
 //! two-link Lagrangian dynamics and the treadmill contact, stepped together.
 
+use crate::body::HipMotion;
 use crate::encoder::Encoder;
 use crate::gear;
 use crate::motor::{AmplifierParams, MotorParams};
@@ -258,12 +259,17 @@ pub struct Leg {
     contact_force: [f64; 2],
     alpha_h: f64,
     alpha: [f64; 2],
+    /// The hip's motion with the body (zero: hip fixed, the old single-leg rig).
+    hip: HipMotion,
     // Constant mass-matrix terms.
     m_a: f64,
     m_b: f64,
     m_d: f64,
     g1: f64,
     g2: f64,
+    // Gravity terms per unit acceleration (g1 = gravity · g1m).
+    g1m: f64,
+    g2m: f64,
 }
 
 impl Leg {
@@ -274,7 +280,9 @@ impl Leg {
         let m_a = t.inertia + t.mass * t.com * t.com + s.mass * t.length * t.length;
         let m_b = s.mass * t.length * s.com;
         let m_d = s.inertia + s.mass * s.com * s.com;
-        let g1 = params.gravity * (t.mass * t.com + s.mass * t.length);
+        let g1m = t.mass * t.com + s.mass * t.length;
+        let g2m = s.mass * s.com;
+        let g1 = params.gravity * g1m;
         let g2 = params.gravity * s.mass * s.com;
         let mk = |dp: DriveParams, q: f64| {
             let psi = dp.ratio() * q;
@@ -301,12 +309,35 @@ impl Leg {
             contact_force: [0.0; 2],
             alpha_h: f64::NAN,
             alpha: [0.0; 2],
+            hip: HipMotion::default(),
             m_a,
             m_b,
             m_d,
             g1,
             g2,
+            g1m,
+            g2m,
         }
+    }
+
+    /// Moves the hip with the body from the next substep on: the leg frame sees gravity
+    /// `g − az` and the belt `z` closer, the foot's speed against the belt gains `vz`
+    /// ([`crate::body`]). The default (all zero) is the fixed hip.
+    pub fn set_hip_motion(&mut self, m: HipMotion) {
+        self.hip = m;
+    }
+
+    /// The hip's motion as last set.
+    pub fn hip_motion(&self) -> HipMotion {
+        self.hip
+    }
+
+    /// Vertical momentum (down) of the two links relative to the hip \[kg·m/s\].
+    pub fn vertical_momentum(&self) -> f64 {
+        let (t, s) = (self.p.thigh, self.p.shank);
+        let (s1, s2) = (self.q[0].sin(), self.q[1].sin());
+        let [v1, v2] = self.v;
+        t.mass * (-t.com * s1 * v1) + s.mass * (-t.length * s1 * v1 - s.com * s2 * v2)
     }
 
     /// The parameters this leg was built with (treadmill as last set).
@@ -463,7 +494,7 @@ impl Leg {
         self.contact_force
     }
 
-    /// Generalised gravity torques on (θ1, θ2) at the present pose [N·m].
+    /// Generalised gravity torques on (θ1, θ2) at the present pose, hip fixed [N·m].
     pub fn gravity_torque(&self) -> [f64; 2] {
         [-self.g1 * self.q[0].sin(), -self.g2 * self.q[1].sin()]
     }
@@ -530,7 +561,15 @@ impl Leg {
         let [v1, v2] = self.v;
         let m12 = self.m_b * cd;
         let cor = [self.m_b * sd * v2 * v2, -self.m_b * sd * v1 * v1];
-        let grav = [-self.g1 * s1, -self.g2 * s2];
+        // A moving hip: gravity g − a_hip in the leg frame (the fixed hip keeps g1, g2 bit
+        // for bit).
+        let (g1, g2) = if self.hip.az == 0.0 {
+            (self.g1, self.g2)
+        } else {
+            let g = self.p.gravity - self.hip.az;
+            (g * self.g1m, g * self.g2m)
+        };
+        let grav = [-g1 * s1, -g2 * s2];
         let jx = [l1 * c1, l2 * c2];
         let jy = [-l1 * s1, -l2 * s2];
         let y = l1 * c1 + l2 * c2;
@@ -541,9 +580,16 @@ impl Leg {
         let cp = self.p.contact;
         let tm = self.p.treadmill;
         let (mut fx, mut fy, mut dx, mut dy) = (0.0, 0.0, 0.0, 0.0);
-        let pen = y - tm.height;
+        let moving = self.hip.z != 0.0 || self.hip.vz != 0.0;
+        let pen = if moving {
+            y - (tm.height - self.hip.z)
+        } else {
+            y - tm.height
+        };
         if pen > 0.0 {
-            let fn_raw = cp.stiffness * pen + cp.damping * yd;
+            // The foot's vertical speed against the belt (the belt does not move vertically).
+            let yd_belt = if moving { yd + self.hip.vz } else { yd };
+            let fn_raw = cp.stiffness * pen + cp.damping * yd_belt;
             if fn_raw > 0.0 {
                 fy = -fn_raw;
                 dy = cp.damping;

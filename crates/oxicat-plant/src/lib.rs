@@ -19,14 +19,16 @@
 //! * Encoder counts are zero at the reset pose (the thesis' Reset button), default θ = (0, 0):
 //!   the leg hanging straight down, where the firmware's angle 0 must be.
 //! * Treadmill: the belt's top surface lies at y = [`Treadmill::height`] below the hip (the
-//!   support rig holds the hip axis fixed); the surface moves with velocity −[`Treadmill::speed`]
-//!   along x (backwards, so a leg walking toward +x is carried back).
+//!   support rig holds the hip axis fixed, or [`body`] moves it); the surface moves with
+//!   velocity −[`Treadmill::speed`] along x (backwards, so a leg walking toward +x is carried
+//!   back).
 //! * Joint index 0 = hip, 1 = knee ([`Joint`]).
 
 #![forbid(unsafe_code)]
 #![deny(missing_docs)]
 
 pub mod bldc_joint;
+pub mod body;
 pub mod encoder;
 pub mod gear;
 pub mod motor;
@@ -37,6 +39,7 @@ pub mod ws2812;
 
 mod leg;
 
+pub use body::{Body, BodyParams, BodyStats, HipMotion, BODY_LEGS};
 pub use encoder::{Encoder, UnitCapture, COUNTS_PER_REV};
 pub use leg::{
     ContactParams, DriveParams, Joint, Leg, LegParams, LinkParams, Side, Treadmill, GRAVITY,

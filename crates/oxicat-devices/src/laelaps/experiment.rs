@@ -47,6 +47,7 @@ use ethercrab::subdevice_group::DcConfiguration;
 use ethercrab::{DcSync, MainDevice, MainDeviceConfig, PduStorage};
 use oxicat_esc::{Esc, EscConfig};
 use oxicat_master::inprocess::{inprocess_task, InProcessConfig};
+use oxicat_plant::{Body, BodyStats};
 use oxicat_sim::exec_time::TimingStats;
 use oxicat_sim::pdi_path::{BusStats as SpiStats, PdiRoute};
 use oxicat_sim::segment::Segment;
@@ -428,6 +429,12 @@ pub struct TrotRun {
     pub final_clock_ns: [u64; 4],
     /// How the leg nodes reached their ESCs, PDI errors and SPI traffic.
     pub pdi: PdiReport,
+    /// With `[robot] body`: body steps a leg asked for before every leg had reported what
+    /// they depend on (0: the coupling was exact lock-step); `None`: hips fixed.
+    pub body_late: Option<u64>,
+    /// With `[robot] body`: the legs' loads, the body's heave and pitch over the steady trot
+    /// (cycles [`Phases::trot`] to [`Phases::back_a`]; the whole run if it has none).
+    pub body_stats: Option<BodyStats>,
 }
 
 /// Progress of a run, for a progress bar.
@@ -454,6 +461,7 @@ pub fn rig_config(s: &Scenario, leg: LegId, phases: &Phases) -> RigConfig {
     let v = s.rig.belt_speed_m_s;
     let (a0, a1) = (phases.ramp_a as f64 * cyc, phases.back_a as f64 * cyc);
     let mut c = RigConfig::laelaps(leg).belt_depth(s.rig.belt_depth_m);
+    c.leg = crate::laelaps::robot::leg_params(&s.robot, leg, c.leg);
     c.plant_period_ns = 1_000_000_000 / u64::from(s.rig.plant_rate_hz);
     c.law = s.control.law();
     c.belt = BeltProfile {
@@ -549,11 +557,15 @@ pub fn run_trot_on(
     // build's definition, each driving the opposite leg.
     let mut seg = Segment::new();
     let mut handles: Vec<(LegId, Box<dyn TrotNode>)> = Vec::new();
+    // With `[robot] body`, the four hips on one body (`crate::laelaps::robot`).
+    let body = crate::laelaps::robot::body(&s.robot);
     for leg in chain_legs() {
         let def = device::device(leg.side());
         let sii = oxicat_esi::sii::generate(def)
             .map_err(|e| MasterError::Usage(format!("SII of the leg node: {e}")))?;
-        let h = attach(&mut seg, leg, sii, rig_config(s, leg, &phases))?;
+        let mut rig = rig_config(s, leg, &phases);
+        rig.body = body.as_ref().map(|b| crate::laelaps::robot::link(b, leg));
+        let h = attach(&mut seg, leg, sii, rig)?;
         handles.push((leg, h));
     }
     debug_assert_eq!(TOWER_CHAIN.len(), handles.len());
@@ -582,7 +594,16 @@ pub fn run_trot_on(
             frame_gap_ns: oxicat_master::SIM_FRAME_GAP_NS,
         },
     );
-    let master = run_master(s, &phases, &md, &segment, &handles, progress);
+    let mut steady_body = None;
+    let master = run_master(
+        s,
+        &phases,
+        &md,
+        &segment,
+        &handles,
+        progress,
+        (body.as_ref(), &mut steady_body),
+    );
     // async-io's executor: ethercrab's PDU timers live in its reactor, which then runs on
     // this thread instead of waking a reactor thread for every frame. `SelfWoken` re-polls
     // in place while the master and the transport wake each other (every frame), so the
@@ -599,6 +620,10 @@ pub fn run_trot_on(
     ))));
     let (rows, mut bus, wall_recorded) = out?;
     let end_ns = segment.lock().unwrap_or_else(|e| e.into_inner()).now();
+    let body_report = body.and_then(|b| {
+        let b = b.lock().unwrap_or_else(|e| e.into_inner());
+        (b.steps() > 0).then(|| (b.late(), steady_body.unwrap_or_else(|| b.stats())))
+    });
     let mut final_clock_ns = [0u64; 4];
     let mut pdi = pdi;
     for (leg, h) in &handles {
@@ -621,6 +646,9 @@ pub fn run_trot_on(
         simulated_s: end_ns as f64 * 1e-9,
         final_clock_ns,
         pdi,
+        // A body no leg stepped (board images keep their hips fixed): `None`.
+        body_late: body_report.map(|b| b.0),
+        body_stats: body_report.map(|b| b.1),
     })
 }
 
@@ -718,6 +746,7 @@ async fn run_master(
     segment: &Arc<Mutex<Segment>>,
     handles: &[(LegId, Box<dyn TrotNode>)],
     progress: &mut dyn FnMut(Progress),
+    (body, steady_body): (Option<&Arc<Mutex<Body>>>, &mut Option<BodyStats>),
 ) -> Result<(Vec<Row>, BusStats, Duration), MasterError> {
     let lock = || segment.lock().unwrap_or_else(|e| e.into_inner());
     let clock = lock().clock();
@@ -857,6 +886,15 @@ async fn run_master(
     for k in 0..settle + total {
         let recording = k >= settle;
         let j = k.saturating_sub(settle);
+        // The body's figures over the steady trot (a and b at their values).
+        if let Some(b) = body.filter(|_| recording) {
+            let mut b = b.lock().unwrap_or_else(|e| e.into_inner());
+            if j == phases.trot {
+                b.reset_stats();
+            } else if j == phases.back_a {
+                *steady_body = Some(b.stats());
+            }
+        }
         if k == settle {
             rec_start = Instant::now();
             // SPI traffic is reported over the recorded cycles.

@@ -57,6 +57,8 @@ pub mod results;
 #[cfg(feature = "bench")]
 pub mod rig;
 #[cfg(feature = "bench")]
+pub mod robot;
+#[cfg(feature = "bench")]
 pub mod scenario;
 #[cfg(feature = "bench")]
 pub mod sweep;

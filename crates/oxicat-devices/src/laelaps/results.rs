@@ -341,9 +341,159 @@ pub fn summary_markdown(run: &TrotRun, s: &Summary) -> String {
         sync0_no(b.release_sync0[2]),
         sync0_no(b.release_sync0[3])
     );
+    thesis_markdown(&mut o, run, s);
     pdi_markdown(&mut o, run);
     timing_markdown(&mut o, run);
     o
+}
+
+/// One of the thesis' per-leg observations of its trotting experiment (§4.1, Figures 4-1
+/// to 4-7) beside what a run shows.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Observation {
+    /// What is observed.
+    pub what: &'static str,
+    /// What the thesis says.
+    pub thesis: &'static str,
+    /// This run's figures.
+    pub run: String,
+    /// Whether the run shows what the thesis saw.
+    pub agrees: bool,
+}
+
+/// The fore legs' and the hind legs' mean of `f` over a summary's legs.
+fn fore_hind(s: &Summary, f: impl Fn(&LegSummary) -> f64) -> (f64, f64) {
+    let mut fore = 0.0;
+    let mut hind = 0.0;
+    for (li, leg) in LegId::TABLE.into_iter().enumerate() {
+        match leg {
+            LegId::ForeLeft | LegId::ForeRight => fore += 0.5 * f(&s.legs[li]),
+            LegId::HindLeft | LegId::HindRight => hind += 0.5 * f(&s.legs[li]),
+        }
+    }
+    (fore, hind)
+}
+
+/// The thesis' observations (§4.1) against the summary of a run. Per leg the figures are
+/// in Table 4-1 order (FL / FR / HL / HR).
+pub fn thesis_observations(s: &Summary) -> Vec<Observation> {
+    let per_leg = |f: &dyn Fn(&LegSummary) -> f64, dec: usize, unit: &str| {
+        let v: Vec<String> = s.legs.iter().map(|l| format!("{:.dec$}", f(l))).collect();
+        format!("{}{unit}", v.join(" / "))
+    };
+    let (toe_f, toe_h) = fore_hind(s, |l| l.toe_rms_mm);
+    let (kl_f, kl_h) = fore_hind(s, |l| l.knee_at_limit_pct);
+    let (hl_f, hl_h) = fore_hind(s, |l| l.hip_at_limit_pct);
+    let hip_worse = s.legs.iter().all(|l| l.hip_rms_deg > l.knee_rms_deg);
+    let within = s
+        .legs
+        .iter()
+        .all(|l| l.knee_peak_speed <= KNEE_MAX_SPEED && l.hip_peak_speed <= HIP_MAX_SPEED);
+    vec![
+        Observation {
+            what: "toe path tracking (Fig. 4-1)",
+            thesis: "not closely tracked, especially the hind legs",
+            run: format!("toe RMS {}", per_leg(&|l| l.toe_rms_mm, 1, " mm")),
+            agrees: toe_h > toe_f,
+        },
+        Observation {
+            what: "hip against knee errors (Figs. 4-2, 4-3)",
+            thesis: "hip errors larger than knee errors",
+            run: format!(
+                "hip RMS {} against knee RMS {}",
+                per_leg(&|l| l.hip_rms_deg, 2, "°"),
+                per_leg(&|l| l.knee_rms_deg, 2, "°")
+            ),
+            agrees: hip_worse,
+        },
+        Observation {
+            what: "knee PWM at its limit (Fig. 4-4)",
+            thesis: "fore legs several times, briefly; hind legs always within",
+            run: format!(
+                "{} of the steady trot",
+                per_leg(&|l| l.knee_at_limit_pct, 1, " %")
+            ),
+            agrees: kl_f > kl_h,
+        },
+        Observation {
+            what: "hip PWM at its limit (Fig. 4-5)",
+            thesis: "recurrently, especially the hind legs",
+            run: format!(
+                "{} of the steady trot",
+                per_leg(&|l| l.hip_at_limit_pct, 1, " %")
+            ),
+            agrees: hl_h > hl_f,
+        },
+        Observation {
+            what: "joint speeds (Figs. 4-6, 4-7)",
+            thesis: "all within the motors' limits",
+            run: format!(
+                "peak knee {} (limit {KNEE_MAX_SPEED:.2}), hip {} (limit {HIP_MAX_SPEED:.2}) rad/s",
+                per_leg(&|l| l.knee_peak_speed, 2, ""),
+                per_leg(&|l| l.hip_peak_speed, 2, "")
+            ),
+            agrees: within,
+        },
+    ]
+}
+
+/// The thesis' observations beside the run's (`summary.md`).
+fn thesis_markdown(o: &mut String, run: &TrotRun, s: &Summary) {
+    let r = &run.scenario.robot;
+    let how = if r.body {
+        format!(
+            "the four legs on one body on its support ({} kg, hips {} cm apart, centre of mass \
+             {} cm behind their midpoint, the support carrying {:.0} % of the weight; assumed), \
+             link masses within ±{} % and motor constants within ±{} % of nominal, seed {}",
+            r.mass_kg,
+            r.hip_spacing_cm,
+            r.com_behind_cm,
+            100.0 * r.support_share,
+            r.mass_tolerance_pct,
+            r.motor_tolerance_pct,
+            r.seed
+        )
+    } else {
+        format!(
+            "each leg alone with its hip fixed, link masses within ±{} % and motor constants \
+             within ±{} % of nominal",
+            r.mass_tolerance_pct, r.motor_tolerance_pct
+        )
+    };
+    let _ = writeln!(
+        o,
+        "\nPer leg against the thesis' observations (§4.1; figures FL / FR / HL / HR). This \
+         run: {how}.\n"
+    );
+    let _ = writeln!(o, "| observation | thesis | this run | agrees |");
+    let _ = writeln!(o, "|---|---|---|---|");
+    for ob in thesis_observations(s) {
+        let _ = writeln!(
+            o,
+            "| {} | {} | {} | {} |",
+            ob.what,
+            ob.thesis,
+            ob.run,
+            if ob.agrees { "yes" } else { "no" }
+        );
+    }
+    if let (Some(late), Some(b)) = (run.body_late, run.body_stats) {
+        let l = b.mean_load();
+        let _ = writeln!(
+            o,
+            "\nThe body over the steady trot: mean load carried FL / FR / HL / HR {:.1} / {:.1} / {:.1} / \
+             {:.1} N, heave {:.2} … {:.2} mm (down), pitch {:.3} … {:.3}° (nose up); {late} body \
+             steps asked for before every leg had reported (0: exact lock-step).",
+            l[0],
+            l[1],
+            l[2],
+            l[3],
+            b.z_range.0 * 1e3,
+            b.z_range.1 * 1e3,
+            b.phi_range.0.to_degrees(),
+            b.phi_range.1.to_degrees()
+        );
+    }
 }
 
 /// The bound a PV joint loop keeps the tracking error within, per joint of a leg's summary
@@ -477,5 +627,56 @@ fn pdi_markdown(o: &mut String, run: &TrotRun) {
             n.pdi_errors,
             spi.protocol_errors
         );
+    }
+}
+
+#[cfg(test)]
+mod observation_tests {
+    use super::*;
+
+    fn summary(toe: [f64; 4], knee: [f64; 4], hip: [f64; 4]) -> Summary {
+        let mut legs = [LegSummary::default(); 4];
+        for (i, l) in legs.iter_mut().enumerate() {
+            l.toe_rms_mm = toe[i];
+            l.knee_at_limit_pct = knee[i];
+            l.hip_at_limit_pct = hip[i];
+            l.knee_rms_deg = 2.0;
+            l.hip_rms_deg = 3.0;
+            l.knee_peak_speed = 1.0;
+            l.hip_peak_speed = 1.0;
+        }
+        Summary {
+            legs,
+            toe_height_correlation: Vec::new(),
+            window: (0, 1),
+        }
+    }
+
+    fn agrees(s: &Summary) -> Vec<bool> {
+        thesis_observations(s).iter().map(|o| o.agrees).collect()
+    }
+
+    /// The thesis' pattern (hind legs track worst, knee PWM limit in the fore legs, hip PWM
+    /// limit in the hind legs) agrees on every line; the mirror image on none of the three.
+    #[test]
+    fn observations_compare_fore_and_hind() {
+        let thesis = summary(
+            [12.0, 12.0, 17.0, 17.0],
+            [9.0, 9.0, 0.0, 0.0],
+            [4.0, 4.0, 21.0, 21.0],
+        );
+        assert_eq!(agrees(&thesis), [true, true, true, true, true]);
+        let mirror = summary(
+            [17.0, 17.0, 12.0, 12.0],
+            [0.0, 0.0, 9.0, 9.0],
+            [21.0, 21.0, 4.0, 4.0],
+        );
+        assert_eq!(agrees(&mirror), [false, true, false, false, true]);
+        let o = thesis_observations(&thesis);
+        assert_eq!(o[0].run, "toe RMS 12.0 / 12.0 / 17.0 / 17.0 mm");
+        // A joint faster than its motor's limit is reported.
+        let mut fast = thesis.clone();
+        fast.legs[2].hip_peak_speed = HIP_MAX_SPEED + 0.1;
+        assert!(!agrees(&fast)[4]);
     }
 }

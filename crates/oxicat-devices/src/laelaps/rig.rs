@@ -31,6 +31,15 @@
 //! at rest (zero error, zero duty), which leaves the firmware in the same state however
 //! many there were.
 //!
+//! # The whole robot (optional)
+//!
+//! With [`RigConfig::body`] the leg's hip is on a body the four rigs share
+//! ([`BodyLink`], `crate::laelaps::robot`): the catch-up then runs
+//! [`advance_on_body`], substep by substep, with the hip's motion of each 100 µs body step
+//! (times since the release, which is the same SYNC0 for all four) and the impulse the leg
+//! puts into its hip handed back. A body step waits for all four legs' impulses of two
+//! steps before, so nothing depends on which node the segment wakes first.
+//!
 //! # Towers and legs
 //!
 //! Network order follows the towers (thesis §3.1): the chain starts at the tower by the
@@ -63,8 +72,9 @@ use crate::laelaps::{
     QepSample, Side, JOINT_LOOP_TIMER,
 };
 use oxicat_esc::Esc;
-use oxicat_plant::{Leg, LegParams, Treadmill};
+use oxicat_plant::{Body, Leg, LegParams, Treadmill};
 use oxicat_slave::{Pdi, Slave};
+use std::sync::{Arc, Mutex};
 
 use oxicat_sim::exec_time::{ExecTiming, TimingStats};
 use oxicat_sim::firmware::{
@@ -217,6 +227,37 @@ pub struct RigConfig {
     pub timing: Option<ExecTiming>,
     /// The joint control law the firmware is built with (default: the thesis' PIV).
     pub law: ControlLaw,
+    /// The body this leg's hip is on (`None`, the default: the hip is fixed, the leg alone).
+    pub body: Option<BodyLink>,
+}
+
+/// A leg's place on the shared body ([`oxicat_plant::body`]): the four rigs of a trot hold
+/// the same body, each with its own leg index (Table 4-1 order, FL FR HL HR).
+#[derive(Clone)]
+pub struct BodyLink {
+    /// The body, shared by the legs' rigs.
+    pub body: Arc<Mutex<Body>>,
+    /// This leg's index on the body.
+    pub leg: usize,
+}
+
+impl BodyLink {
+    /// The body, locked (a poisoned lock still gives the body: it holds plain numbers).
+    pub fn lock(&self) -> std::sync::MutexGuard<'_, Body> {
+        self.body.lock().unwrap_or_else(|e| e.into_inner())
+    }
+}
+
+impl PartialEq for BodyLink {
+    fn eq(&self, o: &Self) -> bool {
+        Arc::ptr_eq(&self.body, &o.body) && self.leg == o.leg
+    }
+}
+
+impl std::fmt::Debug for BodyLink {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("BodyLink").field("leg", &self.leg).finish()
+    }
 }
 
 impl RigConfig {
@@ -232,6 +273,7 @@ impl RigConfig {
             belt: BeltProfile::default(),
             timing: None,
             law: ControlLaw::Piv,
+            body: None,
         }
     }
 
@@ -348,11 +390,25 @@ impl LegPlant {
                 if belt != self.plant.params().treadmill.speed {
                     self.plant.set_belt_speed(belt);
                 }
-                self.plant.advance((since - self.plant_ns) as f64 * 1e-9);
+                match &self.config.body {
+                    None => self.plant.advance((since - self.plant_ns) as f64 * 1e-9),
+                    Some(link) => advance_on_body(
+                        &mut self.plant,
+                        &mut link.lock(),
+                        link.leg,
+                        self.plant_ns,
+                        since,
+                    ),
+                }
                 self.plant_ticks += (since - self.plant_ns).div_ceil(self.config.plant_period_ns);
                 self.plant_ns = since;
             }
         }
+    }
+
+    /// The body the leg is on, if any.
+    pub fn body(&self) -> Option<&BodyLink> {
+        self.config.body.as_ref()
     }
 
     fn sample_encoders(&mut self, app: &mut LegApp) {
@@ -404,6 +460,26 @@ impl LegPlant {
             p.knee.reverse,
         );
     }
+}
+
+/// Advances `leg` (index `index` on `body`) from its time `from_ns` to `to_ns` in the
+/// substeps `Leg::advance` would take, each with its hip's motion of the body step it
+/// starts in, handing the body the impulse it put into the hip (see
+/// [`oxicat_plant::body`]).
+pub fn advance_on_body(leg: &mut Leg, body: &mut Body, index: usize, from_ns: u64, to_ns: u64) {
+    let span_ns = to_ns - from_ns;
+    let dt = span_ns as f64 * 1e-9;
+    let n = (dt / leg.params().substep - 1e-9).ceil().max(1.0) as u64;
+    let h = dt / n as f64;
+    for k in 0..n {
+        let j = body.step_of(from_ns + span_ns * k / n);
+        leg.set_hip_motion(body.hip_motion(index, j));
+        let p0 = leg.vertical_momentum();
+        leg.advance(h);
+        let impulse = h * leg.contact_force()[1] - (leg.vertical_momentum() - p0);
+        body.add_impulse(index, j, impulse);
+    }
+    body.reached(index, to_ns);
 }
 
 impl<Pd: Pdi> Bench<LegImage<Pd>> for LegPlant {

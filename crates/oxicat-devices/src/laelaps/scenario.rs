@@ -32,6 +32,51 @@ pub struct Scenario {
     /// How each leg node's firmware reaches its ESC (optional; default: directly).
     #[serde(default)]
     pub pdi: PdiSettings,
+    /// The whole robot: body on its support, per-leg tolerances (optional; absent: each
+    /// leg alone with its hip fixed, nominal parameters).
+    #[serde(default)]
+    pub robot: Robot,
+}
+
+/// The `[robot]` table: the legs on one body on the treadmill's support, and how far each
+/// leg's masses and motors are from nominal (seeded). See `crate::laelaps::robot`.
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct Robot {
+    /// `true`: the four hips are on one body on its support (the legs coupled through it);
+    /// `false`: each leg alone with its hip fixed.
+    pub body: bool,
+    /// Whole robot, legs included \[kg\] (assumed; the thesis gives no mass).
+    pub mass_kg: f64,
+    /// Fore to hind hip axes \[cm\] (assumed).
+    pub hip_spacing_cm: f64,
+    /// Centre of mass behind the midpoint of the hips \[cm\] (assumed: toward the hind legs).
+    pub com_behind_cm: f64,
+    /// Share of the robot's weight the treadmill support carries at the release height.
+    pub support_share: f64,
+    /// Each leg's link masses within ± this of nominal \[%\] (uniform, seeded).
+    pub mass_tolerance_pct: f64,
+    /// Each leg's motor torque constants and resistances within ± this of nominal \[%\].
+    pub motor_tolerance_pct: f64,
+    /// Seed of the tolerances.
+    pub seed: u64,
+}
+
+impl Default for Robot {
+    /// No `[robot]` table: each leg alone with its hip fixed, nominal masses and motors (the
+    /// body's numbers are the shipped file's, unused).
+    fn default() -> Self {
+        Self {
+            body: false,
+            mass_kg: 40.0,
+            hip_spacing_cm: 70.0,
+            com_behind_cm: 5.0,
+            support_share: 0.2,
+            mass_tolerance_pct: 0.0,
+            motor_tolerance_pct: 0.0,
+            seed: 0,
+        }
+    }
 }
 
 /// Which way the leg nodes' firmware reaches its ESC.
@@ -288,6 +333,43 @@ pub const LIMITS: &[(&str, f64, f64, &str, &str)] = &[
         "plant integration rate",
     ),
     ("pdi.spi_mhz", 1.0, 100.0, " MHz", "SPI clock"),
+    ("robot.mass_kg", 1.0, 500.0, " kg", "whole robot"),
+    (
+        "robot.hip_spacing_cm",
+        10.0,
+        300.0,
+        " cm",
+        "fore to hind hip axes",
+    ),
+    (
+        "robot.com_behind_cm",
+        -50.0,
+        50.0,
+        " cm",
+        "centre of mass behind the hips' midpoint, inside the hips",
+    ),
+    (
+        "robot.support_share",
+        0.0,
+        1.0,
+        "",
+        "share of the weight on the support",
+    ),
+    (
+        "robot.mass_tolerance_pct",
+        0.0,
+        50.0,
+        " %",
+        "link masses around nominal",
+    ),
+    (
+        "robot.motor_tolerance_pct",
+        0.0,
+        50.0,
+        " %",
+        "motor constants around nominal",
+    ),
+    ("robot.seed", 0.0, 999_999_999.0, "", "nine digits"),
     (
         "leg.x_centre_cm",
         -50.0,
@@ -356,6 +438,19 @@ impl Scenario {
             ("rig.belt_speed_m_s".into(), r.belt_speed_m_s),
             ("rig.plant_rate_hz".into(), f64::from(r.plant_rate_hz)),
             ("pdi.spi_mhz".into(), f64::from(self.pdi.spi_mhz)),
+            ("robot.mass_kg".into(), self.robot.mass_kg),
+            ("robot.hip_spacing_cm".into(), self.robot.hip_spacing_cm),
+            ("robot.com_behind_cm".into(), self.robot.com_behind_cm),
+            ("robot.support_share".into(), self.robot.support_share),
+            (
+                "robot.mass_tolerance_pct".into(),
+                self.robot.mass_tolerance_pct,
+            ),
+            (
+                "robot.motor_tolerance_pct".into(),
+                self.robot.motor_tolerance_pct,
+            ),
+            ("robot.seed".into(), self.robot.seed as f64),
         ];
         for (joint, g) in [("knee", &c.knee), ("hip", &c.hip)] {
             for (k, x) in [("kp", g.kp), ("kd", g.kd), ("ki", g.ki)] {
@@ -410,6 +505,14 @@ impl Scenario {
             return bad(format!(
                 "bus.sync0_shift_us = {} must be below bus.cycle_us = {}",
                 self.bus.sync0_shift_us, self.bus.cycle_us
+            ));
+        }
+        let r = &self.robot;
+        if r.com_behind_cm.abs() >= 0.5 * r.hip_spacing_cm {
+            return bad(format!(
+                "robot.com_behind_cm = {} must lie between the hips (|…| < robot.hip_spacing_cm / 2 = {})",
+                r.com_behind_cm,
+                0.5 * r.hip_spacing_cm
             ));
         }
         let p = &self.procedure;
