@@ -12,6 +12,10 @@
 //!   mode, 0x1C32:01 = 1), for 1,000 cycles of 1 ms with the right working counter every
 //!   cycle; the PDI IRQ handler ran for every cycle's RxPDO and no current-loop tick was
 //!   lost (10,000 cycles with `--ignored`);
+//! - from INIT through PREOP, SAFEOP and OP back to PREOP, with SDO downloads of motor
+//!   parameters in OP, every ADC sequence gets its current-loop tick and the ADC interrupt
+//!   waits at most 5 µs after JEOC (issue 15: the hooks once read the dictionary inside the
+//!   firmware's critical section, 175 µs at PRE-OP → SAFE-OP);
 //! - a 1 A current pulse on locked M2, streamed in FRF mode by the experiment's own master
 //!   code, gives the host-compiled board's step response (final value, peak, rise time);
 //! - the free motors, each driven at 0.2 A in normal mode, spin up as on the host.
