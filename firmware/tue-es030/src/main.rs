@@ -19,9 +19,10 @@
 //! handlers, which cannot preempt one another — and by the thread with BASEPRI raised to
 //! 0x20 ([`with_esc_from_thread`]), so their SPI transactions never interleave and never
 //! hold off the current loop. The firmware is shared between the current loop and the
-//! stack's hooks: it lives in a `cortex_m::interrupt::Mutex`, and every hook the stack
-//! calls ([`FwHooks`]) takes it in a short critical section (the firmware's own code, no
-//! SPI).
+//! stack's hooks: it lives in a `cortex_m::interrupt::Mutex`; the hooks (`Hooks(FwCs)`)
+//! read and convert the dictionary outside it and take it only to hand the results over
+//! (motor parameters, the process data's setpoints and feedback), a few words in a
+//! critical section, so the ADC interrupt is never held off for a dictionary read.
 #![no_std]
 #![no_main]
 
@@ -37,9 +38,9 @@ use cortex_m::peripheral::NVIC;
 use cortex_m::register::{basepri, basepri_max};
 use cortex_m_rt::{entry, exception, ExceptionFrame};
 use embedded_hal_bus::spi::{ExclusiveDevice, NoDelay};
-use oxicat_devices::tue_es030::{device, TuEs030};
+use oxicat_devices::tue_es030::{device, FwLock, Hooks, TuEs030};
 use oxicat_pdi::{Lan9252, Lan9252Config};
-use oxicat_slave::{AlState, AlStatusCode, Application, Od, Slave};
+use oxicat_slave::Slave;
 use stm32f4xx_hal::{
     gpio::{Edge, ExtiPin, Output, Pin},
     pac::{self, interrupt, Interrupt},
@@ -127,40 +128,19 @@ fn with_esc_from_thread<R>(f: impl FnOnce(&mut EscSide) -> R) -> R {
     r
 }
 
-/// The firmware as the stack sees it: every hook forwards to the shared [`TuEs030`]
-/// inside a critical section, so the SPI work of the stack's handlers runs with the
-/// current loop enabled and only the firmware's own computation excludes it. (`foe` keeps
-/// the default `None`: this image has no FoE, README.)
-struct FwHooks;
+/// The firmware as the stack sees it: the device's own hooks (`tue_es030::Hooks`) read
+/// and convert the dictionary outside any lock and hand only the results to the shared
+/// [`TuEs030`] here, each in a critical section of a few words, so the SPI work of the
+/// stack's handlers and the dictionary reads (`init_param` at PRE-OP → SAFE-OP, a motor
+/// parameter's SDO write, the process data) run with the current loop enabled. (`foe`
+/// keeps the default `None`: this image has no FoE, README.)
+struct FwCs;
 
-impl<const N: usize> Application<N> for FwHooks {
-    fn state_change(
-        &mut self,
-        from: AlState,
-        to: AlState,
-        od: &mut Od<N>,
-    ) -> Result<(), AlStatusCode> {
-        with_fw(|f| f.state_change(from, to, od))
-    }
+impl FwLock for FwCs {
+    type Board = TueBoard;
 
-    fn safe_outputs(&mut self, od: &mut Od<N>) {
-        with_fw(|f| Application::<N>::safe_outputs(f, od))
-    }
-
-    fn cycle(&mut self, od: &mut Od<N>) {
-        with_fw(|f| Application::<N>::cycle(f, od))
-    }
-
-    fn timer(&mut self, id: u8, od: &mut Od<N>) {
-        with_fw(|f| Application::<N>::timer(f, id, od))
-    }
-
-    fn sdo_written(&mut self, index: u16, sub: u8, od: &mut Od<N>) {
-        with_fw(|f| Application::<N>::sdo_written(f, index, sub, od))
-    }
-
-    fn next_emergency(&mut self) -> Option<(u16, u8, [u8; 5])> {
-        with_fw(Application::<N>::next_emergency)
+    fn with<R>(&mut self, f: impl FnOnce(&mut Firmware) -> R) -> R {
+        with_fw(f)
     }
 }
 
@@ -193,7 +173,7 @@ fn EXTI3() {
     clear_exti(3);
     // SAFETY: ESC handler at PRIO_ESC.
     let e = unsafe { ESC.get() };
-    let _ = e.slave.on_sync0(&mut e.esc, &mut FwHooks);
+    let _ = e.slave.on_sync0(&mut e.esc, &mut Hooks(FwCs));
 }
 
 /// SYNC1 (PB5, the only line enabled in 5..9).
@@ -202,7 +182,7 @@ fn EXTI9_5() {
     clear_exti(5);
     // SAFETY: ESC handler at PRIO_ESC.
     let e = unsafe { ESC.get() };
-    let _ = e.slave.on_sync1(&mut e.esc, &mut FwHooks);
+    let _ = e.slave.on_sync1(&mut e.esc, &mut Hooks(FwCs));
 }
 
 /// PDI IRQ (PA10, the only line enabled in 10..15): the process data on the SM2 event.
@@ -211,7 +191,7 @@ fn EXTI15_10() {
     clear_exti(10);
     // SAFETY: ESC handler at PRIO_ESC.
     let e = unsafe { ESC.get() };
-    let _ = e.slave.on_pdi_irq(&mut e.esc, &mut FwHooks);
+    let _ = e.slave.on_pdi_irq(&mut e.esc, &mut Hooks(FwCs));
 }
 
 /// Blinks the FRUN LED fast forever: the ESC did not answer at start-up.
@@ -388,7 +368,7 @@ fn main() -> ! {
         if now.wrapping_sub(last_poll) >= POLL_EVERY_TICKS {
             last_poll = now;
             with_esc_from_thread(|e| {
-                let _ = e.slave.poll(&mut e.esc, &mut FwHooks);
+                let _ = e.slave.poll(&mut e.esc, &mut Hooks(FwCs));
             });
         }
         // The IRQ line is a level: a cause that arrives while it is still low from another

@@ -6,8 +6,8 @@ use oxicat_slave::{AlState, AlStatusCode, Application, Od, Var};
 
 use super::control::q8mul;
 use super::control::{
-    line_10mv, param2int_rev, phases, u2pwm, vref5_10mv, BoardRev, Motor, MotorParams, KILLVOLTAGE,
-    R2IGAINCH1_Q8, R2IGAIN_Q8, R2U_FP,
+    line_10mv, param2int_rev, phases, u2pwm, vref5_10mv, BoardRev, IntParams, Motor, MotorParams,
+    KILLVOLTAGE, R2IGAINCH1_Q8, R2IGAIN_Q8, R2U_FP,
 };
 use super::device::{FRF_PER_CYCLE, OBJECTS};
 use super::ring::Ring;
@@ -236,9 +236,8 @@ pub struct TuEs030<B: Board> {
     input: bool,
     dostate: u8,
     ledcnt: u16,
-    normal: Option<NormalIo>,
-    frf: Option<FrfIo>,
-    volts: Option<VoltIo>,
+    /// The dictionary is the TUeES030's: the build-time handles apply.
+    dict: bool,
 }
 
 impl<B: Board> TuEs030<B> {
@@ -276,9 +275,7 @@ impl<B: Board> TuEs030<B> {
             input: false,
             dostate: 0,
             ledcnt: 0,
-            normal: None,
-            frf: None,
-            volts: None,
+            dict: false,
         };
         s.clear_pwm();
         s
@@ -289,7 +286,9 @@ impl<B: Board> TuEs030<B> {
         self.output
     }
 
-    fn read_params<const N: usize>(&mut self, od: &Od<N>, k: usize) {
+    /// Motor `k`'s parameters as 0x8000 + `k` holds them (a default where a read fails),
+    /// and converted for board revision `rev`: the dictionary side of `init_param`.
+    fn read_params<const N: usize>(od: &Od<N>, k: usize, rev: BoardRev) -> Params {
         let i = 0x8000 + k as u16;
         let d = MotorParams::DEFAULT;
         let p = MotorParams {
@@ -302,18 +301,17 @@ impl<B: Board> TuEs030<B> {
             encres: od.get(i, 7).unwrap_or(d.encres),
             czero: od.get(i, 8).unwrap_or(d.czero),
         };
-        self.params[k] = p;
-        self.motors[k].par = param2int_rev(&p, self.board_rev);
+        Params {
+            k,
+            si: p,
+            int: param2int_rev(&p, rev),
+        }
     }
 
-    /// Takes the build-time handles when `od` is the TUeES030's dictionary (checked once:
-    /// this runs every cycle).
-    fn resolve<const N: usize>(&mut self, od: &Od<N>) {
-        if self.normal.is_none() && od.built_on(OBJECTS) {
-            self.normal = Some(NormalIo::VARS);
-            self.frf = Some(FrfIo::VARS);
-            self.volts = Some(VoltIo::VARS);
-        }
+    /// Takes over converted motor parameters (the firmware's side of `init_param`).
+    fn set_params(&mut self, p: &Params) {
+        self.params[p.k] = p.si;
+        self.motors[p.k].par = p.int;
     }
 
     /// Brakes every motor (50/50, drivers enabled), the `clear_PWM` of a stopped output.
@@ -351,65 +349,55 @@ impl<B: Board> TuEs030<B> {
         }
     }
 
-    /// 0x8040 "Internal voltages" from the last readings.
-    fn store_voltages<const N: usize>(&mut self, od: &mut Od<N>) {
-        let Some(io) = self.volts else { return };
+    /// 0x8040 "Internal voltages" from the last readings: line, 5 V reference, line
+    /// peak, kill threshold \[10 mV\].
+    fn voltages(&mut self) -> [u16; 4] {
         let vref = vref5_10mv(self.board.adc2(ADC2_VREF5));
-        let v = [
+        [
             self.linevoltage.max(0) as u16,
             vref,
             line_10mv(self.line_peak_counts),
             line_10mv(self.kill_counts),
-        ];
-        for (var, x) in io.volts.iter().zip(v) {
-            od.store(*var, x);
-        }
+        ]
     }
 
-    /// `handle_RXPDO` (normal mode: `update_actuators`).
-    fn handle_rx_normal<const N: usize>(&mut self, od: &Od<N>, io: &NormalIo) {
+    /// `handle_RXPDO` (normal mode: `update_actuators`), from the RxPDO as read.
+    fn apply_rx_normal(&mut self, rx: &RxNormal) {
         for k in 0..3 {
             let m = &mut self.motors[k];
-            m.current_setpoint = od.load(io.sp[k]);
-            m.setpoint_ff = od.load(io.ff[k]).clamp(
-                -super::control::MAXVOLTAGE as i16,
-                super::control::MAXVOLTAGE as i16,
-            );
-            let mcom = od.load(io.mcom[k]);
+            m.current_setpoint = rx.sp[k];
+            m.setpoint_ff = rx.ff[k];
             // The kill holds while the line voltage stays above the threshold.
-            m.enabled = mcom & MCOM_ENABLE != 0 && !self.killed;
-            m.tristate = mcom & MCOM_TRISTATE != 0;
+            m.enabled = rx.mcom[k] & MCOM_ENABLE != 0 && !self.killed;
+            m.tristate = rx.mcom[k] & MCOM_TRISTATE != 0;
         }
-        let d = od.load(io.dig_out);
-        self.board.digout((d & 0x0F) | (self.dostate & 0xF0));
+        self.board
+            .digout((rx.dig_out & 0x0F) | (self.dostate & 0xF0));
         for k in 0..2 {
-            let code = (od.load(io.aout[k]) as i32 + 2048).clamp(0, 4095) as u16;
-            self.board.dac(k, code);
+            self.board.dac(k, rx.dac[k]);
         }
     }
 
-    /// `handle_RXPDO` (FRF mode).
-    fn handle_rx_frf<const N: usize>(&mut self, od: &Od<N>, io: &FrfIo) {
-        let mcom = od.load(io.mcom);
-        self.frf_channel = ((mcom & MCOM_FRF_MMASK) as usize).min(2);
+    /// `handle_RXPDO` (FRF mode), from the RxPDO as read.
+    fn apply_rx_frf(&mut self, rx: &RxFrf) {
+        self.frf_channel = ((rx.mcom & MCOM_FRF_MMASK) as usize).min(2);
         for m in &mut self.motors {
             m.enabled = false;
         }
         let m = &mut self.motors[self.frf_channel];
-        m.enabled = mcom & MCOM_FRF_ENABLE != 0 && !self.killed;
-        m.tristate = mcom & MCOM_FRF_TRISTATE != 0;
-        let count = (od.load(io.entries) as usize).min(FRF_PER_CYCLE);
-        for k in 0..count {
+        m.enabled = rx.mcom & MCOM_FRF_ENABLE != 0 && !self.killed;
+        m.tristate = rx.mcom & MCOM_FRF_TRISTATE != 0;
+        for &sp in &rx.sp[..rx.count] {
             if self.rx.free() > 0 {
-                self.rx.write(od.load(io.sp[k]));
+                self.rx.write(sp);
             } else {
                 self.counters.frf_dropped += 1;
             }
         }
     }
 
-    /// `handle_TXPDO` (normal mode).
-    fn handle_tx_normal<const N: usize>(&mut self, od: &mut Od<N>, io: &NormalIo) {
+    /// `handle_TXPDO` (normal mode): the values, for [`TxNormal::store`].
+    fn tx_normal(&mut self) -> TxNormal {
         let di = self.board.digin();
         let kill = self.take_kill();
         let drv = [
@@ -417,16 +405,19 @@ impl<B: Board> TuEs030<B> {
             Self::mstate_bits(di, DI_M23_FAULT, DI_M23_OTW) | kill,
             Self::mstate_bits(di, DI_M23_FAULT, DI_M23_OTW) | kill,
         ];
+        let mut tx = TxNormal {
+            di,
+            ..TxNormal::default()
+        };
         for (k, (m, d)) in self.motors.iter().zip(drv).enumerate() {
-            od.store(io.mstate[k], m.enabled as u8 | d);
-            od.store(io.count[k], m.position);
-            od.store(io.ts[k], m.poscaptime);
-            od.store(io.vel[k], m.velocity);
-            od.store(io.cur[k], m.current);
+            tx.mstate[k] = m.enabled as u8 | d;
+            tx.count[k] = m.position;
+            tx.ts[k] = m.poscaptime;
+            tx.vel[k] = m.velocity;
+            tx.cur[k] = m.current;
         }
-        od.store(io.dig_in, di);
         let cal = self.board.calipers();
-        let mut v = [0u16; 12];
+        let v = &mut tx.others;
         v[0] = cal[0];
         v[1] = cal[1];
         for k in 0..3 {
@@ -437,35 +428,28 @@ impl<B: Board> TuEs030<B> {
         v[9] = self.board.adc1(ADC1_ANALOG[1]);
         v[10] = self.linevoltage.max(0) as u16;
         v[11] = self.icnt;
-        for (var, x) in io.others.iter().zip(v) {
-            od.store(*var, x);
-        }
+        tx
     }
 
-    /// `handle_TXPDO` (FRF mode): up to 22 buffered currents per RxPDO.
-    fn handle_tx_frf<const N: usize>(&mut self, od: &mut Od<N>, io: &FrfIo) {
-        let mut n = 0;
-        while n < FRF_PER_CYCLE {
+    /// `handle_TXPDO` (FRF mode): up to 22 buffered currents per RxPDO, for
+    /// [`TxFrf::store`].
+    fn tx_frf(&mut self) -> TxFrf {
+        let mut tx = TxFrf::default();
+        while tx.n < FRF_PER_CYCLE {
             let Some(c) = self.tx.read() else { break };
-            od.store(io.cur[n], c);
-            n += 1;
+            tx.cur[tx.n] = c;
+            tx.n += 1;
         }
-        for k in n..FRF_PER_CYCLE {
-            od.store(io.cur[k], 0);
-        }
-        // The listing stores the index of the last entry; we report the count (see README).
-        od.store(io.entries_out, n as u8);
         let di = self.board.digin();
         let en = self.motors.iter().any(|m| m.enabled) as u8;
         let kill = self.take_kill();
-        od.store(
-            io.mstate,
-            en | Self::mstate_bits(di, DI_M1_FAULT, DI_M1_OTW)
-                | Self::mstate_bits(di, DI_M23_FAULT, DI_M23_OTW)
-                | kill,
-        );
-        od.store(io.buffer, self.rx.len().min(255) as u8);
-        od.store(io.ectime, self.icnt);
+        tx.mstate = en
+            | Self::mstate_bits(di, DI_M1_FAULT, DI_M1_OTW)
+            | Self::mstate_bits(di, DI_M23_FAULT, DI_M23_OTW)
+            | kill;
+        tx.buffer = self.rx.len().min(255) as u8;
+        tx.ectime = self.icnt;
+        tx
     }
 
     /// `i_handler_pwm`: the 20 kHz current loop.
@@ -534,43 +518,197 @@ impl<B: Board> TuEs030<B> {
     }
 }
 
-impl<const N: usize, B: Board> Application<N> for TuEs030<B> {
+/// Motor parameters read from the dictionary and converted: what `init_param` and
+/// `sdo_written` hand the firmware.
+#[derive(Debug, Clone, Copy)]
+struct Params {
+    k: usize,
+    si: MotorParams,
+    int: IntParams,
+}
+
+/// A normal-mode RxPDO as read from the dictionary (`ff` clamped, DAC codes converted).
+#[derive(Debug, Clone, Copy)]
+struct RxNormal {
+    sp: [i16; 3],
+    ff: [i16; 3],
+    mcom: [u8; 3],
+    dig_out: u8,
+    dac: [u16; 2],
+}
+
+impl RxNormal {
+    fn read<const N: usize>(od: &Od<N>, io: &NormalIo) -> Self {
+        let max = super::control::MAXVOLTAGE as i16;
+        Self {
+            sp: io.sp.map(|v| od.load(v)),
+            ff: io.ff.map(|v| od.load(v).clamp(-max, max)),
+            mcom: io.mcom.map(|v| od.load(v)),
+            dig_out: od.load(io.dig_out),
+            dac: io
+                .aout
+                .map(|v| (od.load(v) as i32 + 2048).clamp(0, 4095) as u16),
+        }
+    }
+}
+
+/// The normal-mode TxPDO's values, taken from the firmware.
+#[derive(Debug, Clone, Copy, Default)]
+struct TxNormal {
+    mstate: [u8; 3],
+    count: [u32; 3],
+    ts: [u32; 3],
+    vel: [i16; 3],
+    cur: [i16; 3],
+    di: u8,
+    others: [u16; 12],
+}
+
+impl TxNormal {
+    fn store<const N: usize>(&self, od: &mut Od<N>, io: &NormalIo) {
+        for k in 0..3 {
+            od.store(io.mstate[k], self.mstate[k]);
+            od.store(io.count[k], self.count[k]);
+            od.store(io.ts[k], self.ts[k]);
+            od.store(io.vel[k], self.vel[k]);
+            od.store(io.cur[k], self.cur[k]);
+        }
+        od.store(io.dig_in, self.di);
+        for (var, x) in io.others.iter().zip(self.others) {
+            od.store(*var, x);
+        }
+    }
+}
+
+/// An FRF RxPDO as read: `mcom`, the setpoint count (clamped) and the setpoints.
+#[derive(Debug, Clone, Copy)]
+struct RxFrf {
+    mcom: u8,
+    count: usize,
+    sp: [i16; FRF_PER_CYCLE],
+}
+
+impl RxFrf {
+    fn read<const N: usize>(od: &Od<N>, io: &FrfIo) -> Self {
+        let count = (od.load(io.entries) as usize).min(FRF_PER_CYCLE);
+        let mut sp = [0; FRF_PER_CYCLE];
+        for (x, v) in sp.iter_mut().zip(&io.sp[..count]) {
+            *x = od.load(*v);
+        }
+        Self {
+            mcom: od.load(io.mcom),
+            count,
+            sp,
+        }
+    }
+}
+
+/// The FRF TxPDO's values, taken from the firmware.
+#[derive(Debug, Clone, Copy, Default)]
+struct TxFrf {
+    cur: [i16; FRF_PER_CYCLE],
+    n: usize,
+    mstate: u8,
+    buffer: u8,
+    ectime: u16,
+}
+
+impl TxFrf {
+    fn store<const N: usize>(&self, od: &mut Od<N>, io: &FrfIo) {
+        for (var, c) in io.cur.iter().zip(self.cur) {
+            od.store(*var, c);
+        }
+        // The listing stores the index of the last entry; we report the count (see README).
+        od.store(io.entries_out, self.n as u8);
+        od.store(io.mstate, self.mstate);
+        od.store(io.buffer, self.buffer);
+        od.store(io.ectime, self.ectime);
+    }
+}
+
+/// How the stack's hooks reach the firmware: directly on the host; on a board whose
+/// current loop runs in an interrupt, in a critical section. [`Hooks`] read and convert
+/// the dictionary outside [`FwLock::with`] and only hand the results over inside it, so
+/// the current loop waits for a copy of a few words, never for a dictionary read.
+pub trait FwLock {
+    /// The firmware's board.
+    type Board: Board;
+    /// Runs `f` on the firmware (on a board: with the current loop masked).
+    fn with<R>(&mut self, f: impl FnOnce(&mut TuEs030<Self::Board>) -> R) -> R;
+}
+
+impl<B: Board> FwLock for &mut TuEs030<B> {
+    type Board = B;
+    fn with<R>(&mut self, f: impl FnOnce(&mut TuEs030<B>) -> R) -> R {
+        f(self)
+    }
+}
+
+/// The TUeES030's stack hooks on the firmware reached through `L` (the firmware itself
+/// is its own [`Application`] through `Hooks<&mut TuEs030>`).
+pub struct Hooks<L>(pub L);
+
+impl<L: FwLock> Hooks<L> {
+    /// The dictionary is the TUeES030's, so the build-time handles apply (checked once,
+    /// outside the lock: it walks the whole declaration).
+    fn resolved<const N: usize>(&mut self, od: &Od<N>) -> bool {
+        if self.0.with(|f| f.dict) {
+            return true;
+        }
+        let dict = od.built_on(OBJECTS);
+        if dict {
+            self.0.with(|f| f.dict = true);
+        }
+        dict
+    }
+}
+
+impl<const N: usize, L: FwLock> Application<N> for Hooks<L> {
     fn state_change(
         &mut self,
         _from: AlState,
         to: AlState,
         od: &mut Od<N>,
     ) -> Result<(), AlStatusCode> {
-        self.resolve(od);
+        self.resolved(od);
         match to {
-            AlState::SafeOp if !self.input => {
-                // `init_param` at the start of the application; the assignment decides the mode.
-                for k in 0..3 {
-                    self.read_params(od, k);
+            AlState::SafeOp => {
+                let (input, rev) = self.0.with(|f| (f.input, f.board_rev));
+                if !input {
+                    // `init_param` at the start of the application; the assignment decides
+                    // the mode.
+                    let p = [0, 1, 2].map(|k| TuEs030::<L::Board>::read_params(od, k, rev));
+                    let mode = match od.get::<u16>(0x1C12, 1) {
+                        Ok(0x1601) => Mode::Frf,
+                        _ => Mode::Normal,
+                    };
+                    self.0.with(|f| {
+                        for q in &p {
+                            f.set_params(q);
+                        }
+                        f.mode = mode;
+                        f.rx.clear();
+                        f.tx.clear();
+                        f.input = true;
+                    });
                 }
-                self.mode = match od.get::<u16>(0x1C12, 1) {
-                    Ok(0x1601) => Mode::Frf,
-                    _ => Mode::Normal,
-                };
-                self.rx.clear();
-                self.tx.clear();
-                self.input = true;
             }
-            AlState::Op => self.output = true,
-            AlState::SafeOp => {}
-            _ => {
-                self.input = false;
-                self.output = false;
-                self.stop_motors();
-            }
+            AlState::Op => self.0.with(|f| f.output = true),
+            _ => self.0.with(|f| {
+                f.input = false;
+                f.output = false;
+                f.stop_motors();
+            }),
         }
         Ok(())
     }
 
     fn safe_outputs(&mut self, od: &mut Od<N>) {
         // Leaving OP or the watchdog: outputs stop, the motors brake.
-        self.output = false;
-        self.stop_motors();
+        self.0.with(|f| {
+            f.output = false;
+            f.stop_motors();
+        });
         for k in 0..3u16 {
             let _ = od.set(0x7000 + k, 1, 0u8);
             let _ = od.set(0x7000 + k, 2, 0i16);
@@ -582,26 +720,35 @@ impl<const N: usize, B: Board> Application<N> for TuEs030<B> {
     }
 
     fn cycle(&mut self, od: &mut Od<N>) {
-        self.resolve(od);
-        match self.mode {
+        if !self.resolved(od) {
+            return;
+        }
+        let (mode, output, input) = self.0.with(|f| (f.mode, f.output, f.input));
+        match mode {
             Mode::Normal => {
-                let Some(io) = self.normal else { return };
-                if self.output {
-                    self.counters.rx_pdos += 1;
-                    self.handle_rx_normal(od, &io);
+                let io = NormalIo::VARS;
+                if output {
+                    let rx = RxNormal::read(od, &io);
+                    self.0.with(|f| {
+                        f.counters.rx_pdos += 1;
+                        f.apply_rx_normal(&rx);
+                    });
                 }
-                if self.input {
-                    self.handle_tx_normal(od, &io);
+                if input {
+                    self.0.with(|f| f.tx_normal()).store(od, &io);
                 }
             }
             Mode::Frf => {
-                let Some(io) = self.frf else { return };
-                if self.output {
-                    self.counters.rx_pdos += 1;
-                    self.handle_rx_frf(od, &io);
+                let io = FrfIo::VARS;
+                if output {
+                    let rx = RxFrf::read(od, &io);
+                    self.0.with(|f| {
+                        f.counters.rx_pdos += 1;
+                        f.apply_rx_frf(&rx);
+                    });
                 }
-                if self.input {
-                    self.handle_tx_frf(od, &io);
+                if input {
+                    self.0.with(|f| f.tx_frf()).store(od, &io);
                 }
             }
         }
@@ -609,11 +756,18 @@ impl<const N: usize, B: Board> Application<N> for TuEs030<B> {
 
     fn timer(&mut self, id: u8, od: &mut Od<N>) {
         match id {
-            CURRENT_TIMER => self.current_loop(),
+            CURRENT_TIMER => self.0.with(|f| f.current_loop()),
             SERVICE_TIMER => {
-                self.service();
-                self.resolve(od);
-                self.store_voltages(od);
+                let dict = self.resolved(od);
+                let v = self.0.with(|f| {
+                    f.service();
+                    dict.then(|| f.voltages())
+                });
+                if let Some(v) = v {
+                    for (var, x) in VoltIo::VARS.volts.iter().zip(v) {
+                        od.store(*var, x);
+                    }
+                }
             }
             _ => {}
         }
@@ -621,7 +775,36 @@ impl<const N: usize, B: Board> Application<N> for TuEs030<B> {
 
     fn sdo_written(&mut self, index: u16, _sub: u8, od: &mut Od<N>) {
         if (0x8000..=0x8002).contains(&index) {
-            self.read_params(od, (index - 0x8000) as usize);
+            let rev = self.0.with(|f| f.board_rev);
+            let p = TuEs030::<L::Board>::read_params(od, (index - 0x8000) as usize, rev);
+            self.0.with(|f| f.set_params(&p));
         }
+    }
+}
+
+impl<const N: usize, B: Board> Application<N> for TuEs030<B> {
+    fn state_change(
+        &mut self,
+        from: AlState,
+        to: AlState,
+        od: &mut Od<N>,
+    ) -> Result<(), AlStatusCode> {
+        Application::<N>::state_change(&mut Hooks(self), from, to, od)
+    }
+
+    fn safe_outputs(&mut self, od: &mut Od<N>) {
+        Application::<N>::safe_outputs(&mut Hooks(self), od)
+    }
+
+    fn cycle(&mut self, od: &mut Od<N>) {
+        Application::<N>::cycle(&mut Hooks(self), od)
+    }
+
+    fn timer(&mut self, id: u8, od: &mut Od<N>) {
+        Application::<N>::timer(&mut Hooks(self), id, od)
+    }
+
+    fn sdo_written(&mut self, index: u16, sub: u8, od: &mut Od<N>) {
+        Application::<N>::sdo_written(&mut Hooks(self), index, sub, od)
     }
 }

@@ -59,8 +59,8 @@ pub mod rig;
 pub mod ring;
 
 pub use app::{
-    Adcs, Board, Bridges, Encoders, Io, Mode, TuEs030, CURRENT_TIMER, MCOM_ENABLE, MCOM_FRF_ENABLE,
-    MCOM_FRF_TRISTATE, MCOM_TRISTATE, SERVICE_TIMER,
+    Adcs, Board, Bridges, Encoders, FwLock, Hooks, Io, Mode, TuEs030, CURRENT_TIMER, MCOM_ENABLE,
+    MCOM_FRF_ENABLE, MCOM_FRF_TRISTATE, MCOM_TRISTATE, SERVICE_TIMER,
 };
 pub use control::{BoardRev, Motor, MotorParams};
 
