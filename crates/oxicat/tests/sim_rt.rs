@@ -2,12 +2,14 @@
 //! cycling against it, and the options refused with their ranges. Needs root (CI runs as
 //! root); elsewhere the test that changes scheduling reports itself skipped.
 
-use std::process::{Command, Stdio};
+use std::process::Command;
 use std::time::{Duration, Instant};
 
 use oxicat_master::cyclic::CycleOptions;
 use oxicat_master::{Link, Master};
 use oxicat_testkit::served::spawn_udp;
+
+mod bin_common;
 
 fn is_root() -> bool {
     std::fs::read_to_string("/proc/self/status")
@@ -106,15 +108,12 @@ fn a_served_segment_runs_from_one_fifo_thread_with_memory_locked() {
     assert_eq!((stats.cycles, stats.wkc_errors), (200, 0));
 }
 
+/// `oxicat sim ARGS`, which must fail; its standard error.
 fn sim_error(args: &[&str]) -> String {
-    let out = Command::new(env!("CARGO_BIN_EXE_oxicat"))
-        .arg("sim")
-        .args(args)
-        .stdin(Stdio::null())
-        .output()
-        .expect("run oxicat");
-    assert!(!out.status.success(), "{args:?} must fail");
-    String::from_utf8_lossy(&out.stderr).into_owned()
+    let args = [&["sim"][..], args].concat();
+    let (ok, _, err) = bin_common::oxicat_in(None, &args);
+    assert!(!ok, "{args:?} must fail");
+    err
 }
 
 #[test]
