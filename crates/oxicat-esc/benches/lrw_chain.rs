@@ -22,7 +22,7 @@ use criterion::{black_box, criterion_group, criterion_main, BenchmarkId, Criteri
 
 #[path = "common/lrw.rs"]
 mod lrw;
-use lrw::{lrw_frame, Line};
+use lrw::{lrw_frame, lrw_with_state_checks, Line};
 
 fn bench(c: &mut Criterion) {
     let mut g = c.benchmark_group("lrw_chain");
@@ -44,5 +44,26 @@ fn bench(c: &mut Criterion) {
     g.finish();
 }
 
-criterion_group!(benches, bench);
+/// The frame ethercrab's `tx_rx` sends: the LRW plus one FPRD of AL status per slave, so
+/// every ESC walks N datagrams addressed to the others (time per iteration / N = ns per ESC).
+fn bench_state_checks(c: &mut Criterion) {
+    let mut g = c.benchmark_group("lrw_state_checks");
+    for n in [16usize, 64] {
+        let mut line = Line::new(n);
+        line.check(&mut lrw_frame(), 1000);
+        let mut frame = lrw_with_state_checks(n);
+        let mut t = 1000u64;
+        g.throughput(Throughput::Elements(n as u64));
+        g.bench_with_input(BenchmarkId::from_parameter(n), &n, |b, _| {
+            b.iter(|| {
+                t += 1000;
+                black_box(line.cycle(black_box(&mut frame), t))
+            })
+        });
+        line.check(&mut lrw_frame(), t + 1000);
+    }
+    g.finish();
+}
+
+criterion_group!(benches, bench, bench_state_checks);
 criterion_main!(benches);
