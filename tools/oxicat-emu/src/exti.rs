@@ -167,19 +167,26 @@ mod tests {
         e.write(EXTI_BASE, (1 << 10) | (1 << 3));
         let mut pa10 = true;
         let mut pb3 = false;
-        e.sample(0, |p, l| (p == 0 && l == 10 && pa10) || (p == 1 && l == 3 && pb3));
+        e.sample(0, |p, l| {
+            (p == 0 && l == 10 && pa10) || (p == 1 && l == 3 && pb3)
+        });
         assert_eq!(e.pr, 0, "the first sample is a baseline");
         pb3 = true;
-        assert!(e.sample(0, |p, l| (p == 0 && l == 10 && pa10) || (p == 1 && l == 3 && pb3)));
+        assert!(e.sample(0, |p, l| (p == 0 && l == 10 && pa10)
+            || (p == 1 && l == 3 && pb3)));
         assert_eq!(e.irq_lines(), crate::nvic::bit(16 + 9), "EXTI3");
         pa10 = false;
-        e.sample(0, |p, l| (p == 0 && l == 10 && pa10) || (p == 1 && l == 3 && pb3));
+        e.sample(0, |p, l| {
+            (p == 0 && l == 10 && pa10) || (p == 1 && l == 3 && pb3)
+        });
         assert_eq!(e.pr, (1 << 10) | (1 << 3));
         assert_ne!(e.irq_lines() & crate::nvic::bit(16 + 40), 0, "EXTI15_10");
         // The rising edge back on PA10 is not selected.
         e.write(EXTI_BASE + 0x14, 1 << 10);
         pa10 = true;
-        e.sample(0, |p, l| (p == 0 && l == 10 && pa10) || (p == 1 && l == 3 && pb3));
+        e.sample(0, |p, l| {
+            (p == 0 && l == 10 && pa10) || (p == 1 && l == 3 && pb3)
+        });
         assert_eq!(e.pr, 1 << 3);
         assert_eq!(e.merge_base(EXTI_BASE + 0x14), 0);
         // PB3 falls and rises again before its PR bit was cleared: that edge is lost.
@@ -205,6 +212,9 @@ mod tests {
         e.sample(0, |_, _| false);
         e.sample(0, |_, l| l == 7);
         assert_eq!(e.pr, 0);
-        assert_eq!(e.lost_count[7], 0, "a masked line loses nothing: it never pends");
+        assert_eq!(
+            e.lost_count[7], 0,
+            "a masked line loses nothing: it never pends"
+        );
     }
 }

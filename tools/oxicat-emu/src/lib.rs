@@ -294,7 +294,13 @@ fn elf_functions(elf: &[u8]) -> Result<Vec<(u32, u32, String)>, EmuError> {
     let mut f: Vec<(u32, u32, String)> = elf_symbols(elf)?
         .into_iter()
         .filter(|s| s.function && s.size > 0)
-        .map(|s| (s.addr & !1, s.size, demangle(&String::from_utf8_lossy(&s.name))))
+        .map(|s| {
+            (
+                s.addr & !1,
+                s.size,
+                demangle(&String::from_utf8_lossy(&s.name)),
+            )
+        })
         .collect();
     f.sort_by_key(|e| e.0);
     Ok(f)
@@ -327,7 +333,12 @@ fn demangle(name: &str) -> String {
     }
     parts
         .iter()
-        .map(|p| p.replace("$LT$", "<").replace("$GT$", ">").replace("$u20$", " ").replace("..", "::"))
+        .map(|p| {
+            p.replace("$LT$", "<")
+                .replace("$GT$", ">")
+                .replace("$u20$", " ")
+                .replace("..", "::")
+        })
         .collect::<Vec<_>>()
         .join("::")
 }
@@ -1193,7 +1204,10 @@ impl Board {
     /// has symbols.
     pub fn function_at(&self, pc: u32) -> Option<&str> {
         let pc = pc & !1;
-        let k = self.functions.partition_point(|f| f.0 <= pc).checked_sub(1)?;
+        let k = self
+            .functions
+            .partition_point(|f| f.0 <= pc)
+            .checked_sub(1)?;
         let (start, size, name) = &self.functions[k];
         (pc < start + size).then_some(name.as_str())
     }
@@ -1314,6 +1328,27 @@ impl Board {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn mask_instructions_are_decoded_and_rust_symbols_demangled() {
+        let cps = |disable, i, f| Some(MaskOp::Cps { disable, i, f });
+        assert_eq!(mask_op(0xB672, 0), cps(true, true, false), "cpsid i");
+        assert_eq!(mask_op(0xB662, 0), cps(false, true, false), "cpsie i");
+        assert_eq!(mask_op(0xB661, 0), cps(false, false, true), "cpsie f");
+        let msr = |rn, sysm| Some(MaskOp::Msr { rn, sysm });
+        assert_eq!(mask_op(0xF380, 0x8811), msr(0, 0x11), "msr BASEPRI, r0");
+        assert_eq!(mask_op(0xF383, 0x8812), msr(3, 0x12), "msr BASEPRI_MAX, r3");
+        assert_eq!(mask_op(0xF381, 0x8810), msr(1, 0x10), "msr PRIMASK, r1");
+        assert_eq!(mask_op(0xF380, 0x8800), None, "msr APSR_nzcvq");
+        assert_eq!(mask_op(0xF380, 0x8808), None, "msr MSP");
+        assert_eq!(mask_op(0xBF30, 0), None, "wfi");
+        assert_eq!(
+            demangle("_ZN4core3fmt5write17h0123456789abcdefE"),
+            "core::fmt::write"
+        );
+        assert_eq!(demangle("main"), "main");
+        assert_eq!(demangle("_ZN3bad"), "_ZN3bad", "malformed: as it is");
+    }
 
     #[test]
     fn a_file_that_is_not_an_arm_elf_is_refused_with_the_reason() {

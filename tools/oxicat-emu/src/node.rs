@@ -19,9 +19,7 @@ use oxicat_sim::node::{EscEvent, Node};
 
 use crate::chip::{ChipKind, EscChip};
 use crate::plant::{run_with_plant, BoardPlant};
-use crate::{
-    Board, EmuError, HandlerStats, ImageSize, LostEdge, MaskedSpan, SpiStats, StackStats,
-};
+use crate::{Board, EmuError, HandlerStats, ImageSize, LostEdge, MaskedSpan, SpiStats, StackStats};
 
 /// What the board thread is asked to do.
 enum Cmd {

@@ -338,7 +338,11 @@ mod tests {
         m.set(LEVELS, 500, 0x0800_0104);
         let s = m.longest(0x20, 600);
         assert_eq!((s.max_cycles, s.start_cycle, s.pc), (400, 100, 0x0800_0100));
-        assert_eq!(m.longest(0x10, 600).max_cycles, 10, "the joint loop's level");
+        assert_eq!(
+            m.longest(0x10, 600).max_cycles,
+            10,
+            "the joint loop's level"
+        );
         assert_eq!(m.longest(0xF0, 600).max_cycles, 400);
         // An open span counts up to now; a shorter one later does not replace the longest.
         m.set(2, 1_000, 0x0800_0300);

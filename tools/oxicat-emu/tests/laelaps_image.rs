@@ -187,7 +187,10 @@ fn dc_op(cycles: u64) {
             span.pc,
             func.unwrap_or("?")
         );
-        assert!(span.max_cycles > 0, "node {k}: the thread masks the ESC handlers when it polls");
+        assert!(
+            span.max_cycles > 0,
+            "node {k}: the thread masks the ESC handlers when it polls"
+        );
         assert!(
             span_ns < u64::from(KIT.cycle_ns),
             "node {k}: the ESC handlers masked for {span_ns} ns, longer than a SYNC0 cycle"
