@@ -195,6 +195,20 @@ pub struct Slave<P: Pdi, const N: usize, const M: usize = 256> {
     tx_full: bool,
     /// DC SYNC1 mode: the PDI interrupt took a new SM2 buffer since the last SYNC0.
     sm2_taken: bool,
+    /// PREOP → SAFEOP in steps ([`Slave::set_stepwise_safeop`]).
+    stepwise: bool,
+    /// The step of a stepwise PREOP → SAFEOP in progress.
+    pd_step: PdStep,
+}
+
+/// Where a stepwise PREOP → SAFEOP stands: the AL control request was read and the
+/// RxPDO mapping compiled (`Rx`), then the TxPDO mapping too (`Tx`); the next poll makes
+/// the transition.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum PdStep {
+    Idle,
+    Rx,
+    Tx,
 }
 
 type R<P> = Result<(), <P as Pdi>::Error>;
@@ -229,6 +243,8 @@ impl<P: Pdi, const N: usize, const M: usize> Slave<P, N, M> {
             diag,
             tx_full: false,
             sm2_taken: false,
+            stepwise: false,
+            pd_step: PdStep::Idle,
         };
         for n in 0..4 {
             Self::sm_enable(pdi, n, false).map_err(InitError::Pdi)?;
@@ -236,6 +252,18 @@ impl<P: Pdi, const N: usize, const M: usize> Slave<P, N, M> {
         Self::set_event_mask(pdi, reg::EV_AL_CONTROL).map_err(InitError::Pdi)?;
         s.write_status(pdi).map_err(InitError::Pdi)?;
         Ok(s)
+    }
+
+    /// PREOP → SAFEOP in three [`Slave::poll`] calls instead of one: the request and the
+    /// RxPDO mapping, the TxPDO mapping, then the checks and the transition (and the AL
+    /// status). For a main loop that holds the ESC interrupts off while it polls (a board
+    /// whose handlers share the stack): each call then holds them off for a part of the
+    /// work, not for the whole transition, which on a 180 MHz Cortex-M4 with the Laelaps
+    /// leg's mapping outlasts a 400 µs SYNC0 cycle. The polls in between do only that step
+    /// (the mailbox and an AL control request that arrives meanwhile wait for the
+    /// transition). Off by default: the transition in one poll.
+    pub fn set_stepwise_safeop(&mut self, on: bool) {
+        self.stepwise = on;
     }
 
     /// The object dictionary.
@@ -297,9 +325,34 @@ impl<P: Pdi, const N: usize, const M: usize> Slave<P, N, M> {
     }
 
     fn poll_inner<A: Application<N>>(&mut self, pdi: &mut P, app: &mut A) -> R<P> {
+        match self.pd_step {
+            PdStep::Idle => {}
+            PdStep::Rx => {
+                self.pd_step = PdStep::Tx;
+                match pdo::compile(&self.od, Dir::Tx) {
+                    Ok(m) => self.tx_map = m,
+                    Err(_) => {
+                        self.pd_step = PdStep::Idle;
+                        return self.set_error(pdi, AlStatusCode::INVALID_INPUT_MAPPING);
+                    }
+                }
+                return Ok(());
+            }
+            PdStep::Tx => {
+                self.pd_step = PdStep::Idle;
+                let (rx, tx) = (self.rx_map, self.tx_map);
+                return match self.start_pd_with(pdi, app, rx, tx)? {
+                    Ok(()) => self.write_status(pdi),
+                    Err(c) => self.set_error(pdi, c),
+                };
+            }
+        }
         let ev = pdi.al_event_request()?;
         if ev & reg::EV_AL_CONTROL != 0 {
             self.al_control(pdi, app)?;
+            if self.pd_step != PdStep::Idle {
+                return Ok(()); // a stepwise PREOP -> SAFEOP began: nothing else this poll
+            }
         } else if ev & reg::EV_SM_CHANGE != 0 {
             self.sm_change(pdi, app)?;
         }
@@ -594,6 +647,17 @@ impl<P: Pdi, const N: usize, const M: usize> Slave<P, N, M> {
                     self.start_mailbox(pdi, app, true)?
                 }
             }
+            (PreOp, SafeOp) if self.stepwise => {
+                // The mappings are unused below SAFEOP: they hold the steps' results.
+                match pdo::compile(&self.od, Dir::Rx) {
+                    Ok(m) => {
+                        self.rx_map = m;
+                        self.pd_step = PdStep::Rx;
+                        return Ok(());
+                    }
+                    Err(_) => Err(AlStatusCode::INVALID_OUTPUT_MAPPING),
+                }
+            }
             (PreOp, SafeOp) => self.start_pd(pdi, app)?,
             (SafeOp, Op) => match app.state_change(SafeOp, Op, &mut self.od) {
                 Ok(()) => {
@@ -785,6 +849,18 @@ impl<P: Pdi, const N: usize, const M: usize> Slave<P, N, M> {
             Ok(m) => m,
             Err(_) => return Ok(Err(AlStatusCode::INVALID_INPUT_MAPPING)),
         };
+        self.start_pd_with(pdi, app, rx, tx)
+    }
+
+    /// PREOP → SAFEOP with the compiled mappings `rx`, `tx`: SM2/SM3 and the sync mode
+    /// checked, the application asked, the process data started.
+    fn start_pd_with<A: Application<N>>(
+        &mut self,
+        pdi: &mut P,
+        app: &mut A,
+        rx: Mapping,
+        tx: Mapping,
+    ) -> Result<Result<(), AlStatusCode>, P::Error> {
         if let Err(c) = self.pd_config_ok(pdi, rx.bytes(), tx.bytes())? {
             return Ok(Err(c));
         }

@@ -185,6 +185,50 @@ fn sm_change_rechecked<P: Port>() {
     assert_eq!(b.upload(0x1018, 1, false).unwrap(), 0x0A5Cu32.to_le_bytes());
 }
 
+/// Issue 15: a board whose main loop polls with the ESC interrupts masked makes PREOP ->
+/// SAFEOP in three polls ((`Slave::set_stepwise_safeop`)): the AL status answers after the
+/// third, with the same checks as in one poll, and the process data then runs.
+fn stepwise_safeop_takes_three_polls_and_checks_the_same<P: Port>() {
+    let one = |b: &mut Bench<P>| b.s.poll(&mut b.drv, &mut b.app).unwrap();
+    let mut b = Bench::<P>::new();
+    b.s.set_stepwise_safeop(true);
+    b.enter_preop();
+    let (o, i) = (b.expected_out(), b.expected_in());
+    // A wrong SM2 length: refused after the third poll, as in one.
+    b.config_sm(2, SM2, o + 1, 0x64);
+    b.config_sm(3, SM3, i, 0x20);
+    b.wr(0x0120, &4u16.to_le_bytes());
+    one(&mut b);
+    one(&mut b);
+    assert_eq!(
+        b.al_status(),
+        (2, 0),
+        "{}: still PREOP, no answer yet",
+        P::NAME
+    );
+    one(&mut b);
+    assert_eq!(b.al_status(), (0x12, 0x001D), "{}", P::NAME);
+    b.config_sm(2, SM2, o, 0x64);
+    b.wr(0x0120, &0x14u16.to_le_bytes());
+    one(&mut b);
+    assert_eq!(
+        b.al_status(),
+        (0x12, 0x001D),
+        "{}: the request waits",
+        P::NAME
+    );
+    one(&mut b);
+    one(&mut b);
+    assert_eq!(b.al_status(), (4, 0), "{}", P::NAME);
+    assert_eq!(b.request(8), (8, 0));
+    assert_eq!(b.wr(SM2, &[0x01, 0x34, 0x12, 0x07]), 1);
+    b.poll();
+    assert_eq!(b.s.od().get::<i16>(0x7000, 2), Ok(0x1234));
+    // Down and up again, in the usual three polls of `request`.
+    assert_eq!(b.request(2), (2, 0));
+    assert_eq!(b.request(4), (4, 0));
+}
+
 oxicat_testkit::every_pdi!(
     walk_up_and_down,
     invalid_and_unknown_requests,
@@ -196,4 +240,5 @@ oxicat_testkit::every_pdi!(
     outputs_ignored_in_safeop,
     sm_watchdog_drops_to_safeop,
     sm_change_rechecked,
+    stepwise_safeop_takes_three_polls_and_checks_the_same,
 );

@@ -246,7 +246,11 @@ fn fail(leds: &mut BoardLeds, delay: &mut impl embedded_hal::delay::DelayNs) -> 
 fn start_stack(mut esc: Esc) -> Result<(), ()> {
     // SAFETY: a plain read of an immutable static; volatile so the link keeps the symbol.
     let _side = unsafe { core::ptr::read_volatile(&OXICAT_LEG_SIDE) };
-    let slave = LegSlave::new(device::device(SIDE), &mut esc).map_err(|_| ())?;
+    let mut slave = LegSlave::new(device::device(SIDE), &mut esc).map_err(|_| ())?;
+    // The main loop polls with the ESC handlers masked: PREOP -> SAFEOP (compiling both
+    // PDO mappings) in one poll held them off for 770 µs, and a SYNC0 edge was lost when
+    // two fell into it (issue 15). In three polls each holds them off for a part.
+    slave.set_stepwise_safeop(true);
     // SAFETY: once, before any ESC interrupt is unmasked (main enables them afterwards).
     unsafe { ESC.init(EscSide { slave, esc }) };
     Ok(())

@@ -11,6 +11,8 @@
 pub(crate) const EXTI_BASE: u64 = 0x4001_3C00;
 pub(crate) const SYSCFG_BASE: u64 = 0x4001_3800;
 
+use crate::stats::LostEdge;
+
 const LINES: u32 = 0x7F_FFFF;
 
 /// The EXTI controller and the EXTICR multiplexer.
@@ -28,7 +30,14 @@ pub(crate) struct Exti {
     ports: [u8; 16],
     /// SYSCFG registers (EXTICR1..4 at 0x08..0x14).
     syscfg: [u32; 12],
+    /// Edges of lines 0..=15 that found their PR bit still set, per line.
+    pub lost_count: [u64; 16],
+    /// The first [`LOST_KEPT`] of them.
+    pub lost: Vec<LostEdge>,
 }
+
+/// Lost edges kept with their time (the count goes on).
+pub(crate) const LOST_KEPT: usize = 64;
 
 impl Exti {
     /// The port (0 = A …) line `line` (0..=15) follows.
@@ -42,8 +51,10 @@ impl Exti {
         (self.imr | self.emr) & 0xFFFF != 0
     }
 
-    /// Samples lines 0..=15 through `level(port, pin)`; returns whether PR gained bits.
-    pub fn sample(&mut self, mut level: impl FnMut(u8, u32) -> bool) -> bool {
+    /// Samples lines 0..=15 through `level(port, pin)` at cycle `at`; returns whether PR
+    /// gained bits. A selected edge on a line whose PR bit is still set is lost (one
+    /// interrupt for two edges): counted and, the first [`LOST_KEPT`], kept with `at`.
+    pub fn sample(&mut self, at: u64, mut level: impl FnMut(u8, u32) -> bool) -> bool {
         let before = self.pr;
         for line in 0..16 {
             let port = self.port_of(line);
@@ -53,6 +64,15 @@ impl Exti {
             if self.ports[line as usize] == port && now != was {
                 let edge = if now { self.rtsr } else { self.ftsr };
                 if edge & self.imr & b != 0 {
+                    if self.pr & b != 0 {
+                        self.lost_count[line as usize] += 1;
+                        if self.lost.len() < LOST_KEPT {
+                            self.lost.push(LostEdge {
+                                line: line as u8,
+                                cycle: at,
+                            });
+                        }
+                    }
                     self.pr |= b;
                 }
             }
@@ -147,21 +167,34 @@ mod tests {
         e.write(EXTI_BASE, (1 << 10) | (1 << 3));
         let mut pa10 = true;
         let mut pb3 = false;
-        e.sample(|p, l| (p == 0 && l == 10 && pa10) || (p == 1 && l == 3 && pb3));
+        e.sample(0, |p, l| {
+            (p == 0 && l == 10 && pa10) || (p == 1 && l == 3 && pb3)
+        });
         assert_eq!(e.pr, 0, "the first sample is a baseline");
         pb3 = true;
-        assert!(e.sample(|p, l| (p == 0 && l == 10 && pa10) || (p == 1 && l == 3 && pb3)));
+        assert!(e.sample(0, |p, l| (p == 0 && l == 10 && pa10)
+            || (p == 1 && l == 3 && pb3)));
         assert_eq!(e.irq_lines(), crate::nvic::bit(16 + 9), "EXTI3");
         pa10 = false;
-        e.sample(|p, l| (p == 0 && l == 10 && pa10) || (p == 1 && l == 3 && pb3));
+        e.sample(0, |p, l| {
+            (p == 0 && l == 10 && pa10) || (p == 1 && l == 3 && pb3)
+        });
         assert_eq!(e.pr, (1 << 10) | (1 << 3));
         assert_ne!(e.irq_lines() & crate::nvic::bit(16 + 40), 0, "EXTI15_10");
         // The rising edge back on PA10 is not selected.
         e.write(EXTI_BASE + 0x14, 1 << 10);
         pa10 = true;
-        e.sample(|p, l| (p == 0 && l == 10 && pa10) || (p == 1 && l == 3 && pb3));
+        e.sample(0, |p, l| {
+            (p == 0 && l == 10 && pa10) || (p == 1 && l == 3 && pb3)
+        });
         assert_eq!(e.pr, 1 << 3);
         assert_eq!(e.merge_base(EXTI_BASE + 0x14), 0);
+        // PB3 falls and rises again before its PR bit was cleared: that edge is lost.
+        assert_eq!(e.lost_count[3], 0);
+        e.sample(10, |p, l| p == 0 && l == 10);
+        e.sample(20, |p, l| (p == 0 && l == 10) || (p == 1 && l == 3));
+        assert_eq!(e.lost_count[3], 1);
+        assert_eq!(e.lost, vec![LostEdge { line: 3, cycle: 20 }]);
     }
 
     #[test]
@@ -176,8 +209,12 @@ mod tests {
         assert_eq!(e.read(EXTI_BASE + 0x10) & (1 << 6), 0, "PR clears SWIER");
         // Masked line 7: its edge sets nothing.
         e.write(EXTI_BASE + 0x08, 1 << 7);
-        e.sample(|_, _| false);
-        e.sample(|_, l| l == 7);
+        e.sample(0, |_, _| false);
+        e.sample(0, |_, l| l == 7);
         assert_eq!(e.pr, 0);
+        assert_eq!(
+            e.lost_count[7], 0,
+            "a masked line loses nothing: it never pends"
+        );
     }
 }

@@ -68,7 +68,7 @@ pub mod usart;
 
 pub use chip::{ChipKind, EscChip};
 pub use plant::BoardPlant;
-pub use stats::{image_size, HandlerStats, ImageSize, StackStats};
+pub use stats::{image_size, HandlerStats, ImageSize, LostEdge, MaskedSpan, StackStats};
 
 use std::cell::RefCell;
 use std::rc::Rc;
@@ -227,6 +227,33 @@ pub fn elf_segments(elf: &[u8]) -> Result<Vec<Segment>, EmuError> {
 /// lie in a loaded segment, e.g. a stripped image).
 pub fn elf_symbol_bytes(elf: &[u8], name: &str) -> Result<Option<Vec<u8>>, EmuError> {
     let segments = elf_segments(elf)?;
+    let Some(sym) = elf_symbols(elf)?
+        .into_iter()
+        .find(|s| s.name == name.as_bytes())
+    else {
+        return Ok(None);
+    };
+    let (addr, len) = (u64::from(sym.addr), u64::from(sym.size));
+    Ok(segments.iter().find_map(|s| {
+        let start = u64::from(s.addr);
+        (addr >= start && addr + len <= start + s.data.len() as u64).then(|| {
+            let o = (addr - start) as usize;
+            s.data[o..o + len as usize].to_vec()
+        })
+    }))
+}
+
+/// One entry of an ELF symbol table.
+struct ElfSymbol {
+    name: Vec<u8>,
+    addr: u32,
+    size: u32,
+    /// STT_FUNC.
+    function: bool,
+}
+
+/// The entries of an image's symbol tables (none for a stripped image).
+fn elf_symbols(elf: &[u8]) -> Result<Vec<ElfSymbol>, EmuError> {
     let bad = || EmuError::BadImage("truncated section or symbol table".into());
     let u16_at = |o: usize| -> Result<usize, EmuError> {
         let b = elf.get(o..o + 2).ok_or_else(bad)?;
@@ -237,6 +264,7 @@ pub fn elf_symbol_bytes(elf: &[u8], name: &str) -> Result<Option<Vec<u8>>, EmuEr
         Ok(u32::from_le_bytes([b[0], b[1], b[2], b[3]]) as usize)
     };
     let (shoff, shentsize, shnum) = (u32_at(32)?, u16_at(46)?, u16_at(48)?);
+    let mut out = Vec::new();
     for k in 0..shnum {
         let sh = shoff + k * shentsize;
         if u32_at(sh + 4)? != 2 {
@@ -250,20 +278,121 @@ pub fn elf_symbol_bytes(elf: &[u8], name: &str) -> Result<Option<Vec<u8>>, EmuEr
             let n = u32_at(e)?;
             let sym = strings.get(n..).ok_or_else(bad)?;
             let end = sym.iter().position(|&c| c == 0).unwrap_or(sym.len());
-            if &sym[..end] != name.as_bytes() {
-                continue;
-            }
-            let (addr, len) = (u32_at(e + 4)? as u64, u32_at(e + 8)? as u64);
-            return Ok(segments.iter().find_map(|s| {
-                let start = u64::from(s.addr);
-                (addr >= start && addr + len <= start + s.data.len() as u64).then(|| {
-                    let o = (addr - start) as usize;
-                    s.data[o..o + len as usize].to_vec()
-                })
-            }));
+            let info = elf.get(e + 12).copied().ok_or_else(bad)?;
+            out.push(ElfSymbol {
+                name: sym[..end].to_vec(),
+                addr: u32_at(e + 4)? as u32,
+                size: u32_at(e + 8)? as u32,
+                function: info & 0xF == 2,
+            });
         }
     }
-    Ok(None)
+    Ok(out)
+}
+
+/// The functions of an image (start without the Thumb bit, size, demangled name), by
+/// start address: what [`Board::function_at`] looks addresses up in.
+fn elf_functions(elf: &[u8]) -> Result<Vec<(u32, u32, String)>, EmuError> {
+    let mut f: Vec<(u32, u32, String)> = elf_symbols(elf)?
+        .into_iter()
+        .filter(|s| s.function && s.size > 0)
+        .map(|s| {
+            (
+                s.addr & !1,
+                s.size,
+                demangle(&String::from_utf8_lossy(&s.name)),
+            )
+        })
+        .collect();
+    f.sort_by_key(|e| e.0);
+    Ok(f)
+}
+
+/// A Rust symbol in the legacy mangling (`_ZN…17h<hash>E`) as its path; other names as
+/// they are.
+fn demangle(name: &str) -> String {
+    let Some(mut rest) = name.strip_prefix("_ZN") else {
+        return name.to_string();
+    };
+    let mut parts: Vec<&str> = Vec::new();
+    while let Some(d) = rest.find(|c: char| !c.is_ascii_digit()) {
+        let Ok(n) = rest[..d].parse::<usize>() else {
+            break;
+        };
+        let Some(part) = rest.get(d..d + n) else {
+            return name.to_string();
+        };
+        parts.push(part);
+        rest = &rest[d + n..];
+    }
+    if parts.last().is_some_and(|h| {
+        h.len() == 17 && h.starts_with('h') && h[1..].chars().all(|c| c.is_ascii_hexdigit())
+    }) {
+        parts.pop();
+    }
+    if rest != "E" || parts.is_empty() {
+        return name.to_string();
+    }
+    parts
+        .iter()
+        .map(|p| {
+            p.replace("$LT$", "<")
+                .replace("$GT$", ">")
+                .replace("$u20$", " ")
+                .replace("..", "::")
+        })
+        .collect::<Vec<_>>()
+        .join("::")
+}
+
+/// What an MSR or CPS instruction does to the masks.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum MaskOp {
+    /// CPSID/CPSIE: `disable`, on PRIMASK (`i`) and/or FAULTMASK (`f`).
+    Cps { disable: bool, i: bool, f: bool },
+    /// MSR to special register SYSm (0x10 PRIMASK, 0x11 BASEPRI, 0x12 BASEPRI_MAX,
+    /// 0x13 FAULTMASK) from register `rn`.
+    Msr { rn: u8, sysm: u8 },
+}
+
+/// The mask instruction whose first halfword is `hw1` (and second `hw2`), if it is one.
+fn mask_op(hw1: u16, hw2: u16) -> Option<MaskOp> {
+    if hw1 & 0xFFE8 == 0xB660 && hw1 & 3 != 0 {
+        return Some(MaskOp::Cps {
+            disable: hw1 & 0x10 != 0,
+            i: hw1 & 2 != 0,
+            f: hw1 & 1 != 0,
+        });
+    }
+    let sysm = (hw2 & 0xFF) as u8;
+    (hw1 & 0xFFF0 == 0xF380 && hw2 & 0xFF00 == 0x8800 && (0x10..=0x13).contains(&sysm)).then_some(
+        MaskOp::Msr {
+            rn: (hw1 & 0xF) as u8,
+            sysm,
+        },
+    )
+}
+
+/// Every halfword of the image's flash segments that starts a mask instruction (data that
+/// happens to look like one is never executed, so its hook never runs).
+fn mask_sites(segs: &[Segment]) -> Vec<(u32, MaskOp)> {
+    let mut out = Vec::new();
+    for s in segs {
+        if !(FLASH.0..FLASH.0 + FLASH.1).contains(&u64::from(s.addr)) {
+            continue;
+        }
+        let half = |o: usize| {
+            s.data
+                .get(o..o + 2)
+                .map_or(0, |b| u16::from_le_bytes([b[0], b[1]]))
+        };
+        for o in (0..s.data.len().saturating_sub(1)).step_by(2) {
+            if let Some(op) = mask_op(half(o), half(o + 2)) {
+                out.push((s.addr + o as u32, op));
+            }
+        }
+    }
+    out
 }
 
 /// An input event a plant schedules at a time of the board's clock
@@ -366,6 +495,8 @@ pub struct Board {
     size: ImageSize,
     /// The painted stack region: initial SP and the painting's lowest address.
     stack: StackStats,
+    /// The image's functions by start address (start, size, name).
+    functions: Vec<(u32, u32, String)>,
 }
 
 impl Board {
@@ -551,6 +682,71 @@ impl Board {
             }
         })
         .map_err(fault)?;
+        // The thread's masked spans: a hook on each MSR PRIMASK/BASEPRI/BASEPRI_MAX/
+        // FAULTMASK and CPSID/CPSIE of the image (only those instructions call back), which
+        // works out the masks the instruction leaves and hands them to the tracker.
+        const RN: [RegisterARM; 15] = [
+            RegisterARM::R0,
+            RegisterARM::R1,
+            RegisterARM::R2,
+            RegisterARM::R3,
+            RegisterARM::R4,
+            RegisterARM::R5,
+            RegisterARM::R6,
+            RegisterARM::R7,
+            RegisterARM::R8,
+            RegisterARM::R9,
+            RegisterARM::R10,
+            RegisterARM::R11,
+            RegisterARM::R12,
+            RegisterARM::SP,
+            RegisterARM::LR,
+        ];
+        for (at, op) in mask_sites(&segs) {
+            let c = periph.clone();
+            uc.add_code_hook(
+                u64::from(at),
+                u64::from(at),
+                move |uc: &mut Unicorn<'_, ()>, addr: u64, _size: u32| {
+                    let mut p = c.borrow_mut();
+                    if p.scs.ipsr != 0 {
+                        return; // a handler's masks: not the thread's span
+                    }
+                    let r = |reg: RegisterARM| uc.reg_read(reg).unwrap_or(0) as u32;
+                    let (mut pm, mut bp, mut fm) = (
+                        r(RegisterARM::PRIMASK),
+                        r(RegisterARM::BASEPRI),
+                        r(RegisterARM::FAULTMASK),
+                    );
+                    match op {
+                        MaskOp::Cps { disable, i, f } => {
+                            if i {
+                                pm = u32::from(disable);
+                            }
+                            if f {
+                                fm = u32::from(disable);
+                            }
+                        }
+                        MaskOp::Msr { rn, sysm } => {
+                            let v = RN.get(usize::from(rn)).map_or(0, |&reg| r(reg));
+                            match sysm {
+                                0x10 => pm = v & 1,
+                                0x11 => bp = v & 0xFF,
+                                0x12 if v & 0xFF != 0 && (bp == 0 || v & 0xFF < bp) => {
+                                    bp = v & 0xFF
+                                }
+                                0x13 => fm = v & 1,
+                                _ => {}
+                            }
+                        }
+                    }
+                    let now = p.cycles;
+                    p.masks
+                        .set(stats::MaskTracker::level_of(pm, bp, fm), now, addr as u32);
+                },
+            )
+            .map_err(fault)?;
+        }
         let mut vt = [0u8; 8];
         uc.mem_read(FLASH.0, &mut vt).map_err(fault)?;
         let sp = u32::from_le_bytes([vt[0], vt[1], vt[2], vt[3]]);
@@ -578,6 +774,7 @@ impl Board {
                 bottom,
                 max_depth: 0,
             },
+            functions: elf_functions(image)?,
         };
         board.paint(bottom, sp);
         Ok(board)
@@ -805,6 +1002,9 @@ impl Board {
             if p.iwdg.expires().is_some_and(|t| t <= p.cycles) {
                 // The IWDG ran out: a system reset of the MCU, the board's clock running on.
                 p.watchdog_reset();
+                // The reset clears PRIMASK/BASEPRI/FAULTMASK: a span the thread had open ends.
+                let now = p.cycles;
+                p.masks.set(stats::LEVELS, now, 0);
                 drop(p);
                 self.sleeping = false;
                 self.event = false;
@@ -1028,6 +1228,46 @@ impl Board {
         self.periph.borrow().adc.max_latency
     }
 
+    /// The longest time since reset that thread mode held exceptions of priority
+    /// `priority` back (PRIMASK, FAULTMASK, or BASEPRI at that priority or more urgent),
+    /// with where it began; a span still open counts up to now. The handlers that preempted
+    /// the thread meanwhile count in it: for that long an exception of `priority` could not
+    /// be taken. Kept from boot on ([`Board::reset_handler_stats`] leaves it): start-up is
+    /// where the long spans are.
+    pub fn masked_span(&self, priority: u8) -> MaskedSpan {
+        let p = self.periph.borrow();
+        p.masks.longest(priority, p.cycles)
+    }
+
+    /// The image's function that holds address `pc` (its symbol, demangled), if the ELF
+    /// has symbols.
+    pub fn function_at(&self, pc: u32) -> Option<&str> {
+        let pc = pc & !1;
+        let k = self
+            .functions
+            .partition_point(|f| f.0 <= pc)
+            .checked_sub(1)?;
+        let (start, size, name) = &self.functions[k];
+        (pc < start + size).then_some(name.as_str())
+    }
+
+    /// EXTI edges lost since reset (a selected edge on a line whose pending bit was still
+    /// set): the first 64 with their cycle.
+    pub fn lost_edges(&self) -> Vec<LostEdge> {
+        self.periph.borrow().exti.lost.clone()
+    }
+
+    /// How many edges EXTI line `line` (0..=15) lost since reset.
+    pub fn lost_edge_count(&self, line: u8) -> u64 {
+        self.periph
+            .borrow()
+            .exti
+            .lost_count
+            .get(usize::from(line))
+            .copied()
+            .unwrap_or(0)
+    }
+
     /// The duty (0..=1) of timer `tim`'s channel `ch` (TIM1 = 1, CH1 = 1) as a PWM output:
     /// CCRx / (ARR + 1) in PWM mode 1, inverted in PWM mode 2 and for an active-low
     /// channel; `None` unless the channel is an enabled PWM output on a running timer
@@ -1127,6 +1367,27 @@ impl Board {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn mask_instructions_are_decoded_and_rust_symbols_demangled() {
+        let cps = |disable, i, f| Some(MaskOp::Cps { disable, i, f });
+        assert_eq!(mask_op(0xB672, 0), cps(true, true, false), "cpsid i");
+        assert_eq!(mask_op(0xB662, 0), cps(false, true, false), "cpsie i");
+        assert_eq!(mask_op(0xB661, 0), cps(false, false, true), "cpsie f");
+        let msr = |rn, sysm| Some(MaskOp::Msr { rn, sysm });
+        assert_eq!(mask_op(0xF380, 0x8811), msr(0, 0x11), "msr BASEPRI, r0");
+        assert_eq!(mask_op(0xF383, 0x8812), msr(3, 0x12), "msr BASEPRI_MAX, r3");
+        assert_eq!(mask_op(0xF381, 0x8810), msr(1, 0x10), "msr PRIMASK, r1");
+        assert_eq!(mask_op(0xF380, 0x8800), None, "msr APSR_nzcvq");
+        assert_eq!(mask_op(0xF380, 0x8808), None, "msr MSP");
+        assert_eq!(mask_op(0xBF30, 0), None, "wfi");
+        assert_eq!(
+            demangle("_ZN4core3fmt5write17h0123456789abcdefE"),
+            "core::fmt::write"
+        );
+        assert_eq!(demangle("main"), "main");
+        assert_eq!(demangle("_ZN3bad"), "_ZN3bad", "malformed: as it is");
+    }
 
     #[test]
     fn a_file_that_is_not_an_arm_elf_is_refused_with_the_reason() {

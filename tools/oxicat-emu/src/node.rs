@@ -19,7 +19,7 @@ use oxicat_sim::node::{EscEvent, Node};
 
 use crate::chip::{ChipKind, EscChip};
 use crate::plant::{run_with_plant, BoardPlant};
-use crate::{Board, EmuError, HandlerStats, ImageSize, SpiStats, StackStats};
+use crate::{Board, EmuError, HandlerStats, ImageSize, LostEdge, MaskedSpan, SpiStats, StackStats};
 
 /// What the board thread is asked to do.
 enum Cmd {
@@ -72,11 +72,38 @@ pub struct NodeReport {
     pub watchdog_resets: u64,
     /// The board's time of the last of them \[ns\].
     pub last_watchdog_reset_ns: Option<u64>,
+    /// The longest span the thread held each priority level masked, since boot, by level
+    /// (the priority's upper nibble: [`NodeReport::masked`]).
+    pub masked: Vec<MaskedSpan>,
+    /// The function each of those spans began in ([`Board::function_at`]).
+    pub masked_functions: Vec<Option<String>>,
+    /// EXTI edges lost since boot, the first 64 with their cycle ([`Board::lost_edges`]).
+    pub lost_edges: Vec<LostEdge>,
+    /// EXTI edges lost since boot, by line 0..=15.
+    pub lost_edge_count: Vec<u64>,
     /// The fault that stopped the image, if it stopped.
     pub fault: Option<EmuError>,
 }
 
 impl NodeReport {
+    /// The longest span since boot the thread held exceptions of `priority` back, and the
+    /// function it began in ([`Board::masked_span`]).
+    pub fn masked(&self, priority: u8) -> (MaskedSpan, Option<&str>) {
+        let k = usize::from(priority >> 4);
+        (
+            self.masked.get(k).copied().unwrap_or_default(),
+            self.masked_functions.get(k).and_then(|f| f.as_deref()),
+        )
+    }
+
+    /// Edges EXTI line `line` lost since boot.
+    pub fn lost_edges_on(&self, line: u8) -> u64 {
+        self.lost_edge_count
+            .get(usize::from(line))
+            .copied()
+            .unwrap_or(0)
+    }
+
     /// The handler times of exception `number`.
     pub fn handler(&self, number: u16) -> HandlerStats {
         self.handlers
@@ -97,6 +124,15 @@ impl NodeReport {
 }
 
 fn report_of(board: &Board, since: u64, fault: &Option<EmuError>) -> NodeReport {
+    let masked: Vec<(MaskedSpan, Option<String>)> = (0..16u8)
+        .map(|k| {
+            let m = board.masked_span(k << 4);
+            let f = (m.max_cycles > 0)
+                .then(|| board.function_at(m.pc).map(str::to_string))
+                .flatten();
+            (m, f)
+        })
+        .collect();
     NodeReport {
         time_ns: board.time_ns(),
         cycles: board.cycles(),
@@ -117,6 +153,10 @@ fn report_of(board: &Board, since: u64, fault: &Option<EmuError>) -> NodeReport 
         adc_irq_latency_max: board.adc_irq_latency_max(),
         watchdog_resets: board.watchdog_resets(),
         last_watchdog_reset_ns: board.last_watchdog_reset_ns(),
+        masked: masked.iter().map(|m| m.0).collect(),
+        masked_functions: masked.into_iter().map(|m| m.1).collect(),
+        lost_edges: board.lost_edges(),
+        lost_edge_count: (0..16).map(|l| board.lost_edge_count(l)).collect(),
         fault: fault.clone(),
     }
 }

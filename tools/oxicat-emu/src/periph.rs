@@ -90,6 +90,8 @@ pub(crate) struct Periph {
     pub stimuli: std::collections::VecDeque<(u64, Stimulus)>,
     /// Exception profile (handler times).
     pub profile: crate::stats::Profile,
+    /// The thread's masked spans per priority level.
+    pub masks: crate::stats::MaskTracker,
     /// ADC1.
     pub adc: Adc,
     /// Voltages on the ADC input channels (`None`: nothing drives the pin).
@@ -155,6 +157,7 @@ impl Periph {
             dbgmcu: [0; 4],
             stimuli: std::collections::VecDeque::new(),
             profile: crate::stats::Profile::default(),
+            masks: crate::stats::MaskTracker::default(),
         };
         p.reset();
         p
@@ -287,7 +290,7 @@ impl Periph {
             return false;
         }
         let mut exti = std::mem::take(&mut self.exti);
-        let changed = exti.sample(|port, line| self.pin_level(port, line));
+        let changed = exti.sample(self.cycles, |port, line| self.pin_level(port, line));
         self.exti = exti;
         changed
     }

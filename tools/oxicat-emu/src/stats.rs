@@ -130,6 +130,106 @@ impl Profile {
     }
 }
 
+/// The longest time thread mode held one priority level masked (PRIMASK, FAULTMASK, or
+/// BASEPRI at that level or more urgent): the exceptions of that priority could not be
+/// taken for that long, whatever preempted the thread meanwhile (handlers of a more urgent
+/// priority count in the span). Priority levels are the upper nibble the STM32F446
+/// implements.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct MaskedSpan {
+    /// Length of the longest span \[cycles\] (0: the level was never masked).
+    pub max_cycles: u64,
+    /// Cycle at which it began.
+    pub start_cycle: u64,
+    /// Address of the instruction (MSR or CPS) that began it.
+    pub pc: u32,
+}
+
+/// Priority levels tracked: the upper nibble of the priority byte.
+pub(crate) const LEVELS: usize = 16;
+
+/// The thread's mask spans per priority level, kept by the code hooks on the image's
+/// MSR PRIMASK/BASEPRI/BASEPRI_MAX/FAULTMASK and CPSID/CPSIE instructions.
+#[derive(Debug, Clone)]
+pub(crate) struct MaskTracker {
+    /// The most urgent level the thread's masks hold back now (`LEVELS`: none).
+    level: usize,
+    /// Where and when the span of each masked level began: (cycle, PC).
+    began: [(u64, u32); LEVELS],
+    longest: [MaskedSpan; LEVELS],
+}
+
+impl Default for MaskTracker {
+    fn default() -> Self {
+        MaskTracker {
+            level: LEVELS,
+            began: [(0, 0); LEVELS],
+            longest: [MaskedSpan::default(); LEVELS],
+        }
+    }
+}
+
+impl MaskTracker {
+    /// The level masks `primask`, `basepri`, `faultmask` hold back: every priority whose
+    /// upper nibble is at least this one.
+    pub fn level_of(primask: u32, basepri: u32, faultmask: u32) -> usize {
+        if primask & 1 != 0 || faultmask & 1 != 0 {
+            return 0;
+        }
+        match (basepri & 0xF0) >> 4 {
+            0 => LEVELS,
+            n => n as usize,
+        }
+    }
+
+    /// The thread's masks now hold back `level` from cycle `now`, set by the instruction
+    /// at `pc`.
+    pub fn set(&mut self, level: usize, now: u64, pc: u32) {
+        let old = self.level;
+        for k in 0..LEVELS {
+            let (was, is) = (old <= k, level <= k);
+            if !was && is {
+                self.began[k] = (now, pc);
+            } else if was && !is {
+                self.close(k, now);
+            }
+        }
+        self.level = level.min(LEVELS);
+    }
+
+    fn close(&mut self, k: usize, now: u64) {
+        let (start, pc) = self.began[k];
+        let span = now.saturating_sub(start);
+        if span > self.longest[k].max_cycles {
+            self.longest[k] = MaskedSpan {
+                max_cycles: span,
+                start_cycle: start,
+                pc,
+            };
+        }
+    }
+
+    /// The longest span of priority `priority` (a span still open counts up to `now`).
+    pub fn longest(&self, priority: u8, now: u64) -> MaskedSpan {
+        let k = usize::from(priority >> 4);
+        let mut t = self.clone();
+        if t.level <= k {
+            t.close(k, now);
+        }
+        t.longest[k]
+    }
+}
+
+/// An edge on an EXTI line whose pending bit was still set: the interrupt it should have
+/// caused merged with the one already pending (one handler run for two edges).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct LostEdge {
+    /// EXTI line (SYNC0 on the Laelaps leg board: 3).
+    pub line: u8,
+    /// Cycle of the sample that saw the edge.
+    pub cycle: u64,
+}
+
 /// Flash and RAM of an image, from its ELF program headers (what `llvm-size` adds up).
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
 pub struct ImageSize {
@@ -227,6 +327,32 @@ mod tests {
             "out of range reads as none"
         );
         p.leave(5); // no frame: ignored
+    }
+
+    #[test]
+    fn a_mask_span_runs_from_the_instruction_that_raised_it_to_the_one_that_lowered_it() {
+        let mut m = MaskTracker::default();
+        assert_eq!(MaskTracker::level_of(0, 0, 0), LEVELS);
+        assert_eq!(MaskTracker::level_of(0, 0x20, 0), 2);
+        assert_eq!(MaskTracker::level_of(1, 0x20, 0), 0);
+        // BASEPRI 0x20 at cycle 100 (PC 0x0800_0100): 0x20 and less urgent are held back.
+        m.set(2, 100, 0x0800_0100);
+        // A critical section inside it: every level, for 10 cycles.
+        m.set(0, 150, 0x0800_0200);
+        m.set(2, 160, 0x0800_0204);
+        m.set(LEVELS, 500, 0x0800_0104);
+        let s = m.longest(0x20, 600);
+        assert_eq!((s.max_cycles, s.start_cycle, s.pc), (400, 100, 0x0800_0100));
+        assert_eq!(
+            m.longest(0x10, 600).max_cycles,
+            10,
+            "the joint loop's level"
+        );
+        assert_eq!(m.longest(0xF0, 600).max_cycles, 400);
+        // An open span counts up to now; a shorter one later does not replace the longest.
+        m.set(2, 1_000, 0x0800_0300);
+        assert_eq!(m.longest(0x20, 1_100).max_cycles, 400);
+        assert_eq!(m.longest(0x20, 2_000).start_cycle, 1_000);
     }
 
     #[test]

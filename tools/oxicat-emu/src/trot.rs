@@ -41,6 +41,11 @@ pub const EXC_SYNC0: u16 = 16 + 9;
 pub const EXC_JOINT_LOOP: u16 = 16 + 54;
 /// The LAN9252's PDI IRQ: EXTI15_10 (IRQ 40), exception 56.
 pub const EXC_PDI_IRQ: u16 = 16 + 40;
+/// The NVIC priority of the image's three ESC handlers (SYNC0, SYNC1, PDI IRQ;
+/// `PRIO_ESC` in `firmware/laelaps-leg`): what the thread masks while it uses the stack.
+pub const PRIO_ESC: u8 = 0x20;
+/// SYNC0's EXTI line (PB3).
+pub const EXTI_LINE_SYNC0: u8 = 3;
 
 /// The boards boot before the master starts \[ns\]: the image's 50 ms power-on wait, then
 /// the LAN9252's digital reset and start-up (a master that came first would lose the
@@ -247,21 +252,23 @@ pub fn markdown(run: &TrotRun, figures: &[ImageLegFigures]) -> String {
     );
     let _ = writeln!(
         o,
-        "| leg | SYNC0 pulses | SYNC0 lost | SYNC0 handler mean / max [µs] | joint loop (10 kHz) mean / max [µs], load | PDI IRQ runs | CPU awake (whole run) | stack deepest [B] | flash / RAM [B] | instructions |"
+        "| leg | SYNC0 pulses | SYNC0 lost (EXTI3 edges lost) | SYNC0 handler mean / max [µs] | joint loop (10 kHz) mean / max [µs], load | PDI IRQ runs | CPU awake (whole run) | ESC handlers masked by the thread, longest [µs] (since boot, where) | stack deepest [B] | flash / RAM [B] | instructions |"
     );
-    let _ = writeln!(o, "|---|---|---|---|---|---|---|---|---|---|");
+    let _ = writeln!(o, "|---|---|---|---|---|---|---|---|---|---|---|");
     for f in figures {
         let r = &f.report;
         let s0 = r.handler(EXC_SYNC0);
         let jl = r.handler(EXC_JOINT_LOOP);
         let span = r.cycles.saturating_sub(r.stats_since_cycle).max(1);
         let busy = 1.0 - r.slept_cycles as f64 / r.cycles.max(1) as f64;
+        let (masked, masked_fn) = r.masked(PRIO_ESC);
         let _ = writeln!(
             o,
-            "| {} | {} | {} | {:.1} / {:.1} | {:.1} / {:.1}, {:.1} % | {} | {:.1} % | {} | {} / {} | {} |",
+            "| {} | {} | {} ({}) | {:.1} / {:.1} | {:.1} / {:.1}, {:.1} % | {} | {:.1} % | {:.1} (at {:.2} ms, {}) | {} | {} / {} | {} |",
             f.leg.code(),
             f.sync0_pulses,
             f.sync0_lost(),
+            r.lost_edges_on(EXTI_LINE_SYNC0),
             s0.mean_us(CPU_HZ),
             us(s0.max_cycles),
             jl.mean_us(CPU_HZ),
@@ -269,6 +276,9 @@ pub fn markdown(run: &TrotRun, figures: &[ImageLegFigures]) -> String {
             100.0 * jl.own_cycles as f64 / span as f64,
             r.handler(EXC_PDI_IRQ).runs,
             100.0 * busy,
+            us(masked.max_cycles),
+            us(masked.start_cycle) * 1e-3,
+            masked_fn.unwrap_or("?"),
             r.stack.max_depth,
             r.image.flash,
             r.image.ram,

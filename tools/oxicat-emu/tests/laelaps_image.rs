@@ -32,6 +32,9 @@ use oxicat_sim::segment::Segment;
 
 /// SYNC0 of the image: EXTI3, IRQ 9.
 const EXTI3: u16 = 16 + 9;
+/// The priority of the image's ESC handlers (`PRIO_ESC`), which the main loop masks
+/// while it polls the stack.
+const PRIO_ESC: u8 = 0x20;
 /// The image's build (the default, `RIGHT_LEG`).
 const SIDE: Side = Side::Right;
 
@@ -169,6 +172,29 @@ fn dc_op(cycles: u64) {
         );
         assert!(pulses >= cycles, "node {k}: {pulses} SYNC0 pulses");
         assert_eq!(handled, pulses, "node {k}: a SYNC0 was lost");
+        // Issue 15: the main loop polls the stack with the ESC handlers masked (BASEPRI
+        // 0x20). A span longer than the SYNC0 cycle can swallow a SYNC0 edge whenever two
+        // fall into it, as one did in the four-image trot; whether one does is a matter of
+        // phase, so the span itself is bounded: bring-up (PREOP -> SAFEOP under SYNC0
+        // included, since boot) holds them off for less than a cycle.
+        assert_eq!(r.lost_edges_on(3), 0, "node {k}: {:?}", r.lost_edges);
+        let (span, func) = r.masked(PRIO_ESC);
+        let span_ns = span.max_cycles * 1_000_000_000 / oxicat_emu::CPU_HZ;
+        eprintln!(
+            "node {k}: ESC handlers masked by the thread {:.1} µs at most (from {:.2} ms, PC {:#010x} in {})",
+            span_ns as f64 * 1e-3,
+            span.start_cycle as f64 * 1e3 / oxicat_emu::CPU_HZ as f64,
+            span.pc,
+            func.unwrap_or("?")
+        );
+        assert!(
+            span.max_cycles > 0,
+            "node {k}: the thread masks the ESC handlers when it polls"
+        );
+        assert!(
+            span_ns < u64::from(KIT.cycle_ns),
+            "node {k}: the ESC handlers masked for {span_ns} ns, longer than a SYNC0 cycle"
+        );
         // The stack in operation (main loop, the ESC handlers and the joint loop nested
         // on it): `main`'s own frame once held the stack and application for good
         // (21.9 KB: 23.1 KB deepest in operation); built in functions of their own they
