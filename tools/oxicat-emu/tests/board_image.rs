@@ -142,6 +142,20 @@ fn a_corrupt_image_is_a_fault_with_its_pc_not_a_hang() {
 /// OP and exchange process data for 1,000 cycles with the right working counter each cycle.
 #[test]
 fn ethercrab_runs_two_emulated_demo_boards_in_op_with_the_right_wkc() {
+    demo_boards_in_op(1_000);
+}
+
+/// The long run: 10,000 free-run cycles of 1 ms (`cargo test -p oxicat-emu --test
+/// board_image -- --ignored`).
+#[test]
+#[ignore = "long: 10,000 cycles of two emulated boards"]
+fn ethercrab_runs_two_emulated_demo_boards_for_10000_cycles() {
+    demo_boards_in_op(10_000);
+}
+
+/// Two emulated demo boards in OP (free run, the demo's mode) for `cycles` cycles of 1 ms:
+/// the right working counter every cycle.
+fn demo_boards_in_op(cycles: u64) {
     use oxicat_master::cyclic::CycleOptions;
     use oxicat_master::{Link, Master};
     use oxicat_sim::segment::Segment;
@@ -158,7 +172,6 @@ fn ethercrab_runs_two_emulated_demo_boards_in_op_with_the_right_wkc() {
     }
     let wall = std::time::Instant::now();
     let mut m = Master::open(Link::Sim(Arc::new(Mutex::new(seg)))).expect("ethercrab scans");
-    let cycles = 1_000;
     let stats = m
         .run_cycles(
             CycleOptions {
