@@ -125,25 +125,8 @@ fn the_tue_image_boots_brakes_its_bridges_and_answers_its_identity() {
         "10 ms: {ds} ADC sequences, {dt} current-loop ticks"
     );
 
-    let sm = |start: u16, ctrl: u8| {
-        let mut r = [0u8; 8];
-        r[..2].copy_from_slice(&start.to_le_bytes());
-        r[2..4].copy_from_slice(&128u16.to_le_bytes());
-        r[4] = ctrl;
-        r[6] = 1;
-        r
-    };
-    m.wr(&b, 0x0800, &sm(0x1000, 0x26));
-    m.wr(&b, 0x0808, &sm(0x1080, 0x22));
-    m.wr(&b, 0x0120, &2u16.to_le_bytes());
-    let preop = b
-        .run_until(50_000, 20_000_000, |b| m.al_status(b) & 0x1F == 0x02)
-        .unwrap_or_else(|e| panic!("{e}"));
-    assert!(preop, "AL status {:#06x}", m.al_status(&b));
-    let id = DEF.identity;
-    assert_eq!(m.sdo_u32(&mut b, 1, 0x1018, 1), id.vendor_id);
-    assert_eq!(m.sdo_u32(&mut b, 2, 0x1018, 2), id.product_code);
-    assert_eq!(m.sdo_u32(&mut b, 3, 0x1018, 3), id.revision);
+    m.to_preop(&mut b, 20_000_000);
+    m.assert_identity(&mut b, DEF.identity);
     eprintln!(
         "TUeES030 image: {} instructions, {:.1} ms simulated, SPI {:?}, {} current-loop ticks",
         b.instructions(),

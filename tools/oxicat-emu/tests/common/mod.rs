@@ -98,6 +98,33 @@ impl Direct {
         u16::from_le_bytes([s[0], s[1]])
     }
 
+    /// A master's first steps: the two mailbox SyncManagers (SM0 at 0x1000, SM1 at 0x1080,
+    /// 128 bytes each), then INIT → PREOP, waiting at most `timeout_ns` of board time.
+    pub fn to_preop(&self, b: &mut Board, timeout_ns: u64) {
+        let sm = |start: u16, ctrl: u8| {
+            let mut r = [0u8; 8];
+            r[..2].copy_from_slice(&start.to_le_bytes());
+            r[2..4].copy_from_slice(&128u16.to_le_bytes());
+            r[4] = ctrl;
+            r[6] = 1;
+            r
+        };
+        self.wr(b, 0x0800, &sm(0x1000, 0x26));
+        self.wr(b, 0x0808, &sm(0x1080, 0x22));
+        self.wr(b, 0x0120, &2u16.to_le_bytes());
+        let preop = b
+            .run_until(50_000, timeout_ns, |b| self.al_status(b) & 0x1F == 0x02)
+            .unwrap_or_else(|e| panic!("{e}"));
+        assert!(preop, "AL status {:#06x}", self.al_status(b));
+    }
+
+    /// 0x1018:01..03 over SDO are `id`'s vendor, product code and revision.
+    pub fn assert_identity(&self, b: &mut Board, id: oxicat_slave::Identity) {
+        assert_eq!(self.sdo_u32(b, 1, 0x1018, 1), id.vendor_id);
+        assert_eq!(self.sdo_u32(b, 2, 0x1018, 2), id.product_code);
+        assert_eq!(self.sdo_u32(b, 3, 0x1018, 3), id.revision);
+    }
+
     /// SDO upload of `index:sub` (expedited, 4 bytes) through the mailbox.
     pub fn sdo_u32(&self, b: &mut Board, counter: u8, index: u16, sub: u8) -> u32 {
         let mut req = vec![0u8; 128];
