@@ -48,7 +48,17 @@ pub const FIRMWARE_FILE: &str = "firmware.bin";
 /// `oxicat demo firmware <sw_version>`) bootable in slot 0, `firmware.bin` writable in BOOT,
 /// `version.txt` readable always.
 pub fn files(def: &'static DeviceDef) -> FirmwareUpdate<RamStore<2, SLOT_BYTES>> {
-    let payload = format!("oxicat demo firmware {}", def.sw_version);
+    ram_files(def, "demo")
+}
+
+/// The FoE files of simulated device `name` (two RAM slots of `N` bytes): the factory image
+/// (payload `oxicat <name> firmware <sw_version>`) bootable in slot 0, [`FIRMWARE_FILE`]
+/// writable in BOOT, `version.txt` readable always.
+pub fn ram_files<const N: usize>(
+    def: &'static DeviceDef,
+    name: &str,
+) -> FirmwareUpdate<RamStore<2, N>> {
+    let payload = format!("oxicat {name} firmware {}", def.sw_version);
     let img = oxicat_esi::fwimage::build(def, payload.as_bytes());
     let store = RamStore::with_image(&img).unwrap_or_default();
     FirmwareUpdate::new(

@@ -29,7 +29,7 @@ use crate::tue_es030::{
 use oxicat_esc::Esc;
 use oxicat_plant::re30::{BridgeCommand, Re30Drive, Re30Params};
 pub use oxicat_plant::re30::{Line, LineParams};
-use oxicat_slave::foe::{FirmwareUpdate, RamStore, UpdateConfig, WithFoe};
+use oxicat_slave::foe::{FirmwareUpdate, RamStore, WithFoe};
 use oxicat_slave::{DeviceDef, Slave};
 
 use oxicat_sim::firmware::{
@@ -45,7 +45,7 @@ pub type TueSlave<P = Direct> = Slave<<P as PdiPath>::Pdi, { device::IMAGE }, MB
 /// Bytes per firmware slot of the simulated board.
 pub const SLOT_BYTES: usize = 64 * 1024;
 /// Name of the firmware file the board takes in BOOT.
-pub const FIRMWARE_FILE: &str = "firmware.bin";
+pub const FIRMWARE_FILE: &str = crate::demo::rig::FIRMWARE_FILE;
 /// The board's FoE files: the update flow on two RAM slots.
 pub type TueFiles = FirmwareUpdate<RamStore<2, SLOT_BYTES>>;
 /// The firmware on the bench hardware, with its FoE files (`app.board`, `app.motors`, …
@@ -56,18 +56,7 @@ pub type TueApp = WithFoe<TuEs030<BenchBoard>, TueFiles>;
 /// `oxicat tue-es030 firmware <sw_version>`) bootable in slot 0, [`FIRMWARE_FILE`]
 /// writable in BOOT, `version.txt` readable always.
 pub fn files(def: &'static DeviceDef) -> TueFiles {
-    let payload = format!("oxicat tue-es030 firmware {}", def.sw_version);
-    let img = oxicat_esi::fwimage::build(def, payload.as_bytes());
-    let store = RamStore::with_image(&img).unwrap_or_default();
-    FirmwareUpdate::new(
-        store,
-        UpdateConfig {
-            identity: def.identity,
-            file_name: FIRMWARE_FILE,
-            password: 0,
-            read_back: true,
-        },
-    )
+    crate::demo::rig::ram_files(def, "tue-es030")
 }
 
 /// Current-loop tick \[ns\] (20 kHz).
