@@ -738,6 +738,21 @@ static COMM_HIGH: [ObjectDef; 5] = [
 
 const COMM_LOW_SIZE: usize = image_size(&COMM_LOW);
 const COMM_HIGH_SIZE: usize = image_size(&COMM_HIGH);
+
+/// Image offset of each object of `objs` (the sum of the sizes before it), at build time.
+const fn bases<const K: usize>(objs: &[ObjectDef; K]) -> [usize; K] {
+    let mut b = [0; K];
+    let mut i = 1;
+    while i < K {
+        b[i] = b[i - 1] + objs[i - 1].storage_len();
+        i += 1;
+    }
+    b
+}
+/// Image offsets of [`COMM_LOW`]'s objects.
+static COMM_LOW_BASE: [usize; COMM_LOW.len()] = bases(&COMM_LOW);
+/// Image offsets of [`COMM_HIGH`]'s objects (from the end of [`COMM_LOW`]'s).
+static COMM_HIGH_BASE: [usize; COMM_HIGH.len()] = bases(&COMM_HIGH);
 const MAP_OBJ_SIZE: usize = 1 + 4 * MAX_PDO_ENTRIES;
 /// Bytes of the internal image of the communication objects.
 pub const COMM_IMAGE_SIZE: usize = COMM_LOW_SIZE + COMM_HIGH_SIZE + 2 * MAX_PDOS * MAP_OBJ_SIZE;
@@ -788,6 +803,49 @@ impl Obj {
     /// Highest defined subindex.
     pub fn max_sub(&self) -> u8 {
         self.entries.last().map_or(0, |e| e.sub)
+    }
+}
+
+/// Result of [`Od::locate`].
+enum Located {
+    /// A communication object (its image offset is known at build time).
+    Comm(Obj),
+    /// The application object at this position of the definition.
+    App(usize),
+}
+
+/// [`Od::find`] for a run of lookups, such as compiling a PDO mapping when the master
+/// requests SAFEOP. An application object's image offset is the sum of the sizes of the
+/// objects before it; a finder keeps where its last lookup ended and walks on from there,
+/// so lookups in index order (a mapping's usual order) walk the application objects once
+/// in all instead of once each. On a 180 MHz Cortex-M4 the per-lookup walk made PREOP →
+/// SAFEOP of the Laelaps leg outlast a 400 µs SYNC0 cycle.
+pub(crate) struct Finder<'a, const N: usize> {
+    od: &'a Od<N>,
+    /// Position of the application object the walk stands at …
+    at: usize,
+    /// … and its image offset.
+    base: usize,
+}
+
+impl<const N: usize> Finder<'_, N> {
+    /// Object `index`, as [`Od::find`] gives it.
+    pub(crate) fn find(&mut self, index: u16) -> Option<Obj> {
+        match self.od.locate(index)? {
+            Located::Comm(o) => Some(o),
+            Located::App(i) => {
+                if i < self.at {
+                    (self.at, self.base) = (0, 0);
+                }
+                let objects = self.od.def.objects;
+                self.base += objects[self.at..i]
+                    .iter()
+                    .map(|o| o.storage_len())
+                    .sum::<usize>();
+                self.at = i;
+                Some(self.od.app_obj(i, self.base))
+            }
+        }
     }
 }
 
@@ -1238,22 +1296,26 @@ impl<const N: usize> Od<N> {
             return Some(r);
         }
         n -= COMM_HIGH.len();
-        let mut base = 0;
-        for (i, o) in d.objects.iter().enumerate() {
-            if i == n {
-                return Some(Obj {
-                    index: o.index,
-                    name: o.name,
-                    code: o.code,
-                    entries: o.entries,
-                    area: Area::App,
-                    base,
-                    kind: Kind::Plain,
-                });
-            }
-            base += o.storage_len();
+        (n < d.objects.len()).then(|| self.app_obj(n, self.app_base(n)))
+    }
+
+    /// Image offset of the `i`-th application object: the sizes of those before it.
+    fn app_base(&self, i: usize) -> usize {
+        self.def.objects[..i].iter().map(|o| o.storage_len()).sum()
+    }
+
+    /// The `i`-th application object, its image offset `base`.
+    fn app_obj(&self, i: usize, base: usize) -> Obj {
+        let o = &self.def.objects[i];
+        Obj {
+            index: o.index,
+            name: o.name,
+            code: o.code,
+            entries: o.entries,
+            area: Area::App,
+            base,
+            kind: Kind::Plain,
         }
-        None
     }
 
     fn comm_obj(&self, o: &'static ObjectDef, base: usize, kind: Kind) -> Obj {
@@ -1371,22 +1433,41 @@ impl<const N: usize> Od<N> {
 
     /// Finds an object by index.
     pub(crate) fn find(&self, index: u16) -> Option<Obj> {
+        match self.locate(index)? {
+            Located::Comm(o) => Some(o),
+            Located::App(i) => Some(self.app_obj(i, self.app_base(i))),
+        }
+    }
+
+    /// Where object `index` is: a communication object whole, an application object by its
+    /// position in the definition (its image offset costs a walk: [`Od::app_base`]).
+    fn locate(&self, index: u16) -> Option<Located> {
         let d = self.def;
+        let comm = |n| self.object_at(n).map(Located::Comm);
         if let Some(i) = COMM_LOW.iter().position(|o| o.index == index) {
-            return self.object_at(i);
+            return comm(i);
         }
         if let Some(i) = d.rx_pdos.iter().position(|p| p.index == index) {
-            return self.object_at(COMM_LOW.len() + i);
+            return comm(COMM_LOW.len() + i);
         }
         if let Some(i) = d.tx_pdos.iter().position(|p| p.index == index) {
-            return self.object_at(COMM_LOW.len() + d.rx_pdos.len() + i);
+            return comm(COMM_LOW.len() + d.rx_pdos.len() + i);
         }
         let hi0 = COMM_LOW.len() + d.rx_pdos.len() + d.tx_pdos.len();
         if let Some(i) = COMM_HIGH.iter().position(|o| o.index == index) {
-            return self.object_at(hi0 + i);
+            return comm(hi0 + i);
         }
         let i = d.objects.binary_search_by_key(&index, |o| o.index).ok()?;
-        self.object_at(hi0 + COMM_HIGH.len() + i)
+        Some(Located::App(i))
+    }
+
+    /// A [`Finder`] for a run of lookups.
+    pub(crate) fn finder(&self) -> Finder<'_, N> {
+        Finder {
+            od: self,
+            at: 0,
+            base: 0,
+        }
     }
 
     /// Image bytes of an entry.
@@ -1602,11 +1683,11 @@ fn check_entries(o: &ObjectDef) -> Result<(), DefError> {
 }
 
 fn comm_low_base(n: usize) -> usize {
-    COMM_LOW[..n].iter().map(|o| o.storage_len()).sum()
+    COMM_LOW_BASE[n]
 }
 
 fn comm_high_base(n: usize) -> usize {
-    COMM_HIGH[..n].iter().map(|o| o.storage_len()).sum()
+    COMM_HIGH_BASE[n]
 }
 
 fn write_default(dst: &mut [u8], en: &EntryDef, o: &ObjectDef) {
@@ -1723,5 +1804,84 @@ mod app_index_tests {
             Od::<64>::new(&DEF_1C12).err(),
             Some(DefError::BadObjectOrder(0x1C20))
         );
+    }
+}
+
+#[cfg(test)]
+mod finder_tests {
+    use super::*;
+    use crate::device::DeviceDef;
+
+    static I16: [EntryDef; 1] = [EntryDef::new(0, "v", DataType::Int16, Access::RW)];
+    static I32: [EntryDef; 1] = [EntryDef::new(0, "v", DataType::Int32, Access::RW)];
+    static BIT: [EntryDef; 1] = [EntryDef::new(0, "v", DataType::Bool, Access::RW)];
+    const fn var(index: u16, entries: &'static [EntryDef]) -> ObjectDef {
+        ObjectDef {
+            index,
+            name: "v",
+            code: ObjectCode::Var,
+            entries,
+        }
+    }
+    static OBJS: [ObjectDef; 7] = [
+        var(0x1800, &I16),
+        var(0x2000, &I32),
+        ObjectDef {
+            index: 0x2001,
+            name: "r",
+            code: ObjectCode::Record,
+            entries: &[
+                EntryDef::new(0, "n", DataType::Unsigned8, Access::RO),
+                EntryDef::new(1, "a", DataType::Int32, Access::RW),
+                EntryDef::new(3, "b", DataType::Bool, Access::RW),
+            ],
+        },
+        var(0x6000, &BIT),
+        var(0x6001, &I16),
+        var(0x7000, &I32),
+        var(0x7001, &I16),
+    ];
+    static DEF: DeviceDef = DeviceDef {
+        objects: &OBJS,
+        ..DeviceDef::BASE
+    };
+
+    /// A finder's lookups in any order (forward, backward, repeated, communication objects
+    /// in between, missing ones) give exactly what `Od::find` gives.
+    #[test]
+    fn a_finder_finds_what_find_finds_in_any_order() {
+        let od = Od::<64>::new(&DEF).expect("a valid definition");
+        const K: usize = 15;
+        let mut fwd = [0u16; K];
+        for (k, o) in OBJS.iter().enumerate() {
+            fwd[k] = o.index;
+        }
+        fwd[OBJS.len()..].copy_from_slice(&[
+            0x1000, 0x1018, 0x1C12, 0x1C33, 0x1600, 0x1A00, 0x5000, 0xFFFF,
+        ]);
+        let mut rev = fwd;
+        rev.reverse();
+        // A fixed permutation by a stride coprime to the length.
+        let perm: [u16; K] = core::array::from_fn(|k| fwd[(k * 7) % K]);
+        for order in [fwd, rev, perm] {
+            let mut f = od.finder();
+            for &i in order.iter().chain(order.iter()) {
+                let (a, b) = (f.find(i), od.find(i));
+                assert_eq!(a.is_some(), b.is_some(), "{i:#06x}");
+                if let (Some(a), Some(b)) = (a, b) {
+                    assert_eq!(
+                        (a.index, a.base, a.area, a.entries.len()),
+                        (b.index, b.base, b.area, b.entries.len()),
+                        "{i:#06x}"
+                    );
+                }
+            }
+        }
+        // The offsets are the image layout: each application object after the one before.
+        let mut base = 0;
+        for o in &OBJS {
+            assert_eq!(od.find(o.index).map(|x| x.base), Some(base));
+            base += o.storage_len();
+        }
     }
 }

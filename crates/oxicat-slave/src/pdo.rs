@@ -4,7 +4,7 @@
 use oxicat_wire::coe::SdoAbortCode;
 
 use crate::device::PdoEntry;
-use crate::od::{Area, Od, MAX_PDO_ENTRIES};
+use crate::od::{Area, Finder, Od, MAX_PDO_ENTRIES};
 
 /// Maximum process data bytes per direction (1024 with the `twin-capacity` feature; see
 /// [`crate::od::MAX_PDOS`] on capacities).
@@ -208,11 +208,34 @@ pub(crate) fn check_entry<const N: usize>(
     dir: Dir,
     pe: PdoEntry,
 ) -> Result<usize, SdoAbortCode> {
+    check_entry_in(&mut od.finder(), dir, pe)
+}
+
+/// [`check_entry`] with the lookups of a run of checks.
+fn check_entry_in<const N: usize>(
+    f: &mut Finder<'_, N>,
+    dir: Dir,
+    pe: PdoEntry,
+) -> Result<usize, SdoAbortCode> {
+    entry_item(f, dir, pe).map(|it| it.bits as usize)
+}
+
+/// Checks one mapping entry value against the dictionary and resolves it to its place in
+/// the image (a gap for index 0).
+fn entry_item<const N: usize>(
+    f: &mut Finder<'_, N>,
+    dir: Dir,
+    pe: PdoEntry,
+) -> Result<Item, SdoAbortCode> {
     if pe.index == 0 {
-        return Ok(pe.bits as usize);
+        return Ok(Item {
+            off: usize::MAX,
+            app: true,
+            bits: pe.bits as u16,
+        });
     }
-    let o = od.find(pe.index).ok_or(SdoAbortCode::ObjectDoesNotExist)?;
-    let (_, e, _) = o.entry(pe.sub).ok_or(SdoAbortCode::SubindexDoesNotExist)?;
+    let o = f.find(pe.index).ok_or(SdoAbortCode::ObjectDoesNotExist)?;
+    let (_, e, off) = o.entry(pe.sub).ok_or(SdoAbortCode::SubindexDoesNotExist)?;
     let ok = match dir {
         Dir::Rx => e.pdo.rx(),
         Dir::Tx => e.pdo.tx(),
@@ -223,7 +246,11 @@ pub(crate) fn check_entry<const N: usize>(
     if e.bits != pe.bits as u16 {
         return Err(SdoAbortCode::ParameterIncompatible);
     }
-    Ok(pe.bits as usize)
+    Ok(Item {
+        off,
+        app: o.area == Area::App,
+        bits: pe.bits as u16,
+    })
 }
 
 /// Mapping object entries (count, values) of the PDO `index` in the comm image.
@@ -248,19 +275,27 @@ pub(crate) fn pdo_bits<const N: usize>(
     dir: Dir,
     index: u16,
 ) -> Result<usize, SdoAbortCode> {
+    pdo_range(dir, index)?;
+    let (cnt, v) = pdo_entries(od, index).ok_or(SdoAbortCode::ParameterIncompatible)?;
+    let mut f = od.finder();
+    let mut bits = 0;
+    for x in &v[..cnt] {
+        bits += check_entry_in(&mut f, dir, PdoEntry::decode(*x))?;
+    }
+    Ok(bits)
+}
+
+/// Refuses a PDO index outside `dir`'s mapping range.
+fn pdo_range(dir: Dir, index: u16) -> Result<(), SdoAbortCode> {
     let in_range = match dir {
         Dir::Rx => (0x1600..=0x17FF).contains(&index),
         Dir::Tx => (0x1A00..=0x1BFF).contains(&index),
     };
-    if !in_range {
-        return Err(SdoAbortCode::ParameterIncompatible);
+    if in_range {
+        Ok(())
+    } else {
+        Err(SdoAbortCode::ParameterIncompatible)
     }
-    let (cnt, v) = pdo_entries(od, index).ok_or(SdoAbortCode::ParameterIncompatible)?;
-    let mut bits = 0;
-    for x in &v[..cnt] {
-        bits += check_entry(od, dir, PdoEntry::decode(*x))?;
-    }
-    Ok(bits)
 }
 
 /// Compiles the current assignment of `dir` into a [`Mapping`].
@@ -271,29 +306,18 @@ pub(crate) fn compile<const N: usize>(od: &Od<N>, dir: Dir) -> Result<Mapping, S
     };
     let cnt: u8 = od.get(assign, 0).map_err(|_| SdoAbortCode::GeneralError)?;
     let mut m = Mapping::default();
+    let mut f = od.finder();
     for k in 1..=cnt {
         let pdo: u16 = od
             .get(assign, k)
             .map_err(|_| SdoAbortCode::SubindexDoesNotExist)?;
-        pdo_bits(od, dir, pdo)?;
+        // Each entry checked as an SDO write of the mapping would check it (the PDO's
+        // index range first), and resolved with the same lookup.
+        pdo_range(dir, pdo)?;
         let (n, v) = pdo_entries(od, pdo).ok_or(SdoAbortCode::ParameterIncompatible)?;
         for x in &v[..n] {
             let pe = PdoEntry::decode(*x);
-            let item = if pe.index == 0 {
-                Item {
-                    off: usize::MAX,
-                    app: true,
-                    bits: pe.bits as u16,
-                }
-            } else {
-                let o = od.find(pe.index).ok_or(SdoAbortCode::ObjectDoesNotExist)?;
-                let (_, _, off) = o.entry(pe.sub).ok_or(SdoAbortCode::SubindexDoesNotExist)?;
-                Item {
-                    off,
-                    app: o.area == Area::App,
-                    bits: pe.bits as u16,
-                }
-            };
+            let item = entry_item(&mut f, dir, pe)?;
             if m.n >= MAX_ITEMS {
                 return Err(SdoAbortCode::PdoLengthExceeded);
             }
