@@ -25,16 +25,15 @@ use core::sync::atomic::{AtomicU32, Ordering};
 
 use board::{BoardLeds, DmaRings, UartOneWire};
 use cortex_m::peripheral::NVIC;
-use cortex_m_rt::{entry, exception, ExceptionFrame};
-use embedded_hal_bus::spi::{ExclusiveDevice, NoDelay};
+use cortex_m_rt::entry;
+use oxicat_board_support::{esc_spi1, halt_on_fault, EscSpi};
 use oxicat_devices::axis_hub::{HubFirmware, TASKS};
 use oxicat_devices::demo::Leds;
 use oxicat_pdi::{Lan9252, Lan9252Config};
 use stm32f4xx_hal::{
-    gpio::{Edge, ExtiPin, Output, Pin},
+    gpio::{Edge, ExtiPin},
     pac::{self, interrupt, Interrupt},
     prelude::*,
-    spi::{Mode, Phase, Polarity, Spi},
     timer::Event,
 };
 
@@ -43,7 +42,6 @@ const TICK_HZ: u32 = 1_000;
 /// The one NVIC level of everything that touches the firmware (upper nibble).
 const PRIO_FW: u8 = 0x20;
 
-type EscSpi = ExclusiveDevice<Spi<pac::SPI1>, Pin<'B', 6, Output>, NoDelay>;
 type Esc = Lan9252<EscSpi>;
 type Fw = HubFirmware<Esc, UartOneWire, DmaRings>;
 
@@ -231,18 +229,13 @@ fn main() -> ! {
     let rings = DmaRings::new();
 
     // LAN9252 on SPI1: SCK PA5, MISO PA6, MOSI PA7, mode 0, 90 MHz / 4 = 22.5 MHz; CS PB6.
-    let spi = Spi::new(
+    let spi = esc_spi1(
         dp.SPI1,
         (gpioa.pa5, gpioa.pa6, gpioa.pa7),
-        Mode {
-            polarity: Polarity::IdleLow,
-            phase: Phase::CaptureOnFirstTransition,
-        },
+        gpiob.pb6,
         22500.kHz(),
         &clocks,
     );
-    let cs = gpiob.pb6.into_push_pull_output_in_state(true.into());
-    let Ok(spi) = ExclusiveDevice::new_no_delay(spi, cs);
     let mut esc = Lan9252::new(spi, oxicat_pdi::NoLines, Lan9252Config::default());
     // The LAN9252 needs ~ 30 ms after power-on before the SPI answers. A failed init is
     // not fatal: the firmware's supervisor retries the stack every second.
@@ -299,21 +292,5 @@ fn main() -> ! {
     }
 }
 
-/// Panics darken the rings, then halt.
-#[panic_handler]
-fn panic(_: &core::panic::PanicInfo) -> ! {
-    cortex_m::interrupt::disable();
-    board::rings_off();
-    loop {
-        cortex_m::asm::nop();
-    }
-}
-
-/// So do hard faults.
-#[exception]
-unsafe fn HardFault(_: &ExceptionFrame) -> ! {
-    board::rings_off();
-    loop {
-        cortex_m::asm::nop();
-    }
-}
+// Panics and hard faults make the outputs safe, then halt.
+halt_on_fault!(board::rings_off);

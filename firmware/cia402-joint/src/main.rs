@@ -28,26 +28,23 @@
 mod board;
 mod foc;
 
-use core::cell::{Cell, UnsafeCell};
-use core::mem::MaybeUninit;
-use core::sync::atomic::{compiler_fence, AtomicU32, Ordering};
+use core::cell::Cell;
+use core::sync::atomic::{AtomicU32, Ordering};
 
 use board::{BoardLeds, Bridge, Motor, Sensors};
 use cortex_m::interrupt::{self as irq, Mutex};
 use cortex_m::peripheral::NVIC;
-use cortex_m::register::{basepri, basepri_max};
-use cortex_m_rt::{entry, exception, ExceptionFrame};
-use embedded_hal_bus::spi::{ExclusiveDevice, NoDelay};
+use cortex_m_rt::entry;
+use oxicat_board_support::{esc_spi1, halt_on_fault, with_basepri, EscSpi, PrioCell};
 use oxicat_devices::cia402::{
     device, Cia402Drive, CurrentCommand, CurrentFeedback, CurrentLoop, DriveParams, CURRENT_LOOP_HZ,
 };
 use oxicat_pdi::{Et1100Config, Et1100Spi};
 use oxicat_slave::{AlState, AlStatusCode, Application, Od, Slave};
 use stm32f4xx_hal::{
-    gpio::{Edge, ExtiPin, Output, Pin},
+    gpio::{Edge, ExtiPin},
     pac::{self, interrupt, Interrupt},
     prelude::*,
-    spi::{Mode, Phase, Polarity, Spi},
 };
 
 /// Mailbox buffer size of the stack: the drive's mailboxes are 128 bytes.
@@ -64,7 +61,6 @@ const PRIO_CURRENT_LOOP: u8 = 0x10;
 /// SYNC0, SYNC1 and the PDI IRQ share one level so they never preempt one another.
 const PRIO_ESC: u8 = 0x20;
 
-type EscSpi = ExclusiveDevice<Spi<pac::SPI1>, Pin<'B', 6, Output>, NoDelay>;
 type Esc = Et1100Spi<EscSpi>;
 type JointSlave = Slave<Esc, { device::IMAGE }, MBX>;
 type Drive = Cia402Drive<Sensors>;
@@ -82,44 +78,10 @@ struct LoopSide {
     bridge: Bridge,
 }
 
-/// Storage shared by priority rather than by a lock: one priority level uses it, see
-/// [`PrioCell::get`].
-struct PrioCell<T>(UnsafeCell<MaybeUninit<T>>);
-
-// SAFETY: access is serialised by interrupt priority (PrioCell::get's contract).
-unsafe impl<T: Send> Sync for PrioCell<T> {}
-
-impl<T> PrioCell<T> {
-    /// An empty cell.
-    const fn new() -> Self {
-        Self(UnsafeCell::new(MaybeUninit::uninit()))
-    }
-
-    /// The value.
-    ///
-    /// # Safety
-    /// The caller runs at the cell's priority — [`ESC`]: [`PRIO_ESC`] (one of the three ESC
-    /// handlers) or BASEPRI at `PRIO_ESC` or more urgent ([`with_esc_from_thread`]);
-    /// [`LOOP`]: the `ADC` handler — it does not keep the reference beyond that, and
-    /// [`PrioCell::init`] ran before those interrupts were unmasked.
-    #[allow(clippy::mut_from_ref)]
-    unsafe fn get(&self) -> &mut T {
-        unsafe { (*self.0.get()).assume_init_mut() }
-    }
-
-    /// Stores the value.
-    ///
-    /// # Safety
-    /// Called once, before the interrupts that use the cell are unmasked.
-    unsafe fn init(&self, value: T) {
-        unsafe { (*self.0.get()).write(value) };
-    }
-}
-
 /// The ESC side, at priority [`PRIO_ESC`].
-static ESC: PrioCell<EscSide> = PrioCell::new();
+static ESC: PrioCell<EscSide> = PrioCell::uninit();
 /// The current loop, the `ADC` handler's alone.
-static LOOP: PrioCell<LoopSide> = PrioCell::new();
+static LOOP: PrioCell<LoopSide> = PrioCell::uninit();
 /// Current-loop ticks since start (the main loop's poll schedule and LED clock).
 static TICKS: AtomicU32 = AtomicU32::new(0);
 
@@ -188,15 +150,8 @@ static HANDOVER: Handover = Handover {
 /// Runs `f` on the stack from the thread, with the ESC handlers masked (BASEPRI) and the
 /// current loop still running.
 fn with_esc_from_thread<R>(f: impl FnOnce(&mut EscSide) -> R) -> R {
-    let old = basepri::read();
-    basepri_max::write(PRIO_ESC);
-    compiler_fence(Ordering::SeqCst);
     // SAFETY: BASEPRI masks every ESC handler; `main` stored the ESC side first.
-    let r = f(unsafe { ESC.get() });
-    compiler_fence(Ordering::SeqCst);
-    // SAFETY: restores the level this function found.
-    unsafe { basepri::write(old) };
-    r
+    with_basepri(PRIO_ESC, || f(unsafe { ESC.get() }))
 }
 
 /// The application as the stack sees it: every hook runs the drive (at the ESC priority,
@@ -411,18 +366,13 @@ fn main() -> ! {
 
     // ET1100 on SPI1: SCK PA5, MISO PA6, MOSI PA7, mode 0 (PDI config 0x0150 = 0x00 in
     // the drive's SII), 90 MHz / 8 = 11.25 MHz; CS PB6.
-    let spi = Spi::new(
+    let spi = esc_spi1(
         dp.SPI1,
         (gpioa.pa5, gpioa.pa6, gpioa.pa7),
-        Mode {
-            polarity: Polarity::IdleLow,
-            phase: Phase::CaptureOnFirstTransition,
-        },
+        gpiob.pb6,
         11250.kHz(),
         &clocks,
     );
-    let cs = gpiob.pb6.into_push_pull_output_in_state(true.into());
-    let Ok(spi) = ExclusiveDevice::new_no_delay(spi, cs);
     // The lines go to EXTI below, not to the driver.
     let mut esc = Et1100Spi::new(spi, oxicat_pdi::NoLines, Et1100Config::default());
     // EEPROM_LOADED (PB4): the ET1100 configures its PDI from the SII first.
@@ -501,21 +451,5 @@ fn main() -> ! {
     }
 }
 
-/// Panics switch the bridge off, then halt.
-#[panic_handler]
-fn panic(_: &core::panic::PanicInfo) -> ! {
-    cortex_m::interrupt::disable();
-    board::bridge_emergency_off();
-    loop {
-        cortex_m::asm::nop();
-    }
-}
-
-/// So do hard faults.
-#[exception]
-unsafe fn HardFault(_: &ExceptionFrame) -> ! {
-    board::bridge_emergency_off();
-    loop {
-        cortex_m::asm::nop();
-    }
-}
+// Panics and hard faults make the outputs safe, then halt.
+halt_on_fault!(board::bridge_emergency_off);

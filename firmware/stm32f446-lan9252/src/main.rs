@@ -16,7 +16,7 @@
 
 use cortex_m_rt::entry;
 use embedded_hal::digital::InputPin;
-use embedded_hal_bus::spi::ExclusiveDevice;
+use oxicat_board_support::esc_spi1;
 use oxicat_devices::demo::{self, Buttons, Demo, Leds};
 use oxicat_pdi::{Lan9252, Lan9252Config, Pins};
 use oxicat_slave::{AlState, Pdi, Slave};
@@ -25,7 +25,6 @@ use stm32f4xx_hal::{
     gpio::{Output, Pin},
     pac,
     prelude::*,
-    spi::{Mode, Phase, Polarity, Spi},
     watchdog::IndependentWatchdog,
 };
 
@@ -108,19 +107,13 @@ fn main() -> ! {
 
     // SPI1: SCK PA5, MISO PA6, MOSI PA7, mode 0 (the LAN9252 also accepts mode 3),
     // 90 MHz / 4 = 22.5 MHz (the LAN9252's read 0x03 allows up to 30 MHz).
-    let spi = Spi::new(
+    let spi = esc_spi1(
         dp.SPI1,
         (gpioa.pa5, gpioa.pa6, gpioa.pa7),
-        Mode {
-            polarity: Polarity::IdleLow,
-            phase: Phase::CaptureOnFirstTransition,
-        },
+        gpiob.pb6,
         22500.kHz(),
         &clocks,
     );
-    // Chip select PB6 under software control, one CS-low frame per transaction.
-    let cs = gpiob.pb6.into_push_pull_output_in_state(true.into());
-    let Ok(spi) = ExclusiveDevice::new_no_delay(spi, cs);
 
     // IRQ PA10 (open drain, active low: pull-up), SYNC0 PB3, SYNC1 PB5 (push-pull).
     let pins = Pins {

@@ -28,16 +28,14 @@
 
 mod board;
 
-use core::cell::{RefCell, UnsafeCell};
-use core::mem::MaybeUninit;
-use core::sync::atomic::{compiler_fence, AtomicU32, Ordering};
+use core::cell::RefCell;
+use core::sync::atomic::{AtomicU32, Ordering};
 
 use board::TueBoard;
 use cortex_m::interrupt::{self as irq, Mutex};
 use cortex_m::peripheral::NVIC;
-use cortex_m::register::{basepri, basepri_max};
-use cortex_m_rt::{entry, exception, ExceptionFrame};
-use embedded_hal_bus::spi::{ExclusiveDevice, NoDelay};
+use cortex_m_rt::entry;
+use oxicat_board_support::{esc_spi1, halt_on_fault, with_basepri, EscSpi, PrioCell};
 use oxicat_devices::tue_es030::{device, FwLock, Hooks, TuEs030};
 use oxicat_pdi::{Lan9252, Lan9252Config};
 use oxicat_slave::Slave;
@@ -45,7 +43,6 @@ use stm32f4xx_hal::{
     gpio::{Edge, ExtiPin, Output, Pin},
     pac::{self, interrupt, Interrupt},
     prelude::*,
-    spi::{Mode, Phase, Polarity, Spi},
 };
 
 /// Mailbox buffer size of the stack: the board's mailboxes are 128 bytes.
@@ -60,7 +57,6 @@ const PRIO_CURRENT_LOOP: u8 = 0x10;
 /// SYNC0, SYNC1 and the PDI IRQ share one level so they never preempt one another.
 const PRIO_ESC: u8 = 0x20;
 
-type EscSpi = ExclusiveDevice<Spi<pac::SPI1>, Pin<'B', 6, Output>, NoDelay>;
 type Esc = Lan9252<EscSpi>;
 type TueSlave = Slave<Esc, { device::IMAGE }, MBX>;
 type Firmware = TuEs030<TueBoard>;
@@ -71,35 +67,9 @@ struct EscSide {
     esc: Esc,
 }
 
-/// Storage for [`EscSide`], shared by priority rather than by a lock: see [`EscCell::get`].
-struct EscCell(UnsafeCell<MaybeUninit<EscSide>>);
-
-// SAFETY: access is serialised by interrupt priority (EscCell::get's contract).
-unsafe impl Sync for EscCell {}
-
-impl EscCell {
-    /// The ESC side.
-    ///
-    /// # Safety
-    /// The caller runs at priority [`PRIO_ESC`] (one of the three ESC handlers) or has
-    /// BASEPRI at `PRIO_ESC` or more urgent ([`with_esc_from_thread`]), it does not keep
-    /// the reference beyond that, and [`EscCell::init`] ran before the ESC interrupts were
-    /// unmasked.
-    #[allow(clippy::mut_from_ref)]
-    unsafe fn get(&self) -> &mut EscSide {
-        unsafe { (*self.0.get()).assume_init_mut() }
-    }
-
-    /// Stores the ESC side.
-    ///
-    /// # Safety
-    /// Called once, before the ESC interrupts are unmasked.
-    unsafe fn init(&self, side: EscSide) {
-        unsafe { (*self.0.get()).write(side) };
-    }
-}
-
-static ESC: EscCell = EscCell(UnsafeCell::new(MaybeUninit::uninit()));
+/// The ESC side, shared by priority rather than by a lock ([`PrioCell::get`]'s contract:
+/// the three ESC handlers at [`PRIO_ESC`], the thread through [`with_esc_from_thread`]).
+static ESC: PrioCell<EscSide> = PrioCell::uninit();
 /// The board's firmware, shared by the current loop and the stack's hooks.
 static FW: Mutex<RefCell<Option<Firmware>>> = Mutex::new(RefCell::new(None));
 /// Current-loop ticks since start (service schedule, the main loop's poll schedule).
@@ -117,15 +87,8 @@ fn with_fw<R>(f: impl FnOnce(&mut Firmware) -> R) -> R {
 /// Runs `f` on the stack from the thread, with the ESC handlers masked (BASEPRI) and the
 /// current loop still running.
 fn with_esc_from_thread<R>(f: impl FnOnce(&mut EscSide) -> R) -> R {
-    let old = basepri::read();
-    basepri_max::write(PRIO_ESC);
-    compiler_fence(Ordering::SeqCst);
     // SAFETY: BASEPRI masks every ESC handler; `main` stored the ESC side first.
-    let r = f(unsafe { ESC.get() });
-    compiler_fence(Ordering::SeqCst);
-    // SAFETY: restores the level this function found.
-    unsafe { basepri::write(old) };
-    r
+    with_basepri(PRIO_ESC, || f(unsafe { ESC.get() }))
 }
 
 /// The firmware as the stack sees it: the device's own hooks (`tue_es030::Hooks`) read
@@ -300,18 +263,13 @@ fn main() -> ! {
     );
 
     // LAN9252 on SPI1: SCK PA5, MISO PA6, MOSI PA7, mode 0, 90 MHz / 4 = 22.5 MHz; CS PB6.
-    let spi = Spi::new(
+    let spi = esc_spi1(
         dp.SPI1,
         (gpioa.pa5, gpioa.pa6, gpioa.pa7),
-        Mode {
-            polarity: Polarity::IdleLow,
-            phase: Phase::CaptureOnFirstTransition,
-        },
+        gpiob.pb6,
         22500.kHz(),
         &clocks,
     );
-    let cs = gpiob.pb6.into_push_pull_output_in_state(true.into());
-    let Ok(spi) = ExclusiveDevice::new_no_delay(spi, cs);
     // The lines go to EXTI below, not to the driver.
     let mut esc = Lan9252::new(spi, oxicat_pdi::NoLines, Lan9252Config::default());
     // The LAN9252 needs ~ 30 ms after power-on before the SPI answers.
@@ -383,21 +341,5 @@ fn main() -> ! {
     }
 }
 
-/// Panics switch the bridges off, then halt.
-#[panic_handler]
-fn panic(_: &core::panic::PanicInfo) -> ! {
-    cortex_m::interrupt::disable();
-    board::bridges_emergency_off();
-    loop {
-        cortex_m::asm::nop();
-    }
-}
-
-/// So do hard faults.
-#[exception]
-unsafe fn HardFault(_: &ExceptionFrame) -> ! {
-    board::bridges_emergency_off();
-    loop {
-        cortex_m::asm::nop();
-    }
-}
+// Panics and hard faults make the outputs safe, then halt.
+halt_on_fault!(board::bridges_emergency_off);

@@ -152,7 +152,10 @@ fn dc_op(cycles: u64) {
             "node {k}: {pulses} SYNC0 pulses, {handled} EXTI3 handler runs, SYNC0 handler max {:.1} µs",
             r.handler(EXTI3).max_cycles as f64 / 180.0
         );
-        assert!(pulses >= cycles, "node {k}: {pulses} SYNC0 pulses");
+        // SYNC0 starts at the DC start time oxicat-master sets, 4.5 cycles after it
+        // configures DC and before SAFE-OP: the master may count up to five cycles before
+        // the first pulse when the slaves reach OP quickly. From then on every cycle has one.
+        assert!(pulses + 5 >= cycles, "node {k}: {pulses} SYNC0 pulses in {cycles} cycles");
         assert_eq!(handled, pulses, "node {k}: a SYNC0 was lost");
         // Issue 15: the main loop polls the stack with the ESC handlers masked (BASEPRI
         // 0x20). A span longer than the SYNC0 cycle can swallow a SYNC0 edge whenever two
