@@ -26,12 +26,12 @@ use core::sync::atomic::{AtomicU32, Ordering};
 use board::{BoardLeds, DmaRings, UartOneWire};
 use cortex_m::peripheral::NVIC;
 use cortex_m_rt::entry;
-use oxicat_board_support::{esc_spi1, halt_on_fault, EscSpi};
+use oxicat_board_support::{clear_exti, clocks_180mhz, esc_exti, esc_spi1, halt_on_fault, EscSpi};
 use oxicat_devices::axis_hub::{HubFirmware, TASKS};
 use oxicat_devices::demo::Leds;
 use oxicat_pdi::{Lan9252, Lan9252Config};
 use stm32f4xx_hal::{
-    gpio::{Edge, ExtiPin},
+    gpio::PB5,
     pac::{self, interrupt, Interrupt},
     prelude::*,
     timer::Event,
@@ -121,11 +121,6 @@ static HUB: FwCell = FwCell(UnsafeCell::new(MaybeUninit::uninit()));
 /// Milliseconds since the tick started.
 static MS: AtomicU32 = AtomicU32::new(0);
 
-fn clear_exti(line: u8) {
-    // SAFETY: PR is write-1-to-clear; only this line's bit is written.
-    unsafe { (*pac::EXTI::ptr()).pr().write(|w| w.bits(1 << line)) };
-}
-
 /// 1 kHz task tick: runs every task of [`TASKS`] whose period has elapsed, higher
 /// priority first (TASKS is in priority order), as the report's scheduler would.
 #[interrupt]
@@ -199,15 +194,7 @@ fn main() -> ! {
             cortex_m::asm::wfi();
         }
     };
-    // 8 MHz HSE -> 180 MHz SYSCLK; APB1 45 MHz (its timers 90 MHz), APB2 90 MHz (180).
-    let rcc = dp.RCC.constrain();
-    let clocks = rcc
-        .cfgr
-        .use_hse(8.MHz())
-        .sysclk(180.MHz())
-        .pclk1(45.MHz())
-        .pclk2(90.MHz())
-        .freeze();
+    let clocks = clocks_180mhz(dp.RCC);
     let mut delay = cp.SYST.delay(&clocks);
     dp.DBGMCU.cr().modify(|_, w| w.dbg_sleep().set_bit());
 
@@ -247,17 +234,7 @@ fn main() -> ! {
     // ESC lines on EXTI: IRQ PA10 falling (open drain, pull-up), SYNC0 PB3 rising.
     let mut syscfg = dp.SYSCFG.constrain();
     let mut exti = dp.EXTI;
-    let mut irq_pin = gpioa.pa10.into_pull_up_input();
-    let mut sync0 = gpiob.pb3.into_floating_input();
-    irq_pin.make_interrupt_source(&mut syscfg);
-    irq_pin.trigger_on_edge(&mut exti, Edge::Falling);
-    irq_pin.enable_interrupt(&mut exti);
-    sync0.make_interrupt_source(&mut syscfg);
-    sync0.trigger_on_edge(&mut exti, Edge::Rising);
-    sync0.enable_interrupt(&mut exti);
-    for line in [3, 10] {
-        clear_exti(line);
-    }
+    let lines = esc_exti(gpioa.pa10, gpiob.pb3, None::<PB5>, &mut syscfg, &mut exti);
 
     let mut tick = dp.TIM6.counter_hz(&clocks);
     if tick.start(TICK_HZ.Hz()).is_err() {
@@ -284,7 +261,7 @@ fn main() -> ! {
         // gives no new falling edge. Re-run the handler while the line stays low, once per
         // tick.
         let now = MS.load(Ordering::Relaxed);
-        if irq_pin.is_low() && now != last_kick {
+        if lines.irq.is_low() && now != last_kick {
             last_kick = now;
             NVIC::pend(Interrupt::EXTI15_10);
         }

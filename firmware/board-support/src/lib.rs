@@ -6,6 +6,9 @@
 //!   priority wait (BASEPRI), the more urgent ones (a joint or current loop) still run;
 //! - [`esc_spi1`]: the ESC's SPI bus, SPI1 on PA5/PA6/PA7 with chip select PB6, mode 0,
 //!   as every board wires its LAN9252 or ET1100;
+//! - [`esc_exti`]: the ESC's interrupt lines (PDI IRQ PA10, SYNC0 PB3, SYNC1 PB5) on EXTI,
+//!   and [`clear_exti`] for their handlers;
+//! - [`clocks_180mhz`]: the clock tree every board runs (8 MHz HSE, 180 MHz SYSCLK);
 //! - [`halt_on_fault!`]: a panic and a HardFault both make the outputs safe, then halt.
 //!
 //! Each image keeps what is its own: pins beyond the ESC's, timers, the application.
@@ -18,10 +21,14 @@ use core::sync::atomic::{compiler_fence, Ordering};
 
 use cortex_m::register::{basepri, basepri_max};
 use embedded_hal_bus::spi::{ExclusiveDevice, NoDelay};
-use stm32f4xx_hal::gpio::{Output, PushPull, PA5, PA6, PA7, PB6};
-use stm32f4xx_hal::pac::SPI1;
+use stm32f4xx_hal::gpio::{
+    Edge, ExtiPin, Input, Output, PinMode, PushPull, PA10, PA5, PA6, PA7, PB3, PB5, PB6,
+};
+use stm32f4xx_hal::pac::{EXTI, RCC, SPI1};
+use stm32f4xx_hal::prelude::*;
 use stm32f4xx_hal::rcc::Clocks;
 use stm32f4xx_hal::spi::{Mode, Phase, Polarity, Spi};
+use stm32f4xx_hal::syscfg::SysCfg;
 use stm32f4xx_hal::time::Hertz;
 
 /// A value shared by interrupt priority rather than by a lock: stored once before the
@@ -103,6 +110,66 @@ pub fn esc_spi1(
     dev
 }
 
+/// The clock tree of every board: 8 MHz HSE → 180 MHz SYSCLK; APB1 45 MHz (its timers
+/// 90 MHz), APB2 90 MHz (TIM1/TIM8 180 MHz, SPI1 from 90 MHz).
+pub fn clocks_180mhz(rcc: RCC) -> Clocks {
+    rcc.constrain()
+        .cfgr
+        .use_hse(8.MHz())
+        .sysclk(180.MHz())
+        .pclk1(45.MHz())
+        .pclk2(90.MHz())
+        .freeze()
+}
+
+/// The ESC's interrupt lines after [`esc_exti`].
+pub struct EscLines {
+    /// PDI IRQ (PA10, EXTI10): open drain, active low, pulled up.
+    pub irq: PA10<Input>,
+    /// SYNC0 (PB3, EXTI3): push-pull, active high.
+    pub sync0: PB3<Input>,
+    /// SYNC1 (PB5, EXTI5), where the image uses it.
+    pub sync1: Option<PB5<Input>>,
+}
+
+/// Routes the ESC's lines to EXTI (from whatever mode the pins are in: PB3 leaves reset as
+/// JTDO): the PDI IRQ on its falling edge (line 10), SYNC0 and
+/// SYNC1 on their rising edges (lines 3 and 5), each line's pending bit cleared. The NVIC
+/// lines (`EXTI15_10`, `EXTI3`, `EXTI9_5`) stay for the image to prioritise and unmask.
+pub fn esc_exti<M10: PinMode, M3: PinMode, M5: PinMode>(
+    irq: PA10<M10>,
+    sync0: PB3<M3>,
+    sync1: Option<PB5<M5>>,
+    syscfg: &mut SysCfg,
+    exti: &mut EXTI,
+) -> EscLines {
+    let mut irq = irq.into_pull_up_input();
+    irq.make_interrupt_source(syscfg);
+    irq.trigger_on_edge(exti, Edge::Falling);
+    irq.enable_interrupt(exti);
+    clear_exti(10);
+    let mut sync0 = sync0.into_floating_input();
+    sync0.make_interrupt_source(syscfg);
+    sync0.trigger_on_edge(exti, Edge::Rising);
+    sync0.enable_interrupt(exti);
+    clear_exti(3);
+    let sync1 = sync1.map(|p| {
+        let mut p = p.into_floating_input();
+        p.make_interrupt_source(syscfg);
+        p.trigger_on_edge(exti, Edge::Rising);
+        p.enable_interrupt(exti);
+        clear_exti(5);
+        p
+    });
+    EscLines { irq, sync0, sync1 }
+}
+
+/// Clears EXTI line `line`'s pending bit (a handler's first step).
+pub fn clear_exti(line: u8) {
+    // SAFETY: PR is write-1-to-clear; only this line's bit is written.
+    unsafe { (*EXTI::ptr()).pr().write(|w| w.bits(1 << line)) };
+}
+
 /// Defines the image's panic handler and HardFault handler: both call `$safe` (a function
 /// that puts the outputs in their safe state: bridges off, LEDs dark) and halt. A panic
 /// masks the interrupts first; the HardFault handler runs above them anyway. The image
@@ -130,4 +197,3 @@ macro_rules! halt_on_fault {
         }
     };
 }
-

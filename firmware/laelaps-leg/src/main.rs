@@ -32,14 +32,15 @@ use board::{BoardLeds, BoardPwm};
 use cortex_m::interrupt::{self as irq, Mutex};
 use cortex_m::peripheral::NVIC;
 use cortex_m_rt::entry;
-use oxicat_board_support::{esc_spi1, halt_on_fault, with_basepri, EscSpi, PrioCell};
+use oxicat_board_support::{
+    clear_exti, clocks_180mhz, esc_exti, esc_spi1, halt_on_fault, with_basepri, EscSpi, PrioCell,
+};
 use oxicat_devices::demo::Leds;
 use oxicat_devices::laelaps::{device, CaptureConfig, LegNode, Side};
 use oxicat_pdi::{Lan9252, Lan9252Config};
 use oxicat_slave::{AlState, AlStatusCode, Application, Od, Slave};
 use qep::Encoders;
 use stm32f4xx_hal::{
-    gpio::{Edge, ExtiPin},
     pac::{self, interrupt, Interrupt},
     prelude::*,
     qei::Qei,
@@ -148,12 +149,6 @@ impl<const N: usize> Application<N> for NodeHooks {
     }
 }
 
-/// Clears EXTI line `line`'s pending bit.
-fn clear_exti(line: u8) {
-    // SAFETY: PR is write-1-to-clear; only this line's bit is written.
-    unsafe { (*pac::EXTI::ptr()).pr().write(|w| w.bits(1 << line)) };
-}
-
 /// 10 kHz joint loop: both PIV loops on fresh encoder samples, PWM out.
 #[interrupt]
 fn TIM6_DAC() {
@@ -231,15 +226,7 @@ fn start_node(pwm: BoardPwm, encoders: Encoders, leds: BoardLeds, capture: Captu
 fn main() -> ! {
     let dp = pac::Peripherals::take().unwrap();
     let cp = cortex_m::Peripherals::take().unwrap();
-    // 8 MHz HSE -> 180 MHz SYSCLK; APB1 45 MHz (its timers 90 MHz), APB2 90 MHz (TIM1 180).
-    let rcc = dp.RCC.constrain();
-    let clocks = rcc
-        .cfgr
-        .use_hse(8.MHz())
-        .sysclk(180.MHz())
-        .pclk1(45.MHz())
-        .pclk2(90.MHz())
-        .freeze();
+    let clocks = clocks_180mhz(dp.RCC);
     let mut delay = cp.SYST.delay(&clocks);
     // Keep the debug port alive through WFI (probe-rs attach while running).
     dp.DBGMCU.cr().modify(|_, w| w.dbg_sleep().set_bit());
@@ -307,21 +294,13 @@ fn main() -> ! {
     // SYNC1 PB5 rising (push-pull, active high).
     let mut syscfg = dp.SYSCFG.constrain();
     let mut exti = dp.EXTI;
-    let mut irq_pin = gpioa.pa10.into_pull_up_input();
-    let mut sync0 = gpiob.pb3.into_floating_input();
-    let mut sync1 = gpiob.pb5.into_floating_input();
-    irq_pin.make_interrupt_source(&mut syscfg);
-    irq_pin.trigger_on_edge(&mut exti, Edge::Falling);
-    irq_pin.enable_interrupt(&mut exti);
-    sync0.make_interrupt_source(&mut syscfg);
-    sync0.trigger_on_edge(&mut exti, Edge::Rising);
-    sync0.enable_interrupt(&mut exti);
-    sync1.make_interrupt_source(&mut syscfg);
-    sync1.trigger_on_edge(&mut exti, Edge::Rising);
-    sync1.enable_interrupt(&mut exti);
-    for line in [3, 5, 10] {
-        clear_exti(line);
-    }
+    let lines = esc_exti(
+        gpioa.pa10,
+        gpiob.pb3,
+        Some(gpiob.pb5),
+        &mut syscfg,
+        &mut exti,
+    );
 
     // 10 kHz joint-loop timer.
     let mut joint_timer = dp.TIM6.counter_hz(&clocks);
@@ -354,7 +333,7 @@ fn main() -> ! {
         // The IRQ line is a level: a cause that arrives while it is still low from another
         // gives no new falling edge. Re-run the handler while the line stays low, once per
         // joint-loop tick (a cause only `poll` clears would otherwise make this spin).
-        if irq_pin.is_low() && now != last_irq_kick {
+        if lines.irq.is_low() && now != last_irq_kick {
             last_irq_kick = now;
             NVIC::pend(Interrupt::EXTI15_10);
         }

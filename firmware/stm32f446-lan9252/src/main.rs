@@ -16,7 +16,7 @@
 
 use cortex_m_rt::entry;
 use embedded_hal::digital::InputPin;
-use oxicat_board_support::esc_spi1;
+use oxicat_board_support::{clocks_180mhz, esc_spi1};
 use oxicat_devices::demo::{self, Buttons, Demo, Leds};
 use oxicat_pdi::{Lan9252, Lan9252Config, Pins};
 use oxicat_slave::{AlState, Pdi, Slave};
@@ -82,15 +82,7 @@ fn main() -> ! {
     // from 0xFFF (RM0390 §20.3.1: 32.8 s), the first feed below loads the 200 ms.
     let mut watchdog = IndependentWatchdog::new(dp.IWDG);
     watchdog.start(WATCHDOG_MS.millis());
-    // 8 MHz HSE (ST-LINK MCO on the Nucleo) -> 180 MHz SYSCLK, APB2 90 MHz.
-    let rcc = dp.RCC.constrain();
-    let clocks = rcc
-        .cfgr
-        .use_hse(8.MHz())
-        .sysclk(180.MHz())
-        .pclk1(45.MHz())
-        .pclk2(90.MHz())
-        .freeze();
+    let clocks = clocks_180mhz(dp.RCC);
     let mut delay = cp.SYST.delay(&clocks);
 
     let gpioa = dp.GPIOA.split();

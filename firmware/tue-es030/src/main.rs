@@ -35,12 +35,14 @@ use board::TueBoard;
 use cortex_m::interrupt::{self as irq, Mutex};
 use cortex_m::peripheral::NVIC;
 use cortex_m_rt::entry;
-use oxicat_board_support::{esc_spi1, halt_on_fault, with_basepri, EscSpi, PrioCell};
+use oxicat_board_support::{
+    clear_exti, clocks_180mhz, esc_exti, esc_spi1, halt_on_fault, with_basepri, EscSpi, PrioCell,
+};
 use oxicat_devices::tue_es030::{device, FwLock, Hooks, TuEs030};
 use oxicat_pdi::{Lan9252, Lan9252Config};
 use oxicat_slave::Slave;
 use stm32f4xx_hal::{
-    gpio::{Edge, ExtiPin, Output, Pin},
+    gpio::{Output, Pin},
     pac::{self, interrupt, Interrupt},
     prelude::*,
 };
@@ -105,12 +107,6 @@ impl FwLock for FwCs {
     fn with<R>(&mut self, f: impl FnOnce(&mut Firmware) -> R) -> R {
         with_fw(f)
     }
-}
-
-/// Clears EXTI line `line`'s pending bit.
-fn clear_exti(line: u8) {
-    // SAFETY: PR is write-1-to-clear; only this line's bit is written.
-    unsafe { (*pac::EXTI::ptr()).pr().write(|w| w.bits(1 << line)) };
 }
 
 /// 20 kHz: ADC1's injected sequence (triggered by TIM1's update event) is done. Every
@@ -192,15 +188,7 @@ fn main() -> ! {
     let dp = pac::Peripherals::take().unwrap();
     let cp = cortex_m::Peripherals::take().unwrap();
     // 8 MHz HSE -> 180 MHz SYSCLK; APB1 45 MHz (its timers 90 MHz), APB2 90 MHz (TIM1 and
-    // TIM8 180 MHz, ADC 90 MHz / 4).
-    let rcc = dp.RCC.constrain();
-    let clocks = rcc
-        .cfgr
-        .use_hse(8.MHz())
-        .sysclk(180.MHz())
-        .pclk1(45.MHz())
-        .pclk2(90.MHz())
-        .freeze();
+    let clocks = clocks_180mhz(dp.RCC);
     let mut delay = cp.SYST.delay(&clocks);
     // Keep the debug port alive through WFI (probe-rs attach while running).
     dp.DBGMCU.cr().modify(|_, w| w.dbg_sleep().set_bit());
@@ -287,21 +275,13 @@ fn main() -> ! {
     // SYNC1 PB5 rising (push-pull, active high).
     let mut syscfg = dp.SYSCFG.constrain();
     let mut exti = dp.EXTI;
-    let mut irq_pin = gpioa.pa10.into_pull_up_input();
-    let mut sync0 = gpiob.pb3.into_floating_input();
-    let mut sync1 = gpiob.pb5.into_floating_input();
-    irq_pin.make_interrupt_source(&mut syscfg);
-    irq_pin.trigger_on_edge(&mut exti, Edge::Falling);
-    irq_pin.enable_interrupt(&mut exti);
-    sync0.make_interrupt_source(&mut syscfg);
-    sync0.trigger_on_edge(&mut exti, Edge::Rising);
-    sync0.enable_interrupt(&mut exti);
-    sync1.make_interrupt_source(&mut syscfg);
-    sync1.trigger_on_edge(&mut exti, Edge::Rising);
-    sync1.enable_interrupt(&mut exti);
-    for line in [3, 5, 10] {
-        clear_exti(line);
-    }
+    let lines = esc_exti(
+        gpioa.pa10,
+        gpiob.pb3,
+        Some(gpiob.pb5),
+        &mut syscfg,
+        &mut exti,
+    );
 
     // SAFETY: priorities are set before unmasking; the shared state is initialised. The
     // ADC line may be pending from the sequences since TIM1 started: unpended first.
@@ -332,7 +312,7 @@ fn main() -> ! {
         // The IRQ line is a level: a cause that arrives while it is still low from another
         // gives no new falling edge. Re-run the handler while the line stays low, once per
         // current-loop tick (a cause only `poll` clears would otherwise make this spin).
-        if irq_pin.is_low() && now != last_irq_kick {
+        if lines.irq.is_low() && now != last_irq_kick {
             last_irq_kick = now;
             NVIC::pend(Interrupt::EXTI15_10);
         }
