@@ -27,6 +27,7 @@
 #![no_main]
 
 mod board;
+mod store;
 
 use core::cell::{RefCell, UnsafeCell};
 use core::mem::MaybeUninit;
@@ -40,6 +41,7 @@ use cortex_m_rt::{entry, exception, ExceptionFrame};
 use embedded_hal_bus::spi::{ExclusiveDevice, NoDelay};
 use oxicat_devices::tue_es030::{device, FwLock, Hooks, TuEs030};
 use oxicat_pdi::{Lan9252, Lan9252Config};
+use oxicat_slave::foe::{FirmwareUpdate, WithFoe};
 use oxicat_slave::Slave;
 use stm32f4xx_hal::{
     gpio::{Edge, ExtiPin, Output, Pin},
@@ -47,6 +49,7 @@ use stm32f4xx_hal::{
     prelude::*,
     spi::{Mode, Phase, Polarity, Spi},
 };
+use store::FlashStore;
 
 /// Mailbox buffer size of the stack: the board's mailboxes are 128 bytes.
 const MBX: usize = 128;
@@ -64,11 +67,15 @@ type EscSpi = ExclusiveDevice<Spi<pac::SPI1>, Pin<'B', 6, Output>, NoDelay>;
 type Esc = Lan9252<EscSpi>;
 type TueSlave = Slave<Esc, { device::IMAGE }, MBX>;
 type Firmware = TuEs030<TueBoard>;
+/// The stack's application: the device's hooks, and the FoE update flow on the flash
+/// store (the host rig's `WithFoe<_, FirmwareUpdate<_>>`, on flash instead of RAM).
+type App = WithFoe<Hooks<FwCs>, FirmwareUpdate<FlashStore>>;
 
-/// The stack and its ESC driver.
+/// The stack, its ESC driver and its application.
 struct EscSide {
     slave: TueSlave,
     esc: Esc,
+    app: App,
 }
 
 /// Storage for [`EscSide`], shared by priority rather than by a lock: see [`EscCell::get`].
@@ -132,8 +139,8 @@ fn with_esc_from_thread<R>(f: impl FnOnce(&mut EscSide) -> R) -> R {
 /// and convert the dictionary outside any lock and hand only the results to the shared
 /// [`TuEs030`] here, each in a critical section of a few words, so the SPI work of the
 /// stack's handlers and the dictionary reads (`init_param` at PRE-OP → SAFE-OP, a motor
-/// parameter's SDO write, the process data) run with the current loop enabled. (`foe`
-/// keeps the default `None`: this image has no FoE, README.)
+/// parameter's SDO write, the process data) run with the current loop enabled. FoE is
+/// [`App`]'s: the update flow on the flash store (`store.rs`).
 struct FwCs;
 
 impl FwLock for FwCs {
@@ -173,7 +180,7 @@ fn EXTI3() {
     clear_exti(3);
     // SAFETY: ESC handler at PRIO_ESC.
     let e = unsafe { ESC.get() };
-    let _ = e.slave.on_sync0(&mut e.esc, &mut Hooks(FwCs));
+    let _ = e.slave.on_sync0(&mut e.esc, &mut e.app);
 }
 
 /// SYNC1 (PB5, the only line enabled in 5..9).
@@ -182,7 +189,7 @@ fn EXTI9_5() {
     clear_exti(5);
     // SAFETY: ESC handler at PRIO_ESC.
     let e = unsafe { ESC.get() };
-    let _ = e.slave.on_sync1(&mut e.esc, &mut Hooks(FwCs));
+    let _ = e.slave.on_sync1(&mut e.esc, &mut e.app);
 }
 
 /// PDI IRQ (PA10, the only line enabled in 10..15): the process data on the SM2 event.
@@ -191,7 +198,7 @@ fn EXTI15_10() {
     clear_exti(10);
     // SAFETY: ESC handler at PRIO_ESC.
     let e = unsafe { ESC.get() };
-    let _ = e.slave.on_pdi_irq(&mut e.esc, &mut Hooks(FwCs));
+    let _ = e.slave.on_pdi_irq(&mut e.esc, &mut e.app);
 }
 
 /// Blinks the FRUN LED fast forever: the ESC did not answer at start-up.
@@ -210,10 +217,14 @@ fn fail(led: &mut Pin<'D', 14, Output>, delay: &mut impl embedded_hal::delay::De
 /// this frame, gone when it returns (built in `main`, which never returns, they would hold
 /// that stack for good under every interrupt: the Laelaps image's finding).
 #[inline(never)]
-fn start_stack(mut esc: Esc) -> Result<(), ()> {
+fn start_stack(mut esc: Esc, flash: pac::FLASH) -> Result<(), ()> {
     let slave = TueSlave::new(&device::DEF, &mut esc).map_err(|_| ())?;
+    let app = WithFoe {
+        app: Hooks(FwCs),
+        files: FirmwareUpdate::new(FlashStore::new(flash), oxicat_devices::tue_es030::UPDATE),
+    };
     // SAFETY: once, before any ESC interrupt is unmasked (main enables them afterwards).
-    unsafe { ESC.init(EscSide { slave, esc }) };
+    unsafe { ESC.init(EscSide { slave, esc, app }) };
     Ok(())
 }
 
@@ -319,7 +330,7 @@ fn main() -> ! {
     if esc.init().is_err() {
         fail(&mut frun, &mut delay);
     }
-    if start_stack(esc).is_err() {
+    if start_stack(esc, dp.FLASH).is_err() {
         fail(&mut frun, &mut delay);
     }
     // The firmware brakes the three motors (50/50, drivers enabled) as it starts.
@@ -368,7 +379,7 @@ fn main() -> ! {
         if now.wrapping_sub(last_poll) >= POLL_EVERY_TICKS {
             last_poll = now;
             with_esc_from_thread(|e| {
-                let _ = e.slave.poll(&mut e.esc, &mut Hooks(FwCs));
+                let _ = e.slave.poll(&mut e.esc, &mut e.app);
             });
         }
         // The IRQ line is a level: a cause that arrives while it is still low from another

@@ -54,6 +54,7 @@ pub mod cia402;
 mod cpu;
 pub mod dma;
 mod exti;
+pub mod flash;
 pub mod iwdg;
 pub mod laelaps;
 pub mod node;
@@ -73,7 +74,7 @@ pub use stats::{image_size, HandlerStats, ImageSize, LostEdge, MaskedSpan, Stack
 use std::cell::RefCell;
 use std::rc::Rc;
 
-use unicorn_engine::unicorn_const::{Arch, Mode, Prot};
+use unicorn_engine::unicorn_const::{Arch, HookType, MemType, Mode, Prot};
 use unicorn_engine::{ArmCpuModel, RegisterARM, Unicorn};
 
 use nvic::{Masks, SVCALL};
@@ -444,6 +445,52 @@ pub struct SpiStats {
     pub bytes_without_cs: u64,
 }
 
+/// What the FLASH model did ([`Board::flash_stats`]).
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct FlashStats {
+    /// Sector erases.
+    pub erases: u64,
+    /// Program operations (one per CPU write of the PSIZE width).
+    pub programs: u64,
+    /// CPU cycles the core waited on a busy flash (RM0390: no read-while-write).
+    pub stalled_cycles: u64,
+    /// First address the model serves: the sectors from here on are programmable.
+    pub model_from: u32,
+}
+
+/// The end (offset from the flash base) of the sectors that hold the image: from the
+/// first flash segment, the sectors its segments reach without a gap of 16 KiB (the
+/// smallest sector) between them. Segments after a gap (data an image places in a sector of its own, e.g.
+/// a factory file store) lie in the sectors the FLASH model serves.
+fn image_sectors_end(segs: &[Segment]) -> u32 {
+    let mut spans: Vec<(u32, u32)> = segs
+        .iter()
+        .filter(|s| (FLASH.0..FLASH.0 + FLASH.1).contains(&u64::from(s.addr)))
+        .map(|s| {
+            let o = (u64::from(s.addr) - FLASH.0) as u32;
+            (o, o + s.data.len() as u32)
+        })
+        .collect();
+    spans.sort_unstable();
+    let sector_end = |off: u32| {
+        flash::sector_of(off).map_or(FLASH.1 as u32, |k| {
+            flash::SECTORS[k].0 + flash::SECTORS[k].1
+        })
+    };
+    let mut end = 0u32;
+    for (a, b) in spans {
+        if end > 0 && a.saturating_sub(end) >= 16 << 10 {
+            break;
+        }
+        end = end.max(b);
+    }
+    if end == 0 {
+        FLASH.1 as u32
+    } else {
+        sector_end(end - 1)
+    }
+}
+
 /// Sub-word access to a 32-bit register file.
 fn read_sized(word: u32, addr: u64, size: usize) -> u64 {
     let shift = (addr & 3) * 8;
@@ -513,13 +560,58 @@ impl Board {
         let mut uc = Unicorn::new(Arch::ARM, Mode::THUMB).map_err(fault)?;
         uc.ctl_set_cpu_model(ArmCpuModel::CORTEX_M4 as i32)
             .map_err(fault)?;
-        uc.mem_map(FLASH.0, FLASH.1, Prot::READ | Prot::EXEC)
+        // The image's sectors are the engine's memory; the sectors after them are served
+        // by the FLASH model (reads, programming, erase).
+        let model_from = image_sectors_end(&segs);
+        uc.mem_map(FLASH.0, u64::from(model_from), Prot::READ | Prot::EXEC)
             .map_err(fault)?;
         uc.mem_map(SRAM.0, SRAM.1, Prot::ALL).map_err(fault)?;
+        let mut fl = flash::Flash::new(model_from, CPU_HZ);
         for s in &segs {
-            uc.mem_write(u64::from(s.addr), &s.data).map_err(fault)?;
+            let a = u64::from(s.addr);
+            if a >= FLASH.0 + u64::from(model_from) && a < FLASH.0 + FLASH.1 {
+                let o = (a - FLASH.0) as usize;
+                fl.mem[o..o + s.data.len()].copy_from_slice(&s.data);
+            } else {
+                uc.mem_write(a, &s.data).map_err(fault)?;
+            }
         }
-        let periph = Rc::new(RefCell::new(Periph::new(chip)));
+        let mut p = Periph::new(chip);
+        p.flash = fl;
+        let periph = Rc::new(RefCell::new(p));
+        if u64::from(model_from) < FLASH.1 {
+            let (r, w) = (periph.clone(), periph.clone());
+            let base = FLASH.0 + u64::from(model_from);
+            uc.mmio_map(
+                base,
+                FLASH.1 - u64::from(model_from),
+                Some(move |_: &mut Unicorn<'_, ()>, off: u64, size: usize| {
+                    r.borrow_mut().flash_load(base + off, size)
+                }),
+                Some(
+                    move |_: &mut Unicorn<'_, ()>, off: u64, size: usize, v: u64| {
+                        w.borrow_mut().flash_store(base + off, size, v);
+                    },
+                ),
+            )
+            .map_err(fault)?;
+        }
+        // A write to the image's own sectors: not modelled, the image stops naming it.
+        let c = periph.clone();
+        uc.add_mem_hook(
+            HookType::MEM_WRITE_PROT,
+            FLASH.0,
+            FLASH.0 + u64::from(model_from) - 1,
+            move |_: &mut Unicorn<'_, ()>, _t: MemType, addr: u64, size: usize, _v: i64| {
+                let sector = flash::sector_of((addr - FLASH.0) as u32).unwrap_or(0);
+                c.borrow_mut().fault.get_or_insert(format!(
+                    "a {size}-byte write to flash at {addr:#010x} (sector {sector}, which holds \
+                     the image): the FLASH model programs only the sectors after the image"
+                ));
+                false
+            },
+        )
+        .map_err(fault)?;
         let (r, w) = (periph.clone(), periph.clone());
         uc.mmio_map(
             PERIPH.0,
@@ -617,9 +709,13 @@ impl Board {
         uc.add_block_hook(
             1,
             0,
-            move |uc: &mut Unicorn<'_, ()>, _addr: u64, size: u32| {
+            move |uc: &mut Unicorn<'_, ()>, addr: u64, size: u32| {
                 let stop = {
                     let mut p = c.borrow_mut();
+                    // A fetch from flash while it erases or programs waits for the end.
+                    if (FLASH.0..FLASH.0 + FLASH.1).contains(&addr) {
+                        p.flash_stall();
+                    }
                     // The hook runs before the block: a stop here leaves it unexecuted.
                     let stop = p.cycles >= p.wake_at
                         || p.watch.is_some_and(|m| {
@@ -963,6 +1059,9 @@ impl Board {
             self.pc = self.uc.reg_read(RegisterARM::PC).unwrap_or(0) as u32;
             if let Err(e) = r {
                 self.check_stack()?;
+                if let Some(f) = self.periph.borrow_mut().fault.take() {
+                    return Err(self.fault(f));
+                }
                 return Err(self.fault(self.engine_error(e)));
             }
             self.check_stack()?;
@@ -1167,11 +1266,34 @@ impl Board {
         self.periph.borrow_mut().spi_sclk_override = hz.filter(|&h| h > 0);
     }
 
-    /// Reads image memory (flash or SRAM) at `addr`.
+    /// Reads image memory (flash or SRAM) at `addr`, the flash sectors after the image
+    /// from the FLASH model's cells (no stall, no access counted).
     pub fn read_memory(&self, addr: u32, buf: &mut [u8]) -> Result<(), EmuError> {
+        let a = u64::from(addr);
+        let p = self.periph.borrow();
+        let from = FLASH.0 + u64::from(p.flash.model_from);
+        if a >= from && a + buf.len() as u64 <= FLASH.0 + FLASH.1 {
+            let o = (a - FLASH.0) as usize;
+            buf.copy_from_slice(&p.flash.mem[o..o + buf.len()]);
+            return Ok(());
+        }
+        drop(p);
         self.uc
             .mem_read(u64::from(addr), buf)
             .map_err(|e| self.fault(format!("read of {addr:#010x}: {e:?}")))
+    }
+
+    /// What the FLASH model did so far: sector erases, program operations, cycles the
+    /// core waited on a busy flash; and the first flash address it serves (the sectors
+    /// after the image).
+    pub fn flash_stats(&self) -> FlashStats {
+        let p = self.periph.borrow();
+        FlashStats {
+            erases: p.flash.erases,
+            programs: p.flash.programs,
+            stalled_cycles: p.flash.stalled,
+            model_from: (FLASH.0 + u64::from(p.flash.model_from)) as u32,
+        }
     }
 
     fn port(port: char) -> Option<u8> {
