@@ -13,7 +13,7 @@
 //! | PDI IRQ falling (PA10) | `EXTI15_10` | 0x20 | `Slave::on_pdi_irq` (SM-synchronous: RxPDO → application → TxPDO) |
 //! | SYNC0 rising (PB3) | `EXTI3` | 0x20 | `Slave::on_sync0` (not used by the board's SM-synchronous mode) |
 //! | SYNC1 rising (PB5) | `EXTI9_5` | 0x20 | `Slave::on_sync1` |
-//! | every 20th current-loop tick (1 ms) | thread | — | `Slave::poll` (ESM, mailbox, watchdog), then WFI |
+//! | every 20th current-loop tick (1 ms) | thread | — | `Slave::poll` (ESM, mailbox, watchdog, FoE), 0x8040 into the dictionary (`Hooks::store_voltages`), then WFI |
 //!
 //! Sharing: the stack and the ESC driver are used only at priority 0x20 — the three ESC
 //! handlers, which cannot preempt one another — and by the thread with BASEPRI raised to
@@ -278,11 +278,14 @@ fn main() -> ! {
     let _e2b = gpioc.pc7.into_alternate::<2>();
     let _e3a = gpiod.pd12.into_alternate::<2>();
     let _e3b = gpiod.pd13.into_alternate::<2>();
-    // Analog: PC0..PC2 the three current-sense outputs, PC3 the line-voltage divider.
+    // Analog: PC0..PC2 the three current-sense outputs, PC3 the line-voltage divider, PC4
+    // the 5 V reference's.
     let _i1 = gpioc.pc0.into_analog();
     let _i2 = gpioc.pc1.into_analog();
     let _i3 = gpioc.pc2.into_analog();
     let _line = gpioc.pc3.into_analog();
+    // PC4: the 5 V reference through its 1:2 divider.
+    let _vref5 = gpioc.pc4.into_analog();
     // DRV8412 FAULT#/OTW# (open drain): PB12..PB15 with pull-ups; digital inputs PD0..PD3
     // (pull-downs), outputs PD4..PD7, FRUN LED PD14.
     let _flt1 = gpiob.pb12.into_pull_up_input();
@@ -380,6 +383,9 @@ fn main() -> ! {
             last_poll = now;
             with_esc_from_thread(|e| {
                 let _ = e.slave.poll(&mut e.esc, &mut e.app);
+                // The service routine runs in the ADC interrupt, not on the stack's
+                // SERVICE_TIMER: its dictionary side (0x8040) is stored here, at 1 kHz.
+                e.app.app.store_voltages(e.slave.od_mut());
             });
         }
         // The IRQ line is a level: a cause that arrives while it is still low from another

@@ -701,6 +701,12 @@ impl Periph {
                                 self.fault.get_or_insert(e);
                             }
                         }
+                        if self.adc.take_regular_request() {
+                            let cyc = self.cycles_per_adcclk();
+                            if let Err(e) = self.adc.start_regular(now, &self.analog, cyc) {
+                                self.fault.get_or_insert(e);
+                            }
+                        }
                     }
                     Err(e) => {
                         self.fault.get_or_insert(e);
