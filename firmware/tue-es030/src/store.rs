@@ -155,7 +155,7 @@ impl FlashStore {
         self.clear_flags();
         let r = (|| {
             while !data.is_empty() {
-                if addr % 4 == 0 && data.len() >= 4 {
+                if addr.is_multiple_of(4) && data.len() >= 4 {
                     self.set_pg(X32);
                     let w = u32::from_le_bytes([data[0], data[1], data[2], data[3]]);
                     // SAFETY: an aligned word in a slot, PG set at x32.

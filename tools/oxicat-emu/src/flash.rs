@@ -151,7 +151,7 @@ pub struct Flash {
     busy_until: Option<u64>,
     /// The running operation is an erase (STRT reads 1).
     erasing: bool,
-    /// Cycles per ns numerator: the board's clock \[Hz\].
+    /// The board clock that BSY times count in \[Hz\].
     hz: u64,
     /// Sector erases done.
     pub erases: u64,
@@ -375,7 +375,7 @@ impl Flash {
             self.sr |= PGPERR;
             return Access::Refused(PGPERR);
         }
-        if off as usize % size != 0 {
+        if !(off as usize).is_multiple_of(size) {
             self.sr |= PGAERR;
             return Access::Refused(PGAERR);
         }

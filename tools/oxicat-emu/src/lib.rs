@@ -460,8 +460,8 @@ pub struct FlashStats {
 
 /// The end (offset from the flash base) of the sectors that hold the image: from the
 /// first flash segment, the sectors its segments reach without a gap of 16 KiB (the
-/// smallest sector) between them. Segments after a gap (data an image places in a sector of its own, e.g.
-/// a factory file store) lie in the sectors the FLASH model serves.
+/// smallest sector) between them. Segments after a gap (data an image places in a sector
+/// of its own, e.g. a factory file store) lie in the sectors the FLASH model serves.
 fn image_sectors_end(segs: &[Segment]) -> u32 {
     let mut spans: Vec<(u32, u32)> = segs
         .iter()
@@ -1532,6 +1532,30 @@ mod tests {
         e[28] = 200;
         e[44] = 1;
         assert!(matches!(elf_segments(&e), Err(EmuError::BadImage(w)) if w.contains("truncated")));
+    }
+
+    #[test]
+    fn the_image_keeps_the_sectors_its_segments_reach_and_data_after_a_gap_is_the_models() {
+        let seg = |addr: u32, len: usize| Segment {
+            addr,
+            data: vec![0; len],
+            mem_size: len as u32,
+        };
+        // Code into sector 4, .data's load image right after it, a store in sector 6.
+        let segs = [
+            seg(0x0800_0000, 0x1_0040),
+            seg(0x0801_0040, 0x338),
+            seg(0x2000_0000, 0x338),
+            seg(0x0804_0000, 79),
+        ];
+        assert_eq!(image_sectors_end(&segs), 0x2_0000, "sectors 0..4");
+        assert_eq!(image_sectors_end(&segs[..1]), 0x2_0000);
+        assert_eq!(image_sectors_end(&[seg(0x0800_0000, 0x100)]), 0x4000);
+        assert_eq!(
+            image_sectors_end(&[seg(0x2000_0000, 4)]),
+            FLASH.1 as u32,
+            "none"
+        );
     }
 
     #[test]
