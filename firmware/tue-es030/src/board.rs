@@ -36,6 +36,9 @@ pub mod ch {
     pub const I3: u8 = 12;
     /// Line voltage through the 1:11 divider, PC3 = ADC123_IN13.
     pub const LINE: u8 = 13;
+    /// The 5 V reference through its 1:2 divider (`control::VREF5_DIVIDER`), PC4 =
+    /// ADC12_IN14: ADC1's regular group, one conversion per current-loop tick.
+    pub const VREF5: u8 = 14;
 }
 
 /// GPIO pins (port, number) of the board's discrete lines.
@@ -61,6 +64,8 @@ pub struct TueBoard {
     tim4: pac::TIM4,
     tim5: pac::TIM5,
     adc: pac::ADC1,
+    /// The last conversion of the 5 V reference (counts).
+    vref5: u16,
     /// Auto-reload of TIM1/TIM8: compare `arr` = duty 1.
     arr: u32,
     /// 16-bit TIM3/TIM4 counts extended to 32 bits: (last raw count, extended count).
@@ -126,13 +131,20 @@ impl TueBoard {
             adc,
             arr,
             ext,
+            vref5: 0,
         }
     }
 
-    /// Clears the injected end-of-conversion flag (the ADC interrupt's acknowledge).
+    /// Clears the injected end-of-conversion flag (the ADC interrupt's acknowledge), takes
+    /// the 5 V reference's regular conversion started at the previous tick (done 1.2 µs
+    /// after it) and starts the next one: the ADC is idle until the next injected trigger.
     pub fn ack_conversion(&mut self) {
         // SR bits are rc_w0: writing 1 leaves the others unchanged.
         self.adc.sr().write(|w| unsafe { w.bits(!(1 << 2)) });
+        if self.adc.sr().read().eoc().bit_is_set() {
+            self.vref5 = (self.adc.dr().read().bits() & 0xFFF) as u16;
+        }
+        self.adc.cr2().modify(|_, w| w.swstart().set_bit());
     }
 
     /// The firmware's comparator value (0..=PWMPER of its 40 MHz / 80 kHz counter) on this
@@ -201,8 +213,8 @@ impl Bridges for TueBoard {
 
 impl Adcs for TueBoard {
     /// The manual's second ADC (the AS154x on the bridges' side) is ADC1's injected
-    /// group here: channels 3..5 the currents, 2 the line voltage; the others are not
-    /// fitted (0).
+    /// group here: channels 3..5 the currents, 2 the line voltage; 1, the 5 V reference,
+    /// its regular group (PC4); the others are not fitted (0).
     fn adc2(&mut self, ch: usize) -> u16 {
         let jdr = |k: u8| -> u16 {
             (match k {
@@ -214,6 +226,7 @@ impl Adcs for TueBoard {
         };
         match ch {
             app::ADC2_LINE => jdr(4),
+            app::ADC2_VREF5 => self.vref5,
             c if app::ADC2_CURRENT.contains(&c) => jdr((c - app::ADC2_CURRENT[0]) as u8 + 1),
             _ => 0,
         }
@@ -402,7 +415,12 @@ fn setup_adc(adc: &pac::ADC1) {
             .cycles3()
             .smp13()
             .cycles15()
+            .smp14()
+            .cycles15()
     });
+    // The regular group: one conversion of the 5 V reference, started by software.
+    adc.sqr1().write(|w| unsafe { w.l().bits(0) });
+    adc.sqr3().write(|w| unsafe { w.sq1().bits(ch::VREF5) });
     adc.jsqr().write(|w| unsafe {
         w.jsq1()
             .bits(ch::I1)

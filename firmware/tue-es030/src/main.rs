@@ -13,7 +13,7 @@
 //! | PDI IRQ falling (PA10) | `EXTI15_10` | 0x20 | `Slave::on_pdi_irq` (SM-synchronous: RxPDO → application → TxPDO) |
 //! | SYNC0 rising (PB3) | `EXTI3` | 0x20 | `Slave::on_sync0` (not used by the board's SM-synchronous mode) |
 //! | SYNC1 rising (PB5) | `EXTI9_5` | 0x20 | `Slave::on_sync1` |
-//! | every 20th current-loop tick (1 ms) | thread | — | `Slave::poll` (ESM, mailbox, watchdog), then WFI |
+//! | every 20th current-loop tick (1 ms) | thread | — | `Slave::poll` (ESM, mailbox, watchdog, FoE), 0x8040 into the dictionary (`Hooks::store_voltages`), then WFI |
 //!
 //! Sharing: the stack and the ESC driver are used only at priority 0x20 — the three ESC
 //! handlers, which cannot preempt one another — and by the thread with BASEPRI raised to
@@ -27,6 +27,7 @@
 #![no_main]
 
 mod board;
+mod store;
 
 use core::cell::RefCell;
 use core::sync::atomic::{AtomicU32, Ordering};
@@ -40,12 +41,14 @@ use oxicat_board_support::{
 };
 use oxicat_devices::tue_es030::{device, FwLock, Hooks, TuEs030};
 use oxicat_pdi::{Lan9252, Lan9252Config};
+use oxicat_slave::foe::{FirmwareUpdate, WithFoe};
 use oxicat_slave::Slave;
 use stm32f4xx_hal::{
     gpio::{Output, Pin},
     pac::{self, interrupt, Interrupt},
     prelude::*,
 };
+use store::FlashStore;
 
 /// Mailbox buffer size of the stack: the board's mailboxes are 128 bytes.
 const MBX: usize = 128;
@@ -62,11 +65,15 @@ const PRIO_ESC: u8 = 0x20;
 type Esc = Lan9252<EscSpi>;
 type TueSlave = Slave<Esc, { device::IMAGE }, MBX>;
 type Firmware = TuEs030<TueBoard>;
+/// The stack's application: the device's hooks, and the FoE update flow on the flash
+/// store (the host rig's `WithFoe<_, FirmwareUpdate<_>>`, on flash instead of RAM).
+type App = WithFoe<Hooks<FwCs>, FirmwareUpdate<FlashStore>>;
 
-/// The stack and its ESC driver.
+/// The stack, its ESC driver and its application.
 struct EscSide {
     slave: TueSlave,
     esc: Esc,
+    app: App,
 }
 
 /// The ESC side, shared by priority rather than by a lock ([`PrioCell::get`]'s contract:
@@ -97,8 +104,8 @@ fn with_esc_from_thread<R>(f: impl FnOnce(&mut EscSide) -> R) -> R {
 /// and convert the dictionary outside any lock and hand only the results to the shared
 /// [`TuEs030`] here, each in a critical section of a few words, so the SPI work of the
 /// stack's handlers and the dictionary reads (`init_param` at PRE-OP → SAFE-OP, a motor
-/// parameter's SDO write, the process data) run with the current loop enabled. (`foe`
-/// keeps the default `None`: this image has no FoE, README.)
+/// parameter's SDO write, the process data) run with the current loop enabled. FoE is
+/// [`App`]'s: the update flow on the flash store (`store.rs`).
 struct FwCs;
 
 impl FwLock for FwCs {
@@ -132,7 +139,7 @@ fn EXTI3() {
     clear_exti(3);
     // SAFETY: ESC handler at PRIO_ESC.
     let e = unsafe { ESC.get() };
-    let _ = e.slave.on_sync0(&mut e.esc, &mut Hooks(FwCs));
+    let _ = e.slave.on_sync0(&mut e.esc, &mut e.app);
 }
 
 /// SYNC1 (PB5, the only line enabled in 5..9).
@@ -141,7 +148,7 @@ fn EXTI9_5() {
     clear_exti(5);
     // SAFETY: ESC handler at PRIO_ESC.
     let e = unsafe { ESC.get() };
-    let _ = e.slave.on_sync1(&mut e.esc, &mut Hooks(FwCs));
+    let _ = e.slave.on_sync1(&mut e.esc, &mut e.app);
 }
 
 /// PDI IRQ (PA10, the only line enabled in 10..15): the process data on the SM2 event.
@@ -150,7 +157,7 @@ fn EXTI15_10() {
     clear_exti(10);
     // SAFETY: ESC handler at PRIO_ESC.
     let e = unsafe { ESC.get() };
-    let _ = e.slave.on_pdi_irq(&mut e.esc, &mut Hooks(FwCs));
+    let _ = e.slave.on_pdi_irq(&mut e.esc, &mut e.app);
 }
 
 /// Blinks the FRUN LED fast forever: the ESC did not answer at start-up.
@@ -169,10 +176,14 @@ fn fail(led: &mut Pin<'D', 14, Output>, delay: &mut impl embedded_hal::delay::De
 /// this frame, gone when it returns (built in `main`, which never returns, they would hold
 /// that stack for good under every interrupt: the Laelaps image's finding).
 #[inline(never)]
-fn start_stack(mut esc: Esc) -> Result<(), ()> {
+fn start_stack(mut esc: Esc, flash: pac::FLASH) -> Result<(), ()> {
     let slave = TueSlave::new(&device::DEF, &mut esc).map_err(|_| ())?;
+    let app = WithFoe {
+        app: Hooks(FwCs),
+        files: FirmwareUpdate::new(FlashStore::new(flash), oxicat_devices::tue_es030::UPDATE),
+    };
     // SAFETY: once, before any ESC interrupt is unmasked (main enables them afterwards).
-    unsafe { ESC.init(EscSide { slave, esc }) };
+    unsafe { ESC.init(EscSide { slave, esc, app }) };
     Ok(())
 }
 
@@ -218,11 +229,14 @@ fn main() -> ! {
     let _e2b = gpioc.pc7.into_alternate::<2>();
     let _e3a = gpiod.pd12.into_alternate::<2>();
     let _e3b = gpiod.pd13.into_alternate::<2>();
-    // Analog: PC0..PC2 the three current-sense outputs, PC3 the line-voltage divider.
+    // Analog: PC0..PC2 the three current-sense outputs, PC3 the line-voltage divider, PC4
+    // the 5 V reference's.
     let _i1 = gpioc.pc0.into_analog();
     let _i2 = gpioc.pc1.into_analog();
     let _i3 = gpioc.pc2.into_analog();
     let _line = gpioc.pc3.into_analog();
+    // PC4: the 5 V reference through its 1:2 divider.
+    let _vref5 = gpioc.pc4.into_analog();
     // DRV8412 FAULT#/OTW# (open drain): PB12..PB15 with pull-ups; digital inputs PD0..PD3
     // (pull-downs), outputs PD4..PD7, FRUN LED PD14.
     let _flt1 = gpiob.pb12.into_pull_up_input();
@@ -265,7 +279,7 @@ fn main() -> ! {
     if esc.init().is_err() {
         fail(&mut frun, &mut delay);
     }
-    if start_stack(esc).is_err() {
+    if start_stack(esc, dp.FLASH).is_err() {
         fail(&mut frun, &mut delay);
     }
     // The firmware brakes the three motors (50/50, drivers enabled) as it starts.
@@ -306,7 +320,10 @@ fn main() -> ! {
         if now.wrapping_sub(last_poll) >= POLL_EVERY_TICKS {
             last_poll = now;
             with_esc_from_thread(|e| {
-                let _ = e.slave.poll(&mut e.esc, &mut Hooks(FwCs));
+                let _ = e.slave.poll(&mut e.esc, &mut e.app);
+                // The service routine runs in the ADC interrupt, not on the stack's
+                // SERVICE_TIMER: its dictionary side (0x8040) is stored here, at 1 kHz.
+                e.app.app.store_voltages(e.slave.od_mut());
             });
         }
         // The IRQ line is a level: a cause that arrives while it is still low from another

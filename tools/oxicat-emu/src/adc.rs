@@ -13,10 +13,16 @@
 //!   resolution) ADCCLK cycles, ADCCLK = PCLK2 / (2 · (ADC_CCR.ADCPRE + 1)); at its end
 //!   JDR1.. hold the results (minus JOFRx, right- or left-aligned) and SR.JEOC is set,
 //!   which with JEOCIE raises IRQ 18 (`ADC`). SR is rc_w0.
+//! - The regular group, single conversion by software: SWSTART with SQR1.L = 0 (one
+//!   channel, SQ1), CONT, EXTEN and DMA off, converts SQ1 in SMPx + resolution ADCCLK
+//!   cycles; then DR holds the result and SR.EOC is set (IRQ 18 with EOCIE), cleared by a
+//!   read of DR. An injected trigger while it converts is a fault (on silicon it would
+//!   interrupt and restart the regular conversion).
 //! - Voltages come from the board's analog inputs ([`crate::Board::set_analog`]); a
-//!   conversion of a channel that nothing drives, the regular group, the other trigger
-//!   sources, JAUTO/DISCEN/DMA and ADC2/ADC3 are not modelled: the image stops with a
-//!   fault naming the register, never a silent zero.
+//!   conversion of a channel that nothing drives, regular sequences, continuous or
+//!   triggered regular conversions, the other trigger sources, JAUTO/DISCEN/DMA and
+//!   ADC2/ADC3 are not modelled: the image stops with a fault naming the register, never
+//!   a silent zero.
 
 /// ADC1's register block.
 pub(crate) const ADC1: u64 = 0x4001_2000;
@@ -35,8 +41,11 @@ const CR2: usize = 0x08;
 const SMPR1: usize = 0x0C;
 const SMPR2: usize = 0x10;
 const JOFR1: usize = 0x14;
+const SQR1: usize = 0x2C;
+const SQR3: usize = 0x34;
 const JSQR: usize = 0x38;
 const JDR1: usize = 0x3C;
+const DR: usize = 0x4C;
 
 const JEOC: u32 = 1 << 2;
 const JSTRT: u32 = 1 << 3;
@@ -88,6 +97,12 @@ pub struct Adc {
     busy: Option<(u64, [u32; 4])>,
     /// Injected sequences started so far.
     pub sequences: u64,
+    /// A regular conversion converting: its end cycle and result.
+    regular: Option<(u64, u32)>,
+    /// SWSTART was written: the board starts the regular conversion.
+    regular_requested: bool,
+    /// Regular conversions started so far.
+    pub regular_conversions: u64,
     /// The end of the first sequence whose JEOC the ADC handler has not been entered for.
     pub jeoc_unhandled_since: Option<u64>,
     /// Longest time from a JEOC to the entry of the ADC handler (interrupt latency, with
@@ -164,6 +179,13 @@ impl Adc {
         if self.r(CR2) & ADON == 0 || self.busy.is_some() {
             return Ok(());
         }
+        if self.regular.is_some() {
+            return Err(
+                "ADC1: an injected trigger while the regular conversion converts \
+                        (it would interrupt and restart it): not modelled"
+                    .into(),
+            );
+        }
         let bits = self.bits();
         let mut res = [0u32; 4];
         let mut adcclk = 0u64;
@@ -193,8 +215,56 @@ impl Adc {
         Ok(())
     }
 
+    /// A software start of the regular group was written (and is taken now).
+    pub(crate) fn take_regular_request(&mut self) -> bool {
+        core::mem::take(&mut self.regular_requested)
+    }
+
+    /// Starts the regular conversion of SQ1 at cycle `at`.
+    pub(crate) fn start_regular(
+        &mut self,
+        at: u64,
+        analog: &[Option<f64>; CHANNELS],
+        cycles_per_adcclk: u64,
+    ) -> Result<(), String> {
+        if self.r(CR2) & ADON == 0 || self.regular.is_some() {
+            return Ok(());
+        }
+        if self.busy.is_some() {
+            return Err("ADC1: SWSTART while the injected sequence converts: not modelled".into());
+        }
+        let ch = (self.r(SQR3) & 0x1F) as usize;
+        let Some(v) = analog.get(ch).copied().flatten() else {
+            return Err(format!(
+                "ADC1 converts channel IN{ch} ({}), which nothing drives (a plant sets it \
+                 with Board::set_analog)",
+                channel_pin(ch)
+            ));
+        };
+        let bits = self.bits();
+        let full = f64::from(1u32 << bits);
+        let code = (v / VREF * full).floor().clamp(0.0, full - 1.0) as u32;
+        let d = if self.r(CR2) & (1 << 11) != 0 {
+            (code << (16 - bits)) & 0xFFFF
+        } else {
+            code
+        };
+        self.regs[SR / 4] |= 1 << 4; // STRT
+        self.regular_conversions += 1;
+        let adcclk = self.smp(ch) + u64::from(bits);
+        self.regular = Some((at + adcclk * cycles_per_adcclk.max(1), d));
+        Ok(())
+    }
+
     /// Completes the conversion if it ends by `now`.
     pub(crate) fn finish_by(&mut self, now: u64) {
+        if let Some((end, d)) = self.regular {
+            if end <= now {
+                self.regs[DR / 4] = d;
+                self.regs[SR / 4] |= EOC;
+                self.regular = None;
+            }
+        }
         if let Some((end, res)) = self.busy {
             if end <= now {
                 for (k, v) in res.into_iter().enumerate() {
@@ -216,7 +286,10 @@ impl Adc {
 
     /// End of the conversion in progress.
     pub(crate) fn busy_until(&self) -> Option<u64> {
-        self.busy.map(|b| b.0)
+        match (self.busy.map(|b| b.0), self.regular.map(|r| r.0)) {
+            (Some(a), Some(b)) => Some(a.min(b)),
+            (a, b) => a.or(b),
+        }
     }
 
     /// Whether the ADC interrupt line is high.
@@ -229,8 +302,12 @@ impl Adc {
     }
 
     /// A register read (offset in ADC1's block, or the common block's at 0x300..).
-    pub(crate) fn read(&self, off: usize) -> Result<u32, String> {
+    pub(crate) fn read(&mut self, off: usize) -> Result<u32, String> {
         match off {
+            DR => {
+                self.regs[SR / 4] &= !EOC; // a read of DR clears EOC
+                Ok(self.r(DR))
+            }
             0x300 => Ok(self.r(SR) & 0x3F), // CSR: ADC1's flags
             0x304 => Ok(self.ccr),
             0x308 => Ok(0),
@@ -262,15 +339,22 @@ impl Adc {
                 Ok(false)
             }
             CR2 => {
-                if v & (SWSTART | (3 << 28) | (1 << 8)) != 0 {
+                let single = (self.r(SQR1) >> 20) & 0xF == 0;
+                if v & ((3 << 28) | (1 << 8) | (1 << 1)) != 0 || (v & SWSTART != 0 && !single) {
                     return Err(format!(
-                        "ADC1 CR2 {v:#010x}: the regular group (SWSTART/EXTEN) and DMA are \
-                         not modelled"
+                        "ADC1 CR2 {v:#010x} (SQR1 {:#010x}): only single software-started \
+                         regular conversions of one channel are modelled (no EXTEN, CONT, \
+                         DMA, no sequence)",
+                        self.r(SQR1)
                     ));
                 }
-                self.regs[CR2 / 4] = v & !JSWSTART;
+                if v & SWSTART != 0 && v & ADON != 0 {
+                    self.regular_requested = true;
+                }
+                self.regs[CR2 / 4] = v & !(JSWSTART | SWSTART);
                 if v & ADON == 0 {
                     self.busy = None;
+                    self.regular = None;
                 }
                 Ok(v & JSWSTART != 0 && v & ADON != 0)
             }
@@ -338,11 +422,39 @@ mod tests {
     }
 
     #[test]
+    fn a_software_started_regular_conversion_sets_dr_and_eoc_which_a_dr_read_clears() {
+        let mut a = adc();
+        a.write(SQR3, 14).unwrap(); // SQ1 = IN14 (PC4)
+        a.write(SMPR1, 1 << 12).unwrap(); // IN14: 15 cycles
+        a.write(CR2, ADON | (1 << 16) | (1 << 20) | SWSTART)
+            .unwrap();
+        assert!(a.take_regular_request());
+        assert_eq!(a.read(CR2).unwrap() & SWSTART, 0, "SWSTART reads 0");
+        let mut v = [None; CHANNELS];
+        v[14] = Some(2.5);
+        a.start_regular(100, &v, 8).unwrap();
+        // 15 + 12 ADCCLK.
+        a.finish_by(100 + 27 * 8 - 1);
+        assert_eq!(a.read(SR).unwrap() & EOC, 0);
+        a.finish_by(100 + 27 * 8);
+        assert_eq!(a.read(SR).unwrap() & EOC, EOC);
+        assert_eq!(a.read(DR).unwrap(), 3103, "2.5 V of 3.3 V in 12 bits");
+        assert_eq!(a.read(SR).unwrap() & EOC, 0, "the DR read cleared EOC");
+        // An injected trigger while a regular conversion runs: not modelled.
+        a.start_regular(1000, &v, 8).unwrap();
+        let mut all = [Some(1.0); CHANNELS];
+        all[14] = Some(2.5);
+        assert!(a.start(1001, &all, 8).is_err());
+    }
+
+    #[test]
     fn an_undriven_channel_or_an_unmodelled_mode_is_an_error_naming_it() {
         let mut a = adc();
         let e = a.start(0, &[None; CHANNELS], 8).unwrap_err();
         assert!(e.contains("IN10 (PC0)"), "{e}");
+        a.write(SQR1, 1 << 20).unwrap(); // two regular conversions
         assert!(a.write(CR2, ADON | SWSTART).is_err());
+        assert!(a.write(CR2, ADON | (1 << 1)).is_err(), "CONT");
         assert!(a.write(CR2, ADON | (2 << 16) | (1 << 20)).is_ok());
         assert!(a.trigger().is_err(), "TIM2_CH1 as trigger");
         assert!(a.read(0x100).is_err(), "ADC2");

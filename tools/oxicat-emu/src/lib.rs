@@ -15,15 +15,15 @@
 //!
 //! | block | model |
 //! |---|---|
-//! | flash, SRAM | 512 KiB at 0x0800_0000 (the ELF's load segments at their load addresses), 128 KiB at 0x2000_0000 |
+//! | flash, SRAM | 512 KiB at 0x0800_0000 (the ELF's load segments at their load addresses), 128 KiB at 0x2000_0000; the sectors that hold the image are the engine's memory, the sectors after them ([`Board::flash_stats`]`.model_from`) are served by the FLASH model |
 //! | RCC | reset values; HSE/PLL/PLLI2S/PLLSAI/LSE/LSI ready flags follow their enables, SWS follows SW; CFGR's APB prescalers (and DCKCFGR.TIMPRE) set the timer clocks; CSR's reset flags read-only (power-on: POR, PIN, BOR; a watchdog reset adds IWDGRSTF and PINRSTF), RMVF clears them |
 //! | IWDG | [`iwdg`]: KR keys (0xCCCC start from 0xFFF, 0xAAAA reload from RLR, 0x5555 unlock), PR /4../256, RLR, SR PVU/RVU for 5 LSI periods after a write; counts at the LSI ([`iwdg::LSI_HZ`] = 32 kHz unless [`Board::set_lsi_hz`]); on expiry a system reset: the core restarts from the vector table (SP, reset vector, thread mode, masks clear), every peripheral returns to its reset values, SRAM, the ESC chip, the board's clock and what the board's world drives stay ([`Board::watchdog_resets`]). WWDG: any access is a fault |
 //! | PWR | VOSRDY set; over-drive ready flags follow ODEN/ODSWEN |
-//! | FLASH | ACR stored (latency reads back) |
+//! | FLASH | [`flash`]: ACR stored; KEYR unlock (KEY1, KEY2; a wrong key or a key while unlocked is a bus error — a fault — and locks CR until reset), OPTKEYR/OPTCR (nWRP per sector); sector erase (SER/SNB/STRT: 0xFF) and programming (PG: a CPU write of the PSIZE width, old & new: only clears bits) of the sectors after the image, BSY for the datasheet's typical times on the board's clock (128 KiB: 1 s at x32; 16 µs a word); PGSERR (PG clear or locked), PGPERR (width ≠ PSIZE), PGAERR (unaligned), WRPERR (protected sector); EOP with EOPIE; while BSY a fetch, read or write of flash and a write of CR stall the core to BSY's end (no read-while-write). A write or erase of the image's own sectors, MER: faults |
 //! | bit-band alias | 0x4200_0000.. : a word per peripheral bit, read-modify-write of the register (through its read, as the bus does) |
 //! | GPIOA..H | registers stored (MODER, AFR …); BSRR sets/resets ODR; IDR: PA10 = the chip's IRQ, PB3/PB5 = SYNC0/SYNC1, PB4 = an ET1100's EEPROM_LOADED, then levels injected with [`Board::set_input`], PC13 = button released, ODR for outputs, pull-ups high |
 //! | SPI1 | a byte per DR write clocked through the chip (`Lan9252Model::clock_byte`, `Et1100Model::clock_byte` with the idle time before the byte) while PB6 (CS) is low; TXE always set, RXNE until DR is read; bus time counted at the CR1 baud rate (or a what-if clock, [`Board::set_spi_sclk_hz`]) |
-//! | ADC1 | the injected group ([`adc`]): JSQR/JL, SMPRx, RES, ALIGN, JOFRx; started by JSWSTART or TIM1_TRGO rising edges (OCxREF or update event), every channel sampled at the trigger from [`Board::set_analog`], JEOC after Σ(SMP + resolution) ADCCLK cycles (PCLK2 / ADCPRE), IRQ 18 with JEOCIE; the regular group, other triggers, ADC2/3, and a channel nothing drives are faults |
+//! | ADC1 | the injected group ([`adc`]): JSQR/JL, SMPRx, RES, ALIGN, JOFRx; started by JSWSTART or TIM1_TRGO rising edges (OCxREF or update event), every channel sampled at the trigger from [`Board::set_analog`], JEOC after Σ(SMP + resolution) ADCCLK cycles (PCLK2 / ADCPRE), IRQ 18 with JEOCIE; the regular group's single software-started conversion of one channel (SWSTART, SQ1 → DR, EOC cleared by reading DR); regular sequences, CONT, EXTEN, other triggers, ADC2/3, and a channel nothing drives are faults |
 //! | EXTI, SYSCFG | EXTICR1..4 select the port of lines 0..15; RTSR/FTSR edges on IMR lines set PR (write-1-to-clear), SWIER; pins sampled after every engine run, SPI frame and GPIO write; IRQs EXTI0..4, EXTI9_5, EXTI15_10 |
 //! | TIM1..TIM14 | one model (`timers`): PSC/ARR (preloaded)/CNT from the cycle count at the APB timer clock, up/down/center-aligned, RCR (TIM1/8), UDIS/URS/OPM, UG; UIF → update IRQ; CCR/CCMR/CCER stored, PWM duty ([`Board::pwm_duty`]); encoder mode (SMS 1/2/3) from [`Board::set_encoder`]; input capture with CCxIF/CCxOF from [`Board::capture`]; timer links: TRGO in compare-pulse mode (CR2.MMS = 011) on a CH1 capture → the timers whose SMCR.TS selects it (ITR0..3, RM0390's table) capture on TRC (CCxS = 11); TRGO = OC1REF..OC4REF (MMS = 1xx) in PWM mode 1/2 or the update event (MMS = 010, with RCR) as ADC1's trigger, its rising edges computed from the counter (UG's pulse included); a complementary output alone (CCxE = 0, CCxNE = 1) as the channel's PWM. No output-compare match flags, no other master/slave modes |
 //! | plant | a [`BoardPlant`] stepped in lockstep with the CPU ([`plant::run_with_plant`], [`node::EmulatedNode::with_plant`]) schedules [`Stimulus`]es (encoder positions, capture edges, input levels, analogue voltages) at their times of the board's clock; [`laelaps`]: the Laelaps II leg on the leg image's pins; [`cia402`]: the CiA402 joint on the joint image's; [`tue_es030`]: the TUeES030's three RE 30 channels on its image's |
@@ -54,6 +54,7 @@ pub mod cia402;
 mod cpu;
 pub mod dma;
 mod exti;
+pub mod flash;
 pub mod iwdg;
 pub mod laelaps;
 pub mod node;
@@ -73,7 +74,7 @@ pub use stats::{image_size, HandlerStats, ImageSize, LostEdge, MaskedSpan, Stack
 use std::cell::RefCell;
 use std::rc::Rc;
 
-use unicorn_engine::unicorn_const::{Arch, Mode, Prot};
+use unicorn_engine::unicorn_const::{Arch, HookType, MemType, Mode, Prot};
 use unicorn_engine::{ArmCpuModel, RegisterARM, Unicorn};
 
 use nvic::{Masks, SVCALL};
@@ -444,6 +445,52 @@ pub struct SpiStats {
     pub bytes_without_cs: u64,
 }
 
+/// What the FLASH model did ([`Board::flash_stats`]).
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct FlashStats {
+    /// Sector erases.
+    pub erases: u64,
+    /// Program operations (one per CPU write of the PSIZE width).
+    pub programs: u64,
+    /// CPU cycles the core waited on a busy flash (RM0390: no read-while-write).
+    pub stalled_cycles: u64,
+    /// First address the model serves: the sectors from here on are programmable.
+    pub model_from: u32,
+}
+
+/// The end (offset from the flash base) of the sectors that hold the image: from the
+/// first flash segment, the sectors its segments reach without a gap of 16 KiB (the
+/// smallest sector) between them. Segments after a gap (data an image places in a sector
+/// of its own, e.g. a factory file store) lie in the sectors the FLASH model serves.
+fn image_sectors_end(segs: &[Segment]) -> u32 {
+    let mut spans: Vec<(u32, u32)> = segs
+        .iter()
+        .filter(|s| (FLASH.0..FLASH.0 + FLASH.1).contains(&u64::from(s.addr)))
+        .map(|s| {
+            let o = (u64::from(s.addr) - FLASH.0) as u32;
+            (o, o + s.data.len() as u32)
+        })
+        .collect();
+    spans.sort_unstable();
+    let sector_end = |off: u32| {
+        flash::sector_of(off).map_or(FLASH.1 as u32, |k| {
+            flash::SECTORS[k].0 + flash::SECTORS[k].1
+        })
+    };
+    let mut end = 0u32;
+    for (a, b) in spans {
+        if end > 0 && a.saturating_sub(end) >= 16 << 10 {
+            break;
+        }
+        end = end.max(b);
+    }
+    if end == 0 {
+        FLASH.1 as u32
+    } else {
+        sector_end(end - 1)
+    }
+}
+
 /// Sub-word access to a 32-bit register file.
 fn read_sized(word: u32, addr: u64, size: usize) -> u64 {
     let shift = (addr & 3) * 8;
@@ -513,13 +560,58 @@ impl Board {
         let mut uc = Unicorn::new(Arch::ARM, Mode::THUMB).map_err(fault)?;
         uc.ctl_set_cpu_model(ArmCpuModel::CORTEX_M4 as i32)
             .map_err(fault)?;
-        uc.mem_map(FLASH.0, FLASH.1, Prot::READ | Prot::EXEC)
+        // The image's sectors are the engine's memory; the sectors after them are served
+        // by the FLASH model (reads, programming, erase).
+        let model_from = image_sectors_end(&segs);
+        uc.mem_map(FLASH.0, u64::from(model_from), Prot::READ | Prot::EXEC)
             .map_err(fault)?;
         uc.mem_map(SRAM.0, SRAM.1, Prot::ALL).map_err(fault)?;
+        let mut fl = flash::Flash::new(model_from, CPU_HZ);
         for s in &segs {
-            uc.mem_write(u64::from(s.addr), &s.data).map_err(fault)?;
+            let a = u64::from(s.addr);
+            if a >= FLASH.0 + u64::from(model_from) && a < FLASH.0 + FLASH.1 {
+                let o = (a - FLASH.0) as usize;
+                fl.mem[o..o + s.data.len()].copy_from_slice(&s.data);
+            } else {
+                uc.mem_write(a, &s.data).map_err(fault)?;
+            }
         }
-        let periph = Rc::new(RefCell::new(Periph::new(chip)));
+        let mut p = Periph::new(chip);
+        p.flash = fl;
+        let periph = Rc::new(RefCell::new(p));
+        if u64::from(model_from) < FLASH.1 {
+            let (r, w) = (periph.clone(), periph.clone());
+            let base = FLASH.0 + u64::from(model_from);
+            uc.mmio_map(
+                base,
+                FLASH.1 - u64::from(model_from),
+                Some(move |_: &mut Unicorn<'_, ()>, off: u64, size: usize| {
+                    r.borrow_mut().flash_load(base + off, size)
+                }),
+                Some(
+                    move |_: &mut Unicorn<'_, ()>, off: u64, size: usize, v: u64| {
+                        w.borrow_mut().flash_store(base + off, size, v);
+                    },
+                ),
+            )
+            .map_err(fault)?;
+        }
+        // A write to the image's own sectors: not modelled, the image stops naming it.
+        let c = periph.clone();
+        uc.add_mem_hook(
+            HookType::MEM_WRITE_PROT,
+            FLASH.0,
+            FLASH.0 + u64::from(model_from) - 1,
+            move |_: &mut Unicorn<'_, ()>, _t: MemType, addr: u64, size: usize, _v: i64| {
+                let sector = flash::sector_of((addr - FLASH.0) as u32).unwrap_or(0);
+                c.borrow_mut().fault.get_or_insert(format!(
+                    "a {size}-byte write to flash at {addr:#010x} (sector {sector}, which holds \
+                     the image): the FLASH model programs only the sectors after the image"
+                ));
+                false
+            },
+        )
+        .map_err(fault)?;
         let (r, w) = (periph.clone(), periph.clone());
         uc.mmio_map(
             PERIPH.0,
@@ -617,9 +709,13 @@ impl Board {
         uc.add_block_hook(
             1,
             0,
-            move |uc: &mut Unicorn<'_, ()>, _addr: u64, size: u32| {
+            move |uc: &mut Unicorn<'_, ()>, addr: u64, size: u32| {
                 let stop = {
                     let mut p = c.borrow_mut();
+                    // A fetch from flash while it erases or programs waits for the end.
+                    if (FLASH.0..FLASH.0 + FLASH.1).contains(&addr) {
+                        p.flash_stall();
+                    }
                     // The hook runs before the block: a stop here leaves it unexecuted.
                     let stop = p.cycles >= p.wake_at
                         || p.watch.is_some_and(|m| {
@@ -963,6 +1059,9 @@ impl Board {
             self.pc = self.uc.reg_read(RegisterARM::PC).unwrap_or(0) as u32;
             if let Err(e) = r {
                 self.check_stack()?;
+                if let Some(f) = self.periph.borrow_mut().fault.take() {
+                    return Err(self.fault(f));
+                }
                 return Err(self.fault(self.engine_error(e)));
             }
             self.check_stack()?;
@@ -1167,11 +1266,34 @@ impl Board {
         self.periph.borrow_mut().spi_sclk_override = hz.filter(|&h| h > 0);
     }
 
-    /// Reads image memory (flash or SRAM) at `addr`.
+    /// Reads image memory (flash or SRAM) at `addr`, the flash sectors after the image
+    /// from the FLASH model's cells (no stall, no access counted).
     pub fn read_memory(&self, addr: u32, buf: &mut [u8]) -> Result<(), EmuError> {
+        let a = u64::from(addr);
+        let p = self.periph.borrow();
+        let from = FLASH.0 + u64::from(p.flash.model_from);
+        if a >= from && a + buf.len() as u64 <= FLASH.0 + FLASH.1 {
+            let o = (a - FLASH.0) as usize;
+            buf.copy_from_slice(&p.flash.mem[o..o + buf.len()]);
+            return Ok(());
+        }
+        drop(p);
         self.uc
             .mem_read(u64::from(addr), buf)
             .map_err(|e| self.fault(format!("read of {addr:#010x}: {e:?}")))
+    }
+
+    /// What the FLASH model did so far: sector erases, program operations, cycles the
+    /// core waited on a busy flash; and the first flash address it serves (the sectors
+    /// after the image).
+    pub fn flash_stats(&self) -> FlashStats {
+        let p = self.periph.borrow();
+        FlashStats {
+            erases: p.flash.erases,
+            programs: p.flash.programs,
+            stalled_cycles: p.flash.stalled,
+            model_from: (FLASH.0 + u64::from(p.flash.model_from)) as u32,
+        }
     }
 
     fn port(port: char) -> Option<u8> {
@@ -1410,6 +1532,30 @@ mod tests {
         e[28] = 200;
         e[44] = 1;
         assert!(matches!(elf_segments(&e), Err(EmuError::BadImage(w)) if w.contains("truncated")));
+    }
+
+    #[test]
+    fn the_image_keeps_the_sectors_its_segments_reach_and_data_after_a_gap_is_the_models() {
+        let seg = |addr: u32, len: usize| Segment {
+            addr,
+            data: vec![0; len],
+            mem_size: len as u32,
+        };
+        // Code into sector 4, .data's load image right after it, a store in sector 6.
+        let segs = [
+            seg(0x0800_0000, 0x1_0040),
+            seg(0x0801_0040, 0x338),
+            seg(0x2000_0000, 0x338),
+            seg(0x0804_0000, 79),
+        ];
+        assert_eq!(image_sectors_end(&segs), 0x2_0000, "sectors 0..4");
+        assert_eq!(image_sectors_end(&segs[..1]), 0x2_0000);
+        assert_eq!(image_sectors_end(&[seg(0x0800_0000, 0x100)]), 0x4000);
+        assert_eq!(
+            image_sectors_end(&[seg(0x2000_0000, 4)]),
+            FLASH.1 as u32,
+            "none"
+        );
     }
 
     #[test]

@@ -33,6 +33,8 @@ enum Cmd {
     SpiClock(Option<u32>),
     /// Drive an input pin (port, pin, level).
     Input(char, u8, bool),
+    /// Read image memory (address, length).
+    Memory(u32, usize, Sender<Result<Vec<u8>, EmuError>>),
     /// End the board thread.
     Stop,
 }
@@ -81,6 +83,8 @@ pub struct NodeReport {
     pub lost_edges: Vec<LostEdge>,
     /// EXTI edges lost since boot, by line 0..=15.
     pub lost_edge_count: Vec<u64>,
+    /// What the FLASH model did ([`Board::flash_stats`]).
+    pub flash: crate::FlashStats,
     /// The fault that stopped the image, if it stopped.
     pub fault: Option<EmuError>,
 }
@@ -157,6 +161,7 @@ fn report_of(board: &Board, since: u64, fault: &Option<EmuError>) -> NodeReport 
         masked_functions: masked.into_iter().map(|m| m.1).collect(),
         lost_edges: board.lost_edges(),
         lost_edge_count: (0..16).map(|l| board.lost_edge_count(l)).collect(),
+        flash: board.flash_stats(),
         fault: fault.clone(),
     }
 }
@@ -194,6 +199,14 @@ impl NodeHandle {
     /// ([`Board::set_input`]): a jumper, a button, a sensor line.
     pub fn set_input(&self, port: char, pin: u8, level: bool) {
         let _ = self.cmd.send(Cmd::Input(port, pin, level));
+    }
+
+    /// `len` bytes of the board's memory at `addr` (flash or SRAM; the flash sectors after
+    /// the image as the FLASH model holds them); `None` if the board thread has ended.
+    pub fn read_memory(&self, addr: u32, len: usize) -> Option<Result<Vec<u8>, EmuError>> {
+        let (tx, rx) = channel();
+        self.cmd.send(Cmd::Memory(addr, len, tx)).ok()?;
+        rx.recv().ok()
     }
 
     /// SYNC0 events the segment delivered to this node so far.
@@ -314,6 +327,12 @@ impl EmulatedNode {
                         }
                         Cmd::Input(port, pin, level) => {
                             board.set_input(port, pin, level);
+                            continue;
+                        }
+                        Cmd::Memory(addr, len, to) => {
+                            let mut buf = vec![0u8; len];
+                            let r = board.read_memory(addr, &mut buf).map(|()| buf);
+                            let _ = to.send(r);
                             continue;
                         }
                         Cmd::ResetStats => {

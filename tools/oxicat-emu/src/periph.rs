@@ -11,6 +11,7 @@ use crate::chip::{ChipFrame, ChipKind, EscChip};
 
 use crate::dma::{self, Dma, DmaBurst, Run, DMAS};
 use crate::exti::{Exti, EXTI_BASE, SYSCFG_BASE};
+use crate::flash::{self, Flash};
 use crate::iwdg::{self, Iwdg, IWDG_BASE, WWDG_BASE};
 use crate::nvic::{Masks, Scs, DWT_BASE};
 use crate::timers::{Timer, TIMERS};
@@ -32,7 +33,6 @@ const CSR_RMVF: u32 = 1 << 24;
 pub(crate) const CSR_IWDGRSTF: u32 = 1 << 29;
 /// RCC_CSR.PINRSTF: set with every reset, as an internal reset drives NRST low.
 pub(crate) const CSR_PINRSTF: u32 = 1 << 26;
-const FLASH_R: u64 = 0x4002_3C00;
 const PWR: u64 = 0x4000_7000;
 /// GPIOA; ports B..H follow every 0x400.
 pub(crate) const GPIOA: u64 = 0x4002_0000;
@@ -110,6 +110,8 @@ pub(crate) struct Periph {
     pub dma_fetch: Option<(usize, usize, u32, usize, usize)>,
     /// The independent watchdog.
     pub iwdg: Iwdg,
+    /// The embedded flash's interface and the sectors after the image ([`flash`]).
+    pub flash: Flash,
     /// System resets the IWDG caused, and the cycle of the last.
     pub watchdog_resets: u64,
     pub last_watchdog_reset: Option<u64>,
@@ -130,6 +132,7 @@ impl Periph {
             dmas: DMAS.iter().map(|&(b, n)| Dma::new(b, n)).collect(),
             dma_fetch: None,
             iwdg: Iwdg::default(),
+            flash: Flash::new(flash::SIZE as u32, crate::CPU_HZ),
             watchdog_resets: 0,
             last_watchdog_reset: None,
             spi_idle_from: 0,
@@ -215,6 +218,7 @@ impl Periph {
         self.dmas = DMAS.iter().map(|&(b, n)| Dma::new(b, n)).collect();
         self.dma_fetch = None;
         self.iwdg.reset();
+        self.flash.reset();
         self.spi_rx = 0xFF;
         self.rxne = false;
         self.spi_idle_from = self.cycles;
@@ -634,6 +638,9 @@ impl Periph {
             }
             a if Self::usart_index(a).is_some() => self.usart_read(a),
             a if Self::dma_index(a).is_some() => self.dma_read(a),
+            a if (flash::REGS..flash::REGS + 0x400).contains(&a) => {
+                self.flash.read(a - flash::REGS, self.cycles)
+            }
             a if (IWDG_BASE..IWDG_BASE + 0x400).contains(&a) => {
                 match self.iwdg.read(a - IWDG_BASE, self.cycles) {
                     Ok(v) => v,
@@ -691,6 +698,12 @@ impl Periph {
                         if start {
                             let cyc = self.cycles_per_adcclk();
                             if let Err(e) = self.adc.start(now, &self.analog, cyc) {
+                                self.fault.get_or_insert(e);
+                            }
+                        }
+                        if self.adc.take_regular_request() {
+                            let cyc = self.cycles_per_adcclk();
+                            if let Err(e) = self.adc.start_regular(now, &self.analog, cyc) {
                                 self.fault.get_or_insert(e);
                             }
                         }
@@ -754,7 +767,16 @@ impl Periph {
                 let csr = (self.reg(PWR + 4) & !(3 << 16)) | (v & (3 << 16));
                 self.set(PWR + 4, csr | (1 << 14));
             }
-            a if a == FLASH_R => self.set(a, v),
+            a if (flash::REGS..flash::REGS + 0x400).contains(&a) => {
+                if a - flash::REGS == 0x10 {
+                    self.flash_stall(); // CR is not writable while BSY: the bus waits
+                }
+                let now = self.cycles;
+                if let Err(e) = self.flash.write(a - flash::REGS, v, now) {
+                    self.fault.get_or_insert(e);
+                    self.wake_at = 0;
+                }
+            }
             a if (SYSCFG_BASE..EXTI_BASE + 0x400).contains(&a) => {
                 if !(SYSCFG_BASE + 0x30..EXTI_BASE).contains(&a) {
                     // Edges so far count under the old configuration; a newly unmasked
@@ -801,6 +823,31 @@ impl Periph {
                 self.set(a, v);
             }
         }
+    }
+
+    /// Waits for a busy flash (RM0390 §3.5: an access while BSY stalls the bus): the
+    /// clock moves to the end of the operation.
+    pub fn flash_stall(&mut self) {
+        let now = self.cycles;
+        if let Some(end) = self.flash.stall_until(now) {
+            self.flash.stalled += end - now;
+            self.cycles = end;
+        }
+    }
+
+    /// A CPU read of the flash sectors the model serves.
+    pub fn flash_load(&mut self, addr: u64, size: usize) -> u64 {
+        self.flash_stall();
+        self.flash.load((addr - flash::BASE) as u32, size)
+    }
+
+    /// A CPU write to the flash sectors the model serves: programmed, or refused with an
+    /// error flag (RM0390 §3.6.4).
+    pub fn flash_store(&mut self, addr: u64, size: usize, v: u64) {
+        self.flash_stall();
+        let now = self.cycles;
+        self.flash.store((addr - flash::BASE) as u32, size, v, now);
+        self.wake_at = 0;
     }
 
     /// The U(S)ART whose register page holds `addr`.

@@ -10,6 +10,7 @@
 //! | encoders | TIM2 (PA0/PA1), TIM3 (PC6/PC7), TIM4 (PD12/PD13), encoder mode ×4 | the drive's quadrature count (`4 · lines` per turn) |
 //! | currents | ADC1 IN10 (PC0), IN11 (PC1), IN12 (PC2) | the LT1999 output after its RC filter (`Re30Drive::sense_out`), the voltage the host's ADC2 reads |
 //! | line voltage | ADC1 IN13 (PC3) | `V_supply / 11` (the board's divider, `control::LINE_DIVIDER`) |
+//! | 5 V reference | ADC1 IN14 (PC4), a regular conversion per tick | [`RAIL_5V`] / 2 (the board's divider, `control::VREF5_DIVIDER`), the host rig's `rail_5v` |
 //! | driver lines | PB12 M1 FAULT#, PB13 M1 OTW#, PB14 M2/M3 FAULT#, PB15 M2/M3 OTW# (active low) | `Re30Drive::fault` / `otw` |
 //!
 //! A channel whose PWM is not an enabled output (timer stopped, MOE off) or whose enable
@@ -25,12 +26,15 @@
 use std::f64::consts::TAU;
 use std::sync::{Arc, Mutex};
 
-use oxicat_devices::tue_es030::control::LINE_DIVIDER;
+use oxicat_devices::tue_es030::control::{LINE_DIVIDER, VREF5_DIVIDER};
 pub use oxicat_devices::tue_es030::rig::TueConfig;
 use oxicat_plant::re30::{BridgeCommand, Re30Drive};
 
 use crate::plant::BoardPlant;
 use crate::{Board, Stimulus};
+
+/// The board's 5 V rail \[V\] (the host rig's `BenchBoard::rail_5v`).
+pub const RAIL_5V: f64 = 5.0;
 
 /// Plant period \[ns\]: half an 80 kHz PWM period.
 pub const PERIOD_NS: u64 = 6_250;
@@ -47,6 +51,8 @@ pub mod pins {
     pub const CURRENT: [u8; 3] = [10, 11, 12];
     /// ADC1 channel of the line-voltage divider (PC3).
     pub const LINE: u8 = 13;
+    /// ADC1 channel of the 5 V reference's divider (PC4).
+    pub const VREF5: u8 = 14;
     /// M1 FAULT#, M1 OTW#, M2/M3 FAULT#, M2/M3 OTW# (inputs, active low).
     pub const DRIVER: [(char, u8); 4] = [('B', 12), ('B', 13), ('B', 14), ('B', 15)];
 }
@@ -143,6 +149,13 @@ impl TueBoardPlant {
             Stimulus::Analog {
                 channel: pins::LINE,
                 volts: self.supply / f64::from(LINE_DIVIDER),
+            },
+        );
+        board.schedule(
+            at_ns,
+            Stimulus::Analog {
+                channel: pins::VREF5,
+                volts: RAIL_5V / f64::from(VREF5_DIVIDER),
             },
         );
         let d = &self.drives;

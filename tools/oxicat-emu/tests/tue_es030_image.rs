@@ -77,6 +77,7 @@ fn the_tue_image_boots_brakes_its_bridges_and_answers_its_identity() {
         b.set_analog(ch, rest);
     }
     b.set_analog(13, 24.0 / 11.0);
+    b.set_analog(14, 2.5); // the 5 V reference through 1:2
     let m = Direct { chip: chip.into() };
     let up = b
         .run_until(200_000, 200_000_000, |b| {
@@ -563,5 +564,38 @@ fn the_free_motors_spin_up_as_on_the_host() {
             let dc = (c[k] as i32).abs_diff(hc[k] as i32) as f64 / f64::from(hc[k] as i32);
             assert!(dc < 0.05, "M{} count {} vs host {}", k + 1, c[k], hc[k]);
         }
+    });
+}
+
+/// Issue 17: 0x8040:02, the 5 V reference in 10 mV, read 0 on the image while the host
+/// reads 4.99 V: the image's `adc2` had no channel for it, and the image runs the service
+/// routine in its ADC interrupt, not on the stack's SERVICE_TIMER hook, which is where
+/// 0x8040 went into the dictionary — so none of 0x8040 was ever stored. The image now
+/// converts PC4 (the rail through its 1:2 divider) in ADC1's regular group once per tick
+/// and stores 0x8040 from its main loop (`Hooks::store_voltages`); both read the same.
+#[test]
+fn the_5v_reference_0x8040_02_reads_on_the_image_as_on_the_host() {
+    big(|| {
+        let Some(img) = image() else { return };
+        let (link, node, _) = segment(&img, &TueConfig::default());
+        let m = Master::open(link).expect("ethercrab scans");
+        let (hlink, _h) = host(&TueConfig::default());
+        let hm = Master::open(hlink).expect("ethercrab scans the host board");
+        let volts = |m: &Master, sub: u8| {
+            let b = m.sdo_upload(0, 0x8040, sub).expect("0x8040");
+            u16::from_le_bytes([b[0], b[1]])
+        };
+        let (on_host, on_image) = (volts(&hm, 2), volts(&m, 2));
+        assert!(on_host.abs_diff(499) <= 1, "host: {on_host} × 10 mV");
+        assert_eq!(on_image, on_host, "the image's 5 V reference (10 mV)");
+        // The rest of 0x8040 from the image's dictionary too: the 24 V line (its ADC's
+        // counts, within 5 × 10 mV as the TxPDO's) and the kill threshold.
+        let (line_host, line_image) = (volts(&hm, 1), volts(&m, 1));
+        assert!(
+            line_image.abs_diff(line_host) <= 5 && line_host.abs_diff(2400) <= 5,
+            "line {line_image} vs {line_host} × 10 mV"
+        );
+        assert_eq!(volts(&m, 4), volts(&hm, 4), "kill threshold");
+        assert_eq!(node.report().expect("the board runs").fault, None);
     });
 }

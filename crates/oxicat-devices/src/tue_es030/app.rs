@@ -651,6 +651,20 @@ pub struct Hooks<L>(pub L);
 impl<L: FwLock> Hooks<L> {
     /// The dictionary is the TUeES030's, so the build-time handles apply (checked once,
     /// outside the lock: it walks the whole declaration).
+    /// The service routine's dictionary side alone: 0x8040 "Internal voltages" from the
+    /// last readings, as the SERVICE_TIMER hook stores them after `service`. For a board
+    /// that runs `TuEs030::service` in an interrupt of its own (the board image) and calls
+    /// this from the stack's context, once per service period or less often.
+    pub fn store_voltages<const N: usize>(&mut self, od: &mut Od<N>) {
+        if !self.resolved(od) {
+            return;
+        }
+        let v = self.0.with(|f| f.voltages());
+        for (var, x) in VoltIo::VARS.volts.iter().zip(v) {
+            od.store(*var, x);
+        }
+    }
+
     fn resolved<const N: usize>(&mut self, od: &Od<N>) -> bool {
         if self.0.with(|f| f.dict) {
             return true;

@@ -347,15 +347,19 @@ pub const INFO: DeviceInfo = DeviceInfo {
     ..DeviceInfo::DEFAULT
 };
 
+/// The board's identity (0x1018), usable in constants (the factory image of the board
+/// image's FoE store).
+pub const IDENTITY: Identity = Identity {
+    vendor_id: crate::demo::VENDOR_ID,
+    product_code: 0x0000_E030,
+    revision: 1,
+    serial: 0,
+};
+
 /// The device definition: the one source of OD, ESI and SII. Vendor ID: none is given in
 /// the manual; the ETG test range (as the other oxicat devices).
 pub static DEF: DeviceDef = DeviceDef {
-    identity: Identity {
-        vendor_id: crate::demo::VENDOR_ID,
-        product_code: 0x0000_E030,
-        revision: 1,
-        serial: 0,
-    },
+    identity: IDENTITY,
     device_type: 0x0000_0000,
     name: "TUeES030",
     hw_version: "TUeES030 (Spartan-6 soft core, ET1200)",

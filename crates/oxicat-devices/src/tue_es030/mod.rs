@@ -64,5 +64,21 @@ pub use app::{
 };
 pub use control::{BoardRev, Motor, MotorParams};
 
+/// Name of the firmware file the board takes over FoE in BOOT.
+pub const FIRMWARE_FILE: &str = "firmware.bin";
+/// Payload of the factory image the board ships with (the host rig's
+/// `demo::rig::ram_files` builds the same from [`device::DEF`]'s `sw_version`).
+pub const FACTORY_PAYLOAD: &str = concat!("oxicat tue-es030 firmware ", env!("CARGO_PKG_VERSION"));
+
+/// The board's FoE update flow (`oxicat_slave::foe::FirmwareUpdate`) settings: images for
+/// [`device::IDENTITY`], [`FIRMWARE_FILE`], no password, read back in BOOT — the host
+/// rig's and the board image's.
+pub const UPDATE: oxicat_slave::foe::UpdateConfig = oxicat_slave::foe::UpdateConfig {
+    identity: device::IDENTITY,
+    file_name: FIRMWARE_FILE,
+    password: 0,
+    read_back: true,
+};
+
 #[cfg(test)]
 mod tests;
