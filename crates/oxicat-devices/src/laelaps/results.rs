@@ -100,38 +100,59 @@ pub fn sample(raw: &[i32; 9], leg: LegId) -> LegSample {
 /// writes 61,250 rows of 64 such fields, where `core::fmt` took a fifth of a whole trot's
 /// CPU time.
 fn fixed(out: &mut Vec<u8>, raw: i64, decimals: u32) {
+    /// "00" "01" … "99".
+    const PAIRS: [[u8; 2]; 100] = {
+        let mut t = [[0u8; 2]; 100];
+        let mut k = 0;
+        while k < 100 {
+            t[k] = [b'0' + (k / 10) as u8, b'0' + (k % 10) as u8];
+            k += 1;
+        }
+        t
+    };
     // |i64::MIN| has 19 digits; with 18 decimals, a leading zero, the point and the sign
-    // at most 22 bytes. The field is written into a 24-byte tail of `out` (a fixed-size
-    // extension, no `memcpy` call of a run-time length) and the tail cut to its length.
+    // at most 22 bytes, written from the end of the buffer backwards two digits at a time.
     const W: usize = 24;
-    let dec = decimals.min(18) as usize;
-    let mut a = raw.unsigned_abs();
-    let digits = a.checked_ilog10().map_or(1, |l| l as usize + 1);
-    let digits = if dec > 0 { digits.max(dec + 1) } else { digits };
-    let len = usize::from(raw < 0) + digits + usize::from(dec > 0);
-    let at = out.len();
-    out.extend_from_slice(&[0u8; W]);
-    let field = &mut out[at..at + len];
-    let mut i = len;
-    for _ in 0..dec {
-        i -= 1;
-        field[i] = b'0' + (a % 10) as u8;
-        a /= 10;
-    }
+    let mut buf = [0u8; W];
+    let mut i = W;
+    let dec = decimals.min(18);
+    let a = raw.unsigned_abs();
+    let mut int = a;
     if dec > 0 {
+        let p = 10u64.pow(dec);
+        int = a / p;
+        let mut frac = a % p;
+        let mut k = dec;
+        while k >= 2 {
+            i -= 2;
+            buf[i..i + 2].copy_from_slice(&PAIRS[(frac % 100) as usize]);
+            frac /= 100;
+            k -= 2;
+        }
+        if k == 1 {
+            i -= 1;
+            buf[i] = b'0' + (frac % 10) as u8;
+        }
         i -= 1;
-        field[i] = b'.';
+        buf[i] = b'.';
     }
-    let first = usize::from(raw < 0);
-    while i > first {
+    while int >= 100 {
+        i -= 2;
+        buf[i..i + 2].copy_from_slice(&PAIRS[(int % 100) as usize]);
+        int /= 100;
+    }
+    if int >= 10 {
+        i -= 2;
+        buf[i..i + 2].copy_from_slice(&PAIRS[int as usize]);
+    } else {
         i -= 1;
-        field[i] = b'0' + (a % 10) as u8;
-        a /= 10;
+        buf[i] = b'0' + int as u8;
     }
     if raw < 0 {
-        field[0] = b'-';
+        i -= 1;
+        buf[i] = b'-';
     }
-    out.truncate(at + len);
+    out.extend_from_slice(&buf[i..]);
 }
 
 /// Millimetres with two decimals, `-0.00` written as `0.00`.
