@@ -6,6 +6,25 @@ use crate::encoder::Encoder;
 use crate::gear;
 use crate::motor::{AmplifierParams, MotorParams};
 
+/// `x.ceil()` without the libm call the baseline x86-64 target makes for it (no SSE4.1
+/// `roundsd`): the same value for every `x` (the sign of a zero aside, which `max(1.0)`
+/// drops where it is used); called once per substep.
+#[inline]
+pub(crate) fn ceil(x: f64) -> f64 {
+    // Below 2^52 in magnitude the truncation is exact in i64 and back in f64; beyond,
+    // every f64 is an integer already (and NaN/inf go to the library too).
+    if x.abs() < 4_503_599_627_370_496.0 {
+        let i = x as i64 as f64;
+        if i < x {
+            i + 1.0
+        } else {
+            i
+        }
+    } else {
+        x.ceil()
+    }
+}
+
 /// Standard gravity [m/s²].
 pub const GRAVITY: f64 = 9.81;
 
@@ -253,6 +272,11 @@ pub struct Leg {
     p: LegParams,
     sign: f64,
     q: [f64; 2],
+    /// `q[k].sin_cos()`, kept with `q`: a substep needs them at its start and the body's
+    /// coupling needs the sines before and after it, so each pose's sines and cosines are
+    /// computed once instead of three times (the same calls on the same angles: the same
+    /// bits).
+    trig: [(f64, f64); 2],
     v: [f64; 2],
     d: [Drive; 2],
     time: f64,
@@ -303,6 +327,7 @@ impl Leg {
             p: params,
             sign,
             q,
+            trig: [q[0].sin_cos(), q[1].sin_cos()],
             v: [0.0; 2],
             d: [mk(params.hip, q[0]), mk(params.knee, q[1])],
             time: 0.0,
@@ -335,7 +360,7 @@ impl Leg {
     /// Vertical momentum (down) of the two links relative to the hip \[kg·m/s\].
     pub fn vertical_momentum(&self) -> f64 {
         let (t, s) = (self.p.thigh, self.p.shank);
-        let (s1, s2) = (self.q[0].sin(), self.q[1].sin());
+        let (s1, s2) = (self.trig[0].0, self.trig[1].0);
         let [v1, v2] = self.v;
         t.mass * (-t.com * s1 * v1) + s.mass * (-t.length * s1 * v1 - s.com * s2 * v2)
     }
@@ -363,7 +388,7 @@ impl Leg {
         if dt <= 0.0 || !dt.is_finite() {
             return;
         }
-        let n = (dt / self.p.substep - 1e-9).ceil().max(1.0);
+        let n = ceil(dt / self.p.substep - 1e-9).max(1.0);
         let h = dt / n;
         for _ in 0..n as u64 {
             self.substep(h);
@@ -554,8 +579,7 @@ impl Leg {
 
         // 2. Leg kinematics and Lagrangian terms (absolute angles).
         let (l1, l2) = (self.p.thigh.length, self.p.shank.length);
-        let (s1, c1) = self.q[0].sin_cos();
-        let (s2, c2) = self.q[1].sin_cos();
+        let [(s1, c1), (s2, c2)] = self.trig;
         let sd = s1 * c2 - c1 * s2; // sin(θ1 − θ2)
         let cd = c1 * c2 + s1 * s2; // cos(θ1 − θ2)
         let [v1, v2] = self.v;
@@ -710,6 +734,7 @@ impl Leg {
         self.v = vn;
         self.q[0] += h * vn[0];
         self.q[1] += h * vn[1];
+        self.trig = [self.q[0].sin_cos(), self.q[1].sin_cos()];
         let t0 = self.time;
         for (d, &w) in self.d.iter_mut().zip(wn.iter()) {
             let psi0 = d.psi;
@@ -718,5 +743,49 @@ impl Leg {
             d.encoder.update(sign * psi0, sign * d.psi, t0, h);
         }
         self.time += h;
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    /// The substep count's `ceil` is `f64::ceil` (zero's sign aside) on ordinary values,
+    /// halves, integers, both sides of 2^52 and the specials.
+    #[test]
+    fn ceil_is_the_library_ceil() {
+        let big = 4_503_599_627_370_496.0f64;
+        let mut xs = vec![
+            0.0,
+            -0.0,
+            0.5,
+            -0.5,
+            1.0,
+            -1.0,
+            1.0 - 1e-9,
+            2.0 - 1e-9,
+            1.0 + f64::EPSILON,
+            -1.5,
+            big,
+            -big,
+            big - 0.5,
+            -(big - 0.5),
+            big + 2.0,
+            1e300,
+            -1e300,
+            f64::MAX,
+            f64::MIN,
+            f64::INFINITY,
+            f64::NEG_INFINITY,
+            f64::MIN_POSITIVE,
+        ];
+        let mut x = 1e-12f64;
+        while x < 1e18 {
+            xs.extend([x, -x, x * 1.37, -x * 1.37]);
+            x *= 3.1;
+        }
+        for x in xs {
+            let (a, b) = (super::ceil(x), x.ceil());
+            assert!(a == b || a.is_nan() && b.is_nan(), "{x}: {a} against {b}");
+        }
+        assert!(super::ceil(f64::NAN).is_nan());
     }
 }

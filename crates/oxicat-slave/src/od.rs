@@ -1030,14 +1030,25 @@ macro_rules! od_type {
         impl OdType for $t {
             const BITS: u16 = $bits;
             const DTYPE: DataType = DataType::$dt;
+            #[inline]
             fn from_le(b: &[u8]) -> Self {
+                // The common case, an entry of the type's size, as one load (the general
+                // copy has a run-time length: a `memcpy` call per access on the host).
+                if let Ok(a) = <[u8; core::mem::size_of::<$t>()]>::try_from(b) {
+                    return <$t>::from_le_bytes(a);
+                }
                 let mut a = [0u8; core::mem::size_of::<$t>()];
                 let n = a.len().min(b.len());
                 a[..n].copy_from_slice(&b[..n]);
                 <$t>::from_le_bytes(a)
             }
+            #[inline]
             fn to_le(self, b: &mut [u8]) {
                 let a = self.to_le_bytes();
+                if let Ok(d) = <&mut [u8; core::mem::size_of::<$t>()]>::try_from(&mut *b) {
+                    *d = a;
+                    return;
+                }
                 let n = a.len().min(b.len());
                 b[..n].copy_from_slice(&a[..n]);
             }

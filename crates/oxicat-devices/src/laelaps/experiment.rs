@@ -106,7 +106,15 @@ impl PdoPlace {
         }
         let byte = self.bit / 8;
         let n = usize::from(self.bits) / 8;
-        image[byte..byte + n].copy_from_slice(&v.to_le_bytes()[..n]);
+        let v = v.to_le_bytes();
+        // The master writes 15 of these per leg and cycle: fixed-size copies for the
+        // sizes there are, not a `memcpy` call of a run-time length.
+        match n {
+            1 => image[byte] = v[0],
+            2 => image[byte..byte + 2].copy_from_slice(&v[..2]),
+            4 => image[byte..byte + 4].copy_from_slice(&v[..4]),
+            _ => image[byte..byte + n].copy_from_slice(&v[..n]),
+        }
     }
 
     /// Reads the integer at this place of a process-data image (sign-extended if `signed`).
