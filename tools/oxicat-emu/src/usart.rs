@@ -415,6 +415,36 @@ mod tests {
     }
 
     #[test]
+    fn rxne_and_tc_raise_the_usarts_interrupt_line_when_enabled() {
+        let line = crate::nvic::bit(16 + 39);
+        let mut u = uart(None);
+        u.write(0x08, 391, 0, 4).unwrap();
+        u.write(0x0C, CR1_UE | CR1_TE | CR1_RE | CR1_RXNEIE, 0, 4)
+            .unwrap();
+        assert_eq!(u.next_event(), None, "nothing in flight");
+        u.write(0x04, 0xA5, 0, 4).unwrap();
+        // The board stops where the byte ends: RXNE rises there.
+        let end = u.next_event().expect("a byte in flight");
+        u.sync(end - 1, 4);
+        assert_eq!(u.irq_lines(), 0, "not before the byte's end");
+        u.sync(end, 4);
+        assert_eq!(u.irq_lines(), line, "USART3 = IRQ 39");
+        assert_eq!(u.read(0x04, end, 4).unwrap(), 0xA5);
+        assert_eq!(u.irq_lines(), 0, "reading DR clears RXNE and the line");
+        // TC with TCIE: the line stays up until TC is cleared.
+        u.write(0x0C, CR1_UE | CR1_TE | CR1_TCIE, end, 4).unwrap();
+        assert_eq!(u.irq_lines(), line, "TC is set after the byte");
+        u.write(0x00, 0, end, 4).unwrap();
+        assert_eq!(u.irq_lines(), 0);
+        // Without the enables, no line.
+        u.write(0x0C, CR1_UE | CR1_TE | CR1_RE, end, 4).unwrap();
+        u.write(0x04, 0x5A, end, 4).unwrap();
+        assert_eq!(u.next_event(), None);
+        u.sync(end + 20_000, 4);
+        assert_eq!(u.irq_lines(), 0);
+    }
+
+    #[test]
     fn reset_presence_and_slots_reach_the_bus_as_1_wire_timing() {
         let rom = ds18b20_rom(0x42);
         let net = Arc::new(Mutex::new(OneWireNet::new(vec![Ds18b20::new(rom)])));
