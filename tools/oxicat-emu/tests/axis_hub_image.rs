@@ -237,12 +237,11 @@ fn synchronous_op(mode: SyncMode, cycles: u64) {
                         missed.push((io.cycle, ev, want));
                     }
                 }
-                let cmd = (io.cycle >= warm).then(|| {
-                    if io.cycle % 2 == 0 {
-                        CMD_LED_TOGGLE
-                    } else {
-                        CMD_LED_AUTO
-                    }
+                let toggle = io.cycle % 2 == 0;
+                let cmd = (io.cycle >= warm).then_some(if toggle {
+                    CMD_LED_TOGGLE
+                } else {
+                    CMD_LED_AUTO
                 });
                 sent = [sent[1], cmd];
                 io.outputs[0][..2].copy_from_slice(&cmd.unwrap_or(0).to_le_bytes());
