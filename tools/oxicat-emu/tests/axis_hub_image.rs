@@ -180,6 +180,13 @@ fn ethercrab_runs_the_emulated_hub_dc_synchronous() {
     synchronous_op(SyncMode::Dc, 1_000);
 }
 
+/// The control of the echo: in free run the same per-frame commands are acknowledged in
+/// at most 80 % of the frames (the application task runs every 10 ms, the cycle is 4 ms).
+#[test]
+fn in_free_run_the_per_frame_command_echo_fails() {
+    synchronous_op(SyncMode::FreeRun, 200);
+}
+
 /// `cargo test -p oxicat-emu --test axis_hub_image -- --ignored`: 10,000 SM-synchronous
 /// cycles of 4 ms (40 s of board time).
 #[test]
@@ -254,6 +261,18 @@ fn synchronous_op(mode: SyncMode, cycles: u64) {
         )
         .unwrap_or_else(|e| panic!("{e}"));
     assert_eq!((stats.cycles, stats.wkc_errors), (cycles, 0), "{stats:?}");
+    let echoes = cycles - warm - 2;
+    if mode == SyncMode::FreeRun {
+        // The control: the application task (10 ms) misses many of the 4 ms frames' commands
+        // (the two acknowledgements alternate, so half match by chance alone; measured 107
+        // of 178).
+        assert!(
+            echoed * 5 <= echoes * 4,
+            "free run acknowledged {echoed} of {echoes} per-frame commands"
+        );
+        eprintln!("free run at 4 ms: {echoed} of {echoes} per-frame commands acknowledged");
+        return;
+    }
     // The sync mode the hub ran in (the master leaves 0x1C32:01 as it set it).
     let want_mode: u16 = if mode == SyncMode::Dc { 2 } else { 1 };
     assert_eq!(
@@ -269,7 +288,6 @@ fn synchronous_op(mode: SyncMode, cycles: u64) {
     };
     let runs = r.taken[usize::from(handler)];
     assert!(runs >= cycles, "{name}: {runs} runs in {cycles} cycles");
-    let echoes = cycles - warm - 2;
     assert_eq!(
         echoed, echoes,
         "the COMMAND of every frame acknowledged in the next one; first misses (cycle, \
