@@ -316,3 +316,101 @@ fn an_esc_without_its_eeprom_is_err_ecat_init_until_the_master_writes_it() {
         "event {event}"
     );
 }
+
+/// A bus that runs each transaction in the background, as the board's USART3 interrupt
+/// does: `begin` only takes it, the slots run on the plant's bus at the third `collect`.
+struct Background {
+    bus: SimOneWire,
+    txn: Option<onewire::Txn>,
+    polls: u32,
+    begun: u32,
+}
+
+impl onewire::OneWireBus for Background {
+    type Error = core::convert::Infallible;
+    fn reset(&mut self) -> Result<bool, Self::Error> {
+        self.bus.reset()
+    }
+    fn write_bit(&mut self, bit: bool) -> Result<(), Self::Error> {
+        self.bus.write_bit(bit)
+    }
+    fn read_bit(&mut self) -> Result<bool, Self::Error> {
+        self.bus.read_bit()
+    }
+    fn begin(&mut self, t: &mut onewire::Txn) -> Result<bool, Self::Error> {
+        assert!(self.txn.is_none(), "one transaction at a time");
+        self.txn = Some(*t);
+        self.polls = 0;
+        self.begun += 1;
+        Ok(false)
+    }
+    fn collect(&mut self, t: &mut onewire::Txn) -> Result<bool, Self::Error> {
+        self.polls += 1;
+        if self.polls < 3 {
+            return Ok(false);
+        }
+        let mut done = self.txn.take().expect("a transaction runs");
+        self.bus.begin(&mut done)?;
+        *t = done;
+        Ok(true)
+    }
+}
+
+/// The temperature task on a bus whose transactions run in the background (the board
+/// image's interrupt-driven USART) reads what it reads on a blocking bus — the same ROMs,
+/// frames and events — with every call returning without waiting for the bus: a release
+/// only starts its first transaction, `resume` (the board's tick) takes each result and
+/// starts the next.
+#[test]
+fn the_temperature_task_on_a_background_bus_reads_what_it_reads_blocking() {
+    use oxicat_devices::axis_hub::{SystemState, TempTask};
+    let mut blocking = bus(15);
+    let mut bg = Background {
+        bus: bus(15),
+        txn: None,
+        polls: 0,
+        begun: 0,
+    };
+    for (i, t) in [-7.3, 4.2, 19.9, 33.3, 85.0].iter().enumerate() {
+        blocking.0.devices[i].die_temp = *t;
+        bg.bus.0.devices[i].die_temp = *t;
+    }
+    let (mut ta, mut tb) = (TempTask::default(), TempTask::default());
+    let (mut sa, mut sb) = (SystemState::default(), SystemState::default());
+    let mut frames = 0;
+    for release in 0..5u64 {
+        let t = release * 1_000_000_000;
+        blocking.0.set_time(t);
+        bg.bus.0.set_time(t);
+        let fa = ta.run(&mut blocking, &mut sa);
+        assert!(!ta.busy(), "a blocking bus ends the release in the call");
+        let begun = bg.begun;
+        let mut fb = tb.run(&mut bg, &mut sb);
+        assert!(fb.is_none(), "nothing read yet: the release only started");
+        assert_eq!(bg.begun, begun + 1, "one transaction started");
+        let mut ticks = 0;
+        while tb.busy() {
+            ticks += 1;
+            assert!(ticks < 1000, "the release ends");
+            if let Some(f) = tb.resume(&mut bg, &mut sb) {
+                assert!(fb.is_none(), "one frame per release");
+                fb = Some(f);
+            }
+        }
+        assert!(ticks >= 2, "release {release}: {ticks} resumes");
+        assert_eq!(fa, fb, "release {release}");
+        frames += usize::from(fa.is_some());
+        assert_eq!(ta.roms(), tb.roms());
+        assert_eq!(ta.stats, tb.stats);
+        sa.handle_events();
+        sb.handle_events();
+        assert_eq!(
+            (sa.last_event(), sa.last_error()),
+            (sb.last_event(), sb.last_error())
+        );
+    }
+    assert_eq!(ta.roms().len(), 15);
+    assert!(frames >= 3, "{frames} read-outs");
+    // Sensor 4 at 85 °C: the overheat, on both.
+    assert!(ta.overheat() && tb.overheat());
+}

@@ -43,6 +43,123 @@ impl CycleOptions {
     }
 }
 
+/// How the slaves synchronise their application to the master's cycle (ETG.1020: the sync
+/// mode 0x1C32:01 each slave is given, checked against its 0x1C32:04 "sync modes
+/// supported"). [`SyncMode::Auto`] is what [`CycleOptions`] alone does; the others are
+/// explicit and refused, before any slave is changed, when a slave's 0x1C32:04 does not
+/// offer them ([`MasterError::SyncModeUnsupported`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum SyncMode {
+    /// As [`CycleOptions::dc`] says: with `dc`, DC SYNC0 on every slave whose ESC has the DC
+    /// unit (free run when none has); without, each slave free run, or SM-synchronous where
+    /// its 0x1C32:04 offers that and not free run.
+    #[default]
+    Auto,
+    /// Free run (0x1C32:01 = 0, 0x1C32:04 bit 0): the slave runs its cycle on its own timer.
+    FreeRun,
+    /// SM-synchronous (0x1C32:01 = 1, 0x1C32:04 bit 1): the slave runs its cycle on the SM2
+    /// event (PDI interrupt) when the master's frame has written its outputs.
+    SmSync,
+    /// DC SYNC0-synchronous (0x1C32:01 = 2, 0x1C32:04 bits 2..3) on every slave: SYNC0 at the
+    /// cycle time, half a cycle after the frame.
+    Dc,
+}
+
+impl SyncMode {
+    /// 0x1C32:01 of the mode (`None` for [`SyncMode::Auto`], which is chosen per slave).
+    pub fn code(self) -> Option<u16> {
+        match self {
+            Self::Auto => None,
+            Self::FreeRun => Some(crate::bringup::FREE_RUN),
+            Self::SmSync => Some(crate::bringup::SM_SYNC),
+            Self::Dc => Some(2),
+        }
+    }
+
+    /// Whether a slave whose 0x1C32:04 reads `supported` offers the mode (0 or no object:
+    /// the slave does not say, and is taken at its word).
+    pub fn offered_by(self, supported: Option<u16>) -> bool {
+        let Some(s) = supported.filter(|&s| s != 0) else {
+            return true;
+        };
+        match self {
+            Self::Auto => true,
+            Self::FreeRun => s & 0x0001 != 0,
+            Self::SmSync => s & 0x0002 != 0,
+            Self::Dc => s & 0x000C != 0,
+        }
+    }
+}
+
+impl std::fmt::Display for SyncMode {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(match self {
+            Self::Auto => {
+                "automatic (free run, or SM-synchronous where that is all a slave offers)"
+            }
+            Self::FreeRun => "free run (0x1C32:01 = 0)",
+            Self::SmSync => "SM-synchronous (0x1C32:01 = 1)",
+            Self::Dc => "DC SYNC0 (0x1C32:01 = 2)",
+        })
+    }
+}
+
+/// [`CycleOptions`] with an explicit [`SyncMode`]: what the cyclic functions take
+/// (`CycleOptions` converts to it with [`SyncMode::Auto`], so existing callers are unchanged).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct Cycling {
+    /// Cycle time and the DC flag [`SyncMode::Auto`] follows.
+    pub options: CycleOptions,
+    /// The sync mode.
+    pub sync: SyncMode,
+}
+
+impl From<CycleOptions> for Cycling {
+    fn from(options: CycleOptions) -> Self {
+        Self {
+            options,
+            sync: SyncMode::Auto,
+        }
+    }
+}
+
+impl CycleOptions {
+    /// These options with the sync mode `sync` (`dc` then only matters for [`SyncMode::Auto`]).
+    pub fn with_sync(self, sync: SyncMode) -> Cycling {
+        Cycling {
+            options: self,
+            sync,
+        }
+    }
+}
+
+impl Cycling {
+    /// Whether the run is DC-synchronous.
+    pub fn dc(&self) -> bool {
+        match self.sync {
+            SyncMode::Auto => self.options.dc,
+            SyncMode::Dc => true,
+            SyncMode::FreeRun | SyncMode::SmSync => false,
+        }
+    }
+
+    /// [`CycleOptions::check`] for the mode; `dc` set with an explicit mode without DC is
+    /// refused as a contradiction.
+    pub fn check(&self) -> Result<(), MasterError> {
+        if self.options.dc && matches!(self.sync, SyncMode::FreeRun | SyncMode::SmSync) {
+            return Err(MasterError::Usage(format!(
+                "DC cycling (dc = true) and the sync mode {} contradict each other",
+                self.sync
+            )));
+        }
+        CycleOptions {
+            cycle: self.options.cycle,
+            dc: self.dc(),
+        }
+        .check()
+    }
+}
+
 impl Default for CycleOptions {
     fn default() -> Self {
         Self {
@@ -211,7 +328,7 @@ impl Master {
     /// (process data as the slaves and the master's defaults leave it).
     pub fn run_cycles(
         &mut self,
-        opts: CycleOptions,
+        opts: impl Into<Cycling>,
         cycles: u64,
     ) -> Result<CycleStats, MasterError> {
         self.run_cyclic(opts, |io| {
@@ -228,10 +345,10 @@ impl Master {
     /// process-data watchdog would leave them in SAFEOP+ERR 0x001B).
     pub fn run_cyclic(
         &mut self,
-        opts: CycleOptions,
+        opts: impl Into<Cycling>,
         step: impl FnMut(&mut CycleIo) -> Result<Flow, MasterError>,
     ) -> Result<CycleStats, MasterError> {
-        let r = self.run_cyclic_op(opts, step);
+        let r = self.run_cyclic_op(opts.into(), step);
         // Not when another master changed the segment: leave it to that master.
         if self.preop_after_cycling && !matches!(r, Err(MasterError::Disturbed { .. })) {
             let all: Vec<usize> = (0..self.len()).collect();
@@ -278,50 +395,97 @@ impl Master {
             .unwrap_or_else(|| MasterError::Ethercrab("cyclic exchange".into(), err))
     }
 
+    /// 0x1C32:04 (sync modes supported) of the slave: `None` without CoE, without 0x1C32
+    /// or without the subindex.
+    async fn sync_supported(&self, position: usize) -> Result<Option<u16>, MasterError> {
+        if self.sync_mode_async(position).await?.is_none() {
+            return Ok(None);
+        }
+        match self.sdo_upload_async(position, 0x1C32, 4).await {
+            Ok(b) if b.len() >= 2 => Ok(Some(u16::from_le_bytes([b[0], b[1]]))),
+            Ok(_) | Err(MasterError::SdoAbort { .. }) => Ok(None),
+            Err(e) => Err(e),
+        }
+    }
+
+    /// Refuses an explicit sync mode a slave does not offer (its 0x1C32:04, or an ESC
+    /// without SYNC0 for DC), before any slave is changed.
+    fn check_sync(&self, sync: SyncMode, dc_support: &[bool]) -> Result<(), MasterError> {
+        if sync == SyncMode::Auto {
+            return Ok(());
+        }
+        for p in 0..self.len() {
+            let supported = futures_lite::future::block_on(self.sync_supported(p))?;
+            let esc_dc = dc_support.get(p).copied().unwrap_or(false);
+            if !sync.offered_by(supported) || (sync == SyncMode::Dc && !esc_dc) {
+                return Err(MasterError::SyncModeUnsupported {
+                    position: p,
+                    name: self.name(p).unwrap_or_default(),
+                    mode: sync,
+                    supported,
+                    esc_dc,
+                });
+            }
+        }
+        Ok(())
+    }
+
     fn run_cyclic_op(
         &mut self,
-        opts: CycleOptions,
+        opts: Cycling,
         mut step: impl FnMut(&mut CycleIo) -> Result<Flow, MasterError>,
     ) -> Result<CycleStats, MasterError> {
         let n = self.len();
         opts.check()?;
+        let sync = opts.sync;
+        let opts_dc = opts.dc();
+        let opts = opts.options;
         let period = opts.cycle.as_nanos() as u64;
         // ethercrab's group (a reset of every slave to INIT, then PRE-OP).
         self.ensure_group()?;
         self.check_watchdogs(opts.cycle)?;
-        let mut dc = opts.dc;
+        // Which slaves' ESCs generate SYNC0.
+        let supports: Vec<bool> = match &self.slot {
+            Some(Slot::PreOp(g)) => g
+                .iter(&self.md)
+                .map(|s| {
+                    !matches!(
+                        s.dc_support(),
+                        ethercrab::DcSupport::None | ethercrab::DcSupport::RefOnly
+                    )
+                })
+                .collect(),
+            _ => vec![false; n],
+        };
+        self.check_sync(sync, &supports)?;
+        let mut dc = opts_dc;
         if !dc {
-            // Without DC: free run, or SM-synchronous (0x1C32:01 = 1) on a slave whose
-            // 0x1C32:04 offers that and not free run (the TUeES030), as `states` does. A DC
-            // recording left 0x1C32:01 = 2 (DC SYNC0), with which the slave would wait for
-            // SYNC0 pulses that never come and not reach OP.
+            // Without DC: the explicit mode, or (Auto) free run, or SM-synchronous
+            // (0x1C32:01 = 1) on a slave whose 0x1C32:04 offers that and not free run (the
+            // TUeES030), as `states` does. A DC recording left 0x1C32:01 = 2 (DC SYNC0), with
+            // which the slave would wait for SYNC0 pulses that never come and not reach OP.
             for p in 0..n {
                 let r = futures_lite::future::block_on(async {
-                    match self.plain_sync_mode(p).await? {
+                    let mode = match sync.code() {
+                        Some(code) => self.sync_mode_async(p).await?.map(|_| code),
+                        None => self.plain_sync_mode(p).await?,
+                    };
+                    match mode {
                         Some(mode) => self.set_sync_mode(p, mode).await,
                         // No CoE or no 0x1C32: SYNC0 generation off all the same.
                         None => self.set_free_run(p).await,
                     }
                 });
                 if let Err(e) = r {
+                    if sync != SyncMode::Auto {
+                        return Err(e);
+                    }
                     log::warn!("slave {p}: sync mode not checked ({e})");
                 }
             }
         }
         if dc {
             // DC-synchronous slaves: SYNC0 on, and (CoE) sync mode 0x1C32:01 = 2 (DC SYNC0).
-            let supports: Vec<bool> = match &self.slot {
-                Some(Slot::PreOp(g)) => g
-                    .iter(&self.md)
-                    .map(|s| {
-                        !matches!(
-                            s.dc_support(),
-                            ethercrab::DcSupport::None | ethercrab::DcSupport::RefOnly
-                        )
-                    })
-                    .collect(),
-                _ => vec![false; n],
-            };
             if !supports.iter().any(|&s| s) {
                 log::warn!("no slave supports DC SYNC0: cycling in free run");
                 dc = false;
@@ -329,6 +493,9 @@ impl Master {
                 for (p, &s) in supports.iter().enumerate() {
                     if s {
                         if let Err(e) = self.sdo_download(p, 0x1C32, 1, &2u16.to_le_bytes()) {
+                            if sync == SyncMode::Dc && !matches!(e, MasterError::SdoAbort { .. }) {
+                                return Err(e);
+                            }
                             log::info!("slave {p}: sync mode not set ({e})");
                         }
                     }
@@ -489,7 +656,7 @@ impl Master {
     /// cycling `settle` more cycles so the slaves take it; returns the values read back.
     pub fn write_online(
         &mut self,
-        opts: CycleOptions,
+        opts: impl Into<Cycling>,
         vars: &[Variable],
         value: &[u8],
         settle: u64,
@@ -515,20 +682,20 @@ impl Master {
     /// CSV row per cycle: cycle, time in s, then each variable; the header carries units.
     pub fn record(
         &mut self,
-        opts: CycleOptions,
+        opts: impl Into<Cycling>,
         vars: &[Variable],
         cycles: u64,
         out: &mut dyn Write,
         progress: &mut dyn FnMut(u64, u64),
     ) -> Result<CycleStats, MasterError> {
         let stop = std::sync::atomic::AtomicBool::new(false);
-        self.record_until(opts, vars, cycles, out, progress, &stop)
+        self.record_until(opts.into(), vars, cycles, out, progress, &stop)
     }
 
     /// [`Master::record`] that ends early, with the rows so far, when `stop` is set (Ctrl-C).
     pub fn record_until(
         &mut self,
-        opts: CycleOptions,
+        opts: impl Into<Cycling>,
         vars: &[Variable],
         cycles: u64,
         out: &mut dyn Write,
@@ -574,7 +741,7 @@ impl Master {
     /// `count` times (0: until the callback returns false).
     pub fn watch(
         &mut self,
-        opts: CycleOptions,
+        opts: impl Into<Cycling>,
         vars: &[Variable],
         every: u64,
         count: u64,

@@ -95,6 +95,20 @@ pub enum MasterError {
         /// 0x1C32:04 (sync modes supported).
         supported: u16,
     },
+    /// A cyclic run asked for a sync mode a slave does not offer: its 0x1C32:04 (sync modes
+    /// supported) lacks it, or (DC) its ESC has no SYNC0 unit. Nothing was changed.
+    SyncModeUnsupported {
+        /// Position of the slave.
+        position: usize,
+        /// Its name (SII).
+        name: String,
+        /// The mode asked for.
+        mode: crate::cyclic::SyncMode,
+        /// 0x1C32:04, `None` when the slave has no such object.
+        supported: Option<u16>,
+        /// Whether its ESC generates SYNC0 (the DC unit).
+        esc_dc: bool,
+    },
     /// The segment changed under a cyclic verb (slaves left OP, frames stopped coming back):
     /// another master, or a cable/power fault.
     Disturbed {
@@ -175,6 +189,36 @@ impl std::fmt::Display for MasterError {
                 f,
                 "another master changed the segment (or a cable/power fault) after {cycles} cycles: {what}; stopped, the slaves are left as they are"
             ),
+            SyncModeUnsupported {
+                position,
+                name,
+                mode,
+                supported,
+                esc_dc,
+            } => {
+                let offers = match supported {
+                    Some(s) => {
+                        let mut m = Vec::new();
+                        for (bit, what) in [
+                            (0x0001, "free run"),
+                            (0x0002, "SM-synchronous"),
+                            (0x000C, "DC"),
+                        ] {
+                            if s & bit != 0 {
+                                m.push(what);
+                            }
+                        }
+                        format!("0x1C32:04 = 0x{s:04X}: {}", m.join(", "))
+                    }
+                    None => "no 0x1C32:04".to_string(),
+                };
+                let esc = if *esc_dc { "" } else { "; its ESC has no SYNC0 (DC unit)" };
+                write!(
+                    f,
+                    "slave {position} ({name}) does not offer the sync mode {mode} ({offers}{esc}); \
+                     choose a mode it offers; no slave was changed"
+                )
+            }
             SyncUnsupported {
                 position,
                 name,

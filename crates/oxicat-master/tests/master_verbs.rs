@@ -314,3 +314,116 @@ fn alias_is_written_with_the_crc_and_reloaded_into_0x0012() {
         Err(MasterError::NoSuchSlave { .. })
     ));
 }
+
+/// An explicit SM-synchronous run: every slave in OP with 0x1C32:01 = 1, its stack running
+/// the cycle on the SM2 event; `CycleOptions` alone (Auto) keeps free run on the demo.
+#[test]
+fn an_explicit_sync_mode_reaches_the_slaves() {
+    use oxicat_master::cyclic::{Flow, SyncMode};
+    use oxicat_slave::SyncMode as Slave;
+    let (mut m, seg, fws, _) = common::demo_master(2);
+    let opts = CycleOptions {
+        cycle: Duration::from_millis(1),
+        dc: false,
+    };
+    let mut seen = Vec::new();
+    let stats = m
+        .run_cyclic(opts.with_sync(SyncMode::SmSync), |io| {
+            if io.cycle == 20 {
+                seen = fws.iter().map(|f| f.lock().slave.sync_mode()).collect();
+                return Ok(Flow::Stop);
+            }
+            Ok(Flow::Continue)
+        })
+        .unwrap();
+    assert_eq!((stats.cycles, stats.wkc_errors), (21, 0));
+    assert_eq!(seen, vec![Slave::SmSync, Slave::SmSync]);
+    for p in 0..2 {
+        assert_eq!(m.sdo_upload(p, 0x1C32, 1).unwrap(), 1u16.to_le_bytes());
+    }
+    // The default (Auto, no DC) sets the demo, which offers free run, back to free run (a
+    // master cycles once: a new one on the same segment).
+    let mut m = oxicat_master::Master::open(oxicat_master::Link::Sim(seg)).unwrap();
+    let mut mode = None;
+    m.run_cyclic(opts, |io| {
+        if io.cycle == 5 {
+            mode = Some(fws[0].lock().slave.sync_mode());
+            return Ok(Flow::Stop);
+        }
+        Ok(Flow::Continue)
+    })
+    .unwrap();
+    assert_eq!(mode, Some(Slave::FreeRun));
+    assert_eq!(m.sdo_upload(0, 0x1C32, 1).unwrap(), 0u16.to_le_bytes());
+    // An explicit mode without DC and `dc` set contradict: refused before anything runs.
+    let e = CycleOptions {
+        cycle: Duration::from_millis(1),
+        dc: true,
+    }
+    .with_sync(SyncMode::FreeRun)
+    .check()
+    .unwrap_err();
+    assert!(e.to_string().contains("contradict"), "{e}");
+}
+
+/// A slave whose 0x1C32:04 does not offer the mode asked for stops the run before any slave
+/// is changed, naming the slave and what it offers.
+#[test]
+fn a_sync_mode_a_slave_does_not_offer_is_refused_naming_it() {
+    use oxicat_devices::demo::{self, Demo};
+    use oxicat_esc::{Esc, EscConfig};
+    use oxicat_master::cyclic::SyncMode;
+    use oxicat_master::{Link, Master};
+    use oxicat_sim::firmware::{attach_firmware, FirmwareConfig};
+    // Slave 0 the demo (all modes), slave 1 the demo offering free run only.
+    let mut free_only = demo::DEF;
+    free_only.sync.supported = 0x0001;
+    let free_only: &'static _ = Box::leak(Box::new(free_only));
+    let mut seg = oxicat_sim::segment::Segment::new();
+    let mut fws = Vec::new();
+    for def in [&demo::DEF, free_only] {
+        let sii = oxicat_esi::sii::generate(def).expect("SII");
+        let id = seg.add(Esc::new(EscConfig::et1100(), sii));
+        let app = Demo::new(common::SharedLeds::default(), common::FixedButtons(0));
+        fws.push(
+            attach_firmware::<_, { demo::IMAGE }, { common::MBX }>(
+                &mut seg,
+                id,
+                def,
+                app,
+                &FirmwareConfig::default(),
+            )
+            .expect("firmware boots"),
+        );
+    }
+    let mut m = Master::open(Link::Sim(std::sync::Arc::new(std::sync::Mutex::new(seg)))).unwrap();
+    let opts = CycleOptions {
+        cycle: Duration::from_millis(1),
+        dc: false,
+    };
+    for mode in [SyncMode::SmSync, SyncMode::Dc] {
+        let e = m.run_cycles(opts.with_sync(mode), 5).unwrap_err();
+        match &e {
+            MasterError::SyncModeUnsupported {
+                position,
+                supported,
+                ..
+            } => assert_eq!((*position, *supported), (1, Some(0x0001)), "{e}"),
+            e => panic!("{mode:?}: {e}"),
+        }
+        let text = e.to_string();
+        assert!(
+            text.contains("slave 1") && text.contains("0x1C32:04 = 0x0001: free run"),
+            "{text}"
+        );
+        // Slave 0 was not changed.
+        assert_eq!(m.sdo_upload(0, 0x1C32, 1).unwrap(), 0u16.to_le_bytes());
+        assert_eq!(
+            fws[0].lock().slave.sync_mode(),
+            oxicat_slave::SyncMode::FreeRun
+        );
+    }
+    // What both offer runs.
+    let stats = m.run_cycles(opts.with_sync(SyncMode::FreeRun), 10).unwrap();
+    assert_eq!((stats.cycles, stats.wkc_errors), (10, 0));
+}

@@ -12,7 +12,7 @@ use std::sync::{Arc, Mutex};
 use std::time::Duration;
 
 use clap::{Args, Subcommand};
-use oxicat_master::cyclic::CycleOptions;
+use oxicat_master::cyclic::{CycleOptions, Cycling, SyncMode};
 use oxicat_master::pdo::Variable;
 use oxicat_master::value::{parse_int, parse_u16, ValueType};
 use oxicat_master::{AlState, Link, Master, MasterError, MasterOptions};
@@ -347,6 +347,10 @@ pub struct WatchArgs {
     /// Stop after this many refreshes (0: until Ctrl-C).
     #[arg(long, default_value_t = 0)]
     pub count: u64,
+    /// Sync mode (0x1C32:01) of every slave; refused when a slave's 0x1C32:04 does not
+    /// offer it. Default: free run, or SM-synchronous where that is all a slave offers.
+    #[arg(long, value_enum)]
+    pub sync: Option<SyncArg>,
 }
 
 /// The arguments of `write`.
@@ -366,6 +370,9 @@ pub struct WriteArgs {
     /// Cycles to keep cycling after the write.
     #[arg(long, default_value_t = 20)]
     pub settle: u64,
+    /// Sync mode (0x1C32:01) of every slave, as for `watch`.
+    #[arg(long, value_enum)]
+    pub sync: Option<SyncArg>,
 }
 
 /// The arguments of `record`.
@@ -386,9 +393,39 @@ pub struct RecordArgs {
     /// Output CSV.
     #[arg(long, short = 'o')]
     pub output: PathBuf,
-    /// Free run instead of DC SYNC0.
-    #[arg(long)]
+    /// Free run instead of DC SYNC0 (SM-synchronous where that is all a slave offers).
+    #[arg(long, conflicts_with = "sync")]
     pub free_run: bool,
+    /// Sync mode (0x1C32:01) of every slave instead of DC SYNC0 where the ESC has it;
+    /// refused, naming the slave, when its 0x1C32:04 does not offer it.
+    #[arg(long, value_enum)]
+    pub sync: Option<SyncArg>,
+}
+
+/// `--sync` of the cyclic verbs: the sync mode every slave gets (ETG.1020 0x1C32:01).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum SyncArg {
+    /// Free run (0x1C32:01 = 0).
+    FreeRun,
+    /// SM-synchronous: the slave's cycle on the SM2 event (0x1C32:01 = 1).
+    SmSync,
+    /// DC SYNC0-synchronous (0x1C32:01 = 2).
+    Dc,
+}
+
+impl From<SyncArg> for SyncMode {
+    fn from(a: SyncArg) -> Self {
+        match a {
+            SyncArg::FreeRun => SyncMode::FreeRun,
+            SyncArg::SmSync => SyncMode::SmSync,
+            SyncArg::Dc => SyncMode::Dc,
+        }
+    }
+}
+
+/// The cycling of a cyclic verb: `opts` with the `--sync` mode, if given.
+fn cycling(opts: CycleOptions, sync: Option<SyncArg>) -> Cycling {
+    opts.with_sync(sync.map_or(SyncMode::Auto, SyncMode::from))
 }
 
 /// Parses `400us`, `1ms`, `10s`, `250ns`, `2m`.
@@ -1097,8 +1134,11 @@ fn watch(a: WatchArgs, out: &mut dyn Write) -> Result<(), CliError> {
         cycle,
         every,
         count,
+        sync,
     } = a;
     let cycle = parse_duration(&cycle)?;
+    let opts = cycling(CycleOptions { cycle, dc: false }, sync);
+    opts.check()?;
     let mut m = open(&link)?;
     m.prepare_cyclic()?;
     let layouts = m.layouts()?;
@@ -1109,28 +1149,22 @@ fn watch(a: WatchArgs, out: &mut dyn Write) -> Result<(), CliError> {
     let pace = link.sim.is_some();
     let started = std::time::Instant::now();
     let mut lines = 0u32;
-    m.watch(
-        CycleOptions { cycle, dc: false },
-        &vars,
-        every,
-        count,
-        &mut |line| {
-            lines += 1;
-            if pace {
-                let due = started + cycle * every.max(1) as u32 * lines;
-                if let Some(d) = due.checked_duration_since(std::time::Instant::now()) {
-                    std::thread::sleep(d);
-                }
+    m.watch(opts, &vars, every, count, &mut |line| {
+        lines += 1;
+        if pace {
+            let due = started + cycle * every.max(1) as u32 * lines;
+            if let Some(d) = due.checked_duration_since(std::time::Instant::now()) {
+                std::thread::sleep(d);
             }
-            match writeln!(out, "{line}") {
-                Ok(()) => true,
-                Err(e) => {
-                    err = Some(e);
-                    false
-                }
+        }
+        match writeln!(out, "{line}") {
+            Ok(()) => true,
+            Err(e) => {
+                err = Some(e);
+                false
             }
-        },
-    )?;
+        }
+    })?;
     match err {
         Some(e) => Err(MasterError::Output(e).into()),
         None => Ok(()),
@@ -1146,8 +1180,11 @@ fn write(a: WriteArgs, out: &mut dyn Write) -> Result<(), CliError> {
         value,
         cycle,
         settle,
+        sync,
     } = a;
     let cycle = parse_duration(&cycle)?;
+    let opts = cycling(CycleOptions { cycle, dc: false }, sync);
+    opts.check()?;
     let mut m = open(&link)?;
     m.prepare_cyclic()?;
     let layouts = m.layouts()?;
@@ -1166,7 +1203,7 @@ fn write(a: WriteArgs, out: &mut dyn Write) -> Result<(), CliError> {
         }
         .into());
     }
-    let back = m.write_online(CycleOptions { cycle, dc: false }, &vars, &data, settle)?;
+    let back = m.write_online(opts, &vars, &data, settle)?;
     for (v, b) in vars.iter().zip(back) {
         w(
             out,
@@ -1190,10 +1227,11 @@ fn record(a: RecordArgs, out: &mut dyn Write) -> Result<(), CliError> {
         duration,
         output,
         free_run,
+        sync,
     } = a;
     // Every argument is checked before the output is touched; the CSV goes to a
     // temporary file renamed over `output` at the end, so a failure leaves it as it was.
-    let (opts, cycles) = record_plan(&cycle, &duration, free_run)?;
+    let (opts, cycles) = record_plan(&cycle, &duration, free_run, sync)?;
     let mut m = open(&link)?;
     m.prepare_cyclic()?;
     let layouts = m.layouts()?;
@@ -1238,7 +1276,7 @@ fn record(a: RecordArgs, out: &mut dyn Write) -> Result<(), CliError> {
 /// with the rows so far.
 fn record_cycles(
     m: &mut Master,
-    opts: CycleOptions,
+    opts: Cycling,
     vars: &[oxicat_master::pdo::Variable],
     cycles: u64,
     sink: &mut dyn Write,
@@ -1268,13 +1306,18 @@ fn record_plan(
     cycle: &str,
     duration: &str,
     free_run: bool,
-) -> Result<(CycleOptions, u64), CliError> {
+    sync: Option<SyncArg>,
+) -> Result<(Cycling, u64), CliError> {
     let cycle = parse_duration(cycle)?;
     let duration = parse_duration(duration)?;
-    let opts = CycleOptions {
-        cycle,
-        dc: !free_run,
-    };
+    // DC SYNC0 by default; an explicit mode replaces it.
+    let opts = cycling(
+        CycleOptions {
+            cycle,
+            dc: !free_run && sync.is_none(),
+        },
+        sync,
+    );
     opts.check()?;
     if duration < cycle {
         return Err(UsageError::DurationBelowCycle { duration, cycle }.into());

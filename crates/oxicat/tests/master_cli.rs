@@ -285,3 +285,72 @@ fn a_segment_of_130_slaves_is_scanned_brought_to_op_and_cycled() {
     let text = std::fs::read_to_string(&csv).unwrap();
     assert_eq!(text.lines().count(), 51, "{text}");
 }
+
+/// `--sync` gives every slave one sync mode; one a slave's 0x1C32:04 does not offer stops
+/// the verb naming the slave (the TUeES030 offers SM-synchronous only); `--free-run` and
+/// `--sync` together are refused.
+#[test]
+fn the_cyclic_verbs_take_an_explicit_sync_mode() {
+    let dir = std::env::temp_dir().join(format!("oxicat-master-sync-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let csv = dir.join("sm.csv");
+    let out = ok(&[
+        "record",
+        "--sync",
+        "sm-sync",
+        "--cycle",
+        "1ms",
+        "--duration",
+        "20ms",
+        "0.InINT32Var1",
+        "-o",
+        csv.to_str().unwrap(),
+        "--sim",
+        "demo:1",
+    ]);
+    assert!(
+        out.starts_with("20 cycles of 1 variables") && out.contains("(0 working-counter"),
+        "{out}"
+    );
+    let out = ok(&[
+        "watch",
+        "0.InINT32Var3",
+        "--sync",
+        "dc",
+        "--every",
+        "2",
+        "--count",
+        "2",
+        "--sim",
+        "demo:1",
+    ]);
+    assert_eq!(out.lines().count(), 2, "{out}");
+    let err = fails(&[
+        "watch",
+        "0.Count",
+        "--sync",
+        "free-run",
+        "--count",
+        "1",
+        "--sim",
+        "tue-es030:1",
+    ]);
+    assert!(
+        err.contains("slave 0 (TUeES030) does not offer the sync mode free run")
+            && err.contains("0x1C32:04 = 0x0002: SM-synchronous")
+            && err.contains("no slave was changed"),
+        "{err}"
+    );
+    let err = fails(&[
+        "record",
+        "--sync",
+        "sm-sync",
+        "--free-run",
+        "0.InINT32Var1",
+        "-o",
+        csv.to_str().unwrap(),
+        "--sim",
+        "demo:1",
+    ]);
+    assert!(err.contains("cannot be used with"), "{err}");
+}

@@ -1,15 +1,19 @@
 //! The hub board's peripherals behind the application's seams: the 1-Wire master on USART3
-//! (half-duplex, AN214's reset at 9600 baud and bit slots at 115200), and the two WS2812
+//! (half-duplex, AN214's reset at 9600 baud and bit slots at 115200; the temperature task's
+//! transactions run slot by slot in USART3's interrupt), and the two WS2812
 //! rings fed by DMA into a timer's compare register (TIM8 CH1 on PC6 through DMA2 stream 1
 //! channel 7 on TIM8_UP, TIM3 CH2 on PC7 through DMA1 stream 2 channel 5 on TIM3_UP;
 //! RM0390 tables 28/29). Register-level: the HAL has no half-duplex USART or timer-DMA
 //! burst for these parts, and the emulator models exactly these registers.
 
+use core::cell::RefCell;
 use core::ptr::{read_volatile, write_volatile};
+
+use cortex_m::interrupt::Mutex;
 
 use oxicat_devices::axis_hub::ws2812::{HUB_TIMING, RING_SLOTS};
 use oxicat_devices::axis_hub::LedStrip;
-use oxicat_devices::axis_hub::OneWireBus;
+use oxicat_devices::axis_hub::{OneWireBus, Slot, Txn};
 use oxicat_devices::demo::Leds;
 use stm32f4xx_hal::gpio::{Output, Pin};
 
@@ -24,6 +28,7 @@ const DR: usize = 0x04;
 const BRR: usize = 0x08;
 const CR1: usize = 0x0C;
 const CR3: usize = 0x14;
+const SR_ORE: u32 = 1 << 3;
 const SR_RXNE: u32 = 1 << 5;
 const SR_TXE: u32 = 1 << 7;
 
@@ -46,9 +51,15 @@ fn set_bits(addr: usize, bits: u32) {
     wr(addr, rd(addr) | bits);
 }
 
-/// Busy-wait bound of one UART byte: well above a byte at 9600 baud (≈ 1.04 ms, 187,500
-/// cycles at 180 MHz; one loop pass is several cycles).
+/// Busy-wait bound of one UART byte in the polled slots: well above a byte at 9600 baud
+/// (≈ 1.04 ms, 187,500 cycles at 180 MHz; one loop pass is several cycles).
 const SPIN: u32 = 200_000;
+/// Ticks (ms) a transaction may run in the background before it is abandoned as
+/// [`OwError::NoEcho`]: the longest (a search: reset + 8 + 192 slots) takes ≈ 18 ms.
+const TXN_TICKS: u32 = 100;
+
+const CR1_ON: u32 = (1 << 13) | (1 << 3) | (1 << 2);
+const CR1_RXNEIE: u32 = 1 << 5;
 
 /// Why a 1-Wire slot failed.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -57,11 +68,98 @@ pub enum OwError {
     TxTimeout,
     /// The byte did not come back on the half-duplex line (no echo).
     NoEcho,
+    /// A transaction still runs in the background.
+    Busy,
+}
+
+/// The 1-Wire transaction the USART3 interrupt runs, slot by slot: each slot one UART byte
+/// (a reset 0xF0 at 9600 baud, a slot 0xFF / 0x00 at 115200), the echo its result.
+struct Engine {
+    txn: Option<Txn>,
+    /// The slot whose byte is on the line.
+    slot: Option<Slot>,
+    brr_reset: u32,
+    brr_bits: u32,
+    /// Ticks the transaction has been collected without having finished.
+    polls: u32,
+}
+
+static ENGINE: Mutex<RefCell<Engine>> = Mutex::new(RefCell::new(Engine {
+    txn: None,
+    slot: None,
+    brr_reset: 0,
+    brr_bits: 0,
+    polls: 0,
+}));
+
+impl Engine {
+    fn running(&self) -> bool {
+        self.slot.is_some()
+    }
+
+    /// Puts `slot`'s byte on the line at its rate, the RXNE interrupt on.
+    fn send(&mut self, slot: Slot) {
+        let (brr, byte) = match slot {
+            Slot::Reset => (self.brr_reset, 0xF0u8),
+            Slot::Write(false) => (self.brr_bits, 0x00),
+            Slot::Write(true) | Slot::Read => (self.brr_bits, 0xFF),
+        };
+        if rd(USART3 + BRR) != brr {
+            // UE off while the rate changes.
+            wr(USART3 + CR1, (1 << 3) | (1 << 2));
+            wr(USART3 + BRR, brr);
+        }
+        wr(USART3 + CR1, CR1_ON | CR1_RXNEIE);
+        self.slot = Some(slot);
+        wr(USART3 + DR, u32::from(byte));
+    }
+
+    /// Ends the transaction in the background: the interrupt off.
+    fn stop(&mut self) {
+        self.slot = None;
+        wr(USART3 + CR1, CR1_ON);
+    }
+}
+
+/// USART3's interrupt (RXNE: the echo of a slot's byte): feeds the slot's result to the
+/// transaction and puts its next slot on the line, or ends it. A few µs per byte; the
+/// temperature task sees the result at its next tick ([`UartOneWire::collect`]).
+pub fn onewire_irq() {
+    cortex_m::interrupt::free(|cs| {
+        let mut e = ENGINE.borrow(cs).borrow_mut();
+        let sr = rd(USART3 + SR);
+        if sr & (SR_RXNE | SR_ORE) == 0 {
+            return;
+        }
+        // Reading DR clears RXNE (and ORE after the SR read).
+        let echo = rd(USART3 + DR) as u8;
+        let Some(slot) = e.slot else {
+            e.stop();
+            return;
+        };
+        let r = match slot {
+            // A presence pulse pulls the echo's upper bits low.
+            Slot::Reset => echo != 0xF0,
+            Slot::Write(b) => b,
+            // The echo is 0xFF when no device held the line.
+            Slot::Read => echo == 0xFF,
+        };
+        let next = e.txn.as_mut().and_then(|t| {
+            t.feed(r);
+            t.next_slot()
+        });
+        match next {
+            Some(s) => e.send(s),
+            None => e.stop(),
+        }
+    });
 }
 
 /// 1-Wire master on USART3, single wire on TX (PB10, open drain, external 4.7 kΩ pull-up):
 /// a reset is 0xF0 at 9600 baud (a presence pulse pulls the echo's upper bits low), a slot
-/// is one byte at 115200 baud (0xFF writes a 1 / samples the bus, 0x00 writes a 0).
+/// is one byte at 115200 baud (0xFF writes a 1 / samples the bus, 0x00 writes a 0). The
+/// temperature task's transactions run in USART3's interrupt ([`onewire_irq`]); the single
+/// slots of [`OneWireBus`] are polled (bounded).
 pub struct UartOneWire {
     brr_reset: u32,
     brr_bits: u32,
@@ -69,7 +167,7 @@ pub struct UartOneWire {
 
 impl UartOneWire {
     /// Enables USART3 on an APB1 clock of `pclk1` Hz: 8 data bits, no parity, one stop
-    /// bit, half-duplex (CR3.HDSEL), TX and RX on.
+    /// bit, half-duplex (CR3.HDSEL), TX and RX on, its interrupt off until a transaction.
     pub fn new(pclk1: u32) -> Self {
         set_bits(RCC_APB1ENR, 1 << 18);
         let _ = rd(RCC_APB1ENR);
@@ -80,7 +178,12 @@ impl UartOneWire {
         wr(USART3 + CR1, 0);
         wr(USART3 + CR3, 1 << 3);
         wr(USART3 + BRR, s.brr_bits);
-        wr(USART3 + CR1, (1 << 13) | (1 << 3) | (1 << 2));
+        wr(USART3 + CR1, CR1_ON);
+        cortex_m::interrupt::free(|cs| {
+            let mut e = ENGINE.borrow(cs).borrow_mut();
+            e.brr_reset = s.brr_reset;
+            e.brr_bits = s.brr_bits;
+        });
         s
     }
 
@@ -89,12 +192,16 @@ impl UartOneWire {
             // UE off while the rate changes.
             wr(USART3 + CR1, (1 << 3) | (1 << 2));
             wr(USART3 + BRR, brr);
-            wr(USART3 + CR1, (1 << 13) | (1 << 3) | (1 << 2));
+            wr(USART3 + CR1, CR1_ON);
         }
     }
 
-    /// Sends `b` and returns what the line read back.
+    /// Sends `b` and returns what the line read back (polled; not while a transaction
+    /// runs in the background).
     fn xfer(&mut self, b: u8) -> Result<u8, OwError> {
+        if cortex_m::interrupt::free(|cs| ENGINE.borrow(cs).borrow().running()) {
+            return Err(OwError::Busy);
+        }
         // Drop a stale byte (RXNE cleared by reading DR).
         if rd(USART3 + SR) & SR_RXNE != 0 {
             let _ = rd(USART3 + DR);
@@ -134,6 +241,51 @@ impl OneWireBus for UartOneWire {
 
     fn read_bit(&mut self) -> Result<bool, OwError> {
         Ok(self.xfer(0xFF)? == 0xFF)
+    }
+
+    /// Hands `t` to USART3's interrupt and puts its first slot on the line.
+    fn begin(&mut self, t: &mut Txn) -> Result<bool, OwError> {
+        cortex_m::interrupt::free(|cs| {
+            let mut e = ENGINE.borrow(cs).borrow_mut();
+            if e.running() {
+                return Err(OwError::Busy);
+            }
+            let Some(first) = t.next_slot() else {
+                return Ok(true);
+            };
+            // Drop a stale byte (RXNE cleared by reading DR).
+            if rd(USART3 + SR) & SR_RXNE != 0 {
+                let _ = rd(USART3 + DR);
+            }
+            e.txn = Some(*t);
+            e.polls = 0;
+            e.send(first);
+            Ok(false)
+        })
+    }
+
+    /// The transaction back once USART3's interrupt has run its last slot; abandoned as
+    /// [`OwError::NoEcho`] after [`TXN_TICKS`] calls (one per tick) without an end.
+    fn collect(&mut self, t: &mut Txn) -> Result<bool, OwError> {
+        cortex_m::interrupt::free(|cs| {
+            let mut e = ENGINE.borrow(cs).borrow_mut();
+            if e.running() {
+                e.polls += 1;
+                if e.polls > TXN_TICKS {
+                    e.stop();
+                    e.txn = None;
+                    return Err(OwError::NoEcho);
+                }
+                return Ok(false);
+            }
+            match e.txn.take() {
+                Some(done) => {
+                    *t = done;
+                    Ok(true)
+                }
+                None => Err(OwError::NoEcho),
+            }
+        })
     }
 }
 

@@ -41,6 +41,9 @@ use stm32f4xx_hal::{
 const TICK_HZ: u32 = 1_000;
 /// The one NVIC level of everything that touches the firmware (upper nibble).
 const PRIO_FW: u8 = 0x20;
+/// USART3's level (the 1-Wire slots): above [`PRIO_FW`]; it touches only the bus engine,
+/// under a critical section.
+const PRIO_ONEWIRE: u8 = 0x10;
 
 type Esc = Lan9252<EscSpi>;
 type Fw = HubFirmware<Esc, UartOneWire, DmaRings>;
@@ -137,9 +140,18 @@ fn TIM6_DAC() {
             h.fw.on_timer(t.id, &mut h.esc);
         }
     }
+    // The temperature task's 1-Wire transactions run in USART3's interrupt: take a finished
+    // one and start the next (a few µs; the tick never waits for the bus).
+    h.fw.on_onewire();
     // Green: the stack runs; red: the ESC does not answer.
     let up = h.fw.slave().is_some();
     h.leds.set(up, !up);
+}
+
+/// USART3: the 1-Wire slot in flight ended (its echo arrived); the next one goes out.
+#[interrupt]
+fn USART3() {
+    board::onewire_irq();
 }
 
 /// SYNC0 (DC-synchronous cycle).
@@ -250,6 +262,9 @@ fn main() -> ! {
         for i in [Interrupt::TIM6_DAC, Interrupt::EXTI3, Interrupt::EXTI15_10] {
             nvic.set_priority(i, PRIO_FW);
         }
+        // Above the firmware's level: a slot's next byte goes out while a handler runs.
+        nvic.set_priority(Interrupt::USART3, PRIO_ONEWIRE);
+        NVIC::unmask(Interrupt::USART3);
         NVIC::unmask(Interrupt::TIM6_DAC);
         NVIC::unmask(Interrupt::EXTI3);
         NVIC::unmask(Interrupt::EXTI15_10);

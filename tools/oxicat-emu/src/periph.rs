@@ -411,6 +411,10 @@ impl Periph {
         }
         self.adc_sync(now);
         self.dma_sync();
+        for i in 0..self.usarts.len() {
+            let div = self.pclk_div(self.usarts[i].apb2);
+            self.usarts[i].sync(now, div);
+        }
     }
 
     /// CPU cycles per ADCCLK: PCLK2 / (2 · (ADC_CCR.ADCPRE + 1)).
@@ -498,6 +502,7 @@ impl Periph {
             0
         };
         let dma = self.dmas.iter().fold(0, |l, d| l | d.irq_lines());
+        let dma = self.usarts.iter().fold(dma, |l, u| l | u.irq_lines());
         self.timers
             .iter()
             .fold(self.exti.irq_lines() | adc | dma, |l, t| l | t.irq_lines())
@@ -514,6 +519,7 @@ impl Periph {
             .chain(self.adc.busy_until())
             .chain(self.adc_trigger_after(self.adc.last).ok().flatten())
             .chain(self.dma_next_event())
+            .chain(self.usarts.iter().filter_map(|u| u.next_event()))
             .chain(self.iwdg.expires())
             .min()
     }

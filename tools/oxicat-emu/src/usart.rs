@@ -3,9 +3,10 @@
 //! A byte written to DR goes to the transmit data register and from there to the shift
 //! register, which needs one frame (start bit, 8 or 9 data bits, 1 or 2 stop bits) at the
 //! baud rate BRR sets on the USART's APB clock (oversampling by 16: baud = PCLK / BRR);
-//! TXE, TC and RXNE follow in time. Polling is what is modelled: interrupt enables, DMA
-//! requests, parity, 8× oversampling, LIN/IrDA/smartcard/synchronous modes stop the image
-//! with the register, the value and "not modelled".
+//! TXE, TC and RXNE follow in time, polled or as the USART's interrupt (CR1.RXNEIE: RXNE or
+//! ORE; CR1.TCIE: TC). DMA requests, the TXE/parity/idle interrupts, parity, 8× oversampling,
+//! LIN/IrDA/smartcard/synchronous modes stop the image with the register, the value and
+//! "not modelled".
 //!
 //! Receive: in half-duplex (CR3.HDSEL) the receiver reads the TX line back. With a 1-Wire
 //! bus on the line ([`crate::Board::attach_onewire`]) the byte is decoded the way the bus
@@ -19,6 +20,9 @@
 use std::sync::{Arc, Mutex};
 
 use oxicat_plant::onewire::OneWireNet;
+
+/// NVIC interrupt numbers of USART1..3, UART4/5, USART6 (RM0390 table 38).
+const IRQS: [(u8, u16); 6] = [(1, 37), (2, 38), (3, 39), (4, 52), (5, 53), (6, 71)];
 
 /// The U(S)ARTs: base, number, on APB2.
 pub(crate) const USARTS: [(u64, u8, bool); 6] = [
@@ -38,8 +42,12 @@ const CR1_UE: u32 = 1 << 13;
 const CR1_M: u32 = 1 << 12;
 const CR1_TE: u32 = 1 << 3;
 const CR1_RE: u32 = 1 << 2;
-/// CR1 bits modelled (UE, M, TE, RE).
-const CR1_OK: u32 = CR1_UE | CR1_M | CR1_TE | CR1_RE;
+/// RXNE interrupt enable (RXNE or ORE raise the USART's interrupt line).
+const CR1_RXNEIE: u32 = 1 << 5;
+/// Transmission-complete interrupt enable.
+const CR1_TCIE: u32 = 1 << 6;
+/// CR1 bits modelled (UE, M, TE, RE, RXNEIE, TCIE).
+const CR1_OK: u32 = CR1_UE | CR1_M | CR1_TE | CR1_RE | CR1_RXNEIE | CR1_TCIE;
 /// CR2 bits modelled (STOP; ADD is stored, it only matters in multiprocessor mode).
 const CR2_OK: u32 = (3 << 12) | 0xF;
 const CR3_HDSEL: u32 = 1 << 3;
@@ -144,6 +152,26 @@ impl Usart {
     /// The cycle the byte in the shift register finishes, if one is.
     pub fn busy_until(&self) -> Option<u64> {
         self.shift.map(|s| s.end)
+    }
+
+    /// When the byte in flight ends and an interrupt is enabled that its end may raise:
+    /// the board stops there.
+    pub fn next_event(&self) -> Option<u64> {
+        if self.cr1 & (CR1_RXNEIE | CR1_TCIE) == 0 {
+            return None;
+        }
+        self.busy_until()
+    }
+
+    /// The USART's interrupt line (as of the last sync): RXNE or ORE with RXNEIE, TC with
+    /// TCIE.
+    pub fn irq_lines(&self) -> u128 {
+        let rx = self.cr1 & CR1_RXNEIE != 0 && (self.rxne || self.ore);
+        let tc = self.cr1 & CR1_TCIE != 0 && self.tc;
+        match IRQS.iter().find(|(n, _)| *n == self.number) {
+            Some(&(_, irq)) if rx || tc => crate::nvic::bit(16 + irq),
+            _ => 0,
+        }
     }
 
     /// Brings the transmitter and receiver up to cycle `now`.
@@ -266,7 +294,7 @@ impl Usart {
         let v = v.map(|v| format!(" {v:#010x}")).unwrap_or_default();
         format!(
             "{what}{v} {} at {:#010x}: not modelled (polled 8N1/9N1/2-stop frames, \
-             half-duplex, no interrupts or DMA)",
+             half-duplex, RXNE/TC interrupts, no DMA)",
             self.name(),
             self.base + off
         )
@@ -376,14 +404,44 @@ mod tests {
         u.write(0x04, 0x33, now, 4).unwrap();
         now += 20_000;
         assert_eq!(u.read(0, now, 4).unwrap() & SR_RXNE, 0);
-        // Interrupt enables and DMA are refused with the address.
-        let e = u.write(0x0C, CR1_UE | (1 << 5), now, 4).unwrap_err();
+        // The TXE interrupt and DMA are refused with the address.
+        let e = u.write(0x0C, CR1_UE | (1 << 7), now, 4).unwrap_err();
         assert!(e.contains("0x4000480c"), "{e}");
         let e = u.write(0x14, 1 << 7, now, 4).unwrap_err();
         assert!(
             e.contains("0x40004814") && e.contains("not modelled"),
             "{e}"
         );
+    }
+
+    #[test]
+    fn rxne_and_tc_raise_the_usarts_interrupt_line_when_enabled() {
+        let line = crate::nvic::bit(16 + 39);
+        let mut u = uart(None);
+        u.write(0x08, 391, 0, 4).unwrap();
+        u.write(0x0C, CR1_UE | CR1_TE | CR1_RE | CR1_RXNEIE, 0, 4)
+            .unwrap();
+        assert_eq!(u.next_event(), None, "nothing in flight");
+        u.write(0x04, 0xA5, 0, 4).unwrap();
+        // The board stops where the byte ends: RXNE rises there.
+        let end = u.next_event().expect("a byte in flight");
+        u.sync(end - 1, 4);
+        assert_eq!(u.irq_lines(), 0, "not before the byte's end");
+        u.sync(end, 4);
+        assert_eq!(u.irq_lines(), line, "USART3 = IRQ 39");
+        assert_eq!(u.read(0x04, end, 4).unwrap(), 0xA5);
+        assert_eq!(u.irq_lines(), 0, "reading DR clears RXNE and the line");
+        // TC with TCIE: the line stays up until TC is cleared.
+        u.write(0x0C, CR1_UE | CR1_TE | CR1_TCIE, end, 4).unwrap();
+        assert_eq!(u.irq_lines(), line, "TC is set after the byte");
+        u.write(0x00, 0, end, 4).unwrap();
+        assert_eq!(u.irq_lines(), 0);
+        // Without the enables, no line.
+        u.write(0x0C, CR1_UE | CR1_TE | CR1_RE, end, 4).unwrap();
+        u.write(0x04, 0x5A, end, 4).unwrap();
+        assert_eq!(u.next_event(), None);
+        u.sync(end + 20_000, 4);
+        assert_eq!(u.irq_lines(), 0);
     }
 
     #[test]

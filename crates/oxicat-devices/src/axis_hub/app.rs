@@ -265,6 +265,16 @@ impl<B: OneWireBus, L: LedStrip> HubApp<B, L> {
         od.store(io.error, self.sys.active_error());
     }
 
+    /// Lets the temperature task go on with its 1-Wire transactions (on an interrupt-driven
+    /// bus a release runs in the background; call this while `temp.busy()`), then the event
+    /// handler.
+    pub fn resume_temp(&mut self) {
+        if let Some(frame) = self.temp.resume(&mut self.bus, &mut self.sys) {
+            self.temp_slot = Some(frame);
+        }
+        self.sys.handle_events();
+    }
+
     /// One release of task `id` (temperature or LED), then the event handler.
     pub fn run_task(&mut self, id: u8) {
         match id {
@@ -494,6 +504,19 @@ impl<P: Pdi, B: OneWireBus, L: LedStrip> HubFirmware<P, B, L> {
         if let Some(s) = self.slave.as_mut() {
             let r = s.on_sync1(pdi, &mut self.app);
             self.note(r);
+        }
+    }
+
+    /// The 1-Wire bus may have finished a transaction of the temperature task (a board
+    /// whose bus runs in the background calls this every tick): the task takes the result
+    /// and starts the next without waiting for the bus.
+    pub fn on_onewire(&mut self) {
+        if !self.app.temp.busy() {
+            return;
+        }
+        self.app.resume_temp();
+        if let Some(s) = self.slave.as_mut() {
+            self.app.publish(s.od_mut());
         }
     }
 

@@ -82,7 +82,7 @@ pub use app::{
     TIMER_APP, TIMER_LED, TIMER_SUPERVISOR, TIMER_TEMP,
 };
 pub use codes::{StatusWord, SystemState};
-pub use onewire::{OneWireBus, Resolution, Rom, TempFrame, TempTask};
+pub use onewire::{OneWireBus, Resolution, Rom, Slot, TempFrame, TempTask, Txn, TxnStatus};
 pub use ws2812::{LedStrip, PwmTiming, Rgb, Shown};
 
 #[cfg(test)]

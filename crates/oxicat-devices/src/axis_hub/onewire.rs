@@ -61,6 +61,244 @@ pub trait OneWireBus {
         }
         Ok(b)
     }
+
+    /// Starts the transaction `t`; `Ok(true)` when it has finished already. The default
+    /// runs it to its end now, slot by slot, with the methods above (a blocking bus); an
+    /// interrupt-driven bus takes it over, runs its slots in the background and gives it
+    /// back through [`OneWireBus::collect`].
+    fn begin(&mut self, t: &mut Txn) -> Result<bool, Self::Error> {
+        while let Some(slot) = t.next_slot() {
+            let r = match slot {
+                Slot::Reset => self.reset()?,
+                Slot::Write(b) => {
+                    self.write_bit(b)?;
+                    b
+                }
+                Slot::Read => self.read_bit()?,
+            };
+            t.feed(r);
+        }
+        Ok(true)
+    }
+
+    /// The transaction [`OneWireBus::begin`] started, when it has finished: copied into `t`
+    /// and `Ok(true)`; `Ok(false)` while it runs (the default: never, it ran in `begin`).
+    fn collect(&mut self, _t: &mut Txn) -> Result<bool, Self::Error> {
+        Ok(true)
+    }
+}
+
+/// One 1-Wire time slot of a [`Txn`].
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Slot {
+    /// Reset pulse and presence detect.
+    Reset,
+    /// Write slot.
+    Write(bool),
+    /// Read slot.
+    Read,
+}
+
+/// What a [`Txn`] does after its reset.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum TxnKind {
+    /// SKIP ROM, CONVERT T.
+    Convert,
+    /// MATCH ROM, READ SCRATCHPAD (9 bytes).
+    ReadScratchpad,
+    /// SEARCH ROM: the next ROM after `rom` / `last_discrepancy` (Maxim AN187).
+    Search,
+}
+
+/// How a [`Txn`] ended.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum TxnStatus {
+    /// Slots left to run.
+    Running,
+    /// All slots ran.
+    Done,
+    /// No presence pulse after the reset (nothing more was sent).
+    NoPresence,
+    /// A search bit that nobody answered (a device left during the search).
+    SearchLost,
+    /// The bus driver failed (no echo, timeout).
+    BusFault,
+}
+
+/// One 1-Wire transaction as a state machine of slots, so that a bus can run it slot by
+/// slot from its interrupt (each slot's result fed back with [`Txn::feed`]) as well as in
+/// one go: a reset, the command bytes, then the scratchpad's read slots or the search's
+/// 64 bit triplets. The slot sequences are those of [`convert_all`], [`read_scratchpad`]
+/// and [`Search::next`].
+#[derive(Debug, Clone, Copy)]
+pub struct Txn {
+    /// What it does.
+    pub kind: TxnKind,
+    /// How it ended (or that it runs).
+    pub status: TxnStatus,
+    tx: [u8; 10],
+    tx_len: u8,
+    pos: u16,
+    /// The scratchpad read (ReadScratchpad).
+    pub rx: [u8; 9],
+    /// The ROM being found (Search: the previous one on entry, the new one at the end).
+    pub rom: Rom,
+    /// AN187's last discrepancy (Search: the previous search's on entry, this one's at
+    /// the end).
+    pub last_discrepancy: u8,
+    last_zero: u8,
+    id_bit: bool,
+    dir: bool,
+}
+
+impl Txn {
+    fn new(kind: TxnKind, tx: &[u8]) -> Self {
+        let mut buf = [0u8; 10];
+        buf[..tx.len()].copy_from_slice(tx);
+        Self {
+            kind,
+            status: TxnStatus::Running,
+            tx: buf,
+            tx_len: tx.len() as u8,
+            pos: 0,
+            rx: [0; 9],
+            rom: [0; 8],
+            last_discrepancy: 0,
+            last_zero: 0,
+            id_bit: false,
+            dir: false,
+        }
+    }
+
+    /// CONVERT T on every device (SKIP ROM).
+    pub fn convert() -> Self {
+        Self::new(TxnKind::Convert, &[CMD_SKIP_ROM, CMD_CONVERT_T])
+    }
+
+    /// READ SCRATCHPAD of `rom` (MATCH ROM).
+    pub fn read_scratchpad(rom: &Rom) -> Self {
+        let mut tx = [0u8; 10];
+        tx[0] = CMD_MATCH_ROM;
+        tx[1..9].copy_from_slice(rom);
+        tx[9] = CMD_READ_SCRATCHPAD;
+        Self::new(TxnKind::ReadScratchpad, &tx)
+    }
+
+    /// SEARCH ROM after the ROM `rom` with the last discrepancy `last_discrepancy` (both 0
+    /// for the first).
+    pub fn search(rom: Rom, last_discrepancy: u8) -> Self {
+        let mut t = Self::new(TxnKind::Search, &[CMD_SEARCH_ROM]);
+        t.rom = rom;
+        t.last_discrepancy = last_discrepancy;
+        t
+    }
+
+    /// A transaction that ended as `status` without running (e.g. the bus failed).
+    pub fn ended(mut self, status: TxnStatus) -> Self {
+        self.status = status;
+        self
+    }
+
+    fn tx_slots(&self) -> u16 {
+        8 * u16::from(self.tx_len)
+    }
+
+    /// The next slot to run, `None` when the transaction has ended.
+    pub fn next_slot(&self) -> Option<Slot> {
+        if self.status != TxnStatus::Running {
+            return None;
+        }
+        let p = self.pos;
+        if p == 0 {
+            return Some(Slot::Reset);
+        }
+        let k = p - 1;
+        if k < self.tx_slots() {
+            let b = self.tx[usize::from(k / 8)];
+            return Some(Slot::Write(b >> (k % 8) & 1 != 0));
+        }
+        let k = k - self.tx_slots();
+        match self.kind {
+            TxnKind::Convert => None,
+            TxnKind::ReadScratchpad => (k < 72).then_some(Slot::Read),
+            TxnKind::Search => match (k < 64 * 3, k % 3) {
+                (false, _) => None,
+                (true, 2) => Some(Slot::Write(self.dir)),
+                (true, _) => Some(Slot::Read),
+            },
+        }
+    }
+
+    /// The result of the slot [`Txn::next_slot`] gave: the presence for a reset, the bit
+    /// for a read slot (ignored for a write slot).
+    pub fn feed(&mut self, r: bool) {
+        let Some(slot) = self.next_slot() else {
+            return;
+        };
+        let p = self.pos;
+        self.pos += 1;
+        if slot == Slot::Reset {
+            if !r {
+                self.status = TxnStatus::NoPresence;
+            }
+            return;
+        }
+        let k = p - 1;
+        if k >= self.tx_slots() {
+            let k = k - self.tx_slots();
+            match self.kind {
+                TxnKind::Convert => {}
+                TxnKind::ReadScratchpad => {
+                    if r {
+                        self.rx[usize::from(k / 8)] |= 1 << (k % 8);
+                    }
+                }
+                TxnKind::Search => self.search_slot(k, r),
+            }
+        }
+        if self.next_slot().is_none() && self.status == TxnStatus::Running {
+            self.status = TxnStatus::Done;
+            if self.kind == TxnKind::Search {
+                self.last_discrepancy = self.last_zero;
+            }
+        }
+    }
+
+    /// Slot `k` of the search's triplets (read id, read complement, write direction).
+    fn search_slot(&mut self, k: u16, r: bool) {
+        let n = (k / 3 + 1) as u8;
+        let (byte, mask) = (usize::from((n - 1) / 8), 1u8 << ((n - 1) % 8));
+        match k % 3 {
+            0 => self.id_bit = r,
+            1 => {
+                let dir = match (self.id_bit, r) {
+                    (true, true) => {
+                        self.status = TxnStatus::SearchLost;
+                        return;
+                    }
+                    (a, b) if a != b => a,
+                    _ => {
+                        let d = if n < self.last_discrepancy {
+                            self.rom[byte] & mask != 0
+                        } else {
+                            n == self.last_discrepancy
+                        };
+                        if !d {
+                            self.last_zero = n;
+                        }
+                        d
+                    }
+                };
+                if dir {
+                    self.rom[byte] |= mask;
+                } else {
+                    self.rom[byte] &= !mask;
+                }
+                self.dir = dir;
+            }
+            _ => {}
+        }
+    }
 }
 
 pub use oxicat_wire::crc::onewire_crc8 as crc8;
@@ -303,8 +541,28 @@ pub struct TempStats {
 /// the whole bus (cable pulled, bus shorted). The task then restarts from its ROM search.
 pub const TEMP_DSM_FAULT_RUNS: u32 = 3;
 
+/// Where the temperature task's release is (each step one [`Txn`] on the bus).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Step {
+    /// Nothing runs.
+    Idle,
+    /// ROM search: `found` ROMs so far.
+    Search,
+    /// Reading the resolution of sensor `i` after the search.
+    Resolution(usize),
+    /// Reading sensor `i`'s scratchpad.
+    Read(usize),
+    /// CONVERT T.
+    Convert,
+}
+
 /// The temperature task (the report's Temperature SDM + owApp): scan until sensors are found,
 /// then every period read the previous conversion of each sensor and start the next.
+///
+/// A release ([`TempTask::run`]) is a chain of 1-Wire transactions ([`Txn`]); on a blocking
+/// bus it runs to its end in the call, on an interrupt-driven one each transaction runs in
+/// the background and [`TempTask::resume`] (called until [`TempTask::busy`] is false)
+/// takes its result and starts the next: the caller never waits for the bus.
 #[derive(Debug, Clone)]
 pub struct TempTask {
     roms: [Rom; SENSORS],
@@ -318,6 +576,13 @@ pub struct TempTask {
     init_error: bool,
     dead_runs: u32,
     seq: u32,
+    step: Step,
+    txn: Txn,
+    waiting: bool,
+    found: usize,
+    values: [i16; SENSORS],
+    was_failing: bool,
+    max: Option<i16>,
     /// Overheat threshold in 0.01 °C.
     pub threshold: i16,
     /// Counters.
@@ -338,6 +603,13 @@ impl Default for TempTask {
             init_error: false,
             dead_runs: 0,
             seq: 0,
+            step: Step::Idle,
+            txn: Txn::convert(),
+            waiting: false,
+            found: 0,
+            values: [TEMP_INVALID; SENSORS],
+            was_failing: false,
+            max: None,
             threshold: DEFAULT_THRESHOLD,
             stats: TempStats::default(),
         }
@@ -360,6 +632,11 @@ impl TempTask {
         self.overheat
     }
 
+    /// True while a release's transactions run (call [`TempTask::resume`]).
+    pub fn busy(&self) -> bool {
+        self.step != Step::Idle
+    }
+
     fn longest_conversion_us(&self) -> u32 {
         self.res[..self.count]
             .iter()
@@ -369,125 +646,197 @@ impl TempTask {
     }
 
     /// One release of the task (every [`TEMP_PERIOD_MS`]); posts events and errors to
-    /// `sys`; returns a new frame when sensors were read.
+    /// `sys`; returns a new frame when sensors were read (on an interrupt-driven bus the
+    /// frame may come from a later [`TempTask::resume`]). A release while the previous one
+    /// still runs only counts the time.
     pub fn run<B: OneWireBus>(&mut self, bus: &mut B, sys: &mut SystemState) -> Option<TempFrame> {
         self.since_convert_us = self.since_convert_us.saturating_add(TEMP_PERIOD_MS * 1000);
+        if self.busy() {
+            return self.resume(bus, sys);
+        }
         if self.count == 0 {
-            self.scan(bus, sys);
+            self.stats.searches += 1;
+            self.found = 0;
+            self.step = Step::Search;
+            self.start(bus, Txn::search([0; 8], 0));
+        } else if self.converting && self.since_convert_us >= self.longest_conversion_us() {
+            self.values = [TEMP_INVALID; SENSORS];
+            self.was_failing = self.failing.iter().any(|&f| f);
+            self.max = None;
+            self.step = Step::Read(0);
+            self.start(bus, Txn::read_scratchpad(&self.roms[0]));
+        } else if !self.converting {
+            self.step = Step::Convert;
+            self.start(bus, Txn::convert());
+        } else {
             return None;
         }
+        self.resume(bus, sys)
+    }
+
+    /// Starts `t` on the bus (a bus that fails to start it ends it as a bus error).
+    fn start<B: OneWireBus>(&mut self, bus: &mut B, t: Txn) {
+        self.txn = t;
+        self.waiting = match bus.begin(&mut self.txn) {
+            Ok(done) => !done,
+            Err(_) => {
+                self.txn = t.ended(TxnStatus::BusFault);
+                false
+            }
+        };
+    }
+    /// Takes the result of the running transaction when it has finished and starts the
+    /// next, as far as the bus allows without waiting; posts events and errors to `sys`;
+    /// the frame when a read-out ended.
+    pub fn resume<B: OneWireBus>(
+        &mut self,
+        bus: &mut B,
+        sys: &mut SystemState,
+    ) -> Option<TempFrame> {
         let mut frame = None;
-        if self.converting && self.since_convert_us >= self.longest_conversion_us() {
-            let f = self.read_all(bus, sys);
-            self.converting = false;
-            if f.values[..self.count].iter().all(|&v| v == TEMP_INVALID) {
-                self.dead_runs += 1;
-            } else {
-                self.dead_runs = 0;
-            }
-            frame = Some(f);
-            if self.dead_runs >= TEMP_DSM_FAULT_RUNS {
-                // The report's task manager re-created a faulty thread: start again from the
-                // ROM search (sensor errors stay active until the sensors answer again).
-                sys.post(codes::ERR_TEMP_DSM_FAULT);
-                self.dead_runs = 0;
-                self.count = 0;
-                self.init_reported = false;
-                self.init_error = true;
-                self.stats.restarts += 1;
-                return frame;
-            }
-        }
-        if !self.converting {
-            match convert_all(bus) {
-                Ok(_) => {
-                    self.converting = true;
-                    self.since_convert_us = 0;
+        while self.step != Step::Idle {
+            if self.waiting {
+                match bus.collect(&mut self.txn) {
+                    Ok(true) => self.waiting = false,
+                    Ok(false) => break,
+                    Err(_) => {
+                        self.waiting = false;
+                        self.txn.status = TxnStatus::BusFault;
+                    }
                 }
-                Err(_) => {
-                    self.stats.bus_errors += 1;
-                    sys.post(codes::ERR_TEMP_SENS_TIMEOUT);
+            }
+            let t = self.txn;
+            match self.step {
+                Step::Idle => {}
+                Step::Search => self.searched(bus, sys, &t),
+                Step::Resolution(i) => {
+                    self.res[i] = match scratchpad_of(&t) {
+                        Ok(sp) => Resolution::from_config(sp[4]),
+                        Err(_) => Resolution::Bits12,
+                    };
+                    if i + 1 < self.count {
+                        self.step = Step::Resolution(i + 1);
+                        self.start(bus, Txn::read_scratchpad(&self.roms[i + 1]));
+                    } else {
+                        if !self.init_reported {
+                            self.init_reported = true;
+                            sys.post(codes::EV_TEMP_DSM_INIT);
+                        }
+                        self.step = Step::Idle;
+                    }
+                }
+                Step::Read(i) => {
+                    self.read_one(i, &t, sys);
+                    if i + 1 < self.count {
+                        self.step = Step::Read(i + 1);
+                        self.start(bus, Txn::read_scratchpad(&self.roms[i + 1]));
+                    } else {
+                        frame = Some(self.read_out(sys));
+                        if self.count == 0 {
+                            // The task restarts from the ROM search at the next release.
+                            self.step = Step::Idle;
+                        } else {
+                            self.step = Step::Convert;
+                            self.start(bus, Txn::convert());
+                        }
+                    }
+                }
+                Step::Convert => {
+                    if t.status == TxnStatus::BusFault {
+                        self.stats.bus_errors += 1;
+                        sys.post(codes::ERR_TEMP_SENS_TIMEOUT);
+                    } else {
+                        self.converting = true;
+                        self.since_convert_us = 0;
+                    }
+                    self.step = Step::Idle;
                 }
             }
         }
         frame
     }
 
-    #[allow(clippy::needless_range_loop)]
-    fn scan<B: OneWireBus>(&mut self, bus: &mut B, sys: &mut SystemState) {
-        self.stats.searches += 1;
-        let n = match search_all(bus, &mut self.roms) {
-            Ok(n) => n,
-            Err(OwError::Bus(_)) => {
-                self.stats.bus_errors += 1;
-                0
+    /// A search transaction ended: the next ROM, or the end of the search (then the
+    /// resolution of each sensor).
+    fn searched<B: OneWireBus>(&mut self, bus: &mut B, sys: &mut SystemState, t: &Txn) {
+        let next = match t.status {
+            TxnStatus::Done if crc8(&t.rom) != 0 => Err(()),
+            TxnStatus::Done => {
+                self.roms[self.found] = t.rom;
+                self.found += 1;
+                Ok(t.last_discrepancy != 0 && self.found < SENSORS)
             }
-            Err(_) => 0,
+            // Nobody answered the reset: the search is over.
+            TxnStatus::NoPresence => Ok(false),
+            TxnStatus::BusFault => {
+                self.stats.bus_errors += 1;
+                Err(())
+            }
+            TxnStatus::SearchLost | TxnStatus::Running => Err(()),
         };
-        self.count = n;
-        if n == 0 {
+        match next {
+            Ok(true) => {
+                self.start(bus, Txn::search(t.rom, t.last_discrepancy));
+                return;
+            }
+            Ok(false) => {}
+            // A failed search finds nothing (as before: the ROMs so far are dropped).
+            Err(()) => self.found = 0,
+        }
+        self.count = self.found;
+        if self.count == 0 {
             if !self.init_error {
                 self.init_error = true;
                 sys.post(codes::ERR_TEMP_SENS_INIT);
             }
+            self.step = Step::Idle;
             return;
         }
-        for i in 0..n {
-            self.res[i] = match read_scratchpad(bus, &self.roms[i]) {
-                Ok(sp) => Resolution::from_config(sp[4]),
-                Err(_) => Resolution::Bits12,
-            };
-        }
-        if !self.init_reported {
-            self.init_reported = true;
-            sys.post(codes::EV_TEMP_DSM_INIT);
+        self.step = Step::Resolution(0);
+        self.start(bus, Txn::read_scratchpad(&self.roms[0]));
+    }
+
+    /// Sensor `i`'s scratchpad transaction ended.
+    fn read_one(&mut self, i: usize, t: &Txn, sys: &mut SystemState) {
+        let fail = match scratchpad_of(t) {
+            Ok(sp) => {
+                self.stats.reads += 1;
+                let (v, res) = centi_celsius(&sp);
+                self.res[i] = res;
+                self.values[i] = v;
+                self.max = Some(self.max.map_or(v, |m| m.max(v)));
+                None
+            }
+            Err(OwError::Crc) => {
+                self.stats.crc_errors += 1;
+                Some(codes::ERR_TEMP_SENS_CRC)
+            }
+            Err(OwError::NoPresence) => {
+                self.stats.no_answer += 1;
+                Some(codes::ERR_TEMP_SENS_LOST)
+            }
+            Err(OwError::Bus(())) => {
+                self.stats.bus_errors += 1;
+                Some(codes::ERR_TEMP_SENS_TIMEOUT)
+            }
+        };
+        match fail {
+            Some(code) => {
+                if !self.failing[i] {
+                    sys.post(code);
+                }
+                self.failing[i] = true;
+            }
+            None => self.failing[i] = false,
         }
     }
 
-    // One index walks the ROM, resolution, failing and value tables together.
-    #[allow(clippy::needless_range_loop)]
-    fn read_all<B: OneWireBus>(&mut self, bus: &mut B, sys: &mut SystemState) -> TempFrame {
-        let mut values = [TEMP_INVALID; SENSORS];
-        let was_failing = self.failing.iter().any(|&f| f);
-        let mut max: Option<i16> = None;
-        for i in 0..self.count {
-            let r = read_scratchpad(bus, &self.roms[i]);
-            let fail = match r {
-                Ok(sp) => {
-                    self.stats.reads += 1;
-                    let (t, res) = centi_celsius(&sp);
-                    self.res[i] = res;
-                    values[i] = t;
-                    max = Some(max.map_or(t, |m| m.max(t)));
-                    None
-                }
-                Err(OwError::Crc) => {
-                    self.stats.crc_errors += 1;
-                    Some(codes::ERR_TEMP_SENS_CRC)
-                }
-                Err(OwError::NoPresence) => {
-                    self.stats.no_answer += 1;
-                    Some(codes::ERR_TEMP_SENS_LOST)
-                }
-                Err(OwError::Bus(_)) => {
-                    self.stats.bus_errors += 1;
-                    Some(codes::ERR_TEMP_SENS_TIMEOUT)
-                }
-            };
-            match fail {
-                Some(code) => {
-                    if !self.failing[i] {
-                        sys.post(code);
-                    }
-                    self.failing[i] = true;
-                }
-                None => self.failing[i] = false,
-            }
-        }
-        if was_failing && !self.failing.iter().any(|&f| f) {
+    /// The read-out's end: recovery, overheat, the frame; a dead bus restarts the task.
+    fn read_out(&mut self, sys: &mut SystemState) -> TempFrame {
+        if self.was_failing && !self.failing.iter().any(|&f| f) {
             sys.post(codes::EV_TEMP_SENS_BACK);
         }
-        if let Some(m) = max {
+        if let Some(m) = self.max {
             if !self.overheat && m >= self.threshold {
                 self.overheat = true;
                 sys.post(codes::ERR_TEMP_SENS_OVERHEAT);
@@ -497,9 +846,43 @@ impl TempTask {
             }
         }
         self.seq = self.seq.wrapping_add(1);
-        TempFrame {
-            values,
+        let f = TempFrame {
+            values: self.values,
             seq: self.seq,
+        };
+        self.converting = false;
+        if f.values[..self.count].iter().all(|&v| v == TEMP_INVALID) {
+            self.dead_runs += 1;
+        } else {
+            self.dead_runs = 0;
         }
+        if self.dead_runs >= TEMP_DSM_FAULT_RUNS {
+            // The report's task manager re-created a faulty thread: start again from the
+            // ROM search (sensor errors stay active until the sensors answer again).
+            sys.post(codes::ERR_TEMP_DSM_FAULT);
+            self.dead_runs = 0;
+            self.count = 0;
+            self.init_reported = false;
+            self.init_error = true;
+            self.stats.restarts += 1;
+        }
+        f
     }
+}
+
+/// The scratchpad a READ SCRATCHPAD transaction read, CRC-checked (as [`read_scratchpad`]).
+fn scratchpad_of(t: &Txn) -> Result<[u8; 9], OwError<()>> {
+    match t.status {
+        TxnStatus::Done => {}
+        TxnStatus::BusFault => return Err(OwError::Bus(())),
+        _ => return Err(OwError::NoPresence),
+    }
+    let sp = t.rx;
+    if sp.iter().all(|&b| b == 0xFF) {
+        return Err(OwError::NoPresence);
+    }
+    if crc8(&sp[..8]) != sp[8] {
+        return Err(OwError::Crc);
+    }
+    Ok(sp)
 }
