@@ -4,7 +4,7 @@
 //!
 //! ```text
 //! cargo run --release -p oxicat --example segment_scale -- [--kind demo,twin] \
-//!     [--n 16,64,256,1000] [--seconds 10] [--cycle-us 1000] [--rt]
+//!     [--n 16,64,256,1000] [--seconds 10] [--cycle-us 1000] [--rt] [--per-esc-walk]
 //! ```
 //!
 //! Columns: late cycles (an exchange that ended after the next cycle was due), the round
@@ -14,7 +14,9 @@
 //! and the resident memory the segment added per slave. `demo` is the firmware-hosting
 //! demo device; `twin` an EL2008 twin built from Beckhoff's ESI (an ESC with its SII and
 //! SM/FMMU set-up, no firmware), from `../shared/reference/esi-vendor` or
-//! `OXICAT_REFERENCE`. `--rt` serves from a SCHED_FIFO thread (root).
+//! `OXICAT_REFERENCE`. `--rt` serves from a SCHED_FIFO thread (root); `--per-esc-walk` turns
+//! the segment's configured-address dispatch off (every ESC walks every datagram, as before
+//! it), for before/after figures from one binary.
 
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex};
@@ -98,7 +100,7 @@ fn devices(kind: &str, n: usize) -> Vec<String> {
     }
 }
 
-fn run(kind: &str, n: usize, seconds: u64, cycle_us: u64, rt: bool) -> Row {
+fn run(kind: &str, n: usize, seconds: u64, cycle_us: u64, rt: bool, per_esc: bool) -> Row {
     let args = SimArgs {
         iface: None,
         udp: Some("127.0.0.1:0".into()),
@@ -117,7 +119,8 @@ fn run(kind: &str, n: usize, seconds: u64, cycle_us: u64, rt: bool) -> Row {
     let rss0 = status_kb("/proc/self/status", "VmRSS:");
     let desc = sim_cmd::describe(&args).unwrap_or_else(|e| fail(&e.to_string()));
     sim_cmd::check_segment(&desc).unwrap_or_else(|e| fail(&e.to_string()));
-    let (seg, names) = sim_cmd::build_segment(&desc).unwrap_or_else(|e| fail(&e.to_string()));
+    let (mut seg, names) = sim_cmd::build_segment(&desc).unwrap_or_else(|e| fail(&e.to_string()));
+    seg.set_configured_dispatch(!per_esc);
     let kb_per_slave =
         status_kb("/proc/self/status", "VmRSS:").saturating_sub(rss0) as f64 / n as f64;
     let port =
@@ -210,6 +213,7 @@ fn main() {
     let mut kinds = vec!["demo".to_string(), "twin".to_string()];
     let mut ns = vec![16usize, 64, 256, 1000];
     let (mut seconds, mut cycle_us, mut rt, mut one) = (10u64, 1000u64, false, false);
+    let mut per_esc = false;
     let mut it = std::env::args().skip(1);
     while let Some(a) = it.next() {
         let mut val = || {
@@ -227,6 +231,9 @@ fn main() {
             "--seconds" => seconds = val().parse().unwrap_or_else(|_| fail("--seconds")),
             "--cycle-us" => cycle_us = val().parse().unwrap_or_else(|_| fail("--cycle-us")),
             "--rt" => rt = true,
+            // The reference walk: every ESC walks every datagram (no configured-address
+            // dispatch), for before/after figures from one binary.
+            "--per-esc-walk" => per_esc = true,
             // One row in this process (each row runs in a process of its own, so that the
             // memory a segment adds is not hidden by what the previous one freed).
             "--one" => one = true,
@@ -238,7 +245,7 @@ fn main() {
     }
     if one {
         let (kind, n) = (&kinds[0], ns[0]);
-        let mut r = run(kind, n, seconds, cycle_us, rt);
+        let mut r = run(kind, n, seconds, cycle_us, rt, per_esc);
         let (p50, p99, max) = (
             pct(&mut r.rtt, 0.5),
             pct(&mut r.rtt, 0.99),
@@ -281,6 +288,9 @@ fn main() {
             ]);
             if rt {
                 cmd.arg("--rt");
+            }
+            if per_esc {
+                cmd.arg("--per-esc-walk");
             }
             let out = cmd
                 .stderr(std::process::Stdio::null())
