@@ -153,13 +153,13 @@ impl Esc {
         frame: &mut [u8],
         t: u64,
         frame_ok: bool,
-        mut d: Option<&mut FrameDispatch>,
+        d: Option<&mut FrameDispatch>,
     ) -> Forward {
         let port = port & 3;
         self.now = t;
         self.sii_settle(t);
         self.dc.frame_arrival(&mut self.mem[..REG_END], port, t);
-        self.forward_after_arrival(port, frame, frame_ok, d.as_deref_mut())
+        self.forward_after_arrival(port, frame, frame_ok, d)
     }
 
     /// `forward` after the DC unit saw the frame's arrival.
