@@ -19,8 +19,12 @@ impl Esc {
     /// port the frame leaves through or `Dropped` (circulating frame rule).
     #[inline]
     pub fn forward(&mut self, port: u8, frame: &mut [u8], t: u64, frame_ok: bool) -> Forward {
-        self.memo.clear();
+        // The memo is cleared where the frame is processed (`process_frame`, the fused
+        // path): a frame that only passes (arriving at port 1..3 and leaving without a
+        // visit to the processing unit) changes the SII settle, a DC receive time and the
+        // RX error counters, none of which the memo's answers read.
         if port == 0 && frame_ok && self.fused.ok {
+            self.memo.clear();
             self.now = t;
             self.dc.frame_arrival_port0(&mut self.mem[..REG_END], t);
             if let Some(out) = self.process_fused(frame, t) {
@@ -47,8 +51,8 @@ impl Esc {
         if !d.is_active() {
             return self.forward(port, frame, t, frame_ok);
         }
-        self.memo.clear();
         if port == 0 && frame_ok && self.fused.ok {
+            self.memo.clear();
             // As `forward`; the fused path declines the frame (it takes frames of one
             // logical datagram, and this one has a configured-address datagram).
             self.now = t;
@@ -208,6 +212,7 @@ impl Esc {
         frame_ok: bool,
         d: Option<&mut FrameDispatch>,
     ) {
+        self.memo.clear();
         self.frame_ok = frame_ok;
         match d {
             Some(d) => self.walk_dispatched(frame, d),
