@@ -14,6 +14,7 @@ extern crate std;
 
 pub mod config;
 pub mod dc;
+pub mod dispatch;
 pub mod esc;
 pub mod fmmu;
 pub mod regs;
@@ -21,6 +22,7 @@ pub mod sii;
 pub mod sm;
 
 pub use config::{DcSupport, EscConfig};
+pub use dispatch::FrameDispatch;
 pub use esc::{Esc, EscEvents, Forward, PdiError};
 
 #[cfg(test)]

@@ -782,6 +782,56 @@ fn configured_datagrams_for_other_stations_only_carry_the_irq() {
     assert_eq!(fprd(&mut e, 0x0F80, 2).0, [5, 6]);
 }
 
+/// Through a frame index ([`crate::FrameDispatch`]) the ESC processes its own
+/// configured-address datagram and the others only through the index: their IRQ bits are
+/// recorded, not written, until `apply_irq`; the bytes then equal the per-ESC walk's. A
+/// station-address write in the frame makes the rest of the frame the ESC's own again.
+#[test]
+fn dispatched_walk_defers_foreign_irqs_and_follows_an_address_change() {
+    let mut e = esc();
+    let me = e.station_address();
+    fpwr(&mut e, 0x0200, &[0x08, 0]);
+    e.pdi_write(0x0130, &[0x02, 0]).unwrap();
+    let other = me.wrapping_add(1);
+    let mk = || {
+        frame(&[
+            (phys(Command::Fprd, other, 0x0130, &[0, 0]), &[0, 0]),
+            (phys(Command::Fprd, me, 0x0130, &[0, 0]), &[0, 0]),
+            (
+                phys(Command::Fpwr, me, 0x0010, &[0, 0]),
+                &other.to_le_bytes(),
+            ),
+            (phys(Command::Fprd, other, 0x0130, &[0, 0]), &[0, 0]),
+        ])
+    };
+    let mut reference = e.clone();
+    let mut want = mk();
+    reference.forward(0, &mut want, 0, true);
+    let mut d = crate::FrameDispatch::new();
+    let mut f = mk();
+    assert!(d.build(&mut f));
+    assert_eq!(d.len(), 4);
+    assert_eq!(
+        e.forward_dispatched(0, &mut f, 0, true, &mut d),
+        Forward::Port(0)
+    );
+    assert_eq!(
+        dg(&f, 0).2.irq,
+        0,
+        "the foreign FPRD's IRQ bits wait in the index"
+    );
+    assert_eq!(dg(&f, 1).1, 1, "its own FPRD answered");
+    assert_eq!(
+        dg(&f, 3).1,
+        1,
+        "after the address write, the last FPRD is its own"
+    );
+    d.apply_irq(&mut f);
+    assert_eq!(dg(&f, 0).2.irq, 0x08);
+    assert_eq!(f, want, "same bytes as the per-ESC walk");
+    assert_eq!(e.memory(), reference.memory());
+}
+
 /// The benchmark's configuration (SM2/SM3 3-buffer, two FMMUs mapping a 64-byte LRW's
 /// halves) takes the fused path, and it gives the generic path's results.
 #[test]

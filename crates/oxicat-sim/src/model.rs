@@ -12,6 +12,20 @@ pub trait SegmentEsc: Send {
     /// A frame (starting at the EtherCAT header) reaches `port` at `t`; returns the egress
     /// port, or `None` when the ESC drops it.
     fn forward(&mut self, port: u8, frame: &mut [u8], t: u64, frame_ok: bool) -> Option<u8>;
+    /// [`forward`](Self::forward) with the frame's configured-address index (built once per
+    /// frame by the segment): an ESC that uses it processes only its own FPRD/FPWR/FPRW
+    /// datagrams and records the IRQ bits of the others in `d`. The default ignores it.
+    fn forward_dispatched(
+        &mut self,
+        port: u8,
+        frame: &mut [u8],
+        t: u64,
+        frame_ok: bool,
+        d: &mut oxicat_esc::FrameDispatch,
+    ) -> Option<u8> {
+        let _ = d;
+        self.forward(port, frame, t, frame_ok)
+    }
     /// Physical link state of `port`.
     fn set_link(&mut self, port: u8, up: bool);
     /// Time passes up to `t`.
@@ -25,6 +39,20 @@ pub trait SegmentEsc: Send {
 impl SegmentEsc for oxicat_esc::Esc {
     fn forward(&mut self, port: u8, frame: &mut [u8], t: u64, frame_ok: bool) -> Option<u8> {
         match oxicat_esc::Esc::forward(self, port, frame, t, frame_ok) {
+            oxicat_esc::Forward::Port(p) => Some(p),
+            oxicat_esc::Forward::Dropped => None,
+        }
+    }
+
+    fn forward_dispatched(
+        &mut self,
+        port: u8,
+        frame: &mut [u8],
+        t: u64,
+        frame_ok: bool,
+        d: &mut oxicat_esc::FrameDispatch,
+    ) -> Option<u8> {
+        match oxicat_esc::Esc::forward_dispatched(self, port, frame, t, frame_ok, d) {
             oxicat_esc::Forward::Port(p) => Some(p),
             oxicat_esc::Forward::Dropped => None,
         }

@@ -223,6 +223,10 @@ pub struct Segment<E: SegmentEsc = oxicat_esc::Esc> {
     /// Above this many slots the next event comes from a heap ([`LINEAR_PICK_MAX`]; a test
     /// lowers it to compare both picks).
     linear_pick_max: usize,
+    /// Configured-address dispatch on (the default; see [`Segment::set_configured_dispatch`]).
+    dispatch_on: bool,
+    /// The index of the frame being walked (kept for its buffers).
+    dispatch: oxicat_esc::FrameDispatch,
 }
 
 /// The master's side of an in-process segment ([`oxicat_wire::pipe`]).
@@ -277,6 +281,8 @@ impl<E: SegmentEsc> Segment<E> {
             last_fate: None,
             event_log: None,
             linear_pick_max: LINEAR_PICK_MAX,
+            dispatch_on: true,
+            dispatch: oxicat_esc::FrameDispatch::new(),
         }
     }
 
@@ -826,9 +832,42 @@ impl<E: SegmentEsc> Segment<E> {
         true
     }
 
+    /// Configured-address dispatch (on by default): each frame's datagram headers are
+    /// indexed once and an FPRD/FPWR/FPRW datagram is processed only by the ESC(s) it
+    /// addresses, the others adding their IRQ bits to it without walking it
+    /// ([`oxicat_esc::FrameDispatch`]); without it every ESC walks every datagram, the
+    /// reference the dispatch is tested against (same frames, working counters and
+    /// registers). A frame meeting an injected corruption always takes the per-ESC walk.
+    pub fn set_configured_dispatch(&mut self, on: bool) {
+        self.dispatch_on = on;
+    }
+
     /// Walks an EtherCAT frame (from its header) through the topology; returns its fate and
     /// the time its first bit is back at the master (or was lost).
     fn walk(&mut self, ecat: &mut [u8], t0: u64) -> (FrameFate, u64) {
+        // A corruption on the way changes the bytes (headers included) under the index.
+        if !self.dispatch_on || !self.corruptions.is_empty() {
+            return self.walk_through(ecat, t0, None);
+        }
+        let mut d = core::mem::take(&mut self.dispatch);
+        let r = if d.build(ecat) {
+            let r = self.walk_through(ecat, t0, Some(&mut d));
+            d.apply_irq(ecat);
+            r
+        } else {
+            self.walk_through(ecat, t0, None)
+        };
+        self.dispatch = d;
+        r
+    }
+
+    /// [`walk`](Self::walk) with the frame's index `d`, if any.
+    fn walk_through(
+        &mut self,
+        ecat: &mut [u8],
+        t0: u64,
+        mut d: Option<&mut oxicat_esc::FrameDispatch>,
+    ) -> (FrameFate, u64) {
         if self.slots.is_empty() || !self.master_link_up {
             return (FrameFate::LostAtOpenPort(0, 0), t0);
         }
@@ -852,7 +891,10 @@ impl<E: SegmentEsc> Segment<E> {
             let (s, p) = at;
             let slot = &mut self.slots[s];
             // Keep the ESC's own timeline in step so its events come before the frame.
-            let out = slot.esc.forward(p, ecat, t, ok);
+            let out = match d.as_deref_mut() {
+                Some(d) => slot.esc.forward_dispatched(p, ecat, t, ok, d),
+                None => slot.esc.forward(p, ecat, t, ok),
+            };
             if let Some(ne) = slot.esc.next_event() {
                 self.horizon = self.horizon.min(ne);
             }

@@ -4,7 +4,7 @@
 //!
 //! ```text
 //! cargo run --release -p oxicat --example segment_scale -- [--kind demo,twin] \
-//!     [--n 16,64,256,1000] [--seconds 10] [--cycle-us 1000] [--rt]
+//!     [--n 16,64,256,1000] [--seconds 10] [--cycle-us 1000] [--rt] [--per-esc-walk] [--idle]
 //! ```
 //!
 //! Columns: late cycles (an exchange that ended after the next cycle was due), the round
@@ -14,7 +14,11 @@
 //! and the resident memory the segment added per slave. `demo` is the firmware-hosting
 //! demo device; `twin` an EL2008 twin built from Beckhoff's ESI (an ESC with its SII and
 //! SM/FMMU set-up, no firmware), from `../shared/reference/esi-vendor` or
-//! `OXICAT_REFERENCE`. `--rt` serves from a SCHED_FIFO thread (root).
+//! `OXICAT_REFERENCE`. `--rt` serves from a SCHED_FIFO thread (root); `--per-esc-walk` turns
+//! the segment's configured-address dispatch off (every ESC walks every datagram, as before
+//! it), for before/after figures from one binary. `--idle` runs no master: it advances the
+//! segment's virtual time 1 ms at a time and prints the CPU time per ms (the nodes' main
+//! loops and timers, the scheduler).
 
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex};
@@ -41,9 +45,15 @@ fn status_kb(path: &str, key: &str) -> u64 {
         .unwrap_or(0)
 }
 
-/// utime + stime of thread `tid` of this process, in clock ticks (100 per second).
+/// utime + stime of thread `tid` of this process (`self`: the calling thread), in clock
+/// ticks (100 per second).
 fn thread_ticks(tid: &str) -> u64 {
-    let stat = std::fs::read_to_string(format!("/proc/self/task/{tid}/stat")).unwrap_or_default();
+    let path = if tid == "self" {
+        "/proc/thread-self/stat".to_string()
+    } else {
+        format!("/proc/self/task/{tid}/stat")
+    };
+    let stat = std::fs::read_to_string(path).unwrap_or_default();
     let rest = stat.rsplit_once(')').map(|(_, r)| r).unwrap_or_default();
     let f: Vec<&str> = rest.split_whitespace().collect();
     // Fields 14 and 15 (utime, stime), counted from 1 with the state as field 3.
@@ -98,7 +108,7 @@ fn devices(kind: &str, n: usize) -> Vec<String> {
     }
 }
 
-fn run(kind: &str, n: usize, seconds: u64, cycle_us: u64, rt: bool) -> Row {
+fn run(kind: &str, n: usize, seconds: u64, cycle_us: u64, rt: bool, per_esc: bool) -> Row {
     let args = SimArgs {
         iface: None,
         udp: Some("127.0.0.1:0".into()),
@@ -117,7 +127,8 @@ fn run(kind: &str, n: usize, seconds: u64, cycle_us: u64, rt: bool) -> Row {
     let rss0 = status_kb("/proc/self/status", "VmRSS:");
     let desc = sim_cmd::describe(&args).unwrap_or_else(|e| fail(&e.to_string()));
     sim_cmd::check_segment(&desc).unwrap_or_else(|e| fail(&e.to_string()));
-    let (seg, names) = sim_cmd::build_segment(&desc).unwrap_or_else(|e| fail(&e.to_string()));
+    let (mut seg, names) = sim_cmd::build_segment(&desc).unwrap_or_else(|e| fail(&e.to_string()));
+    seg.set_configured_dispatch(!per_esc);
     let kb_per_slave =
         status_kb("/proc/self/status", "VmRSS:").saturating_sub(rss0) as f64 / n as f64;
     let port =
@@ -206,10 +217,47 @@ fn run(kind: &str, n: usize, seconds: u64, cycle_us: u64, rt: bool) -> Row {
     }
 }
 
+/// `--idle`: the segment's own cost with no master: virtual time advanced 1 ms at a time
+/// for `seconds`, the thread's CPU time per ms (what the nodes' firmware main loops, timers
+/// and the scheduler cost before a frame arrives).
+fn idle(kind: &str, n: usize, seconds: u64) {
+    let args = SimArgs {
+        iface: None,
+        udp: None,
+        segment: None,
+        eni: None,
+        esi_dir: Vec::new(),
+        devices: devices(kind, n),
+        esi: Vec::new(),
+        list: false,
+        spin: false,
+        quiet: true,
+        slowdown: 1,
+        rt: None,
+        rt_cpu: None,
+    };
+    let desc = sim_cmd::describe(&args).unwrap_or_else(|e| fail(&e.to_string()));
+    let (mut seg, _) = sim_cmd::build_segment(&desc).unwrap_or_else(|e| fail(&e.to_string()));
+    let ms = seconds * 1000;
+    let t0 = thread_ticks("self");
+    let w0 = std::time::Instant::now();
+    for _ in 0..ms {
+        seg.advance_by(1_000_000);
+    }
+    let wall = w0.elapsed().as_secs_f64();
+    let cpu_us_per_ms = thread_ticks("self").saturating_sub(t0) as f64 * 10_000.0 / ms as f64;
+    println!(
+        "| {kind} | {n} | idle, {ms} ms of virtual time | {cpu_us_per_ms:.0} µs CPU per ms ({:.2} µs per node; {:.2} s wall) |",
+        cpu_us_per_ms / n as f64,
+        wall
+    );
+}
+
 fn main() {
     let mut kinds = vec!["demo".to_string(), "twin".to_string()];
     let mut ns = vec![16usize, 64, 256, 1000];
     let (mut seconds, mut cycle_us, mut rt, mut one) = (10u64, 1000u64, false, false);
+    let (mut per_esc, mut idle_only) = (false, false);
     let mut it = std::env::args().skip(1);
     while let Some(a) = it.next() {
         let mut val = || {
@@ -227,6 +275,10 @@ fn main() {
             "--seconds" => seconds = val().parse().unwrap_or_else(|_| fail("--seconds")),
             "--cycle-us" => cycle_us = val().parse().unwrap_or_else(|_| fail("--cycle-us")),
             "--rt" => rt = true,
+            // The reference walk: every ESC walks every datagram (no configured-address
+            // dispatch), for before/after figures from one binary.
+            "--per-esc-walk" => per_esc = true,
+            "--idle" => idle_only = true,
             // One row in this process (each row runs in a process of its own, so that the
             // memory a segment adds is not hidden by what the previous one freed).
             "--one" => one = true,
@@ -236,9 +288,17 @@ fn main() {
     if seconds == 0 || cycle_us == 0 {
         fail("--seconds and --cycle-us must be above 0");
     }
+    if idle_only {
+        for kind in &kinds {
+            for &n in &ns {
+                idle(kind, n, seconds);
+            }
+        }
+        return;
+    }
     if one {
         let (kind, n) = (&kinds[0], ns[0]);
-        let mut r = run(kind, n, seconds, cycle_us, rt);
+        let mut r = run(kind, n, seconds, cycle_us, rt, per_esc);
         let (p50, p99, max) = (
             pct(&mut r.rtt, 0.5),
             pct(&mut r.rtt, 0.99),
@@ -281,6 +341,9 @@ fn main() {
             ]);
             if rt {
                 cmd.arg("--rt");
+            }
+            if per_esc {
+                cmd.arg("--per-esc-walk");
             }
             let out = cmd
                 .stderr(std::process::Stdio::null())

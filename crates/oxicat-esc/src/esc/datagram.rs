@@ -19,16 +19,47 @@ impl Esc {
     /// port the frame leaves through or `Dropped` (circulating frame rule).
     #[inline]
     pub fn forward(&mut self, port: u8, frame: &mut [u8], t: u64, frame_ok: bool) -> Forward {
-        self.memo.clear();
+        // The memo is cleared where the frame is processed (`process_frame`, the fused
+        // path): a frame that only passes (arriving at port 1..3 and leaving without a
+        // visit to the processing unit) changes the SII settle, a DC receive time and the
+        // RX error counters, none of which the memo's answers read.
         if port == 0 && frame_ok && self.fused.ok {
+            self.memo.clear();
             self.now = t;
             self.dc.frame_arrival_port0(&mut self.mem[..REG_END], t);
             if let Some(out) = self.process_fused(frame, t) {
                 return out;
             }
-            return self.forward_after_arrival(0, frame, true);
+            return self.forward_after_arrival(0, frame, true, None);
         }
-        self.forward_generic(port, frame, t, frame_ok)
+        self.forward_generic(port, frame, t, frame_ok, None)
+    }
+
+    /// [`Esc::forward`] with the frame's configured-address index `d` (built by the
+    /// segment once per frame, see [`FrameDispatch`]): the same effects on the ESC and the
+    /// frame, except that the IRQ bits this ESC ORs into configured-address datagrams for
+    /// other stations are recorded in `d` ([`FrameDispatch::apply_irq`] writes them).
+    #[inline]
+    pub fn forward_dispatched(
+        &mut self,
+        port: u8,
+        frame: &mut [u8],
+        t: u64,
+        frame_ok: bool,
+        d: &mut FrameDispatch,
+    ) -> Forward {
+        if !d.is_active() {
+            return self.forward(port, frame, t, frame_ok);
+        }
+        if port == 0 && frame_ok && self.fused.ok {
+            self.memo.clear();
+            // As `forward`; the fused path declines the frame (it takes frames of one
+            // logical datagram, and this one has a configured-address datagram).
+            self.now = t;
+            self.dc.frame_arrival_port0(&mut self.mem[..REG_END], t);
+            return self.forward_after_arrival(0, frame, true, Some(d));
+        }
+        self.forward_generic(port, frame, t, frame_ok, Some(d))
     }
 
     /// The fused path (see `Fused`), after the frame's arrival: the checks first (no state
@@ -126,12 +157,13 @@ impl Esc {
         frame: &mut [u8],
         t: u64,
         frame_ok: bool,
+        d: Option<&mut FrameDispatch>,
     ) -> Forward {
         let port = port & 3;
         self.now = t;
         self.sii_settle(t);
         self.dc.frame_arrival(&mut self.mem[..REG_END], port, t);
-        self.forward_after_arrival(port, frame, frame_ok)
+        self.forward_after_arrival(port, frame, frame_ok, d)
     }
 
     /// `forward` after the DC unit saw the frame's arrival.
@@ -140,13 +172,14 @@ impl Esc {
         port: u8,
         frame: &mut [u8],
         frame_ok: bool,
+        mut d: Option<&mut FrameDispatch>,
     ) -> Forward {
         if !frame_ok {
             let a = regs::RX_ERROR_COUNTER as usize + 2 * port as usize;
             self.mem[a] = self.mem[a].saturating_add(1);
         }
         if port == 0 {
-            self.process_frame(frame, frame_ok);
+            self.process_frame(frame, frame_ok, d.as_deref_mut());
         }
         let mut cur = port;
         for _ in 0..8 {
@@ -166,16 +199,25 @@ impl Esc {
                     Some(false) => set_circulating(frame),
                     None => {}
                 }
-                self.process_frame(frame, frame_ok);
+                self.process_frame(frame, frame_ok, d.as_deref_mut());
             }
             cur = nxt;
         }
         Forward::Dropped
     }
 
-    pub(super) fn process_frame(&mut self, frame: &mut [u8], frame_ok: bool) {
+    pub(super) fn process_frame(
+        &mut self,
+        frame: &mut [u8],
+        frame_ok: bool,
+        d: Option<&mut FrameDispatch>,
+    ) {
+        self.memo.clear();
         self.frame_ok = frame_ok;
-        self.walk_datagrams(frame);
+        match d {
+            Some(d) => self.walk_dispatched(frame, d),
+            None => self.walk_datagrams(frame),
+        }
         if !frame_ok {
             // A bad frame also abandons a buffer write ECAT had opened.
             for k in 0..self.active_sms.len() {
@@ -207,28 +249,130 @@ impl Esc {
 
     /// Walks the datagrams of `frame` with wire's one walker (it stops at the first
     /// malformed datagram, as an ESC does: the rest of the frame passes untouched) and hands
-    /// logical datagrams to [`Esc::logical_datagram`] as views, without decoding a header.
+    /// each to [`Esc::datagram`]. The reference for [`Esc::walk_dispatched`].
     #[inline]
     pub(super) fn walk_datagrams(&mut self, frame: &mut [u8]) {
         let _ = view::walk_datagrams::<WireError>(frame, |dg| {
-            let cmd = dg.command_raw();
-            if (CMD_LRD..=CMD_LRW).contains(&cmd) {
-                self.logical_datagram(dg, cmd);
-            } else if (CMD_FPRD..=CMD_FPRW).contains(&cmd) && !self.configured_match(dg.adp()) {
-                // FPRD/FPWR/FPRW for another slave (a master's per-slave state checks: every
-                // ESC of the line sees every one): only the IRQ field passes this ESC, as
-                // `process_datagram` would leave it (FRMW, which all ESCs but the addressed
-                // one write, takes the full path).
-                if self.events_dirty && self.ecat_mask != 0 {
-                    self.refresh_events();
-                }
-                let mut dg = dg;
-                dg.or_irq(self.ecat_irq);
-            } else if let Ok((mut d, _)) = DatagramMut::parse(dg.into_inner()) {
-                self.process_datagram(&mut d);
-            }
+            self.datagram(dg);
             Ok(())
         });
+    }
+
+    /// One datagram of a frame at this ESC: logical datagrams as views, without decoding
+    /// a header; a configured-address datagram for another station only ORs the IRQ
+    /// field.
+    #[inline]
+    pub(super) fn datagram(&mut self, dg: view::Datagram<&mut [u8]>) {
+        let cmd = dg.command_raw();
+        if (CMD_LRD..=CMD_LRW).contains(&cmd) {
+            self.logical_datagram(dg, cmd);
+        } else if (CMD_FPRD..=CMD_FPRW).contains(&cmd) && !self.configured_match(dg.adp()) {
+            // FPRD/FPWR/FPRW for another slave (a master's per-slave state checks: every
+            // ESC of the line sees every one): only the IRQ field passes this ESC, as
+            // `process_datagram` would leave it (FRMW, which all ESCs but the addressed
+            // one write, takes the full path).
+            let irq = self.passing_irq();
+            let mut dg = dg;
+            dg.or_irq(irq);
+        } else if let Ok((mut d, _)) = DatagramMut::parse(dg.into_inner()) {
+            self.process_datagram(&mut d);
+        }
+    }
+
+    /// The IRQ bits this ESC ORs into a datagram passing it now (events brought up to
+    /// date first, as for every datagram).
+    #[inline]
+    fn passing_irq(&mut self) -> u16 {
+        if self.events_dirty && self.ecat_mask != 0 {
+            self.refresh_events();
+        }
+        self.ecat_irq
+    }
+
+    /// The registers that decide which configured-address datagrams are this ESC's:
+    /// station address, alias enable, alias.
+    #[inline]
+    fn address_key(&self) -> (u16, bool, u16) {
+        (
+            self.reg16(regs::STATION_ADDR),
+            self.mem[regs::DL_ALIAS_ENABLE as usize] & 1 != 0,
+            self.reg16(regs::STATION_ALIAS),
+        )
+    }
+
+    /// [`Esc::walk_datagrams`] through the frame's index `d`: the datagrams every ESC
+    /// processes and those addressed to this ESC's station address (or its alias, when
+    /// enabled), in frame order; for the foreign configured-address datagrams between them
+    /// only the IRQ bits, recorded in `d` per run (this ESC's state cannot change while it
+    /// passes them, so one value holds for the run). If a processed datagram changes the
+    /// station address, the alias or its enable, the rest of the frame takes the
+    /// datagram-by-datagram walk.
+    pub(super) fn walk_dispatched(&mut self, frame: &mut [u8], d: &mut FrameDispatch) {
+        let n = d.dgs.len();
+        let key = self.address_key();
+        let (mut a, a_end) = d.fp_run(key.0);
+        let (mut b, b_end) = if key.1 && key.2 != key.0 {
+            d.fp_run(key.2)
+        } else {
+            (0, 0)
+        };
+        let (mut e, e_end) = (0, d.every.len());
+        let mut pos = 0;
+        loop {
+            let mut j = usize::MAX;
+            if e < e_end {
+                j = d.every[e] as usize;
+            }
+            if a < a_end {
+                j = j.min(d.fp[a].1 as usize);
+            }
+            if b < b_end {
+                j = j.min(d.fp[b].1 as usize);
+            }
+            if j == usize::MAX {
+                break;
+            }
+            if e < e_end && d.every[e] as usize == j {
+                e += 1;
+            } else if a < a_end && d.fp[a].1 as usize == j {
+                a += 1;
+            } else {
+                b += 1;
+            }
+            if j > pos {
+                self.pass_run(d, pos, j);
+            }
+            self.dispatch_one(frame, d, j);
+            pos = j + 1;
+            if self.address_key() != key {
+                for k in pos..n {
+                    self.dispatch_one(frame, d, k);
+                }
+                return;
+            }
+        }
+        if pos < n {
+            self.pass_run(d, pos, n);
+        }
+    }
+
+    /// Datagram `j` of the index through [`Esc::datagram`].
+    #[inline]
+    fn dispatch_one(&mut self, frame: &mut [u8], d: &FrameDispatch, j: usize) {
+        let s = d.dgs[j];
+        let (at, len) = (s.at as usize, s.len as usize);
+        if let Some(dg) = frame.get_mut(at..at + len) {
+            self.datagram(view::Datagram::new_unchecked(dg));
+        }
+    }
+
+    /// Foreign configured-address datagrams `from..to` pass this ESC: their IRQ bits.
+    #[inline]
+    fn pass_run(&mut self, d: &mut FrameDispatch, from: usize, to: usize) {
+        let irq = self.passing_irq();
+        if irq != 0 {
+            d.or_irq_range(from, to, irq);
+        }
     }
 
     /// A logical datagram (a checked view; `cmd` is LRD, LWR or LRW): what

@@ -7,7 +7,8 @@ use super::*;
 /// requests ([`Esc::compute_events`], for `irq_line`, `al_event_request`,
 /// `ecat_event_request`) and [`Esc::next_event`]. Between two state changes their answers
 /// cannot change. Cleared on entry to every `&mut self` entry point (only `advance` keeps
-/// it when neither the DC unit nor a watchdog changed anything). Atomics rather than
+/// it when neither the DC unit nor a watchdog changed anything, and `forward` when the frame
+/// only passes: it is cleared where a frame is processed). Atomics rather than
 /// `Cell` so that `Esc` stays `Sync`; 32-bit ones, because Cortex-M (thumbv7em) has no
 /// 64-bit atomics. Each value is published by a release store of its valid flag after its
 /// parts; concurrent `&self` writers can only store the same answer.

@@ -22,6 +22,7 @@ use oxicat_wire::{view, Command, DatagramMut, WireError};
 
 use crate::config::{DcSupport, EscConfig};
 use crate::dc::Dc;
+use crate::dispatch::FrameDispatch;
 use crate::fmmu::{get_bit, set_bit, Fmmu, Overlap};
 use crate::regs::{self, PERMISSIONS, P_CLEAR, P_ECAT, P_IMPL, P_PDI};
 use crate::sii;
