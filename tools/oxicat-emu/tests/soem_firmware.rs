@@ -24,10 +24,12 @@ mod soem_common;
 
 mod common;
 
-use std::time::Duration;
+use std::sync::Mutex;
+use std::time::{Duration, Instant};
 
 use netns_common::NetnsSim;
 use oxicat_devices::registry;
+use oxicat_slave::SyncMode;
 use soem_common::{has_dc, python_with_pysoem, Drive, Results};
 
 /// One board image to drive.
@@ -40,24 +42,62 @@ struct Case {
     env: &'static str,
     /// How many times slower than real time the segment runs.
     slowdown: u32,
+    /// The sync mode SOEM runs it in (`None`: DC SYNC0 where the device has it).
+    sync: Option<SyncMode>,
+    /// The cycle time in the segment's time, ns.
+    cycle_ns: u32,
 }
 
-const CASES: [Case; 2] = [
-    Case {
-        device: "demo",
-        board: "stm32f446-lan9252",
-        env: "OXICAT_BOARD_IMAGE",
-        // A polling main loop, emulated in full.
-        slowdown: 30,
-    },
-    Case {
-        device: "laelaps-leg",
-        board: "laelaps-leg",
-        env: "OXICAT_LAELAPS_IMAGE",
-        // Sleeps in WFI between its interrupts; the leg's plant runs beside it.
-        slowdown: 15,
-    },
-];
+const DEMO: Case = Case {
+    device: "demo",
+    board: "stm32f446-lan9252",
+    env: "OXICAT_BOARD_IMAGE",
+    // A polling main loop, emulated in full.
+    slowdown: 30,
+    sync: None,
+    cycle_ns: 1_000_000,
+};
+
+const LEG: Case = Case {
+    device: "laelaps-leg",
+    board: "laelaps-leg",
+    env: "OXICAT_LAELAPS_IMAGE",
+    // Sleeps in WFI between its interrupts; the leg's plant runs beside it.
+    slowdown: 15,
+    sync: None,
+    cycle_ns: 1_000_000,
+};
+
+const JOINT: Case = Case {
+    device: "cia402-joint",
+    board: "cia402-joint",
+    env: "OXICAT_CIA402_IMAGE",
+    slowdown: 20,
+    sync: Some(SyncMode::DcSync0),
+    cycle_ns: 1_000_000,
+};
+
+const HUB: Case = Case {
+    device: "axis-hub",
+    board: "axis-hub",
+    env: "OXICAT_AXIS_HUB_IMAGE",
+    slowdown: 10,
+    // The hub's default: free run, its application task polling every 10 ms.
+    sync: Some(SyncMode::FreeRun),
+    cycle_ns: 10_000_000,
+};
+
+const TUE: Case = Case {
+    device: "tue-es030",
+    board: "tue-es030",
+    env: "OXICAT_TUE_ES030_IMAGE",
+    slowdown: 30,
+    // Its only mode (0x1C32:04 = 0x0002): outputs on the SM2 event.
+    sync: Some(SyncMode::SmSync),
+    cycle_ns: 1_000_000,
+};
+
+const CASES: [&Case; 5] = [&DEMO, &LEG, &JOINT, &HUB, &TUE];
 
 /// Serves `case`'s image on a netns bench and runs soem_check.py for `cycles` cycles;
 /// `None` when skipped here (no root, no pysoem, no image).
@@ -108,10 +148,11 @@ fn drive(case: &Case, cycles: u32) -> Option<Results> {
         kit,
         Drive {
             cycles,
-            cycle_ns: 1_000_000,
+            cycle_ns: case.cycle_ns,
             nodes: 1,
             slowdown: case.slowdown,
             watchdog_ms: Some(100),
+            sync: case.sync,
         },
         &mut results,
     );
@@ -135,8 +176,10 @@ fn assert_all_pass(case: &Case, results: &Results) {
         "watchdog_safeop_err",
         "watchdog_ack_to_op",
     ];
-    if has_dc((kit.def)(0)) {
-        checks.push("dc_sync0");
+    match case.sync {
+        None | Some(SyncMode::DcSync0) if has_dc((kit.def)(0)) => checks.push("dc_sync0"),
+        Some(_) => checks.push("sync_mode"),
+        None => {}
     }
     let mut bad = Vec::new();
     for c in checks {
@@ -163,24 +206,55 @@ fn assert_all_pass(case: &Case, results: &Results) {
     );
 }
 
-/// One image after the other: two slowed-down segments and two SOEM processes at once
-/// starved each other on a 2-core machine (frames past SOEM's receive timeout).
-#[test]
-fn soem_runs_the_demo_and_leg_node_board_images_over_a_veth() {
-    for case in &CASES {
-        if let Some(r) = drive(case, 300) {
-            assert_all_pass(case, &r);
-        }
+/// One image at a time: two slowed-down segments and two SOEM processes at once starved
+/// each other on a 2-core machine (frames past SOEM's receive timeout).
+static ONE_AT_A_TIME: Mutex<()> = Mutex::new(());
+
+/// Drives `case` for `cycles` cycles, alone on the machine's cores, and asserts every check.
+fn run(case: &Case, cycles: u32) {
+    let _one = ONE_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
+    let start = Instant::now();
+    if let Some(r) = drive(case, cycles) {
+        assert_all_pass(case, &r);
+        eprintln!(
+            "{} image: {cycles} cycles, slowdown {}, {:.0} s wall",
+            case.board,
+            case.slowdown,
+            start.elapsed().as_secs_f64()
+        );
     }
 }
 
-/// The 10,000 cycles per image (about 5 and 3 minutes slowed down).
+#[test]
+fn soem_runs_the_demo_board_image_over_a_veth() {
+    run(&DEMO, 300);
+}
+
+#[test]
+fn soem_runs_the_laelaps_leg_image_over_a_veth() {
+    run(&LEG, 300);
+}
+
+#[test]
+fn soem_runs_the_cia402_joint_image_in_dc_over_a_veth() {
+    run(&JOINT, 300);
+}
+
+#[test]
+fn soem_runs_the_axis_hub_image_in_free_run_over_a_veth() {
+    run(&HUB, 300);
+}
+
+#[test]
+fn soem_runs_the_tue_es030_image_sm_synchronous_over_a_veth() {
+    run(&TUE, 300);
+}
+
+/// The 10,000 cycles per image (minutes each, slowed down).
 #[test]
 #[ignore = "long: 10,000 cycles per image, slowed down"]
 fn soem_runs_each_board_image_for_10000_cycles() {
-    for case in &CASES {
-        if let Some(r) = drive(case, 10_000) {
-            assert_all_pass(case, &r);
-        }
+    for case in CASES {
+        run(case, 10_000);
     }
 }
