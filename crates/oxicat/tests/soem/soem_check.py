@@ -51,8 +51,8 @@ BOOT_TIMEOUT_S = 5
 # A scan whose slaves are not in PREOP after this long (s of the segment's time) is done
 # again.
 PREOP_RESCAN_S = 2
-# Attempts of an SDO read that got no reply in SOEM's mailbox timeout (700 ms, fixed in
-# pysoem's sdo_read): a debug-build simulator serving a leg node on a machine loaded by a
+# Attempts of an SDO read that got no reply in SOEM's mailbox timeout (700 ms, the
+# master's sdo_read_timeout, K times that for a segment slowed down K times): a debug-build simulator serving a leg node on a machine loaded by a
 # parallel build has missed it (WkcError on a 0x1018 read, twice in about twenty CI
 # runs). A reply that is wrong, or none in three attempts, still fails the check.
 SDO_READ_ATTEMPTS = 3
@@ -306,8 +306,10 @@ def stretch_soem_timeouts(master, slow):
     in OP failed at random (45 of 300 reads of 0x0130), and a mailbox read that came back
     late made SOEM ask the slave to repeat its reply, which the next SDO then took for its
     own (PacketError, "unexpected frame"). Stretched by K, every SOEM timeout is the same in
-    the segment's time as on a real one; the floor covers the host, which on a loaded
-    2-core machine held single frames for up to 90 ms of wall time whatever K was.
+    the segment's time as on a real one; the floor covers the host, which on a 2-core
+    machine at a load of 10 held single frames for up to 200 ms of wall time whatever K
+    was. (SOEM asks for a repeat when a mailbox read is lost: ecx_mbxreceive toggles the
+    SM1 repeat request.)
     A segment in real time (K = 1, host-compiled firmware) keeps SOEM's own timeouts.
     """
     if slow <= 1:
