@@ -52,6 +52,7 @@ const DRIVE: Drive = Drive {
     nodes: NODES,
     slowdown: 1,
     watchdog_ms: None,
+    sync: None,
 };
 
 /// Serves `dev:NODES` and runs soem_check.py on it.

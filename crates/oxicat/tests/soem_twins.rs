@@ -94,6 +94,7 @@ const DRIVE: Drive = Drive {
     nodes: 1,
     slowdown: 1,
     watchdog_ms: None,
+    sync: None,
 };
 
 /// Serves the device `name` (an `oxicat sim` device argument) on a veth, runs

@@ -42,8 +42,17 @@ RECV_TIMEOUT_US = 500_000
 WATCHDOG_MS = 500
 # Waiting for a state (µs).
 STATE_TIMEOUT_US = 5_000_000
-# Attempts of an SDO read that got no reply in SOEM's mailbox timeout (700 ms, fixed in
-# pysoem's sdo_read): a debug-build simulator serving a leg node on a machine loaded by a
+# The least time SOEM waits for a datagram of a slowed-down segment (µs of wall time): the
+# host's own stalls (see stretch_soem_timeouts).
+HOST_STALL_US = 250_000
+# How long the scan waits for every slave to reach PREOP (s of the segment's time): a
+# board image boots for up to 0.7 s of its time before its mailbox runs.
+BOOT_TIMEOUT_S = 5
+# A scan whose slaves are not in PREOP after this long (s of the segment's time) is done
+# again.
+PREOP_RESCAN_S = 2
+# Attempts of an SDO read that got no reply in SOEM's mailbox timeout (700 ms, the
+# master's sdo_read_timeout, K times that for a segment slowed down K times): a debug-build simulator serving a leg node on a machine loaded by a
 # parallel build has missed it (WkcError on a 0x1018 read, twice in about twenty CI
 # runs). A reply that is wrong, or none in three attempts, still fails the check.
 SDO_READ_ATTEMPTS = 3
@@ -168,8 +177,10 @@ def sdo_checks(pos, slave, spec):
 class Cycler:
     """Process-data cycles at a fixed period, counting working-counter errors."""
 
-    def __init__(self, master, period_s, expected_wkc):
+    def __init__(self, master, period_s, expected_wkc, slow=1):
         self.master = master
+        # The receive timeout in the segment's time, as SOEM's (stretch_soem_timeouts).
+        self.recv_timeout_us = RECV_TIMEOUT_US * slow
         self.expected_wkc = expected_wkc
         self.period = period_s
         self.next = time.monotonic()
@@ -179,7 +190,7 @@ class Cycler:
 
     def cycle(self):
         self.master.send_processdata()
-        wkc = self.master.receive_processdata(RECV_TIMEOUT_US)
+        wkc = self.master.receive_processdata(self.recv_timeout_us)
         self.cycles += 1
         # Nothing mapped: SOEM sends no frame and receive reports EC_NOFRAME (-1); the
         # cycle is then only the period.
@@ -223,6 +234,12 @@ def reach(master, cycler, want, timeout_s):
     return all_in(master, want)
 
 
+def fprd(slave, address, size):
+    """An FPRD with SOEM's datagram timeout (pysoem's `_fprd` defaults to a fixed 2 ms,
+    whatever `stretch_soem_timeouts` set)."""
+    return slave._fprd(address, size, pysoem.settings.timeouts.ret)
+
+
 def dc_checks(pos, slave, cycle_ns, slow=1):
     """SYNC0 on: 0x1C32:01 = DC SYNC0, 0x1C32:02 = the SYNC0 cycle, the ESC's SYNC0 unit
     activated with our cycle and its next-pulse time advancing by whole cycles. The wait
@@ -233,11 +250,11 @@ def dc_checks(pos, slave, cycle_ns, slow=1):
     try:
         mode = struct.unpack("<H", slave.sdo_read(0x1C32, 1))[0]
         cyc = struct.unpack("<I", slave.sdo_read(0x1C32, 2))[0]
-        act = slave._fprd(REG_DC_ACTIVATION, 2)
-        sync0_cycle = struct.unpack("<I", slave._fprd(REG_DC_SYNC0_CYCLE, 4))[0]
-        t0 = struct.unpack("<Q", slave._fprd(REG_DC_NEXT_SYNC0, 8))[0]
+        act = fprd(slave, REG_DC_ACTIVATION, 2)
+        sync0_cycle = struct.unpack("<I", fprd(slave, REG_DC_SYNC0_CYCLE, 4))[0]
+        t0 = struct.unpack("<Q", fprd(slave, REG_DC_NEXT_SYNC0, 8))[0]
         time.sleep(wait_s)
-        t1 = struct.unpack("<Q", slave._fprd(REG_DC_NEXT_SYNC0, 8))[0]
+        t1 = struct.unpack("<Q", fprd(slave, REG_DC_NEXT_SYNC0, 8))[0]
         adv = t1 - t0
         ok = (mode == 2 and cyc == cycle_ns and act[1] & 0x03 == 0x03
               and sync0_cycle == cycle_ns and adv > 0 and adv % cycle_ns == 0)
@@ -249,6 +266,106 @@ def dc_checks(pos, slave, cycle_ns, slow=1):
         check("dc_sync0", pos, False, f"{type(e).__name__}: {e}")
 
 
+SYNC_MODES = {0: "free run", 1: "SM-synchronous", 2: "DC SYNC0", 3: "DC SYNC1"}
+
+
+def set_sync_mode(pos, slave, mode):
+    """Sets 0x1C32:01 to `mode` in PREOP unless it is already (SOEM writes no 0x1C32)."""
+    try:
+        got = struct.unpack("<H", sdo_read(pos, slave, 0x1C32, 1)[:2])[0]
+        if got != mode:
+            slave.sdo_write(0x1C32, 1, struct.pack("<H", mode))
+            info(f"slave {pos}: 0x1C32:01 was {got}, set to {mode} ({SYNC_MODES[mode]})")
+        else:
+            info(f"slave {pos}: 0x1C32:01 = {got} ({SYNC_MODES[mode]}) already")
+    except Exception as e:  # noqa: BLE001 - the check in OP reports the outcome
+        info(f"slave {pos}: setting 0x1C32:01 = {mode}: {type(e).__name__}: {e}")
+
+
+def sync_mode_check(pos, slave, mode):
+    """In OP: 0x1C32:01 is `mode` and 0x1C32:04 (supported modes) offers it."""
+    try:
+        got = struct.unpack("<H", sdo_read(pos, slave, 0x1C32, 1)[:2])[0]
+        supported = struct.unpack("<H", sdo_read(pos, slave, 0x1C32, 4)[:2])[0]
+        ok = got == mode and supported & (1 << mode) != 0
+        check("sync_mode", pos, ok,
+              f"0x1C32:01 = {got} (want {mode}, {SYNC_MODES[mode]}), "
+              f"0x1C32:04 = 0x{supported:04X}")
+    except Exception as e:  # noqa: BLE001
+        check("sync_mode", pos, False, f"{type(e).__name__}: {e}")
+
+
+def stretch_soem_timeouts(master, slow):
+    """Multiplies SOEM's timeouts (pysoem.settings.timeouts and the master's SDO timeouts,
+    µs of wall time) by `slow`, and gives every datagram at least HOST_STALL_US.
+
+    A segment served K times slower than real time answers K times later: SOEM's 2 ms for a
+    datagram (EC_TIMEOUTRET: a state read, a mailbox poll) is 0.1 ms of a segment served 20
+    times slower, less than an emulated board takes for a burst of its firmware (the CiA402
+    joint's 180 µs SYNC0 handler), so frames came back after SOEM had given up: state reads
+    in OP failed at random (45 of 300 reads of 0x0130), and a mailbox read that came back
+    late made SOEM ask the slave to repeat its reply, which the next SDO then took for its
+    own (PacketError, "unexpected frame"). Stretched by K, every SOEM timeout is the same in
+    the segment's time as on a real one; the floor covers the host, which on a 2-core
+    machine at a load of 10 held single frames for up to 200 ms of wall time whatever K
+    was. (SOEM asks for a repeat when a mailbox read is lost: ecx_mbxreceive toggles the
+    SM1 repeat request.)
+    A segment in real time (K = 1, host-compiled firmware) keeps SOEM's own timeouts.
+    """
+    if slow <= 1:
+        return
+    t = pysoem.settings.timeouts
+    for name in ("ret", "safe", "eeprom", "tx_mailbox", "rx_mailbox", "state"):
+        setattr(t, name, max(getattr(t, name) * slow, HOST_STALL_US))
+    master.sdo_read_timeout *= slow
+    master.sdo_write_timeout *= slow
+    info(f"SOEM timeouts stretched {slow} times: datagram {t.ret} µs, SDO "
+         f"{master.sdo_read_timeout} µs")
+
+
+def scan_to_preop(master, slow):
+    """Scans (config_init, which requests PREOP) and waits until every slave found is in
+    PREOP (or refused it with the error flag), asking again every 100 ms of the segment's
+    time as masters do; returns how many slaves the last scan found.
+
+    A board still booting (an emulated image's calibration, power-on wait and ESC set-up
+    take up to 0.7 s of its time, K times that in wall time when served `--slowdown K`)
+    has no mailbox yet: SDOs sent before it answers PREOP time out. Nothing found (a master
+    scans again when nothing answered in time), or not in PREOP within PREOP_RESCAN_S of the
+    segment's time (a LAN9252 reset by its booting firmware drops the address the scan gave
+    it): scan again, up to BOOT_TIMEOUT_S of the segment's time (at least 10 s of wall
+    time)."""
+    start = time.monotonic()
+    deadline = start + max(10.0, BOOT_TIMEOUT_S * slow)
+    attempt = 0
+    while True:
+        attempt += 1
+        n = master.config_init()
+        info(f"config_init (attempt {attempt}) found {n} slaves")
+        if n > 0:
+            rescan = time.monotonic() + PREOP_RESCAN_S * slow
+            polls = 0
+            while time.monotonic() < min(rescan, deadline):
+                master.read_state()
+                # In PREOP, or refused with the error flag: the firmware answered.
+                if all(s.state & 0x0F == pysoem.PREOP_STATE or s.state & pysoem.STATE_ERROR
+                       for s in master.slaves):
+                    info(f"all {n} slaves answered the PREOP request "
+                         f"{time.monotonic() - start:.1f} s after the first scan: "
+                         f"{', '.join(state_name(s.state) for s in master.slaves)}")
+                    return n
+                polls += 1
+                if polls % 10 == 0:
+                    master.state = pysoem.PREOP_STATE
+                    master.write_state()
+                time.sleep(0.01 * slow)
+        else:
+            time.sleep(1.0)
+        if time.monotonic() >= deadline:
+            info(f"not all in PREOP {time.monotonic() - start:.1f} s after the first scan")
+            return n
+
+
 def main():
     iface, spec_path = sys.argv[1], sys.argv[2]
     with open(spec_path, encoding="utf-8") as f:
@@ -258,24 +375,17 @@ def main():
     cycle_ns = spec["cycle_ns"]
     # A segment served slowed down (`--slowdown K`, emulated board images) runs its clock K
     # times slower than real time: the script's own cycle and waits stretch by K so that
-    # they stay the same in the segment's time (SOEM's fixed timeouts do not; they are
-    # generous enough).
+    # they stay the same in the segment's time, and so do SOEM's timeouts.
     slow = spec.get("slowdown", 1)
     # The SM watchdog time (segment time); a slowed-down segment, which does not stall like a
     # debug build, takes the ESC's default 100 ms so the wait for it stays short in wall time.
     watchdog_ms = spec.get("watchdog_ms", WATCHDOG_MS)
 
     master = pysoem.Master()
+    stretch_soem_timeouts(master, slow)
     master.open(iface)
     try:
-        # A real master scans again when nothing answered in time (SOEM waits 20 ms for
-        # the first broadcast read; a debug-build simulator on a loaded machine may be late).
-        for attempt in range(1, 6):
-            n = master.config_init()
-            info(f"config_init (attempt {attempt}) found {n} slaves")
-            if n > 0:
-                break
-            time.sleep(1)
+        n = scan_to_preop(master, slow)
         check("scan_count", 0, n == len(want), f"found {n}, want {len(want)}")
         if n != len(want):
             return
@@ -310,6 +420,13 @@ def main():
             if s.get("stack", True):
                 sdo_checks(pos, slave, s)
 
+        # A slave run in a mode other than DC (`sync_mode`, the 0x1C32:01 code): SOEM's
+        # configuration writes no 0x1C32, so an application sets the mode in PREOP where
+        # the device's default differs (an SM-synchronous-only slave already defaults to it).
+        sync_slaves = [pos for pos, s in enumerate(want) if "sync_mode" in s]
+        for pos in sync_slaves:
+            set_sync_mode(pos, master.slaves[pos], want[pos]["sync_mode"])
+
         dc_slaves = [pos for pos, s in enumerate(want) if s["dc"]]
         if dc_slaves:
             found = master.config_dc()
@@ -339,7 +456,7 @@ def main():
             for pos, slave in enumerate(master.slaves):
                 for sm in (2, 3):
                     try:
-                        r = slave._fprd(0x0800 + 8 * sm, 8)
+                        r = fprd(slave, 0x0800 + 8 * sm, 8)
                         info(f"slave {pos} SM{sm}: start 0x{r[0] | r[1] << 8:04X} length "
                              f"{r[2] | r[3] << 8} control 0x{r[4]:02X} activate 0x{r[6]:02X}")
                     except Exception as e:  # noqa: BLE001
@@ -358,7 +475,7 @@ def main():
                      f"against {hw_wkc}")
         else:
             hw_wkc = master.expected_wkc
-        cycler = Cycler(master, cycle_ns / 1e9 * slow, hw_wkc)
+        cycler = Cycler(master, cycle_ns / 1e9 * slow, hw_wkc, slow)
         reach(master, cycler, pysoem.OP_STATE, 10.0 * slow)
         for pos, slave in enumerate(master.slaves):
             check("to_op", pos, slave.state == pysoem.OP_STATE,
@@ -380,6 +497,10 @@ def main():
 
         for pos in dc_slaves:
             dc_checks(pos, master.slaves[pos], cycle_ns, slow)
+            for _ in range(20):
+                cycler.cycle()
+        for pos in sync_slaves:
+            sync_mode_check(pos, master.slaves[pos], want[pos]["sync_mode"])
             for _ in range(20):
                 cycler.cycle()
 

@@ -40,6 +40,9 @@ pub struct Drive {
     pub slowdown: u32,
     /// SM watchdog time in the segment's time, ms (`None`: the script's 500 ms).
     pub watchdog_ms: Option<u32>,
+    /// The sync mode the slaves run in, checked in 0x1C32:01 after the cycles (`None`: DC
+    /// SYNC0 where the device has it, else whatever the device defaults to, unchecked).
+    pub sync: Option<SyncMode>,
 }
 
 /// Check results: check name → (device, slave position, passed, detail).
@@ -172,10 +175,18 @@ impl Expect {
 }
 
 /// The JSON object soem_check.py reads for one slave.
-fn slave_json(e: &Expect) -> String {
+fn slave_json(e: &Expect, sync: Option<SyncMode>) -> String {
     let def = e.def;
     let id = def.identity;
-    let dc = e.stack && has_dc(def);
+    let dc = e.stack
+        && has_dc(def)
+        && matches!(sync, None | Some(SyncMode::DcSync0 | SyncMode::DcSync1));
+    // A mode other than DC: the script sets 0x1C32:01 in PREOP where the device's default
+    // differs (as a SOEM application does before SAFEOP) and checks it in OP.
+    let sync_mode = match sync {
+        Some(m) if e.stack && !dc => format!("\"sync_mode\": {}, ", m as u16),
+        _ => String::new(),
+    };
     let (out_bits, in_bits) = e
         .pd_bits
         .unwrap_or((def.default_output_bits(), def.default_input_bits()));
@@ -186,7 +197,7 @@ fn slave_json(e: &Expect) -> String {
     format!(
         "{{\"vendor_id\": {}, \"product_code\": {}, \"revision\": {}, \
          \"order_code\": {}, \"name\": {}, \"device_name\": {}, \"hw_version\": {}, \
-         \"sw_version\": {}, \"dc\": {dc}, \"stack\": {}, \"watchdog\": {watchdog}, \"out_bytes\": {out_bytes}, \
+         \"sw_version\": {}, \"dc\": {dc}, {sync_mode}\"stack\": {}, \"watchdog\": {watchdog}, \"out_bytes\": {out_bytes}, \
          \"in_bytes\": {in_bytes}, \"rx_assign\": {:?}, \"tx_assign\": {:?}, \
          \"missing_index\": {}, \"rw\": {}}}",
         id.vendor_id,
@@ -214,7 +225,7 @@ pub fn spec_of(slaves: &[Expect], drive: Drive) -> (String, u32) {
         .map(|e| e.def.sync.min_cycle_ns)
         .fold(drive.cycle_ns, u32::max);
     let cycle_ns = cycle_ns.div_ceil(drive.cycle_ns) * drive.cycle_ns;
-    let slaves: Vec<String> = slaves.iter().map(slave_json).collect();
+    let slaves: Vec<String> = slaves.iter().map(|e| slave_json(e, drive.sync)).collect();
     (
         format!(
             "{{\"cycles\": {}, \"cycle_ns\": {cycle_ns}, \"slowdown\": {}, {}\"slaves\": [{}]}}",
