@@ -155,7 +155,10 @@ fn dc_op(cycles: u64) {
         // SYNC0 starts at the DC start time oxicat-master sets, 4.5 cycles after it
         // configures DC and before SAFE-OP: the master may count up to five cycles before
         // the first pulse when the slaves reach OP quickly. From then on every cycle has one.
-        assert!(pulses + 5 >= cycles, "node {k}: {pulses} SYNC0 pulses in {cycles} cycles");
+        assert!(
+            pulses + 5 >= cycles,
+            "node {k}: {pulses} SYNC0 pulses in {cycles} cycles"
+        );
         assert_eq!(handled, pulses, "node {k}: a SYNC0 was lost");
         // Issue 15: the main loop polls the stack with the ESC handlers masked (BASEPRI
         // 0x20). A span longer than the SYNC0 cycle can swallow a SYNC0 edge whenever two
