@@ -16,7 +16,10 @@
 //! cycle, and the share of the run the CPU was awake; then the shortest sustained cycle
 //! (the thesis' F28379D node: 200 µs minimum, 85 µs of stack time per cycle).
 //!
-//! `cargo run --release -p oxicat-emu --example min_cycle [laelaps-leg|cia402-joint] [elf]
+//! The axis hub (`firmware/axis-hub`, LAN9252, no sensors on its 1-Wire line) from its 10 ms
+//! kit cycle down to its 1 ms minimum, in DC mode.
+//!
+//! `cargo run --release -p oxicat-emu --example min_cycle [laelaps-leg|cia402-joint|axis-hub] [elf]
 //! [cycles per step] [--spi-mhz MHZ]` (the master refuses cycles below a slave's
 //! 0x1C32:05, so the device's minimum is the floor).
 
@@ -80,6 +83,8 @@ enum Dev {
     Leg,
     /// The CiA402 joint (ET1100).
     Joint,
+    /// The axis hub (LAN9252; DC-capable, free run by default; no sensors on its line).
+    Hub,
 }
 
 impl Dev {
@@ -87,6 +92,7 @@ impl Dev {
         match self {
             Dev::Leg => "laelaps-leg",
             Dev::Joint => "cia402-joint",
+            Dev::Hub => "axis-hub",
         }
     }
 
@@ -94,6 +100,7 @@ impl Dev {
         match self {
             Dev::Leg => device::device(Side::Right),
             Dev::Joint => &oxicat_devices::cia402::DEF,
+            Dev::Hub => &oxicat_devices::axis_hub::device::DEF,
         }
     }
 
@@ -102,6 +109,7 @@ impl Dev {
         match self {
             Dev::Leg => &[400, 300, 250, 200, 175, 150, 140, 130, 125, 110, 100],
             Dev::Joint => &[1000, 750, 500, 400, 350, 300, 275, 250],
+            Dev::Hub => &[10_000, 4000, 2000, 1000],
         }
     }
 }
@@ -134,9 +142,13 @@ fn step(
             // Current-sense calibration, 500 ms alignment, the ET1100's init.
             (node, 800_000_000)
         }
+        Dev::Hub => {
+            // Boot to the task tick under 0.7 s of board time (README).
+            (EmulatedNode::new(img.to_vec(), 100_000), 800_000_000)
+        }
     };
     let esc = match dev {
-        Dev::Leg => EscConfig::lan9252(),
+        Dev::Leg | Dev::Hub => EscConfig::lan9252(),
         Dev::Joint => EscConfig::et1100(),
     };
     let id = seg.add(Esc::new(esc, sii));
@@ -233,6 +245,10 @@ fn main() {
             args.next();
             Dev::Leg
         }
+        Some("axis-hub") => {
+            args.next();
+            Dev::Hub
+        }
         _ => Dev::Leg,
     };
     let path = args.next().unwrap_or_else(|| {
@@ -264,7 +280,7 @@ fn main() {
     let min_us = u64::from(dev.def().sync.min_cycle_ns) / 1000;
     let spi = match (dev, spi_hz) {
         (_, Some(hz)) => format!("SPI1 at {:.2} MHz (what-if)", f64::from(hz) / 1e6),
-        (Dev::Leg, None) => "LAN9252, SPI1 at the image's 22.5 MHz".to_string(),
+        (Dev::Leg | Dev::Hub, None) => "LAN9252, SPI1 at the image's 22.5 MHz".to_string(),
         (Dev::Joint, None) => "ET1100, SPI1 at the image's 11.25 MHz".to_string(),
     };
     println!(
