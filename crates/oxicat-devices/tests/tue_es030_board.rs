@@ -7,14 +7,13 @@ use std::sync::{Arc, Mutex};
 
 use oxicat_devices::tue_es030::app::MSTATE_KILLED;
 use oxicat_devices::tue_es030::control::{line_10mv, KILLVOLTAGE};
-use oxicat_devices::tue_es030::device::DEF;
+use oxicat_devices::tue_es030::device::{with_identity, DEF};
 use oxicat_devices::tue_es030::experiment::{self as tue, Braking, NormalRow, TueParams};
 use oxicat_devices::tue_es030::rig::{attach, TueConfig, TueHandle, FIRMWARE_FILE, SLOT_BYTES};
 use oxicat_master::{Link, Master, MasterError};
 use oxicat_plant::re30::LineParams;
 use oxicat_sim::segment::Segment;
 use oxicat_slave::foe::UpdateResult;
-use oxicat_slave::{DeviceDef, Identity};
 
 /// Runs a test body on a thread with a large stack (the ethercrab master is big).
 fn big<F: FnOnce() + Send + 'static>(f: F) {
@@ -81,22 +80,8 @@ fn internal_voltages_over_sdo_body() {
     assert!(!h.lock().app.motors.iter().any(|m| m.enabled));
 }
 
-fn tue_with(revision: u32, product_code: u32) -> DeviceDef {
-    DeviceDef {
-        identity: Identity {
-            revision,
-            product_code,
-            ..DEF.identity
-        },
-        ..DEF
-    }
-}
-
 fn foe_code(r: Result<(), MasterError>) -> u32 {
-    match r {
-        Err(MasterError::Foe { code, .. }) => code,
-        other => panic!("expected an FoE refusal, got {other:?}"),
-    }
+    r.err().and_then(|e| e.foe_code()).expect("an FoE refusal")
 }
 
 #[test]
@@ -110,7 +95,7 @@ fn foe_refuses_bad_images_and_installs_a_good_one_body() {
     let none = &mut |_: usize, _: usize| {};
     let v0 = String::from_utf8(m.foe_read(0, "version.txt", 0, none).unwrap()).unwrap();
     assert!(v0.contains("revision=0x00000001"), "factory image: {v0}");
-    let good_def = tue_with(2, DEF.identity.product_code);
+    let good_def = with_identity(2, DEF.identity.product_code);
     let payload: Vec<u8> = (0..5000u32).map(|i| (i * 13 + 7) as u8).collect();
     let good = oxicat_esi::fwimage::build(&good_def, &payload);
     // Outside BOOT: bootstrap only.
@@ -122,7 +107,7 @@ fn foe_refuses_bad_images_and_installs_a_good_one_body() {
     // Another file in BOOT: not bootstrap.
     assert_eq!(foe_code(m.foe_write(0, "app.bin", 0, &good, none)), 0x8009);
     // Another device's image: program error.
-    let other = oxicat_esi::fwimage::build(&tue_with(2, 0x1234), &payload);
+    let other = oxicat_esi::fwimage::build(&with_identity(2, 0x1234), &payload);
     assert_eq!(
         foe_code(m.foe_write(0, FIRMWARE_FILE, 0, &other, none)),
         0x800B

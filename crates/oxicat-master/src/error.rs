@@ -172,6 +172,17 @@ pub enum MasterError {
     File(std::path::PathBuf, std::io::Error),
 }
 
+impl MasterError {
+    /// The FoE error code (0x8000..) of a transfer the slave refused ([`MasterError::Foe`]);
+    /// `None` for any other error.
+    pub fn foe_code(&self) -> Option<u32> {
+        match self {
+            MasterError::Foe { code, .. } => Some(*code),
+            _ => None,
+        }
+    }
+}
+
 impl std::fmt::Display for MasterError {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         use MasterError::*;

@@ -16,14 +16,13 @@
 use std::sync::{Arc, Mutex};
 use std::time::Duration;
 
-use oxicat_devices::tue_es030::device::DEF;
+use oxicat_devices::tue_es030::device::{with_identity, DEF};
 use oxicat_devices::tue_es030::rig::{self, FIRMWARE_FILE};
 use oxicat_emu::node::{EmulatedNode, NodeHandle};
 use oxicat_emu::tue_es030::{TueBoardPlant, TueConfig};
 use oxicat_esc::{Esc, EscConfig};
 use oxicat_master::{Link, Master, MasterError, MasterOptions};
 use oxicat_sim::segment::Segment;
-use oxicat_slave::device::{DeviceDef, Identity};
 
 mod common;
 
@@ -45,22 +44,8 @@ fn big<F: FnOnce() + Send + 'static>(f: F) {
         .unwrap_or_else(|e| std::panic::resume_unwind(e));
 }
 
-fn tue_with(revision: u32, product_code: u32) -> DeviceDef {
-    DeviceDef {
-        identity: Identity {
-            revision,
-            product_code,
-            ..DEF.identity
-        },
-        ..DEF
-    }
-}
-
 fn foe_code(r: Result<(), MasterError>) -> u32 {
-    match r {
-        Err(MasterError::Foe { code, .. }) => code,
-        other => panic!("expected an FoE refusal, got {other:?}"),
-    }
+    r.err().and_then(|e| e.foe_code()).expect("an FoE refusal")
 }
 
 /// A master with room for the image's flash erases: a sector erase stalls the board's CPU
@@ -124,7 +109,7 @@ fn body() {
     assert!(v0.contains("revision=0x00000001"), "{v0}");
     assert_eq!((mark(&node, 0), mark(&node, 1)), (1, 0xFFFF_FFFF));
 
-    let good_def = tue_with(2, DEF.identity.product_code);
+    let good_def = with_identity(2, DEF.identity.product_code);
     let payload: Vec<u8> = (0..5000u32).map(|i| (i * 13 + 7) as u8).collect();
     let good = oxicat_esi::fwimage::build(&good_def, &payload);
     assert_eq!(
@@ -134,7 +119,7 @@ fn body() {
     );
     m.enter_boot(0).unwrap();
     assert_eq!(foe_code(m.foe_write(0, "app.bin", 0, &good, none)), 0x8009);
-    let other = oxicat_esi::fwimage::build(&tue_with(2, 0x1234), &payload);
+    let other = oxicat_esi::fwimage::build(&with_identity(2, 0x1234), &payload);
     assert_eq!(
         foe_code(m.foe_write(0, FIRMWARE_FILE, 0, &other, none)),
         0x800B,
@@ -200,7 +185,7 @@ fn body() {
     );
     // A bad download now goes into slot 0 (the factory image's): refused, and the image
     // just installed stays the bootable one.
-    let next = oxicat_esi::fwimage::build(&tue_with(3, DEF.identity.product_code), &payload);
+    let next = oxicat_esi::fwimage::build(&with_identity(3, DEF.identity.product_code), &payload);
     let mut bad = next.clone();
     bad[4000] ^= 0x01;
     assert_eq!(

@@ -384,3 +384,16 @@ pub static DEF: DeviceDef = DeviceDef {
     },
     info: INFO,
 };
+
+/// The board's definition under another revision and product code: what a firmware image
+/// built for another revision or another device carries (an FoE update must refuse it).
+pub fn with_identity(revision: u32, product_code: u32) -> DeviceDef {
+    DeviceDef {
+        identity: Identity {
+            revision,
+            product_code,
+            ..DEF.identity
+        },
+        ..DEF
+    }
+}
