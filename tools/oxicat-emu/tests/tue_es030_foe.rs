@@ -35,15 +35,6 @@ fn image() -> Option<Vec<u8>> {
     common::image("tue-es030", "OXICAT_TUE_ES030_IMAGE")
 }
 
-fn big<F: FnOnce() + Send + 'static>(f: F) {
-    std::thread::Builder::new()
-        .stack_size(64 << 20)
-        .spawn(f)
-        .unwrap()
-        .join()
-        .unwrap_or_else(|e| std::panic::resume_unwind(e));
-}
-
 fn foe_code(r: Result<(), MasterError>) -> u32 {
     r.err().and_then(|e| e.foe_code()).expect("an FoE refusal")
 }
@@ -85,7 +76,7 @@ fn mark(node: &NodeHandle, slot: usize) -> u32 {
 
 #[test]
 fn foe_on_the_image_refuses_bad_images_as_the_host_and_installs_a_good_one_in_flash() {
-    big(body);
+    common::big(body);
 }
 
 fn body() {

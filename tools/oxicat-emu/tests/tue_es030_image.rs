@@ -52,16 +52,6 @@ fn image() -> Option<Vec<u8>> {
     common::image("tue-es030", "OXICAT_TUE_ES030_IMAGE")
 }
 
-/// Runs a test body on a thread with a large stack (the ethercrab master is big).
-fn big<F: FnOnce() + Send + 'static>(f: F) {
-    std::thread::Builder::new()
-        .stack_size(64 << 20)
-        .spawn(f)
-        .unwrap()
-        .join()
-        .unwrap_or_else(|e| std::panic::resume_unwind(e));
-}
-
 #[test]
 fn the_tue_image_boots_brakes_its_bridges_and_answers_its_identity() {
     let Some(img) = image() else { return };
@@ -162,7 +152,7 @@ fn host(config: &TueConfig) -> (Link, rig::TueHandle) {
 
 #[test]
 fn ethercrab_runs_the_emulated_board_sm_synchronous_for_1000_cycles() {
-    big(|| sm_sync_op(1_000));
+    common::big(|| sm_sync_op(1_000));
 }
 
 /// The long run: 10,000 SM-synchronous cycles of 1 ms,
@@ -170,7 +160,7 @@ fn ethercrab_runs_the_emulated_board_sm_synchronous_for_1000_cycles() {
 #[test]
 #[ignore = "long: 10,000 cycles of the emulated board"]
 fn ethercrab_runs_the_emulated_board_for_10000_cycles() {
-    big(|| sm_sync_op(10_000));
+    common::big(|| sm_sync_op(10_000));
 }
 
 /// The board in OP at its kit cycle (1 ms) for `cycles` cycles: the right working counter
@@ -351,7 +341,7 @@ impl RawMbx {
 /// downloads of motor parameters (0x8000..0x8002, `sdo_written`) while in OP.
 #[test]
 fn the_current_loop_keeps_every_tick_through_al_transitions_and_sdo_writes_in_op() {
-    big(|| {
+    common::big(|| {
         let Some(img) = image() else { return };
         let (link, node, _) = segment(&img, &TueConfig::default());
         let Link::Sim(pipe) = link.clone() else {
@@ -482,7 +472,7 @@ fn pulse(link: &Link) -> tue::StepMetrics {
 
 #[test]
 fn a_current_step_on_a_locked_motor_matches_the_host_board() {
-    big(|| {
+    common::big(|| {
         let Some(img) = image() else { return };
         let cfg = TueConfig::default().locked(true);
         let (hl, _h) = host(&cfg);
@@ -538,7 +528,7 @@ fn spin(link: &Link, cycles: u64) -> ([i16; 3], [u32; 3]) {
 
 #[test]
 fn the_free_motors_spin_up_as_on_the_host() {
-    big(|| {
+    common::big(|| {
         let Some(img) = image() else { return };
         let cfg = TueConfig::default();
         let (hl, _h) = host(&cfg);
@@ -575,7 +565,7 @@ fn the_free_motors_spin_up_as_on_the_host() {
 /// and stores 0x8040 from its main loop (`Hooks::store_voltages`); both read the same.
 #[test]
 fn the_5v_reference_0x8040_02_reads_on_the_image_as_on_the_host() {
-    big(|| {
+    common::big(|| {
         let Some(img) = image() else { return };
         let (link, node, _) = segment(&img, &TueConfig::default());
         let m = Master::open(link).expect("ethercrab scans");
