@@ -108,10 +108,11 @@ fn devices(kind: &str, n: usize) -> Vec<String> {
     }
 }
 
-fn run(kind: &str, n: usize, seconds: u64, cycle_us: u64, rt: bool, per_esc: bool) -> Row {
-    let args = SimArgs {
+/// The `oxicat sim` arguments of a row: `n` devices of `kind`, quiet, at real time.
+fn sim_args(kind: &str, n: usize, udp: Option<String>, rt: Option<u8>) -> SimArgs {
+    SimArgs {
         iface: None,
-        udp: Some("127.0.0.1:0".into()),
+        udp,
         segment: None,
         eni: None,
         esi_dir: Vec::new(),
@@ -121,9 +122,18 @@ fn run(kind: &str, n: usize, seconds: u64, cycle_us: u64, rt: bool, per_esc: boo
         spin: false,
         quiet: true,
         slowdown: 1,
-        rt: rt.then_some(oxicat_sim::rt::DEFAULT_PRIORITY),
+        rt,
         rt_cpu: None,
-    };
+    }
+}
+
+fn run(kind: &str, n: usize, seconds: u64, cycle_us: u64, rt: bool, per_esc: bool) -> Row {
+    let args = sim_args(
+        kind,
+        n,
+        Some("127.0.0.1:0".into()),
+        rt.then_some(oxicat_sim::rt::DEFAULT_PRIORITY),
+    );
     let rss0 = status_kb("/proc/self/status", "VmRSS:");
     let desc = sim_cmd::describe(&args).unwrap_or_else(|e| fail(&e.to_string()));
     sim_cmd::check_segment(&desc).unwrap_or_else(|e| fail(&e.to_string()));
@@ -221,21 +231,7 @@ fn run(kind: &str, n: usize, seconds: u64, cycle_us: u64, rt: bool, per_esc: boo
 /// for `seconds`, the thread's CPU time per ms (what the nodes' firmware main loops, timers
 /// and the scheduler cost before a frame arrives).
 fn idle(kind: &str, n: usize, seconds: u64) {
-    let args = SimArgs {
-        iface: None,
-        udp: None,
-        segment: None,
-        eni: None,
-        esi_dir: Vec::new(),
-        devices: devices(kind, n),
-        esi: Vec::new(),
-        list: false,
-        spin: false,
-        quiet: true,
-        slowdown: 1,
-        rt: None,
-        rt_cpu: None,
-    };
+    let args = sim_args(kind, n, None, None);
     let desc = sim_cmd::describe(&args).unwrap_or_else(|e| fail(&e.to_string()));
     let (mut seg, _) = sim_cmd::build_segment(&desc).unwrap_or_else(|e| fail(&e.to_string()));
     let ms = seconds * 1000;

@@ -278,11 +278,7 @@ impl Txn {
                     }
                     (a, b) if a != b => a,
                     _ => {
-                        let d = if n < self.last_discrepancy {
-                            self.rom[byte] & mask != 0
-                        } else {
-                            n == self.last_discrepancy
-                        };
+                        let d = branch(&self.rom, byte, mask, n, self.last_discrepancy);
                         if !d {
                             self.last_zero = n;
                         }
@@ -360,6 +356,17 @@ impl Resolution {
     }
 }
 
+/// AN187's choice at a discrepancy (both bit values present) at bit `n` of the search:
+/// below the last discrepancy the previous ROM's bit (`rom[byte] & mask`), at it 1, above
+/// it 0. The blocking [`Search`] and the background [`Txn`] take the same path.
+fn branch(rom: &Rom, byte: usize, mask: u8, n: u8, last_discrepancy: u8) -> bool {
+    if n < last_discrepancy {
+        rom[byte] & mask != 0
+    } else {
+        n == last_discrepancy
+    }
+}
+
 /// ROM search state (Maxim AN187).
 #[derive(Debug, Clone, Copy, Default)]
 pub struct Search {
@@ -392,11 +399,7 @@ impl Search {
                 }
                 (a, b) if a != b => a,
                 _ => {
-                    let d = if n < self.last_discrepancy {
-                        self.rom[byte] & mask != 0
-                    } else {
-                        n == self.last_discrepancy
-                    };
+                    let d = branch(&self.rom, byte, mask, n, self.last_discrepancy);
                     if !d {
                         last_zero = n;
                     }
