@@ -9,7 +9,8 @@
 //! mapping, sync modes). No clocks, GPIO, SPI or interrupts are set up. What it shows is
 //! that the stack and the device link for `thumbv7em-none-eabihf` and how much flash and
 //! RAM they take: `cargo build --release`, then `llvm-size` on
-//! `target/thumbv7em-none-eabihf/release/oxicat-firmware-minimal`.
+//! `../target/thumbv7em-none-eabihf/release/oxicat-firmware-minimal` (the images' shared
+//! target directory, `firmware/target`).
 #![no_std]
 #![no_main]
 

@@ -14,7 +14,7 @@ fn main() {
     let path = std::env::args().nth(1).unwrap_or_else(|| {
         concat!(
             env!("CARGO_MANIFEST_DIR"),
-            "/../../firmware/stm32f446-lan9252/target/thumbv7em-none-eabihf/release/oxicat-firmware-stm32f446-lan9252"
+            "/../../firmware/target/thumbv7em-none-eabihf/release/oxicat-firmware-stm32f446-lan9252"
         )
         .to_string()
     });

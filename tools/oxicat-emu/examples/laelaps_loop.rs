@@ -51,7 +51,7 @@ fn main() {
     let path = args.next().unwrap_or_else(|| {
         concat!(
             env!("CARGO_MANIFEST_DIR"),
-            "/../../firmware/laelaps-leg/target/thumbv7em-none-eabihf/release/oxicat-firmware-laelaps-leg"
+            "/../../firmware/target/thumbv7em-none-eabihf/release/oxicat-firmware-laelaps-leg"
         )
         .to_string()
     });

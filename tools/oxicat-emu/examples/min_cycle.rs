@@ -253,9 +253,8 @@ fn main() {
     };
     let path = args.next().unwrap_or_else(|| {
         format!(
-            "{}/../../firmware/{}/target/thumbv7em-none-eabihf/release/oxicat-firmware-{}",
+            "{}/../../firmware/target/thumbv7em-none-eabihf/release/oxicat-firmware-{}",
             env!("CARGO_MANIFEST_DIR"),
-            dev.name(),
             dev.name()
         )
     });

@@ -18,7 +18,7 @@ use oxicat_emu::EmuError;
 mod common;
 
 /// The right build (`.ci/run`'s plain build) and the left build (`--features left-leg`,
-/// target dir `target/left`).
+/// target dir `firmware/target/left`).
 fn images() -> Option<(Vec<u8>, Vec<u8>)> {
     let right = common::image("laelaps-leg", "OXICAT_LAELAPS_IMAGE")?;
     let left = common::image_in("laelaps-leg", "left", "OXICAT_LAELAPS_LEFT_IMAGE")?;

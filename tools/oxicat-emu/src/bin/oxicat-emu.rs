@@ -57,15 +57,14 @@ enum Verb {
 }
 
 /// Where `.ci/run` and the firmware README build the two leg-node images.
-const RIGHT_ELF: &str =
-    "firmware/laelaps-leg/target/thumbv7em-none-eabihf/release/oxicat-firmware-laelaps-leg";
+const RIGHT_ELF: &str = "firmware/target/thumbv7em-none-eabihf/release/oxicat-firmware-laelaps-leg";
 const LEFT_ELF: &str =
-    "firmware/laelaps-leg/target/left/thumbv7em-none-eabihf/release/oxicat-firmware-laelaps-leg";
+    "firmware/target/left/thumbv7em-none-eabihf/release/oxicat-firmware-laelaps-leg";
 
 #[derive(clap::Args)]
 struct EmuTrotArgs {
     /// The left legs' image (`cargo build --release --features left-leg --target-dir
-    /// target/left` in firmware/laelaps-leg).
+    /// ../target/left` in firmware/laelaps-leg).
     #[arg(long, value_name = "ELF", default_value = LEFT_ELF)]
     left: PathBuf,
     /// The right legs' image (`cargo build --release` in firmware/laelaps-leg).

@@ -9,7 +9,7 @@ use oxicat_wire::{Command, DatagramHeader, EcatFrame};
 
 /// The release ELF of `firmware/<board>` that `.ci/run` builds before the tests: the file
 /// named by the environment variable `env` if set, else in `CARGO_TARGET_DIR` when the build
-/// used one, or in the firmware's own target directory. Missing: a failure under `CI`
+/// used one, or in the firmware images' shared target directory (`firmware/target`). Missing: a failure under `CI`
 /// (the image must be there), else `None` with the reason on standard error.
 #[allow(dead_code)] // not every test binary uses it
 pub fn image(board: &str, env: &str) -> Option<Vec<u8>> {
@@ -17,15 +17,13 @@ pub fn image(board: &str, env: &str) -> Option<Vec<u8>> {
 }
 
 /// [`image`] for a build with a target directory of its own, `sub` below the usual one
-/// (the left leg's build: `--target-dir <target>/left`).
+/// (the left leg's build: `--target-dir ../target/left`).
 pub fn image_in(board: &str, sub: &str, env: &str) -> Option<Vec<u8>> {
     let elf = PathBuf::from(sub).join(format!(
         "thumbv7em-none-eabihf/release/oxicat-firmware-{board}"
     ));
     let own = PathBuf::from(env!("CARGO_MANIFEST_DIR"))
-        .join("../../firmware")
-        .join(board)
-        .join("target")
+        .join("../../firmware/target")
         .join(&elf);
     let candidates: Vec<PathBuf> = match std::env::var_os(env) {
         Some(p) => vec![PathBuf::from(p)],
@@ -44,7 +42,7 @@ pub fn image_in(board: &str, sub: &str, env: &str) -> Option<Vec<u8>> {
     let msg = format!(
         "no {board} image at {} (build it: cd firmware/{board} && cargo build --release --locked{})",
         tried.join(" or "),
-        if sub.is_empty() { String::new() } else { format!(" … --target-dir target/{sub}") }
+        if sub.is_empty() { String::new() } else { format!(" … --target-dir ../target/{sub}") }
     );
     if std::env::var_os("CI").is_some() {
         panic!("{msg}");
