@@ -508,18 +508,29 @@ impl Dc {
     }
 
     /// First bit of a frame reached `port` at global time `t`.
+    #[inline(always)]
     pub fn frame_arrival(&mut self, regs: &mut [u8], port: u8, t: u64) {
-        self.ensure_init(regs);
+        if self.inited {
+            self.pulse_len = rd16(regs, 0x0982);
+        } else {
+            self.ensure_init(regs);
+        }
         if port == 0 {
             self.sof0 = Some(t);
             self.latch_pending = 0;
         } else if port < 4 && self.latch_pending & (1 << port) != 0 {
-            self.latch_pending &= !(1 << port);
-            let lt = self.local_time(t) as u32;
-            let a = 0x0900 + 4 * port as usize;
-            self.put32(a, lt);
-            self.publish_range(regs, a, a + 4);
+            self.latch_receive_time(regs, port, t);
         }
+    }
+
+    /// The receive time of the latch frame at `port` (1..3), armed by a write to 0x0900.
+    #[cold]
+    fn latch_receive_time(&mut self, regs: &mut [u8], port: u8, t: u64) {
+        self.latch_pending &= !(1 << port);
+        let lt = self.local_time(t) as u32;
+        let a = 0x0900 + 4 * port as usize;
+        self.put32(a, lt);
+        self.publish_range(regs, a, a + 4);
     }
 
     /// Refresh live registers in `addr..addr+len` before they are read at `t`.

@@ -32,7 +32,28 @@ impl Esc {
             }
             return self.forward_after_arrival(0, frame, true, None);
         }
+        if let Some(out) = self.pass_through(port, t, frame_ok) {
+            return out;
+        }
         self.forward_generic(port, frame, t, frame_ok, None)
+    }
+
+    /// The pass-through shortcut: a good frame entering port 1..3 that leaves again
+    /// without reaching the processing unit (`route`). What `forward_generic` does for it,
+    /// without its port loop: time, the SII settle, the DC arrival (the receive time
+    /// latch when one is armed for this port); no RX error to count, nothing processed,
+    /// the memo untouched (as there).
+    #[inline(always)]
+    fn pass_through(&mut self, port: u8, t: u64, frame_ok: bool) -> Option<Forward> {
+        let p = port & 3;
+        let out = self.route[p as usize];
+        if p == 0 || out == NO_ROUTE || !frame_ok {
+            return None;
+        }
+        self.now = t;
+        self.sii_settle(t);
+        self.dc.frame_arrival(&mut self.mem[..REG_END], p, t);
+        Some(Forward::Port(out))
     }
 
     /// [`Esc::forward`] with the frame's configured-address index `d` (built by the
@@ -51,6 +72,11 @@ impl Esc {
         if !d.is_active() {
             return self.forward(port, frame, t, frame_ok);
         }
+        if port == 0 && frame_ok {
+            if let Some(out) = self.pass_foreign(t, d) {
+                return out;
+            }
+        }
         if port == 0 && frame_ok && self.fused.ok {
             self.memo.clear();
             // As `forward`; the fused path declines the frame (it takes frames of one
@@ -59,7 +85,37 @@ impl Esc {
             self.dc.frame_arrival_port0(&mut self.mem[..REG_END], t);
             return self.forward_after_arrival(0, frame, true, Some(d));
         }
+        if let Some(out) = self.pass_through(port, t, frame_ok) {
+            return out;
+        }
         self.forward_generic(port, frame, t, frame_ok, Some(d))
+    }
+
+    /// The foreign-frame shortcut: a good frame entering port 0 whose datagrams are all
+    /// configured-address ones for other stations (`d` has none every ESC processes and
+    /// none for this station address or enabled alias), leaving through `route[0]`. What
+    /// the general path does for it: time, the SII settle, the DC arrival, this ESC's IRQ
+    /// bits recorded for the whole frame (`walk_dispatched` finds one run), the exit
+    /// port; nothing is processed, so the memo stays (its answers read nothing this
+    /// changes: `refresh_events` stores what the memo computes).
+    #[inline]
+    fn pass_foreign(&mut self, t: u64, d: &mut FrameDispatch) -> Option<Forward> {
+        let out = self.route[0];
+        if out == NO_ROUTE || !d.every.is_empty() {
+            return None;
+        }
+        let (station, alias_on, alias) = self.address_key();
+        if d.may_address(station) || (alias_on && d.may_address(alias)) {
+            return None;
+        }
+        self.now = t;
+        self.sii_settle(t);
+        self.dc.frame_arrival_port0(&mut self.mem[..REG_END], t);
+        let n = d.dgs.len();
+        if n > 0 {
+            self.pass_run(d, 0, n);
+        }
+        Some(Forward::Port(out))
     }
 
     /// The fused path (see `Fused`), after the frame's arrival: the checks first (no state
@@ -183,12 +239,7 @@ impl Esc {
         }
         let mut cur = port;
         for _ in 0..8 {
-            let nxt = match cur {
-                0 => 3,
-                3 => 1,
-                1 => 2,
-                _ => 0,
-            };
+            let nxt = fastpath::next_port(cur);
             if self.port_open(nxt) {
                 return Forward::Port(nxt);
             }
@@ -310,8 +361,12 @@ impl Esc {
     pub(super) fn walk_dispatched(&mut self, frame: &mut [u8], d: &mut FrameDispatch) {
         let n = d.dgs.len();
         let key = self.address_key();
-        let (mut a, a_end) = d.fp_run(key.0);
-        let (mut b, b_end) = if key.1 && key.2 != key.0 {
+        let (mut a, a_end) = if d.may_address(key.0) {
+            d.fp_run(key.0)
+        } else {
+            (0, 0)
+        };
+        let (mut b, b_end) = if key.1 && key.2 != key.0 && d.may_address(key.2) {
             d.fp_run(key.2)
         } else {
             (0, 0)

@@ -147,7 +147,7 @@ impl Esc {
         // (port 0 itself last; all closed: the frame loops back, generic path).
         let exit = [3u8, 1, 2, 0].into_iter().find(|&p| self.port_open(p));
         let n = self.plan_len as usize;
-        let mut ok = !self.fused_disabled && self.plan_ok && n > 0 && exit.is_some();
+        let mut ok = !self.fast_off && self.plan_ok && n > 0 && exit.is_some();
         let mut seen = 0u32;
         for (k, op) in self.plan[..n].iter().enumerate() {
             let i = op.sm as usize;
@@ -190,11 +190,47 @@ impl Esc {
         self.fused = f;
     }
 
-    /// Test switch: `false` forces every frame through the generic path.
-    #[cfg(test)]
-    pub(crate) fn set_fused_enabled(&mut self, on: bool) {
+    /// Rebuilds [`Esc::route`] from the open ports: the exit `forward_after_arrival`'s
+    /// port loop finds for a frame entering each port, where it finds one before the
+    /// frame would loop back through a closed port 0 into the processing unit.
+    pub(super) fn rebuild_routes(&mut self) {
+        let open = self.open_ports;
+        self.route = core::array::from_fn(|p| {
+            let mut cur = p as u8;
+            for _ in 0..8 {
+                let nxt = next_port(cur);
+                if open & (1 << nxt) != 0 {
+                    return if self.fast_off { NO_ROUTE } else { nxt };
+                }
+                if nxt == 0 {
+                    break;
+                }
+                cur = nxt;
+            }
+            NO_ROUTE
+        });
+    }
+
+    /// Reference switch for differential tests and benchmarks: with `false` every frame
+    /// takes the general path (`forward_generic`: no fused LRW path, no pass-through
+    /// shortcut for frames that only pass the ESC) and [`Esc::query_epoch`] answers
+    /// `None`, so a segment re-reads the ESC's next event and IRQ line after every hop.
+    /// The observable behaviour is the same either way; on by default.
+    pub fn set_fast_paths(&mut self, on: bool) {
         self.memo.clear();
-        self.fused_disabled = !on;
+        self.fast_off = !on;
+        self.rebuild_routes();
         self.rebuild_fused();
+    }
+}
+
+/// The port after `p` in the ESC's processing order 0 → 3 → 1 → 2 → 0.
+#[inline(always)]
+pub(super) fn next_port(p: u8) -> u8 {
+    match p {
+        0 => 3,
+        3 => 1,
+        1 => 2,
+        _ => 0,
     }
 }
