@@ -220,7 +220,8 @@ pub struct Dc {
     shadow: [u8; SHADOW_LEN],
     /// Start time as last written (0x0990).
     start_written: u64,
-    /// Pulse length in 10 ns units (copy of 0x0982).
+    /// Pulse length in 10 ns units (copy of 0x0982, refreshed by `ensure_init` before
+    /// every use).
     pulse_len: u16,
     sync: SyncUnit,
     /// Latch input levels.
@@ -498,21 +499,20 @@ impl Dc {
     /// `frame_arrival` at port 0 (the ESC's fused frame path): the same effects, inlined.
     #[inline(always)]
     pub fn frame_arrival_port0(&mut self, regs: &mut [u8], t: u64) {
-        if self.inited {
-            self.pulse_len = rd16(regs, 0x0982);
-        } else {
+        if !self.inited {
             self.ensure_init(regs);
         }
         self.sof0 = Some(t);
         self.latch_pending = 0;
     }
 
-    /// First bit of a frame reached `port` at global time `t`.
+    /// First bit of a frame reached `port` at global time `t`. (The first contact
+    /// initialises the unit; the pulse length copy is not refreshed here: every path that
+    /// reads it — `catch_up` via `advance_slow`, `before_read`, `after_read`,
+    /// `after_write` — refreshes it from 0x0982 first.)
     #[inline(always)]
     pub fn frame_arrival(&mut self, regs: &mut [u8], port: u8, t: u64) {
-        if self.inited {
-            self.pulse_len = rd16(regs, 0x0982);
-        } else {
+        if !self.inited {
             self.ensure_init(regs);
         }
         if port == 0 {

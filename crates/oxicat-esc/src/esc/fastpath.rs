@@ -53,6 +53,39 @@ pub(super) struct Fused {
     /// Working-counter increment for LRD, LWR, LRW.
     pub(super) inc: [u16; 3],
     pub(super) steps: [FusedStep; PLAN_MAX],
+    /// The last frame the fused path took (see [`FusedKey`]); a cyclic master sends the
+    /// same headers every cycle, so the frame checks reduce to one comparison.
+    pub(super) key: FusedKey,
+}
+
+/// What the fused path's frame checks depend on, and what they derived, for the last frame
+/// they accepted (with this configuration: `rebuild_fused` starts afresh). The checks read
+/// nothing but the EtherCAT header word, the datagram header's command, address and
+/// length/flags words and the frame's length, so a frame equal in those passes them with
+/// the same results.
+#[derive(Debug, Clone, Copy, Default)]
+pub(super) struct FusedKey {
+    /// Frame length (0: no frame accepted yet; a taken frame has at least 12 bytes).
+    pub(super) frame_len: usize,
+    /// Bytes 2..10 (command, index, address, length and flags) with the index masked out.
+    pub(super) dg: u64,
+    /// EtherCAT header word.
+    pub(super) ecat: u16,
+    /// Command index (0 LRD, 1 LWR, 2 LRW), datagram data length, plan window offset in
+    /// the data.
+    pub(super) cmd: u8,
+    pub(super) data_len: u16,
+    pub(super) win_off: u16,
+}
+
+impl FusedKey {
+    /// The datagram header bytes 2..10 of `head` without the index (byte 3).
+    #[inline(always)]
+    pub(super) fn dg_of(head: &[u8; 12]) -> u64 {
+        let (_, rest) = head.split_at(2);
+        let b: &[u8; 8] = rest.first_chunk().unwrap_or(&[0; 8]);
+        u64::from_le_bytes(*b) & !0xFF00
+    }
 }
 
 impl Esc {
