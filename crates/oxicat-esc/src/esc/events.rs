@@ -210,7 +210,19 @@ impl Esc {
             self.now = t;
         }
         self.sii_settle(t);
-        let dce = if self.dc.advance_quiet(t) {
+        let quiet = self.dc.advance_quiet(t);
+        if quiet && !self.fast_off {
+            // The memo's next event, when known, is the earliest of the DC edge, both
+            // watchdog deadlines and the loop revert as the state stands (the memo is
+            // cleared whenever that changes): before it, none of them is due.
+            if let Some(n) = self.memo.next_event() {
+                if n.is_none_or(|n| t < n) {
+                    self.events_dirty = true;
+                    return EscEvents::default();
+                }
+            }
+        }
+        let dce = if quiet {
             crate::dc::DcEvents::default()
         } else {
             // The DC unit may change its status bits (AL event request bits 2/3).
