@@ -10,13 +10,21 @@
 //! 300; (Ir(300) - Ir(100)) / (200 * 256).
 //!
 //! Figures (2-core shared box, load average 4-7 while measuring; wall-clock is noisy, see
-//! the crate README "Performance" for all runs):
+//! the crate README "Performance" for all runs). Up to the fused path the ESCs were the
+//! end of the line (outbound pass only); from "honest line" on, a line in OP with the way
+//! back, Ir/ESC/dg for the chain of 256 (chains 1 / 16 in brackets):
 //!
 //! | version                        | Ir/ESC/dg | ns/ESC/dg 1 / 16 / 256, best | median of 3        |
 //! |--------------------------------|-----------|------------------------------|--------------------|
 //! | before (generic datagram path) | 592       | ~50 (previous engineer)      |                    |
 //! | logical fast path + plan       | 495       | 43.8 / 53.6 / 47.3           | 54.6 / 55.0 / 71.3 |
 //! | fused path from `forward`      | 262       | 19.3 / 21.2 / 22.3           | 22.2 / 24.1 / 27.4 |
+//! | honest line (main, A/B below)  | 336 (302 / 334) | 37.6 / 34.6 / 37.2     | 38.7 / 37.7 / 38.8 |
+//! | pass-through, `FusedKey`       | 270 (287 / 272) | 31.2 / 26.6 / 36.4     | 36.6 / 29.0 / 36.9 |
+//!
+//! (The last two rows: A/B in one session, both bench binaries alternately, three runs
+//! each, load average 5.7-6.1 on the 2 cores, so about twice the quiet-box figures; the
+//! same code measured 18.5 / 18.4 / 20.6 ns on a quiet box before this change.)
 
 use criterion::{black_box, criterion_group, criterion_main, BenchmarkId, Criterion, Throughput};
 

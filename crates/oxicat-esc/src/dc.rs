@@ -220,7 +220,8 @@ pub struct Dc {
     shadow: [u8; SHADOW_LEN],
     /// Start time as last written (0x0990).
     start_written: u64,
-    /// Pulse length in 10 ns units (copy of 0x0982).
+    /// Pulse length in 10 ns units (copy of 0x0982, refreshed by `ensure_init` before
+    /// every use).
     pulse_len: u16,
     sync: SyncUnit,
     /// Latch input levels.
@@ -498,28 +499,38 @@ impl Dc {
     /// `frame_arrival` at port 0 (the ESC's fused frame path): the same effects, inlined.
     #[inline(always)]
     pub fn frame_arrival_port0(&mut self, regs: &mut [u8], t: u64) {
-        if self.inited {
-            self.pulse_len = rd16(regs, 0x0982);
-        } else {
+        if !self.inited {
             self.ensure_init(regs);
         }
         self.sof0 = Some(t);
         self.latch_pending = 0;
     }
 
-    /// First bit of a frame reached `port` at global time `t`.
+    /// First bit of a frame reached `port` at global time `t`. (The first contact
+    /// initialises the unit; the pulse length copy is not refreshed here: every path that
+    /// reads it — `catch_up` via `advance_slow`, `before_read`, `after_read`,
+    /// `after_write` — refreshes it from 0x0982 first.)
+    #[inline(always)]
     pub fn frame_arrival(&mut self, regs: &mut [u8], port: u8, t: u64) {
-        self.ensure_init(regs);
+        if !self.inited {
+            self.ensure_init(regs);
+        }
         if port == 0 {
             self.sof0 = Some(t);
             self.latch_pending = 0;
         } else if port < 4 && self.latch_pending & (1 << port) != 0 {
-            self.latch_pending &= !(1 << port);
-            let lt = self.local_time(t) as u32;
-            let a = 0x0900 + 4 * port as usize;
-            self.put32(a, lt);
-            self.publish_range(regs, a, a + 4);
+            self.latch_receive_time(regs, port, t);
         }
+    }
+
+    /// The receive time of the latch frame at `port` (1..3), armed by a write to 0x0900.
+    #[cold]
+    fn latch_receive_time(&mut self, regs: &mut [u8], port: u8, t: u64) {
+        self.latch_pending &= !(1 << port);
+        let lt = self.local_time(t) as u32;
+        let a = 0x0900 + 4 * port as usize;
+        self.put32(a, lt);
+        self.publish_range(regs, a, a + 4);
     }
 
     /// Refresh live registers in `addr..addr+len` before they are read at `t`.

@@ -52,6 +52,11 @@ pub struct FrameDispatch {
     pub(crate) every: Vec<u16>,
     /// (station address, index) of the FPRD/FPWR/FPRW datagrams, sorted.
     pub(crate) fp: Vec<(u16, u16)>,
+    /// Lowest and highest station address in `fp` (`fp_lo > fp_hi` when empty) and a
+    /// 256-bit set of their low bytes: [`FrameDispatch::may_address`] in O(1).
+    fp_lo: u16,
+    fp_hi: u16,
+    fp_bits: [u64; 4],
     /// Per-bit difference counts of the deferred IRQ ranges (`dgs.len() + 1` rows).
     irq_diff: Vec<[i32; 16]>,
     /// Some range was recorded since the last build.
@@ -96,6 +101,12 @@ impl FrameDispatch {
             Ok(())
         });
         self.fp.sort_unstable();
+        self.fp_bits = [0; 4];
+        for &(a, _) in &self.fp {
+            self.fp_bits[usize::from(a >> 6 & 3)] |= 1 << (a & 63);
+        }
+        self.fp_lo = self.fp.first().map_or(1, |f| f.0);
+        self.fp_hi = self.fp.last().map_or(0, |f| f.0);
         if self.irq_diff.len() < self.dgs.len() + 1 {
             self.irq_diff.resize(self.dgs.len() + 1, [0; 16]);
         }
@@ -116,6 +127,14 @@ impl FrameDispatch {
     /// True when the frame had no datagram.
     pub fn is_empty(&self) -> bool {
         self.dgs.is_empty()
+    }
+
+    /// False when no FPRD/FPWR/FPRW of the frame is addressed to `adp` (true: maybe).
+    #[inline(always)]
+    pub(crate) fn may_address(&self, adp: u16) -> bool {
+        adp >= self.fp_lo
+            && adp <= self.fp_hi
+            && self.fp_bits[usize::from(adp >> 6 & 3)] & (1 << (adp & 63)) != 0
     }
 
     /// The run of `fp` addressed to `adp`: `(start, end)` indices.

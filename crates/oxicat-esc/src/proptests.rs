@@ -6,7 +6,8 @@ use alloc::vec::Vec;
 use oxicat_wire::{Command, DatagramHeader, EcatFrame};
 use proptest::prelude::*;
 
-use crate::tests::{dg, esc, fmmu, fpwr, frame, sm};
+use crate::tests::{dg, eeprom, esc, fmmu, fpwr, frame, run_at, sm};
+use crate::{Esc, EscConfig, FrameDispatch};
 
 proptest! {
     /// The 3-buffer consumer (PDI) only ever sees a buffer that was written completely
@@ -185,11 +186,26 @@ enum Op {
     PdiWrite(u16, Vec<u8>),
     /// ECAT FPWR of the event mask (IRQ field contents).
     Mask(u16),
-    /// Link change on port 1.
-    Link(bool),
+    /// Link change on a port.
+    Link(u8, bool),
     /// Time passes.
     Advance(u64),
+    /// A frame (an FPRD of AL status with an IRQ field) entering a port, good FCS or not.
+    Pass(u8, u16, bool),
+    /// A frame of configured-address datagrams (FPRD of AL status) through
+    /// `forward_dispatched` at port 0: station addresses from [`STATIONS`] (this ESC's,
+    /// its alias, others), optionally an APRD behind them (a datagram every ESC
+    /// processes), good FCS or not.
+    Foreign(Vec<u8>, bool, bool),
+    /// ECAT write of the DL control loop bits (0x0101) and alias enable (0x0103).
+    DlControl(u8, bool),
+    /// ECAT write of port 0 receive time: arms the receive-time latch of every port.
+    ArmLatch,
 }
+
+/// Station addresses of the `Foreign` frames: the ESC's station address (set up), its
+/// alias (from the EEPROM), two others.
+const STATIONS: [u16; 4] = [0x1001, 0x1234, 0x1002, 0x2001];
 
 fn arb_op() -> impl Strategy<Value = Op> {
     prop_oneof![
@@ -201,26 +217,49 @@ fn arb_op() -> impl Strategy<Value = Op> {
         3 => (0u16..0x280, proptest::collection::vec(any::<u8>(), 1..48))
             .prop_map(|(a, d)| Op::PdiWrite(a, d)),
         1 => any::<u16>().prop_map(Op::Mask),
-        1 => any::<bool>().prop_map(Op::Link),
+        1 => (1u8..4, any::<bool>()).prop_map(|(p, up)| Op::Link(p, up)),
         1 => (0u64..2_000_000).prop_map(Op::Advance),
+        4 => (0u8..6, prop_oneof![3 => Just(0u16), 1 => any::<u16>()], proptest::bool::weighted(0.9))
+            .prop_map(|(p, irq, ok)| Op::Pass(p, irq, ok)),
+        4 => (proptest::collection::vec(prop_oneof![6 => 2u8..4, 1 => 0u8..2], 1..6),
+              proptest::bool::weighted(0.1), proptest::bool::weighted(0.9))
+            .prop_map(|(a, every, ok)| Op::Foreign(a, every, ok)),
+        1 => (any::<u8>(), any::<bool>()).prop_map(|(l, a)| Op::DlControl(l, a)),
+        1 => Just(Op::ArmLatch),
     ]
 }
 
 proptest! {
     #![proptest_config(ProptestConfig::with_cases(600))]
 
-    /// The fused LRW path and the generic path leave identical frames, memory, registers
-    /// and events for random SM/FMMU configurations and random logical frames.
+    /// The fast paths — the fused LRW path, the pass-through of frames entering ports
+    /// 1..3 and the foreign-frame pass of dispatched frames with no datagram for this ESC —
+    /// and the general path leave identical frames, exit ports, memory, registers and
+    /// events for random SM/FMMU configurations, two- and four-port ESCs, random logical
+    /// frames, frames entering every port, dispatched frames of configured-address
+    /// datagrams, link and loop-control changes, armed receive-time latches and time. And
+    /// while [`Esc::query_epoch`] stays the same, `next_event` and `irq_line` answer the
+    /// same (the segment skips reading them then).
     #[test]
-    fn fused_path_equals_generic(
+    fn fast_paths_equal_general(
         sms in proptest::collection::vec(arb_sm(), 1..5),
         fmmus in proptest::collection::vec(arb_fmmu(), 1..5),
         fmmus_per_sm in proptest::bool::weighted(0.8),
+        four_ports in any::<bool>(),
         ops in proptest::collection::vec(arb_op(), 1..40),
     ) {
-        let mut a = esc();
-        let mut b = esc();
-        b.set_fused_enabled(false);
+        let mk = || {
+            let mut c = EscConfig::et1100();
+            if four_ports {
+                c.port_descriptor = 0xFF;
+            }
+            let mut e = Esc::new(c, eeprom(0x0005, STATIONS[1]));
+            fpwr(&mut e, 0x0010, &STATIONS[0].to_le_bytes());
+            e
+        };
+        let mut a = mk();
+        let mut b = mk();
+        b.set_fast_paths(false);
         let sm_start = |n: usize| match sms[n].0 {
             Some(u) => 0x1000 + 16 * u,
             None => 0x1000 + 0x80 * n as u16,
@@ -255,6 +294,9 @@ proptest! {
             }
         }
         let mut t = 0u64;
+        let mut da = FrameDispatch::new();
+        let mut db = FrameDispatch::new();
+        let mut seen: Option<(Option<u64>, Option<u64>, bool)> = None;
         for op in ops {
             t += 1000;
             match op {
@@ -294,9 +336,50 @@ proptest! {
                 Op::Mask(m) => {
                     prop_assert_eq!(fpwr(&mut a, 0x0200, &m.to_le_bytes()), fpwr(&mut b, 0x0200, &m.to_le_bytes()));
                 }
-                Op::Link(up) => {
-                    a.set_link(1, up);
-                    b.set_link(1, up);
+                Op::Link(p, up) => {
+                    a.set_link(p, up);
+                    b.set_link(p, up);
+                }
+                Op::Pass(port, irq, ok) => {
+                    let mut h = DatagramHeader::physical(Command::Fprd, 0, STATIONS[2], 0x0130, 2);
+                    h.irq = irq;
+                    let mut f = frame(&[(h, &[0, 0])]);
+                    let mut g = f.clone();
+                    prop_assert_eq!(a.forward(port, &mut f, t, ok), b.forward(port, &mut g, t, ok));
+                    prop_assert_eq!(f, g);
+                }
+                Op::Foreign(who, every, ok) => {
+                    let mut dgs: Vec<(DatagramHeader, &[u8])> = who
+                        .iter()
+                        .map(|&k| {
+                            let h = DatagramHeader::physical(Command::Fprd, 0, STATIONS[k as usize], 0x0130, 2);
+                            (h, &[0u8, 0][..])
+                        })
+                        .collect();
+                    if every {
+                        dgs.push((DatagramHeader::physical(Command::Aprd, 0, 0, 0x0130, 2), &[0, 0]));
+                    }
+                    let mut f = frame(&dgs);
+                    let mut g = f.clone();
+                    prop_assert!(da.build(&mut f));
+                    prop_assert!(db.build(&mut g));
+                    let ra = a.forward_dispatched(0, &mut f, t, ok, &mut da);
+                    let rb = b.forward_dispatched(0, &mut g, t, ok, &mut db);
+                    da.apply_irq(&mut f);
+                    db.apply_irq(&mut g);
+                    prop_assert_eq!(ra, rb);
+                    prop_assert_eq!(f, g);
+                }
+                Op::DlControl(lc, alias) => {
+                    for e in [&mut a, &mut b] {
+                        run_at(e, t, Command::Fpwr, STATIONS[0], 0x0101, &[lc]);
+                        run_at(e, t, Command::Fpwr, STATIONS[0], 0x0103, &[u8::from(alias)]);
+                    }
+                }
+                Op::ArmLatch => {
+                    for e in [&mut a, &mut b] {
+                        run_at(e, t, Command::Fpwr, STATIONS[0], 0x0900, &[0; 4]);
+                    }
                 }
                 Op::Advance(dt) => {
                     t += dt;
@@ -309,6 +392,16 @@ proptest! {
             prop_assert_eq!(a.irq_line(), b.irq_line());
             prop_assert_eq!(a.digital_outputs(), b.digital_outputs());
             prop_assert_eq!(a.next_event(), b.next_event());
+            // The epoch: unchanged means the same answers as when it was last seen.
+            let now = (a.query_epoch(), a.next_event(), a.irq_line());
+            prop_assert!(now.0.is_some());
+            prop_assert_eq!(b.query_epoch(), None);
+            if let Some(was) = seen {
+                if was.0 == now.0 {
+                    prop_assert_eq!((was.1, was.2), (now.1, now.2), "same epoch, other answers");
+                }
+            }
+            seen = Some(now);
         }
         prop_assert_eq!(b.fused_hits, 0);
     }

@@ -838,7 +838,7 @@ fn dispatched_walk_defers_foreign_irqs_and_follows_an_address_change() {
 fn fused_path_taken_for_the_lrw_benchmark_shape() {
     let mk = |fused: bool| {
         let mut e = esc();
-        e.set_fused_enabled(fused);
+        e.set_fast_paths(fused);
         sm(&mut e, 2, 0x1000, 32, 0x64, 1);
         sm(&mut e, 3, 0x1100, 32, 0x20, 1);
         fmmu(&mut e, 0, 0x0001_0000, 32, 0, 7, 0x1000, 0, 2);

@@ -34,6 +34,13 @@ pub trait SegmentEsc: Send {
     fn next_event(&self) -> Option<u64>;
     /// Level of the PDI interrupt line.
     fn irq_line(&self) -> bool;
+    /// A number that changes whenever [`next_event`](Self::next_event) and
+    /// [`irq_line`](Self::irq_line) may answer differently; `None` (the default): unknown,
+    /// the segment asks both after every hop of a frame. With `Some`, a hop that leaves it
+    /// as the previous hop at this ESC left it skips both (see `oxicat_esc::Esc::query_epoch`).
+    fn query_epoch(&self) -> Option<u64> {
+        None
+    }
 }
 
 impl SegmentEsc for oxicat_esc::Esc {
@@ -72,5 +79,10 @@ impl SegmentEsc for oxicat_esc::Esc {
 
     fn irq_line(&self) -> bool {
         oxicat_esc::Esc::irq_line(self)
+    }
+
+    #[inline]
+    fn query_epoch(&self) -> Option<u64> {
+        oxicat_esc::Esc::query_epoch(self)
     }
 }

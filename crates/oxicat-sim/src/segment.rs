@@ -144,6 +144,9 @@ struct Slot<E> {
     /// The ESC's `next_event()` and the node's [`wakeup`](Slot::wakeup) as last asked
     /// (valid inside one [`Segment::run_events_until`] pass; see there).
     due: Due,
+    /// The ESC's [`SegmentEsc::query_epoch`] after the last hop of a frame here, when that
+    /// hop had read its next event and IRQ line (see `Segment::walk_through`).
+    hop_epoch: Option<u64>,
 }
 
 /// A slot's next times as the scheduler last read them.
@@ -324,6 +327,7 @@ impl<E: SegmentEsc> Segment<E> {
             last_sync1: None,
             last_wake: None,
             due: Due::default(),
+            hop_epoch: None,
         });
         self.refresh_horizon();
         id
@@ -875,19 +879,23 @@ impl<E: SegmentEsc> Segment<E> {
         let mut t = t0 + self.master_link_delay_ns;
         let mut ok = true;
         for _ in 0..MAX_HOPS {
-            if let Some(k) = self
-                .corruptions
-                .iter()
-                .position(|c| c.slave == at.0 && c.port == at.1)
-            {
-                let c = self.corruptions.remove(k);
-                if !ecat.is_empty() {
-                    let o = c.offset % ecat.len();
-                    ecat[o] ^= 0xFF;
+            if !self.corruptions.is_empty() {
+                if let Some(k) = self
+                    .corruptions
+                    .iter()
+                    .position(|c| c.slave == at.0 && c.port == at.1)
+                {
+                    let c = self.corruptions.remove(k);
+                    if !ecat.is_empty() {
+                        let o = c.offset % ecat.len();
+                        ecat[o] ^= 0xFF;
+                    }
+                    ok = false;
                 }
-                ok = false;
             }
-            self.run_events_until(t);
+            if t >= self.horizon {
+                self.run_events_until(t);
+            }
             let (s, p) = at;
             let slot = &mut self.slots[s];
             // Keep the ESC's own timeline in step so its events come before the frame.
@@ -895,14 +903,25 @@ impl<E: SegmentEsc> Segment<E> {
                 Some(d) => slot.esc.forward_dispatched(p, ecat, t, ok, d),
                 None => slot.esc.forward(p, ecat, t, ok),
             };
-            if let Some(ne) = slot.esc.next_event() {
-                self.horizon = self.horizon.min(ne);
-            }
-            if self.check_irq(s, t) {
-                // The node handled the interrupt: its next times may have moved.
-                if let Some(ne) = self.slots[s].next_due() {
+            // The ESC's next event and IRQ line, unless its query epoch is the one the
+            // last hop here left: then neither can have changed since that hop folded
+            // the next event into the horizon (which only ever gets recomputed from
+            // every slot's current answer) and set `irq` to the line's level (which
+            // every later `check_irq` sets to the same level), so both reads would be
+            // no-ops. A frame that only passes an ESC leaves its epoch alone.
+            let epoch = slot.esc.query_epoch();
+            if epoch.is_none() || epoch != slot.hop_epoch {
+                if let Some(ne) = slot.esc.next_event() {
                     self.horizon = self.horizon.min(ne);
                 }
+                if self.check_irq(s, t) {
+                    // The node handled the interrupt: its next times may have moved.
+                    if let Some(ne) = self.slots[s].next_due() {
+                        self.horizon = self.horizon.min(ne);
+                    }
+                }
+                let slot = &mut self.slots[s];
+                slot.hop_epoch = slot.esc.query_epoch();
             }
             let Some(out) = out else {
                 return (FrameFate::DroppedByEsc(s), t);

@@ -4,7 +4,10 @@
 //! alias, loop-control and mask writes in the same frame as configured-address datagrams
 //! for those stations, malformed tails), a segment with dispatch and one without return
 //! the same frames (bytes, working counters, IRQ fields), fates and times, and leave every
-//! ESC with the same registers and process RAM.
+//! ESC with the same registers and process RAM. Both against the reference: the per-ESC
+//! walk with the ESCs' fast paths off (`Esc::set_fast_paths(false)`: no fused path, no
+//! pass-through shortcuts, every hop re-reads next event and IRQ line), which also gives
+//! the same events (IRQ edges, SYNC, watchdogs) at the same times.
 
 use oxicat_esc::{Esc, EscConfig};
 use oxicat_sim::segment::Segment;
@@ -209,15 +212,23 @@ fn eeprom(s: &EscSpec) -> Vec<u8> {
 /// Builds the segment of `t` and sets it up through frames (identical for both walks):
 /// station addresses, alias enables, IRQ masks and an FMMU over process RAM.
 fn build(t: &Topo, dispatch: bool) -> Segment<Esc> {
+    build_with(t, dispatch, true)
+}
+
+/// [`build`] with the ESCs' fast paths on or off (the reference), event logging on.
+fn build_with(t: &Topo, dispatch: bool, fast: bool) -> Segment<Esc> {
     let mut seg = Segment::<Esc>::new();
     seg.set_configured_dispatch(dispatch);
+    seg.log_events(true);
     let n = t.escs.len();
     for s in &t.escs {
         let mut c = EscConfig::et1100();
         if s.four_ports {
             c.port_descriptor = 0xFF;
         }
-        seg.add_unwired(Esc::new(c, eeprom(s)));
+        let mut e = Esc::new(c, eeprom(s));
+        e.set_fast_paths(fast);
+        seg.add_unwired(e);
     }
     let mut prev = 0;
     for i in 1..n {
@@ -278,22 +289,32 @@ proptest! {
     fn dispatch_matches_the_per_esc_walk(t in topo(), frames in prop::collection::vec(frame(), 1..6)) {
         let mut new = build(&t, true);
         let mut old = build(&t, false);
-        prop_assert_eq!(state(&new), state(&old));
+        let mut reference = build_with(&t, false, false);
+        prop_assert_eq!(state(&new), state(&reference));
+        prop_assert_eq!(state(&old), state(&reference));
+        prop_assert_eq!(new.take_events(), reference.take_events());
+        prop_assert_eq!(old.take_events(), reference.take_events());
         for f in &frames {
             new.advance_by(f.gap_ns);
             old.advance_by(f.gap_ns);
+            reference.advance_by(f.gap_ns);
             let bytes = ethernet(&f.dgs, f.cut);
-            let a = new.exchange(&bytes);
-            let b = old.exchange(&bytes);
-            prop_assert_eq!(&a, &b);
-            prop_assert_eq!(new.last_fate(), old.last_fate());
-            prop_assert_eq!(new.now(), old.now());
-            let (sa, sb) = (state(&new), state(&old));
-            for (i, (x, y)) in sa.iter().zip(&sb).enumerate() {
-                if let Some(k) = x.iter().zip(y).position(|(p, q)| p != q) {
-                    prop_assert!(false, "ESC {} differs at 0x{:04X}: {:#04x} vs {:#04x}", i, k, x[k], y[k]);
+            let r = reference.exchange(&bytes);
+            for seg in [&mut new, &mut old] {
+                let a = seg.exchange(&bytes);
+                prop_assert_eq!(&a, &r);
+                prop_assert_eq!(seg.last_fate(), reference.last_fate());
+                prop_assert_eq!(seg.now(), reference.now());
+                let (sa, sb) = (state(seg), state(&reference));
+                for (i, (x, y)) in sa.iter().zip(&sb).enumerate() {
+                    if let Some(k) = x.iter().zip(y).position(|(p, q)| p != q) {
+                        prop_assert!(false, "ESC {} differs at 0x{:04X}: {:#04x} vs {:#04x}", i, k, x[k], y[k]);
+                    }
                 }
             }
+            let events = reference.take_events();
+            prop_assert_eq!(new.take_events(), events.clone());
+            prop_assert_eq!(old.take_events(), events);
         }
     }
 }

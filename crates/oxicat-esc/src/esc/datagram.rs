@@ -19,6 +19,17 @@ impl Esc {
     /// port the frame leaves through or `Dropped` (circulating frame rule).
     #[inline]
     pub fn forward(&mut self, port: u8, frame: &mut [u8], t: u64, frame_ok: bool) -> Forward {
+        // The pass-through shortcut first, inlined into the caller: on a line every frame
+        // passes every ESC but the last once without being processed (the way back).
+        if let Some(out) = self.pass_through(port, t, frame_ok) {
+            return out;
+        }
+        self.forward_processed(port, frame, t, frame_ok)
+    }
+
+    /// [`Esc::forward`] for a frame the pass-through shortcut declined: the fused path for
+    /// a frame entering port 0, the general path otherwise.
+    fn forward_processed(&mut self, port: u8, frame: &mut [u8], t: u64, frame_ok: bool) -> Forward {
         // The memo is cleared where the frame is processed (`process_frame`, the fused
         // path): a frame that only passes (arriving at port 1..3 and leaving without a
         // visit to the processing unit) changes the SII settle, a DC receive time and the
@@ -33,6 +44,24 @@ impl Esc {
             return self.forward_after_arrival(0, frame, true, None);
         }
         self.forward_generic(port, frame, t, frame_ok, None)
+    }
+
+    /// The pass-through shortcut: a good frame entering port 1..3 that leaves again
+    /// without reaching the processing unit (`route`). What `forward_generic` does for it,
+    /// without its port loop: time, the SII settle, the DC arrival (the receive time
+    /// latch when one is armed for this port); no RX error to count, nothing processed,
+    /// the memo untouched (as there).
+    #[inline(always)]
+    fn pass_through(&mut self, port: u8, t: u64, frame_ok: bool) -> Option<Forward> {
+        let p = port & 3;
+        let out = self.route[p as usize];
+        if p == 0 || out == NO_ROUTE || !frame_ok {
+            return None;
+        }
+        self.now = t;
+        self.sii_settle(t);
+        self.dc.frame_arrival(&mut self.mem[..REG_END], p, t);
+        Some(Forward::Port(out))
     }
 
     /// [`Esc::forward`] with the frame's configured-address index `d` (built by the
@@ -51,6 +80,27 @@ impl Esc {
         if !d.is_active() {
             return self.forward(port, frame, t, frame_ok);
         }
+        if let Some(out) = self.pass_through(port, t, frame_ok) {
+            return out;
+        }
+        self.forward_dispatched_processed(port, frame, t, frame_ok, d)
+    }
+
+    /// [`Esc::forward_dispatched`] for an active index and a frame the pass-through
+    /// shortcut declined.
+    fn forward_dispatched_processed(
+        &mut self,
+        port: u8,
+        frame: &mut [u8],
+        t: u64,
+        frame_ok: bool,
+        d: &mut FrameDispatch,
+    ) -> Forward {
+        if port == 0 && frame_ok {
+            if let Some(out) = self.pass_foreign(t, d) {
+                return out;
+            }
+        }
         if port == 0 && frame_ok && self.fused.ok {
             self.memo.clear();
             // As `forward`; the fused path declines the frame (it takes frames of one
@@ -62,6 +112,33 @@ impl Esc {
         self.forward_generic(port, frame, t, frame_ok, Some(d))
     }
 
+    /// The foreign-frame shortcut: a good frame entering port 0 whose datagrams are all
+    /// configured-address ones for other stations (`d` has none every ESC processes and
+    /// none for this station address or enabled alias), leaving through `route[0]`. What
+    /// the general path does for it: time, the SII settle, the DC arrival, this ESC's IRQ
+    /// bits recorded for the whole frame (`walk_dispatched` finds one run), the exit
+    /// port; nothing is processed, so the memo stays (its answers read nothing this
+    /// changes: `refresh_events` stores what the memo computes).
+    #[inline(always)]
+    fn pass_foreign(&mut self, t: u64, d: &mut FrameDispatch) -> Option<Forward> {
+        let out = self.route[0];
+        if out == NO_ROUTE || !d.every.is_empty() {
+            return None;
+        }
+        let (station, alias_on, alias) = self.address_key();
+        if d.may_address(station) || (alias_on && d.may_address(alias)) {
+            return None;
+        }
+        self.now = t;
+        self.sii_settle(t);
+        self.dc.frame_arrival_port0(&mut self.mem[..REG_END], t);
+        let n = d.dgs.len();
+        if n > 0 {
+            self.pass_run(d, 0, n);
+        }
+        Some(Forward::Port(out))
+    }
+
     /// The fused path (see `Fused`), after the frame's arrival: the checks first (no state
     /// touched when they fail and the generic path takes over), then the plan steps with
     /// the end-of-frame commit of each written SM, IRQ and working counter, exit port.
@@ -70,30 +147,49 @@ impl Esc {
     pub(super) fn process_fused(&mut self, frame: &mut [u8], t: u64) -> Option<Forward> {
         // The frame header and the first datagram's header through wire's views, over a
         // fixed-size copy of the first 12 bytes so that every field read is one load with
-        // no bounds check left.
+        // no bounds check left; the checks only when the headers differ from the last
+        // frame taken (`FusedKey`).
         let dg_at = ECAT_HEADER_LEN;
         let head: &[u8; ECAT_HEADER_LEN + DG_HEADER_LEN] = frame.first_chunk()?;
-        let f = view::Frame::new_unchecked(&head[..]);
-        let d = view::Datagram::new_unchecked(&head[dg_at..]);
-        let cmd = d.command_raw();
-        let len = d.data_len();
-        // Frame end (header length); the single datagram must fit in it.
-        let end = f.end();
-        let dg_end = dg_at + DG_HEADER_LEN + len + 2;
-        // One logical datagram (no more-follows) in a datagram frame.
-        if !f.is_datagrams()
-            || cmd.wrapping_sub(CMD_LRD) > CMD_LRW - CMD_LRD
-            || d.more_follows()
-            || dg_end > end
-            || end > frame.len()
-        {
-            return None;
-        }
-        let ds = u64::from(d.address());
-        let (lo, hi) = (self.fused.lo, self.fused.hi);
-        if ds > lo || hi > ds + len as u64 {
-            return None;
-        }
+        let ecat = u16::from_le_bytes([head[0], head[1]]);
+        let dgk = fastpath::FusedKey::dg_of(head);
+        let k = self.fused.key;
+        let (c, len, woff) = if k.frame_len == frame.len() && k.dg == dgk && k.ecat == ecat {
+            (k.cmd as usize, k.data_len as usize, k.win_off as usize)
+        } else {
+            let f = view::Frame::new_unchecked(&head[..]);
+            let d = view::Datagram::new_unchecked(&head[dg_at..]);
+            let cmd = d.command_raw();
+            let len = d.data_len();
+            // Frame end (header length); the single datagram must fit in it.
+            let end = f.end();
+            let dg_end = dg_at + DG_HEADER_LEN + len + 2;
+            // One logical datagram (no more-follows) in a datagram frame.
+            if !f.is_datagrams()
+                || cmd.wrapping_sub(CMD_LRD) > CMD_LRW - CMD_LRD
+                || d.more_follows()
+                || dg_end > end
+                || end > frame.len()
+            {
+                return None;
+            }
+            let ds = u64::from(d.address());
+            let (lo, hi) = (self.fused.lo, self.fused.hi);
+            if ds > lo || hi > ds + len as u64 {
+                return None;
+            }
+            // The window offset fits: `hi - ds <= len` < 2^11.
+            let woff = (lo - ds) as usize;
+            self.fused.key = fastpath::FusedKey {
+                frame_len: frame.len(),
+                dg: dgk,
+                ecat,
+                cmd: cmd - CMD_LRD,
+                data_len: len as u16,
+                win_off: woff as u16,
+            };
+            ((cmd - CMD_LRD) as usize, len, woff)
+        };
         if self.events_dirty && self.ecat_mask != 0 {
             self.refresh_events();
         }
@@ -103,15 +199,14 @@ impl Esc {
         }
         let irq = self.ecat_irq;
         // The plan window in the frame (inside the datagram data, checked above).
-        let wstart = ECAT_HEADER_LEN + DG_HEADER_LEN + (lo - ds) as usize;
-        let win = frame.get_mut(wstart..wstart + (hi - lo) as usize)?;
+        let wstart = ECAT_HEADER_LEN + DG_HEADER_LEN + woff;
+        let win = frame.get_mut(wstart..wstart + (self.fused.hi - self.fused.lo) as usize)?;
         // Registers (SM status, watchdog status) and process RAM (the SM buffers, which
         // the fused path requires to lie at or above `REG_END`).
         let (regs, ram) = self.mem.split_at_mut(REG_END);
         let regs: &mut [u8; REG_END] = regs.try_into().ok()?;
         // The steps this command runs (reads come first, then writes): one loop.
-        let c = (cmd - CMD_LRD) as usize;
-        let (from_step, to_step) = self.fused.range[c];
+        let (from_step, to_step) = *self.fused.range.get(c)?;
         for st in self.fused.steps.get(from_step as usize..to_step as usize)? {
             let i = st.sm as usize & 15;
             let sm = &mut self.sms[i];
@@ -134,7 +229,7 @@ impl Esc {
                 copy_small(&mut win[o..o + l], &ram[from..from + l]);
             }
         }
-        let inc = self.fused.inc[(cmd - CMD_LRD) as usize];
+        let inc = *self.fused.inc.get(c)?;
         // Some step ran exactly when the working counter counts.
         self.events_dirty |= inc != 0;
         // IRQ through a view of the fixed-size header; the working counter where the
@@ -183,12 +278,7 @@ impl Esc {
         }
         let mut cur = port;
         for _ in 0..8 {
-            let nxt = match cur {
-                0 => 3,
-                3 => 1,
-                1 => 2,
-                _ => 0,
-            };
+            let nxt = fastpath::next_port(cur);
             if self.port_open(nxt) {
                 return Forward::Port(nxt);
             }
@@ -310,8 +400,12 @@ impl Esc {
     pub(super) fn walk_dispatched(&mut self, frame: &mut [u8], d: &mut FrameDispatch) {
         let n = d.dgs.len();
         let key = self.address_key();
-        let (mut a, a_end) = d.fp_run(key.0);
-        let (mut b, b_end) = if key.1 && key.2 != key.0 {
+        let (mut a, a_end) = if d.may_address(key.0) {
+            d.fp_run(key.0)
+        } else {
+            (0, 0)
+        };
+        let (mut b, b_end) = if key.1 && key.2 != key.0 && d.may_address(key.2) {
             d.fp_run(key.2)
         } else {
             (0, 0)

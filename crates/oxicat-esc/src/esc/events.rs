@@ -22,6 +22,9 @@ pub(super) struct QueryMemo {
     pub(super) next_state: AtomicU8,
     pub(super) next_lo: AtomicU32,
     pub(super) next_hi: AtomicU32,
+    /// Bumped by every [`QueryMemo::clear`]: while it stays the same, the memo's answers
+    /// stay valid once computed ([`Esc::query_epoch`]).
+    pub(super) epoch: u64,
 }
 
 impl QueryMemo {
@@ -67,6 +70,7 @@ impl QueryMemo {
     pub(super) fn clear(&mut self) {
         *self.ecat.get_mut() = 0;
         *self.next_state.get_mut() = 0;
+        self.epoch = self.epoch.wrapping_add(1);
     }
 }
 
@@ -82,6 +86,7 @@ impl Clone for QueryMemo {
             next_state,
             next_lo: copy(&self.next_lo),
             next_hi: copy(&self.next_hi),
+            epoch: self.epoch,
         }
     }
 }
@@ -91,6 +96,7 @@ impl Esc {
         self.open_ports = (0..4u8)
             .filter(|&p| self.compute_port_open(p))
             .fold(0, |m, p| m | (1 << p));
+        self.rebuild_routes();
         self.rebuild_fused();
         let mut s: u16 = 0;
         if sii::read_ctl(&self.mem) & sii::CTL_NOT_LOADED == 0 {
@@ -204,7 +210,19 @@ impl Esc {
             self.now = t;
         }
         self.sii_settle(t);
-        let dce = if self.dc.advance_quiet(t) {
+        let quiet = self.dc.advance_quiet(t);
+        if quiet && !self.fast_off {
+            // The memo's next event, when known, is the earliest of the DC edge, both
+            // watchdog deadlines and the loop revert as the state stands (the memo is
+            // cleared whenever that changes): before it, none of them is due.
+            if let Some(n) = self.memo.next_event() {
+                if n.is_none_or(|n| t < n) {
+                    self.events_dirty = true;
+                    return EscEvents::default();
+                }
+            }
+        }
+        let dce = if quiet {
             crate::dc::DcEvents::default()
         } else {
             // The DC unit may change its status bits (AL event request bits 2/3).
@@ -293,6 +311,16 @@ impl Esc {
     /// ECAT event request 0x0210 (what is ORed into datagram IRQ fields, before the mask).
     pub fn ecat_event_request(&self) -> u16 {
         self.events_now().0
+    }
+
+    /// A number that changes whenever the answers of [`next_event`](Self::next_event) and
+    /// [`irq_line`](Self::irq_line) may change (the query memo's generation: every entry
+    /// point that can change them clears the memo). A caller that read both at epoch `e`
+    /// may skip reading them again while the epoch is still `e` (the segment does after
+    /// each hop of a frame). `None` with the fast paths off ([`Esc::set_fast_paths`]).
+    #[inline]
+    pub fn query_epoch(&self) -> Option<u64> {
+        (!self.fast_off).then_some(self.memo.epoch)
     }
 
     /// The PDI interrupt line: AL event request & AL event mask (0x0204) != 0.

@@ -53,6 +53,39 @@ pub(super) struct Fused {
     /// Working-counter increment for LRD, LWR, LRW.
     pub(super) inc: [u16; 3],
     pub(super) steps: [FusedStep; PLAN_MAX],
+    /// The last frame the fused path took (see [`FusedKey`]); a cyclic master sends the
+    /// same headers every cycle, so the frame checks reduce to one comparison.
+    pub(super) key: FusedKey,
+}
+
+/// What the fused path's frame checks depend on, and what they derived, for the last frame
+/// they accepted (with this configuration: `rebuild_fused` starts afresh). The checks read
+/// nothing but the EtherCAT header word, the datagram header's command, address and
+/// length/flags words and the frame's length, so a frame equal in those passes them with
+/// the same results.
+#[derive(Debug, Clone, Copy, Default)]
+pub(super) struct FusedKey {
+    /// Frame length (0: no frame accepted yet; a taken frame has at least 12 bytes).
+    pub(super) frame_len: usize,
+    /// Bytes 2..10 (command, index, address, length and flags) with the index masked out.
+    pub(super) dg: u64,
+    /// EtherCAT header word.
+    pub(super) ecat: u16,
+    /// Command index (0 LRD, 1 LWR, 2 LRW), datagram data length, plan window offset in
+    /// the data.
+    pub(super) cmd: u8,
+    pub(super) data_len: u16,
+    pub(super) win_off: u16,
+}
+
+impl FusedKey {
+    /// The datagram header bytes 2..10 of `head` without the index (byte 3).
+    #[inline(always)]
+    pub(super) fn dg_of(head: &[u8; 12]) -> u64 {
+        let (_, rest) = head.split_at(2);
+        let b: &[u8; 8] = rest.first_chunk().unwrap_or(&[0; 8]);
+        u64::from_le_bytes(*b) & !0xFF00
+    }
 }
 
 impl Esc {
@@ -147,7 +180,7 @@ impl Esc {
         // (port 0 itself last; all closed: the frame loops back, generic path).
         let exit = [3u8, 1, 2, 0].into_iter().find(|&p| self.port_open(p));
         let n = self.plan_len as usize;
-        let mut ok = !self.fused_disabled && self.plan_ok && n > 0 && exit.is_some();
+        let mut ok = !self.fast_off && self.plan_ok && n > 0 && exit.is_some();
         let mut seen = 0u32;
         for (k, op) in self.plan[..n].iter().enumerate() {
             let i = op.sm as usize;
@@ -190,11 +223,47 @@ impl Esc {
         self.fused = f;
     }
 
-    /// Test switch: `false` forces every frame through the generic path.
-    #[cfg(test)]
-    pub(crate) fn set_fused_enabled(&mut self, on: bool) {
+    /// Rebuilds [`Esc::route`] from the open ports: the exit `forward_after_arrival`'s
+    /// port loop finds for a frame entering each port, where it finds one before the
+    /// frame would loop back through a closed port 0 into the processing unit.
+    pub(super) fn rebuild_routes(&mut self) {
+        let open = self.open_ports;
+        self.route = core::array::from_fn(|p| {
+            let mut cur = p as u8;
+            for _ in 0..8 {
+                let nxt = next_port(cur);
+                if open & (1 << nxt) != 0 {
+                    return if self.fast_off { NO_ROUTE } else { nxt };
+                }
+                if nxt == 0 {
+                    break;
+                }
+                cur = nxt;
+            }
+            NO_ROUTE
+        });
+    }
+
+    /// Reference switch for differential tests and benchmarks: with `false` every frame
+    /// takes the general path (`forward_generic`: no fused LRW path, no pass-through
+    /// shortcut for frames that only pass the ESC) and [`Esc::query_epoch`] answers
+    /// `None`, so a segment re-reads the ESC's next event and IRQ line after every hop.
+    /// The observable behaviour is the same either way; on by default.
+    pub fn set_fast_paths(&mut self, on: bool) {
         self.memo.clear();
-        self.fused_disabled = !on;
+        self.fast_off = !on;
+        self.rebuild_routes();
         self.rebuild_fused();
+    }
+}
+
+/// The port after `p` in the ESC's processing order 0 → 3 → 1 → 2 → 0.
+#[inline(always)]
+pub(super) fn next_port(p: u8) -> u8 {
+    match p {
+        0 => 3,
+        3 => 1,
+        1 => 2,
+        _ => 0,
     }
 }

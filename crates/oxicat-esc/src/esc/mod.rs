@@ -96,6 +96,12 @@ const CMD_LWR: u8 = Command::Lwr as u8;
 const CMD_LRW: u8 = Command::Lrw as u8;
 const CMD_FPRD: u8 = Command::Fprd as u8;
 const CMD_FPRW: u8 = Command::Fprw as u8;
+/// Start of the next ESC's query epoch, in units of 2^32 ([`Esc::query_epoch`]): two
+/// ESCs, e.g. an old and a new one in the same place, never share an epoch.
+static EPOCH_BASE: AtomicU32 = AtomicU32::new(0);
+
+/// [`Esc::route`]: no shortcut (the frame goes through the processing unit again).
+const NO_ROUTE: u8 = 0xFF;
 /// PDI control 0x0140 value of the digital I/O PDI.
 const PDI_DIGITAL_IO: u8 = 0x04;
 
@@ -138,8 +144,15 @@ pub struct Esc {
     memo: QueryMemo,
     /// Hot state of the fused LRW path.
     fused: Fused,
-    /// Test switch: never take the fused path (differential tests).
-    fused_disabled: bool,
+    /// Reference switch ([`Esc::set_fast_paths`]): no fused path, no pass-through
+    /// shortcut, no [`Esc::query_epoch`].
+    fast_off: bool,
+    /// Where a frame entering port `p` leaves when it does not reach the processing unit
+    /// on its way (the port order 0 → 3 → 1 → 2 → 0 over the open ports, stopping at port
+    /// 0 if it is open); [`NO_ROUTE`] when it would loop back through a closed port 0 into
+    /// the processing unit, or when the fast paths are off. For port 0, where the frame
+    /// leaves after processing. Rebuilt with the open ports.
+    route: [u8; 4],
     /// Frames the fused path processed (tests).
     #[cfg(test)]
     pub(crate) fused_hits: u64,
@@ -249,10 +262,15 @@ impl Esc {
         }
         let mut dc = Dc::new(cfg.clock);
         dc.reset(&mut mem[..REG_END]);
+        let memo = QueryMemo {
+            epoch: u64::from(EPOCH_BASE.fetch_add(1, Ordering::Relaxed)) << 32,
+            ..QueryMemo::default()
+        };
         let mut esc = Self {
-            memo: QueryMemo::default(),
+            memo,
             fused: Fused::default(),
-            fused_disabled: false,
+            fast_off: false,
+            route: [NO_ROUTE; 4],
             #[cfg(test)]
             fused_hits: 0,
             cfg,
