@@ -568,8 +568,8 @@ impl<P: Pdi, const N: usize, const M: usize> Slave<P, N, M> {
                     return Err(Abort::ValueRangeExceeded);
                 }
                 let pdos = match dir {
-                    Dir::Rx => self.od.def.rx_pdos,
-                    Dir::Tx => self.od.def.tx_pdos,
+                    Dir::Rx => self.od.def().rx_pdos,
+                    Dir::Tx => self.od.def().tx_pdos,
                 };
                 let range = if sub0 { n } else { o.entries.len() - 1 };
                 let mut bits = 0;
@@ -596,7 +596,7 @@ impl<P: Pdi, const N: usize, const M: usize> Slave<P, N, M> {
             Kind::SyncPar => {
                 let mode = u16::from_le_bytes([v[1], v[2]]);
                 match SyncMode::from_u16(mode) {
-                    Some(m) if self.od.def.sync.supported & m.support_bit() != 0 => Ok(()),
+                    Some(m) if self.od.def().sync.supported & m.support_bit() != 0 => Ok(()),
                     _ => Err(Abort::ValueRangeExceeded),
                 }
             }

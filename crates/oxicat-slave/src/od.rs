@@ -837,7 +837,7 @@ impl<const N: usize> Finder<'_, N> {
                 if i < self.at {
                     (self.at, self.base) = (0, 0);
                 }
-                let objects = self.od.def.objects;
+                let objects = self.od.def().objects;
                 self.base += objects[self.at..i]
                     .iter()
                     .map(|o| o.storage_len())
@@ -883,6 +883,14 @@ pub struct EntryRef {
 }
 
 impl EntryRef {
+    /// A zero-length reference (all bytes zero), a placeholder until resolved.
+    pub(crate) const BLANK: Self = Self {
+        area_app: false,
+        offset: 0,
+        len: 0,
+        bits: 0,
+    };
+
     /// Bit length of the entry.
     pub fn bits(&self) -> u16 {
         self.bits
@@ -1154,7 +1162,8 @@ impl core::fmt::Display for DefError {
 
 /// The object dictionary of one device: definition plus value images.
 pub struct Od<const N: usize> {
-    pub(crate) def: &'static DeviceDef,
+    /// `None` only in [`Od::blank`] (so a blank stack is all zero bytes).
+    def: Option<&'static DeviceDef>,
     pub(crate) app: [u8; N],
     pub(crate) comm: [u8; COMM_IMAGE_SIZE],
 }
@@ -1162,19 +1171,38 @@ pub struct Od<const N: usize> {
 impl<const N: usize> Od<N> {
     /// Checks the definition and fills both images with the default values.
     pub fn new(def: &'static DeviceDef) -> Result<Self, DefError> {
-        check_def(def, N)?;
-        let mut od = Self {
-            def,
+        let mut od = Self::blank();
+        od.init(def)?;
+        Ok(od)
+    }
+
+    /// An image without a definition, all bytes zero ([`Od::init`] makes it a dictionary).
+    pub(crate) const fn blank() -> Self {
+        Self {
+            def: None,
             app: [0; N],
             comm: [0; COMM_IMAGE_SIZE],
-        };
-        od.reset_defaults();
-        Ok(od)
+        }
+    }
+
+    /// [`Od::new`] in place (the images filled where they are, no copy on the stack).
+    pub(crate) fn init(&mut self, def: &'static DeviceDef) -> Result<(), DefError> {
+        check_def(def, N)?;
+        self.def = Some(def);
+        self.app.fill(0);
+        self.comm.fill(0);
+        self.reset_defaults();
+        Ok(())
     }
 
     /// The device definition.
     pub fn def(&self) -> &'static DeviceDef {
-        self.def
+        /// What a blank dictionary (never handed out) stands on.
+        static BLANK: DeviceDef = DeviceDef::BASE;
+        match self.def {
+            Some(d) => d,
+            None => &BLANK,
+        }
     }
 
     /// True when this dictionary's application objects are laid out as `objects` (the
@@ -1182,7 +1210,7 @@ impl<const N: usize> Od<N> {
     /// which build-time handles ([`Var::of`] on `objects`) are valid for it. Compared by
     /// content, since the address of a static's data is not a reliable identity.
     pub fn built_on(&self, objects: &[ObjectDef]) -> bool {
-        let mine = self.def.objects;
+        let mine = self.def().objects;
         mine.len() == objects.len()
             && mine.iter().zip(objects).all(|(a, b)| {
                 a.index == b.index
@@ -1197,7 +1225,7 @@ impl<const N: usize> Od<N> {
     /// Resets every value (application and communication objects) to its default.
     pub fn reset_defaults(&mut self) {
         let mut off = 0;
-        for o in self.def.objects {
+        for o in self.def().objects {
             for en in o.entries {
                 let len = en.storage_len();
                 write_default(&mut self.app[off..off + len], en, o);
@@ -1212,7 +1240,7 @@ impl<const N: usize> Od<N> {
                 off += len;
             }
         }
-        let d = self.def;
+        let d = self.def();
         let _ = self.set(0x1000, 0, d.device_type);
         copy_str(self.comm_entry_mut(0x1008, 0), d.name);
         copy_str(self.comm_entry_mut(0x1009, 0), d.hw_version);
@@ -1254,15 +1282,15 @@ impl<const N: usize> Od<N> {
     /// Number of objects (communication + application).
     pub fn object_count(&self) -> usize {
         COMM_LOW.len()
-            + self.def.rx_pdos.len()
-            + self.def.tx_pdos.len()
+            + self.def().rx_pdos.len()
+            + self.def().tx_pdos.len()
             + COMM_HIGH.len()
-            + self.def.objects.len()
+            + self.def().objects.len()
     }
 
     /// The `n`-th object in index order.
     pub(crate) fn object_at(&self, n: usize) -> Option<Obj> {
-        let d = self.def;
+        let d = self.def();
         let mut n = n;
         if n < COMM_LOW.len() {
             return Some(self.comm_obj(&COMM_LOW[n], comm_low_base(n), Kind::Plain));
@@ -1312,12 +1340,15 @@ impl<const N: usize> Od<N> {
 
     /// Image offset of the `i`-th application object: the sizes of those before it.
     fn app_base(&self, i: usize) -> usize {
-        self.def.objects[..i].iter().map(|o| o.storage_len()).sum()
+        self.def().objects[..i]
+            .iter()
+            .map(|o| o.storage_len())
+            .sum()
     }
 
     /// The `i`-th application object, its image offset `base`.
     fn app_obj(&self, i: usize, base: usize) -> Obj {
-        let o = &self.def.objects[i];
+        let o = &self.def().objects[i];
         Obj {
             index: o.index,
             name: o.name,
@@ -1363,7 +1394,7 @@ impl<const N: usize> Od<N> {
     /// `out` (its storage length, little endian).
     pub(crate) fn default_of(&self, o: &Obj, e: &EntryDef, out: &mut [u8]) {
         out.fill(0);
-        let d = self.def;
+        let d = self.def();
         let put = |out: &mut [u8], v: u64| {
             let b = v.to_le_bytes();
             let n = out.len().min(8);
@@ -1453,7 +1484,7 @@ impl<const N: usize> Od<N> {
     /// Where object `index` is: a communication object whole, an application object by its
     /// position in the definition (its image offset costs a walk: [`Od::app_base`]).
     fn locate(&self, index: u16) -> Option<Located> {
-        let d = self.def;
+        let d = self.def();
         let comm = |n| self.object_at(n).map(Located::Comm);
         if let Some(i) = COMM_LOW.iter().position(|o| o.index == index) {
             return comm(i);
