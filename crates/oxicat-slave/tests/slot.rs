@@ -86,3 +86,37 @@ fn a_slot_refuses_a_definition_the_stack_refuses() {
         Err(InitError::MailboxSize)
     ));
 }
+
+/// `DeviceDef::for_image` (what a board image links) drops the ESI/SII texts and keeps
+/// everything the stack serves: the same dictionary, byte for byte.
+#[test]
+fn the_image_definition_serves_the_same_dictionary() {
+    use oxicat_devices::demo;
+    static IMAGE_DEF: oxicat_slave::DeviceDef = demo::DEF.for_image();
+    type Demo = Slave<Esc, { demo::IMAGE }, 128>;
+    let info = &IMAGE_DEF.info;
+    assert_eq!((info.vendor_name, info.order_code), ("", ""));
+    assert!(info.description.is_none() && info.dc_modes.is_empty());
+    assert!(!demo::DEF.info.vendor_name.is_empty() && !demo::DEF.info.dc_modes.is_empty());
+    assert_eq!(
+        (IMAGE_DEF.info.coe, IMAGE_DEF.info.foe),
+        (demo::DEF.info.coe, demo::DEF.info.foe)
+    );
+    assert_eq!(IMAGE_DEF.mailbox_protocols(), demo::DEF.mailbox_protocols());
+    // Every object's description (SDO information) and every entry's value.
+    let dump = |def: &'static oxicat_slave::DeviceDef| {
+        let mut e = Esc::new(EscConfig::default(), eeprom(&demo::DEF));
+        let s = Demo::new(def, &mut e).expect("new");
+        let od = s.od();
+        let mut all = Vec::new();
+        for n in 0..od.object_count() {
+            let o = od.object_info(n).expect("object");
+            for en in o.entries {
+                let v = od.bytes(o.index, en.sub).expect("entry").to_vec();
+                all.push((o.index, o.name, o.code, *en, v));
+            }
+        }
+        all
+    };
+    assert_eq!(dump(&IMAGE_DEF), dump(&demo::DEF));
+}

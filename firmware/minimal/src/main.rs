@@ -25,8 +25,12 @@ use core::hint::black_box;
 use cortex_m_rt::entry;
 use oxicat_devices::demo::{self, Buttons, Demo, Leds};
 use oxicat_slave::foe::{FirmwareStore, FirmwareUpdate, StoreError, UpdateConfig, WithFoe};
-use oxicat_slave::{IrqLines, Pdi, Slave, SlaveSlot};
+use oxicat_slave::{DeviceDef, IrqLines, Pdi, Slave, SlaveSlot};
 use panic_halt as _;
+
+/// The demo device as the image links it: the stack's part of `demo::DEF`, without the
+/// texts only its ESI and SII carry (vendor, group, description, DC mode names).
+static DEF: DeviceDef = demo::DEF.for_image();
 
 /// Mailbox buffer size of the stack: the demo's mailboxes are 128 bytes.
 const MBX: usize = 128;
@@ -123,7 +127,7 @@ impl FirmwareStore for StubFlash {
 /// The FoE files the demo device advertises: `firmware.bin` writable in BOOT (and read
 /// back), `version.txt` readable, as the host rig's demo devices serve them.
 const UPDATE: UpdateConfig = UpdateConfig {
-    identity: demo::DEF.identity,
+    identity: DEF.identity,
     file_name: "firmware.bin",
     password: 0,
     read_back: true,
@@ -155,7 +159,7 @@ fn main() -> ! {
         app: Demo::new(BoardLeds, BoardButtons),
         files: FirmwareUpdate::new(StubFlash, UPDATE),
     };
-    let Ok(slave) = SLOT.start(&demo::DEF, &mut pdi) else {
+    let Ok(slave) = SLOT.start(&DEF, &mut pdi) else {
         #[allow(clippy::empty_loop)]
         loop {}
     };
