@@ -192,15 +192,18 @@ def main():
     rows = [analyse(e) for e in args]
     plus = lambda lb: "+" if lb else ""
     if md:
-        print("| image | flash B (.text / .rodata) | static RAM B | stack B: main path / deepest handler | RAM B: static + main path |")
+        print(
+            "| image | flash B (.text / .rodata) | static RAM B | stack B: main path / deepest handler"
+            " / all nested | RAM B: static + all-nested stack |"
+        )
         print("|---|---|---|---|---|")
     for r in rows:
         name = r["elf"].rsplit("/", 1)[-1]
         if md:
             print(
                 f"| {name} | {r['flash']:,} ({r['text']:,} / {r['rodata']:,}) | {r['ram']:,} | "
-                f"{r['main']:,}{plus(r['main_lb'])} / {r['handler']:,}{plus(r['handler_lb'])} | "
-                f"{r['ram'] + r['main']:,}{plus(r['main_lb'])} |"
+                f"{r['main']:,}{plus(r['main_lb'])} / {r['handler']:,}{plus(r['handler_lb'])} / "
+                f"{r['worst']:,}{plus(r['worst_lb'])} | {r['ram'] + r['worst']:,}{plus(r['worst_lb'])} |"
             )
         else:
             print(

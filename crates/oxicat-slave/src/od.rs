@@ -753,9 +753,58 @@ const fn bases<const K: usize>(objs: &[ObjectDef; K]) -> [usize; K] {
 static COMM_LOW_BASE: [usize; COMM_LOW.len()] = bases(&COMM_LOW);
 /// Image offsets of [`COMM_HIGH`]'s objects (from the end of [`COMM_LOW`]'s).
 static COMM_HIGH_BASE: [usize; COMM_HIGH.len()] = bases(&COMM_HIGH);
-const MAP_OBJ_SIZE: usize = 1 + 4 * MAX_PDO_ENTRIES;
+/// Bytes the PDO mapping objects of a definition may take in the communication image, a
+/// pool each definition lays its own out in ([`map_storage`]): a fixed mapping takes
+/// 1 + 4 bytes per entry, a configurable one 1 + 4 × [`MAP_SHOWN`] (or its default's count).
+/// 512 bytes on a microcontroller build (the devices here need 90..364: TUeES030 364,
+/// testkit 271, CiA402 250, Laelaps 143, demo 106, hub 90; was 16 slots of 31 entries,
+/// 2,000 bytes, whatever the device); with `twin-capacity` every PDO at the full capacity.
+pub const MAP_POOL: usize = if cfg!(feature = "twin-capacity") {
+    2 * MAX_PDOS * (1 + 4 * MAX_PDO_ENTRIES)
+} else {
+    MAP_POOL_MCU
+};
+/// [`MAP_POOL`] of a microcontroller build (without `twin-capacity`), whatever this build's
+/// is: a board's device must fit it (host tests check the devices of `oxicat-devices`).
+pub const MAP_POOL_MCU: usize = 512;
 /// Bytes of the internal image of the communication objects.
-pub const COMM_IMAGE_SIZE: usize = COMM_LOW_SIZE + COMM_HIGH_SIZE + 2 * MAX_PDOS * MAP_OBJ_SIZE;
+pub const COMM_IMAGE_SIZE: usize = COMM_LOW_SIZE + COMM_HIGH_SIZE + MAP_POOL;
+
+/// Subindexes (after 0) the mapping object of `p` shows and stores.
+const fn map_shown(p: &PdoDef) -> usize {
+    let n = p.entries.len();
+    if !p.configurable {
+        n
+    } else if n < MAP_SHOWN {
+        MAP_SHOWN
+    } else if n > MAX_PDO_ENTRIES {
+        MAX_PDO_ENTRIES
+    } else {
+        n
+    }
+}
+
+/// Bytes one mapping object of `p` takes in the communication image.
+const fn map_obj_size(p: &PdoDef) -> usize {
+    1 + 4 * map_shown(p)
+}
+
+/// Bytes `def`'s PDO mapping objects take in the communication image (at most
+/// [`MAP_POOL`]).
+pub const fn map_storage(def: &DeviceDef) -> usize {
+    let mut n = 0;
+    let mut i = 0;
+    while i < def.rx_pdos.len() {
+        n += map_obj_size(&def.rx_pdos[i]);
+        i += 1;
+    }
+    i = 0;
+    while i < def.tx_pdos.len() {
+        n += map_obj_size(&def.tx_pdos[i]);
+        i += 1;
+    }
+    n
+}
 
 /// Which image an object's values live in.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -1132,6 +1181,11 @@ pub enum DefError {
     /// The string of 0x1008/0x1009/0x100A (name, hardware or software version) is longer
     /// than [`STR_MAX`] bytes.
     StringTooLong(u16),
+    /// The PDO mapping objects need more than the stack's [`MAP_POOL`] bytes.
+    MappingsTooLarge {
+        /// Bytes the definition's mapping objects need ([`map_storage`]).
+        needed: usize,
+    },
 }
 
 impl core::fmt::Display for DefError {
@@ -1155,6 +1209,10 @@ impl core::fmt::Display for DefError {
             Self::StringTooLong(i) => write!(
                 f,
                 "the string of 0x{i:04X} is longer than the {STR_MAX} bytes the object dictionary holds"
+            ),
+            Self::MappingsTooLarge { needed } => write!(
+                f,
+                "the PDO mapping objects need {needed} bytes; the stack holds {MAP_POOL} (a configurable PDO takes 1 + 4 x {MAP_SHOWN}, a fixed one 1 + 4 per entry)"
             ),
         }
     }
@@ -1249,9 +1307,10 @@ impl<const N: usize> Od<N> {
         let _ = self.set(0x1018, 2, d.identity.product_code);
         let _ = self.set(0x1018, 3, d.identity.revision);
         let _ = self.set(0x1018, 4, d.identity.serial);
-        for (i, p) in d.rx_pdos.iter().chain(d.tx_pdos.iter()).enumerate() {
-            let base = COMM_LOW_SIZE + COMM_HIGH_SIZE + i * MAP_OBJ_SIZE;
-            let m = &mut self.comm[base..base + MAP_OBJ_SIZE];
+        let mut base = COMM_LOW_SIZE + COMM_HIGH_SIZE;
+        for p in d.rx_pdos.iter().chain(d.tx_pdos.iter()) {
+            let m = &mut self.comm[base..base + map_obj_size(p)];
+            base += m.len();
             m.fill(0);
             m[0] = p.entries.len() as u8;
             for (k, pe) in p.entries.iter().enumerate() {
@@ -1374,17 +1433,26 @@ impl<const N: usize> Od<N> {
 
     fn map_obj(&self, p: &'static PdoDef, slot: usize, kind: Kind) -> Obj {
         let entries: &'static [EntryDef] = if p.configurable {
-            &MAP_RW[..p.entries.len().clamp(MAP_SHOWN, MAX_PDO_ENTRIES) + 1]
+            &MAP_RW[..map_shown(p) + 1]
         } else {
-            &MAP_RO[..p.entries.len() + 1]
+            &MAP_RO[..map_shown(p) + 1]
         };
+        // The mapping objects lie in definition order (RxPDOs, then TxPDOs), each its size.
+        let d = self.def();
+        let before: usize = d
+            .rx_pdos
+            .iter()
+            .chain(d.tx_pdos.iter())
+            .take(slot)
+            .map(map_obj_size)
+            .sum();
         Obj {
             index: p.index,
             name: p.name,
             code: ObjectCode::Record,
             entries,
             area: Area::Comm,
-            base: COMM_LOW_SIZE + COMM_HIGH_SIZE + slot * MAP_OBJ_SIZE,
+            base: COMM_LOW_SIZE + COMM_HIGH_SIZE + before,
             kind,
         }
     }
@@ -1681,6 +1749,10 @@ pub fn check_def(def: &DeviceDef, image: usize) -> Result<(), DefError> {
     }
     if def.rx_assign.len() > MAX_ASSIGN || def.tx_assign.len() > MAX_ASSIGN {
         return Err(DefError::BadPdo(0x1C12));
+    }
+    let needed = map_storage(def);
+    if needed > MAP_POOL {
+        return Err(DefError::MappingsTooLarge { needed });
     }
     Ok(())
 }

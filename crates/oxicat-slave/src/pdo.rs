@@ -299,7 +299,11 @@ pub(crate) fn pdo_entries<const N: usize>(
 ) -> Option<(usize, [u32; MAX_PDO_ENTRIES])> {
     let o = od.find(index)?;
     let base = o.base;
-    let cnt = (od.comm[base] as usize).min(MAX_PDO_ENTRIES);
+    // At most the subindexes the object stores (a fixed mapping's count, a configurable
+    // one's shown slots).
+    let cnt = (od.comm[base] as usize)
+        .min(MAX_PDO_ENTRIES)
+        .min(o.max_sub() as usize);
     let mut v = [0u32; MAX_PDO_ENTRIES];
     for (k, x) in v.iter_mut().enumerate().take(cnt) {
         let a = base + 1 + 4 * k;

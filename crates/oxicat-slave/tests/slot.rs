@@ -120,3 +120,49 @@ fn the_image_definition_serves_the_same_dictionary() {
     };
     assert_eq!(dump(&IMAGE_DEF), dump(&demo::DEF));
 }
+
+/// The PDO mapping objects lie in a pool of the communication image, each its own size (a
+/// fixed mapping 1 + 4 bytes per entry): every device a board image runs fits the pool of
+/// a microcontroller build, so no board stops at start-up with `MappingsTooLarge`.
+#[test]
+fn every_board_device_fits_the_microcontroller_mapping_pool() {
+    use oxicat_devices::{axis_hub, cia402, demo, laelaps, tue_es030};
+    use oxicat_slave::od::{map_storage, MAP_POOL_MCU, MAP_SHOWN};
+    let defs: [(&str, &oxicat_slave::DeviceDef); 7] = [
+        ("demo", &demo::DEF),
+        ("demo additions", &demo::additions::DEF),
+        (
+            "laelaps left",
+            laelaps::device::device(laelaps::kinematics::Side::Left),
+        ),
+        (
+            "laelaps right",
+            laelaps::device::device(laelaps::kinematics::Side::Right),
+        ),
+        ("cia402", &cia402::device::DEF),
+        ("tue-es030", &tue_es030::device::DEF),
+        ("axis hub", &axis_hub::device::DEF),
+    ];
+    for (name, def) in defs {
+        let want: usize = def
+            .rx_pdos
+            .iter()
+            .chain(def.tx_pdos.iter())
+            .map(|p| {
+                let shown = if p.configurable {
+                    p.entries.len().max(MAP_SHOWN)
+                } else {
+                    p.entries.len()
+                };
+                1 + 4 * shown
+            })
+            .sum();
+        assert_eq!(map_storage(def), want, "{name}");
+        assert!(
+            want <= MAP_POOL_MCU,
+            "{name}: {want} bytes of mapping objects"
+        );
+    }
+    // The demo's six fixed PDOs: 106 bytes (was 16 × 125 = 2,000 at the 31-entry capacity).
+    assert_eq!(map_storage(&demo::DEF), 106);
+}
