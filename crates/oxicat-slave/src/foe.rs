@@ -205,6 +205,8 @@ impl<P: Pdi, const N: usize, const M: usize> Slave<P, N, M> {
     }
 
     /// One FoE request (`p` = FoE header + data).
+    // Not inlined, as `coe_request`.
+    #[inline(never)]
     pub(crate) fn foe_request<A: Application<N>>(&mut self, app: &mut A, p: &[u8]) {
         if app.foe().is_none() {
             self.mbx_error(MailboxErrorDetail::UnsupportedProtocol);
