@@ -189,7 +189,19 @@ def main():
     if not args:
         print(__doc__)
         sys.exit(2)
-    rows = [analyse(e) for e in args]
+    # Only ELF files (a glob over a target directory also matches the `.d` dependency files).
+    def is_elf(path):
+        try:
+            with open(path, "rb") as f:
+                return f.read(4) == b"\x7fELF"
+        except OSError:
+            return False
+
+    missing = [e for e in args if not is_elf(e)]
+    for e in missing:
+        if not e.endswith(".d"):
+            print(f"{e}: not an ELF file, skipped", file=sys.stderr)
+    rows = [analyse(e) for e in args if is_elf(e)]
     plus = lambda lb: "+" if lb else ""
     if md:
         print(
