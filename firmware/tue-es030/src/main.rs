@@ -326,10 +326,14 @@ fn main() -> ! {
         if now.wrapping_sub(last_poll) >= POLL_EVERY_TICKS {
             last_poll = now;
             with_esc_from_thread(|e| {
-                let _ = e.slave.poll(&mut e.esc, &mut e.app);
                 // The service routine runs in the ADC interrupt, not on the stack's
-                // SERVICE_TIMER: its dictionary side (0x8040) is stored here, at 1 kHz.
+                // SERVICE_TIMER: its dictionary side (0x8040) is stored here, at 1 kHz —
+                // before the poll, so an SDO upload the poll serves reads this tick's
+                // values (after it, the first upload after PREOP could read 0x8040 before
+                // it was ever stored: the emulator test saw 0 V when the start-up timing
+                // moved).
                 e.app.app.store_voltages(e.slave.od_mut());
+                let _ = e.slave.poll(&mut e.esc, &mut e.app);
             });
         }
         // The IRQ line is a level: a cause that arrives while it is still low from another
