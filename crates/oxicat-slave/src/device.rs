@@ -234,6 +234,18 @@ pub struct DeviceDef {
 }
 
 impl DeviceDef {
+    /// This definition as a board image links it: the same device for the stack (every
+    /// object, PDO, mailbox, sync and identity field), with [`DeviceInfo::for_image`], so the
+    /// strings only the ESI and SII need are not in the image's flash
+    /// (`static DEF: DeviceDef = demo::DEF.for_image();`). The ESI and the EEPROM are made
+    /// from the full definition on the host.
+    pub const fn for_image(&self) -> DeviceDef {
+        DeviceDef {
+            info: self.info.for_image(),
+            ..*self
+        }
+    }
+
     /// A base definition with empty lists and [`DeviceInfo::DEFAULT`]: start a device with
     /// `DeviceDef { identity, name, objects, .., ..DeviceDef::BASE }`.
     pub const BASE: DeviceDef = DeviceDef {
@@ -556,6 +568,29 @@ pub struct DeviceInfo {
 }
 
 impl DeviceInfo {
+    /// Only what a running device needs of it: the mailbox protocol flags and the sizes
+    /// (ESC configuration, EEPROM, SII version, SM control, mailbox range, E-bus current);
+    /// the texts and tables only ESI and SII carry (vendor, group, order code, description,
+    /// image, physics, FMMU usage, DC mode names, timeouts) emptied. See
+    /// [`DeviceDef::for_image`].
+    pub const fn for_image(self) -> Self {
+        Self {
+            vendor_name: "",
+            group: Group {
+                type_name: "",
+                name: "",
+            },
+            order_code: "",
+            description: None,
+            image: None,
+            physics: "",
+            fmmus: &[],
+            dc_modes: &[],
+            timeouts: None,
+            ..self
+        }
+    }
+
     /// Defaults: SPI PDI, 2 KiB EEPROM, FMMUs Outputs/Inputs/MBoxState, standard SM control
     /// bytes, CoE as the stack implements it, no DC modes.
     pub const DEFAULT: DeviceInfo = DeviceInfo {

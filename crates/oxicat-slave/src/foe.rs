@@ -205,6 +205,8 @@ impl<P: Pdi, const N: usize, const M: usize> Slave<P, N, M> {
     }
 
     /// One FoE request (`p` = FoE header + data).
+    // Not inlined, as `coe_request`.
+    #[inline(never)]
     pub(crate) fn foe_request<A: Application<N>>(&mut self, app: &mut A, p: &[u8]) {
         if app.foe().is_none() {
             self.mbx_error(MailboxErrorDetail::UnsupportedProtocol);
@@ -723,6 +725,8 @@ impl<S: FirmwareStore> FirmwareUpdate<S> {
         FoeError::Fault(f)
     }
 
+    /// Writes `version.txt` into `self.text` (by hand, not with `core::fmt`: the formatting
+    /// machinery would be most of the FoE code in a board image).
     fn render_version(&mut self) -> usize {
         let mut w = TextBuf {
             buf: &mut self.text,
@@ -730,17 +734,15 @@ impl<S: FirmwareStore> FirmwareUpdate<S> {
         };
         match self.store.current_image() {
             Some(h) => {
-                let _ = core::fmt::write(
-                    &mut w,
-                    format_args!(
-                        "vendor_id=0x{:08X}\nproduct_code=0x{:08X}\nrevision=0x{:08X}\nlength={}\ncrc32=0x{:08X}\n",
-                        h.vendor_id, h.product_code, h.revision, h.length, h.crc
-                    ),
-                );
+                w.hex("vendor_id=0x", h.vendor_id);
+                w.hex("product_code=0x", h.product_code);
+                w.hex("revision=0x", h.revision);
+                w.str("length=");
+                w.dec(h.length);
+                w.str("\n");
+                w.hex("crc32=0x", h.crc);
             }
-            None => {
-                let _ = core::fmt::write(&mut w, format_args!("no image\n"));
-            }
+            None => w.str("no image\n"),
         }
         w.len
     }
@@ -781,16 +783,42 @@ struct TextBuf<'a> {
     len: usize,
 }
 
-impl core::fmt::Write for TextBuf<'_> {
-    fn write_str(&mut self, s: &str) -> core::fmt::Result {
+impl TextBuf<'_> {
+    /// Appends `s` (nothing once the buffer is full).
+    fn str(&mut self, s: &str) {
         let b = s.as_bytes();
         let end = self.len + b.len();
-        if end > self.buf.len() {
-            return Err(core::fmt::Error);
+        if let Some(d) = self.buf.get_mut(self.len..end) {
+            d.copy_from_slice(b);
+            self.len = end;
         }
-        self.buf[self.len..end].copy_from_slice(b);
-        self.len = end;
-        Ok(())
+    }
+
+    /// Appends `label`, `v` as 8 upper-case hex digits and a newline.
+    fn hex(&mut self, label: &str, v: u32) {
+        self.str(label);
+        let mut d = [0u8; 9];
+        for (k, x) in d[..8].iter_mut().enumerate() {
+            let n = (v >> (28 - 4 * k)) & 0xF;
+            *x = b"0123456789ABCDEF"[n as usize];
+        }
+        d[8] = b'\n';
+        self.str(core::str::from_utf8(&d).unwrap_or(""));
+    }
+
+    /// Appends `v` in decimal.
+    fn dec(&mut self, mut v: u32) {
+        let mut d = [0u8; 10];
+        let mut i = d.len();
+        loop {
+            i -= 1;
+            d[i] = b'0' + (v % 10) as u8;
+            v /= 10;
+            if v == 0 {
+                break;
+            }
+        }
+        self.str(core::str::from_utf8(&d[i..]).unwrap_or(""));
     }
 }
 
@@ -1083,5 +1111,77 @@ mod tests {
         assert!(h.fits(&id));
         assert_eq!(ImageHeader::parse(&[0; 31]), Err(ImageError::Short));
         assert_eq!(ImageHeader::parse(&[0; 32]), Err(ImageError::Magic));
+    }
+
+    extern crate std;
+    use std::format;
+
+    /// `version.txt` is written by hand (no `core::fmt` in board images): its bytes are
+    /// the ones `format!` gives for the same fields, extremes included.
+    #[test]
+    fn version_text_is_the_formatted_text() {
+        let cfg = |identity| UpdateConfig {
+            identity,
+            file_name: "firmware.bin",
+            password: 0,
+            read_back: true,
+        };
+        for (id, payload) in [
+            (
+                Identity {
+                    vendor_id: 0xE000_0000,
+                    product_code: 0x1111_0141,
+                    revision: 0x0001_0002,
+                    serial: 0,
+                },
+                &b"oxicat demo firmware 0.1.0"[..],
+            ),
+            (
+                Identity {
+                    vendor_id: 0,
+                    product_code: u32::MAX,
+                    revision: 0xA,
+                    serial: 0,
+                },
+                &[][..],
+            ),
+        ] {
+            let h = ImageHeader::for_payload(&id, payload);
+            let mut img = h.to_bytes().to_vec();
+            img.extend_from_slice(payload);
+            let mut fw =
+                FirmwareUpdate::new(RamStore::<2, 256>::with_image(&img).unwrap(), cfg(id));
+            let n = fw.render_version();
+            let want = format!(
+                "vendor_id=0x{:08X}\nproduct_code=0x{:08X}\nrevision=0x{:08X}\nlength={}\ncrc32=0x{:08X}\n",
+                h.vendor_id, h.product_code, h.revision, h.length, h.crc
+            );
+            assert_eq!(&fw.text[..n], want.as_bytes());
+        }
+        let mut empty = FirmwareUpdate::new(
+            RamStore::<2, 256>::new(),
+            cfg(Identity {
+                vendor_id: 1,
+                product_code: 2,
+                revision: 3,
+                serial: 0,
+            }),
+        );
+        let n = empty.render_version();
+        assert_eq!(&empty.text[..n], b"no image\n");
+    }
+
+    #[test]
+    fn decimal_digits() {
+        let mut buf = [0u8; 32];
+        for v in [0u32, 7, 10, 99, 100, 12345, u32::MAX] {
+            let mut w = TextBuf {
+                buf: &mut buf,
+                len: 0,
+            };
+            w.dec(v);
+            let n = w.len;
+            assert_eq!(&buf[..n], format!("{v}").as_bytes());
+        }
     }
 }

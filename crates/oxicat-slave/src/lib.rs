@@ -26,4 +26,4 @@ pub use od::{
     ObjectCode, ObjectDef, Od, OdError, OdType, PdoMapping, Scale, Var,
 };
 pub use pdi::{IrqLines, Pdi};
-pub use slave::{Application, InitError, Slave, Stats};
+pub use slave::{Application, InitError, Slave, SlaveSlot, Stats};

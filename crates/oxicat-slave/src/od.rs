@@ -753,9 +753,58 @@ const fn bases<const K: usize>(objs: &[ObjectDef; K]) -> [usize; K] {
 static COMM_LOW_BASE: [usize; COMM_LOW.len()] = bases(&COMM_LOW);
 /// Image offsets of [`COMM_HIGH`]'s objects (from the end of [`COMM_LOW`]'s).
 static COMM_HIGH_BASE: [usize; COMM_HIGH.len()] = bases(&COMM_HIGH);
-const MAP_OBJ_SIZE: usize = 1 + 4 * MAX_PDO_ENTRIES;
+/// Bytes the PDO mapping objects of a definition may take in the communication image, a
+/// pool each definition lays its own out in ([`map_storage`]): a fixed mapping takes
+/// 1 + 4 bytes per entry, a configurable one 1 + 4 × [`MAP_SHOWN`] (or its default's count).
+/// 512 bytes on a microcontroller build (the devices here need 90..364: TUeES030 364,
+/// testkit 271, CiA402 250, Laelaps 143, demo 106, hub 90; was 16 slots of 31 entries,
+/// 2,000 bytes, whatever the device); with `twin-capacity` every PDO at the full capacity.
+pub const MAP_POOL: usize = if cfg!(feature = "twin-capacity") {
+    2 * MAX_PDOS * (1 + 4 * MAX_PDO_ENTRIES)
+} else {
+    MAP_POOL_MCU
+};
+/// [`MAP_POOL`] of a microcontroller build (without `twin-capacity`), whatever this build's
+/// is: a board's device must fit it (host tests check the devices of `oxicat-devices`).
+pub const MAP_POOL_MCU: usize = 512;
 /// Bytes of the internal image of the communication objects.
-pub const COMM_IMAGE_SIZE: usize = COMM_LOW_SIZE + COMM_HIGH_SIZE + 2 * MAX_PDOS * MAP_OBJ_SIZE;
+pub const COMM_IMAGE_SIZE: usize = COMM_LOW_SIZE + COMM_HIGH_SIZE + MAP_POOL;
+
+/// Subindexes (after 0) the mapping object of `p` shows and stores.
+const fn map_shown(p: &PdoDef) -> usize {
+    let n = p.entries.len();
+    if !p.configurable {
+        n
+    } else if n < MAP_SHOWN {
+        MAP_SHOWN
+    } else if n > MAX_PDO_ENTRIES {
+        MAX_PDO_ENTRIES
+    } else {
+        n
+    }
+}
+
+/// Bytes one mapping object of `p` takes in the communication image.
+const fn map_obj_size(p: &PdoDef) -> usize {
+    1 + 4 * map_shown(p)
+}
+
+/// Bytes `def`'s PDO mapping objects take in the communication image (at most
+/// [`MAP_POOL`]).
+pub const fn map_storage(def: &DeviceDef) -> usize {
+    let mut n = 0;
+    let mut i = 0;
+    while i < def.rx_pdos.len() {
+        n += map_obj_size(&def.rx_pdos[i]);
+        i += 1;
+    }
+    i = 0;
+    while i < def.tx_pdos.len() {
+        n += map_obj_size(&def.tx_pdos[i]);
+        i += 1;
+    }
+    n
+}
 
 /// Which image an object's values live in.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -837,7 +886,7 @@ impl<const N: usize> Finder<'_, N> {
                 if i < self.at {
                     (self.at, self.base) = (0, 0);
                 }
-                let objects = self.od.def.objects;
+                let objects = self.od.def().objects;
                 self.base += objects[self.at..i]
                     .iter()
                     .map(|o| o.storage_len())
@@ -883,6 +932,14 @@ pub struct EntryRef {
 }
 
 impl EntryRef {
+    /// A zero-length reference (all bytes zero), a placeholder until resolved.
+    pub(crate) const BLANK: Self = Self {
+        area_app: false,
+        offset: 0,
+        len: 0,
+        bits: 0,
+    };
+
     /// Bit length of the entry.
     pub fn bits(&self) -> u16 {
         self.bits
@@ -1124,6 +1181,11 @@ pub enum DefError {
     /// The string of 0x1008/0x1009/0x100A (name, hardware or software version) is longer
     /// than [`STR_MAX`] bytes.
     StringTooLong(u16),
+    /// The PDO mapping objects need more than the stack's [`MAP_POOL`] bytes.
+    MappingsTooLarge {
+        /// Bytes the definition's mapping objects need ([`map_storage`]).
+        needed: usize,
+    },
 }
 
 impl core::fmt::Display for DefError {
@@ -1148,13 +1210,18 @@ impl core::fmt::Display for DefError {
                 f,
                 "the string of 0x{i:04X} is longer than the {STR_MAX} bytes the object dictionary holds"
             ),
+            Self::MappingsTooLarge { needed } => write!(
+                f,
+                "the PDO mapping objects need {needed} bytes; the stack holds {MAP_POOL} (a configurable PDO takes 1 + 4 x {MAP_SHOWN}, a fixed one 1 + 4 per entry)"
+            ),
         }
     }
 }
 
 /// The object dictionary of one device: definition plus value images.
 pub struct Od<const N: usize> {
-    pub(crate) def: &'static DeviceDef,
+    /// `None` only in [`Od::blank`] (so a blank stack is all zero bytes).
+    def: Option<&'static DeviceDef>,
     pub(crate) app: [u8; N],
     pub(crate) comm: [u8; COMM_IMAGE_SIZE],
 }
@@ -1162,19 +1229,38 @@ pub struct Od<const N: usize> {
 impl<const N: usize> Od<N> {
     /// Checks the definition and fills both images with the default values.
     pub fn new(def: &'static DeviceDef) -> Result<Self, DefError> {
-        check_def(def, N)?;
-        let mut od = Self {
-            def,
+        let mut od = Self::blank();
+        od.init(def)?;
+        Ok(od)
+    }
+
+    /// An image without a definition, all bytes zero ([`Od::init`] makes it a dictionary).
+    pub(crate) const fn blank() -> Self {
+        Self {
+            def: None,
             app: [0; N],
             comm: [0; COMM_IMAGE_SIZE],
-        };
-        od.reset_defaults();
-        Ok(od)
+        }
+    }
+
+    /// [`Od::new`] in place (the images filled where they are, no copy on the stack).
+    pub(crate) fn init(&mut self, def: &'static DeviceDef) -> Result<(), DefError> {
+        check_def(def, N)?;
+        self.def = Some(def);
+        self.app.fill(0);
+        self.comm.fill(0);
+        self.reset_defaults();
+        Ok(())
     }
 
     /// The device definition.
     pub fn def(&self) -> &'static DeviceDef {
-        self.def
+        /// What a blank dictionary (never handed out) stands on.
+        static BLANK: DeviceDef = DeviceDef::BASE;
+        match self.def {
+            Some(d) => d,
+            None => &BLANK,
+        }
     }
 
     /// True when this dictionary's application objects are laid out as `objects` (the
@@ -1182,7 +1268,7 @@ impl<const N: usize> Od<N> {
     /// which build-time handles ([`Var::of`] on `objects`) are valid for it. Compared by
     /// content, since the address of a static's data is not a reliable identity.
     pub fn built_on(&self, objects: &[ObjectDef]) -> bool {
-        let mine = self.def.objects;
+        let mine = self.def().objects;
         mine.len() == objects.len()
             && mine.iter().zip(objects).all(|(a, b)| {
                 a.index == b.index
@@ -1197,7 +1283,7 @@ impl<const N: usize> Od<N> {
     /// Resets every value (application and communication objects) to its default.
     pub fn reset_defaults(&mut self) {
         let mut off = 0;
-        for o in self.def.objects {
+        for o in self.def().objects {
             for en in o.entries {
                 let len = en.storage_len();
                 write_default(&mut self.app[off..off + len], en, o);
@@ -1212,7 +1298,7 @@ impl<const N: usize> Od<N> {
                 off += len;
             }
         }
-        let d = self.def;
+        let d = self.def();
         let _ = self.set(0x1000, 0, d.device_type);
         copy_str(self.comm_entry_mut(0x1008, 0), d.name);
         copy_str(self.comm_entry_mut(0x1009, 0), d.hw_version);
@@ -1221,9 +1307,10 @@ impl<const N: usize> Od<N> {
         let _ = self.set(0x1018, 2, d.identity.product_code);
         let _ = self.set(0x1018, 3, d.identity.revision);
         let _ = self.set(0x1018, 4, d.identity.serial);
-        for (i, p) in d.rx_pdos.iter().chain(d.tx_pdos.iter()).enumerate() {
-            let base = COMM_LOW_SIZE + COMM_HIGH_SIZE + i * MAP_OBJ_SIZE;
-            let m = &mut self.comm[base..base + MAP_OBJ_SIZE];
+        let mut base = COMM_LOW_SIZE + COMM_HIGH_SIZE;
+        for p in d.rx_pdos.iter().chain(d.tx_pdos.iter()) {
+            let m = &mut self.comm[base..base + map_obj_size(p)];
+            base += m.len();
             m.fill(0);
             m[0] = p.entries.len() as u8;
             for (k, pe) in p.entries.iter().enumerate() {
@@ -1254,15 +1341,15 @@ impl<const N: usize> Od<N> {
     /// Number of objects (communication + application).
     pub fn object_count(&self) -> usize {
         COMM_LOW.len()
-            + self.def.rx_pdos.len()
-            + self.def.tx_pdos.len()
+            + self.def().rx_pdos.len()
+            + self.def().tx_pdos.len()
             + COMM_HIGH.len()
-            + self.def.objects.len()
+            + self.def().objects.len()
     }
 
     /// The `n`-th object in index order.
     pub(crate) fn object_at(&self, n: usize) -> Option<Obj> {
-        let d = self.def;
+        let d = self.def();
         let mut n = n;
         if n < COMM_LOW.len() {
             return Some(self.comm_obj(&COMM_LOW[n], comm_low_base(n), Kind::Plain));
@@ -1312,12 +1399,15 @@ impl<const N: usize> Od<N> {
 
     /// Image offset of the `i`-th application object: the sizes of those before it.
     fn app_base(&self, i: usize) -> usize {
-        self.def.objects[..i].iter().map(|o| o.storage_len()).sum()
+        self.def().objects[..i]
+            .iter()
+            .map(|o| o.storage_len())
+            .sum()
     }
 
     /// The `i`-th application object, its image offset `base`.
     fn app_obj(&self, i: usize, base: usize) -> Obj {
-        let o = &self.def.objects[i];
+        let o = &self.def().objects[i];
         Obj {
             index: o.index,
             name: o.name,
@@ -1343,17 +1433,26 @@ impl<const N: usize> Od<N> {
 
     fn map_obj(&self, p: &'static PdoDef, slot: usize, kind: Kind) -> Obj {
         let entries: &'static [EntryDef] = if p.configurable {
-            &MAP_RW[..p.entries.len().clamp(MAP_SHOWN, MAX_PDO_ENTRIES) + 1]
+            &MAP_RW[..map_shown(p) + 1]
         } else {
-            &MAP_RO[..p.entries.len() + 1]
+            &MAP_RO[..map_shown(p) + 1]
         };
+        // The mapping objects lie in definition order (RxPDOs, then TxPDOs), each its size.
+        let d = self.def();
+        let before: usize = d
+            .rx_pdos
+            .iter()
+            .chain(d.tx_pdos.iter())
+            .take(slot)
+            .map(map_obj_size)
+            .sum();
         Obj {
             index: p.index,
             name: p.name,
             code: ObjectCode::Record,
             entries,
             area: Area::Comm,
-            base: COMM_LOW_SIZE + COMM_HIGH_SIZE + slot * MAP_OBJ_SIZE,
+            base: COMM_LOW_SIZE + COMM_HIGH_SIZE + before,
             kind,
         }
     }
@@ -1363,7 +1462,7 @@ impl<const N: usize> Od<N> {
     /// `out` (its storage length, little endian).
     pub(crate) fn default_of(&self, o: &Obj, e: &EntryDef, out: &mut [u8]) {
         out.fill(0);
-        let d = self.def;
+        let d = self.def();
         let put = |out: &mut [u8], v: u64| {
             let b = v.to_le_bytes();
             let n = out.len().min(8);
@@ -1453,7 +1552,7 @@ impl<const N: usize> Od<N> {
     /// Where object `index` is: a communication object whole, an application object by its
     /// position in the definition (its image offset costs a walk: [`Od::app_base`]).
     fn locate(&self, index: u16) -> Option<Located> {
-        let d = self.def;
+        let d = self.def();
         let comm = |n| self.object_at(n).map(Located::Comm);
         if let Some(i) = COMM_LOW.iter().position(|o| o.index == index) {
             return comm(i);
@@ -1650,6 +1749,10 @@ pub fn check_def(def: &DeviceDef, image: usize) -> Result<(), DefError> {
     }
     if def.rx_assign.len() > MAX_ASSIGN || def.tx_assign.len() > MAX_ASSIGN {
         return Err(DefError::BadPdo(0x1C12));
+    }
+    let needed = map_storage(def);
+    if needed > MAP_POOL {
+        return Err(DefError::MappingsTooLarge { needed });
     }
     Ok(())
 }

@@ -98,6 +98,16 @@ struct SyncDiag {
 }
 
 impl SyncDiag {
+    /// Unresolved (all bytes zero; [`Slave::init`] resolves it).
+    const BLANK: Self = Self {
+        missed: [EntryRef::BLANK; 2],
+        exceeded: [EntryRef::BLANK; 2],
+        error: [EntryRef::BLANK; 2],
+        limit: EntryRef::BLANK,
+        missed_count: 0,
+        exceeded_count: 0,
+    };
+
     fn new<const N: usize>(od: &Od<N>) -> Result<Self, DefError> {
         let r = |i: u16, s: u8| od.entry(i, s).map_err(|_| DefError::BadEntries(i));
         Ok(Self {
@@ -138,7 +148,7 @@ pub(crate) struct MbxState<const M: usize> {
 }
 
 impl<const M: usize> MbxState<M> {
-    fn new() -> Self {
+    const fn new() -> Self {
         Self {
             running: false,
             boot: false,
@@ -156,6 +166,17 @@ impl<const M: usize> MbxState<M> {
         }
     }
 
+    /// Back to [`MbxState::new`] in place.
+    fn clear(&mut self) {
+        self.boot = false;
+        self.out.fill(0);
+        self.last.fill(0);
+        self.out_counter = 0;
+        self.rx.fill(0);
+        self.stage.fill(0);
+        self.reset();
+    }
+
     fn reset(&mut self) {
         self.running = false;
         self.out_len = 0;
@@ -164,6 +185,49 @@ impl<const M: usize> MbxState<M> {
         self.toggle = false;
         self.in_counter = 0;
         self.emcy = [None; 4];
+    }
+}
+
+/// Storage for a stack built in place, for a `static` on a microcontroller: all bytes
+/// zero until [`SlaveSlot::start`] (so it lives in `.bss`, no flash copy), and the stack is
+/// built where it lies — no `Slave` value, image or mailbox buffer is ever on the stack.
+///
+/// ```ignore
+/// #[entry]
+/// fn main() -> ! {
+///     // cortex-m-rt makes this a `&'static mut` (one per program).
+///     static mut SLOT: SlaveSlot<MyPdi, { demo::IMAGE }, 128> = SlaveSlot::new();
+///     let slave = SLOT.start(&demo::DEF, &mut pdi).unwrap();
+///     loop { slave.poll(&mut pdi, &mut app).ok(); }
+/// }
+/// ```
+pub struct SlaveSlot<P: Pdi, const N: usize, const M: usize = 256> {
+    slave: Slave<P, N, M>,
+}
+
+impl<P: Pdi, const N: usize, const M: usize> SlaveSlot<P, N, M> {
+    /// An empty slot (usable in a `static`).
+    pub const fn new() -> Self {
+        Self {
+            slave: Slave::blank(),
+        }
+    }
+
+    /// Builds the stack in the slot, as [`Slave::new`] does, and returns it. A second call
+    /// starts it afresh.
+    pub fn start(
+        &mut self,
+        def: &'static DeviceDef,
+        pdi: &mut P,
+    ) -> Result<&mut Slave<P, N, M>, InitError<P::Error>> {
+        self.slave.init(def, pdi)?;
+        Ok(&mut self.slave)
+    }
+}
+
+impl<P: Pdi, const N: usize, const M: usize> Default for SlaveSlot<P, N, M> {
+    fn default() -> Self {
+        Self::new()
     }
 }
 
@@ -216,42 +280,78 @@ type R<P> = Result<(), <P as Pdi>::Error>;
 impl<P: Pdi, const N: usize, const M: usize> Slave<P, N, M> {
     /// Creates the stack: checks the definition, fills the dictionary with defaults,
     /// deactivates every SyncManager, sets the AL event mask and AL status INIT through
-    /// `pdi`.
+    /// `pdi`. The value is several KB: a microcontroller builds it in place in a static
+    /// [`SlaveSlot`] instead (no copy of it on the stack).
     pub fn new(def: &'static DeviceDef, pdi: &mut P) -> Result<Self, InitError<P::Error>> {
-        let od = Od::new(def).map_err(InitError::Def)?;
-        let diag = SyncDiag::new(&od).map_err(InitError::Def)?;
+        let mut s = Self::blank();
+        s.init(def, pdi)?;
+        Ok(s)
+    }
+
+    /// A stack without a definition, all bytes zero (so a `static` of it is in `.bss`, not
+    /// copied from flash); [`Slave::init`] makes it a stack. Only [`SlaveSlot`] hands one
+    /// out, after `init`.
+    const fn blank() -> Self {
+        Self {
+            _pdi: PhantomData,
+            od: Od::blank(),
+            state: AlState::Init,
+            error: false,
+            code: AlStatusCode::NONE,
+            mbx: MbxState::new(),
+            sdo: SdoState::Idle,
+            foe: FoeState::Idle,
+            rx_map: Mapping::EMPTY,
+            tx_map: Mapping::EMPTY,
+            sync: SyncMode::FreeRun,
+            pd: [0; MAX_PD_BYTES],
+            stats: Stats {
+                mbx_requests: 0,
+                mbx_duplicates: 0,
+                mbx_repeats: 0,
+                cycles: 0,
+                outputs: 0,
+            },
+            diag: SyncDiag::BLANK,
+            tx_full: false,
+            sm2_taken: false,
+            stepwise: false,
+            pd_step: PdStep::Idle,
+        }
+    }
+
+    /// [`Slave::new`] in place: every field set where it is (no temporary `Slave`, image or
+    /// mailbox buffer on the stack). On an error the value is not a usable stack.
+    fn init(&mut self, def: &'static DeviceDef, pdi: &mut P) -> Result<(), InitError<P::Error>> {
+        self.od.init(def).map_err(InitError::Def)?;
+        self.diag = SyncDiag::new(&self.od).map_err(InitError::Def)?;
         let fits = |m: &MailboxDef| {
             (m.rx_len as usize) <= M && (m.tx_len as usize) <= M && m.rx_len >= 16 && m.tx_len >= 16
         };
         if !fits(&def.mailbox) || def.boot_mailbox.is_some_and(|m| !fits(&m)) {
             return Err(InitError::MailboxSize);
         }
-        let mut s = Self {
-            _pdi: PhantomData,
-            od,
-            state: AlState::Init,
-            error: false,
-            code: AlStatusCode::NONE,
-            mbx: MbxState::new(),
-            sdo: SdoState::default(),
-            foe: FoeState::Idle,
-            rx_map: Mapping::default(),
-            tx_map: Mapping::default(),
-            sync: SyncMode::FreeRun,
-            pd: [0; MAX_PD_BYTES],
-            stats: Stats::default(),
-            diag,
-            tx_full: false,
-            sm2_taken: false,
-            stepwise: false,
-            pd_step: PdStep::Idle,
-        };
+        self.state = AlState::Init;
+        self.error = false;
+        self.code = AlStatusCode::NONE;
+        self.mbx.clear();
+        self.sdo = SdoState::Idle;
+        self.foe = FoeState::Idle;
+        self.rx_map.clear();
+        self.tx_map.clear();
+        self.sync = SyncMode::FreeRun;
+        self.pd.fill(0);
+        self.stats = Stats::default();
+        self.tx_full = false;
+        self.sm2_taken = false;
+        self.stepwise = false;
+        self.pd_step = PdStep::Idle;
         for n in 0..4 {
             Self::sm_enable(pdi, n, false).map_err(InitError::Pdi)?;
         }
         Self::set_event_mask(pdi, reg::EV_AL_CONTROL).map_err(InitError::Pdi)?;
-        s.write_status(pdi).map_err(InitError::Pdi)?;
-        Ok(s)
+        self.write_status(pdi).map_err(InitError::Pdi)?;
+        Ok(())
     }
 
     /// PREOP → SAFEOP in three [`Slave::poll`] calls instead of one: the request and the
@@ -340,8 +440,8 @@ impl<P: Pdi, const N: usize, const M: usize> Slave<P, N, M> {
             }
             PdStep::Tx => {
                 self.pd_step = PdStep::Idle;
-                let (rx, tx) = (self.rx_map, self.tx_map);
-                return match self.start_pd_with(pdi, app, rx, tx)? {
+                let (rx, tx) = (self.rx_map.bytes(), self.tx_map.bytes());
+                return match self.start_pd_with(pdi, app, rx, tx, false)? {
                     Ok(()) => self.write_status(pdi),
                     Err(c) => self.set_error(pdi, c),
                 };
@@ -556,7 +656,7 @@ impl<P: Pdi, const N: usize, const M: usize> Slave<P, N, M> {
         if ev & reg::ev_sm(2) == 0 {
             return Ok(());
         }
-        let start = self.od.def.sm2_start;
+        let start = self.od.def().sm2_start;
         pdi.read(start, &mut self.pd[..n])?;
         if self.state == AlState::Op {
             self.rx_map.unpack(&mut self.od, &self.pd[..n]);
@@ -574,7 +674,7 @@ impl<P: Pdi, const N: usize, const M: usize> Slave<P, N, M> {
             self.pd[..n].fill(0);
         }
         self.tx_map.pack(&self.od, &mut self.pd[..n]);
-        let start = self.od.def.sm3_start;
+        let start = self.od.def().sm3_start;
         pdi.write(start, &self.pd[..n])
     }
 
@@ -641,7 +741,7 @@ impl<P: Pdi, const N: usize, const M: usize> Slave<P, N, M> {
             }
             (Init, PreOp) => self.start_mailbox(pdi, app, false)?,
             (Init, Boot) => {
-                if self.od.def.boot_mailbox.is_none() {
+                if self.od.def().boot_mailbox.is_none() {
                     Err(AlStatusCode::BOOT_NOT_SUPPORTED)
                 } else {
                     self.start_mailbox(pdi, app, true)?
@@ -735,7 +835,7 @@ impl<P: Pdi, const N: usize, const M: usize> Slave<P, N, M> {
         out: usize,
         inp: usize,
     ) -> Result<Result<(), AlStatusCode>, P::Error> {
-        let def = self.od.def;
+        let def = self.od.def();
         let (s2, l2, c2, a2) = Self::read_sm(pdi, 2)?;
         let out_ok = if out == 0 {
             a2 & 1 == 0 || l2 == 0
@@ -792,9 +892,9 @@ impl<P: Pdi, const N: usize, const M: usize> Slave<P, N, M> {
         boot: bool,
     ) -> Result<Result<(), AlStatusCode>, P::Error> {
         let def = if boot {
-            self.od.def.boot_mailbox
+            self.od.def().boot_mailbox
         } else {
-            Some(self.od.def.mailbox)
+            Some(self.od.def().mailbox)
         };
         let bad = if boot {
             AlStatusCode::INVALID_BOOT_MBX_CONFIG
@@ -841,27 +941,33 @@ impl<P: Pdi, const N: usize, const M: usize> Slave<P, N, M> {
         pdi: &mut P,
         app: &mut A,
     ) -> Result<Result<(), AlStatusCode>, P::Error> {
-        let rx = match pdo::compile(&self.od, Dir::Rx) {
-            Ok(m) => m,
+        // Checked first and compiled into the stack's own mappings only when the transition
+        // is taken: a refused one leaves the active mappings as they were, and no mapping
+        // is built on the stack.
+        let rx = match pdo::check(&self.od, Dir::Rx) {
+            Ok(n) => n,
             Err(_) => return Ok(Err(AlStatusCode::INVALID_OUTPUT_MAPPING)),
         };
-        let tx = match pdo::compile(&self.od, Dir::Tx) {
-            Ok(m) => m,
+        let tx = match pdo::check(&self.od, Dir::Tx) {
+            Ok(n) => n,
             Err(_) => return Ok(Err(AlStatusCode::INVALID_INPUT_MAPPING)),
         };
-        self.start_pd_with(pdi, app, rx, tx)
+        self.start_pd_with(pdi, app, rx, tx, true)
     }
 
-    /// PREOP → SAFEOP with the compiled mappings `rx`, `tx`: SM2/SM3 and the sync mode
-    /// checked, the application asked, the process data started.
+    /// PREOP → SAFEOP with mappings of `rx`, `tx` bytes: SM2/SM3 and the sync mode
+    /// checked, the application asked, the process data started. `compile`: the mappings
+    /// (checked) are compiled into the stack's when the transition is taken; else they are
+    /// there already (stepwise).
     fn start_pd_with<A: Application<N>>(
         &mut self,
         pdi: &mut P,
         app: &mut A,
-        rx: Mapping,
-        tx: Mapping,
+        rx: usize,
+        tx: usize,
+        compile: bool,
     ) -> Result<Result<(), AlStatusCode>, P::Error> {
-        if let Err(c) = self.pd_config_ok(pdi, rx.bytes(), tx.bytes())? {
+        if let Err(c) = self.pd_config_ok(pdi, rx, tx)? {
             return Ok(Err(c));
         }
         let mode = match self.check_sync(pdi)? {
@@ -871,9 +977,16 @@ impl<P: Pdi, const N: usize, const M: usize> Slave<P, N, M> {
         if let Err(c) = app.state_change(AlState::PreOp, AlState::SafeOp, &mut self.od) {
             return Ok(Err(c));
         }
-        self.rx_map = rx;
-        self.tx_map = tx;
-        self.tx_full = tx.covers_all();
+        if compile {
+            // Checked above on the same dictionary: does not fail.
+            if pdo::compile_into(&self.od, Dir::Rx, &mut self.rx_map).is_err() {
+                return Ok(Err(AlStatusCode::INVALID_OUTPUT_MAPPING));
+            }
+            if pdo::compile_into(&self.od, Dir::Tx, &mut self.tx_map).is_err() {
+                return Ok(Err(AlStatusCode::INVALID_INPUT_MAPPING));
+            }
+        }
+        self.tx_full = self.tx_map.covers_all();
         self.sync = mode;
         self.sm2_taken = false;
         self.diag.missed_count = 0;
@@ -883,16 +996,16 @@ impl<P: Pdi, const N: usize, const M: usize> Slave<P, N, M> {
         // mode the SM event that triggers the cycle (an AL control event still pending
         // would otherwise hold the line and hide the next edge); else AL control only.
         let mask = match mode {
-            SyncMode::SmSync | SyncMode::DcSync1 if rx.bytes() > 0 => reg::ev_sm(2),
+            SyncMode::SmSync | SyncMode::DcSync1 if rx > 0 => reg::ev_sm(2),
             SyncMode::SmSync => reg::ev_sm(3),
             _ => reg::EV_AL_CONTROL,
         };
         Self::set_event_mask(pdi, mask)?;
         app.safe_outputs(&mut self.od);
-        if rx.bytes() > 0 {
+        if rx > 0 {
             Self::sm_enable(pdi, 2, true)?;
         }
-        if tx.bytes() > 0 {
+        if tx > 0 {
             Self::sm_enable(pdi, 3, true)?;
         }
         self.state = AlState::SafeOp;
@@ -902,7 +1015,7 @@ impl<P: Pdi, const N: usize, const M: usize> Slave<P, N, M> {
 
     /// Decides the sync mode from 0x1C32:01 and the ESC's DC activation.
     fn check_sync(&mut self, pdi: &mut P) -> Result<Result<SyncMode, AlStatusCode>, P::Error> {
-        let def = self.od.def;
+        let def = self.od.def();
         let act = pdi.read_u8(reg::DC_ACTIVATION + 1)?;
         let dc_on = act & 0x03 == 0x03;
         let sync1 = act & 0x04 != 0;
@@ -959,9 +1072,9 @@ impl<P: Pdi, const N: usize, const M: usize> Slave<P, N, M> {
     // ------------------------------------------------------------------ mailbox
 
     pub(crate) fn mbx_def(&self) -> MailboxDef {
-        match (self.mbx.boot, self.od.def.boot_mailbox) {
+        match (self.mbx.boot, self.od.def().boot_mailbox) {
             (true, Some(b)) => b,
-            _ => self.od.def.mailbox,
+            _ => self.od.def().mailbox,
         }
     }
 

@@ -130,6 +130,30 @@ fn dynamic_pdo_assignment<P: Port>() {
     assert_eq!(i16::from_le_bytes([d[3], d[4]]), 100);
 }
 
+/// A PREOP -> SAFEOP refused after the mappings were checked (SM2 sized for the old
+/// mapping) leaves the active mappings as they were: the stack compiles a new mapping into
+/// its own only when the transition is taken.
+fn refused_safeop_keeps_the_active_mapping<P: Port>() {
+    let mut b = Bench::<P>::new();
+    b.enter_safeop();
+    let (out, inp) = (b.s.output_bytes(), b.s.input_bytes());
+    assert_eq!(out, b.expected_out() as usize);
+    assert_eq!(b.request(2), (2, 0));
+    // Remap 0x1600 to Setpoint only (2 bytes), SMs left as they were.
+    b.download(0x1600, 0, false, &[0]).unwrap();
+    b.download(0x1600, 1, false, &0x7000_0210u32.to_le_bytes())
+        .unwrap();
+    b.download(0x1600, 0, false, &[1]).unwrap();
+    assert_ne!(b.expected_out() as usize, out);
+    // SM2 still has the old length: refused (invalid output configuration).
+    assert_eq!(b.request(4), (0x12, 0x001D));
+    assert_eq!((b.s.output_bytes(), b.s.input_bytes()), (out, inp));
+    // With SM2 sized for the new mapping it is taken, and the new mapping is active.
+    b.config_pd();
+    assert_eq!(b.request(0x14), (4, 0));
+    assert_eq!(b.s.output_bytes(), 2);
+}
+
 fn abort_codes_table<P: Port>() {
     let mut b = Bench::<P>::new();
     b.enter_preop();
@@ -613,6 +637,7 @@ oxicat_testkit::every_pdi!(
     segmented_1k_both_directions,
     complete_access,
     dynamic_pdo_assignment,
+    refused_safeop_keeps_the_active_mapping,
     abort_codes_table,
     protocol_aborts,
     mailbox_errors_and_counters,

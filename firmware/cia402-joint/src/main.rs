@@ -42,7 +42,7 @@ use oxicat_devices::cia402::{
     device, Cia402Drive, CurrentCommand, CurrentFeedback, CurrentLoop, DriveParams, CURRENT_LOOP_HZ,
 };
 use oxicat_pdi::{Et1100Config, Et1100Spi};
-use oxicat_slave::{AlState, AlStatusCode, Application, Od, Slave};
+use oxicat_slave::{AlState, AlStatusCode, Application, Od, Slave, SlaveSlot};
 use stm32f4xx_hal::{
     pac::{self, interrupt, Interrupt},
     prelude::*,
@@ -64,11 +64,15 @@ const PRIO_ESC: u8 = 0x20;
 
 type Esc = Et1100Spi<EscSpi>;
 type JointSlave = Slave<Esc, { device::IMAGE }, MBX>;
+/// Where [`JointSlave`] is built in place: `main`'s `static mut`, all zero in `.bss` until
+/// [`start_stack`] starts it (no `Slave` value on the stack, no copy of one).
+type StackSlot = SlaveSlot<Esc, { device::IMAGE }, MBX>;
 type Drive = Cia402Drive<Sensors>;
 
 /// The stack, its ESC driver and the drive (the application the stack's hooks call).
 struct EscSide {
-    slave: JointSlave,
+    /// The stack, built in place in `main`'s [`StackSlot`] (`.bss`).
+    slave: &'static mut JointSlave,
     esc: Esc,
     drive: Drive,
 }
@@ -269,15 +273,19 @@ fn run_led(state: AlState, ms: u32) -> bool {
     }
 }
 
-/// Starts the slave stack on the ET1100 and stores it with the driver and the drive on
-/// `sensors` in [`ESC`]. A function of its own, not inlined: the `Slave` (several KB),
-/// the drive and the moves of them live in this frame, gone when it returns; built in
-/// `main`, which never returns, they held about 22 KB of stack for good under every
-/// interrupt (the Laelaps image's painted stack in `tools/oxicat-emu` showed it; `sub sp`
-/// in this ELF's `main` was 22,144 B).
+/// Starts the slave stack on the ET1100 in `slot` and stores it with the driver and the
+/// drive on `sensors` in [`ESC`]. The stack is built where it lies ([`SlaveSlot`]); a
+/// function of its own, not inlined: the drive and its move live in this frame, gone when
+/// it returns (built in `main`, which never returns, the stack and the drive held about
+/// 22 KB of stack for good under every interrupt; `sub sp` in `main` was 22,144 B).
 #[inline(never)]
-fn start_stack(mut esc: Esc, sensors: Sensors, params: DriveParams) -> Result<(), ()> {
-    let slave = JointSlave::new(&device::DEF, &mut esc).map_err(|_| ())?;
+fn start_stack(
+    slot: &'static mut StackSlot,
+    mut esc: Esc,
+    sensors: Sensors,
+    params: DriveParams,
+) -> Result<(), ()> {
+    let slave = slot.start(&device::DEF, &mut esc).map_err(|_| ())?;
     let drive = Cia402Drive::new(sensors, params);
     HANDOVER.put_command(drive.current_command());
     // SAFETY: once, before any ESC interrupt is unmasked (main enables them afterwards).
@@ -300,6 +308,8 @@ fn start_current_loop(bridge: Bridge, params: &DriveParams) {
 
 #[entry]
 fn main() -> ! {
+    // cortex-m-rt hands `main` this as a `&'static mut` (one per program).
+    static mut SLOT: StackSlot = SlaveSlot::new();
     let dp = pac::Peripherals::take().unwrap();
     let cp = cortex_m::Peripherals::take().unwrap();
     let clocks = clocks_180mhz(dp.RCC);
@@ -373,7 +383,7 @@ fn main() -> ! {
     if esc.init(&mut eeprom_loaded).is_err() {
         fail(&mut leds, &mut delay);
     }
-    if start_stack(esc, sensors, params).is_err() {
+    if start_stack(SLOT, esc, sensors, params).is_err() {
         fail(&mut leds, &mut delay);
     }
     start_current_loop(bridge, &params);

@@ -11,6 +11,13 @@
 //! RAM they take: `cargo build --release`, then `llvm-size` on
 //! `../target/thumbv7em-none-eabihf/release/oxicat-firmware-minimal` (the images' shared
 //! target directory, `firmware/target`).
+//!
+//! The device advertises FoE (firmware download in BOOT, `version.txt`), and the image
+//! serves it: the stack's update flow ([`FirmwareUpdate`]: `firmware.bin` in BOOT, CRC and
+//! identity checks, the FoE error codes, `version.txt`) on [`StubFlash`], a stand-in for a
+//! flash driver such as `firmware/tue-es030/src/store.rs` (two 128 KiB slots), opaque to
+//! the optimiser like [`StubPdi`]. The stack's state is built in place in a static
+//! ([`SlaveSlot`]), so `main`'s frame holds no `Slave`.
 #![no_std]
 #![no_main]
 
@@ -18,8 +25,13 @@ use core::hint::black_box;
 
 use cortex_m_rt::entry;
 use oxicat_devices::demo::{self, Buttons, Demo, Leds};
-use oxicat_slave::{IrqLines, Pdi, Slave};
+use oxicat_slave::foe::{FirmwareStore, FirmwareUpdate, StoreError, UpdateConfig, WithFoe};
+use oxicat_slave::{DeviceDef, IrqLines, Pdi, Slave, SlaveSlot};
 use panic_halt as _;
+
+/// The demo device as the image links it: the stack's part of `demo::DEF`, without the
+/// texts only its ESI and SII carry (vendor, group, description, DC mode names).
+static DEF: DeviceDef = demo::DEF.for_image();
 
 /// Mailbox buffer size of the stack: the demo's mailboxes are 128 bytes.
 const MBX: usize = 128;
@@ -68,6 +80,60 @@ impl Pdi for StubPdi {
     }
 }
 
+/// Stand-in for the flash driver of the FoE firmware store (two 128 KiB sectors on an
+/// STM32F446, as `firmware/tue-es030/src/store.rs`): every operation goes through
+/// `black_box`, so the update flow above it stays whole in the image.
+pub struct StubFlash;
+
+impl FirmwareStore for StubFlash {
+    fn slots(&self) -> u8 {
+        2
+    }
+
+    fn capacity(&self) -> u32 {
+        128 * 1024
+    }
+
+    fn erase(&mut self, slot: u8) -> Result<(), StoreError> {
+        black_box(slot);
+        if black_box(false) {
+            return Err(StoreError::Busy { done: 0, entire: 1 });
+        }
+        Ok(())
+    }
+
+    fn write(&mut self, slot: u8, offset: u32, data: &[u8]) -> Result<(), StoreError> {
+        black_box((slot, offset, data));
+        Ok(())
+    }
+
+    fn read(&mut self, slot: u8, offset: u32, buf: &mut [u8]) -> Result<(), StoreError> {
+        black_box((slot, offset));
+        for b in buf.iter_mut() {
+            *b = black_box(0xFF);
+        }
+        Ok(())
+    }
+
+    fn mark_bootable(&mut self, slot: u8) -> Result<(), StoreError> {
+        black_box(slot);
+        Ok(())
+    }
+
+    fn bootable(&self) -> Option<u8> {
+        black_box(Some(0))
+    }
+}
+
+/// The FoE files the demo device advertises: `firmware.bin` writable in BOOT (and read
+/// back), `version.txt` readable, as the host rig's demo devices serve them.
+const UPDATE: UpdateConfig = UpdateConfig {
+    identity: DEF.identity,
+    file_name: "firmware.bin",
+    password: 0,
+    read_back: true,
+};
+
 /// The board's LEDs (GPIO writes on real hardware).
 struct BoardLeds;
 impl Leds for BoardLeds {
@@ -86,9 +152,15 @@ impl Buttons for BoardButtons {
 
 #[entry]
 fn main() -> ! {
+    // The stack's state, built in place in `.bss` (cortex-m-rt hands `main` a `&'static
+    // mut`): no `Slave` value on the stack and no copy of one.
+    static mut SLOT: SlaveSlot<StubPdi, { demo::IMAGE }, MBX> = SlaveSlot::new();
     let mut pdi = StubPdi;
-    let mut app = Demo::new(BoardLeds, BoardButtons);
-    let Ok(mut slave) = Stack::new(&demo::DEF, &mut pdi) else {
+    let mut app = WithFoe {
+        app: Demo::new(BoardLeds, BoardButtons),
+        files: FirmwareUpdate::new(StubFlash, UPDATE),
+    };
+    let Ok(slave) = SLOT.start(&DEF, &mut pdi) else {
         #[allow(clippy::empty_loop)]
         loop {}
     };

@@ -16,13 +16,13 @@
 
 use cortex_m_rt::entry;
 use embedded_hal::digital::InputPin;
-use oxicat_board_support::{clocks_180mhz, esc_spi1};
+use oxicat_board_support::{clocks_180mhz, esc_spi1, EscSpi};
 use oxicat_devices::demo::{self, Buttons, Demo, Leds};
 use oxicat_pdi::{Lan9252, Lan9252Config, Pins};
-use oxicat_slave::{AlState, Pdi, Slave};
+use oxicat_slave::{AlState, DeviceDef, Pdi, SlaveSlot};
 use panic_halt as _;
 use stm32f4xx_hal::{
-    gpio::{Output, Pin},
+    gpio::{Input, Output, Pin},
     pac,
     prelude::*,
     watchdog::IndependentWatchdog,
@@ -30,6 +30,13 @@ use stm32f4xx_hal::{
 
 /// Mailbox buffer size of the stack: the demo's mailboxes are 128 bytes.
 const MBX: usize = 128;
+
+/// The ESC: the LAN9252 on SPI1, IRQ on PA10, SYNC0 on PB3, SYNC1 on PB5.
+type Esc = Lan9252<EscSpi, Pins<Pin<'A', 10, Input>, Pin<'B', 3, Input>, Pin<'B', 5, Input>>>;
+
+/// The demo device as the image links it: the stack's part of `demo::DEF`, without the
+/// texts only its ESI and SII carry (vendor, group, description, DC mode names).
+static DEF: DeviceDef = demo::DEF.for_image();
 
 /// IWDG timeout: a hang resets the MCU this long after the last feed (at the LSI's nominal
 /// 32 kHz; the LSI's 17–47 kHz spread makes it 136..376 ms on a given part).
@@ -72,6 +79,9 @@ fn fail(leds: &mut BoardLeds, delay: &mut impl embedded_hal::delay::DelayNs) -> 
 
 #[entry]
 fn main() -> ! {
+    // The stack's state, built in place in `.bss` (cortex-m-rt hands `main` a `&'static
+    // mut`): no `Slave` value in `main`'s frame and no copy of one.
+    static mut SLOT: SlaveSlot<Esc, { demo::IMAGE }, MBX> = SlaveSlot::new();
     let dp = pac::Peripherals::take().unwrap();
     let cp = cortex_m::Peripherals::take().unwrap();
     // Why the MCU (re)started: RCC_CSR's reset flags, cleared (RMVF) for the next reset.
@@ -127,7 +137,7 @@ fn main() -> ! {
     }
 
     let mut app = Demo::new(leds, buttons);
-    let mut slave = match Slave::<_, { demo::IMAGE }, MBX>::new(&demo::DEF, &mut esc) {
+    let slave = match SLOT.start(&DEF, &mut esc) {
         Ok(s) => s,
         Err(_) => fail(&mut app.leds, &mut delay),
     };

@@ -42,7 +42,7 @@ use oxicat_board_support::{
 use oxicat_devices::tue_es030::{device, FwLock, Hooks, TuEs030};
 use oxicat_pdi::{Lan9252, Lan9252Config};
 use oxicat_slave::foe::{FirmwareUpdate, WithFoe};
-use oxicat_slave::Slave;
+use oxicat_slave::{Slave, SlaveSlot};
 use stm32f4xx_hal::{
     gpio::{Output, Pin},
     pac::{self, interrupt, Interrupt},
@@ -64,6 +64,9 @@ const PRIO_ESC: u8 = 0x20;
 
 type Esc = Lan9252<EscSpi>;
 type TueSlave = Slave<Esc, { device::IMAGE }, MBX>;
+/// Where [`TueSlave`] is built in place: `main`'s `static mut`, all zero in `.bss` until
+/// [`start_stack`] starts it (no `Slave` value on the stack, no copy of one).
+type StackSlot = SlaveSlot<Esc, { device::IMAGE }, MBX>;
 type Firmware = TuEs030<TueBoard>;
 /// The stack's application: the device's hooks, and the FoE update flow on the flash
 /// store (the host rig's `WithFoe<_, FirmwareUpdate<_>>`, on flash instead of RAM).
@@ -71,7 +74,8 @@ type App = WithFoe<Hooks<FwCs>, FirmwareUpdate<FlashStore>>;
 
 /// The stack, its ESC driver and its application.
 struct EscSide {
-    slave: TueSlave,
+    /// The stack, built in place in `main`'s [`StackSlot`] (`.bss`).
+    slave: &'static mut TueSlave,
     esc: Esc,
     app: App,
 }
@@ -171,13 +175,13 @@ fn fail(led: &mut Pin<'D', 14, Output>, delay: &mut impl embedded_hal::delay::De
     }
 }
 
-/// Starts the slave stack on the LAN9252 and stores it with the driver in [`ESC`]. A
-/// function of its own, not inlined: the `Slave` (several KB) and the moves of it live in
-/// this frame, gone when it returns (built in `main`, which never returns, they would hold
-/// that stack for good under every interrupt: the Laelaps image's finding).
+/// Starts the slave stack on the LAN9252 in `slot` and stores it with the driver in
+/// [`ESC`]. The stack is built where it lies ([`SlaveSlot`]): as a value, the `Slave` and
+/// the moves of it took 24 KB of stack at start-up (`scripts/fw-footprint.py`). A function
+/// of its own, not inlined, for the FoE files' frame.
 #[inline(never)]
-fn start_stack(mut esc: Esc, flash: pac::FLASH) -> Result<(), ()> {
-    let slave = TueSlave::new(&device::DEF, &mut esc).map_err(|_| ())?;
+fn start_stack(slot: &'static mut StackSlot, mut esc: Esc, flash: pac::FLASH) -> Result<(), ()> {
+    let slave = slot.start(&device::DEF, &mut esc).map_err(|_| ())?;
     let app = WithFoe {
         app: Hooks(FwCs),
         files: FirmwareUpdate::new(FlashStore::new(flash), oxicat_devices::tue_es030::UPDATE),
@@ -196,6 +200,8 @@ fn start_firmware(board: TueBoard) {
 
 #[entry]
 fn main() -> ! {
+    // cortex-m-rt hands `main` this as a `&'static mut` (one per program).
+    static mut SLOT: StackSlot = SlaveSlot::new();
     let dp = pac::Peripherals::take().unwrap();
     let cp = cortex_m::Peripherals::take().unwrap();
     // 8 MHz HSE -> 180 MHz SYSCLK; APB1 45 MHz (its timers 90 MHz), APB2 90 MHz (TIM1 and
@@ -279,7 +285,7 @@ fn main() -> ! {
     if esc.init().is_err() {
         fail(&mut frun, &mut delay);
     }
-    if start_stack(esc, dp.FLASH).is_err() {
+    if start_stack(SLOT, esc, dp.FLASH).is_err() {
         fail(&mut frun, &mut delay);
     }
     // The firmware brakes the three motors (50/50, drivers enabled) as it starts.
@@ -320,10 +326,14 @@ fn main() -> ! {
         if now.wrapping_sub(last_poll) >= POLL_EVERY_TICKS {
             last_poll = now;
             with_esc_from_thread(|e| {
-                let _ = e.slave.poll(&mut e.esc, &mut e.app);
                 // The service routine runs in the ADC interrupt, not on the stack's
-                // SERVICE_TIMER: its dictionary side (0x8040) is stored here, at 1 kHz.
+                // SERVICE_TIMER: its dictionary side (0x8040) is stored here, at 1 kHz —
+                // before the poll, so an SDO upload the poll serves reads this tick's
+                // values (after it, the first upload after PREOP could read 0x8040 before
+                // it was ever stored: the emulator test saw 0 V when the start-up timing
+                // moved).
                 e.app.app.store_voltages(e.slave.od_mut());
+                let _ = e.slave.poll(&mut e.esc, &mut e.app);
             });
         }
         // The IRQ line is a level: a cause that arrives while it is still low from another

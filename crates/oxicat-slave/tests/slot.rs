@@ -1,0 +1,168 @@
+//! `SlaveSlot`: the stack built in place (a board image's static) is the stack
+//! `Slave::new` builds, and starting a used slot again gives a fresh one.
+
+use oxicat_esc::{Esc, EscConfig};
+use oxicat_slave::{AlState, InitError, Slave, SlaveSlot};
+use oxicat_testkit::device::{eeprom, DEF, IMG, MBX};
+
+type Stack = Slave<Esc, IMG, MBX>;
+
+fn esc() -> Esc {
+    Esc::new(EscConfig::default(), eeprom(&DEF))
+}
+
+/// Every object's every entry, as bytes, and the AL status the stack wrote to the ESC.
+fn snapshot(s: &Stack, esc: &mut Esc) -> (Vec<Vec<u8>>, Vec<u8>) {
+    let od = s.od();
+    let mut all = Vec::new();
+    for n in 0..od.object_count() {
+        let o = od.object_info(n).expect("object");
+        for e in o.entries {
+            all.push(od.bytes(o.index, e.sub).expect("entry").to_vec());
+        }
+    }
+    let mut al = [0u8; 6];
+    esc.pdi_read(0x0130, &mut al).expect("AL status");
+    (all, al.to_vec())
+}
+
+#[test]
+fn a_slot_builds_the_stack_new_builds() {
+    let (mut e1, mut e2) = (esc(), esc());
+    let new = Stack::new(&DEF, &mut e1).expect("new");
+    let mut slot = Box::new(SlaveSlot::<Esc, IMG, MBX>::new());
+    let started = slot.start(&DEF, &mut e2).expect("start");
+    assert_eq!(started.state(), AlState::Init);
+    assert_eq!(
+        (started.output_bytes(), started.input_bytes()),
+        (new.output_bytes(), new.input_bytes())
+    );
+    assert_eq!(started.od().app_image(), new.od().app_image());
+    assert_eq!(snapshot(started, &mut e2), snapshot(&new, &mut e1));
+    assert!(snapshot(&new, &mut e1)
+        .0
+        .iter()
+        .any(|v| v.iter().any(|&b| b != 0)));
+}
+
+#[test]
+fn starting_a_used_slot_again_resets_it() {
+    let mut e = esc();
+    let mut slot = Box::new(SlaveSlot::<Esc, IMG, MBX>::new());
+    let s = slot.start(&DEF, &mut e).expect("start");
+    // Change the dictionary (a writable entry) and the stack's state.
+    let n = s.od().object_count();
+    let writable = (0..n)
+        .filter_map(|k| s.od().object_info(k))
+        .find_map(|o| {
+            o.entries
+                .iter()
+                .find(|e| e.access.writable() && e.bits == 16)
+                .map(|e| (o.index, e.sub))
+        })
+        .expect("a writable 16-bit entry");
+    let old: u16 = s.od().get(writable.0, writable.1).expect("get");
+    s.od_mut()
+        .set(writable.0, writable.1, old ^ 0x5A5A)
+        .expect("set");
+    s.set_stepwise_safeop(true);
+    let s = slot.start(&DEF, &mut e).expect("start again");
+    assert_eq!(s.od().get::<u16>(writable.0, writable.1), Ok(old));
+    assert_eq!(s.state(), AlState::Init);
+    let fresh = Stack::new(&DEF, &mut esc()).expect("new");
+    assert_eq!(snapshot(s, &mut e).0, snapshot(&fresh, &mut esc()).0);
+}
+
+#[test]
+fn a_slot_refuses_a_definition_the_stack_refuses() {
+    // Mailbox buffers smaller than the definition's mailboxes.
+    let mut slot = Box::new(SlaveSlot::<Esc, IMG, 16>::new());
+    assert!(matches!(
+        slot.start(&DEF, &mut esc()),
+        Err(InitError::MailboxSize)
+    ));
+    assert!(matches!(
+        Slave::<Esc, IMG, 16>::new(&DEF, &mut esc()),
+        Err(InitError::MailboxSize)
+    ));
+}
+
+/// `DeviceDef::for_image` (what a board image links) drops the ESI/SII texts and keeps
+/// everything the stack serves: the same dictionary, byte for byte.
+#[test]
+fn the_image_definition_serves_the_same_dictionary() {
+    use oxicat_devices::demo;
+    static IMAGE_DEF: oxicat_slave::DeviceDef = demo::DEF.for_image();
+    type Demo = Slave<Esc, { demo::IMAGE }, 128>;
+    let info = &IMAGE_DEF.info;
+    assert_eq!((info.vendor_name, info.order_code), ("", ""));
+    assert!(info.description.is_none() && info.dc_modes.is_empty());
+    assert!(!demo::DEF.info.vendor_name.is_empty() && !demo::DEF.info.dc_modes.is_empty());
+    assert_eq!(
+        (IMAGE_DEF.info.coe, IMAGE_DEF.info.foe),
+        (demo::DEF.info.coe, demo::DEF.info.foe)
+    );
+    assert_eq!(IMAGE_DEF.mailbox_protocols(), demo::DEF.mailbox_protocols());
+    // Every object's description (SDO information) and every entry's value.
+    let dump = |def: &'static oxicat_slave::DeviceDef| {
+        let mut e = Esc::new(EscConfig::default(), eeprom(&demo::DEF));
+        let s = Demo::new(def, &mut e).expect("new");
+        let od = s.od();
+        let mut all = Vec::new();
+        for n in 0..od.object_count() {
+            let o = od.object_info(n).expect("object");
+            for en in o.entries {
+                let v = od.bytes(o.index, en.sub).expect("entry").to_vec();
+                all.push((o.index, o.name, o.code, *en, v));
+            }
+        }
+        all
+    };
+    assert_eq!(dump(&IMAGE_DEF), dump(&demo::DEF));
+}
+
+/// The PDO mapping objects lie in a pool of the communication image, each its own size (a
+/// fixed mapping 1 + 4 bytes per entry): every device a board image runs fits the pool of
+/// a microcontroller build, so no board stops at start-up with `MappingsTooLarge`.
+#[test]
+fn every_board_device_fits_the_microcontroller_mapping_pool() {
+    use oxicat_devices::{axis_hub, cia402, demo, laelaps, tue_es030};
+    use oxicat_slave::od::{map_storage, MAP_POOL_MCU, MAP_SHOWN};
+    let defs: [(&str, &oxicat_slave::DeviceDef); 7] = [
+        ("demo", &demo::DEF),
+        ("demo additions", &demo::additions::DEF),
+        (
+            "laelaps left",
+            laelaps::device::device(laelaps::kinematics::Side::Left),
+        ),
+        (
+            "laelaps right",
+            laelaps::device::device(laelaps::kinematics::Side::Right),
+        ),
+        ("cia402", &cia402::device::DEF),
+        ("tue-es030", &tue_es030::device::DEF),
+        ("axis hub", &axis_hub::device::DEF),
+    ];
+    for (name, def) in defs {
+        let want: usize = def
+            .rx_pdos
+            .iter()
+            .chain(def.tx_pdos.iter())
+            .map(|p| {
+                let shown = if p.configurable {
+                    p.entries.len().max(MAP_SHOWN)
+                } else {
+                    p.entries.len()
+                };
+                1 + 4 * shown
+            })
+            .sum();
+        assert_eq!(map_storage(def), want, "{name}");
+        assert!(
+            want <= MAP_POOL_MCU,
+            "{name}: {want} bytes of mapping objects"
+        );
+    }
+    // The demo's six fixed PDOs: 106 bytes (was 16 × 125 = 2,000 at the 31-entry capacity).
+    assert_eq!(map_storage(&demo::DEF), 106);
+}
