@@ -3,9 +3,10 @@
 //!
 //! An indexed binary heap: each slot has at most one entry per kind, found through its
 //! position, so a changed time is a sift up or down (O(log n)) and an unchanged one costs a
-//! comparison. There are no stale entries and the heap never holds more than two entries
-//! per slot, however often the times move (a firmware's PDI watchdog deadline moves at every
-//! main-loop pass).
+//! comparison, and the heap never holds more than two entries per slot however often the
+//! times move. [`EventQueue::lower`] lets the segment leave an entry earlier than its time
+//! (checked when it comes first), so a time that only moves later (a firmware's PDI
+//! watchdog deadline, at every main-loop pass) costs no sift.
 
 /// No position: the entry is not in the heap.
 const NONE: u32 = u32::MAX;
@@ -22,81 +23,99 @@ pub(crate) enum Kind {
 /// Pending events of a segment's slots, earliest first.
 #[derive(Debug, Default)]
 pub(crate) struct EventQueue {
-    /// Entry ids (`slot * 2 + kind`) in heap order.
-    heap: Vec<u32>,
-    /// Position in `heap` of each entry id, or [`NONE`].
+    /// `(time, kind << 31 | slot)` in heap order: the key itself, so a sift compares in
+    /// place (no look-up per comparison); its order is time, then kind, then slot.
+    heap: Vec<(u64, u32)>,
+    /// Position in `heap` of each entry id (`slot * 2 + kind`), or [`NONE`].
     pos: Vec<u32>,
-    /// Time of each entry id (meaningful while it is in the heap).
-    time: Vec<u64>,
+}
+
+/// The second half of an entry's key: its kind, then its slot.
+#[inline]
+fn rank(slot: usize, kind: Kind) -> u32 {
+    (kind as u32) << 31 | slot as u32
+}
+
+/// The entry id of a key's second half.
+#[inline]
+fn id_of(rank: u32) -> usize {
+    ((rank & 0x7FFF_FFFF) * 2 + (rank >> 31)) as usize
 }
 
 impl EventQueue {
-    /// Room for slot `slots - 1` (no entries yet).
+    /// Room for slots `0 .. slots` (no entries yet).
     pub(crate) fn grow_to(&mut self, slots: usize) {
         self.pos.resize(2 * slots, NONE);
-        self.time.resize(2 * slots, 0);
-    }
-
-    /// The ordering key of entry `id`: time, then kind, then slot.
-    #[inline]
-    fn key(&self, id: u32) -> (u64, u32, u32) {
-        (self.time[id as usize], id & 1, id >> 1)
-    }
-
-    #[inline]
-    fn less(&self, a: u32, b: u32) -> bool {
-        self.key(a) < self.key(b)
     }
 
     /// Sets (`Some`) or removes (`None`) the entry of `kind` of `slot`.
     #[inline]
     pub(crate) fn set(&mut self, slot: usize, kind: Kind, t: Option<u64>) {
-        let id = (slot * 2 + kind as usize) as u32;
-        let p = self.pos[id as usize];
+        let id = slot * 2 + kind as usize;
+        let p = self.pos[id];
         match t {
             None if p == NONE => {}
             None => self.remove_at(p as usize),
             Some(t) if p == NONE => {
-                self.time[id as usize] = t;
-                self.heap.push(id);
-                self.pos[id as usize] = (self.heap.len() - 1) as u32;
+                self.heap.push((t, rank(slot, kind)));
                 self.sift_up(self.heap.len() - 1);
             }
             Some(t) => {
-                let old = self.time[id as usize];
+                let p = p as usize;
+                let old = self.heap[p].0;
                 if t == old {
                     return;
                 }
-                self.time[id as usize] = t;
+                self.heap[p].0 = t;
                 if t < old {
-                    self.sift_up(p as usize);
+                    self.sift_up(p);
                 } else {
-                    self.sift_down(p as usize);
+                    self.sift_down(p);
                 }
             }
         }
     }
 
+    /// Queues the entry of `kind` of `slot` at `t` if it is not queued or queued later; an
+    /// entry queued earlier, or `t == None`, is left as it is (the caller checks an entry
+    /// when it comes first).
+    #[inline]
+    pub(crate) fn lower(&mut self, slot: usize, kind: Kind, t: Option<u64>) {
+        if let Some(t) = t {
+            if self.time(slot, kind).is_none_or(|q| t < q) {
+                self.set(slot, kind, Some(t));
+            }
+        }
+    }
+
+    /// Time of the entry of `kind` of `slot`, if it is queued.
+    #[inline]
+    pub(crate) fn time(&self, slot: usize, kind: Kind) -> Option<u64> {
+        let p = self.pos[slot * 2 + kind as usize];
+        (p != NONE).then(|| self.heap[p as usize].0)
+    }
+
     /// The earliest entry: `(time, slot, kind)`.
     #[inline]
     pub(crate) fn peek(&self) -> Option<(u64, usize, Kind)> {
-        let &id = self.heap.first()?;
-        let kind = if id & 1 == 0 { Kind::Esc } else { Kind::Wake };
-        Some((self.time[id as usize], (id >> 1) as usize, kind))
+        let &(t, r) = self.heap.first()?;
+        let kind = if r >> 31 == 0 { Kind::Esc } else { Kind::Wake };
+        Some((t, (r & 0x7FFF_FFFF) as usize, kind))
     }
 
-    fn place(&mut self, i: usize, id: u32) {
-        self.heap[i] = id;
-        self.pos[id as usize] = i as u32;
+    #[inline]
+    fn place(&mut self, i: usize, e: (u64, u32)) {
+        self.heap[i] = e;
+        self.pos[id_of(e.1)] = i as u32;
     }
 
     fn remove_at(&mut self, i: usize) {
-        let id = self.heap[i];
-        self.pos[id as usize] = NONE;
-        let last = self.heap.pop().unwrap_or(id);
+        let e = self.heap[i];
+        self.pos[id_of(e.1)] = NONE;
+        let last = self.heap.pop().unwrap_or(e);
         if i < self.heap.len() {
             self.place(i, last);
-            if i > 0 && self.less(last, self.heap[(i - 1) / 2]) {
+            if i > 0 && last < self.heap[(i - 1) / 2] {
                 self.sift_up(i);
             } else {
                 self.sift_down(i);
@@ -105,21 +124,21 @@ impl EventQueue {
     }
 
     fn sift_up(&mut self, mut i: usize) {
-        let id = self.heap[i];
+        let e = self.heap[i];
         while i > 0 {
             let parent = (i - 1) / 2;
             let p = self.heap[parent];
-            if !self.less(id, p) {
+            if e >= p {
                 break;
             }
             self.place(i, p);
             i = parent;
         }
-        self.place(i, id);
+        self.place(i, e);
     }
 
     fn sift_down(&mut self, mut i: usize) {
-        let id = self.heap[i];
+        let e = self.heap[i];
         let n = self.heap.len();
         loop {
             let l = 2 * i + 1;
@@ -127,18 +146,19 @@ impl EventQueue {
                 break;
             }
             let r = l + 1;
-            let c = if r < n && self.less(self.heap[r], self.heap[l]) {
+            let c = if r < n && self.heap[r] < self.heap[l] {
                 r
             } else {
                 l
             };
-            if !self.less(self.heap[c], id) {
+            let ce = self.heap[c];
+            if ce >= e {
                 break;
             }
-            self.place(i, self.heap[c]);
+            self.place(i, ce);
             i = c;
         }
-        self.place(i, id);
+        self.place(i, e);
     }
 }
 
@@ -183,6 +203,10 @@ mod tests {
                 .min();
             let got = q.peek().map(|(t, s, k)| (t, k as u32, s as u32));
             assert_eq!(got, least, "step {step}");
+            for (s, e) in reference.iter().enumerate() {
+                assert_eq!(q.time(s, Kind::Esc), e[0]);
+                assert_eq!(q.time(s, Kind::Wake), e[1]);
+            }
             let live = reference.iter().flatten().flatten().count();
             assert_eq!(q.heap.len(), live, "one entry per (slot, kind)");
         }

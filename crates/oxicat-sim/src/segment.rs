@@ -592,30 +592,42 @@ impl<E: SegmentEsc> Segment<E> {
         self.dirty.extend(0..self.slots.len());
     }
 
-    /// Reads slot `i`'s next ESC event and next node wakeup into the event queue (after
-    /// anything that may have changed them: the slot's ESC advanced, a frame passed it, its
-    /// node ran, a cable or the node changed).
+    /// Slot `i`'s next ESC event still to come (one at or before the time the ESC was
+    /// brought to is done) and its node's next wakeup, as they are now.
+    #[inline]
+    fn due_now(&self, i: usize) -> (Option<u64>, Option<u64>) {
+        let s = &self.slots[i];
+        (s.esc.next_event().filter(|&ne| ne > s.advanced), s.wakeup())
+    }
+
+    /// Brings slot `i`'s entries in the event queue up to date after anything that may
+    /// have moved its next times (its ESC advanced, a frame passed it, its node ran, a cable
+    /// or the node changed): an earlier or new time is queued at once; a later one (or none)
+    /// is left for [`run_events_until`](Self::run_events_until) to find when the entry comes
+    /// first (an entry is never later than its slot's time, so the first entry, once checked,
+    /// is the earliest). A firmware's PDI watchdog deadline moves later at every main-loop
+    /// pass; this way it costs a comparison, not a sift.
     #[inline]
     fn requeue(&mut self, i: usize) {
-        let s = &self.slots[i];
-        // An ESC event at or before the time the ESC was brought to is already done.
-        let esc = s.esc.next_event().filter(|&ne| ne > s.advanced);
-        let wake = s.wakeup();
-        self.queue.set(i, Kind::Esc, esc);
-        self.queue.set(i, Kind::Wake, wake);
+        let (esc, wake) = self.due_now(i);
+        self.queue.lower(i, Kind::Esc, esc);
+        self.queue.lower(i, Kind::Wake, wake);
     }
 
     /// Delivers all events and node wakeups due up to `t`, earliest first across ESCs: by
     /// time, then ESC event before wakeup, then lowest slot index.
     ///
-    /// The candidates come from the event queue, which holds each slot's next ESC event
-    /// and next wakeup as last read. A slot is read again after whatever may change them —
-    /// its ESC advanced ([`advance_slot`](Self::advance_slot)), a frame passed it, its node
-    /// handled an event or a wakeup, its ESC was lent out ([`esc_mut`](Self::esc_mut)), a
-    /// cable or its node changed — and only then: handling an event touches that slot's ESC
-    /// and node only, so the others' times still hold. Each pick costs O(log n) instead of
-    /// a read of every slot ([`set_reference_scheduler`](Self::set_reference_scheduler)
-    /// keeps that way, to compare).
+    /// The candidates come from the event queue, which holds an entry per slot and kind no
+    /// later than the slot's next ESC event or next wakeup. A slot's entries are brought up
+    /// to date after whatever may move its times — its ESC advanced
+    /// ([`advance_slot`](Self::advance_slot)), a frame passed it, its node handled an event
+    /// or a wakeup, its ESC was lent out ([`esc_mut`](Self::esc_mut)), a cable or its node
+    /// changed — and only then: handling an event touches that slot's ESC and node only, so
+    /// the others' times still hold. The first entry is checked against its slot before it
+    /// runs (an entry left early is moved to its time and the next one looked at). Each pick
+    /// costs O(log n) instead of a read of every slot
+    /// ([`set_reference_scheduler`](Self::set_reference_scheduler) keeps that way, to
+    /// compare).
     fn run_events_until(&mut self, t: u64) {
         if self.reference {
             return self.run_events_reference(t);
@@ -627,13 +639,31 @@ impl<E: SegmentEsc> Segment<E> {
             if at > t {
                 break;
             }
-            // Taken: whatever the slot wants next is read after it ran.
-            self.queue.set(i, kind, None);
+            let (esc, wake) = self.due_now(i);
+            let now = match kind {
+                Kind::Esc => esc,
+                Kind::Wake => wake,
+            };
+            if now != Some(at) {
+                // Left early: to its time (or out), and look again.
+                self.queue.set(i, kind, now);
+                continue;
+            }
             match kind {
                 Kind::Esc => self.advance_slot(i, at),
                 Kind::Wake => self.wake(i, at),
             }
-            self.requeue(i);
+            // Taken: the entry moves to the slot's next time of that kind (one sift), the
+            // other kind's entry is lowered if it must. Neither can be `at` again — an ESC
+            // event must be later than the time its ESC was brought to, a wakeup later than
+            // the last — but an entry left at `at` would be picked forever, so make sure.
+            let (esc, wake) = self.due_now(i);
+            let (this, other, other_kind) = match kind {
+                Kind::Esc => (esc, wake, Kind::Wake),
+                Kind::Wake => (wake, esc, Kind::Esc),
+            };
+            self.queue.set(i, kind, this.filter(|&n| n != at));
+            self.queue.lower(i, other_kind, other);
         }
     }
 
