@@ -1155,6 +1155,11 @@ mod tests {
             self.next = t + self.period;
             // Every third wakeup toggles the IRQ line (an event of its own on the rise).
             e.irq = (t / self.period).is_multiple_of(3);
+            // Every fifth brings its ESC's next SYNC edge close (a PDI write of the DC start
+            // time).
+            if e.period > 0 && (t / self.period).is_multiple_of(5) {
+                e.next = Some(t + 7);
+            }
         }
     }
 
@@ -1162,9 +1167,9 @@ mod tests {
     /// afresh at every pass, linear pick) delivers, in the same order — ties included: equal
     /// times across slots, ESC events and wakeups at the same time — with frames walking the
     /// line between advances, frames that reschedule an ESC's events and raise its IRQ (the
-    /// node then asks for an early wakeup), and PDI-side pokes through `esc_mut`. It fails
-    /// when a slot is not re-queued after a frame passed it, after its node ran or after
-    /// `esc_mut`.
+    /// node then asks for an early wakeup), wakeups that bring their ESC's next event close,
+    /// and PDI-side pokes through `esc_mut`. It fails when a slot is not re-queued after a
+    /// frame passed it, after `esc_mut`, or after its node ran (either kind of entry).
     #[test]
     fn event_queue_delivers_what_the_reference_scheduler_delivers() {
         let run = |reference: bool, seed: u64| {

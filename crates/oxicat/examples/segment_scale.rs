@@ -143,6 +143,7 @@ fn run(kind: &str, n: usize, seconds: u64, cycle_us: u64, rt: bool, per_esc: boo
     let rss0 = status_kb("/proc/self/status", "VmRSS:");
     let desc = sim_cmd::describe(&args).unwrap_or_else(|e| fail(&e.to_string()));
     sim_cmd::check_segment(&desc).unwrap_or_else(|e| fail(&e.to_string()));
+    sim_cmd::check_served(&desc).unwrap_or_else(|e| fail(&e.to_string()));
     let (mut seg, names) = sim_cmd::build_segment(&desc).unwrap_or_else(|e| fail(&e.to_string()));
     seg.set_configured_dispatch(!per_esc);
     let kb_per_slave =
@@ -268,6 +269,7 @@ fn virtual_row(kind: &str, n: usize, seconds: u64, cycle_us: u64) {
     let t0 = process_ticks();
     let (seg, _) = sim_cmd::build_segment(&desc).unwrap_or_else(|e| fail(&e.to_string()));
     let t_built = process_ticks();
+    let clock = seg.clock();
     let seg = Arc::new(Mutex::new(seg));
     let period = cycle_us * 1000;
     let cycles = seconds * 1_000_000 / cycle_us;
@@ -276,7 +278,7 @@ fn virtual_row(kind: &str, n: usize, seconds: u64, cycle_us: u64) {
         .spawn(move || {
             let mut m = Master::open(Link::Sim(seg))?;
             let _ = m.scan()?;
-            let mut ticks_op = 0;
+            let (mut ticks_op, mut image, mut t_op) = (0, 0, 0);
             // FNV-1a over every cycle's inputs and working counter.
             let mut digest: u64 = 0xcbf2_9ce4_8422_2325;
             let mut eat = |b: u8| {
@@ -291,6 +293,8 @@ fn virtual_row(kind: &str, n: usize, seconds: u64, cycle_us: u64) {
                 |io| {
                     if io.cycle == 0 {
                         ticks_op = process_ticks();
+                        t_op = clock.now();
+                        image = io.inputs.iter().chain(&io.outputs).map(Vec::len).sum();
                     }
                     for i in &io.inputs {
                         i.iter().for_each(|&b| eat(b));
@@ -307,18 +311,20 @@ fn virtual_row(kind: &str, n: usize, seconds: u64, cycle_us: u64) {
                 },
             )?;
             let t_end = process_ticks();
-            Ok::<_, oxicat_master::MasterError>((stats, ticks_op, t_end, digest))
+            Ok::<_, oxicat_master::MasterError>((stats, ticks_op, t_end, digest, image, t_op))
         })
         .unwrap_or_else(|e| fail(&e.to_string()))
         .join()
         .unwrap_or_else(|_| fail("master thread panicked"));
     match r {
-        Ok((s, t_op, t_end, digest)) => println!(
-            "| {kind} | {n} | virtual | {} | {} | build {:.2} s, bring-up {:.2} s CPU | {:.1} µs CPU per cycle | digest {digest:016x} |",
+        Ok((s, t_op, t_end, digest, image, v_op)) => println!(
+            "| {kind} | {n} | virtual | {} | {} | build {:.2} s, bring-up {:.2} s CPU for {:.2} s of virtual time ({:.0} µs CPU per ms, the master's included) | {:.1} µs CPU per cycle | {image} B of process data | digest {digest:016x} |",
             s.cycles,
             s.wkc_errors,
             (t_built - t0) as f64 / 100.0,
             t_op.saturating_sub(t_built) as f64 / 100.0,
+            v_op as f64 * 1e-9,
+            t_op.saturating_sub(t_built) as f64 * 1e4 / (v_op as f64 * 1e-6).max(1e-9),
             t_end.saturating_sub(t_op) as f64 * 10_000.0 / s.cycles.max(1) as f64,
         ),
         Err(e) => println!("| {kind} | {n} | virtual | failed: {e} |"),
