@@ -563,19 +563,38 @@ impl<I, P: PdiPath, B> Shared<Host<I, P, B>> {
 }
 
 /// The [`Node`] of a [`Host`] on its ESC; see the module documentation.
-pub struct HostNode<I, P: PdiPath = Direct, B = ()>(Shared<Host<I, P, B>>);
+pub struct HostNode<I, P: PdiPath = Direct, B = ()> {
+    host: Shared<Host<I, P, B>>,
+    /// The host's next wakeup as of the end of its last handler. Only the host's own
+    /// handlers move its schedule (timers, main loop, MCU state are private to it; a
+    /// handle reaches the image, the bench and the counters), so the segment's scheduler
+    /// reads it here without taking the host's mutex.
+    next: u64,
+}
+
+impl<I: Image<P::Pdi>, P: PdiPath, B: Bench<I>> HostNode<I, P, B> {
+    /// The node of `host`.
+    fn new(host: Shared<Host<I, P, B>>) -> Self {
+        let next = host.lock().next_wakeup();
+        Self { host, next }
+    }
+}
 
 impl<I: Image<P::Pdi> + Send + 'static, P: PdiPath, B: Bench<I>> Node<Esc> for HostNode<I, P, B> {
     fn on_event(&mut self, esc: &mut Esc, ev: EscEvent, t: u64) {
-        self.0.lock().event(esc, ev, t);
+        let mut h = self.host.lock();
+        h.event(esc, ev, t);
+        self.next = h.next_wakeup();
     }
 
     fn next_wakeup(&self) -> Option<u64> {
-        Some(self.0.lock().next_wakeup())
+        Some(self.next)
     }
 
     fn on_wakeup(&mut self, esc: &mut Esc, t: u64) {
-        self.0.lock().wakeup(esc, t);
+        let mut h = self.host.lock();
+        h.wakeup(esc, t);
+        self.next = h.next_wakeup();
     }
 }
 
@@ -614,7 +633,7 @@ pub fn attach_host<I: Image<P::Pdi> + Send + 'static, P: PdiPath, B: Bench<I>>(
     let image = boot(esc, &mut path)?;
     let host = Shared::new(Host::new(image, bench, path, config, now));
     segment
-        .attach(id, Box::new(HostNode(host.clone())))
+        .attach(id, Box::new(HostNode::new(host.clone())))
         .map_err(AttachError::Topology)?;
     Ok(host)
 }

@@ -19,4 +19,5 @@ pub mod pcapng;
 pub mod pdi_path;
 pub mod realtime;
 pub mod rt;
+mod sched;
 pub mod segment;

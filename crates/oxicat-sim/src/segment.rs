@@ -15,13 +15,11 @@ use oxicat_wire::EthernetHeader;
 use crate::capture::{CaptureSink, Direction};
 use crate::model::{AdvanceEvents, SegmentEsc};
 use crate::node::{EscEvent, Node};
+use crate::sched::{EventQueue, Kind};
 
 /// Ports an ESC can have.
 pub const MAX_PORTS: usize = 4;
 
-/// Up to this many slots the scheduler picks the next event by a pass over the slots; above
-/// it, from a heap (see `Segment::run_events_by_heap`).
-const LINEAR_PICK_MAX: usize = 16;
 /// Default forwarding delay of an ESC (arrival at a port to departure at the next), in ns.
 pub const DEFAULT_ESC_DELAY_NS: u64 = 450;
 /// Default cable delay of a link (about 10 m), in ns.
@@ -142,7 +140,7 @@ struct Slot<E> {
     /// Time of the node's last wakeup (its next one must be later).
     last_wake: Option<u64>,
     /// The ESC's `next_event()` and the node's [`wakeup`](Slot::wakeup) as last asked
-    /// (valid inside one [`Segment::run_events_until`] pass; see there).
+    /// (the reference scheduler's copy, valid inside one of its passes).
     due: Due,
     /// The ESC's [`SegmentEsc::query_epoch`] after the last hop of a frame here, when that
     /// hop had read its next event and IRQ line (see `Segment::walk_through`).
@@ -163,31 +161,12 @@ impl<E: SegmentEsc> Slot<E> {
         self.last_wake.is_none_or(|l| w > l).then_some(w)
     }
 
-    /// The earliest of the ESC's next event and the node's next wakeup.
-    fn next_due(&self) -> Option<u64> {
-        let d = Due {
-            esc: self.esc.next_event(),
-            wake: self.wakeup(),
-        };
-        d.min()
-    }
-
     /// Reads the ESC's next event and the node's next wakeup into `due`.
     fn read_due(&mut self) {
         self.due = Due {
             esc: self.esc.next_event(),
             wake: self.wakeup(),
         };
-    }
-}
-
-impl Due {
-    /// The earliest of both.
-    fn min(self) -> Option<u64> {
-        match (self.esc, self.wake) {
-            (Some(a), Some(b)) => Some(a.min(b)),
-            (a, b) => a.or(b),
-        }
     }
 }
 
@@ -216,16 +195,20 @@ pub struct Segment<E: SegmentEsc = oxicat_esc::Esc> {
     clock: &'static SimTime,
     master_link_delay_ns: u64,
     master_link_up: bool,
-    horizon: u64,
+    /// Every slot's next ESC event and node wakeup, earliest first (see
+    /// [`Segment::run_events_until`]).
+    queue: EventQueue,
+    /// Slots whose ESC was lent out ([`Segment::esc_mut`]): their next times are read again
+    /// before the next pick.
+    dirty: Vec<SlaveId>,
     capture: Option<Box<dyn CaptureSink>>,
     drop_next: u64,
     corruptions: Vec<Corruption>,
     stats: SegmentStats,
     last_fate: Option<FrameFate>,
     event_log: Option<Vec<LoggedEvent>>,
-    /// Above this many slots the next event comes from a heap ([`LINEAR_PICK_MAX`]; a test
-    /// lowers it to compare both picks).
-    linear_pick_max: usize,
+    /// The reference scheduler (see [`Segment::set_reference_scheduler`]).
+    reference: bool,
     /// Configured-address dispatch on (the default; see [`Segment::set_configured_dispatch`]).
     dispatch_on: bool,
     /// The index of the frame being walked (kept for its buffers).
@@ -276,14 +259,15 @@ impl<E: SegmentEsc> Segment<E> {
             clock: Box::leak(Box::new(SimTime(AtomicU64::new(0)))),
             master_link_delay_ns: DEFAULT_LINK_DELAY_NS,
             master_link_up: true,
-            horizon: u64::MAX,
+            queue: EventQueue::default(),
+            dirty: Vec::new(),
             capture: None,
             drop_next: 0,
             corruptions: Vec::new(),
             stats: SegmentStats::default(),
             last_fate: None,
             event_log: None,
-            linear_pick_max: LINEAR_PICK_MAX,
+            reference: false,
             dispatch_on: true,
             dispatch: oxicat_esc::FrameDispatch::new(),
         }
@@ -329,7 +313,8 @@ impl<E: SegmentEsc> Segment<E> {
             due: Due::default(),
             hop_epoch: None,
         });
-        self.refresh_horizon();
+        self.queue.grow_to(self.slots.len());
+        self.requeue(id);
         id
     }
 
@@ -386,6 +371,8 @@ impl<E: SegmentEsc> Segment<E> {
         });
         self.slots[a].esc.set_link(pa, true);
         self.slots[b].esc.set_link(pb, true);
+        self.requeue(a);
+        self.requeue(b);
         Ok(())
     }
 
@@ -398,6 +385,8 @@ impl<E: SegmentEsc> Segment<E> {
         self.slots[l.peer].links[l.peer_port as usize] = None;
         self.slots[a].esc.set_link(pa, false);
         self.slots[l.peer].esc.set_link(l.peer_port, false);
+        self.requeue(a);
+        self.requeue(l.peer);
         Ok(())
     }
 
@@ -409,6 +398,7 @@ impl<E: SegmentEsc> Segment<E> {
         if Self::is_master_port(a, pa) {
             self.master_link_up = plugged;
             self.slots[0].esc.set_link(0, plugged);
+            self.requeue(0);
             return Ok(());
         }
         let l = self.slots[a].links[pa as usize].ok_or(TopologyError::NotWired(a, pa))?;
@@ -417,6 +407,7 @@ impl<E: SegmentEsc> Segment<E> {
                 x.up = plugged;
             }
             self.slots[s].esc.set_link(p, plugged);
+            self.requeue(s);
         }
         Ok(())
     }
@@ -464,7 +455,7 @@ impl<E: SegmentEsc> Segment<E> {
         self.check(s, 0)?;
         self.slots[s].node = Some(node);
         self.slots[s].last_wake = None;
-        self.refresh_horizon();
+        self.requeue(s);
         Ok(())
     }
 
@@ -485,10 +476,11 @@ impl<E: SegmentEsc> Segment<E> {
 
     /// ESC `s`, mutably (PDI-side pokes between cycles).
     pub fn esc_mut(&mut self, s: SlaveId) -> Option<&mut E> {
-        let e = self.slots.get_mut(s).map(|x| &mut x.esc);
-        // A PDI access may have changed the ESC's schedule.
-        self.horizon = 0;
-        e
+        if s < self.slots.len() {
+            // A PDI access may change the ESC's schedule: read it again before the next pick.
+            self.dirty.push(s);
+        }
+        self.slots.get_mut(s).map(|x| &mut x.esc)
     }
 
     /// Global time of the last SYNC0 / SYNC1 rising edge of ESC `s`.
@@ -589,39 +581,103 @@ impl<E: SegmentEsc> Segment<E> {
         self.run_events_until(t);
         for i in 0..self.slots.len() {
             self.advance_slot(i, t);
+            self.requeue(i);
         }
-        self.refresh_horizon();
         self.set_now(t);
     }
 
-    fn refresh_horizon(&mut self) {
-        self.horizon = self
-            .slots
-            .iter()
-            .filter_map(|s| s.next_due())
-            .min()
-            .unwrap_or(u64::MAX);
+    /// The reference scheduler (off by default): every pass reads every slot's next times
+    /// afresh and picks the earliest by a pass over all slots, as the scheduler did before
+    /// its event queue. Both deliver the same events in the same order (a slot's next times
+    /// change only when the segment touches its ESC or its node runs, and each such touch
+    /// re-queues the slot); equivalence tests run both.
+    pub fn set_reference_scheduler(&mut self, on: bool) {
+        self.reference = on;
+        self.dirty.extend(0..self.slots.len());
     }
 
-    /// Delivers all events and node wakeups due up to `t`, earliest first across ESCs (at
-    /// equal times ESC events come before wakeups).
-    ///
-    /// Each slot's next times are read once on entry (nodes' handles may have changed them
-    /// since the last pass) and then only for the slot that just ran: handling an event or
-    /// a wakeup touches that slot's ESC and node only, so the others' answers still hold.
-    /// The earliest is then picked from those cached values — with 4–8 slots a linear pass
-    /// over a few integers beats a heap — with the same tie-break as always: earliest
+    /// Slot `i`'s next ESC event still to come (one at or before the time the ESC was
+    /// brought to is done) and its node's next wakeup, as they are now.
+    #[inline]
+    fn due_now(&self, i: usize) -> (Option<u64>, Option<u64>) {
+        let s = &self.slots[i];
+        (s.esc.next_event().filter(|&ne| ne > s.advanced), s.wakeup())
+    }
+
+    /// Brings slot `i`'s entries in the event queue up to date after anything that may
+    /// have moved its next times (its ESC advanced, a frame passed it, its node ran, a cable
+    /// or the node changed): an earlier or new time is queued at once; a later one (or none)
+    /// is left for [`run_events_until`](Self::run_events_until) to find when the entry comes
+    /// first (an entry is never later than its slot's time, so the first entry, once checked,
+    /// is the earliest). A firmware's PDI watchdog deadline moves later at every main-loop
+    /// pass; this way it costs a comparison, not a sift.
+    #[inline]
+    fn requeue(&mut self, i: usize) {
+        let (esc, wake) = self.due_now(i);
+        self.queue.lower(i, Kind::Esc, esc);
+        self.queue.lower(i, Kind::Wake, wake);
+    }
+
+    /// Delivers all events and node wakeups due up to `t`, earliest first across ESCs: by
     /// time, then ESC event before wakeup, then lowest slot index.
+    ///
+    /// The candidates come from the event queue, which holds an entry per slot and kind no
+    /// later than the slot's next ESC event or next wakeup. A slot's entries are brought up
+    /// to date after whatever may move its times — its ESC advanced
+    /// ([`advance_slot`](Self::advance_slot)), a frame passed it, its node handled an event
+    /// or a wakeup, its ESC was lent out ([`esc_mut`](Self::esc_mut)), a cable or its node
+    /// changed — and only then: handling an event touches that slot's ESC and node only, so
+    /// the others' times still hold. The first entry is checked against its slot before it
+    /// runs (an entry left early is moved to its time and the next one looked at). Each pick
+    /// costs O(log n) instead of a read of every slot
+    /// ([`set_reference_scheduler`](Self::set_reference_scheduler) keeps that way, to
+    /// compare).
     fn run_events_until(&mut self, t: u64) {
-        if t < self.horizon {
-            return;
+        if self.reference {
+            return self.run_events_reference(t);
         }
+        while let Some(i) = self.dirty.pop() {
+            self.requeue(i);
+        }
+        while let Some((at, i, kind)) = self.queue.peek() {
+            if at > t {
+                break;
+            }
+            let (esc, wake) = self.due_now(i);
+            let now = match kind {
+                Kind::Esc => esc,
+                Kind::Wake => wake,
+            };
+            if now != Some(at) {
+                // Left early: to its time (or out), and look again.
+                self.queue.set(i, kind, now);
+                continue;
+            }
+            match kind {
+                Kind::Esc => self.advance_slot(i, at),
+                Kind::Wake => self.wake(i, at),
+            }
+            // Taken: the entry moves to the slot's next time of that kind (one sift), the
+            // other kind's entry is lowered if it must. Neither can be `at` again — an ESC
+            // event must be later than the time its ESC was brought to, a wakeup later than
+            // the last — but an entry left at `at` would be picked forever, so make sure.
+            let (esc, wake) = self.due_now(i);
+            let (this, other, other_kind) = match kind {
+                Kind::Esc => (esc, wake, Kind::Wake),
+                Kind::Wake => (wake, esc, Kind::Esc),
+            };
+            self.queue.set(i, kind, this.filter(|&n| n != at));
+            self.queue.lower(i, other_kind, other);
+        }
+    }
+
+    /// The reference of [`run_events_until`](Self::run_events_until): each slot's next
+    /// times read on entry and, after it ran, for the slot that ran; the earliest picked by
+    /// a pass over all slots, with the same tie-break.
+    fn run_events_reference(&mut self, t: u64) {
+        self.dirty.clear();
         for s in &mut self.slots {
             s.read_due();
-        }
-        if self.slots.len() > self.linear_pick_max {
-            self.run_events_by_heap(t);
-            return;
         }
         loop {
             // (time, is a wakeup, slot)
@@ -651,63 +707,6 @@ impl<E: SegmentEsc> Segment<E> {
             };
             self.slots[i].read_due();
         }
-        self.horizon_from_due();
-    }
-
-    /// [`run_events_until`](Self::run_events_until) for large segments (hundreds of nodes,
-    /// each with its own wakeups): the same picks in the same order — earliest time, ESC
-    /// event before wakeup, lowest slot — from a binary heap instead of a pass over every
-    /// slot per event (which made a 1,000-slave segment quadratic). Entries carry the
-    /// slot's generation, bumped whenever the slot ran, so an entry read before is
-    /// recognised as stale; `due` is read on entry, as for the linear pick.
-    fn run_events_by_heap(&mut self, t: u64) {
-        use std::cmp::Reverse;
-        // (time, is a wakeup, slot, generation)
-        let mut gen = vec![0u32; self.slots.len()];
-        let mut heap = std::collections::BinaryHeap::with_capacity(2 * self.slots.len());
-        let push = |heap: &mut std::collections::BinaryHeap<_>, s: &Slot<E>, i: usize, g: u32| {
-            if let Some(ne) = s.due.esc {
-                if ne <= t && ne > s.advanced {
-                    heap.push(Reverse((ne, false, i, g)));
-                }
-            }
-            if let Some(w) = s.due.wake {
-                if w <= t {
-                    heap.push(Reverse((w, true, i, g)));
-                }
-            }
-        };
-        for (i, s) in self.slots.iter().enumerate() {
-            push(&mut heap, s, i, 0);
-        }
-        while let Some(Reverse((at, wakeup, i, g))) = heap.pop() {
-            if g != gen[i] {
-                continue;
-            }
-            if wakeup {
-                self.wake(i, at);
-            } else {
-                if at <= self.slots[i].advanced {
-                    continue;
-                }
-                self.advance_slot(i, at);
-            }
-            gen[i] += 1;
-            self.slots[i].read_due();
-            push(&mut heap, &self.slots[i], i, gen[i]);
-        }
-        self.horizon_from_due();
-    }
-
-    /// The horizon from the slots' next times as last read (`due`), after a pass of either
-    /// pick.
-    fn horizon_from_due(&mut self) {
-        self.horizon = self
-            .slots
-            .iter()
-            .filter_map(|s| s.due.min())
-            .min()
-            .unwrap_or(u64::MAX);
     }
 
     /// Runs node `i`'s wakeup at `w` (the ESC first brought to `w`, unless it is already
@@ -765,8 +764,7 @@ impl<E: SegmentEsc> Segment<E> {
         }
         let slot = &mut self.slots[i];
         if let Some(node) = slot.node.as_mut() {
-            // The horizon is brought up to date by every caller: `run_events_until` and
-            // `advance_to` recompute it, `walk` folds in the slot's next times.
+            // Every caller re-queues the slot after it (its next times may have moved).
             node.on_event(&mut slot.esc, ev, t);
         }
     }
@@ -893,9 +891,7 @@ impl<E: SegmentEsc> Segment<E> {
                     ok = false;
                 }
             }
-            if t >= self.horizon {
-                self.run_events_until(t);
-            }
+            self.run_events_until(t);
             let (s, p) = at;
             let slot = &mut self.slots[s];
             // Keep the ESC's own timeline in step so its events come before the frame.
@@ -903,23 +899,18 @@ impl<E: SegmentEsc> Segment<E> {
                 Some(d) => slot.esc.forward_dispatched(p, ecat, t, ok, d),
                 None => slot.esc.forward(p, ecat, t, ok),
             };
-            // The ESC's next event and IRQ line, unless its query epoch is the one the
-            // last hop here left: then neither can have changed since that hop folded
-            // the next event into the horizon (which only ever gets recomputed from
-            // every slot's current answer) and set `irq` to the line's level (which
-            // every later `check_irq` sets to the same level), so both reads would be
-            // no-ops. A frame that only passes an ESC leaves its epoch alone.
+            // The ESC's IRQ line and the slot's queue entries, unless the ESC's query epoch
+            // is the one the last hop here left: then neither its next event nor its IRQ
+            // line can have changed since that hop re-queued the slot (every other change
+            // to the slot's times re-queues it where it happens) and set `irq` to the
+            // line's level (which every later `check_irq` sets to the same level), so both
+            // would be no-ops. A frame that only passes an ESC leaves its epoch alone.
             let epoch = slot.esc.query_epoch();
             if epoch.is_none() || epoch != slot.hop_epoch {
-                if let Some(ne) = slot.esc.next_event() {
-                    self.horizon = self.horizon.min(ne);
-                }
-                if self.check_irq(s, t) {
-                    // The node handled the interrupt: its next times may have moved.
-                    if let Some(ne) = self.slots[s].next_due() {
-                        self.horizon = self.horizon.min(ne);
-                    }
-                }
+                self.check_irq(s, t);
+                // The frame (and the node, if it handled an interrupt) may have moved the
+                // slot's next times.
+                self.requeue(s);
                 let slot = &mut self.slots[s];
                 slot.hop_epoch = slot.esc.query_epoch();
             }
@@ -971,6 +962,12 @@ mod tests {
             self.seen.lock().unwrap().push((port, t, ok));
             if port == 0 && frame.len() > 2 {
                 frame[2] = frame[2].wrapping_add(1);
+            }
+            // A marker in byte 3 reschedules the ESC's next SYNC edge and sets its IRQ
+            // line, as a frame writing the DC start time or an SM does.
+            if port == 0 && frame.len() > 3 && frame[3] != 0 && self.period > 0 {
+                self.next = Some(t + u64::from(frame[3]) * 10);
+                self.irq = frame[3].is_multiple_of(3);
             }
             let order = [0u8, 3, 1, 2];
             let i = order.iter().position(|&x| x == port).unwrap();
@@ -1162,6 +1159,10 @@ mod tests {
                 _ => "other",
             };
             self.log.lock().unwrap().push((self.id, t, what));
+            if ev == EscEvent::Irq {
+                // The interrupt handler asks for an early wakeup.
+                self.next = self.next.min(t + 37);
+            }
         }
         fn next_wakeup(&self) -> Option<u64> {
             Some(self.next)
@@ -1171,25 +1172,35 @@ mod tests {
             self.next = t + self.period;
             // Every third wakeup toggles the IRQ line (an event of its own on the rise).
             e.irq = (t / self.period).is_multiple_of(3);
+            // Every fifth brings its ESC's next SYNC edge close (a PDI write of the DC start
+            // time).
+            if e.period > 0 && (t / self.period).is_multiple_of(5) {
+                e.next = Some(t + 7);
+            }
         }
     }
 
-    /// The heap pick of large segments delivers exactly what the linear pick delivers, in
-    /// the same order (ties included: equal times across slots, ESC events and wakeups at
-    /// the same time), with frames walking the line between advances.
+    /// The event queue delivers exactly what the reference scheduler (every slot read
+    /// afresh at every pass, linear pick) delivers, in the same order — ties included: equal
+    /// times across slots, ESC events and wakeups at the same time — with frames walking the
+    /// line between advances, frames that reschedule an ESC's events and raise its IRQ (the
+    /// node then asks for an early wakeup), wakeups that bring their ESC's next event close,
+    /// and PDI-side pokes through `esc_mut`. It fails when a slot is not re-queued after a
+    /// frame passed it, after `esc_mut`, or after its node ran (either kind of entry).
     #[test]
-    fn heap_and_linear_picks_deliver_the_same_events_in_the_same_order() {
-        let run = |linear_max: usize| {
-            let (mut v, _) = fakes(40);
+    fn event_queue_delivers_what_the_reference_scheduler_delivers() {
+        let run = |reference: bool, seed: u64| {
+            let n = 40;
+            let (mut v, seen) = fakes(n);
             for (i, f) in v.iter_mut().enumerate() {
                 f.period = [1000, 700, 400, 1000, 250][i % 5];
                 f.next = Some([0, 300, 1000, 50, 700][i % 5] + (i as u64 / 5) * 50);
             }
             let mut seg = Segment::line(v);
-            seg.linear_pick_max = linear_max;
+            seg.set_reference_scheduler(reference);
             seg.log_events(true);
             let log = Arc::new(Mutex::new(Vec::new()));
-            for i in 0..40 {
+            for i in 0..n {
                 seg.attach(
                     i,
                     Box::new(Ticker {
@@ -1201,25 +1212,58 @@ mod tests {
                 )
                 .unwrap();
             }
-            let f = eth_frame();
-            for k in 1..=40 {
-                seg.advance_to(k * 173);
-                assert!(seg.exchange(&f).is_some());
+            let mut x = seed;
+            let mut rnd = move || {
+                x ^= x << 13;
+                x ^= x >> 7;
+                x ^= x << 17;
+                x
+            };
+            for _ in 0..120 {
+                match rnd() % 4 {
+                    0 => {
+                        let t = seg.now() + rnd() % 700;
+                        seg.advance_to(t);
+                    }
+                    1 => {
+                        // A PDI-side poke: the ESC's next SYNC edge moves.
+                        let (k, dt) = ((rnd() % n as u64) as usize, rnd() % 900);
+                        let now = seg.now();
+                        if let Some(e) = seg.esc_mut(k) {
+                            e.next = Some(now + 1 + dt);
+                        }
+                    }
+                    _ => {
+                        let mut f = eth_frame();
+                        f[17] = if rnd() % 2 == 0 {
+                            (rnd() % 60) as u8
+                        } else {
+                            0
+                        };
+                        assert!(seg.exchange(&f).is_some());
+                    }
+                }
             }
             let events: Vec<(usize, u64)> =
                 seg.take_events().iter().map(|e| (e.slave, e.t)).collect();
             let nodes = log.lock().unwrap().clone();
-            (events, nodes)
+            let frames: Vec<_> = seen.iter().map(|s| s.lock().unwrap().clone()).collect();
+            (events, nodes, frames)
         };
-        let (heap_ev, heap_nodes) = run(4);
-        let (lin_ev, lin_nodes) = run(usize::MAX);
-        assert!(
-            heap_ev.len() > 500 && heap_nodes.len() > 1000,
-            "{}",
-            heap_nodes.len()
-        );
-        assert_eq!(heap_ev, lin_ev);
-        assert_eq!(heap_nodes, lin_nodes);
+        for seed in [0x9E37_79B9_7F4A_7C15, 0x2545_F491_4F6C_DD1D, 7] {
+            let (q_ev, q_nodes, q_frames) = run(false, seed);
+            let (r_ev, r_nodes, r_frames) = run(true, seed);
+            assert!(
+                q_ev.len() > 200 && q_nodes.len() > 1000,
+                "{} {}",
+                q_ev.len(),
+                q_nodes.len()
+            );
+            assert!(q_nodes.iter().any(|e| e.2 == "irq"), "frames raised IRQs");
+            assert_eq!(q_ev, r_ev);
+            assert_eq!(q_nodes, r_nodes);
+            assert_eq!(q_frames, r_frames);
+        }
     }
 
     #[test]

@@ -18,7 +18,11 @@
 //! the segment's configured-address dispatch off (every ESC walks every datagram, as before
 //! it), for before/after figures from one binary. `--idle` runs no master: it advances the
 //! segment's virtual time 1 ms at a time and prints the CPU time per ms (the nodes' main
-//! loops and timers, the scheduler).
+//! loops and timers, the scheduler). `--virtual` runs the master in this process on the
+//! segment's virtual clock (`Link::Sim`, no network, no real time): the CPU time the
+//! bring-up and each 1 ms cycle cost, load-independent, and a digest of every input byte
+//! and working counter the master saw, so two builds can be compared for both speed and
+//! sameness.
 
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex};
@@ -46,10 +50,12 @@ fn status_kb(path: &str, key: &str) -> u64 {
 }
 
 /// utime + stime of thread `tid` of this process (`self`: the calling thread), in clock
-/// ticks (100 per second).
+/// ticks (100 per second); `process`: the whole process.
 fn thread_ticks(tid: &str) -> u64 {
     let path = if tid == "self" {
         "/proc/thread-self/stat".to_string()
+    } else if tid == "process" {
+        "/proc/self/stat".to_string()
     } else {
         format!("/proc/self/task/{tid}/stat")
     };
@@ -137,6 +143,7 @@ fn run(kind: &str, n: usize, seconds: u64, cycle_us: u64, rt: bool, per_esc: boo
     let rss0 = status_kb("/proc/self/status", "VmRSS:");
     let desc = sim_cmd::describe(&args).unwrap_or_else(|e| fail(&e.to_string()));
     sim_cmd::check_segment(&desc).unwrap_or_else(|e| fail(&e.to_string()));
+    sim_cmd::check_served(&desc).unwrap_or_else(|e| fail(&e.to_string()));
     let (mut seg, names) = sim_cmd::build_segment(&desc).unwrap_or_else(|e| fail(&e.to_string()));
     seg.set_configured_dispatch(!per_esc);
     let kb_per_slave =
@@ -249,11 +256,86 @@ fn idle(kind: &str, n: usize, seconds: u64) {
     );
 }
 
+/// CPU time of this process (all threads), in clock ticks (100 per second).
+fn process_ticks() -> u64 {
+    thread_ticks("process")
+}
+
+/// `--virtual`: bring-up and `seconds` of 1 kHz cycles on the virtual clock, in this
+/// process; prints CPU per cycle and a digest of what the master saw.
+fn virtual_row(kind: &str, n: usize, seconds: u64, cycle_us: u64) {
+    let args = sim_args(kind, n, None, None);
+    let desc = sim_cmd::describe(&args).unwrap_or_else(|e| fail(&e.to_string()));
+    let t0 = process_ticks();
+    let (seg, _) = sim_cmd::build_segment(&desc).unwrap_or_else(|e| fail(&e.to_string()));
+    let t_built = process_ticks();
+    let clock = seg.clock();
+    let seg = Arc::new(Mutex::new(seg));
+    let period = cycle_us * 1000;
+    let cycles = seconds * 1_000_000 / cycle_us;
+    let r = std::thread::Builder::new()
+        .stack_size(64 << 20)
+        .spawn(move || {
+            let mut m = Master::open(Link::Sim(seg))?;
+            let _ = m.scan()?;
+            let (mut ticks_op, mut image, mut t_op) = (0, 0, 0);
+            // FNV-1a over every cycle's inputs and working counter.
+            let mut digest: u64 = 0xcbf2_9ce4_8422_2325;
+            let mut eat = |b: u8| {
+                digest ^= u64::from(b);
+                digest = digest.wrapping_mul(0x0100_0000_01b3);
+            };
+            let stats = m.run_cyclic(
+                CycleOptions {
+                    cycle: Duration::from_nanos(period),
+                    dc: false,
+                },
+                |io| {
+                    if io.cycle == 0 {
+                        ticks_op = process_ticks();
+                        t_op = clock.now();
+                        image = io.inputs.iter().chain(&io.outputs).map(Vec::len).sum();
+                    }
+                    for i in &io.inputs {
+                        i.iter().for_each(|&b| eat(b));
+                    }
+                    io.working_counter
+                        .to_le_bytes()
+                        .iter()
+                        .for_each(|&b| eat(b));
+                    Ok(if io.cycle + 1 >= cycles {
+                        Flow::Stop
+                    } else {
+                        Flow::Continue
+                    })
+                },
+            )?;
+            let t_end = process_ticks();
+            Ok::<_, oxicat_master::MasterError>((stats, ticks_op, t_end, digest, image, t_op))
+        })
+        .unwrap_or_else(|e| fail(&e.to_string()))
+        .join()
+        .unwrap_or_else(|_| fail("master thread panicked"));
+    match r {
+        Ok((s, t_op, t_end, digest, image, v_op)) => println!(
+            "| {kind} | {n} | virtual | {} | {} | build {:.2} s, bring-up {:.2} s CPU for {:.2} s of virtual time ({:.0} µs CPU per ms, the master's included) | {:.1} µs CPU per cycle | {image} B of process data | digest {digest:016x} |",
+            s.cycles,
+            s.wkc_errors,
+            (t_built - t0) as f64 / 100.0,
+            t_op.saturating_sub(t_built) as f64 / 100.0,
+            v_op as f64 * 1e-9,
+            t_op.saturating_sub(t_built) as f64 * 1e4 / (v_op as f64 * 1e-6).max(1e-9),
+            t_end.saturating_sub(t_op) as f64 * 10_000.0 / s.cycles.max(1) as f64,
+        ),
+        Err(e) => println!("| {kind} | {n} | virtual | failed: {e} |"),
+    }
+}
+
 fn main() {
     let mut kinds = vec!["demo".to_string(), "twin".to_string()];
     let mut ns = vec![16usize, 64, 256, 1000];
     let (mut seconds, mut cycle_us, mut rt, mut one) = (10u64, 1000u64, false, false);
-    let (mut per_esc, mut idle_only) = (false, false);
+    let (mut per_esc, mut idle_only, mut virt) = (false, false, false);
     let mut it = std::env::args().skip(1);
     while let Some(a) = it.next() {
         let mut val = || {
@@ -275,6 +357,7 @@ fn main() {
             // dispatch), for before/after figures from one binary.
             "--per-esc-walk" => per_esc = true,
             "--idle" => idle_only = true,
+            "--virtual" => virt = true,
             // One row in this process (each row runs in a process of its own, so that the
             // memory a segment adds is not hidden by what the previous one freed).
             "--one" => one = true,
@@ -283,6 +366,14 @@ fn main() {
     }
     if seconds == 0 || cycle_us == 0 {
         fail("--seconds and --cycle-us must be above 0");
+    }
+    if virt {
+        for kind in &kinds {
+            for &n in &ns {
+                virtual_row(kind, n, seconds, cycle_us);
+            }
+        }
+        return;
     }
     if idle_only {
         for kind in &kinds {

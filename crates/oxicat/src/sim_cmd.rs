@@ -103,6 +103,13 @@ use oxicat_sim::pdi_path::PdiRoute;
 /// and firmware (about 80 MB for 1000).
 pub const MAX_SIM_SLAVES: usize = 1000;
 
+/// Most firmware-hosting devices (every device but an ESC twin: their firmware runs in the
+/// segment, its main loop every 50 µs of virtual time) that `oxicat sim` serves in real
+/// time; more are refused before anything is built (see [`check_served`]). Measured with
+/// `segment_scale` (README, "Scale"): 128 demo devices come up and cycle; at 256 the
+/// bring-up's PDUs time out.
+pub const MAX_SERVED_FIRMWARE_NODES: usize = 128;
+
 /// Largest ESC or cable delay of a segment file, ns (1 ms: a whole 1 kHz cycle; a real ESC
 /// forwards in ~0.5 µs, a 100 m cable takes ~0.5 µs).
 pub const MAX_DELAY_NS: u64 = 1_000_000;
@@ -669,6 +676,47 @@ pub fn check_segment(desc: &SegmentFile) -> Result<(), SimError> {
     Ok(())
 }
 
+/// Number of firmware-hosting devices in `desc` (every device but ESC twins from an ESI or
+/// an SII image).
+pub fn firmware_nodes(desc: &SegmentFile) -> usize {
+    desc.devices
+        .iter()
+        .filter(|d| {
+            d.esi.is_none()
+                && d.sii.is_none()
+                && !d.name.starts_with(oxicat_devices::twin::PREFIX)
+                && !d.name.starts_with(oxicat_devices::twin::SII_PREFIX)
+        })
+        .map(|d| d.count)
+        .sum()
+}
+
+/// Refuses a segment to be served in real time with more than
+/// [`MAX_SERVED_FIRMWARE_NODES`] firmware-hosting devices, with the figure behind the limit.
+/// (A segment driven in the same process runs on its virtual clock and has no such limit.)
+pub fn check_served(desc: &SegmentFile) -> Result<(), SimError> {
+    let n = firmware_nodes(desc);
+    if n > MAX_SERVED_FIRMWARE_NODES {
+        return Err(SimError::Range {
+            key: "firmware-hosting devices".into(),
+            value: n.to_string(),
+            range: served_firmware_range(),
+        });
+    }
+    Ok(())
+}
+
+fn served_firmware_range() -> String {
+    format!(
+        "at most {MAX_SERVED_FIRMWARE_NODES} served in real time: each runs its firmware's main \
+         loop every 50 µs of virtual time, ≈ 1.6 µs of CPU per device per ms before any frame, \
+         and every frame passes every ESC twice; with 256 demo devices the serving thread falls \
+         behind and the master's PDUs time out in bring-up. ESC twins (esi=…) do not count; a \
+         segment driven in the same process (--sim) runs on its virtual clock and has no such \
+         limit"
+    )
+}
+
 /// Builds the segment (firmware booted at virtual time 0); returns it with the device name
 /// of every node.
 pub fn build_segment(desc: &SegmentFile) -> Result<(Segment, Vec<String>), SimError> {
@@ -875,6 +923,7 @@ pub fn serve_until_with(
     }
     let desc = describe(args)?;
     check_segment(&desc)?;
+    check_served(&desc)?;
     let total: usize = desc.devices.iter().map(|d| d.count).sum();
     eprintln!("oxicat sim: booting {total} slave(s); Ctrl-C to stop");
     let (seg, names) = build_segment_with(&desc, &stop, add)?;
@@ -1188,6 +1237,54 @@ mod tests {
             e.contains("device[1].count") && e.contains("1 … 1000"),
             "{e}"
         );
+    }
+
+    #[test]
+    fn served_firmware_nodes_beyond_the_limit_are_refused_with_the_figure() {
+        let over = format!("demo:{}", MAX_SERVED_FIRMWARE_NODES + 1);
+        let desc = parse_specs(std::slice::from_ref(&over)).unwrap();
+        assert_eq!(firmware_nodes(&desc), MAX_SERVED_FIRMWARE_NODES + 1);
+        let e = check_served(&desc).unwrap_err().to_string();
+        assert!(
+            e.contains(&(MAX_SERVED_FIRMWARE_NODES + 1).to_string())
+                && e.contains(&format!("at most {MAX_SERVED_FIRMWARE_NODES}"))
+                && e.contains("µs of CPU per device"),
+            "{e}"
+        );
+        // The total counts, across entries; ESC twins do not.
+        let half = MAX_SERVED_FIRMWARE_NODES / 2;
+        let desc = parse_specs(&[format!("demo:{half},tue-es030:{}", half + 1)]).unwrap();
+        assert!(check_served(&desc).is_err());
+        let mut desc = parse_specs(&[format!("demo:{MAX_SERVED_FIRMWARE_NODES}")]).unwrap();
+        assert!(check_served(&desc).is_ok());
+        desc.devices.push(DeviceEntry {
+            esi: Some("EL2008.xml".into()),
+            name: String::new(),
+            count: 100,
+            ..desc.devices[0].clone()
+        });
+        assert_eq!(firmware_nodes(&desc), MAX_SERVED_FIRMWARE_NODES);
+        assert!(check_served(&desc).is_ok());
+        // Refused before anything is built or bound.
+        let args = SimArgs {
+            iface: None,
+            udp: Some("127.0.0.1:0".into()),
+            segment: None,
+            eni: None,
+            esi_dir: Vec::new(),
+            devices: vec![over],
+            esi: Vec::new(),
+            list: false,
+            spin: false,
+            quiet: true,
+            slowdown: 1,
+            rt: None,
+            rt_cpu: None,
+        };
+        let e = serve_until(&args, Arc::new(AtomicBool::new(false)))
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("firmware-hosting devices"), "{e}");
     }
 
     #[test]
