@@ -229,8 +229,18 @@ fn slave_counts_beyond_the_limit_are_refused() {
 #[cfg(unix)]
 #[test]
 fn sim_stops_on_ctrl_c_while_it_boots_the_segment() {
+    // The most a served segment may hold and the slowest to build: the firmware-hosting
+    // devices' limit and ESC twins with a slave stack (CoE) up to 1,000 slaves in all.
+    let demo = format!("demo:{}", oxicat::sim_cmd::MAX_SERVED_FIRMWARE_NODES);
+    let twins = format!(
+        "esi={}:EL3002*{}",
+        oxicat_testkit::served::reference()
+            .join("esi-vendor/Beckhoff-EL30xx.xml")
+            .display(),
+        oxicat::sim_cmd::MAX_SIM_SLAVES - oxicat::sim_cmd::MAX_SERVED_FIRMWARE_NODES
+    );
     let mut child = Command::new(env!("CARGO_BIN_EXE_oxicat"))
-        .args(["sim", "-q", "--udp", "127.0.0.1:0", "demo:1000"])
+        .args(["sim", "-q", "--udp", "127.0.0.1:0", &demo, &twins])
         .stdin(Stdio::null())
         .stderr(Stdio::piped())
         .spawn()
