@@ -45,10 +45,7 @@ pub trait SegmentEsc: Send {
 
 impl SegmentEsc for oxicat_esc::Esc {
     fn forward(&mut self, port: u8, frame: &mut [u8], t: u64, frame_ok: bool) -> Option<u8> {
-        match oxicat_esc::Esc::forward(self, port, frame, t, frame_ok) {
-            oxicat_esc::Forward::Port(p) => Some(p),
-            oxicat_esc::Forward::Dropped => None,
-        }
+        oxicat_esc::Esc::forward(self, port, frame, t, frame_ok).port()
     }
 
     fn forward_dispatched(
@@ -59,10 +56,7 @@ impl SegmentEsc for oxicat_esc::Esc {
         frame_ok: bool,
         d: &mut oxicat_esc::FrameDispatch,
     ) -> Option<u8> {
-        match oxicat_esc::Esc::forward_dispatched(self, port, frame, t, frame_ok, d) {
-            oxicat_esc::Forward::Port(p) => Some(p),
-            oxicat_esc::Forward::Dropped => None,
-        }
+        oxicat_esc::Esc::forward_dispatched(self, port, frame, t, frame_ok, d).port()
     }
 
     fn set_link(&mut self, port: u8, up: bool) {

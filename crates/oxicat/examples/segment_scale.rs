@@ -117,19 +117,9 @@ fn devices(kind: &str, n: usize) -> Vec<String> {
 /// The `oxicat sim` arguments of a row: `n` devices of `kind`, quiet, at real time.
 fn sim_args(kind: &str, n: usize, udp: Option<String>, rt: Option<u8>) -> SimArgs {
     SimArgs {
-        iface: None,
         udp,
-        segment: None,
-        eni: None,
-        esi_dir: Vec::new(),
-        devices: devices(kind, n),
-        esi: Vec::new(),
-        list: false,
-        spin: false,
-        quiet: true,
-        slowdown: 1,
         rt,
-        rt_cpu: None,
+        ..SimArgs::quiet(devices(kind, n))
     }
 }
 

@@ -191,6 +191,27 @@ pub fn host_node(
 }
 
 impl SimArgs {
+    /// `oxicat sim -q DEVICES…` with every other option at its default (no interface, no
+    /// UDP address, no segment file, slowdown 1, normal scheduling): the base of the
+    /// arguments a program or a test serves a segment with (`SimArgs { udp, ..quiet(…) }`).
+    pub fn quiet(devices: Vec<String>) -> Self {
+        Self {
+            iface: None,
+            udp: None,
+            segment: None,
+            eni: None,
+            esi_dir: Vec::new(),
+            devices,
+            esi: Vec::new(),
+            list: false,
+            spin: false,
+            quiet: true,
+            slowdown: 1,
+            rt: None,
+            rt_cpu: None,
+        }
+    }
+
     /// The real-time options of `--rt` and `--rt-cpu`, if asked.
     pub fn rt_options(&self) -> Option<oxicat_sim::rt::RtOptions> {
         self.rt.map(|priority| oxicat_sim::rt::RtOptions {
@@ -1267,19 +1288,8 @@ mod tests {
         assert!(check_served(&desc).is_ok());
         // Refused before anything is built or bound.
         let args = SimArgs {
-            iface: None,
             udp: Some("127.0.0.1:0".into()),
-            segment: None,
-            eni: None,
-            esi_dir: Vec::new(),
-            devices: vec![over],
-            esi: Vec::new(),
-            list: false,
-            spin: false,
-            quiet: true,
-            slowdown: 1,
-            rt: None,
-            rt_cpu: None,
+            ..SimArgs::quiet(vec![over])
         };
         let e = serve_until(&args, Arc::new(AtomicBool::new(false)))
             .unwrap_err()

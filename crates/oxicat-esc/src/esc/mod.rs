@@ -46,6 +46,17 @@ pub enum Forward {
     Dropped,
 }
 
+impl Forward {
+    /// The egress port, `None` when the frame was dropped.
+    #[inline]
+    pub fn port(self) -> Option<u8> {
+        match self {
+            Forward::Port(p) => Some(p),
+            Forward::Dropped => None,
+        }
+    }
+}
+
 /// How long a temporary loop control setting (0x0100 bit 1) lasts: "about 1 second"
 /// (ETG.1000.4 table 33).
 pub const TEMPORARY_LOOP_NS: u64 = 1_000_000_000;

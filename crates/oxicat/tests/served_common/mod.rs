@@ -41,19 +41,9 @@ fn serve_with(segment: Option<std::path::PathBuf>, devices: &[&str]) -> Served {
     let port = oxicat_sim::net::udp::UdpPort::bind("127.0.0.1:0").expect("bind UDP");
     let addr = port.local_addr().to_string();
     let args = SimArgs {
-        iface: None,
         udp: Some(addr.clone()),
         segment,
-        devices: devices.iter().map(|s| s.to_string()).collect(),
-        esi: Vec::new(),
-        eni: None,
-        esi_dir: Vec::new(),
-        list: false,
-        spin: false,
-        quiet: true,
-        slowdown: 1,
-        rt: None,
-        rt_cpu: None,
+        ..SimArgs::quiet(devices.iter().map(|s| s.to_string()).collect())
     };
     let stop = Arc::new(AtomicBool::new(false));
     let s = stop.clone();
