@@ -10,15 +10,7 @@ use oxicat_devices::cia402::rig::{attach, BldcJointParams, JointHandle};
 use oxicat_master::{Link, Master};
 use oxicat_sim::segment::Segment;
 
-/// Runs a test body on a thread with a large stack (the ethercrab master is big).
-fn big<F: FnOnce() + Send + 'static>(f: F) {
-    std::thread::Builder::new()
-        .stack_size(64 << 20)
-        .spawn(f)
-        .unwrap()
-        .join()
-        .unwrap_or_else(|e| std::panic::resume_unwind(e));
-}
+use oxicat_testkit::big;
 
 fn segment(n: usize) -> (Link, Vec<JointHandle>) {
     let mut seg = Segment::new();

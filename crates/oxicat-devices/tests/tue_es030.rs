@@ -9,15 +9,7 @@ use oxicat_devices::tue_es030::BoardRev;
 use oxicat_master::{Link, Master};
 use oxicat_sim::segment::Segment;
 
-/// Runs a test body on a thread with a large stack (the ethercrab master is big).
-fn big<F: FnOnce() + Send + 'static>(f: F) {
-    std::thread::Builder::new()
-        .stack_size(64 << 20)
-        .spawn(f)
-        .unwrap()
-        .join()
-        .unwrap_or_else(|e| std::panic::resume_unwind(e));
-}
+use oxicat_testkit::big;
 
 fn bench() -> (Link, Arc<Mutex<Segment>>, TueHandle) {
     bench_with(&TueConfig::default())

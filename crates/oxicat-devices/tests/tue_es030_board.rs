@@ -15,15 +15,7 @@ use oxicat_plant::re30::LineParams;
 use oxicat_sim::segment::Segment;
 use oxicat_slave::foe::UpdateResult;
 
-/// Runs a test body on a thread with a large stack (the ethercrab master is big).
-fn big<F: FnOnce() + Send + 'static>(f: F) {
-    std::thread::Builder::new()
-        .stack_size(64 << 20)
-        .spawn(f)
-        .unwrap()
-        .join()
-        .unwrap_or_else(|e| std::panic::resume_unwind(e));
-}
+use oxicat_testkit::big;
 
 fn bench_with(cfg: &TueConfig) -> (Link, Arc<Mutex<Segment>>, TueHandle) {
     let mut seg = Segment::new();

@@ -26,15 +26,7 @@ use oxicat_sim::pdi_path::PdiRoute;
 use oxicat_sim::segment::Segment;
 use oxicat_testkit::served::reference;
 
-/// Runs a test body on a thread with a large stack (the ethercrab master is big).
-fn big<F: FnOnce() + Send + 'static>(f: F) {
-    std::thread::Builder::new()
-        .stack_size(64 << 20)
-        .spawn(f)
-        .unwrap()
-        .join()
-        .unwrap_or_else(|e| std::panic::resume_unwind(e));
-}
+use oxicat_testkit::big;
 
 fn twin(file: &str) -> &'static Twin {
     let p = reference().join(file);

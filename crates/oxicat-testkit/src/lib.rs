@@ -33,6 +33,17 @@ pub mod served;
 pub use bench::Bench;
 pub use ports::Port;
 
+/// Runs a test body on a thread with a large stack (an ethercrab master is big in a debug
+/// build) and passes its panic on.
+pub fn big<F: FnOnce() + Send + 'static>(f: F) {
+    std::thread::Builder::new()
+        .stack_size(64 << 20)
+        .spawn(f)
+        .unwrap()
+        .join()
+        .unwrap_or_else(|e| std::panic::resume_unwind(e));
+}
+
 /// Instantiates each generic test function `f::<P: Port>()` once per PDI path, as a
 /// `#[test]` in a module named after the path: `soft_esc`, `lan9252`, `lan9252_fast_read`,
 /// `et1100`, `et1100_three_byte`, `et1100_read_pause`.

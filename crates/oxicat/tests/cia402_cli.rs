@@ -2,14 +2,7 @@
 
 use oxicat::cia402_cmd::{run, Cia402Args, Cia402Verb};
 
-fn big<F: FnOnce() + Send + 'static>(f: F) {
-    std::thread::Builder::new()
-        .stack_size(64 << 20)
-        .spawn(f)
-        .unwrap()
-        .join()
-        .unwrap_or_else(|e| std::panic::resume_unwind(e));
-}
+use oxicat_testkit::big;
 
 fn args(verb: Cia402Verb, joints: usize, out: std::path::PathBuf) -> Cia402Args {
     Cia402Args {

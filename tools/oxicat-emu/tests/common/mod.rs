@@ -153,14 +153,5 @@ impl Direct {
     }
 }
 
-/// Runs a test body on a thread with a large stack (the ethercrab master is big in a debug
-/// build) and passes its panic on.
-#[allow(dead_code)] // not every test binary uses it
-pub fn big<F: FnOnce() + Send + 'static>(f: F) {
-    std::thread::Builder::new()
-        .stack_size(64 << 20)
-        .spawn(f)
-        .unwrap()
-        .join()
-        .unwrap_or_else(|e| std::panic::resume_unwind(e));
-}
+#[allow(unused_imports)] // not every test binary uses it
+pub use oxicat_testkit::big;
