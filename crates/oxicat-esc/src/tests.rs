@@ -526,9 +526,9 @@ fn digital_outputs_and_watchdog() {
 }
 
 /// The injected watchdog fault: not running before an output write, then the expiry at
-/// once with its effects, and the next write retriggers it.
+/// the next time step (1 ns on) with its effects, and the next write retriggers it.
 #[test]
-fn an_injected_pd_watchdog_expiry_acts_at_once() {
+fn an_injected_pd_watchdog_expiry_acts_at_the_next_time_step() {
     let mut e = Esc::new(EscConfig::et1100(), eeprom(0x0104, 0));
     sm(&mut e, 2, 0x0F00, 1, 0x44, 1);
     fmmu(&mut e, 0, 0x100, 1, 0, 7, 0x0F00, 0, 2);
@@ -538,7 +538,8 @@ fn an_injected_pd_watchdog_expiry_acts_at_once() {
     assert_eq!(e.digital_outputs(), 0x0A);
     e.advance(2000);
     assert!(e.expire_pd_watchdog());
-    let ev = e.advance(2000);
+    assert_eq!(e.next_event(), Some(2001), "at the next time step");
+    let ev = e.advance(2001);
     assert!(ev.pd_watchdog_expired);
     assert_eq!(e.digital_outputs(), 0);
     assert_eq!(e.memory()[0x0442], 1);

@@ -42,6 +42,24 @@ fn aprd(seg: &mut Segment, k: u16, ado: u16, len: u16) -> Vec<u8> {
     d
 }
 
+/// Sends one datagram with header `h`; returns (data, wkc) of the reply.
+fn send(seg: &mut Segment, h: DatagramHeader, data: &[u8]) -> Option<(Vec<u8>, u16)> {
+    let mut buf = [0u8; 128];
+    let eth = EthernetHeader {
+        dst: [0xFF; 6],
+        src: [0x10; 6],
+        vlan_tci: None,
+        payload_offset: 14,
+    };
+    let mut b = FrameBuilder::new(&mut buf, &eth).unwrap();
+    b.push(h, data).unwrap();
+    let n = b.finish();
+    let back = seg.exchange(&buf[..n])?;
+    let (_, f) = EcatFrame::parse_ethernet(&back).expect("valid reply");
+    let dg = f.datagrams().next().unwrap().expect("datagram");
+    Some((dg.data.to_vec(), dg.wkc))
+}
+
 fn brd_wkc(seg: &mut Segment) -> Option<u16> {
     one(seg, Command::Brd, 0, 0x0000, &[], 2).map(|r| r.1)
 }
@@ -121,4 +139,56 @@ fn pulled_cable_closes_the_loop_and_replugging_reopens_it() {
     assert_eq!(brd_wkc(&mut seg), None);
     seg.set_cable(0, 0, true).unwrap();
     assert_eq!(brd_wkc(&mut seg), Some(N));
+}
+
+/// The injected process-data watchdog expiry (the Python package's `expire_watchdog`, a
+/// fault a test injects between two cycles) acts at the next time step however the slave's
+/// ESC was last brought up to date: also right after the segment advanced it by time, when
+/// the ESC's time and the segment's record of how far it advanced that ESC are equal. It
+/// used to be dropped there as an event already done, and the master's next output write
+/// then retriggered the watchdog: the slave stayed in OP (a flaky pytest in CI).
+#[test]
+fn an_injected_watchdog_expiry_acts_after_the_segment_advanced_the_esc() {
+    let mut seg = common::real_segment();
+    // Slave 1 (EL2004): SM2 over its digital outputs 0x0F00 with the watchdog trigger, and
+    // FMMU0 mapping logical 0x100 onto it.
+    let apwr = |seg: &mut Segment, ado: u16, d: &[u8]| {
+        let h =
+            DatagramHeader::physical(Command::Apwr, 1, 0u16.wrapping_sub(1), ado, d.len() as u16);
+        assert_eq!(send(seg, h, d).expect("reply").1, 1);
+    };
+    apwr(&mut seg, 0x0810, &[0x00, 0x0F, 1, 0, 0x44, 0, 1, 0]);
+    apwr(
+        &mut seg,
+        0x0600,
+        &[0x00, 0x01, 0, 0, 1, 0, 0, 7, 0x00, 0x0F, 0, 2, 1, 0, 0, 0],
+    );
+    let lrw = |seg: &mut Segment, v: u8| {
+        let h = DatagramHeader::logical(Command::Lrw, 2, 0x100, 1);
+        assert_eq!(send(seg, h, &[v]).expect("reply").1, 2);
+    };
+    let wd_status = |seg: &Segment| seg.esc(1).unwrap().memory()[0x0440] & 1;
+    let wd_count = |seg: &Segment| seg.esc(1).unwrap().memory()[0x0442];
+    lrw(&mut seg, 0x0A);
+    assert_eq!(
+        wd_status(&seg),
+        1,
+        "the output write triggered the watchdog"
+    );
+    for then_a_frame in [false, true] {
+        let before = wd_count(&seg);
+        // Time passes by the segment's clock: every ESC is brought to that time.
+        seg.advance_by(1_000_000);
+        assert!(seg.esc_mut(1).unwrap().expire_pd_watchdog());
+        if then_a_frame {
+            // The master's next cycle writes the outputs again: the expiry comes first.
+            lrw(&mut seg, 0x0B);
+            assert_eq!(wd_status(&seg), 1, "the write retriggered it afterwards");
+        } else {
+            seg.advance_by(1_000);
+            assert_eq!(wd_status(&seg), 0, "0x0440 bit 0 clears");
+            lrw(&mut seg, 0x0C);
+        }
+        assert_eq!(wd_count(&seg), before + 1, "0x0442 counts the expiry");
+    }
 }

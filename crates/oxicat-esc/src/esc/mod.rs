@@ -513,7 +513,9 @@ impl Esc {
         if self.pd_wd_deadline().is_none() {
             return false;
         }
-        self.pd_wd_forced = Some(self.now);
+        // One nanosecond on: a caller that already brought this ESC to `now` (the segment)
+        // takes an event at `now` as done.
+        self.pd_wd_forced = Some(self.now + 1);
         self.memo.clear();
         true
     }
