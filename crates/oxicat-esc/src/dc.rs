@@ -496,6 +496,24 @@ impl Dc {
 
     // ------------------------------------------------------------- contract
 
+    /// Whether [`Dc::frame_arrival`] at `port` needs the register file: the unit's first
+    /// contact, or a receive-time latch armed for the port (1..3). Otherwise
+    /// [`Dc::frame_arrival_quiet`] has the same effect.
+    #[inline(always)]
+    pub(crate) fn arrival_needs_regs(&self, port: u8) -> bool {
+        !self.inited || (port != 0 && self.latch_pending & (1 << (port & 3)) != 0)
+    }
+
+    /// [`Dc::frame_arrival`] when [`Dc::arrival_needs_regs`] is false: at port 0 the start
+    /// of frame (and the end of the latch window), at the other ports nothing.
+    #[inline(always)]
+    pub(crate) fn frame_arrival_quiet(&mut self, port: u8, t: u64) {
+        if port == 0 {
+            self.sof0 = Some(t);
+            self.latch_pending = 0;
+        }
+    }
+
     /// `frame_arrival` at port 0 (the ESC's fused frame path): the same effects, inlined.
     #[inline(always)]
     pub fn frame_arrival_port0(&mut self, regs: &mut [u8], t: u64) {

@@ -28,10 +28,6 @@ pub(super) struct FusedStep {
     pub(super) len: u16,
     /// SM index.
     pub(super) sm: u8,
-    /// ECAT writes the SM (a write step; otherwise a read step).
-    pub(super) write: bool,
-    /// The SM triggers the process-data watchdog (write steps).
-    pub(super) wd: bool,
 }
 
 /// The fused path (`Esc::forward_fused`): a frame entering port 0 with a good FCS that
@@ -44,15 +40,17 @@ pub(super) struct Fused {
     pub(super) ok: bool,
     /// Port the frame leaves through (first open port after port 0).
     pub(super) exit: u8,
-    /// The steps LRD, LWR and LRW run: `steps[range[c].0..range[c].1]` (reads come
-    /// first, then writes).
-    pub(super) range: [(u8, u8); 3],
+    /// The read steps (`reads[..nr]`, run by LRD and LRW) and the write steps
+    /// (`writes[..nw]`, run by LWR and LRW), each in FMMU order; reads run first.
+    pub(super) nr: u8,
+    pub(super) nw: u8,
+    pub(super) reads: [FusedStep; PLAN_MAX],
+    pub(super) writes: [FusedStep; PLAN_MAX],
+    /// Some write step's SM triggers the process-data watchdog.
+    pub(super) wd: bool,
     /// Plan window `[lo, hi)` (logical bytes).
     pub(super) lo: u64,
     pub(super) hi: u64,
-    /// Working-counter increment for LRD, LWR, LRW.
-    pub(super) inc: [u16; 3],
-    pub(super) steps: [FusedStep; PLAN_MAX],
     /// The last frame the fused path took (see [`FusedKey`]); a cyclic master sends the
     /// same headers every cycle, so the frame checks reduce to one comparison.
     pub(super) key: FusedKey,
@@ -62,7 +60,8 @@ pub(super) struct Fused {
 /// they accepted (with this configuration: `rebuild_fused` starts afresh). The checks read
 /// nothing but the EtherCAT header word, the datagram header's command, address and
 /// length/flags words and the frame's length, so a frame equal in those passes them with
-/// the same results.
+/// the same results; what the frame then does (which steps run, where the window and the
+/// working counter lie in the frame, the counter's increment) follows from them too.
 #[derive(Debug, Clone, Copy, Default)]
 pub(super) struct FusedKey {
     /// Frame length (0: no frame accepted yet; a taken frame has at least 12 bytes).
@@ -71,11 +70,17 @@ pub(super) struct FusedKey {
     pub(super) dg: u64,
     /// EtherCAT header word.
     pub(super) ecat: u16,
-    /// Command index (0 LRD, 1 LWR, 2 LRW), datagram data length, plan window offset in
-    /// the data.
-    pub(super) cmd: u8,
-    pub(super) data_len: u16,
-    pub(super) win_off: u16,
+    /// Offset of the plan window in the frame.
+    pub(super) base: u16,
+    /// Offset of the working counter in the frame.
+    pub(super) wkc_at: u16,
+    /// Working-counter increment (LRD, LWR, LRW: from the read and write steps).
+    pub(super) inc: u16,
+    /// Read and write steps the command runs (`Fused::reads[..nr]`, `Fused::writes[..nw]`).
+    pub(super) nr: u8,
+    pub(super) nw: u8,
+    /// The command runs a watchdog-triggering write step.
+    pub(super) wd: bool,
 }
 
 impl FusedKey {
@@ -200,25 +205,29 @@ impl Esc {
                 break;
             }
             seen |= 1 << i;
-            f.steps[k] = FusedStep {
+            let st = FusedStep {
                 off: op.off as u16,
                 ram: sm.start - REG_END as u16,
                 len: sm.len,
                 sm: op.sm,
-                write: k >= self.plan_reads as usize,
-                wd: sm.ctrl & CTRL_WD_TRIGGER != 0,
             };
+            // Reads first, then writes (the plan's order).
+            if k >= self.plan_reads as usize {
+                f.writes[f.nw as usize] = st;
+                f.nw += 1;
+                f.wd |= sm.ctrl & CTRL_WD_TRIGGER != 0;
+            } else {
+                f.reads[f.nr as usize] = st;
+                f.nr += 1;
+            }
         }
         if ok {
-            let nr = self.plan_reads.min(self.plan_len);
-            let rd = u16::from(nr > 0);
-            let wr = u16::from(self.plan_len > nr);
             f.ok = true;
             f.exit = exit.unwrap_or(0);
-            f.range = [(0, nr), (nr, self.plan_len), (0, self.plan_len)];
             f.lo = self.plan_lo;
             f.hi = self.plan_hi;
-            f.inc = [rd, wr, rd + 2 * wr];
+        } else {
+            f = Fused::default();
         }
         self.fused = f;
     }

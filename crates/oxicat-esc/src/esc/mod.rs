@@ -118,8 +118,8 @@ const PDI_DIGITAL_IO: u8 = 0x04;
 
 /// Copies `s` into `d` (equal lengths): process-data images are small, and a call into
 /// `memcpy` costs more than the copy. 16..=64 bytes take two or four overlapping 16-byte
-/// moves (no loop), 4..16 bytes two overlapping 4- or 8-byte moves; longer images go in
-/// 16-byte chunks.
+/// moves (no loop), 4..16 bytes two overlapping 4- or 8-byte moves; other lengths take
+/// `copy_from_slice` out of line.
 #[inline(always)]
 pub(crate) fn copy_small(d: &mut [u8], s: &[u8]) {
     let n = d.len();
@@ -137,15 +137,16 @@ pub(crate) fn copy_small(d: &mut [u8], s: &[u8]) {
         d[..4].copy_from_slice(&s[..4]);
         d[n - 4..].copy_from_slice(&s[n - 4..]);
     } else {
-        let mut dc = d.chunks_exact_mut(16);
-        let mut sc = s.chunks_exact(16);
-        for (x, y) in (&mut dc).zip(&mut sc) {
-            x.copy_from_slice(y);
-        }
-        for (x, y) in dc.into_remainder().iter_mut().zip(sc.remainder()) {
-            *x = *y;
-        }
+        copy_other(d, s);
     }
+}
+
+/// [`copy_small`] for lengths under 4 or over 64 (out of line: the fast paths' loops then
+/// keep no state for it).
+#[cold]
+#[inline(never)]
+fn copy_other(d: &mut [u8], s: &[u8]) {
+    d.copy_from_slice(s);
 }
 
 /// A software EtherCAT Slave Controller.
