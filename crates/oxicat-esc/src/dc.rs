@@ -189,9 +189,15 @@ struct SyncUnit {
     start_out_of_range: bool,
 }
 
-/// The DC unit.
+/// The DC unit. `repr(C)`: what every frame's arrival touches first (one cache line).
 #[derive(Debug, Clone)]
+#[repr(C)]
 pub struct Dc {
+    /// Arrival time of the last frame at port 0.
+    sof0: Option<u64>,
+    /// Ports (bit n) still to latch the receive time of the latch frame.
+    latch_pending: u8,
+    inited: bool,
     cfg: ClockConfig,
     drift_ppt: i64,
     /// Global time of the last rate change.
@@ -212,10 +218,6 @@ pub struct Dc {
     integ: i128,
     /// Global time of the previous system time write.
     last_sample: Option<u64>,
-    /// Arrival time of the last frame at port 0.
-    sof0: Option<u64>,
-    /// Ports (bit n) still to latch the receive time of the latch frame.
-    latch_pending: u8,
     /// Authoritative copy of the owned registers 0x0900..0x09FF.
     shadow: [u8; SHADOW_LEN],
     /// Start time as last written (0x0990).
@@ -237,7 +239,6 @@ pub struct Dc {
     edge_memo: Option<(ClockKey, u64, u64)>,
     /// Width of the start-time comparison (32 for ET1100, 64 for 64-bit compare).
     compare_bits: u32,
-    inited: bool,
 }
 
 impl Dc {

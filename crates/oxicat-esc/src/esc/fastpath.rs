@@ -35,7 +35,11 @@ pub(super) struct FusedStep {
 /// are all distinct buffered-mode (3-buffer) SMs in process RAM and which has an open
 /// port (the frame does not loop back into the processing unit). Rebuilt with the plan and on port changes.
 #[derive(Debug, Clone, Copy, Default)]
+#[repr(C)]
 pub(super) struct Fused {
+    /// The last frame the fused path took (see [`FusedKey`]); a cyclic master sends the
+    /// same headers every cycle, so the frame checks reduce to one comparison.
+    pub(super) key: FusedKey,
     /// The fused path applies to this ESC's configuration.
     pub(super) ok: bool,
     /// Port the frame leaves through (first open port after port 0).
@@ -51,9 +55,6 @@ pub(super) struct Fused {
     /// Plan window `[lo, hi)` (logical bytes).
     pub(super) lo: u64,
     pub(super) hi: u64,
-    /// The last frame the fused path took (see [`FusedKey`]); a cyclic master sends the
-    /// same headers every cycle, so the frame checks reduce to one comparison.
-    pub(super) key: FusedKey,
 }
 
 /// What the fused path's frame checks depend on, and what they derived, for the last frame
@@ -63,6 +64,7 @@ pub(super) struct Fused {
 /// the same results; what the frame then does (which steps run, where the window and the
 /// working counter lie in the frame, the counter's increment) follows from them too.
 #[derive(Debug, Clone, Copy, Default)]
+#[repr(C)]
 pub(super) struct FusedKey {
     /// Frame length (0: no frame accepted yet; a taken frame has at least 12 bytes).
     pub(super) frame_len: usize,

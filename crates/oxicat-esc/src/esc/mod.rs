@@ -150,26 +150,45 @@ fn copy_other(d: &mut [u8], s: &[u8]) {
 }
 
 /// A software EtherCAT Slave Controller.
+///
+/// `repr(C)`: the fields a frame touches come first, in the order of use (the pass-through
+/// shortcut, then the fused LRW path), so that a hop touches few cache lines (a line of
+/// hundreds of ESCs does not fit in L1), from a cache-line boundary.
 #[derive(Debug, Clone)]
+#[repr(C, align(64))]
 pub struct Esc {
-    /// See [`QueryMemo`].
-    memo: QueryMemo,
-    /// Hot state of the fused LRW path.
-    fused: Fused,
-    /// Reference switch ([`Esc::set_fast_paths`]): no fused path, no pass-through
-    /// shortcut, no [`Esc::query_epoch`].
-    fast_off: bool,
+    now: u64,
+    /// End of the EEPROM write cycle under way ([`sii::WRITE_CYCLE_NS`] after the write
+    /// command): until then 0x0502 shows busy and refuses commands.
+    pub(crate) sii_busy_until: Option<u64>,
+    pd_wd_last: Option<u64>,
+    /// An injected expiry ([`Esc::expire_pd_watchdog`]): the deadline, until it expires or
+    /// a write retriggers the watchdog.
+    pd_wd_forced: Option<u64>,
     /// Where a frame entering port `p` leaves when it does not reach the processing unit
     /// on its way (the port order 0 → 3 → 1 → 2 → 0 over the open ports, stopping at port
     /// 0 if it is open); [`NO_ROUTE`] when it would loop back through a closed port 0 into
     /// the processing unit, or when the fast paths are off. For port 0, where the frame
     /// leaves after processing. Rebuilt with the open ports.
     route: [u8; 4],
+    /// Reference switch ([`Esc::set_fast_paths`]): no fused path, no pass-through
+    /// shortcut, no [`Esc::query_epoch`].
+    fast_off: bool,
+    events_dirty: bool,
+    ecat_mask: u16,
+    ecat_irq: u16,
+    /// See [`QueryMemo`].
+    memo: QueryMemo,
+    mem: Vec<u8>,
+    /// Hot state of the fused LRW path.
+    fused: Fused,
+    /// SyncManagers; the chip has the first `cfg.sm_count` (the others stay disabled).
+    sms: [Sm; 16],
+    dc: Dc,
     /// Frames the fused path processed (tests).
     #[cfg(test)]
     pub(crate) fused_hits: u64,
     cfg: EscConfig,
-    mem: Vec<u8>,
     /// Per-byte permissions of this chip's register file (the generic table with the
     /// FMMUs, SMs and DC parts the chip lacks removed).
     perm: Vec<u8>,
@@ -179,13 +198,7 @@ pub struct Esc {
     eeprom: Vec<u8>,
     /// Words below this acknowledge writes ([`Esc::protect_eeprom_from`]).
     eeprom_writable_words: usize,
-    /// End of the EEPROM write cycle under way ([`sii::WRITE_CYCLE_NS`] after the write
-    /// command): until then 0x0502 shows busy and refuses commands.
-    pub(crate) sii_busy_until: Option<u64>,
-    dc: Dc,
     link: [bool; 4],
-    /// SyncManagers; the chip has the first `cfg.sm_count` (the others stay disabled).
-    sms: [Sm; 16],
     active_sms: Vec<u8>,
     fmmus: Vec<Fmmu>,
     fmmu_rw_overlap: bool,
@@ -208,21 +221,13 @@ pub struct Esc {
     scratch: Vec<u8>,
     scratch_bits: Vec<u8>,
     scratch_mask: Vec<u8>,
-    now: u64,
     frame_ok: bool,
     /// SMs (bit n) with a producer write completed by ECAT in the current frame.
     pending_sms: u16,
-    events_dirty: bool,
-    ecat_mask: u16,
     open_ports: u8,
-    ecat_irq: u16,
     ecat_ev: u16,
     al_ev: u32,
     dout: u32,
-    pd_wd_last: Option<u64>,
-    /// An injected expiry ([`Esc::expire_pd_watchdog`]): the deadline, until it expires or
-    /// a write retriggers the watchdog.
-    pd_wd_forced: Option<u64>,
     pdi_wd_last: Option<u64>,
     latch_inputs: [bool; 2],
     /// Loop control (0x0101) as last written permanently (0x0100 bit 1 clear).
