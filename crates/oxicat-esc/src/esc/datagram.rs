@@ -171,14 +171,13 @@ impl Esc {
         // headers differ from the last frame taken (`FusedKey`), which also holds what
         // they derived.
         let head: &[u8; ECAT_HEADER_LEN + DG_HEADER_LEN] = frame.first_chunk()?;
-        let ecat = u16::from_le_bytes([head[0], head[1]]);
-        let dgk = fastpath::FusedKey::dg_of(head);
         let irq_in = u16::from_le_bytes([head[10], head[11]]);
+        let (lo, hi) = fastpath::FusedKey::words(head, frame.len());
         let k = &self.fused.key;
-        // One test for the three comparisons.
-        let miss = (k.frame_len ^ frame.len()) as u64 | (k.dg ^ dgk) | u64::from(k.ecat ^ ecat);
-        if miss != 0 {
-            self.fused_accept(frame.len(), ecat, dgk)?;
+        // One test for all the compared fields.
+        if (lo ^ k.lo) | (hi ^ k.hi) != 0 {
+            let head = *head;
+            self.fused_accept(&head, frame.len())?;
         }
         if self.events_dirty && self.ecat_mask != 0 {
             self.refresh_events();
@@ -213,8 +212,7 @@ impl Esc {
             self.pd_wd_forced = None;
             regs[regs::WD_STATUS_PD as usize] |= 1;
         }
-        // The plan window lies inside the datagram data (checked with the key).
-        let base = k.base as usize;
+        // The steps' bytes lie inside the datagram data (checked with the key).
         for st in &self.fused.reads[..k.nr as usize] {
             let i = st.sm as usize & 15;
             let sm = &mut self.sms[i];
@@ -222,7 +220,7 @@ impl Esc {
             regs[regs::sm_reg(i, 5)] = sm.buffered_status_reg();
             let l = st.len as usize;
             let from = st.ram as usize + b as usize * l;
-            let at = base + st.off as usize;
+            let at = st.at as usize;
             copy_small(&mut frame[at..at + l], &ram[from..from + l]);
         }
         for st in &self.fused.writes[..k.nw as usize] {
@@ -232,24 +230,24 @@ impl Esc {
             regs[regs::sm_reg(i, 5)] = sm.buffered_status_reg();
             let l = st.len as usize;
             let to = st.ram as usize + b as usize * l;
-            let at = base + st.off as usize;
+            let at = st.at as usize;
             copy_small(&mut ram[to..to + l], &frame[at..at + l]);
         }
         Some(Forward::Port(self.fused.exit))
     }
 
-    /// The fused path's frame checks for a frame of `frame_len` bytes whose headers differ
-    /// from the last one taken (`ecat`: the EtherCAT header word, `dgk`: the datagram
-    /// header key, see [`fastpath::FusedKey::dg_of`]): `None` when the fused path does not
-    /// take it; otherwise the key for it is stored. Reads the frame bytes through wire's
-    /// views.
+    /// The fused path's frame checks for a frame of `frame_len` bytes that starts with
+    /// `head` and whose headers differ from the last one taken: `None` when the fused path
+    /// does not take it; otherwise the key for it is stored and the steps' frame offsets
+    /// set. Reads the headers through wire's views.
     #[cold]
     #[inline(never)]
-    fn fused_accept(&mut self, frame_len: usize, ecat: u16, dgk: u64) -> Option<()> {
+    fn fused_accept(
+        &mut self,
+        head: &[u8; ECAT_HEADER_LEN + DG_HEADER_LEN],
+        frame_len: usize,
+    ) -> Option<()> {
         let dg_at = ECAT_HEADER_LEN;
-        let mut head = [0u8; ECAT_HEADER_LEN + DG_HEADER_LEN];
-        head[..2].copy_from_slice(&ecat.to_le_bytes());
-        head[2..10].copy_from_slice(&dgk.to_le_bytes());
         let f = view::Frame::new_unchecked(&head[..]);
         let d = view::Datagram::new_unchecked(&head[dg_at..]);
         let cmd = d.command_raw();
@@ -279,11 +277,16 @@ impl Esc {
         let nr = if c == 1 { 0 } else { nr };
         let nw = if c == 0 { 0 } else { nw };
         let inc = u16::from(nr > 0) + u16::from(nw > 0) * if c == 1 { 1 } else { 2 };
+        // Frame offsets of the steps' bytes: < 2^11 + the headers.
+        let base = dg_at + DG_HEADER_LEN + woff;
+        let f = &mut self.fused;
+        for st in f.reads.iter_mut().chain(f.writes.iter_mut()) {
+            st.at = (base + st.off as usize) as u16;
+        }
+        let (lo, hi) = fastpath::FusedKey::words(head, frame_len);
         self.fused.key = fastpath::FusedKey {
-            frame_len,
-            dg: dgk,
-            ecat,
-            base: (dg_at + DG_HEADER_LEN + woff) as u16,
+            lo,
+            hi,
             wkc_at: (dg_at + view::field::wkc(len).start) as u16,
             inc,
             nr,

@@ -21,6 +21,8 @@ pub(super) const PLAN_MAX: usize = 4;
 /// One step of the fused path: a whole buffered-mode SM buffer, byte-aligned.
 #[derive(Debug, Clone, Copy, Default)]
 pub(super) struct FusedStep {
+    /// Offset of the step's bytes in the frame the key describes (set with the key).
+    pub(super) at: u16,
     /// Offset of the step's bytes from the plan window's start in the datagram data.
     pub(super) off: u16,
     /// The SM's start address relative to `REG_END` and length (one buffer).
@@ -66,14 +68,12 @@ pub(super) struct Fused {
 #[derive(Debug, Clone, Copy, Default)]
 #[repr(C)]
 pub(super) struct FusedKey {
-    /// Frame length (0: no frame accepted yet; a taken frame has at least 12 bytes).
-    pub(super) frame_len: usize,
-    /// Bytes 2..10 (command, index, address, length and flags) with the index masked out.
-    pub(super) dg: u64,
-    /// EtherCAT header word.
-    pub(super) ecat: u16,
-    /// Offset of the plan window in the frame.
-    pub(super) base: u16,
+    /// Frame bytes 0..8 (EtherCAT header word, command, index, address) with the index
+    /// masked out ([`FusedKey::words`]).
+    pub(super) lo: u64,
+    /// Frame bytes 8..10 (datagram length and flags) and, from bit 16, the frame length
+    /// (0: no frame accepted yet; a taken frame has at least 12 bytes).
+    pub(super) hi: u64,
     /// Offset of the working counter in the frame.
     pub(super) wkc_at: u16,
     /// Working-counter increment (LRD, LWR, LRW: from the read and write steps).
@@ -86,12 +86,14 @@ pub(super) struct FusedKey {
 }
 
 impl FusedKey {
-    /// The datagram header bytes 2..10 of `head` without the index (byte 3).
+    /// The key words ([`FusedKey::lo`], [`FusedKey::hi`]) of a frame of `len` bytes that
+    /// starts with `head`.
     #[inline(always)]
-    pub(super) fn dg_of(head: &[u8; 12]) -> u64 {
-        let (_, rest) = head.split_at(2);
-        let b: &[u8; 8] = rest.first_chunk().unwrap_or(&[0; 8]);
-        u64::from_le_bytes(*b) & !0xFF00
+    pub(super) fn words(head: &[u8; 12], len: usize) -> (u64, u64) {
+        let (a, rest) = head.split_first_chunk::<8>().unwrap_or((&[0; 8], &[]));
+        let lo = u64::from_le_bytes(*a) & !0xFF00_0000;
+        let hi = u64::from(u16::from_le_bytes([rest[0], rest[1]])) | (len as u64) << 16;
+        (lo, hi)
     }
 }
 
@@ -208,6 +210,7 @@ impl Esc {
             }
             seen |= 1 << i;
             let st = FusedStep {
+                at: 0,
                 off: op.off as u16,
                 ram: sm.start - REG_END as u16,
                 len: sm.len,
