@@ -896,13 +896,41 @@ fn fused_key_holds_the_frame_length() {
             whole += usize::from(fa.len() >= f.len());
             let mut fb = fa.clone();
             t += 1000;
-            assert_eq!(a.forward(0, &mut fa, t, true), b.forward(0, &mut fb, t, true));
+            assert_eq!(
+                a.forward(0, &mut fa, t, true),
+                b.forward(0, &mut fb, t, true)
+            );
             assert_eq!(fa, fb, "frame cut by {cut}, padded by {pad}");
             assert_eq!(a.memory(), b.memory());
         }
     }
-    assert_eq!(a.fused_hits, whole as u64, "the frames the datagram fits in");
+    assert_eq!(
+        a.fused_hits, whole as u64,
+        "the frames the datagram fits in"
+    );
     assert_eq!(whole, 8);
+}
+
+/// A receive-time latch armed by a write to 0x0900 takes the time a frame reaches port 1
+/// on its way back (the pass-through shortcut's DC arrival), with the fast paths on and
+/// off alike.
+#[test]
+fn receive_time_latched_on_the_way_back() {
+    for fast in [true, false] {
+        let mut e = esc();
+        e.set_fast_paths(fast);
+        e.set_link(1, true);
+        let sa = e.station_address();
+        assert_eq!(
+            run_at(&mut e, 10_000, Command::Fpwr, sa, 0x0900, &[0; 4]).1,
+            1
+        );
+        let mut f = frame(&[(phys(Command::Nop, 0, 0, &[0; 2]), &[0; 2])]);
+        assert_eq!(e.forward(1, &mut f, 10_700, true), Forward::Port(0));
+        let p0 = u32::from_le_bytes(fprd(&mut e, 0x0900, 4).0.try_into().unwrap());
+        let p1 = u32::from_le_bytes(fprd(&mut e, 0x0904, 4).0.try_into().unwrap());
+        assert_eq!(p1.wrapping_sub(p0), 700, "fast paths {fast}");
+    }
 }
 
 /// The small-copy helper of the fast paths equals `copy_from_slice` for every length.

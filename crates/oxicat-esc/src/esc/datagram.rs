@@ -308,7 +308,8 @@ impl Esc {
         let port = port & 3;
         self.now = t;
         self.sii_settle(t);
-        self.dc_arrival(port, t);
+        // The DC unit's own entry (the reference for the shortcuts' `dc_arrival`).
+        self.dc.frame_arrival(&mut self.mem[..REG_END], port, t);
         self.forward_after_arrival(port, frame, frame_ok, d)
     }
 
