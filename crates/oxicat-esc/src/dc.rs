@@ -189,9 +189,10 @@ struct SyncUnit {
     start_out_of_range: bool,
 }
 
-/// The DC unit. `repr(C)`: what every frame's arrival touches first (one cache line).
+/// The DC unit. `repr(C)`, cache-line aligned: what every frame's arrival touches first,
+/// in one cache line.
 #[derive(Debug, Clone)]
-#[repr(C)]
+#[repr(C, align(64))]
 pub struct Dc {
     /// Arrival time of the last frame at port 0.
     sof0: Option<u64>,

@@ -213,7 +213,7 @@ impl Esc {
             regs[regs::WD_STATUS_PD as usize] |= 1;
         }
         // The steps' bytes lie inside the datagram data (checked with the key).
-        for st in &self.fused.reads[..k.nr as usize] {
+        for st in &self.fused.steps[..k.nr as usize] {
             let i = st.sm as usize & 15;
             let sm = &mut self.sms[i];
             let b = sm.buffered_read_whole();
@@ -223,7 +223,7 @@ impl Esc {
             let at = st.at as usize;
             copy_small(&mut frame[at..at + l], &ram[from..from + l]);
         }
-        for st in &self.fused.writes[..k.nw as usize] {
+        for st in &self.fused.steps[k.w0 as usize..k.w1 as usize] {
             let i = st.sm as usize & 15;
             let sm = &mut self.sms[i];
             let b = sm.buffered_write_commit();
@@ -279,9 +279,8 @@ impl Esc {
         let inc = u16::from(nr > 0) + u16::from(nw > 0) * if c == 1 { 1 } else { 2 };
         // Frame offsets of the steps' bytes: < 2^11 + the headers.
         let base = dg_at + DG_HEADER_LEN + woff;
-        let f = &mut self.fused;
-        for st in f.reads.iter_mut().chain(f.writes.iter_mut()) {
-            st.at = (base + st.off as usize) as u16;
+        for (st, op) in self.fused.steps.iter_mut().zip(&self.plan) {
+            st.at = (base + op.off as usize) as u16;
         }
         let (lo, hi) = fastpath::FusedKey::words(head, frame_len);
         self.fused.key = fastpath::FusedKey {
@@ -290,7 +289,8 @@ impl Esc {
             wkc_at: (dg_at + view::field::wkc(len).start) as u16,
             inc,
             nr,
-            nw,
+            w0: self.fused.nr,
+            w1: self.fused.nr + nw,
             wd: nw > 0 && self.fused.wd,
         };
         Some(())

@@ -21,10 +21,9 @@ pub(super) const PLAN_MAX: usize = 4;
 /// One step of the fused path: a whole buffered-mode SM buffer, byte-aligned.
 #[derive(Debug, Clone, Copy, Default)]
 pub(super) struct FusedStep {
-    /// Offset of the step's bytes in the frame the key describes (set with the key).
+    /// Offset of the step's bytes in the frame the key describes (set with the key, from
+    /// the plan step's window offset).
     pub(super) at: u16,
-    /// Offset of the step's bytes from the plan window's start in the datagram data.
-    pub(super) off: u16,
     /// The SM's start address relative to `REG_END` and length (one buffer).
     pub(super) ram: u16,
     pub(super) len: u16,
@@ -46,14 +45,14 @@ pub(super) struct Fused {
     pub(super) ok: bool,
     /// Port the frame leaves through (first open port after port 0).
     pub(super) exit: u8,
-    /// The read steps (`reads[..nr]`, run by LRD and LRW) and the write steps
-    /// (`writes[..nw]`, run by LWR and LRW), each in FMMU order; reads run first.
-    pub(super) nr: u8,
-    pub(super) nw: u8,
-    pub(super) reads: [FusedStep; PLAN_MAX],
-    pub(super) writes: [FusedStep; PLAN_MAX],
     /// Some write step's SM triggers the process-data watchdog.
     pub(super) wd: bool,
+    /// The plan's steps (`steps[k]` is `plan[k]`): `nr` read steps (run by LRD and LRW),
+    /// then `nw` write steps (run by LWR and LRW), each in FMMU order. In one array with
+    /// the key, so that a frame reads one cache line of them.
+    pub(super) nr: u8,
+    pub(super) nw: u8,
+    pub(super) steps: [FusedStep; PLAN_MAX],
     /// Plan window `[lo, hi)` (logical bytes).
     pub(super) lo: u64,
     pub(super) hi: u64,
@@ -78,9 +77,10 @@ pub(super) struct FusedKey {
     pub(super) wkc_at: u16,
     /// Working-counter increment (LRD, LWR, LRW: from the read and write steps).
     pub(super) inc: u16,
-    /// Read and write steps the command runs (`Fused::reads[..nr]`, `Fused::writes[..nw]`).
+    /// The steps the command runs: reads `Fused::steps[..nr]`, writes `Fused::steps[w0..w1]`.
     pub(super) nr: u8,
-    pub(super) nw: u8,
+    pub(super) w0: u8,
+    pub(super) w1: u8,
     /// The command runs a watchdog-triggering write step.
     pub(super) wd: bool,
 }
@@ -211,18 +211,16 @@ impl Esc {
             seen |= 1 << i;
             let st = FusedStep {
                 at: 0,
-                off: op.off as u16,
                 ram: sm.start - REG_END as u16,
                 len: sm.len,
                 sm: op.sm,
             };
             // Reads first, then writes (the plan's order).
+            f.steps[k] = st;
             if k >= self.plan_reads as usize {
-                f.writes[f.nw as usize] = st;
                 f.nw += 1;
                 f.wd |= sm.ctrl & CTRL_WD_TRIGGER != 0;
             } else {
-                f.reads[f.nr as usize] = st;
                 f.nr += 1;
             }
         }

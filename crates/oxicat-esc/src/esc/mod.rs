@@ -149,6 +149,34 @@ fn copy_other(d: &mut [u8], s: &[u8]) {
     d.copy_from_slice(s);
 }
 
+/// Bytes before SM0 in [`SmBank`]: SM2 starts a cache line, so that SM2..SM4 share one
+/// (SM0/SM1 the line before): the usual assignment, SM0/SM1 mailbox, SM2/SM3 process data.
+const SM_BANK_PAD: usize = 64 - 2 * core::mem::size_of::<Sm>() % 64;
+
+/// The SyncManagers at a cache-line-aligned place (see [`SM_BANK_PAD`]); derefs to the
+/// array.
+#[derive(Debug, Clone)]
+#[repr(C, align(64))]
+struct SmBank {
+    _pad: [u8; SM_BANK_PAD],
+    sms: [Sm; 16],
+}
+
+impl core::ops::Deref for SmBank {
+    type Target = [Sm; 16];
+    #[inline(always)]
+    fn deref(&self) -> &[Sm; 16] {
+        &self.sms
+    }
+}
+
+impl core::ops::DerefMut for SmBank {
+    #[inline(always)]
+    fn deref_mut(&mut self) -> &mut [Sm; 16] {
+        &mut self.sms
+    }
+}
+
 /// A software EtherCAT Slave Controller.
 ///
 /// `repr(C)`: the fields a frame touches come first, in the order of use (the pass-through
@@ -183,7 +211,7 @@ pub struct Esc {
     /// Hot state of the fused LRW path.
     fused: Fused,
     /// SyncManagers; the chip has the first `cfg.sm_count` (the others stay disabled).
-    sms: [Sm; 16],
+    sms: SmBank,
     dc: Dc,
     /// Frames the fused path processed (tests).
     #[cfg(test)]
@@ -299,7 +327,10 @@ impl Esc {
             sii_busy_until: None,
             dc,
             link: [true, false, false, false],
-            sms,
+            sms: SmBank {
+                _pad: [0; SM_BANK_PAD],
+                sms,
+            },
             active_sms: Vec::with_capacity(16),
             fmmus: Vec::with_capacity(16),
             fmmu_rw_overlap: false,
