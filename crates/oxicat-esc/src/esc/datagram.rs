@@ -193,7 +193,7 @@ impl Esc {
         // The IRQ field (as it came in, ORed with this ESC's bits as they stand before the
         // datagram's own access), the working counter where the checked length put it and
         // the watchdog trigger first: the steps touch none of them (the plan window lies
-        // inside the datagram data), and with them done few values stay live in the loops.
+        // inside the datagram data), and with them done few values stay live in the loop.
         let irq = self.ecat_irq;
         if irq & !irq_in != 0 {
             frame[10..12].copy_from_slice(&(irq_in | irq).to_le_bytes());
@@ -213,25 +213,22 @@ impl Esc {
             regs[regs::WD_STATUS_PD as usize] |= 1;
         }
         // The steps' bytes lie inside the datagram data (checked with the key).
-        for st in &self.fused.steps[..k.nr as usize] {
+        for st in &self.fused.steps[k.s0 as usize..k.s1 as usize] {
             let i = st.sm as usize & 15;
             let sm = &mut self.sms[i];
-            let b = sm.buffered_read_whole();
-            regs[regs::sm_reg(i, 5)] = sm.buffered_status_reg();
             let l = st.len as usize;
-            let from = st.ram as usize + b as usize * l;
             let at = st.at as usize;
-            copy_small(&mut frame[at..at + l], &ram[from..from + l]);
-        }
-        for st in &self.fused.steps[k.w0 as usize..k.w1 as usize] {
-            let i = st.sm as usize & 15;
-            let sm = &mut self.sms[i];
-            let b = sm.buffered_write_commit();
-            regs[regs::sm_reg(i, 5)] = sm.buffered_status_reg();
-            let l = st.len as usize;
-            let to = st.ram as usize + b as usize * l;
-            let at = st.at as usize;
-            copy_small(&mut ram[to..to + l], &frame[at..at + l]);
+            if st.write {
+                let b = sm.buffered_write_commit();
+                regs[regs::sm_reg(i, 5)] = sm.buffered_status_reg();
+                let to = st.ram as usize + b as usize * l;
+                copy_small(&mut ram[to..to + l], &frame[at..at + l]);
+            } else {
+                let b = sm.buffered_read_whole();
+                regs[regs::sm_reg(i, 5)] = sm.buffered_status_reg();
+                let from = st.ram as usize + b as usize * l;
+                copy_small(&mut frame[at..at + l], &ram[from..from + l]);
+            }
         }
         Some(Forward::Port(self.fused.exit))
     }
@@ -288,9 +285,8 @@ impl Esc {
             hi,
             wkc_at: (dg_at + view::field::wkc(len).start) as u16,
             inc,
-            nr,
-            w0: self.fused.nr,
-            w1: self.fused.nr + nw,
+            s0: if c == 1 { self.fused.nr } else { 0 },
+            s1: self.fused.nr + nw,
             wd: nw > 0 && self.fused.wd,
         };
         Some(())

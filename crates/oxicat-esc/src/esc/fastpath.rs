@@ -29,6 +29,8 @@ pub(super) struct FusedStep {
     pub(super) len: u16,
     /// SM index.
     pub(super) sm: u8,
+    /// ECAT writes the SM (a write step; otherwise a read step).
+    pub(super) write: bool,
 }
 
 /// The fused path (`Esc::forward_fused`): a frame entering port 0 with a good FCS that
@@ -77,10 +79,10 @@ pub(super) struct FusedKey {
     pub(super) wkc_at: u16,
     /// Working-counter increment (LRD, LWR, LRW: from the read and write steps).
     pub(super) inc: u16,
-    /// The steps the command runs: reads `Fused::steps[..nr]`, writes `Fused::steps[w0..w1]`.
-    pub(super) nr: u8,
-    pub(super) w0: u8,
-    pub(super) w1: u8,
+    /// The steps the command runs, `Fused::steps[s0..s1]`: the reads for LRD, the writes
+    /// for LWR, all for LRW.
+    pub(super) s0: u8,
+    pub(super) s1: u8,
     /// The command runs a watchdog-triggering write step.
     pub(super) wd: bool,
 }
@@ -211,6 +213,7 @@ impl Esc {
             seen |= 1 << i;
             let st = FusedStep {
                 at: 0,
+                write: k >= self.plan_reads as usize,
                 ram: sm.start - REG_END as u16,
                 len: sm.len,
                 sm: op.sm,
