@@ -21,10 +21,13 @@
 //! | fused path from `forward`      | 262       | 19.3 / 21.2 / 22.3           | 22.2 / 24.1 / 27.4 |
 //! | honest line (main, A/B below)  | 336 (302 / 334) | 37.6 / 34.6 / 37.2     | 38.7 / 37.7 / 38.8 |
 //! | pass-through, `FusedKey`       | 270 (287 / 272) | 31.2 / 26.6 / 36.4     | 36.6 / 29.0 / 36.9 |
+//! | key words, one step loop, inlined, hot fields first | 195 (234 / 198) | 21.4 / 14.4 / 15.8 | 23.3 / 15.8 / 17.2 (of 4) |
 //!
-//! (The last two rows: A/B in one session, both bench binaries alternately, three runs
-//! each, load average 5.7-6.1 on the 2 cores, so about twice the quiet-box figures; the
-//! same code measured 18.5 / 18.4 / 20.6 ns on a quiet box before this change.)
+//! (The "honest line" and `FusedKey` rows: A/B in one session, both bench binaries
+//! alternately, three runs each, load average 5.7-6.1 on the 2 cores, so about twice the
+//! quiet-box figures; the same code measured 18.5 / 18.4 / 20.6 ns on a quiet box before
+//! that change. The last row: A/B against the `FusedKey` row's binary, four runs each,
+//! load average 4.3-6.8: that binary 22.0 / 18.5 / 24.2 best, 28.5 / 19.5 / 25.7 median.)
 
 use criterion::{black_box, criterion_group, criterion_main, BenchmarkId, Criterion, Throughput};
 

@@ -189,9 +189,16 @@ struct SyncUnit {
     start_out_of_range: bool,
 }
 
-/// The DC unit.
+/// The DC unit. `repr(C)`, cache-line aligned: what every frame's arrival touches first,
+/// in one cache line.
 #[derive(Debug, Clone)]
+#[repr(C, align(64))]
 pub struct Dc {
+    /// Arrival time of the last frame at port 0.
+    sof0: Option<u64>,
+    /// Ports (bit n) still to latch the receive time of the latch frame.
+    latch_pending: u8,
+    inited: bool,
     cfg: ClockConfig,
     drift_ppt: i64,
     /// Global time of the last rate change.
@@ -212,10 +219,6 @@ pub struct Dc {
     integ: i128,
     /// Global time of the previous system time write.
     last_sample: Option<u64>,
-    /// Arrival time of the last frame at port 0.
-    sof0: Option<u64>,
-    /// Ports (bit n) still to latch the receive time of the latch frame.
-    latch_pending: u8,
     /// Authoritative copy of the owned registers 0x0900..0x09FF.
     shadow: [u8; SHADOW_LEN],
     /// Start time as last written (0x0990).
@@ -237,7 +240,6 @@ pub struct Dc {
     edge_memo: Option<(ClockKey, u64, u64)>,
     /// Width of the start-time comparison (32 for ET1100, 64 for 64-bit compare).
     compare_bits: u32,
-    inited: bool,
 }
 
 impl Dc {
@@ -495,6 +497,24 @@ impl Dc {
     }
 
     // ------------------------------------------------------------- contract
+
+    /// Whether [`Dc::frame_arrival`] at `port` needs the register file: the unit's first
+    /// contact, or a receive-time latch armed for the port (1..3). Otherwise
+    /// [`Dc::frame_arrival_quiet`] has the same effect.
+    #[inline(always)]
+    pub(crate) fn arrival_needs_regs(&self, port: u8) -> bool {
+        !self.inited || (port != 0 && self.latch_pending & (1 << (port & 3)) != 0)
+    }
+
+    /// [`Dc::frame_arrival`] when [`Dc::arrival_needs_regs`] is false: at port 0 the start
+    /// of frame (and the end of the latch window), at the other ports nothing.
+    #[inline(always)]
+    pub(crate) fn frame_arrival_quiet(&mut self, port: u8, t: u64) {
+        if port == 0 {
+            self.sof0 = Some(t);
+            self.latch_pending = 0;
+        }
+    }
 
     /// `frame_arrival` at port 0 (the ESC's fused frame path): the same effects, inlined.
     #[inline(always)]

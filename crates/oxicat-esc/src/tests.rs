@@ -866,6 +866,73 @@ fn fused_path_taken_for_the_lrw_benchmark_shape() {
     }
 }
 
+/// The fused path's header key holds the frame length: after an LRW the fused path took,
+/// the same headers in a frame cut short (the datagram no longer fits) or padded go the
+/// way the general path does, without a panic (a key without the length would reuse the
+/// stored WKC and window offsets past the end of the short frame).
+#[test]
+fn fused_key_holds_the_frame_length() {
+    let mk = |fused: bool| {
+        let mut e = esc();
+        e.set_fast_paths(fused);
+        sm(&mut e, 2, 0x1000, 32, 0x64, 1);
+        sm(&mut e, 3, 0x1100, 32, 0x20, 1);
+        fmmu(&mut e, 0, 0x0001_0000, 32, 0, 7, 0x1000, 0, 2);
+        fmmu(&mut e, 1, 0x0001_0020, 32, 0, 7, 0x1100, 0, 1);
+        e
+    };
+    let (mut a, mut b) = (mk(true), mk(false));
+    let f = frame(&[(
+        DatagramHeader::logical(Command::Lrw, 0, 0x0001_0000, 64),
+        &[7; 64],
+    )]);
+    let mut t = 1000;
+    let mut whole = 0;
+    for cut in [0usize, 1, 2, 30, 0, 66, 0] {
+        for pad in [0usize, 3] {
+            let mut fa = f[..f.len() - cut].to_vec();
+            fa.resize(fa.len() + pad, 0xEE);
+            // The datagram fits in the frame (a longer frame carries padding).
+            whole += usize::from(fa.len() >= f.len());
+            let mut fb = fa.clone();
+            t += 1000;
+            assert_eq!(
+                a.forward(0, &mut fa, t, true),
+                b.forward(0, &mut fb, t, true)
+            );
+            assert_eq!(fa, fb, "frame cut by {cut}, padded by {pad}");
+            assert_eq!(a.memory(), b.memory());
+        }
+    }
+    assert_eq!(
+        a.fused_hits, whole as u64,
+        "the frames the datagram fits in"
+    );
+    assert_eq!(whole, 8);
+}
+
+/// A receive-time latch armed by a write to 0x0900 takes the time a frame reaches port 1
+/// on its way back (the pass-through shortcut's DC arrival), with the fast paths on and
+/// off alike.
+#[test]
+fn receive_time_latched_on_the_way_back() {
+    for fast in [true, false] {
+        let mut e = esc();
+        e.set_fast_paths(fast);
+        e.set_link(1, true);
+        let sa = e.station_address();
+        assert_eq!(
+            run_at(&mut e, 10_000, Command::Fpwr, sa, 0x0900, &[0; 4]).1,
+            1
+        );
+        let mut f = frame(&[(phys(Command::Nop, 0, 0, &[0; 2]), &[0; 2])]);
+        assert_eq!(e.forward(1, &mut f, 10_700, true), Forward::Port(0));
+        let p0 = u32::from_le_bytes(fprd(&mut e, 0x0900, 4).0.try_into().unwrap());
+        let p1 = u32::from_le_bytes(fprd(&mut e, 0x0904, 4).0.try_into().unwrap());
+        assert_eq!(p1.wrapping_sub(p0), 700, "fast paths {fast}");
+    }
+}
+
 /// The small-copy helper of the fast paths equals `copy_from_slice` for every length.
 #[test]
 fn copy_small_equals_copy_from_slice() {

@@ -17,33 +17,37 @@ pub(super) fn set_circulating(frame: &mut [u8]) {
 impl Esc {
     /// A frame's first bit reaches `port` at time `t`; see the API contract. Returns the
     /// port the frame leaves through or `Dropped` (circulating frame rule).
-    #[inline]
+    #[inline(always)]
     pub fn forward(&mut self, port: u8, frame: &mut [u8], t: u64, frame_ok: bool) -> Forward {
         // The pass-through shortcut first, inlined into the caller: on a line every frame
         // passes every ESC but the last once without being processed (the way back).
         if let Some(out) = self.pass_through(port, t, frame_ok) {
             return out;
         }
-        self.forward_processed(port, frame, t, frame_ok)
+        // The fused path inlined too (a call's register saves cost as much as a third of
+        // it); every other frame out of line.
+        if port == 0 && frame_ok && self.fused.ok {
+            return self.forward_fused(frame, t);
+        }
+        self.forward_generic(port, frame, t, frame_ok, None)
     }
 
-    /// [`Esc::forward`] for a frame the pass-through shortcut declined: the fused path for
-    /// a frame entering port 0, the general path otherwise.
-    fn forward_processed(&mut self, port: u8, frame: &mut [u8], t: u64, frame_ok: bool) -> Forward {
+    /// [`Esc::forward`] for a good frame entering port 0 at an ESC where the fused path
+    /// applies: the fused path if it takes the frame, the general path after the arrival
+    /// otherwise.
+    #[inline(always)]
+    fn forward_fused(&mut self, frame: &mut [u8], t: u64) -> Forward {
         // The memo is cleared where the frame is processed (`process_frame`, the fused
         // path): a frame that only passes (arriving at port 1..3 and leaving without a
         // visit to the processing unit) changes the SII settle, a DC receive time and the
         // RX error counters, none of which the memo's answers read.
-        if port == 0 && frame_ok && self.fused.ok {
-            self.memo.clear();
-            self.now = t;
-            self.dc.frame_arrival_port0(&mut self.mem[..REG_END], t);
-            if let Some(out) = self.process_fused(frame, t) {
-                return out;
-            }
-            return self.forward_after_arrival(0, frame, true, None);
+        self.memo.clear();
+        self.now = t;
+        self.dc_arrival(0, t);
+        if let Some(out) = self.process_fused(frame, t) {
+            return out;
         }
-        self.forward_generic(port, frame, t, frame_ok, None)
+        self.forward_after_arrival(0, frame, true, None)
     }
 
     /// The pass-through shortcut: a good frame entering port 1..3 that leaves again
@@ -60,7 +64,7 @@ impl Esc {
         }
         self.now = t;
         self.sii_settle(t);
-        self.dc.frame_arrival(&mut self.mem[..REG_END], p, t);
+        self.dc_arrival(p, t);
         Some(Forward::Port(out))
     }
 
@@ -106,10 +110,27 @@ impl Esc {
             // As `forward`; the fused path declines the frame (it takes frames of one
             // logical datagram, and this one has a configured-address datagram).
             self.now = t;
-            self.dc.frame_arrival_port0(&mut self.mem[..REG_END], t);
+            self.dc_arrival(0, t);
             return self.forward_after_arrival(0, frame, true, Some(d));
         }
         self.forward_generic(port, frame, t, frame_ok, Some(d))
+    }
+
+    /// The DC unit sees a frame's first bit at `port` (`Dc::frame_arrival`), the register
+    /// file only when the unit needs it.
+    #[inline(always)]
+    fn dc_arrival(&mut self, port: u8, t: u64) {
+        if self.dc.arrival_needs_regs(port) {
+            self.dc_arrival_slow(port, t);
+        } else {
+            self.dc.frame_arrival_quiet(port, t);
+        }
+    }
+
+    #[cold]
+    #[inline(never)]
+    fn dc_arrival_slow(&mut self, port: u8, t: u64) {
+        self.dc.frame_arrival(&mut self.mem[..REG_END], port, t);
     }
 
     /// The foreign-frame shortcut: a good frame entering port 0 whose datagrams are all
@@ -131,7 +152,7 @@ impl Esc {
         }
         self.now = t;
         self.sii_settle(t);
-        self.dc.frame_arrival_port0(&mut self.mem[..REG_END], t);
+        self.dc_arrival(0, t);
         let n = d.dgs.len();
         if n > 0 {
             self.pass_run(d, 0, n);
@@ -145,51 +166,19 @@ impl Esc {
     /// Same effects as `process_frame` plus the exit-port search on such a frame.
     #[inline(always)]
     pub(super) fn process_fused(&mut self, frame: &mut [u8], t: u64) -> Option<Forward> {
-        // The frame header and the first datagram's header through wire's views, over a
-        // fixed-size copy of the first 12 bytes so that every field read is one load with
-        // no bounds check left; the checks only when the headers differ from the last
-        // frame taken (`FusedKey`).
-        let dg_at = ECAT_HEADER_LEN;
+        // The frame header and the first datagram's header from a fixed-size copy of the
+        // first 12 bytes (one load per field, no bounds check); the checks only when the
+        // headers differ from the last frame taken (`FusedKey`), which also holds what
+        // they derived.
         let head: &[u8; ECAT_HEADER_LEN + DG_HEADER_LEN] = frame.first_chunk()?;
-        let ecat = u16::from_le_bytes([head[0], head[1]]);
-        let dgk = fastpath::FusedKey::dg_of(head);
-        let k = self.fused.key;
-        let (c, len, woff) = if k.frame_len == frame.len() && k.dg == dgk && k.ecat == ecat {
-            (k.cmd as usize, k.data_len as usize, k.win_off as usize)
-        } else {
-            let f = view::Frame::new_unchecked(&head[..]);
-            let d = view::Datagram::new_unchecked(&head[dg_at..]);
-            let cmd = d.command_raw();
-            let len = d.data_len();
-            // Frame end (header length); the single datagram must fit in it.
-            let end = f.end();
-            let dg_end = dg_at + DG_HEADER_LEN + len + 2;
-            // One logical datagram (no more-follows) in a datagram frame.
-            if !f.is_datagrams()
-                || cmd.wrapping_sub(CMD_LRD) > CMD_LRW - CMD_LRD
-                || d.more_follows()
-                || dg_end > end
-                || end > frame.len()
-            {
-                return None;
-            }
-            let ds = u64::from(d.address());
-            let (lo, hi) = (self.fused.lo, self.fused.hi);
-            if ds > lo || hi > ds + len as u64 {
-                return None;
-            }
-            // The window offset fits: `hi - ds <= len` < 2^11.
-            let woff = (lo - ds) as usize;
-            self.fused.key = fastpath::FusedKey {
-                frame_len: frame.len(),
-                dg: dgk,
-                ecat,
-                cmd: cmd - CMD_LRD,
-                data_len: len as u16,
-                win_off: woff as u16,
-            };
-            ((cmd - CMD_LRD) as usize, len, woff)
-        };
+        let irq_in = u16::from_le_bytes([head[10], head[11]]);
+        let (lo, hi) = fastpath::FusedKey::words(head, frame.len());
+        let k = &self.fused.key;
+        // One test for all the compared fields.
+        if (lo ^ k.lo) | (hi ^ k.hi) != 0 {
+            let head = *head;
+            self.fused_accept(&head, frame.len())?;
+        }
         if self.events_dirty && self.ecat_mask != 0 {
             self.refresh_events();
         }
@@ -197,52 +186,110 @@ impl Esc {
         {
             self.fused_hits += 1;
         }
-        let irq = self.ecat_irq;
-        // The plan window in the frame (inside the datagram data, checked above).
-        let wstart = ECAT_HEADER_LEN + DG_HEADER_LEN + woff;
-        let win = frame.get_mut(wstart..wstart + (self.fused.hi - self.fused.lo) as usize)?;
         // Registers (SM status, watchdog status) and process RAM (the SM buffers, which
-        // the fused path requires to lie at or above `REG_END`).
+        // the fused path requires to lie at or above `REG_END` with all three buffers).
         let (regs, ram) = self.mem.split_at_mut(REG_END);
         let regs: &mut [u8; REG_END] = regs.try_into().ok()?;
-        // The steps this command runs (reads come first, then writes): one loop.
-        let (from_step, to_step) = *self.fused.range.get(c)?;
-        for st in self.fused.steps.get(from_step as usize..to_step as usize)? {
+        // The IRQ field (as it came in, ORed with this ESC's bits as they stand before the
+        // datagram's own access), the working counter where the checked length put it and
+        // the watchdog trigger first: the steps touch none of them (the plan window lies
+        // inside the datagram data), and with them done few values stay live in the loop.
+        let irq = self.ecat_irq;
+        if irq & !irq_in != 0 {
+            frame[10..12].copy_from_slice(&(irq_in | irq).to_le_bytes());
+        }
+        let k = &self.fused.key;
+        if k.inc != 0 {
+            let at = k.wkc_at as usize;
+            let wkc = &mut frame[at..at + 2];
+            let w = u16::from_le_bytes([wkc[0], wkc[1]]).wrapping_add(k.inc);
+            wkc.copy_from_slice(&w.to_le_bytes());
+            // Some step runs exactly when the working counter counts.
+            self.events_dirty = true;
+        }
+        if k.wd {
+            self.pd_wd_last = Some(t);
+            self.pd_wd_forced = None;
+            regs[regs::WD_STATUS_PD as usize] |= 1;
+        }
+        // The steps' bytes lie inside the datagram data (checked with the key).
+        for st in &self.fused.steps[k.s0 as usize..k.s1 as usize] {
             let i = st.sm as usize & 15;
             let sm = &mut self.sms[i];
             let l = st.len as usize;
-            let o = st.off as usize;
+            let at = st.at as usize;
             if st.write {
                 let b = sm.buffered_write_commit();
                 regs[regs::sm_reg(i, 5)] = sm.buffered_status_reg();
                 let to = st.ram as usize + b as usize * l;
-                copy_small(&mut ram[to..to + l], &win[o..o + l]);
-                if st.wd {
-                    self.pd_wd_last = Some(t);
-                    self.pd_wd_forced = None;
-                    regs[regs::WD_STATUS_PD as usize] |= 1;
-                }
+                copy_small(&mut ram[to..to + l], &frame[at..at + l]);
             } else {
                 let b = sm.buffered_read_whole();
                 regs[regs::sm_reg(i, 5)] = sm.buffered_status_reg();
                 let from = st.ram as usize + b as usize * l;
-                copy_small(&mut win[o..o + l], &ram[from..from + l]);
+                copy_small(&mut frame[at..at + l], &ram[from..from + l]);
             }
         }
-        let inc = *self.fused.inc.get(c)?;
-        // Some step ran exactly when the working counter counts.
-        self.events_dirty |= inc != 0;
-        // IRQ through a view of the fixed-size header; the working counter where the
-        // checked length put it.
-        let head: &mut [u8; DG_HEADER_LEN] = frame.get_mut(dg_at..)?.first_chunk_mut()?;
-        view::Datagram::new_unchecked(&mut head[..]).or_irq(irq);
-        if inc != 0 {
-            let at = dg_at + view::field::wkc(len).start;
-            let wkc = frame.get_mut(at..at + 2)?;
-            let w = u16::from_le_bytes([wkc[0], wkc[1]]).wrapping_add(inc);
-            wkc.copy_from_slice(&w.to_le_bytes());
-        }
         Some(Forward::Port(self.fused.exit))
+    }
+
+    /// The fused path's frame checks for a frame of `frame_len` bytes that starts with
+    /// `head` and whose headers differ from the last one taken: `None` when the fused path
+    /// does not take it; otherwise the key for it is stored and the steps' frame offsets
+    /// set. Reads the headers through wire's views.
+    #[cold]
+    #[inline(never)]
+    fn fused_accept(
+        &mut self,
+        head: &[u8; ECAT_HEADER_LEN + DG_HEADER_LEN],
+        frame_len: usize,
+    ) -> Option<()> {
+        let dg_at = ECAT_HEADER_LEN;
+        let f = view::Frame::new_unchecked(&head[..]);
+        let d = view::Datagram::new_unchecked(&head[dg_at..]);
+        let cmd = d.command_raw();
+        let len = d.data_len();
+        // Frame end (header length); the single datagram must fit in it.
+        let end = f.end();
+        let dg_end = dg_at + DG_HEADER_LEN + len + 2;
+        // One logical datagram (no more-follows) in a datagram frame.
+        if !f.is_datagrams()
+            || cmd.wrapping_sub(CMD_LRD) > CMD_LRW - CMD_LRD
+            || d.more_follows()
+            || dg_end > end
+            || end > frame_len
+        {
+            return None;
+        }
+        let ds = u64::from(d.address());
+        let (lo, hi) = (self.fused.lo, self.fused.hi);
+        if ds > lo || hi > ds + len as u64 {
+            return None;
+        }
+        // The window offset fits: `hi - ds <= len` < 2^11.
+        let woff = (lo - ds) as usize;
+        let c = cmd - CMD_LRD;
+        let (nr, nw) = (self.fused.nr, self.fused.nw);
+        // LRD runs the reads, LWR the writes, LRW both; a write counts 1 in LWR, 2 in LRW.
+        let nr = if c == 1 { 0 } else { nr };
+        let nw = if c == 0 { 0 } else { nw };
+        let inc = u16::from(nr > 0) + u16::from(nw > 0) * if c == 1 { 1 } else { 2 };
+        // Frame offsets of the steps' bytes: < 2^11 + the headers.
+        let base = dg_at + DG_HEADER_LEN + woff;
+        for (st, op) in self.fused.steps.iter_mut().zip(&self.plan) {
+            st.at = (base + op.off as usize) as u16;
+        }
+        let (lo, hi) = fastpath::FusedKey::words(head, frame_len);
+        self.fused.key = fastpath::FusedKey {
+            lo,
+            hi,
+            wkc_at: (dg_at + view::field::wkc(len).start) as u16,
+            inc,
+            s0: if c == 1 { self.fused.nr } else { 0 },
+            s1: self.fused.nr + nw,
+            wd: nw > 0 && self.fused.wd,
+        };
+        Some(())
     }
 
     /// `forward` for every frame (the fused path is a shortcut for one kind).
@@ -257,6 +304,7 @@ impl Esc {
         let port = port & 3;
         self.now = t;
         self.sii_settle(t);
+        // The DC unit's own entry (the reference for the shortcuts' `dc_arrival`).
         self.dc.frame_arrival(&mut self.mem[..REG_END], port, t);
         self.forward_after_arrival(port, frame, frame_ok, d)
     }

@@ -21,8 +21,9 @@ pub(super) const PLAN_MAX: usize = 4;
 /// One step of the fused path: a whole buffered-mode SM buffer, byte-aligned.
 #[derive(Debug, Clone, Copy, Default)]
 pub(super) struct FusedStep {
-    /// Offset of the step's bytes from the plan window's start in the datagram data.
-    pub(super) off: u16,
+    /// Offset of the step's bytes in the frame the key describes (set with the key, from
+    /// the plan step's window offset).
+    pub(super) at: u16,
     /// The SM's start address relative to `REG_END` and length (one buffer).
     pub(super) ram: u16,
     pub(super) len: u16,
@@ -30,8 +31,6 @@ pub(super) struct FusedStep {
     pub(super) sm: u8,
     /// ECAT writes the SM (a write step; otherwise a read step).
     pub(super) write: bool,
-    /// The SM triggers the process-data watchdog (write steps).
-    pub(super) wd: bool,
 }
 
 /// The fused path (`Esc::forward_fused`): a frame entering port 0 with a good FCS that
@@ -39,52 +38,64 @@ pub(super) struct FusedStep {
 /// are all distinct buffered-mode (3-buffer) SMs in process RAM and which has an open
 /// port (the frame does not loop back into the processing unit). Rebuilt with the plan and on port changes.
 #[derive(Debug, Clone, Copy, Default)]
+#[repr(C)]
 pub(super) struct Fused {
+    /// The last frame the fused path took (see [`FusedKey`]); a cyclic master sends the
+    /// same headers every cycle, so the frame checks reduce to one comparison.
+    pub(super) key: FusedKey,
     /// The fused path applies to this ESC's configuration.
     pub(super) ok: bool,
     /// Port the frame leaves through (first open port after port 0).
     pub(super) exit: u8,
-    /// The steps LRD, LWR and LRW run: `steps[range[c].0..range[c].1]` (reads come
-    /// first, then writes).
-    pub(super) range: [(u8, u8); 3],
+    /// Some write step's SM triggers the process-data watchdog.
+    pub(super) wd: bool,
+    /// The plan's steps (`steps[k]` is `plan[k]`): `nr` read steps (run by LRD and LRW),
+    /// then `nw` write steps (run by LWR and LRW), each in FMMU order. In one array with
+    /// the key, so that a frame reads one cache line of them.
+    pub(super) nr: u8,
+    pub(super) nw: u8,
+    pub(super) steps: [FusedStep; PLAN_MAX],
     /// Plan window `[lo, hi)` (logical bytes).
     pub(super) lo: u64,
     pub(super) hi: u64,
-    /// Working-counter increment for LRD, LWR, LRW.
-    pub(super) inc: [u16; 3],
-    pub(super) steps: [FusedStep; PLAN_MAX],
-    /// The last frame the fused path took (see [`FusedKey`]); a cyclic master sends the
-    /// same headers every cycle, so the frame checks reduce to one comparison.
-    pub(super) key: FusedKey,
 }
 
 /// What the fused path's frame checks depend on, and what they derived, for the last frame
 /// they accepted (with this configuration: `rebuild_fused` starts afresh). The checks read
 /// nothing but the EtherCAT header word, the datagram header's command, address and
 /// length/flags words and the frame's length, so a frame equal in those passes them with
-/// the same results.
+/// the same results; what the frame then does (which steps run, where the window and the
+/// working counter lie in the frame, the counter's increment) follows from them too.
 #[derive(Debug, Clone, Copy, Default)]
+#[repr(C)]
 pub(super) struct FusedKey {
-    /// Frame length (0: no frame accepted yet; a taken frame has at least 12 bytes).
-    pub(super) frame_len: usize,
-    /// Bytes 2..10 (command, index, address, length and flags) with the index masked out.
-    pub(super) dg: u64,
-    /// EtherCAT header word.
-    pub(super) ecat: u16,
-    /// Command index (0 LRD, 1 LWR, 2 LRW), datagram data length, plan window offset in
-    /// the data.
-    pub(super) cmd: u8,
-    pub(super) data_len: u16,
-    pub(super) win_off: u16,
+    /// Frame bytes 0..8 (EtherCAT header word, command, index, address) with the index
+    /// masked out ([`FusedKey::words`]).
+    pub(super) lo: u64,
+    /// Frame bytes 8..10 (datagram length and flags) and, from bit 16, the frame length
+    /// (0: no frame accepted yet; a taken frame has at least 12 bytes).
+    pub(super) hi: u64,
+    /// Offset of the working counter in the frame.
+    pub(super) wkc_at: u16,
+    /// Working-counter increment (LRD, LWR, LRW: from the read and write steps).
+    pub(super) inc: u16,
+    /// The steps the command runs, `Fused::steps[s0..s1]`: the reads for LRD, the writes
+    /// for LWR, all for LRW.
+    pub(super) s0: u8,
+    pub(super) s1: u8,
+    /// The command runs a watchdog-triggering write step.
+    pub(super) wd: bool,
 }
 
 impl FusedKey {
-    /// The datagram header bytes 2..10 of `head` without the index (byte 3).
+    /// The key words ([`FusedKey::lo`], [`FusedKey::hi`]) of a frame of `len` bytes that
+    /// starts with `head`.
     #[inline(always)]
-    pub(super) fn dg_of(head: &[u8; 12]) -> u64 {
-        let (_, rest) = head.split_at(2);
-        let b: &[u8; 8] = rest.first_chunk().unwrap_or(&[0; 8]);
-        u64::from_le_bytes(*b) & !0xFF00
+    pub(super) fn words(head: &[u8; 12], len: usize) -> (u64, u64) {
+        let (a, rest) = head.split_first_chunk::<8>().unwrap_or((&[0; 8], &[]));
+        let lo = u64::from_le_bytes(*a) & !0xFF00_0000;
+        let hi = u64::from(u16::from_le_bytes([rest[0], rest[1]])) | (len as u64) << 16;
+        (lo, hi)
     }
 }
 
@@ -200,25 +211,29 @@ impl Esc {
                 break;
             }
             seen |= 1 << i;
-            f.steps[k] = FusedStep {
-                off: op.off as u16,
+            let st = FusedStep {
+                at: 0,
+                write: k >= self.plan_reads as usize,
                 ram: sm.start - REG_END as u16,
                 len: sm.len,
                 sm: op.sm,
-                write: k >= self.plan_reads as usize,
-                wd: sm.ctrl & CTRL_WD_TRIGGER != 0,
             };
+            // Reads first, then writes (the plan's order).
+            f.steps[k] = st;
+            if k >= self.plan_reads as usize {
+                f.nw += 1;
+                f.wd |= sm.ctrl & CTRL_WD_TRIGGER != 0;
+            } else {
+                f.nr += 1;
+            }
         }
         if ok {
-            let nr = self.plan_reads.min(self.plan_len);
-            let rd = u16::from(nr > 0);
-            let wr = u16::from(self.plan_len > nr);
             f.ok = true;
             f.exit = exit.unwrap_or(0);
-            f.range = [(0, nr), (nr, self.plan_len), (0, self.plan_len)];
             f.lo = self.plan_lo;
             f.hi = self.plan_hi;
-            f.inc = [rd, wr, rd + 2 * wr];
+        } else {
+            f = Fused::default();
         }
         self.fused = f;
     }

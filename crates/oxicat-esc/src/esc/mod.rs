@@ -118,8 +118,8 @@ const PDI_DIGITAL_IO: u8 = 0x04;
 
 /// Copies `s` into `d` (equal lengths): process-data images are small, and a call into
 /// `memcpy` costs more than the copy. 16..=64 bytes take two or four overlapping 16-byte
-/// moves (no loop), 4..16 bytes two overlapping 4- or 8-byte moves; longer images go in
-/// 16-byte chunks.
+/// moves (no loop), 4..16 bytes two overlapping 4- or 8-byte moves; other lengths take
+/// `copy_from_slice` out of line.
 #[inline(always)]
 pub(crate) fn copy_small(d: &mut [u8], s: &[u8]) {
     let n = d.len();
@@ -137,38 +137,86 @@ pub(crate) fn copy_small(d: &mut [u8], s: &[u8]) {
         d[..4].copy_from_slice(&s[..4]);
         d[n - 4..].copy_from_slice(&s[n - 4..]);
     } else {
-        let mut dc = d.chunks_exact_mut(16);
-        let mut sc = s.chunks_exact(16);
-        for (x, y) in (&mut dc).zip(&mut sc) {
-            x.copy_from_slice(y);
-        }
-        for (x, y) in dc.into_remainder().iter_mut().zip(sc.remainder()) {
-            *x = *y;
-        }
+        copy_other(d, s);
+    }
+}
+
+/// [`copy_small`] for lengths under 4 or over 64 (out of line: the fast paths' loops then
+/// keep no state for it).
+#[cold]
+#[inline(never)]
+fn copy_other(d: &mut [u8], s: &[u8]) {
+    d.copy_from_slice(s);
+}
+
+/// Bytes before SM0 in [`SmBank`]: SM2 starts a cache line, so that SM2..SM4 share one
+/// (SM0/SM1 the line before): the usual assignment, SM0/SM1 mailbox, SM2/SM3 process data.
+const SM_BANK_PAD: usize = 64 - 2 * core::mem::size_of::<Sm>() % 64;
+
+/// The SyncManagers at a cache-line-aligned place (see [`SM_BANK_PAD`]); derefs to the
+/// array.
+#[derive(Debug, Clone)]
+#[repr(C, align(64))]
+struct SmBank {
+    _pad: [u8; SM_BANK_PAD],
+    sms: [Sm; 16],
+}
+
+impl core::ops::Deref for SmBank {
+    type Target = [Sm; 16];
+    #[inline(always)]
+    fn deref(&self) -> &[Sm; 16] {
+        &self.sms
+    }
+}
+
+impl core::ops::DerefMut for SmBank {
+    #[inline(always)]
+    fn deref_mut(&mut self) -> &mut [Sm; 16] {
+        &mut self.sms
     }
 }
 
 /// A software EtherCAT Slave Controller.
+///
+/// `repr(C)`: the fields a frame touches come first, in the order of use (the pass-through
+/// shortcut, then the fused LRW path), so that a hop touches few cache lines (a line of
+/// hundreds of ESCs does not fit in L1), from a cache-line boundary.
 #[derive(Debug, Clone)]
+#[repr(C, align(64))]
 pub struct Esc {
-    /// See [`QueryMemo`].
-    memo: QueryMemo,
-    /// Hot state of the fused LRW path.
-    fused: Fused,
-    /// Reference switch ([`Esc::set_fast_paths`]): no fused path, no pass-through
-    /// shortcut, no [`Esc::query_epoch`].
-    fast_off: bool,
+    now: u64,
+    /// End of the EEPROM write cycle under way ([`sii::WRITE_CYCLE_NS`] after the write
+    /// command): until then 0x0502 shows busy and refuses commands.
+    pub(crate) sii_busy_until: Option<u64>,
+    pd_wd_last: Option<u64>,
+    /// An injected expiry ([`Esc::expire_pd_watchdog`]): the deadline, until it expires or
+    /// a write retriggers the watchdog.
+    pd_wd_forced: Option<u64>,
     /// Where a frame entering port `p` leaves when it does not reach the processing unit
     /// on its way (the port order 0 → 3 → 1 → 2 → 0 over the open ports, stopping at port
     /// 0 if it is open); [`NO_ROUTE`] when it would loop back through a closed port 0 into
     /// the processing unit, or when the fast paths are off. For port 0, where the frame
     /// leaves after processing. Rebuilt with the open ports.
     route: [u8; 4],
+    /// Reference switch ([`Esc::set_fast_paths`]): no fused path, no pass-through
+    /// shortcut, no [`Esc::query_epoch`].
+    fast_off: bool,
+    events_dirty: bool,
+    ecat_mask: u16,
+    ecat_irq: u16,
+    /// See [`QueryMemo`].
+    memo: QueryMemo,
+    mem: Vec<u8>,
+    /// Hot state of the fused LRW path.
+    fused: Fused,
+    /// SyncManagers; the chip has the first `cfg.sm_count` (the others stay disabled).
+    sms: SmBank,
+    dc: Dc,
     /// Frames the fused path processed (tests).
     #[cfg(test)]
     pub(crate) fused_hits: u64,
     cfg: EscConfig,
-    mem: Vec<u8>,
     /// Per-byte permissions of this chip's register file (the generic table with the
     /// FMMUs, SMs and DC parts the chip lacks removed).
     perm: Vec<u8>,
@@ -178,13 +226,7 @@ pub struct Esc {
     eeprom: Vec<u8>,
     /// Words below this acknowledge writes ([`Esc::protect_eeprom_from`]).
     eeprom_writable_words: usize,
-    /// End of the EEPROM write cycle under way ([`sii::WRITE_CYCLE_NS`] after the write
-    /// command): until then 0x0502 shows busy and refuses commands.
-    pub(crate) sii_busy_until: Option<u64>,
-    dc: Dc,
     link: [bool; 4],
-    /// SyncManagers; the chip has the first `cfg.sm_count` (the others stay disabled).
-    sms: [Sm; 16],
     active_sms: Vec<u8>,
     fmmus: Vec<Fmmu>,
     fmmu_rw_overlap: bool,
@@ -207,21 +249,13 @@ pub struct Esc {
     scratch: Vec<u8>,
     scratch_bits: Vec<u8>,
     scratch_mask: Vec<u8>,
-    now: u64,
     frame_ok: bool,
     /// SMs (bit n) with a producer write completed by ECAT in the current frame.
     pending_sms: u16,
-    events_dirty: bool,
-    ecat_mask: u16,
     open_ports: u8,
-    ecat_irq: u16,
     ecat_ev: u16,
     al_ev: u32,
     dout: u32,
-    pd_wd_last: Option<u64>,
-    /// An injected expiry ([`Esc::expire_pd_watchdog`]): the deadline, until it expires or
-    /// a write retriggers the watchdog.
-    pd_wd_forced: Option<u64>,
     pdi_wd_last: Option<u64>,
     latch_inputs: [bool; 2],
     /// Loop control (0x0101) as last written permanently (0x0100 bit 1 clear).
@@ -293,7 +327,10 @@ impl Esc {
             sii_busy_until: None,
             dc,
             link: [true, false, false, false],
-            sms,
+            sms: SmBank {
+                _pad: [0; SM_BANK_PAD],
+                sms,
+            },
             active_sms: Vec::with_capacity(16),
             fmmus: Vec::with_capacity(16),
             fmmu_rw_overlap: false,
