@@ -163,7 +163,9 @@ def parse(elf, words=None):
             cur["indirect"] = True
         elif op in ("b", "b.w") and "0x" in args:
             t = TARGET.search(args)
-            if t and t.group(3) is None and t.group(2) != cur["name"]:
+            # A branch to another function's entry; not to a mapping symbol ($t after a
+            # literal pool: the same function).
+            if t and t.group(3) is None and t.group(2) != cur["name"] and not t.group(2).startswith("$"):
                 cur["tails"].add(int(t.group(1), 16))
     for f, a in pending:
         if a in funcs:
