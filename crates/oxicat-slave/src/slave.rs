@@ -450,8 +450,10 @@ impl<P: Pdi, const N: usize, const M: usize> Slave<P, N, M> {
             PdStep::Idle => {}
             PdStep::Rx => {
                 self.pd_step = PdStep::Tx;
-                match pdo::compile(&self.od, Dir::Tx) {
-                    Ok(m) => self.tx_map = m,
+                // In place (a Mapping is 0.5 KB); below SAFEOP the mapping is unused, so a
+                // refused one may leave a part of it there.
+                match pdo::compile_into(&self.od, Dir::Tx, &mut self.tx_map) {
+                    Ok(()) => {}
                     Err(_) => {
                         self.pd_step = PdStep::Idle;
                         return self.set_error(pdi, AlStatusCode::INVALID_INPUT_MAPPING);
@@ -769,10 +771,10 @@ impl<P: Pdi, const N: usize, const M: usize> Slave<P, N, M> {
                 }
             }
             (PreOp, SafeOp) if self.stepwise => {
-                // The mappings are unused below SAFEOP: they hold the steps' results.
-                match pdo::compile(&self.od, Dir::Rx) {
-                    Ok(m) => {
-                        self.rx_map = m;
+                // The mappings are unused below SAFEOP: they hold the steps' results,
+                // compiled in place.
+                match pdo::compile_into(&self.od, Dir::Rx, &mut self.rx_map) {
+                    Ok(()) => {
                         self.pd_step = PdStep::Rx;
                         return Ok(());
                     }
