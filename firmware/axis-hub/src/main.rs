@@ -207,6 +207,7 @@ fn start(
 fn main() -> ! {
     // cortex-m-rt hands `main` this as a `&'static mut` (one per program).
     static mut SLOT: HubSlot<Esc> = HubSlot::new();
+    static mut RING_BUFS: board::RingBufs = [[0; oxicat_devices::axis_hub::ws2812::RING_SLOTS]; 2];
     let Some(dp) = pac::Peripherals::take() else {
         loop {
             cortex_m::asm::wfi();
@@ -236,7 +237,7 @@ fn main() -> ! {
     // LED rings: PC6 = TIM8_CH1 (AF3), PC7 = TIM3_CH2 (AF2).
     let _ring1 = gpioc.pc6.into_alternate::<3>();
     let _ring2 = gpioc.pc7.into_alternate::<2>();
-    let rings = DmaRings::new();
+    let rings = DmaRings::new(RING_BUFS);
 
     // LAN9252 on SPI1: SCK PA5, MISO PA6, MOSI PA7, mode 0, 90 MHz / 4 = 22.5 MHz; CS PB6.
     let spi = esc_spi1(
