@@ -525,7 +525,10 @@ fn sdo_information<P: Port>() {
             .filter_map(|n| od.object_info(n))
             .find(|o| o.index == index)
             .expect("mapping object");
-        assert!(info.entries.iter().all(|e| e.access.0 == want), "{index:#x}");
+        assert!(
+            info.entries.iter().all(|e| e.access.0 == want),
+            "{index:#x}"
+        );
     }
     // Unknown object.
     b.mbx_write(MailboxType::Coe, &[0x00, 0x80, 0x03, 0, 0, 0, 0x55, 0x55]);

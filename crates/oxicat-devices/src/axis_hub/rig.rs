@@ -141,12 +141,8 @@ impl LedStrip for SimLeds {
 
 /// The hub firmware on the `Pdi` of path `P` (the software ESC by default) with the
 /// simulated hardware.
-pub type HubFw<P = Direct> = HubFirmware<
-    <P as PdiPath>::Pdi,
-    SimOneWire,
-    SimLeds,
-    Box<super::HubSlot<<P as PdiPath>::Pdi>>,
->;
+pub type HubFw<P = Direct> =
+    HubFirmware<<P as PdiPath>::Pdi, SimOneWire, SimLeds, Box<super::HubSlot<<P as PdiPath>::Pdi>>>;
 
 /// Plant set-up of a hub.
 #[derive(Debug, Clone, PartialEq)]
