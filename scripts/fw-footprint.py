@@ -306,4 +306,7 @@ def main():
 
 
 if __name__ == "__main__":
-    main()
+    try:
+        main()
+    except BrokenPipeError:  # output cut short (`| head`)
+        sys.stderr.close()
