@@ -14,8 +14,13 @@ each vector-table handler adds its own depth plus the exception frame the core s
 (104 B with the FPU context of a Cortex-M4F). Worst case = main path + every distinct
 handler nested once (an upper bound: handlers of one priority level do not nest).
 
-Indirect calls (`blx rN`) and recursion cannot be followed: the script lists them; a figure
-with such a function on its path is a lower bound for that path and marked with `+`.
+An indirect call `blx rN` is followed when rN holds a function's address the same function
+loaded from its literal pool (`ldr rN, [pc, #k]`) or built with `movw`/`movt` (what
+`opt-level = "z"` does: it keeps a callee's address in a register to call it several
+times); the register is tracked through `mov` in a linear pass, and forgotten when another
+instruction writes it. Other indirect calls (function pointers, trait objects) and recursion
+cannot be followed: the script lists them; a figure with such a function on its path is a
+lower bound for that path and marked with `+`.
 """
 
 import re
@@ -58,7 +63,30 @@ def reg_count(text):
     return n
 
 
-def parse(elf):
+REG = re.compile(r"^(r\d+|sb|sl|fp|ip|lr)\b")
+LITERAL = re.compile(r"\[pc, #-?\d+\]\s*@ 0x([0-9a-f]+)")
+IMM = re.compile(r"#(0x[0-9a-f]+|\d+)")
+# Instructions whose first operand is not a register they write.
+NO_WRITE = ("str", "cmp", "cmn", "tst", "teq", "b", "push", "pop", "it", "vst", "stm", "vpush", "vpop", "nop", "dsb", "isb", "dmb", "cps", "wfi", "wfe", "sev", "bkpt", "udf", "svc", "pld")
+
+
+class Words:
+    """32-bit words of the ELF's allocated sections, by address (literal pools)."""
+
+    def __init__(self, elf, secs):
+        self.elf = elf
+        self.secs = [(addr, size, off) for (size, addr, off, typ) in secs.values() if addr and typ != "NOBITS"]
+        self.data = open(elf, "rb").read()
+
+    def __call__(self, a):
+        for addr, size, off in self.secs:
+            if addr <= a and a + 4 <= addr + size:
+                o = off + a - addr
+                return int.from_bytes(self.data[o : o + 4], "little")
+        return None
+
+
+def parse(elf, words=None):
     """Functions: addr -> dict(name, frame, calls, tails, indirect, dynamic)."""
     out = subprocess.run(
         ["llvm-objdump", "-d", "--no-show-raw-insn", "--demangle", elf],
@@ -66,11 +94,18 @@ def parse(elf):
     ).stdout
     funcs = {}
     cur = None
+    regs = {}
+    pending = []  # (function, address) of `blx rN` with rN = address, checked once all are known
     for line in out.splitlines():
         m = FUNC.match(line)
+        if m and m.group(2).startswith("$") and cur is not None:
+            # A mapping symbol ($t code, $d data: literal pools inside a function, frequent
+            # at opt-level "z"): the function goes on.
+            continue
         if m:
             addr = int(m.group(1), 16)
             cur = funcs.setdefault(addr, dict(name=m.group(2), frame=0, calls=set(), tails=set(), indirect=False, dynamic=False))
+            regs = {}
             continue
         if cur is None:
             continue
@@ -78,7 +113,41 @@ def parse(elf):
         if not m:
             continue
         op, args = m.group(2), m.group(3)
-        if op in ("push", "push.w", "stmdb") and ("sp!" in args or op.startswith("push")):
+        base = op.split(".")[0]
+        dst = REG.match(args)
+        if base == "blx" and dst and not "0x" in args:
+            v = regs.get(dst.group(1))
+            if v is not None:
+                pending.append((cur, v & ~1))
+            else:
+                cur["indirect"] = True
+            continue
+        if dst and not base.startswith(NO_WRITE):
+            r = dst.group(1)
+            lit = LITERAL.search(args)
+            imm = IMM.search(args)
+            if base == "ldr" and lit and words is not None:
+                regs[r] = words(int(lit.group(1), 16))
+            elif base == "mov" and REG.match(args.split(",", 1)[1].strip() if "," in args else ""):
+                regs[r] = regs.get(REG.match(args.split(",", 1)[1].strip()).group(1))
+            elif base == "movw" and imm:
+                regs[r] = int(imm.group(1), 0)
+            elif base == "movt" and imm and regs.get(r) is not None:
+                regs[r] = (regs[r] & 0xFFFF) | (int(imm.group(1), 0) << 16)
+            else:
+                regs.pop(r, None)
+                if base == "ldrd":
+                    second = REG.match(args.split(",", 1)[1].strip())
+                    if second:
+                        regs.pop(second.group(1), None)
+                elif base.startswith("ldm"):
+                    regs.clear()
+        elif base == "pop":
+            regs.clear()
+        if base in ("str", "strd") and re.search(r"\[sp, #-(\d+)\]!", args):
+            # A push by pre-indexed store (one register, as the outliner and -Oz save one).
+            cur["frame"] += int(re.search(r"\[sp, #-(\d+)\]!", args).group(1))
+        elif op in ("push", "push.w", "stmdb") and ("sp!" in args or op.startswith("push")):
             cur["frame"] += 4 * reg_count(args)
         elif op in ("vpush", "vpush.64"):
             cur["frame"] += 8 * reg_count(args)
@@ -94,8 +163,15 @@ def parse(elf):
             cur["indirect"] = True
         elif op in ("b", "b.w") and "0x" in args:
             t = TARGET.search(args)
-            if t and t.group(3) is None and t.group(2) != cur["name"]:
+            # A branch to another function's entry; not to a mapping symbol ($t after a
+            # literal pool: the same function).
+            if t and t.group(3) is None and t.group(2) != cur["name"] and not t.group(2).startswith("$"):
                 cur["tails"].add(int(t.group(1), 16))
+    for f, a in pending:
+        if a in funcs:
+            f["calls"].add(a)
+        else:
+            f["indirect"] = True
     return funcs
 
 
@@ -111,7 +187,7 @@ def vectors(elf, secs):
 
 def analyse(elf):
     secs = sections(elf)
-    funcs = parse(elf)
+    funcs = parse(elf, Words(elf, secs))
     unknown = set()
 
     @lru_cache(maxsize=None)
@@ -230,4 +306,7 @@ def main():
 
 
 if __name__ == "__main__":
-    main()
+    try:
+        main()
+    except BrokenPipeError:  # output cut short (`| head`)
+        sys.stderr.close()

@@ -226,18 +226,19 @@ impl<P: Pdi, const N: usize, const M: usize> Slave<P, N, M> {
         let o = self.od.find(index).ok_or(Abort::ObjectDoesNotExist)?;
         let st = self.state;
         let check = |e: &EntryDef| -> Result<(), Abort> {
+            let access = o.access(e);
             if write {
-                if !e.access.writable() {
+                if !access.writable() {
                     return Err(Abort::ReadOnly);
                 }
-                if !e.access.write_in(st) {
+                if !access.write_in(st) {
                     return Err(Abort::CannotTransferDeviceState);
                 }
             } else {
-                if !e.access.readable() {
+                if !access.readable() {
                     return Err(Abort::WriteOnly);
                 }
-                if !e.access.read_in(st) {
+                if !access.read_in(st) {
                     return Err(Abort::CannotTransferDeviceState);
                 }
             }
@@ -800,7 +801,7 @@ impl<P: Pdi, const N: usize, const M: usize> Slave<P, N, M> {
                 let (vi, mut at) = self.value_info(&o, e, value_info, &mut d[..cap]);
                 let name = e.name.as_bytes();
                 let nl = name.len().min(cap - at);
-                let mut acc = e.access.0;
+                let mut acc = o.access(e).0;
                 if e.pdo.rx() {
                     acc |= 0x40;
                 }

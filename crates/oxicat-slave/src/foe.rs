@@ -786,7 +786,12 @@ struct TextBuf<'a> {
 impl TextBuf<'_> {
     /// Appends `s` (nothing once the buffer is full).
     fn str(&mut self, s: &str) {
-        let b = s.as_bytes();
+        self.bytes(s.as_bytes());
+    }
+
+    /// Appends the ASCII bytes `b` (nothing once the buffer is full): the digits go in as
+    /// bytes, so the image needs no UTF-8 validation (`core::str::from_utf8`, 368 B).
+    fn bytes(&mut self, b: &[u8]) {
         let end = self.len + b.len();
         if let Some(d) = self.buf.get_mut(self.len..end) {
             d.copy_from_slice(b);
@@ -803,7 +808,7 @@ impl TextBuf<'_> {
             *x = b"0123456789ABCDEF"[n as usize];
         }
         d[8] = b'\n';
-        self.str(core::str::from_utf8(&d).unwrap_or(""));
+        self.bytes(&d);
     }
 
     /// Appends `v` in decimal.
@@ -818,7 +823,7 @@ impl TextBuf<'_> {
                 break;
             }
         }
-        self.str(core::str::from_utf8(&d[i..]).unwrap_or(""));
+        self.bytes(&d[i..]);
     }
 }
 

@@ -200,12 +200,18 @@ pub struct EntryDef {
     pub default: DefaultValue,
     /// Unit (ETG.1004 unit code; 0 = none).
     pub unit: u32,
-    /// Allowed range for integer entries (`min > max`: no check).
-    pub range: (i64, i64),
+    /// Allowed range for integer entries (`min > max`: no check). 32-bit bounds (every
+    /// range the devices declare fits): 8 bytes less per entry in flash than 64-bit ones.
+    pub range: (i32, i32),
     /// How the integer maps to a physical value (process data: what a master's
     /// recordings show); `None`: a plain number.
     pub scale: Option<&'static Scale>,
 }
+
+// An entry's size in a microcontroller's flash (every object description of the image is
+// one): 48 bytes on a 32-bit target (was 56 with 64-bit range bounds).
+const _: () =
+    assert!(cfg!(not(target_pointer_width = "32")) || core::mem::size_of::<EntryDef>() <= 48);
 
 /// How a process-data integer maps to a physical value: `value = raw × num / den`, in
 /// `unit`. Declared once on the entry ([`EntryDef::with_scale`]); the master decodes with it
@@ -336,7 +342,7 @@ impl EntryDef {
     }
 
     /// With an allowed value range (integer entries).
-    pub const fn range(mut self, min: i64, max: i64) -> Self {
+    pub const fn range(mut self, min: i32, max: i32) -> Self {
         self.range = (min, max);
         self
     }
@@ -834,6 +840,10 @@ pub(crate) struct Obj {
     pub area: Area,
     pub base: usize,
     pub kind: Kind,
+    /// Read-only in every state whatever its entries say: the mapping and assignment
+    /// objects of a fixed mapping or assignment share one table with the configurable
+    /// ones (one copy in flash instead of a read-only and a read-write one).
+    pub read_only: bool,
 }
 
 impl Obj {
@@ -852,6 +862,15 @@ impl Obj {
     /// Highest defined subindex.
     pub fn max_sub(&self) -> u8 {
         self.entries.last().map_or(0, |e| e.sub)
+    }
+
+    /// Access rights of entry `e` of this object.
+    pub fn access(&self, e: &EntryDef) -> Access {
+        if self.read_only {
+            Access::RO
+        } else {
+            e.access
+        }
     }
 }
 
@@ -1378,17 +1397,13 @@ impl<const N: usize> Od<N> {
                 } else {
                     d.tx_assign.len()
                 };
-                let full: &'static [EntryDef] = if d.assign_configurable {
-                    &ASSIGN_RW
-                } else {
-                    &ASSIGN_RO
-                };
-                // A fixed assignment shows only its entries; a configurable one
-                // ASSIGN_SHOWN slots, or as many as its default assignment fills.
+                // A fixed assignment shows only its entries, read-only; a configurable
+                // one ASSIGN_SHOWN slots, or as many as its default assignment fills.
+                r.read_only = !d.assign_configurable;
                 r.entries = if d.assign_configurable {
-                    &full[..len.clamp(ASSIGN_SHOWN, MAX_ASSIGN) + 1]
+                    &ASSIGN_RW[..len.clamp(ASSIGN_SHOWN, MAX_ASSIGN) + 1]
                 } else {
-                    &full[..len + 1]
+                    &ASSIGN_RW[..len + 1]
                 };
             }
             return Some(r);
@@ -1416,6 +1431,7 @@ impl<const N: usize> Od<N> {
             area: Area::App,
             base,
             kind: Kind::Plain,
+            read_only: false,
         }
     }
 
@@ -1428,15 +1444,14 @@ impl<const N: usize> Od<N> {
             area: Area::Comm,
             base,
             kind,
+            read_only: false,
         }
     }
 
     fn map_obj(&self, p: &'static PdoDef, slot: usize, kind: Kind) -> Obj {
-        let entries: &'static [EntryDef] = if p.configurable {
-            &MAP_RW[..map_shown(p) + 1]
-        } else {
-            &MAP_RO[..map_shown(p) + 1]
-        };
+        // One table for fixed and configurable mappings: a fixed one is read-only
+        // through `Obj::read_only`.
+        let entries: &'static [EntryDef] = &MAP_RW[..map_shown(p) + 1];
         // The mapping objects lie in definition order (RxPDOs, then TxPDOs), each its size.
         let d = self.def();
         let before: usize = d
@@ -1454,6 +1469,7 @@ impl<const N: usize> Od<N> {
             area: Area::Comm,
             base: COMM_LOW_SIZE + COMM_HIGH_SIZE + before,
             kind,
+            read_only: !p.configurable,
         }
     }
 
@@ -1533,11 +1549,19 @@ impl<const N: usize> Od<N> {
     /// SDO information service lists it; for listings such as the ESI dictionary.
     pub fn object_info(&self, n: usize) -> Option<ObjectInfo> {
         let o = self.object_at(n)?;
+        // The listing shows each entry with its access: a read-only mapping or assignment
+        // object with the read-only table (a table only host tools link; the stack's SDO
+        // server and SDO information take the access from `Obj::access`).
+        let entries = match o.kind {
+            Kind::RxMap | Kind::TxMap if o.read_only => &MAP_RO[..o.entries.len()],
+            Kind::RxAssign | Kind::TxAssign if o.read_only => &ASSIGN_RO[..o.entries.len()],
+            _ => o.entries,
+        };
         Some(ObjectInfo {
             index: o.index,
             name: o.name,
             code: o.code,
-            entries: o.entries,
+            entries,
         })
     }
 

@@ -397,10 +397,3 @@ pub(crate) fn compile_into<const N: usize>(
     m.clear();
     walk(od, dir, |it| m.push(it)).map(|_| ())
 }
-
-/// Compiles the mapping of `dir` from the dictionary.
-pub(crate) fn compile<const N: usize>(od: &Od<N>, dir: Dir) -> Result<Mapping, SdoAbortCode> {
-    let mut m = Mapping::default();
-    compile_into(od, dir, &mut m)?;
-    Ok(m)
-}

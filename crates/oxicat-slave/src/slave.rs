@@ -203,6 +203,8 @@ impl<const M: usize> MbxState<M> {
 /// ```
 pub struct SlaveSlot<P: Pdi, const N: usize, const M: usize = 256> {
     slave: Slave<P, N, M>,
+    /// The last [`SlaveSlot::start`] succeeded and no [`SlaveSlot::stop`] followed.
+    running: bool,
 }
 
 impl<P: Pdi, const N: usize, const M: usize> SlaveSlot<P, N, M> {
@@ -210,18 +212,37 @@ impl<P: Pdi, const N: usize, const M: usize> SlaveSlot<P, N, M> {
     pub const fn new() -> Self {
         Self {
             slave: Slave::blank(),
+            running: false,
         }
     }
 
     /// Builds the stack in the slot, as [`Slave::new`] does, and returns it. A second call
-    /// starts it afresh.
+    /// starts it afresh; a failed one leaves the slot stopped.
     pub fn start(
         &mut self,
         def: &'static DeviceDef,
         pdi: &mut P,
     ) -> Result<&mut Slave<P, N, M>, InitError<P::Error>> {
+        self.running = false;
         self.slave.init(def, pdi)?;
+        self.running = true;
         Ok(&mut self.slave)
+    }
+
+    /// Marks the stack gone (a firmware that takes it down when its ESC stops answering and
+    /// starts it again later): [`SlaveSlot::slave`] is `None` until the next start.
+    pub fn stop(&mut self) {
+        self.running = false;
+    }
+
+    /// The stack, when the last [`SlaveSlot::start`] succeeded and no stop followed.
+    pub fn slave(&self) -> Option<&Slave<P, N, M>> {
+        self.running.then_some(&self.slave)
+    }
+
+    /// The stack, mutably, when it runs (as [`SlaveSlot::slave`]).
+    pub fn slave_mut(&mut self) -> Option<&mut Slave<P, N, M>> {
+        self.running.then_some(&mut self.slave)
     }
 }
 
@@ -429,8 +450,10 @@ impl<P: Pdi, const N: usize, const M: usize> Slave<P, N, M> {
             PdStep::Idle => {}
             PdStep::Rx => {
                 self.pd_step = PdStep::Tx;
-                match pdo::compile(&self.od, Dir::Tx) {
-                    Ok(m) => self.tx_map = m,
+                // In place (a Mapping is 0.5 KB); below SAFEOP the mapping is unused, so a
+                // refused one may leave a part of it there.
+                match pdo::compile_into(&self.od, Dir::Tx, &mut self.tx_map) {
+                    Ok(()) => {}
                     Err(_) => {
                         self.pd_step = PdStep::Idle;
                         return self.set_error(pdi, AlStatusCode::INVALID_INPUT_MAPPING);
@@ -748,10 +771,10 @@ impl<P: Pdi, const N: usize, const M: usize> Slave<P, N, M> {
                 }
             }
             (PreOp, SafeOp) if self.stepwise => {
-                // The mappings are unused below SAFEOP: they hold the steps' results.
-                match pdo::compile(&self.od, Dir::Rx) {
-                    Ok(m) => {
-                        self.rx_map = m;
+                // The mappings are unused below SAFEOP: they hold the steps' results,
+                // compiled in place.
+                match pdo::compile_into(&self.od, Dir::Rx, &mut self.rx_map) {
+                    Ok(()) => {
                         self.pd_step = PdStep::Rx;
                         return Ok(());
                     }

@@ -504,6 +504,32 @@ fn sdo_information<P: Port>() {
         }
         o => panic!("{o:?}"),
     }
+    // Access of a mapping object's entry: a fixed mapping (0x1A00) read-only, a
+    // configurable one (0x1600) writable in PREOP, though both share one entry table.
+    for (index, want) in [(0x1A00u16, 0x07u16), (0x1600, 0x0F)] {
+        let i = index.to_le_bytes();
+        b.mbx_write(
+            MailboxType::Coe,
+            &[0x00, 0x80, 0x05, 0, 0, 0, i[0], i[1], 0x01, 0],
+        );
+        let (_, p) = b.mbx_read().unwrap();
+        match SdoInfoRef::parse(&p).unwrap().service().unwrap() {
+            SdoInfoService::GetEntryDescriptionResponse { object_access, .. } => {
+                assert_eq!(object_access, want, "{index:#x}:1")
+            }
+            o => panic!("{o:?}"),
+        }
+        // The listing host tools build the ESI from says the same.
+        let od = b.s.od();
+        let info = (0..od.object_count())
+            .filter_map(|n| od.object_info(n))
+            .find(|o| o.index == index)
+            .expect("mapping object");
+        assert!(
+            info.entries.iter().all(|e| e.access.0 == want),
+            "{index:#x}"
+        );
+    }
     // Unknown object.
     b.mbx_write(MailboxType::Coe, &[0x00, 0x80, 0x03, 0, 0, 0, 0x55, 0x55]);
     let (_, p) = b.mbx_read().unwrap();

@@ -87,6 +87,24 @@ fn a_slot_refuses_a_definition_the_stack_refuses() {
     ));
 }
 
+#[test]
+fn a_slot_hands_out_its_stack_only_while_it_runs() {
+    let mut e = esc();
+    let mut slot = Box::new(SlaveSlot::<Esc, IMG, MBX>::new());
+    assert!(slot.slave().is_none() && slot.slave_mut().is_none());
+    slot.start(&DEF, &mut e).expect("start");
+    assert_eq!(slot.slave().map(|s| s.state()), Some(AlState::Init));
+    assert!(slot.slave_mut().is_some());
+    slot.stop();
+    assert!(slot.slave().is_none() && slot.slave_mut().is_none());
+    slot.start(&DEF, &mut e).expect("start again");
+    assert!(slot.slave().is_some());
+    // A failed start leaves the slot stopped, not holding the previous stack.
+    let mut small = Box::new(SlaveSlot::<Esc, IMG, 16>::new());
+    assert!(small.start(&DEF, &mut e).is_err());
+    assert!(small.slave().is_none());
+}
+
 /// `DeviceDef::for_image` (what a board image links) drops the ESI/SII texts and keeps
 /// everything the stack serves: the same dictionary, byte for byte.
 #[test]

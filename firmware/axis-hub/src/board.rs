@@ -341,11 +341,16 @@ pub enum LedError {
 /// Two WS2812 rings: each bit is one PWM period of the ring's timer (HUB_TIMING at a
 /// 90 MHz counter clock), its duty written into CCRx by DMA on every update event.
 pub struct DmaRings {
-    buf: [[u16; RING_SLOTS]; 2],
+    /// The DMA source of each ring: a static the firmware lends for good (fixed address,
+    /// and not moved through the start-up frames as part of the value: 1.3 KB).
+    buf: &'static mut RingBufs,
     /// The LED task's guard timer (the report's `timeoutLed`): when it was armed (TIM2, the
     /// tasks' 1 MHz time base) and for how long, in µs.
     guard: Option<(u32, u32)>,
 }
+
+/// The duty buffers of both rings.
+pub type RingBufs = [[u16; RING_SLOTS]; 2];
 
 /// TIM2's counter: the tasks' free-running 1 MHz time base (`main::start_time_base`).
 const TIM2_CNT: usize = 0x4000_0024;
@@ -353,7 +358,7 @@ const TIM2_CNT: usize = 0x4000_0024;
 impl DmaRings {
     /// Sets up TIM8 (APB2, 180 MHz timer clock, prescaler 2) and TIM3 (APB1, 90 MHz) as
     /// PWM mode 1 with preload, duty 0 (line low), update DMA request on; the DMA clocks.
-    pub fn new() -> Self {
+    pub fn new(buf: &'static mut RingBufs) -> Self {
         set_bits(RCC_AHB1ENR, (1 << 21) | (1 << 22));
         set_bits(RCC_APB1ENR, 1 << 1);
         set_bits(RCC_APB2ENR, 1 << 1);
@@ -380,10 +385,7 @@ impl DmaRings {
         wr(TIM3 + 0x10, 0);
         wr(TIM3 + 0x0C, 1 << 8);
         wr(TIM3, (1 << 7) | 1); // CR1: ARPE, CEN
-        Self {
-            buf: [[0; RING_SLOTS]; 2],
-            guard: None,
-        }
+        Self { buf, guard: None }
     }
 }
 

@@ -21,13 +21,14 @@ mod board;
 
 use core::cell::UnsafeCell;
 use core::mem::MaybeUninit;
+use core::ptr::addr_of_mut;
 use core::sync::atomic::{AtomicU32, Ordering};
 
 use board::{BoardLeds, DmaRings, UartOneWire};
 use cortex_m::peripheral::NVIC;
 use cortex_m_rt::entry;
 use oxicat_board_support::{clear_exti, clocks_180mhz, esc_exti, esc_spi1, halt_on_fault, EscSpi};
-use oxicat_devices::axis_hub::{HubFirmware, TASKS};
+use oxicat_devices::axis_hub::{HubFirmware, HubSlot, TASKS};
 use oxicat_devices::demo::Leds;
 use oxicat_pdi::{Lan9252, Lan9252Config};
 use stm32f4xx_hal::{
@@ -46,7 +47,7 @@ const PRIO_FW: u8 = 0x20;
 const PRIO_ONEWIRE: u8 = 0x10;
 
 type Esc = Lan9252<EscSpi>;
-type Fw = HubFirmware<Esc, UartOneWire, DmaRings>;
+type Fw = HubFirmware<Esc, UartOneWire, DmaRings, &'static mut HubSlot<Esc>>;
 
 /// The firmware and its ESC driver.
 struct Hub {
@@ -114,9 +115,10 @@ impl FwCell {
     }
 
     /// # Safety
-    /// Called once, before the interrupts at [`PRIO_FW`] are unmasked.
-    unsafe fn init(&self, hub: Hub) {
-        unsafe { (*self.0.get()).write(hub) };
+    /// Called once, before the interrupts at [`PRIO_FW`] are unmasked; `f` writes every
+    /// field of the `Hub` it is given.
+    unsafe fn init_with(&self, f: impl FnOnce(*mut Hub)) {
+        unsafe { f((*self.0.get()).as_mut_ptr()) };
     }
 }
 
@@ -172,30 +174,40 @@ fn EXTI15_10() {
     h.fw.on_pdi_irq(&mut h.esc);
 }
 
-/// Builds the firmware into [`HUB`] in a frame of its own: the stack (several KB) and its
-/// moves live here, gone when it returns (in `main`, which never returns, they would hold
-/// that stack for good).
+/// Builds the firmware into [`HUB`] in a frame of its own. The slave stack is built in
+/// `slot` where it lies (`HubSlot`, main's `static mut`, in `.bss`): built as a value and
+/// kept in an `Option` inside the firmware, it and its moves took an 18 KB frame here and
+/// 6.6 KB in every restart from the supervisor's timer handler.
 #[inline(never)]
-fn start(mut esc: Esc, bus: UartOneWire, rings: DmaRings, leds: BoardLeds) {
-    let fw = Fw::new(&mut esc, bus, rings);
-    let clock = TaskClock {
-        last_cnt: TaskClock::now_us(),
-        us: 0,
-        last_ms: 0,
-    };
+fn start(
+    mut esc: Esc,
+    slot: &'static mut HubSlot<Esc>,
+    bus: UartOneWire,
+    rings: DmaRings,
+    leds: BoardLeds,
+) {
     // SAFETY: once, before any PRIO_FW interrupt is unmasked (main enables them afterwards).
+    // Each field is written where it lies (the firmware, 2.2 KB, is not built in this
+    // frame and then copied).
     unsafe {
-        HUB.init(Hub {
-            fw,
-            esc,
-            leds,
-            clock,
+        HUB.init_with(|hub| {
+            addr_of_mut!((*hub).fw).write(Fw::new(&mut esc, slot, bus, rings));
+            addr_of_mut!((*hub).esc).write(esc);
+            addr_of_mut!((*hub).leds).write(leds);
+            addr_of_mut!((*hub).clock).write(TaskClock {
+                last_cnt: TaskClock::now_us(),
+                us: 0,
+                last_ms: 0,
+            });
         })
     };
 }
 
 #[entry]
 fn main() -> ! {
+    // cortex-m-rt hands `main` this as a `&'static mut` (one per program).
+    static mut SLOT: HubSlot<Esc> = HubSlot::new();
+    static mut RING_BUFS: board::RingBufs = [[0; oxicat_devices::axis_hub::ws2812::RING_SLOTS]; 2];
     let Some(dp) = pac::Peripherals::take() else {
         loop {
             cortex_m::asm::wfi();
@@ -225,7 +237,7 @@ fn main() -> ! {
     // LED rings: PC6 = TIM8_CH1 (AF3), PC7 = TIM3_CH2 (AF2).
     let _ring1 = gpioc.pc6.into_alternate::<3>();
     let _ring2 = gpioc.pc7.into_alternate::<2>();
-    let rings = DmaRings::new();
+    let rings = DmaRings::new(RING_BUFS);
 
     // LAN9252 on SPI1: SCK PA5, MISO PA6, MOSI PA7, mode 0, 90 MHz / 4 = 22.5 MHz; CS PB6.
     let spi = esc_spi1(
@@ -241,7 +253,7 @@ fn main() -> ! {
     delay.delay_ms(50);
     let _ = esc.init();
     start_time_base(clocks.timclk1().raw());
-    start(esc, bus, rings, leds);
+    start(esc, SLOT, bus, rings, leds);
 
     // ESC lines on EXTI: IRQ PA10 falling (open drain, pull-up), SYNC0 PB3 rising.
     let mut syscfg = dp.SYSCFG.constrain();

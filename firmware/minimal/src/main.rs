@@ -150,6 +150,18 @@ impl Buttons for BoardButtons {
     }
 }
 
+/// Interrupt vectors of the STM32F446 (IRQ 0..=96, RM0390; the board images' PAC table
+/// has 90), each the default handler: this image enables none. cortex-m-rt without a
+/// device crate would put 240 (960 B).
+#[link_section = ".vector_table.interrupts"]
+#[no_mangle]
+static __INTERRUPTS: [unsafe extern "C" fn(); 97] = [DefaultHandler; 97];
+
+extern "C" {
+    /// cortex-m-rt's default exception handler (`link.x`).
+    fn DefaultHandler();
+}
+
 #[entry]
 fn main() -> ! {
     // The stack's state, built in place in `.bss` (cortex-m-rt hands `main` a `&'static

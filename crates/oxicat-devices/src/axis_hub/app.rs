@@ -2,7 +2,9 @@
 //! firmware main ([`HubFirmware`]) that owns the slave stack and runs the EtherCAT
 //! supervisor.
 
-use oxicat_slave::{AlState, AlStatusCode, Application, Od, Pdi, Slave, Var};
+use core::borrow::BorrowMut;
+
+use oxicat_slave::{AlState, AlStatusCode, Application, Od, Pdi, Slave, SlaveSlot, Var};
 
 use super::codes::{self, SystemState};
 use super::device::{self, IMAGE, MBX, SENSORS, TEMP_INVALID};
@@ -357,13 +359,20 @@ impl Default for Supervisor {
 /// The hub's stack type on PDI `P`.
 pub type HubSlave<P> = Slave<P, IMAGE, MBX>;
 
+/// Where the hub's stack is built, in place ([`SlaveSlot`]): a board image's
+/// `static mut` (all zero, in `.bss`), a `Box` on a host. Built as a value and kept in an
+/// `Option`, the stack and its moves took an 18 KB frame in the board image.
+pub type HubSlot<P> = SlaveSlot<P, IMAGE, MBX>;
+
 /// The firmware main: owns the slave stack (while the ESC answers) and the application,
 /// lends the PDI to the stack per event, and supervises the EtherCAT side. Nothing in it
 /// waits on an ESC register: every PDI access returns (the driver has a timeout) and a
 /// failed one is counted; [`PDI_FAULT_LIMIT`] in a row take the stack down and it is
-/// re-created every [`RESTART_MS`] until the ESC answers again — no MCU reset.
-pub struct HubFirmware<P: Pdi, B: OneWireBus, L: LedStrip> {
-    slave: Option<HubSlave<P>>,
+/// re-created every [`RESTART_MS`] until the ESC answers again — no MCU reset. The stack
+/// is built in `S`, a [`HubSlot`] the firmware lends for good (`&'static mut` on a board,
+/// `Box` on a host).
+pub struct HubFirmware<P: Pdi, B: OneWireBus, L: LedStrip, S> {
+    slot: S,
     /// The application.
     pub app: HubApp<B, L>,
     /// The supervisor.
@@ -372,11 +381,13 @@ pub struct HubFirmware<P: Pdi, B: OneWireBus, L: LedStrip> {
     pub last_pdi_error: Option<P::Error>,
 }
 
-impl<P: Pdi, B: OneWireBus, L: LedStrip> HubFirmware<P, B, L> {
-    /// Boots: starts the stack if the ESC answers (otherwise the supervisor retries).
-    pub fn new(pdi: &mut P, bus: B, strip: L) -> Self {
+impl<P: Pdi, B: OneWireBus, L: LedStrip, S: BorrowMut<HubSlot<P>>> HubFirmware<P, B, L, S> {
+    /// Boots: starts the stack in `slot` if the ESC answers (otherwise the supervisor
+    /// retries).
+    pub fn new(pdi: &mut P, mut slot: S, bus: B, strip: L) -> Self {
+        slot.borrow_mut().stop();
         let mut fw = Self {
-            slave: None,
+            slot,
             app: HubApp::new(bus, strip),
             sup: Supervisor::default(),
             last_pdi_error: None,
@@ -412,9 +423,8 @@ impl<P: Pdi, B: OneWireBus, L: LedStrip> HubFirmware<P, B, L> {
                 return;
             }
         }
-        match HubSlave::<P>::new(&device::DEF, pdi) {
-            Ok(s) => {
-                self.slave = Some(s);
+        match self.slot.borrow_mut().start(&device::DEF, pdi) {
+            Ok(_) => {
                 self.sup.phase = EcatPhase::Connected;
                 self.sup.consecutive = 0;
                 self.sup.fault_ms = 0;
@@ -445,7 +455,7 @@ impl<P: Pdi, B: OneWireBus, L: LedStrip> HubFirmware<P, B, L> {
     }
 
     fn enter_fault(&mut self) {
-        self.slave = None;
+        self.slot.borrow_mut().stop();
         self.sup.phase = EcatPhase::Fault;
         self.sup.fault_ms = 0;
         self.app.op = false;
@@ -454,7 +464,7 @@ impl<P: Pdi, B: OneWireBus, L: LedStrip> HubFirmware<P, B, L> {
 
     /// The stack, while it runs.
     pub fn slave(&self) -> Option<&HubSlave<P>> {
-        self.slave.as_ref()
+        self.slot.borrow().slave()
     }
 
     fn note(&mut self, r: Result<(), P::Error>) {
@@ -475,7 +485,7 @@ impl<P: Pdi, B: OneWireBus, L: LedStrip> HubFirmware<P, B, L> {
 
     /// Main-loop pass (mailbox, ESM; the free-run cycle).
     pub fn poll(&mut self, pdi: &mut P) {
-        if let Some(s) = self.slave.as_mut() {
+        if let Some(s) = self.slot.borrow_mut().slave_mut() {
             let r = s.poll(pdi, &mut self.app);
             self.note(r);
         }
@@ -484,7 +494,7 @@ impl<P: Pdi, B: OneWireBus, L: LedStrip> HubFirmware<P, B, L> {
     /// PDI interrupt: the SM-synchronous cycle, then the ESM/mailbox work the interrupt
     /// announces (an AL control write is handled at once, not at the next poll).
     pub fn on_pdi_irq(&mut self, pdi: &mut P) {
-        if let Some(s) = self.slave.as_mut() {
+        if let Some(s) = self.slot.borrow_mut().slave_mut() {
             let r = s.on_pdi_irq(pdi, &mut self.app);
             self.note(r);
         }
@@ -493,7 +503,7 @@ impl<P: Pdi, B: OneWireBus, L: LedStrip> HubFirmware<P, B, L> {
 
     /// SYNC0 (DC-synchronous cycle).
     pub fn on_sync0(&mut self, pdi: &mut P) {
-        if let Some(s) = self.slave.as_mut() {
+        if let Some(s) = self.slot.borrow_mut().slave_mut() {
             let r = s.on_sync0(pdi, &mut self.app);
             self.note(r);
         }
@@ -501,7 +511,7 @@ impl<P: Pdi, B: OneWireBus, L: LedStrip> HubFirmware<P, B, L> {
 
     /// SYNC1.
     pub fn on_sync1(&mut self, pdi: &mut P) {
-        if let Some(s) = self.slave.as_mut() {
+        if let Some(s) = self.slot.borrow_mut().slave_mut() {
             let r = s.on_sync1(pdi, &mut self.app);
             self.note(r);
         }
@@ -515,7 +525,7 @@ impl<P: Pdi, B: OneWireBus, L: LedStrip> HubFirmware<P, B, L> {
             return;
         }
         self.app.resume_temp();
-        if let Some(s) = self.slave.as_mut() {
+        if let Some(s) = self.slot.borrow_mut().slave_mut() {
             self.app.publish(s.od_mut());
         }
     }
@@ -528,20 +538,20 @@ impl<P: Pdi, B: OneWireBus, L: LedStrip> HubFirmware<P, B, L> {
             // The tasks run with or without the stack (their data waits for it).
             _ => self.app.run_task(id),
         }
-        if let Some(s) = self.slave.as_mut() {
+        if let Some(s) = self.slot.borrow_mut().slave_mut() {
             self.app.publish(s.od_mut());
         }
     }
 
     fn supervise(&mut self, pdi: &mut P) {
-        let Some(slave) = self.slave.as_ref() else {
+        let Some(slave) = self.slot.borrow().slave() else {
             self.sup.fault_ms += SUPERVISOR_PERIOD_MS;
             if self.sup.fault_ms >= RESTART_MS {
                 self.sup.fault_ms = 0;
                 let before = self.sup.restarts;
                 self.sup.restarts += 1;
                 self.start_stack(pdi);
-                if self.slave.is_some() {
+                if self.slave().is_some() {
                     self.app.sys.post(codes::EV_SOES_RESPAWNED);
                 } else {
                     self.sup.restarts = before.saturating_add(1);
@@ -578,7 +588,7 @@ impl<P: Pdi, B: OneWireBus, L: LedStrip> HubFirmware<P, B, L> {
             self.app.sys.post(codes::ERR_ECAT_DSM_FAULT);
             self.enter_fault();
             self.start_stack(pdi);
-            if self.slave.is_some() {
+            if self.slave().is_some() {
                 self.app.sys.post(codes::EV_SOES_RESPAWNED);
             }
             self.sup.was_op = false;

@@ -126,8 +126,12 @@ pub static OBJECTS: &[ObjectDef] = &[
     },
 ];
 
-/// Object image size of [`OBJECTS`].
-pub const IMAGE: usize = oxicat_slave::image_size(OBJECTS);
+/// Object image size of [`OBJECTS`] (`HubSlot`'s `N`). A literal, checked against
+/// `image_size(OBJECTS)` below: as a type-level constant computed from the static, rustc
+/// found a query cycle through the rig's async closures once `HubSlot` appeared in a trait
+/// bound.
+pub const IMAGE: usize = 54;
+const _: () = assert!(IMAGE == oxicat_slave::image_size(OBJECTS));
 
 const fn t16(sub: u8) -> PdoEntry {
     PdoEntry::of(OBJECTS, 0x6000, sub)

@@ -78,8 +78,8 @@ pub mod rig;
 pub mod ws2812;
 
 pub use app::{
-    EcatPhase, HubApp, HubFirmware, HubSlave, Priority, Supervisor, Task, PDI_FAULT_LIMIT, TASKS,
-    TIMER_APP, TIMER_LED, TIMER_SUPERVISOR, TIMER_TEMP,
+    EcatPhase, HubApp, HubFirmware, HubSlave, HubSlot, Priority, Supervisor, Task, PDI_FAULT_LIMIT,
+    TASKS, TIMER_APP, TIMER_LED, TIMER_SUPERVISOR, TIMER_TEMP,
 };
 pub use codes::{StatusWord, SystemState};
 pub use onewire::{OneWireBus, Resolution, Rom, Slot, TempFrame, TempTask, Txn, TxnStatus};

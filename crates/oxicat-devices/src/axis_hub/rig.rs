@@ -15,6 +15,7 @@
 //! to OP (free run, SM-synchronous or DC) at a 10 ms cycle and walks it through an
 //! overheat, an unplugged sensor, a CRC fault and a cable opened for 2 s.
 
+use std::borrow::BorrowMut;
 use std::sync::{Arc, Mutex, MutexGuard};
 use std::time::Duration;
 
@@ -140,7 +141,8 @@ impl LedStrip for SimLeds {
 
 /// The hub firmware on the `Pdi` of path `P` (the software ESC by default) with the
 /// simulated hardware.
-pub type HubFw<P = Direct> = HubFirmware<<P as PdiPath>::Pdi, SimOneWire, SimLeds>;
+pub type HubFw<P = Direct> =
+    HubFirmware<<P as PdiPath>::Pdi, SimOneWire, SimLeds, Box<super::HubSlot<<P as PdiPath>::Pdi>>>;
 
 /// Plant set-up of a hub.
 #[derive(Debug, Clone, PartialEq)]
@@ -180,7 +182,9 @@ pub fn hub_esc(sii: Vec<u8>) -> Esc {
     Esc::new(EscConfig::lan9252(), sii)
 }
 
-impl<P: oxicat_slave::Pdi, B: OneWireBus, L: LedStrip> Image<P> for HubFirmware<P, B, L> {
+impl<P: oxicat_slave::Pdi, B: OneWireBus, L: LedStrip, S: BorrowMut<super::HubSlot<P>>> Image<P>
+    for HubFirmware<P, B, L, S>
+{
     fn on_pdi_irq(&mut self, pdi: &mut P) -> Result<(), P::Error> {
         HubFirmware::on_pdi_irq(self, pdi);
         Ok(())
@@ -214,8 +218,10 @@ pub struct HubPlant {
     plant_ns: u64,
 }
 
-impl<P: oxicat_slave::Pdi> Bench<HubFirmware<P, SimOneWire, SimLeds>> for HubPlant {
-    fn before_timers(&mut self, fw: &mut HubFirmware<P, SimOneWire, SimLeds>, t: u64) {
+impl<P: oxicat_slave::Pdi, S: BorrowMut<super::HubSlot<P>>>
+    Bench<HubFirmware<P, SimOneWire, SimLeds, S>> for HubPlant
+{
+    fn before_timers(&mut self, fw: &mut HubFirmware<P, SimOneWire, SimLeds, S>, t: u64) {
         if t > self.plant_ns {
             self.thermal.advance((t - self.plant_ns) as f64 * 1e-9);
             self.plant_ns = t;
@@ -357,6 +363,7 @@ fn attach_hub_with<P: PdiPath>(
         Ok(path.with_pdi(esc, |pdi| {
             HubFirmware::new(
                 pdi,
+                Box::new(super::HubSlot::new()),
                 SimOneWire(OneWireNet::new(devices)),
                 SimLeds::default(),
             )

@@ -243,7 +243,7 @@ fn a_missing_esc_never_hangs_and_the_stack_comes_back_without_a_reset() {
         accesses: 0,
     };
     // Boot with the ESC absent: the stack does not start, nothing waits.
-    let mut fw = HubFirmware::new(&mut spi, NoBus, Dma::default());
+    let mut fw = HubFirmware::new(&mut spi, Box::new(HubSlot::new()), NoBus, Dma::default());
     assert!(fw.slave().is_none());
     assert_eq!(fw.sup.phase, EcatPhase::Fault);
     assert!(fw.app.sys.is_active(ERR_ECAT_TIMEOUT));
@@ -305,7 +305,7 @@ fn an_esc_without_its_eeprom_configuration_is_err_ecat_init_and_retried() {
         dead: false,
         accesses: 0,
     };
-    let mut fw = HubFirmware::new(&mut spi, NoBus, Dma::default());
+    let mut fw = HubFirmware::new(&mut spi, Box::new(HubSlot::new()), NoBus, Dma::default());
     assert!(fw.slave().is_none());
     assert!(fw.app.sys.is_active(ERR_ECAT_INIT));
     assert!(

@@ -94,7 +94,7 @@ pub fn writable_entry(def: &DeviceDef) -> Option<String> {
                 continue;
             };
             let (lo, hi) = if e.range.0 <= e.range.1 {
-                (e.range.0, e.range.1)
+                (i64::from(e.range.0), i64::from(e.range.1))
             } else {
                 (0, (1i64 << (8 * size)) - 1)
             };
