@@ -474,10 +474,12 @@ pub fn advance_on_body(leg: &mut Leg, body: &mut Body, index: usize, from_ns: u6
     // The momentum after a substep is the next one's before: the hip's motion, set in
     // between, does not enter it.
     let mut p0 = leg.vertical_momentum();
+    // What `leg.advance(h)` would split `h` into, the same at every substep.
+    let inner = leg.split(h);
     for k in 0..n {
         let j = body.step_of(from_ns + span_ns * k / n);
         leg.set_hip_motion(body.hip_motion(index, j));
-        leg.advance(h);
+        leg.run_split(inner);
         let p1 = leg.vertical_momentum();
         let impulse = h * leg.contact_force()[1] - (p1 - p0);
         body.add_impulse(index, j, impulse);
