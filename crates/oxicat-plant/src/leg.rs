@@ -770,11 +770,26 @@ mod tests {
     fn split_cuts_into_equal_bounded_substeps() {
         let leg = Leg::new(LegParams::default());
         let s = leg.params().substep;
-        for dt in [s, s * (1.0 + 1e-12), s * 1.5, 2.0 * s, 99_990e-9, 100_000e-9, 1e-3, 1e-7] {
+        for dt in [
+            s,
+            s * (1.0 + 1e-12),
+            s * 1.5,
+            2.0 * s,
+            99_990e-9,
+            100_000e-9,
+            1e-3,
+            1e-7,
+        ] {
             let (n, h) = leg.split(dt);
             assert!(n >= 1 && h <= s * (1.0 + 1e-9), "{dt}: {n} × {h}");
-            assert!((n as f64 * h - dt).abs() <= 1e-15 * dt.max(1.0), "{dt}: {n} × {h}");
-            assert!(n == 1 || h > s / 2.0 * 0.999, "{dt}: no more substeps than needed");
+            assert!(
+                (n as f64 * h - dt).abs() <= 1e-15 * dt.max(1.0),
+                "{dt}: {n} × {h}"
+            );
+            assert!(
+                n == 1 || h > s / 2.0 * 0.999,
+                "{dt}: no more substeps than needed"
+            );
             assert_eq!(leg.split(h), (1, h), "{dt}");
         }
         for dt in [0.0, -1e-4, f64::NAN, f64::INFINITY] {
