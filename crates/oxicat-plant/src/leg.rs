@@ -385,12 +385,24 @@ impl Leg {
 
     /// Advance by `dt` [s] in equal substeps no longer than `params.substep`.
     pub fn advance(&mut self, dt: f64) {
+        let s = self.split(dt);
+        self.run_split(s);
+    }
+
+    /// How [`advance`](Self::advance) splits `dt` [s]: `(n, h)`, `n` substeps of `h`
+    /// (none for a `dt` that is not positive and finite). A caller advancing by the same
+    /// `dt` many times splits it once.
+    pub fn split(&self, dt: f64) -> (u64, f64) {
         if dt <= 0.0 || !dt.is_finite() {
-            return;
+            return (0, dt);
         }
         let n = ceil(dt / self.p.substep - 1e-9).max(1.0);
-        let h = dt / n;
-        for _ in 0..n as u64 {
+        (n as u64, dt / n)
+    }
+
+    /// Runs a split from [`split`](Self::split): `advance(dt)` is `run_split(split(dt))`.
+    pub fn run_split(&mut self, (n, h): (u64, f64)) {
+        for _ in 0..n {
             self.substep(h);
         }
     }
@@ -748,6 +760,43 @@ impl Leg {
 
 #[cfg(test)]
 mod tests {
+    use super::{Leg, LegParams};
+
+    /// `split` cuts a span into equal substeps no longer than the bound (a hair over it is
+    /// one substep), covering it; nothing for a span that is not positive and finite; and
+    /// a split's own substep splits into itself (what the body coupling relies on when it
+    /// splits once per tick).
+    #[test]
+    fn split_cuts_into_equal_bounded_substeps() {
+        let leg = Leg::new(LegParams::default());
+        let s = leg.params().substep;
+        for dt in [
+            s,
+            s * (1.0 + 1e-12),
+            s * 1.5,
+            2.0 * s,
+            99_990e-9,
+            100_000e-9,
+            1e-3,
+            1e-7,
+        ] {
+            let (n, h) = leg.split(dt);
+            assert!(n >= 1 && h <= s * (1.0 + 1e-9), "{dt}: {n} × {h}");
+            assert!(
+                (n as f64 * h - dt).abs() <= 1e-15 * dt.max(1.0),
+                "{dt}: {n} × {h}"
+            );
+            assert!(
+                n == 1 || h > s / 2.0 * 0.999,
+                "{dt}: no more substeps than needed"
+            );
+            assert_eq!(leg.split(h), (1, h), "{dt}");
+        }
+        for dt in [0.0, -1e-4, f64::NAN, f64::INFINITY] {
+            assert_eq!(leg.split(dt).0, 0, "{dt}");
+        }
+    }
+
     /// The substep count's `ceil` is `f64::ceil` (zero's sign aside) on ordinary values,
     /// halves, integers, both sides of 2^52 and the specials.
     #[test]

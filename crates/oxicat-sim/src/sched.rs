@@ -1,12 +1,25 @@
 //! The segment's event queue: every slot's next ESC event and next node wakeup, ordered
 //! by (time, ESC event before wakeup, slot), kept up to date entry by entry.
 //!
-//! An indexed binary heap: each slot has at most one entry per kind, found through its
-//! position, so a changed time is a sift up or down (O(log n)) and an unchanged one costs a
-//! comparison, and the heap never holds more than two entries per slot however often the
-//! times move. [`EventQueue::lower`] lets the segment leave an entry earlier than its time
-//! (checked when it comes first), so a time that only moves later (a firmware's PDI
-//! watchdog deadline, at every main-loop pass) costs no sift.
+//! Two layouts with the same answers. Up to [`SMALL_SLOTS`] slots (the trot's four legs, a
+//! demo bench) each entry's time sits in a fixed array with a bit per live entry, and the
+//! earliest is found by a pass over the live bits, remembered until an entry it depends on
+//! moves later or goes: setting an entry costs a store and a comparison, a look at the
+//! first entry between changes nothing. More slots use an indexed binary heap: each slot
+//! has at most one entry per kind, found through its position, so a changed time is a sift
+//! up or down (O(log n)) and an unchanged one costs a comparison, and the heap never holds
+//! more than two entries per slot however often the times move. [`EventQueue::lower`] lets
+//! the segment leave an entry earlier than its time (checked when it comes first), so a
+//! time that only moves later (a firmware's PDI watchdog deadline, at every main-loop pass)
+//! costs no sift.
+
+/// Most slots the array layout takes (two entries each, one bit per entry in a `u32`);
+/// more switch the queue to the heap.
+pub(crate) const SMALL_SLOTS: usize = 8;
+
+/// Entries of the array layout, at `kind * SMALL_SLOTS + slot`: in the order of the
+/// tie-break, so that of equal times the lowest index comes first.
+const SMALL_IDS: usize = 2 * SMALL_SLOTS;
 
 /// No position: the entry is not in the heap.
 const NONE: u32 = u32::MAX;
@@ -20,9 +33,118 @@ pub(crate) enum Kind {
     Wake = 1,
 }
 
+/// The array layout: the time of the entry at index `x` (`kind * SMALL_SLOTS + slot`) in
+/// `t[x]` while bit `x` of `live` is set, `u64::MAX` while it is not (so that a pass for
+/// the least time needs no look at `live`).
+#[derive(Debug, Clone, Copy)]
+struct Small {
+    t: [u64; SMALL_IDS],
+    live: u32,
+    /// Slots in use (`0 .. n`).
+    n: usize,
+    /// The index of the earliest live entry ([`NONE`]: none), unless `stale`.
+    best: u32,
+    /// `best` must be found again (the entry it named moved later or went).
+    stale: bool,
+}
+
+impl Default for Small {
+    fn default() -> Self {
+        Self {
+            t: [u64::MAX; SMALL_IDS],
+            live: 0,
+            n: 0,
+            best: NONE,
+            stale: false,
+        }
+    }
+}
+
+impl Small {
+    /// The index of the entry of `kind` of `slot`.
+    #[inline]
+    fn index(slot: usize, kind: Kind) -> u32 {
+        (kind as usize * SMALL_SLOTS + slot) as u32
+    }
+
+    #[inline]
+    fn set(&mut self, x: u32, t: Option<u64>) {
+        let bit = 1u32 << x;
+        let was = self.live & bit != 0;
+        let Some(t) = t else {
+            self.live &= !bit;
+            self.t[x as usize] = u64::MAX;
+            if was && self.best == x {
+                self.stale = true;
+            }
+            return;
+        };
+        let old = self.t[x as usize];
+        if was && old == t {
+            return;
+        }
+        self.t[x as usize] = t;
+        self.live |= bit;
+        if self.stale {
+            return;
+        }
+        if self.best == x {
+            // Earlier: still the first; later: another may be now.
+            if t > old {
+                self.stale = true;
+            }
+        } else if self.best == NONE || {
+            let bt = self.t[self.best as usize];
+            t < bt || (t == bt && x < self.best)
+        } {
+            self.best = x;
+        }
+    }
+
+    #[inline]
+    fn time(&self, x: u32) -> Option<u64> {
+        (self.live & (1 << x) != 0).then(|| self.t[x as usize])
+    }
+
+    /// The index of the earliest live entry, or [`NONE`].
+    #[inline]
+    fn first(&mut self) -> u32 {
+        if self.stale {
+            self.stale = false;
+            // In index order, so a strictly earlier time is the only reason to move on.
+            let (esc, wake) = self.t.split_at(SMALL_SLOTS);
+            let mut best = NONE;
+            let mut bt = u64::MAX;
+            for (x, &t) in esc[..self.n].iter().enumerate() {
+                if t < bt {
+                    bt = t;
+                    best = x as u32;
+                }
+            }
+            for (x, &t) in wake[..self.n].iter().enumerate() {
+                if t < bt {
+                    bt = t;
+                    best = (SMALL_SLOTS + x) as u32;
+                }
+            }
+            if best == NONE && self.live != 0 {
+                // Every live entry at `u64::MAX`: the lowest index.
+                best = self.live.trailing_zeros();
+            }
+            self.best = best;
+        }
+        self.best
+    }
+}
+
 /// Pending events of a segment's slots, earliest first.
 #[derive(Debug, Default)]
 pub(crate) struct EventQueue {
+    /// The array layout, while the queue has room for at most [`SMALL_SLOTS`] slots (then
+    /// `heap` and `pos` stay empty).
+    small: Option<Small>,
+    /// Room for this many slots.
+    slots: usize,
     /// `(time, kind << 31 | slot)` in heap order: the key itself, so a sift compares in
     /// place (no look-up per comparison); its order is time, then kind, then slot.
     heap: Vec<(u64, u32)>,
@@ -45,12 +167,40 @@ fn id_of(rank: u32) -> usize {
 impl EventQueue {
     /// Room for slots `0 .. slots` (no entries yet).
     pub(crate) fn grow_to(&mut self, slots: usize) {
-        self.pos.resize(2 * slots, NONE);
+        if self.slots == 0 && slots <= SMALL_SLOTS && self.small.is_none() {
+            self.small = Some(Small::default());
+        }
+        self.slots = self.slots.max(slots);
+        if self.slots <= SMALL_SLOTS {
+            if let Some(small) = self.small.as_mut() {
+                small.n = self.slots;
+            }
+            return;
+        }
+        self.pos.resize(2 * self.slots, NONE);
+        if let Some(small) = self.small.take() {
+            // Outgrown: the live entries move to the heap.
+            let mut m = small.live;
+            while m != 0 {
+                let x = m.trailing_zeros() as usize;
+                m &= m - 1;
+                let kind = if x < SMALL_SLOTS {
+                    Kind::Esc
+                } else {
+                    Kind::Wake
+                };
+                self.set(x % SMALL_SLOTS, kind, Some(small.t[x]));
+            }
+        }
     }
 
     /// Sets (`Some`) or removes (`None`) the entry of `kind` of `slot`.
     #[inline]
     pub(crate) fn set(&mut self, slot: usize, kind: Kind, t: Option<u64>) {
+        if let Some(small) = self.small.as_mut() {
+            debug_assert!(slot < self.slots, "slot {slot} of {}", self.slots);
+            return small.set(Small::index(slot, kind), t);
+        }
         let id = slot * 2 + kind as usize;
         let p = self.pos[id];
         match t {
@@ -91,13 +241,29 @@ impl EventQueue {
     /// Time of the entry of `kind` of `slot`, if it is queued.
     #[inline]
     pub(crate) fn time(&self, slot: usize, kind: Kind) -> Option<u64> {
+        if let Some(small) = &self.small {
+            debug_assert!(slot < self.slots, "slot {slot} of {}", self.slots);
+            return small.time(Small::index(slot, kind));
+        }
         let p = self.pos[slot * 2 + kind as usize];
         (p != NONE).then(|| self.heap[p as usize].0)
     }
 
     /// The earliest entry: `(time, slot, kind)`.
     #[inline]
-    pub(crate) fn peek(&self) -> Option<(u64, usize, Kind)> {
+    pub(crate) fn peek(&mut self) -> Option<(u64, usize, Kind)> {
+        if let Some(small) = self.small.as_mut() {
+            let x = small.first() as usize;
+            if x == NONE as usize {
+                return None;
+            }
+            let kind = if x < SMALL_SLOTS {
+                Kind::Esc
+            } else {
+                Kind::Wake
+            };
+            return Some((small.t[x], x % SMALL_SLOTS, kind));
+        }
         let &(t, r) = self.heap.first()?;
         let kind = if r >> 31 == 0 { Kind::Esc } else { Kind::Wake };
         Some((t, (r & 0x7FFF_FFFF) as usize, kind))
@@ -166,49 +332,82 @@ impl EventQueue {
 mod tests {
     use super::*;
 
-    /// Random sets and removals against a sorted reference: the queue's first entry is
-    /// always the reference's least (time, kind, slot).
+    /// Random sets and removals against a sorted reference, in both layouts (4, 8 slots:
+    /// arrays; 9, 37: heap) and across the switch (3 slots grown to 20 half way, with
+    /// entries live): the queue's first entry is always the reference's least
+    /// (time, kind, slot).
     #[test]
     fn always_yields_the_least_key() {
-        let slots = 37;
-        let mut q = EventQueue::default();
-        q.grow_to(slots);
-        let mut reference = vec![[None::<u64>; 2]; slots];
-        let mut x: u64 = 0x2545_F491_4F6C_DD1D;
-        let mut rnd = || {
-            x ^= x << 13;
-            x ^= x >> 7;
-            x ^= x << 17;
-            x
-        };
-        for step in 0..20_000 {
-            let s = (rnd() % slots as u64) as usize;
-            let k = if rnd() % 2 == 0 {
-                Kind::Esc
-            } else {
-                Kind::Wake
+        for (start, end) in [
+            (37, 37),
+            (4, 4),
+            (SMALL_SLOTS, SMALL_SLOTS),
+            (9, 9),
+            (3, 20),
+        ] {
+            let mut q = EventQueue::default();
+            q.grow_to(start);
+            assert_eq!(q.small.is_some(), start <= SMALL_SLOTS);
+            let mut slots = start;
+            let mut reference = vec![[None::<u64>; 2]; end];
+            let mut x: u64 = 0x2545_F491_4F6C_DD1D;
+            let mut rnd = || {
+                x ^= x << 13;
+                x ^= x >> 7;
+                x ^= x << 17;
+                x
             };
-            // Few distinct times, so ties between kinds and slots are common.
-            let t = (rnd() % 5 != 0).then(|| rnd() % 40);
-            q.set(s, k, t);
-            reference[s][k as usize] = t;
-            let least = reference
-                .iter()
-                .enumerate()
-                .flat_map(|(s, e)| {
-                    [(e[0], 0u32), (e[1], 1)]
-                        .into_iter()
-                        .filter_map(move |(t, k)| t.map(|t| (t, k, s as u32)))
-                })
-                .min();
-            let got = q.peek().map(|(t, s, k)| (t, k as u32, s as u32));
-            assert_eq!(got, least, "step {step}");
-            for (s, e) in reference.iter().enumerate() {
-                assert_eq!(q.time(s, Kind::Esc), e[0]);
-                assert_eq!(q.time(s, Kind::Wake), e[1]);
+            for step in 0..20_000 {
+                if step == 10_000 && end > slots {
+                    slots = end;
+                    q.grow_to(slots);
+                    assert!(q.small.is_none(), "{end} slots take the heap");
+                }
+                let s = (rnd() % slots as u64) as usize;
+                let k = if rnd() % 2 == 0 {
+                    Kind::Esc
+                } else {
+                    Kind::Wake
+                };
+                // Few distinct times, so ties between kinds and slots are common.
+                // Now and then the end of time (the array layout's mark of no entry).
+                let t = (rnd() % 5 != 0).then(|| {
+                    if rnd() % 11 == 0 {
+                        u64::MAX
+                    } else {
+                        rnd() % 40
+                    }
+                });
+                if rnd() % 3 == 0 {
+                    q.lower(s, k, t);
+                    if let Some(t) = t {
+                        let r = &mut reference[s][k as usize];
+                        *r = Some(r.map_or(t, |r| r.min(t)));
+                    }
+                } else {
+                    q.set(s, k, t);
+                    reference[s][k as usize] = t;
+                }
+                let least = reference
+                    .iter()
+                    .enumerate()
+                    .flat_map(|(s, e)| {
+                        [(e[0], 0u32), (e[1], 1)]
+                            .into_iter()
+                            .filter_map(move |(t, k)| t.map(|t| (t, k, s as u32)))
+                    })
+                    .min();
+                let got = q.peek().map(|(t, s, k)| (t, k as u32, s as u32));
+                assert_eq!(got, least, "{start}..{end} slots, step {step}");
+                for (s, e) in reference.iter().enumerate().take(slots) {
+                    assert_eq!(q.time(s, Kind::Esc), e[0]);
+                    assert_eq!(q.time(s, Kind::Wake), e[1]);
+                }
+                if q.small.is_none() {
+                    let live = reference.iter().flatten().flatten().count();
+                    assert_eq!(q.heap.len(), live, "one entry per (slot, kind)");
+                }
             }
-            let live = reference.iter().flatten().flatten().count();
-            assert_eq!(q.heap.len(), live, "one entry per (slot, kind)");
         }
     }
 }

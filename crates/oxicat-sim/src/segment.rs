@@ -1193,10 +1193,11 @@ mod tests {
     /// node then asks for an early wakeup), wakeups that bring their ESC's next event close,
     /// and PDI-side pokes through `esc_mut`. It fails when a slot is not re-queued after a
     /// frame passed it, after `esc_mut`, or after its node ran (either kind of entry).
+    /// Both layouts of the queue: 40 slots (heap) and 5 (arrays, see `sched::SMALL_SLOTS`).
     #[test]
     fn event_queue_delivers_what_the_reference_scheduler_delivers() {
-        let run = |reference: bool, seed: u64| {
-            let n = 40;
+        const { assert!(5 <= crate::sched::SMALL_SLOTS && 40 > crate::sched::SMALL_SLOTS) };
+        let run = |reference: bool, seed: u64, n: usize| {
             let (mut v, seen) = fakes(n);
             for (i, f) in v.iter_mut().enumerate() {
                 f.period = [1000, 700, 400, 1000, 250][i % 5];
@@ -1256,11 +1257,14 @@ mod tests {
             let frames: Vec<_> = seen.iter().map(|s| s.lock().unwrap().clone()).collect();
             (events, nodes, frames)
         };
-        for seed in [0x9E37_79B9_7F4A_7C15, 0x2545_F491_4F6C_DD1D, 7] {
-            let (q_ev, q_nodes, q_frames) = run(false, seed);
-            let (r_ev, r_nodes, r_frames) = run(true, seed);
+        for (seed, n) in [0x9E37_79B9_7F4A_7C15, 0x2545_F491_4F6C_DD1D, 7]
+            .into_iter()
+            .flat_map(|seed| [(seed, 40), (seed, 5)])
+        {
+            let (q_ev, q_nodes, q_frames) = run(false, seed, n);
+            let (r_ev, r_nodes, r_frames) = run(true, seed, n);
             assert!(
-                q_ev.len() > 200 && q_nodes.len() > 1000,
+                q_ev.len() > 5 * n && q_nodes.len() > 25 * n,
                 "{} {}",
                 q_ev.len(),
                 q_nodes.len()

@@ -471,13 +471,19 @@ pub fn advance_on_body(leg: &mut Leg, body: &mut Body, index: usize, from_ns: u6
     let dt = span_ns as f64 * 1e-9;
     let n = (dt / leg.params().substep - 1e-9).ceil().max(1.0) as u64;
     let h = dt / n as f64;
+    // The momentum after a substep is the next one's before: the hip's motion, set in
+    // between, does not enter it.
+    let mut p0 = leg.vertical_momentum();
+    // What `leg.advance(h)` would split `h` into, the same at every substep.
+    let inner = leg.split(h);
     for k in 0..n {
         let j = body.step_of(from_ns + span_ns * k / n);
         leg.set_hip_motion(body.hip_motion(index, j));
-        let p0 = leg.vertical_momentum();
-        leg.advance(h);
-        let impulse = h * leg.contact_force()[1] - (leg.vertical_momentum() - p0);
+        leg.run_split(inner);
+        let p1 = leg.vertical_momentum();
+        let impulse = h * leg.contact_force()[1] - (p1 - p0);
         body.add_impulse(index, j, impulse);
+        p0 = p1;
     }
     body.reached(index, to_ns);
 }
