@@ -34,6 +34,9 @@ impl UdpPort {
         let addrs: Vec<SocketAddr> = addr.to_socket_addrs().map_err(bind_err)?.collect();
         let socket = UdpSocket::bind(&addrs[..]).map_err(bind_err)?;
         let local = socket.local_addr().map_err(bind_err)?;
+        // `wait: None` below is non-blocking: make it so (a fresh socket blocks forever, and
+        // a first `recv` without a wait would never return).
+        socket.set_nonblocking(true).map_err(bind_err)?;
         Ok(Self {
             socket,
             local,
@@ -128,6 +131,24 @@ mod tests {
         p.resize(14, 0);
         assert!(is_ecat_payload(&p));
         assert!(!is_ecat_payload(&[1]));
+    }
+
+    /// A first `recv` without a wait (`serve`'s spin mode) returns at once when nothing
+    /// came in; it used to block until a frame arrived (the socket was left blocking while
+    /// the port took it for non-blocking), so a spinning server with no master never saw
+    /// its stop flag.
+    #[test]
+    fn a_first_recv_without_a_wait_does_not_block() {
+        let (tx, rx) = std::sync::mpsc::channel();
+        std::thread::spawn(move || {
+            let mut p = UdpPort::bind("127.0.0.1:0").unwrap();
+            let mut buf = Vec::new();
+            let _ = tx.send(p.recv(&mut buf, Duration::ZERO).map(|r| r.is_none()));
+        });
+        let got = rx
+            .recv_timeout(Duration::from_secs(30))
+            .expect("recv returned (it blocked waiting for a frame)");
+        assert!(got.expect("no error"), "nothing was sent");
     }
 
     #[test]
