@@ -833,20 +833,23 @@ fn dispatched_walk_defers_foreign_irqs_and_follows_an_address_change() {
     assert_eq!(e.memory(), reference.memory());
 }
 
+/// An ESC in the benchmark's configuration (SM2/SM3 3-buffer, two FMMUs mapping a 64-byte
+/// LRW's halves), with its fast paths on or off.
+fn bench_shape(fast: bool) -> Esc {
+    let mut e = esc();
+    e.set_fast_paths(fast);
+    sm(&mut e, 2, 0x1000, 32, 0x64, 1);
+    sm(&mut e, 3, 0x1100, 32, 0x20, 1);
+    fmmu(&mut e, 0, 0x0001_0000, 32, 0, 7, 0x1000, 0, 2);
+    fmmu(&mut e, 1, 0x0001_0020, 32, 0, 7, 0x1100, 0, 1);
+    e
+}
+
 /// The benchmark's configuration (SM2/SM3 3-buffer, two FMMUs mapping a 64-byte LRW's
 /// halves) takes the fused path, and it gives the generic path's results.
 #[test]
 fn fused_path_taken_for_the_lrw_benchmark_shape() {
-    let mk = |fused: bool| {
-        let mut e = esc();
-        e.set_fast_paths(fused);
-        sm(&mut e, 2, 0x1000, 32, 0x64, 1);
-        sm(&mut e, 3, 0x1100, 32, 0x20, 1);
-        fmmu(&mut e, 0, 0x0001_0000, 32, 0, 7, 0x1000, 0, 2);
-        fmmu(&mut e, 1, 0x0001_0020, 32, 0, 7, 0x1100, 0, 1);
-        e
-    };
-    let (mut a, mut b) = (mk(true), mk(false));
+    let (mut a, mut b) = (bench_shape(true), bench_shape(false));
     for k in 0..5u8 {
         e_pdi(&mut a, k);
         e_pdi(&mut b, k);
@@ -872,16 +875,7 @@ fn fused_path_taken_for_the_lrw_benchmark_shape() {
 /// stored WKC and window offsets past the end of the short frame).
 #[test]
 fn fused_key_holds_the_frame_length() {
-    let mk = |fused: bool| {
-        let mut e = esc();
-        e.set_fast_paths(fused);
-        sm(&mut e, 2, 0x1000, 32, 0x64, 1);
-        sm(&mut e, 3, 0x1100, 32, 0x20, 1);
-        fmmu(&mut e, 0, 0x0001_0000, 32, 0, 7, 0x1000, 0, 2);
-        fmmu(&mut e, 1, 0x0001_0020, 32, 0, 7, 0x1100, 0, 1);
-        e
-    };
-    let (mut a, mut b) = (mk(true), mk(false));
+    let (mut a, mut b) = (bench_shape(true), bench_shape(false));
     let f = frame(&[(
         DatagramHeader::logical(Command::Lrw, 0, 0x0001_0000, 64),
         &[7; 64],

@@ -18,21 +18,7 @@ fn one(
     data: &[u8],
     len: u16,
 ) -> Option<(Vec<u8>, u16)> {
-    let mut buf = [0u8; 128];
-    let eth = EthernetHeader {
-        dst: [0xFF; 6],
-        src: [0x10; 6],
-        vlan_tci: None,
-        payload_offset: 14,
-    };
-    let mut b = FrameBuilder::new(&mut buf, &eth).unwrap();
-    b.push(DatagramHeader::physical(cmd, 1, adp, ado, len), data)
-        .unwrap();
-    let n = b.finish();
-    let back = seg.exchange(&buf[..n])?;
-    let (_, f) = EcatFrame::parse_ethernet(&back).expect("valid reply");
-    let dg = f.datagrams().next().unwrap().expect("datagram");
-    Some((dg.data.to_vec(), dg.wkc))
+    send(seg, DatagramHeader::physical(cmd, 1, adp, ado, len), data)
 }
 
 /// APRD of `len` bytes at `ado` of slave `k` (position addressing).
