@@ -3,8 +3,8 @@
 //!
 //! Two layouts with the same answers. Up to [`SMALL_SLOTS`] slots (the trot's four legs, a
 //! demo bench) each entry's time sits in a fixed array with a bit per live entry, and the
-//! earliest is found by a pass over the live bits, remembered until an entry it depends on
-//! moves later or goes: setting an entry costs a store and a comparison, a look at the
+//! earliest is found by a pass over the times (a free entry holds `u64::MAX`), remembered
+//! until the entry it names moves later or goes: setting an entry costs a store and a comparison, a look at the
 //! first entry between changes nothing. More slots use an indexed binary heap: each slot
 //! has at most one entry per kind, found through its position, so a changed time is a sift
 //! up or down (O(log n)) and an unchanged one costs a comparison, and the heap never holds
@@ -65,6 +65,18 @@ impl Small {
     #[inline]
     fn index(slot: usize, kind: Kind) -> u32 {
         (kind as usize * SMALL_SLOTS + slot) as u32
+    }
+
+    /// The slot and kind of the entry at index `x` (the inverse of [`Small::index`]).
+    #[inline]
+    fn entry(x: u32) -> (usize, Kind) {
+        let x = x as usize;
+        let kind = if x < SMALL_SLOTS {
+            Kind::Esc
+        } else {
+            Kind::Wake
+        };
+        (x % SMALL_SLOTS, kind)
     }
 
     #[inline]
@@ -182,14 +194,10 @@ impl EventQueue {
             // Outgrown: the live entries move to the heap.
             let mut m = small.live;
             while m != 0 {
-                let x = m.trailing_zeros() as usize;
+                let x = m.trailing_zeros();
                 m &= m - 1;
-                let kind = if x < SMALL_SLOTS {
-                    Kind::Esc
-                } else {
-                    Kind::Wake
-                };
-                self.set(x % SMALL_SLOTS, kind, Some(small.t[x]));
+                let (slot, kind) = Small::entry(x);
+                self.set(slot, kind, Some(small.t[x as usize]));
             }
         }
     }
@@ -253,16 +261,12 @@ impl EventQueue {
     #[inline]
     pub(crate) fn peek(&mut self) -> Option<(u64, usize, Kind)> {
         if let Some(small) = self.small.as_mut() {
-            let x = small.first() as usize;
-            if x == NONE as usize {
+            let x = small.first();
+            if x == NONE {
                 return None;
             }
-            let kind = if x < SMALL_SLOTS {
-                Kind::Esc
-            } else {
-                Kind::Wake
-            };
-            return Some((small.t[x], x % SMALL_SLOTS, kind));
+            let (slot, kind) = Small::entry(x);
+            return Some((small.t[x as usize], slot, kind));
         }
         let &(t, r) = self.heap.first()?;
         let kind = if r >> 31 == 0 { Kind::Esc } else { Kind::Wake };
