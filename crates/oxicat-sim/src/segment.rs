@@ -133,7 +133,14 @@ struct Slot<E> {
     node: Option<Box<dyn Node<E>>>,
     links: [Option<Link>; MAX_PORTS],
     delay_ns: u64,
+    /// The time this slot's ESC was last brought to by [`Segment::advance_slot`]. Time
+    /// reaches every slot lazily: a slot's events up to `max(advanced, Segment::now)` are
+    /// done (see [`Segment::done_to`]), and its ESC is brought to a time only when the
+    /// segment next touches it.
     advanced: u64,
+    /// In [`Segment::stale`]: its ESC has an event at or before the time its events are
+    /// done (a frame or its node scheduled one there).
+    stale: bool,
     irq: bool,
     last_sync0: Option<u64>,
     last_sync1: Option<u64>,
@@ -201,6 +208,9 @@ pub struct Segment<E: SegmentEsc = oxicat_esc::Esc> {
     /// Slots whose ESC was lent out ([`Segment::esc_mut`]): their next times are read again
     /// before the next pick.
     dirty: Vec<SlaveId>,
+    /// Slots whose ESC has an event at or before the time their events are done: time
+    /// reaching the next instant brings them there (see [`Segment::advance_to`]).
+    stale: Vec<SlaveId>,
     capture: Option<Box<dyn CaptureSink>>,
     drop_next: u64,
     corruptions: Vec<Corruption>,
@@ -261,6 +271,7 @@ impl<E: SegmentEsc> Segment<E> {
             master_link_up: true,
             queue: EventQueue::default(),
             dirty: Vec::new(),
+            stale: Vec::new(),
             capture: None,
             drop_next: 0,
             corruptions: Vec::new(),
@@ -306,6 +317,7 @@ impl<E: SegmentEsc> Segment<E> {
             links: [None; MAX_PORTS],
             delay_ns: DEFAULT_ESC_DELAY_NS,
             advanced: self.now,
+            stale: false,
             irq: false,
             last_sync0: None,
             last_sync1: None,
@@ -369,6 +381,8 @@ impl<E: SegmentEsc> Segment<E> {
             delay_ns,
             up: true,
         });
+        self.settle(a);
+        self.settle(b);
         self.slots[a].esc.set_link(pa, true);
         self.slots[b].esc.set_link(pb, true);
         self.requeue(a);
@@ -383,6 +397,8 @@ impl<E: SegmentEsc> Segment<E> {
             .take()
             .ok_or(TopologyError::NotWired(a, pa))?;
         self.slots[l.peer].links[l.peer_port as usize] = None;
+        self.settle(a);
+        self.settle(l.peer);
         self.slots[a].esc.set_link(pa, false);
         self.slots[l.peer].esc.set_link(l.peer_port, false);
         self.requeue(a);
@@ -397,6 +413,7 @@ impl<E: SegmentEsc> Segment<E> {
         self.check(a, pa)?;
         if Self::is_master_port(a, pa) {
             self.master_link_up = plugged;
+            self.settle(0);
             self.slots[0].esc.set_link(0, plugged);
             self.requeue(0);
             return Ok(());
@@ -406,6 +423,7 @@ impl<E: SegmentEsc> Segment<E> {
             if let Some(x) = self.slots[s].links[p as usize].as_mut() {
                 x.up = plugged;
             }
+            self.settle(s);
             self.slots[s].esc.set_link(p, plugged);
             self.requeue(s);
         }
@@ -469,7 +487,10 @@ impl<E: SegmentEsc> Segment<E> {
         self.slots.is_empty()
     }
 
-    /// ESC `s`.
+    /// ESC `s`, as the segment last touched it: registers that only time changes (the
+    /// SII EEPROM's busy bit at the end of a write cycle, the ESC's own idea of the time)
+    /// may be those of an earlier instant than [`now`](Self::now) — every event up to
+    /// `now` has been delivered, and [`esc_mut`](Self::esc_mut) brings the ESC to `now`.
     pub fn esc(&self, s: SlaveId) -> Option<&E> {
         self.slots.get(s).map(|x| &x.esc)
     }
@@ -477,7 +498,9 @@ impl<E: SegmentEsc> Segment<E> {
     /// ESC `s`, mutably (PDI-side pokes between cycles).
     pub fn esc_mut(&mut self, s: SlaveId) -> Option<&mut E> {
         if s < self.slots.len() {
-            // A PDI access may change the ESC's schedule: read it again before the next pick.
+            // Brought to `now` first (what it reads of time is then current); a PDI access
+            // may change the ESC's schedule: read it again before the next pick.
+            self.settle(s);
             self.dirty.push(s);
         }
         self.slots.get_mut(s).map(|x| &mut x.esc)
@@ -577,19 +600,59 @@ impl<E: SegmentEsc> Segment<E> {
 
     /// Advances virtual time to `t` (no-op if `t` is in the past), delivering every ESC's
     /// events in time order.
+    ///
+    /// Slots are brought to `t` lazily: every event up to `t` is delivered here, but an ESC
+    /// with none is brought to the time only when the segment next touches it (a frame
+    /// passes it, its node runs, [`esc_mut`](Self::esc_mut), a cable). At 1,000 ESCs a
+    /// pass over every slot after each frame was a tenth of the serving CPU; nothing it
+    /// did is observable through a frame or a node (an ESC's interrupt line and next times
+    /// change only where the segment touches it, and is re-read there).
+    /// [`set_reference_scheduler`](Self::set_reference_scheduler) keeps that pass.
     pub fn advance_to(&mut self, t: u64) {
         if t < self.now {
-            // Every event up to `now` was delivered and every slot brought to `now` when
-            // time reached it (a frame's trip can take virtual time past a real-time
-            // server's clock; its next advance then comes here, for every slot).
+            // Every event up to `now` was delivered when time reached it (a frame's trip
+            // can take virtual time past a real-time server's clock; its next advance then
+            // comes here).
             return;
         }
         self.run_events_until(t);
-        for i in 0..self.slots.len() {
-            self.advance_slot(i, t);
-            self.requeue(i);
+        if self.reference {
+            for i in 0..self.slots.len() {
+                self.advance_slot(i, t);
+                self.requeue(i);
+            }
+            for i in core::mem::take(&mut self.stale) {
+                self.slots[i].stale = false;
+            }
+        } else if !self.stale.is_empty() {
+            // The slots that pass would have found an event at: in slot order, as it went.
+            let mut stale = core::mem::take(&mut self.stale);
+            stale.sort_unstable();
+            for i in stale {
+                self.slots[i].stale = false;
+                if t > self.done_to(i) {
+                    self.advance_esc(i, t);
+                }
+                self.requeue(i);
+            }
         }
         self.set_now(t);
+    }
+
+    /// Brings slot `i` to [`now`](Self::now), as time reaching it would have (see
+    /// [`advance_to`](Self::advance_to)), before the segment lends or changes its ESC.
+    fn settle(&mut self, i: usize) {
+        if self.slots[i].advanced < self.now {
+            self.advance_esc(i, self.now);
+            self.requeue(i);
+        }
+    }
+
+    /// The time up to which slot `i`'s events are done: the time its ESC was last brought
+    /// to, or `now`, which time reached for every slot.
+    #[inline]
+    fn done_to(&self, i: usize) -> u64 {
+        self.slots[i].advanced.max(self.now)
     }
 
     /// The reference scheduler (off by default): every pass reads every slot's next times
@@ -602,12 +665,25 @@ impl<E: SegmentEsc> Segment<E> {
         self.dirty.extend(0..self.slots.len());
     }
 
-    /// Slot `i`'s next ESC event still to come (one at or before the time the ESC was
-    /// brought to is done) and its node's next wakeup, as they are now.
+    /// Slot `i`'s next ESC event still to come and its node's next wakeup, as they are
+    /// now. An ESC event at or before the time the slot's events are done (a frame or the
+    /// node scheduled it there) is not one to come: the slot is noted in `stale`, and the
+    /// time's next step brings its ESC there.
     #[inline]
-    fn due_now(&self, i: usize) -> (Option<u64>, Option<u64>) {
-        let s = &self.slots[i];
-        (s.esc.next_event().filter(|&ne| ne > s.advanced), s.wakeup())
+    fn due_now(&mut self, i: usize) -> (Option<u64>, Option<u64>) {
+        let done = self.done_to(i);
+        let s = &mut self.slots[i];
+        let esc = match s.esc.next_event() {
+            Some(ne) if ne <= done => {
+                if !s.stale {
+                    s.stale = true;
+                    self.stale.push(i);
+                }
+                None
+            }
+            ne => ne,
+        };
+        (esc, s.wakeup())
     }
 
     /// Brings slot `i`'s entries in the event queue up to date after anything that may
@@ -724,11 +800,23 @@ impl<E: SegmentEsc> Segment<E> {
         if let Some(node) = slot.node.as_mut() {
             node.on_wakeup(&mut slot.esc, w);
         }
-        let t = w.max(self.slots[i].advanced);
+        let t = w.max(self.done_to(i));
         self.check_irq(i, t);
     }
 
+    /// Brings slot `i`'s ESC to `t` (to `now` at least) and delivers what that brought. A
+    /// slot time has lazily passed is first brought to `now`, as the time reaching it
+    /// would have (see [`advance_to`](Self::advance_to)).
     fn advance_slot(&mut self, i: usize, t: u64) {
+        if self.slots[i].advanced < self.now {
+            self.advance_esc(i, self.now);
+        }
+        self.advance_esc(i, t);
+    }
+
+    /// Brings slot `i`'s ESC to `t` and delivers what that brought (nothing when it is
+    /// there already).
+    fn advance_esc(&mut self, i: usize, t: u64) {
         let slot = &mut self.slots[i];
         if t <= slot.advanced {
             return;
@@ -961,10 +1049,14 @@ mod tests {
         period: u64,
         next: Option<u64>,
         irq: bool,
+        /// The time of the last `advance` or frame (as given: an earlier time shows).
+        clock: u64,
     }
 
     impl SegmentEsc for Fake {
         fn forward(&mut self, port: u8, frame: &mut [u8], t: u64, ok: bool) -> Option<u8> {
+            // A frame brings the ESC to its time, as `oxicat_esc::Esc::forward` does.
+            self.clock = t;
             self.seen.lock().unwrap().push((port, t, ok));
             if port == 0 && frame.len() > 2 {
                 frame[2] = frame[2].wrapping_add(1);
@@ -989,6 +1081,7 @@ mod tests {
             self.links[port as usize] = up;
         }
         fn advance(&mut self, t: u64) -> AdvanceEvents {
+            self.clock = t;
             let mut ev = AdvanceEvents::default();
             while let Some(n) = self.next {
                 if n > t {
@@ -1154,17 +1247,17 @@ mod tests {
         log: TickLog,
     }
 
-    /// (node, time, what) as a [`Ticker`] saw it.
-    type TickLog = Arc<Mutex<Vec<(usize, u64, &'static str)>>>;
+    /// (node, time, what, the time its ESC was last advanced to) as a [`Ticker`] saw it.
+    type TickLog = Arc<Mutex<Vec<(usize, u64, &'static str, u64)>>>;
 
     impl Node<Fake> for Ticker {
-        fn on_event(&mut self, _e: &mut Fake, ev: EscEvent, t: u64) {
+        fn on_event(&mut self, e: &mut Fake, ev: EscEvent, t: u64) {
             let what = match ev {
                 EscEvent::Sync0 => "sync0",
                 EscEvent::Irq => "irq",
                 _ => "other",
             };
-            self.log.lock().unwrap().push((self.id, t, what));
+            self.log.lock().unwrap().push((self.id, t, what, e.clock));
             if ev == EscEvent::Irq {
                 // The interrupt handler asks for an early wakeup.
                 self.next = self.next.min(t + 37);
@@ -1174,7 +1267,7 @@ mod tests {
             Some(self.next)
         }
         fn on_wakeup(&mut self, e: &mut Fake, t: u64) {
-            self.log.lock().unwrap().push((self.id, t, "wake"));
+            self.log.lock().unwrap().push((self.id, t, "wake", e.clock));
             self.next = t + self.period;
             // Every third wakeup toggles the IRQ line (an event of its own on the rise).
             e.irq = (t / self.period).is_multiple_of(3);
@@ -1191,8 +1284,12 @@ mod tests {
     /// times across slots, ESC events and wakeups at the same time — with frames walking the
     /// line between advances, frames that reschedule an ESC's events and raise its IRQ (the
     /// node then asks for an early wakeup), wakeups that bring their ESC's next event close,
-    /// and PDI-side pokes through `esc_mut`. It fails when a slot is not re-queued after a
-    /// frame passed it, after `esc_mut`, or after its node ran (either kind of entry).
+    /// PDI-side pokes through `esc_mut`, and nodes attached with a first wakeup already
+    /// past. The reference also brings every slot to the time after each advance and
+    /// frame, where the queue leaves a slot behind until it is touched; the nodes log the
+    /// time their ESC was brought to. It fails when a slot is not re-queued after a frame
+    /// passed it, after `esc_mut`, or after its node ran (either kind of entry), and when a
+    /// slot left behind is not brought to the time before a late wakeup or `esc_mut`.
     /// Both layouts of the queue: 40 slots (heap) and 5 (arrays, see `sched::SMALL_SLOTS`).
     #[test]
     fn event_queue_delivers_what_the_reference_scheduler_delivers() {
@@ -1226,19 +1323,45 @@ mod tests {
                 x ^= x << 17;
                 x
             };
+            let mut late = 0;
             for _ in 0..120 {
-                match rnd() % 4 {
+                match rnd() % 5 {
                     0 => {
-                        let t = seg.now() + rnd() % 700;
-                        seg.advance_to(t);
+                        // Now and then a step to the time it is (a poke's past event waits).
+                        let dt = if rnd() % 4 == 0 { 0 } else { rnd() % 700 };
+                        seg.advance_to(seg.now() + dt);
                     }
                     1 => {
-                        // A PDI-side poke: the ESC's next SYNC edge moves.
+                        // A PDI-side poke: the ESC's next SYNC edge moves, now and then to
+                        // a time already passed (an event that is due at once); the poke logs
+                        // the ESC's time.
                         let (k, dt) = ((rnd() % n as u64) as usize, rnd() % 900);
                         let now = seg.now();
+                        let at = if dt % 3 == 0 {
+                            now.saturating_sub(dt / 3)
+                        } else {
+                            now + 1 + dt
+                        };
                         if let Some(e) = seg.esc_mut(k) {
-                            e.next = Some(now + 1 + dt);
+                            e.next = Some(at);
+                            log.lock().unwrap().push((k, now, "poke", e.clock));
                         }
+                    }
+                    2 => {
+                        // A new node whose first wakeup has passed (it runs at once).
+                        let k = (rnd() % n as u64) as usize;
+                        let next = seg.now().saturating_sub(rnd() % 300);
+                        late += 1;
+                        seg.attach(
+                            k,
+                            Box::new(Ticker {
+                                id: n + late,
+                                next,
+                                period: 450,
+                                log: log.clone(),
+                            }),
+                        )
+                        .unwrap();
                     }
                     _ => {
                         let mut f = eth_frame();
@@ -1274,6 +1397,36 @@ mod tests {
             assert_eq!(q_nodes, r_nodes);
             assert_eq!(q_frames, r_frames);
         }
+    }
+
+    /// Events an ESC has at or before the time its slot is done (a PDI poke set them
+    /// there) are delivered when time next moves, in slot order, whatever order the pokes
+    /// came in — as the reference, which brings every slot to the time, delivers them.
+    #[test]
+    fn events_already_due_come_at_the_next_step_in_slot_order() {
+        let run = |reference: bool| {
+            let (mut v, _) = fakes(4);
+            for f in &mut v {
+                f.period = 1_000_000;
+            }
+            let mut seg = Segment::line(v);
+            seg.set_reference_scheduler(reference);
+            seg.log_events(true);
+            seg.advance_to(5_000);
+            for (k, at) in [(3, 4_000), (1, 4_500), (2, 5_000)] {
+                seg.esc_mut(k).unwrap().next = Some(at);
+            }
+            // Not yet: time has not moved.
+            seg.advance_to(5_000);
+            let before = seg.take_events().len();
+            assert!(seg.exchange(&eth_frame()).is_some());
+            let after: Vec<(usize, u64)> =
+                seg.take_events().iter().map(|e| (e.slave, e.t)).collect();
+            (before, after)
+        };
+        let lazy = run(false);
+        assert_eq!(lazy, run(true));
+        assert_eq!(lazy, (0, vec![(1, 4_500), (2, 5_000), (3, 4_000)]));
     }
 
     #[test]
