@@ -179,7 +179,8 @@ impl Esc {
             let head = *head;
             self.fused_accept(&head, frame.len())?;
         }
-        if self.events_dirty && self.ecat_mask != 0 {
+        // The mask first: with no ECAT event unmasked (a master that polls) one test.
+        if self.ecat_mask != 0 && self.events_dirty {
             self.refresh_events();
         }
         #[cfg(test)]
@@ -213,7 +214,11 @@ impl Esc {
             regs[regs::WD_STATUS_PD as usize] |= 1;
         }
         // The steps' bytes lie inside the datagram data (checked with the key).
-        for st in &self.fused.steps[k.s0 as usize..k.s1 as usize] {
+        // `j < n <= PLAN_MAX`, a power of two: the mask keeps `j`, and the index needs no
+        // test.
+        const _: () = assert!(PLAN_MAX.is_power_of_two());
+        for j in 0..k.n as usize {
+            let st = &self.fused.run[j & (PLAN_MAX - 1)];
             let i = st.sm as usize & 15;
             let sm = &mut self.sms[i];
             let l = st.len as usize;
@@ -274,19 +279,32 @@ impl Esc {
         let nr = if c == 1 { 0 } else { nr };
         let nw = if c == 0 { 0 } else { nw };
         let inc = u16::from(nr > 0) + u16::from(nw > 0) * if c == 1 { 1 } else { 2 };
-        // Frame offsets of the steps' bytes: < 2^11 + the headers.
+        // The command's steps in plan order (reads, then writes), with the frame offsets
+        // of their bytes: < 2^11 + the headers.
         let base = dg_at + DG_HEADER_LEN + woff;
-        for (st, op) in self.fused.steps.iter_mut().zip(&self.plan) {
-            st.at = (base + op.off as usize) as u16;
+        let (s0, s1) = (if c == 1 { self.fused.nr } else { 0 }, self.fused.nr + nw);
+        let mut run = [fastpath::FusedStep::default(); PLAN_MAX];
+        for (r, (st, op)) in run.iter_mut().zip(
+            self.fused
+                .steps
+                .iter()
+                .zip(&self.plan)
+                .take(s1 as usize)
+                .skip(s0 as usize),
+        ) {
+            *r = fastpath::FusedStep {
+                at: (base + op.off as usize) as u16,
+                ..*st
+            };
         }
+        self.fused.run = run;
         let (lo, hi) = fastpath::FusedKey::words(head, frame_len);
         self.fused.key = fastpath::FusedKey {
             lo,
             hi,
             wkc_at: (dg_at + view::field::wkc(len).start) as u16,
             inc,
-            s0: if c == 1 { self.fused.nr } else { 0 },
-            s1: self.fused.nr + nw,
+            n: s1 - s0,
             wd: nw > 0 && self.fused.wd,
         };
         Some(())

@@ -47,11 +47,14 @@ pub(super) struct Fused {
     pub(super) ok: bool,
     /// Port the frame leaves through (first open port after port 0).
     pub(super) exit: u8,
+    /// The steps the key's command runs (`key.n` of them, in plan order: the reads for
+    /// LRD, the writes for LWR, all for LRW), with their frame offsets; set with the key.
+    /// In one cache line with the key.
+    pub(super) run: [FusedStep; PLAN_MAX],
     /// Some write step's SM triggers the process-data watchdog.
     pub(super) wd: bool,
     /// The plan's steps (`steps[k]` is `plan[k]`): `nr` read steps (run by LRD and LRW),
-    /// then `nw` write steps (run by LWR and LRW), each in FMMU order. In one array with
-    /// the key, so that a frame reads one cache line of them.
+    /// then `nw` write steps (run by LWR and LRW), each in FMMU order.
     pub(super) nr: u8,
     pub(super) nw: u8,
     pub(super) steps: [FusedStep; PLAN_MAX],
@@ -79,10 +82,8 @@ pub(super) struct FusedKey {
     pub(super) wkc_at: u16,
     /// Working-counter increment (LRD, LWR, LRW: from the read and write steps).
     pub(super) inc: u16,
-    /// The steps the command runs, `Fused::steps[s0..s1]`: the reads for LRD, the writes
-    /// for LWR, all for LRW.
-    pub(super) s0: u8,
-    pub(super) s1: u8,
+    /// How many steps the command runs ([`Fused::run`]).
+    pub(super) n: u8,
     /// The command runs a watchdog-triggering write step.
     pub(super) wd: bool,
 }
