@@ -1089,3 +1089,39 @@ fn fuzz_input_bad_fcs_frame_under_an_sm_over_registers() {
         }
     }
 }
+
+/// A frame the fused path declines at an ESC where it applies (here an FPRD of the EEPROM
+/// control register, through `forward` and through `forward_dispatched`) sees the EEPROM
+/// write cycle end at its arrival, as on the general path: the ESC's time is the frame's,
+/// not that of the last `advance`. (The fused path left the settle out on its way to the
+/// general path.)
+#[test]
+fn declined_fused_frame_settles_the_eeprom_cycle() {
+    use crate::sii::WRITE_CYCLE_NS;
+    for (fast, dispatched) in [(true, false), (true, true), (false, false), (false, true)] {
+        let mut e = bench_shape(fast);
+        let sa = e.station_address();
+        let t0 = 1_000_000;
+        run_at(&mut e, t0, Command::Fpwr, sa, 0x0504, &[0x20, 0, 0, 0]);
+        run_at(&mut e, t0, Command::Fpwr, sa, 0x0508, &[0x11, 0x22]);
+        run_at(&mut e, t0, Command::Fpwr, sa, 0x0502, &[0x01, 0x02]);
+        let ctl = |e: &mut Esc, t: u64| {
+            let h = phys(Command::Fprd, sa, 0x0502, &[0; 2]);
+            let mut f = frame(&[(h, &[0; 2])]);
+            if dispatched {
+                let mut d = crate::FrameDispatch::new();
+                assert!(d.build(&mut f));
+                e.forward_dispatched(0, &mut f, t, true, &mut d);
+                d.apply_irq(&mut f);
+            } else {
+                e.forward(0, &mut f, t, true);
+            }
+            let d = dg(&f, 0).0;
+            u16::from_le_bytes([d[0], d[1]])
+        };
+        let c = ctl(&mut e, t0 + WRITE_CYCLE_NS - 1);
+        assert_ne!(c & 0x8000, 0, "busy (fast {fast}, dispatched {dispatched})");
+        let c = ctl(&mut e, t0 + WRITE_CYCLE_NS);
+        assert_eq!(c & 0x8000, 0, "idle (fast {fast}, dispatched {dispatched})");
+    }
+}

@@ -41,13 +41,31 @@ impl Esc {
         // path): a frame that only passes (arriving at port 1..3 and leaving without a
         // visit to the processing unit) changes the SII settle, a DC receive time and the
         // RX error counters, none of which the memo's answers read.
+        //
+        // The SII settle is left to the next access that can see it (every other entry
+        // settles first: a frame on any other path, the PDI, `advance`): the fused path
+        // reads and writes nothing of the EEPROM interface.
         self.memo.clear();
         self.now = t;
         self.dc_arrival(0, t);
         if let Some(out) = self.process_fused(frame, t) {
             return out;
         }
-        self.forward_after_arrival(0, frame, true, None)
+        self.fused_declined(frame, t, None)
+    }
+
+    /// A frame the fused path declined after its arrival: the general path from there
+    /// (the SII settle first, as in `forward_generic`).
+    #[cold]
+    #[inline(never)]
+    fn fused_declined(
+        &mut self,
+        frame: &mut [u8],
+        t: u64,
+        d: Option<&mut FrameDispatch>,
+    ) -> Forward {
+        self.sii_settle(t);
+        self.forward_after_arrival(0, frame, true, d)
     }
 
     /// The pass-through shortcut: a good frame entering port 1..3 that leaves again
@@ -111,7 +129,7 @@ impl Esc {
             // logical datagram, and this one has a configured-address datagram).
             self.now = t;
             self.dc_arrival(0, t);
-            return self.forward_after_arrival(0, frame, true, Some(d));
+            return self.fused_declined(frame, t, Some(d));
         }
         self.forward_generic(port, frame, t, frame_ok, Some(d))
     }
