@@ -516,6 +516,21 @@ impl Dc {
         self.slow_ports & (1 << (port & 3)) != 0
     }
 
+    /// Whether a frame's arrival at port 0 needs more than the start-of-frame time
+    /// ([`Dc::frame_arrival_sof`]): before the first contact, or with a receive-time latch
+    /// armed at any port (which port 0's arrival ends).
+    #[inline(always)]
+    pub(crate) fn arrival0_needs_more(&self) -> bool {
+        self.slow_ports != 0
+    }
+
+    /// [`Dc::frame_arrival`] at port 0 when [`Dc::arrival0_needs_more`] is false (nothing
+    /// armed, so nothing to clear): the start-of-frame time.
+    #[inline(always)]
+    pub(crate) fn frame_arrival_sof(&mut self, t: u64) {
+        self.sof0 = t;
+    }
+
     /// Brings [`Dc::slow_ports`] in step with `inited` and `latch_pending` (after every
     /// change of either).
     #[inline(always)]

@@ -47,7 +47,11 @@ impl Esc {
         // reads and writes nothing of the EEPROM interface.
         self.memo.clear();
         self.now = t;
-        self.dc_arrival(0, t);
+        if self.dc.arrival0_needs_more() {
+            self.dc_arrival_slow(0, t);
+        } else {
+            self.dc.frame_arrival_sof(t);
+        }
         if let Some(out) = self.process_fused(frame, t) {
             return out;
         }
@@ -232,11 +236,8 @@ impl Esc {
             regs[regs::WD_STATUS_PD as usize] |= 1;
         }
         // The steps' bytes lie inside the datagram data (checked with the key).
-        // `j < n <= PLAN_MAX`, a power of two: the mask keeps `j`, and the index needs no
-        // test.
-        const _: () = assert!(PLAN_MAX.is_power_of_two());
-        for j in 0..k.n as usize {
-            let st = &self.fused.run[j & (PLAN_MAX - 1)];
+        // (`n <= PLAN_MAX`: the bound costs one compare per frame.)
+        for st in &self.fused.run[..usize::from(k.n).min(PLAN_MAX)] {
             let i = st.sm as usize & 15;
             let sm = &mut self.sms[i];
             let l = st.len as usize;
