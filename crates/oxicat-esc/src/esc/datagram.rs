@@ -74,9 +74,10 @@ impl Esc {
 
     /// The pass-through shortcut: a good frame entering port 1..3 that leaves again
     /// without reaching the processing unit (`route`). What `forward_generic` does for it,
-    /// without its port loop: time, the SII settle, the DC arrival (the receive time
-    /// latch when one is armed for this port); no RX error to count, nothing processed,
-    /// the memo untouched (as there).
+    /// without its port loop: the time; the SII settle and the DC arrival have nothing to
+    /// do (`route` sends the frame the general way while the EEPROM write cycle runs or a
+    /// receive-time latch is armed for the port: [`Esc::gate_routes`]); no RX error to
+    /// count, nothing processed, the memo untouched (as there).
     #[inline(always)]
     fn pass_through(&mut self, port: u8, t: u64, frame_ok: bool) -> Option<Forward> {
         let p = port & 3;
@@ -84,9 +85,11 @@ impl Esc {
         if p == 0 || out == NO_ROUTE || !frame_ok {
             return None;
         }
+        #[cfg(test)]
+        {
+            self.pass_hits += 1;
+        }
         self.now = t;
-        self.sii_settle(t);
-        self.dc_arrival(p, t);
         Some(Forward::Port(out))
     }
 
@@ -153,6 +156,8 @@ impl Esc {
     #[inline(never)]
     fn dc_arrival_slow(&mut self, port: u8, t: u64) {
         self.dc.frame_arrival(&mut self.mem[..REG_END], port, t);
+        // The arrival may have latched a receive time or ended the latch window.
+        self.gate_routes();
     }
 
     /// The foreign-frame shortcut: a good frame entering port 0 whose datagrams are all
@@ -343,6 +348,7 @@ impl Esc {
         self.sii_settle(t);
         // The DC unit's own entry (the reference for the shortcuts' `dc_arrival`).
         self.dc.frame_arrival(&mut self.mem[..REG_END], port, t);
+        self.gate_routes();
         self.forward_after_arrival(port, frame, frame_ok, d)
     }
 

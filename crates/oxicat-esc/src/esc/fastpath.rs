@@ -244,7 +244,7 @@ impl Esc {
     /// frame would loop back through a closed port 0 into the processing unit.
     pub(super) fn rebuild_routes(&mut self) {
         let open = self.open_ports;
-        self.route = core::array::from_fn(|p| {
+        self.route_base = core::array::from_fn(|p| {
             let mut cur = p as u8;
             for _ in 0..8 {
                 let nxt = next_port(cur);
@@ -257,6 +257,25 @@ impl Esc {
                 cur = nxt;
             }
             NO_ROUTE
+        });
+        self.gate_routes();
+    }
+
+    /// [`Esc::route`] from [`Esc::route_base`]: ports 1..3 take the general path while the
+    /// EEPROM write cycle is under way (its end is settled there) or a receive-time latch
+    /// is armed for the port (latched there). Called wherever either changes: the write
+    /// command that starts the cycle, the settle that ends it, DC writes (0x0900 arms the
+    /// latches) and the DC unit's frame arrivals (which latch or end the window).
+    pub(super) fn gate_routes(&mut self) {
+        let busy = self.sii_busy_until.is_some();
+        let base = self.route_base;
+        let dc = &self.dc;
+        self.route = core::array::from_fn(|p| {
+            if p != 0 && (busy || dc.arrival_needs_regs(p as u8)) {
+                NO_ROUTE
+            } else {
+                base[p]
+            }
         });
     }
 

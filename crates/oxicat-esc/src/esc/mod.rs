@@ -197,7 +197,10 @@ pub struct Esc {
     /// on its way (the port order 0 → 3 → 1 → 2 → 0 over the open ports, stopping at port
     /// 0 if it is open); [`NO_ROUTE`] when it would loop back through a closed port 0 into
     /// the processing unit, or when the fast paths are off. For port 0, where the frame
-    /// leaves after processing. Rebuilt with the open ports.
+    /// leaves after processing. Rebuilt with the open ports. For ports 1..3 also
+    /// [`NO_ROUTE`] while the EEPROM write cycle is under way or a receive-time latch is
+    /// armed for the port ([`Esc::gate_routes`]): then the SII settle and the DC arrival
+    /// have work, and the general path does it.
     route: [u8; 4],
     /// Reference switch ([`Esc::set_fast_paths`]): no fused path, no pass-through
     /// shortcut, no [`Esc::query_epoch`].
@@ -216,6 +219,9 @@ pub struct Esc {
     /// Frames the fused path processed (tests).
     #[cfg(test)]
     pub(crate) fused_hits: u64,
+    /// Frames the pass-through shortcut passed (tests).
+    #[cfg(test)]
+    pub(crate) pass_hits: u64,
     cfg: EscConfig,
     /// Per-byte permissions of this chip's register file (the generic table with the
     /// FMMUs, SMs and DC parts the chip lacks removed).
@@ -227,6 +233,8 @@ pub struct Esc {
     /// Words below this acknowledge writes ([`Esc::protect_eeprom_from`]).
     eeprom_writable_words: usize,
     link: [bool; 4],
+    /// [`Esc::route`] from the open ports alone (before [`Esc::gate_routes`]).
+    route_base: [u8; 4],
     active_sms: Vec<u8>,
     fmmus: Vec<Fmmu>,
     fmmu_rw_overlap: bool,
@@ -316,8 +324,11 @@ impl Esc {
             fused: Fused::default(),
             fast_off: false,
             route: [NO_ROUTE; 4],
+            route_base: [NO_ROUTE; 4],
             #[cfg(test)]
             fused_hits: 0,
+            #[cfg(test)]
+            pass_hits: 0,
             cfg,
             mem,
             perm,
@@ -537,6 +548,7 @@ impl Esc {
             if t >= d {
                 self.sii_busy_until = None;
                 sii::end_write_cycle(&mut self.mem);
+                self.gate_routes();
             }
         }
     }

@@ -444,6 +444,7 @@ impl Esc {
                     sii::SiiOutcome::Written => {
                         sii::begin_write_cycle(&mut self.mem);
                         self.sii_busy_until = Some(self.now.saturating_add(sii::WRITE_CYCLE_NS));
+                        self.gate_routes();
                     }
                     _ => {}
                 }
@@ -480,6 +481,8 @@ impl Esc {
                 self.now,
                 ecat,
             );
+            // A write to 0x0900 arms the receive-time latches.
+            self.gate_routes();
             self.events_dirty = true;
         }
         if over(0x0F00, 0x0F04) && side == Side::Ecat {
