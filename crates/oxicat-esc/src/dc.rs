@@ -524,10 +524,11 @@ impl Dc {
         self.slow_ports != 0
     }
 
-    /// [`Dc::frame_arrival`] at port 0 when [`Dc::arrival0_needs_more`] is false (nothing
-    /// armed, so nothing to clear): the start-of-frame time.
-    #[inline(always)]
-    pub(crate) fn frame_arrival_sof(&mut self, t: u64) {
+    /// Sets the start-of-frame time at port 0 (the ESC keeps it for the frames whose
+    /// arrival it handles itself, see [`Dc::arrival0_needs_more`], and hands it over
+    /// before a register write that reads it).
+    #[inline]
+    pub(crate) fn set_sof0(&mut self, t: u64) {
         self.sof0 = t;
     }
 

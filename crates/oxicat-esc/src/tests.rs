@@ -1168,9 +1168,10 @@ fn passing_frame_settles_the_eeprom_cycle() {
     assert_eq!(b.pass_hits, 0);
 }
 
-/// The pass-through shortcut closes while its skipped work is due and opens again as soon
-/// as it is done, whichever way: an EEPROM cycle settled by `advance`, latches armed by a
-/// write to 0x0900 and ended by the next frame at port 0 on the fused path.
+/// The pass-through shortcut (and the fused path, for port 0) closes while its skipped
+/// work is due and opens again as soon as it is done, whichever way: an EEPROM cycle
+/// settled by `advance`; latches armed by a write to 0x0900 and ended by the next frame at
+/// port 0, through `forward` (the general path then) and through `forward_dispatched`.
 #[test]
 fn pass_through_reopens_after_settle_and_latch_window() {
     use crate::sii::WRITE_CYCLE_NS;
@@ -1182,6 +1183,26 @@ fn pass_through_reopens_after_settle_and_latch_window() {
         assert_eq!(e.forward(1, &mut f, t, true), Forward::Port(0));
         e.pass_hits
     };
+    let lrw_at = |e: &mut Esc, t: u64, dispatched: bool| {
+        let h = DatagramHeader::logical(Command::Lrw, 0, 0x0001_0000, 64);
+        // Dispatched: with an FPRD for another station (an index needs one).
+        let other = phys(Command::Fprd, 0x7777, 0x0130, &[0; 2]);
+        let mut f = if dispatched {
+            frame(&[(h, &[1; 64]), (other, &[0; 2])])
+        } else {
+            frame(&[(h, &[1; 64])])
+        };
+        let hits = e.fused_hits;
+        if dispatched {
+            let mut d = crate::FrameDispatch::new();
+            assert!(d.build(&mut f));
+            e.forward_dispatched(0, &mut f, t, true, &mut d);
+        } else {
+            e.forward(0, &mut f, t, true);
+        }
+        assert_eq!(dg(&f, 0).1, 3);
+        e.fused_hits - hits
+    };
     let t0 = 1_000_000;
     assert_eq!(pass(&mut e, t0), 1);
     run_at(&mut e, t0, Command::Fpwr, sa, 0x0504, &[0x20, 0, 0, 0]);
@@ -1192,10 +1213,20 @@ fn pass_through_reopens_after_settle_and_latch_window() {
         2,
         "open after the settle"
     );
-    let t1 = t0 + WRITE_CYCLE_NS + 1_000;
-    run_at(&mut e, t1, Command::Fpwr, sa, 0x0900, &[0; 4]);
-    let hits = e.fused_hits;
-    lrw(&mut e, 0x0001_0000, &[1; 64]);
-    assert_eq!(e.fused_hits, hits + 1, "the LRW took the fused path");
-    assert_eq!(pass(&mut e, t1 + 1_000), 3, "open after the latch window");
+    for (k, dispatched) in [false, true].into_iter().enumerate() {
+        let t1 = t0 + WRITE_CYCLE_NS + 10_000 * (k as u64 + 1);
+        run_at(&mut e, t1, Command::Fpwr, sa, 0x0900, &[0; 4]);
+        assert_eq!(
+            lrw_at(&mut e, t1 + 100, dispatched),
+            0,
+            "armed: general path"
+        );
+        let hits = 3 + k as u64;
+        assert_eq!(
+            pass(&mut e, t1 + 1_000),
+            hits,
+            "open after the window ({k})"
+        );
+        assert_eq!(lrw_at(&mut e, t1 + 2_000, false), 1, "fused again ({k})");
+    }
 }

@@ -26,7 +26,7 @@ impl Esc {
         }
         // The fused path inlined too (a call's register saves cost as much as a third of
         // it); every other frame out of line.
-        if port == 0 && frame_ok && self.fused.ok {
+        if port == 0 && frame_ok && self.fused.on {
             return self.forward_fused(frame, t);
         }
         self.forward_generic(port, frame, t, frame_ok, None)
@@ -45,13 +45,11 @@ impl Esc {
         // The SII settle is left to the next access that can see it (every other entry
         // settles first: a frame on any other path, the PDI, `advance`): the fused path
         // reads and writes nothing of the EEPROM interface.
+        //
+        // The DC arrival: `fused.on` says it is the start-of-frame time alone, kept here.
         self.memo.clear();
         self.now = t;
-        if self.dc.arrival0_needs_more() {
-            self.dc_arrival_slow(0, t);
-        } else {
-            self.dc.frame_arrival_sof(t);
-        }
+        self.sof0 = t;
         if let Some(out) = self.process_fused(frame, t) {
             return out;
         }
@@ -145,7 +143,16 @@ impl Esc {
     /// file only when the unit needs it.
     #[inline(always)]
     fn dc_arrival(&mut self, port: u8, t: u64) {
-        if self.dc.arrival_needs_regs(port) {
+        if port == 0 {
+            self.sof0 = t;
+        }
+        // At port 0 an armed latch anywhere: the window ends, and the routes reopen.
+        let slow = if port == 0 {
+            self.dc.arrival0_needs_more()
+        } else {
+            self.dc.arrival_needs_regs(port)
+        };
+        if slow {
             self.dc_arrival_slow(port, t);
         } else {
             self.dc.frame_arrival_quiet(port, t);
@@ -237,7 +244,7 @@ impl Esc {
         }
         if k.wd {
             self.pd_wd_last = Some(t);
-            self.pd_wd_forced = None;
+            self.pd_wd_forced = NO_DEADLINE;
             regs[regs::WD_STATUS_PD as usize] |= 1;
         }
         // The steps' bytes lie inside the datagram data (checked with the key).
@@ -347,6 +354,9 @@ impl Esc {
         self.now = t;
         self.sii_settle(t);
         // The DC unit's own entry (the reference for the shortcuts' `dc_arrival`).
+        if port == 0 {
+            self.sof0 = t;
+        }
         self.dc.frame_arrival(&mut self.mem[..REG_END], port, t);
         self.gate_routes();
         self.forward_after_arrival(port, frame, frame_ok, d)

@@ -45,6 +45,10 @@ pub(super) struct Fused {
     pub(super) key: FusedKey,
     /// The fused path applies to this ESC's configuration.
     pub(super) ok: bool,
+    /// `ok`, and a frame's arrival at port 0 needs nothing of the DC unit but the
+    /// start-of-frame time (no receive-time latch armed; [`Esc::gate_routes`]): the
+    /// fused path then does not touch the DC unit.
+    pub(super) on: bool,
     /// Port the frame leaves through (first open port after port 0).
     pub(super) exit: u8,
     /// The steps the key's command runs (`key.n` of them, in plan order: the reads for
@@ -237,6 +241,7 @@ impl Esc {
             f = Fused::default();
         }
         self.fused = f;
+        self.gate_routes();
     }
 
     /// Rebuilds [`Esc::route`] from the open ports: the exit `forward_after_arrival`'s
@@ -263,10 +268,13 @@ impl Esc {
 
     /// [`Esc::route`] from [`Esc::route_base`]: ports 1..3 take the general path while the
     /// EEPROM write cycle is under way (its end is settled there) or a receive-time latch
-    /// is armed for the port (latched there). Called wherever either changes: the write
-    /// command that starts the cycle, the settle that ends it, DC writes (0x0900 arms the
-    /// latches) and the DC unit's frame arrivals (which latch or end the window).
+    /// is armed for the port (latched there); and [`Fused::on`]: port 0 takes it while a
+    /// latch is armed anywhere (the window ends there). Called wherever either changes:
+    /// the write command that starts the cycle, the settle that ends it, DC writes (0x0900
+    /// arms the latches), the DC unit's frame arrivals (which latch or end the window)
+    /// and the fused path's rebuild.
     pub(super) fn gate_routes(&mut self) {
+        self.fused.on = self.fused.ok && !self.dc.arrival0_needs_more();
         let busy = self.sii_busy_until.is_some();
         let base = self.route_base;
         let dc = &self.dc;
