@@ -517,8 +517,8 @@ impl Dc {
     }
 
     /// Whether a frame's arrival at port 0 needs more than the start-of-frame time
-    /// ([`Dc::frame_arrival_sof`]): before the first contact, or with a receive-time latch
-    /// armed at any port (which port 0's arrival ends).
+    /// (which the ESC may then keep itself, [`Dc::set_sof0`]): before the first contact,
+    /// or with a receive-time latch armed at any port (which port 0's arrival ends).
     #[inline(always)]
     pub(crate) fn arrival0_needs_more(&self) -> bool {
         self.slow_ports != 0
