@@ -22,6 +22,7 @@
 //! | honest line (main, A/B below)  | 336 (302 / 334) | 37.6 / 34.6 / 37.2     | 38.7 / 37.7 / 38.8 |
 //! | pass-through, `FusedKey`       | 270 (287 / 272) | 31.2 / 26.6 / 36.4     | 36.6 / 29.0 / 36.9 |
 //! | key words, one step loop, inlined, hot fields first | 195 (234 / 198) | 21.4 / 14.4 / 15.8 | 23.3 / 15.8 / 17.2 (of 4) |
+//! | steps with the key, gated routes, fused path without the DC unit | 172 (198 / 174) | see the crate README | (second pass of item 6) |
 //!
 //! (The "honest line" and `FusedKey` rows: A/B in one session, both bench binaries
 //! alternately, three runs each, load average 5.7-6.1 on the 2 cores, so about twice the

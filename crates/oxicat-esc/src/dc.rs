@@ -189,16 +189,23 @@ struct SyncUnit {
     start_out_of_range: bool,
 }
 
+/// [`Dc`]'s start-of-frame time before the first frame at port 0.
+const NO_SOF: u64 = u64::MAX;
+
 /// The DC unit. `repr(C)`, cache-line aligned: what every frame's arrival touches first,
 /// in one cache line.
 #[derive(Debug, Clone)]
 #[repr(C, align(64))]
 pub struct Dc {
-    /// Arrival time of the last frame at port 0.
-    sof0: Option<u64>,
+    /// Arrival time of the last frame at port 0 ([`NO_SOF`]: none yet).
+    sof0: u64,
     /// Ports (bit n) still to latch the receive time of the latch frame.
     latch_pending: u8,
     inited: bool,
+    /// Ports (bit n) where a frame's arrival needs the register file
+    /// ([`Dc::arrival_needs_regs`]): all before the first contact, then the armed
+    /// receive-time latches (`latch_pending`); kept in step by [`Dc::sync_slow`].
+    slow_ports: u8,
     cfg: ClockConfig,
     drift_ppt: i64,
     /// Global time of the last rate change.
@@ -259,8 +266,9 @@ impl Dc {
             mean_q: 0,
             integ: 0,
             last_sample: None,
-            sof0: None,
+            sof0: NO_SOF,
             latch_pending: 0,
+            slow_ports: 0xF,
             shadow: [0; SHADOW_LEN],
             start_written: 0,
             pulse_len: 0,
@@ -297,6 +305,7 @@ impl Dc {
         *self = Self::new(cfg);
         self.compare_bits = bits;
         self.inited = true;
+        self.sync_slow();
         self.pulse_len = rd16(regs, 0x0982);
         self.publish(regs);
     }
@@ -306,6 +315,7 @@ impl Dc {
     fn ensure_init_keep(&mut self, regs: &mut [u8], keep: (usize, usize)) {
         if !self.inited {
             self.inited = true;
+            self.sync_slow();
             self.publish_range(regs, BASE, keep.0.clamp(BASE, BASE + SHADOW_LEN));
             self.publish_range(
                 regs,
@@ -503,7 +513,34 @@ impl Dc {
     /// [`Dc::frame_arrival_quiet`] has the same effect.
     #[inline(always)]
     pub(crate) fn arrival_needs_regs(&self, port: u8) -> bool {
-        !self.inited || (port != 0 && self.latch_pending & (1 << (port & 3)) != 0)
+        self.slow_ports & (1 << (port & 3)) != 0
+    }
+
+    /// Whether a frame's arrival at port 0 needs more than the start-of-frame time
+    /// (which the ESC may then keep itself, [`Dc::set_sof0`]): before the first contact,
+    /// or with a receive-time latch armed at any port (which port 0's arrival ends).
+    #[inline(always)]
+    pub(crate) fn arrival0_needs_more(&self) -> bool {
+        self.slow_ports != 0
+    }
+
+    /// Sets the start-of-frame time at port 0 (the ESC keeps it for the frames whose
+    /// arrival it handles itself, see [`Dc::arrival0_needs_more`], and hands it over
+    /// before a register write that reads it).
+    #[inline]
+    pub(crate) fn set_sof0(&mut self, t: u64) {
+        self.sof0 = t;
+    }
+
+    /// Brings [`Dc::slow_ports`] in step with `inited` and `latch_pending` (after every
+    /// change of either).
+    #[inline(always)]
+    fn sync_slow(&mut self) {
+        self.slow_ports = if self.inited {
+            self.latch_pending & 0b1110
+        } else {
+            0xF
+        };
     }
 
     /// [`Dc::frame_arrival`] when [`Dc::arrival_needs_regs`] is false: at port 0 the start
@@ -511,8 +548,9 @@ impl Dc {
     #[inline(always)]
     pub(crate) fn frame_arrival_quiet(&mut self, port: u8, t: u64) {
         if port == 0 {
-            self.sof0 = Some(t);
+            self.sof0 = t;
             self.latch_pending = 0;
+            self.slow_ports = 0;
         }
     }
 
@@ -522,8 +560,9 @@ impl Dc {
         if !self.inited {
             self.ensure_init(regs);
         }
-        self.sof0 = Some(t);
+        self.sof0 = t;
         self.latch_pending = 0;
+        self.sync_slow();
     }
 
     /// First bit of a frame reached `port` at global time `t`. (The first contact
@@ -536,8 +575,9 @@ impl Dc {
             self.ensure_init(regs);
         }
         if port == 0 {
-            self.sof0 = Some(t);
+            self.sof0 = t;
             self.latch_pending = 0;
+            self.sync_slow();
         } else if port < 4 && self.latch_pending & (1 << port) != 0 {
             self.latch_receive_time(regs, port, t);
         }
@@ -547,6 +587,7 @@ impl Dc {
     #[cold]
     fn latch_receive_time(&mut self, regs: &mut [u8], port: u8, t: u64) {
         self.latch_pending &= !(1 << port);
+        self.sync_slow();
         let lt = self.local_time(t) as u32;
         let a = 0x0900 + 4 * port as usize;
         self.put32(a, lt);
@@ -633,15 +674,19 @@ impl Dc {
             }
         }
         // Frame time for ECAT writes: the frame's arrival at port 0.
-        let tf = match self.sof0 {
-            Some(s) if ecat && s <= t && s >= self.anchor_t => s,
-            _ => t,
+        // (`NO_SOF` is never <= t unless t is that value too: then both give t.)
+        let s = self.sof0;
+        let tf = if ecat && s <= t && s >= self.anchor_t {
+            s
+        } else {
+            t
         };
         if ecat && overlaps(addr, len, 0x0900, 0x0903) {
             let lt = self.local_time(tf);
             self.put32(0x0900, lt as u32);
             self.put64(0x0918, lt);
             self.latch_pending = 0b1110;
+            self.sync_slow();
         }
         if ecat && covers(addr, len, 0x0910, 0x0913) {
             let rx = rd32(regs, 0x0910);
@@ -1108,6 +1153,27 @@ fn rd32(regs: &[u8], a: usize) -> u32 {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// `arrival_needs_regs` (the ESC's shortcut test) says what `frame_arrival` needs:
+    /// every port before the first contact, none after it, the armed latch ports after a
+    /// write to 0x0900 until each latched or a frame reached port 0.
+    #[test]
+    fn arrival_needs_regs_follows_the_unit() {
+        // The ports (bit n) whose arrival needs the register file.
+        let slow = |dc: &Dc| (0..4u8).fold(0u8, |m, p| m | u8::from(dc.arrival_needs_regs(p)) << p);
+        let mut regs = [0u8; 0x1000];
+        let mut dc = Dc::new(ClockConfig::default());
+        assert_eq!(slow(&dc), 0b1111, "before the first contact");
+        dc.reset(&mut regs);
+        assert_eq!(slow(&dc), 0, "after the reset");
+        dc.frame_arrival(&mut regs, 0, 1_000);
+        dc.after_write(&mut regs, 0x0900, 1, 1_100, true);
+        assert_eq!(slow(&dc), 0b1110, "latch armed by the write to 0x0900");
+        dc.frame_arrival(&mut regs, 2, 1_200);
+        assert_eq!(slow(&dc), 0b1010, "port 2 latched");
+        dc.frame_arrival(&mut regs, 0, 2_000);
+        assert_eq!(slow(&dc), 0, "next frame at port 0");
+    }
 
     #[test]
     fn event_bits_match_the_separate_queries() {

@@ -35,7 +35,7 @@ pub enum Side {
     Pdi,
 }
 
-/// One SyncManager channel.
+/// One SyncManager channel (16 bytes: the fused path finds one with a shift).
 #[derive(Debug, Clone, Default)]
 pub struct Sm {
     /// Physical start address.
@@ -56,8 +56,10 @@ pub struct Sm {
     pub write_buf: u8,
     /// Buffered mode: buffer the consumer reads (locked while opened).
     pub user_buf: u8,
-    /// Buffered mode: newest completely written buffer not yet taken by the consumer.
-    pub next_buf: Option<u8>,
+    /// Buffered mode: the buffer the consumer takes when it next opens one: the newest
+    /// completely written buffer, which is `user_buf` itself when none was written since
+    /// the consumer last took one (so that taking needs no test).
+    pub next_buf: u8,
     /// Last completely written buffer (status bits 4..5), 3 = none.
     pub last_written: u8,
     /// Producer has accessed the start address (buffer opened for writing).
@@ -69,6 +71,13 @@ pub struct Sm {
 }
 
 impl Sm {
+    /// The consumer takes the newest completely written buffer (its own when none is
+    /// newer, see [`Sm::next_buf`]).
+    #[inline(always)]
+    fn take_next(&mut self) {
+        self.user_buf = self.next_buf;
+    }
+
     /// Decodes the 8 register bytes of one SM (keeps run-time state).
     pub fn load_regs(&mut self, r: &[u8]) {
         if r.len() < 8 {
@@ -91,7 +100,7 @@ impl Sm {
         self.status = 0;
         self.write_buf = 0;
         self.user_buf = 2;
-        self.next_buf = None;
+        self.next_buf = 2;
         self.last_written = 3;
         self.write_open = false;
         self.read_open = false;
@@ -162,7 +171,7 @@ impl Sm {
             return;
         }
         let w = self.write_buf;
-        self.next_buf = Some(w);
+        self.next_buf = w;
         self.last_written = w;
         // The producer continues in the buffer that is neither the newest nor the consumer's.
         self.write_buf = 3 - w - self.user_buf;
@@ -181,9 +190,7 @@ impl Sm {
             self.close_read();
             return Some(0);
         }
-        if let Some(n) = self.next_buf.take() {
-            self.user_buf = n;
-        }
+        self.take_next();
         self.read_open = false;
         self.status = (self.status & !STATUS_IRQ_WRITE) | STATUS_IRQ_READ;
         Some(self.user_buf as u32 * self.len as u32)
@@ -212,9 +219,7 @@ impl Sm {
     /// (fused LRW path): the index of the buffer it reads.
     #[inline(always)]
     pub fn buffered_read_whole(&mut self) -> u8 {
-        if let Some(n) = self.next_buf.take() {
-            self.user_buf = n;
-        }
+        self.take_next();
         self.read_open = false;
         self.status = (self.status & !STATUS_IRQ_WRITE) | STATUS_IRQ_READ;
         self.user_buf
@@ -228,7 +233,7 @@ impl Sm {
         let w = self.write_buf;
         self.write_open = false;
         self.pending_commit = false;
-        self.next_buf = Some(w);
+        self.next_buf = w;
         self.last_written = w;
         self.write_buf = 3 - w - self.user_buf;
         self.status = (self.status & !STATUS_IRQ_READ) | STATUS_IRQ_WRITE;
@@ -257,8 +262,8 @@ impl Sm {
             if self.status & STATUS_MBX_FULL == 0 {
                 return false;
             }
-        } else if let Some(n) = self.next_buf.take() {
-            self.user_buf = n;
+        } else {
+            self.take_next();
         }
         self.read_open = true;
         self.status &= !STATUS_IRQ_WRITE;

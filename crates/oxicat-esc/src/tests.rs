@@ -921,9 +921,13 @@ fn receive_time_latched_on_the_way_back() {
         );
         let mut f = frame(&[(phys(Command::Nop, 0, 0, &[0; 2]), &[0; 2])]);
         assert_eq!(e.forward(1, &mut f, 10_700, true), Forward::Port(0));
+        assert_eq!(e.pass_hits, 0, "the armed port takes the general path");
         let p0 = u32::from_le_bytes(fprd(&mut e, 0x0900, 4).0.try_into().unwrap());
         let p1 = u32::from_le_bytes(fprd(&mut e, 0x0904, 4).0.try_into().unwrap());
         assert_eq!(p1.wrapping_sub(p0), 700, "fast paths {fast}");
+        // Latched: the shortcut is open again (the route is gated no longer).
+        assert_eq!(e.forward(1, &mut f, 10_900, true), Forward::Port(0));
+        assert_eq!(e.pass_hits, u64::from(fast), "fast paths {fast}");
     }
 }
 
@@ -1087,5 +1091,142 @@ fn fuzz_input_bad_fcs_frame_under_an_sm_over_registers() {
                 assert_eq!(&e.memory()[0x0800..0x0880], &before[..]);
             }
         }
+    }
+}
+
+/// A frame the fused path declines at an ESC where it applies (here an FPRD of the EEPROM
+/// control register, through `forward` and through `forward_dispatched`) sees the EEPROM
+/// write cycle end at its arrival, as on the general path: the ESC's time is the frame's,
+/// not that of the last `advance`. (The fused path left the settle out on its way to the
+/// general path.)
+#[test]
+fn declined_fused_frame_settles_the_eeprom_cycle() {
+    use crate::sii::WRITE_CYCLE_NS;
+    for (fast, dispatched) in [(true, false), (true, true), (false, false), (false, true)] {
+        let mut e = bench_shape(fast);
+        let sa = e.station_address();
+        let t0 = 1_000_000;
+        run_at(&mut e, t0, Command::Fpwr, sa, 0x0504, &[0x20, 0, 0, 0]);
+        run_at(&mut e, t0, Command::Fpwr, sa, 0x0508, &[0x11, 0x22]);
+        run_at(&mut e, t0, Command::Fpwr, sa, 0x0502, &[0x01, 0x02]);
+        let ctl = |e: &mut Esc, t: u64| {
+            let h = phys(Command::Fprd, sa, 0x0502, &[0; 2]);
+            let mut f = frame(&[(h, &[0; 2])]);
+            if dispatched {
+                let mut d = crate::FrameDispatch::new();
+                assert!(d.build(&mut f));
+                e.forward_dispatched(0, &mut f, t, true, &mut d);
+                d.apply_irq(&mut f);
+            } else {
+                e.forward(0, &mut f, t, true);
+            }
+            let d = dg(&f, 0).0;
+            u16::from_le_bytes([d[0], d[1]])
+        };
+        let c = ctl(&mut e, t0 + WRITE_CYCLE_NS - 1);
+        assert_ne!(c & 0x8000, 0, "busy (fast {fast}, dispatched {dispatched})");
+        let c = ctl(&mut e, t0 + WRITE_CYCLE_NS);
+        assert_eq!(c & 0x8000, 0, "idle (fast {fast}, dispatched {dispatched})");
+    }
+}
+
+/// A frame passing an ESC (in at port 1, out at port 0) after the EEPROM write cycle ended
+/// leaves the registers as the general path does: the pass-through shortcut is closed
+/// while the cycle runs (`Esc::gate_routes`), so the frame's arrival settles it.
+#[test]
+fn passing_frame_settles_the_eeprom_cycle() {
+    use crate::sii::WRITE_CYCLE_NS;
+    let mut escs = [bench_shape(true), bench_shape(false)];
+    let t0 = 1_000_000;
+    for e in escs.iter_mut() {
+        e.set_link(1, true);
+        let sa = e.station_address();
+        run_at(e, t0, Command::Fpwr, sa, 0x0504, &[0x20, 0, 0, 0]);
+        run_at(e, t0, Command::Fpwr, sa, 0x0508, &[0x11, 0x22]);
+        run_at(e, t0, Command::Fpwr, sa, 0x0502, &[0x01, 0x02]);
+        let mut f = frame(&[(phys(Command::Fprd, 0x7777, 0x0130, &[0; 2]), &[0; 2])]);
+        assert_eq!(
+            e.forward(1, &mut f, t0 + WRITE_CYCLE_NS, true),
+            Forward::Port(0)
+        );
+    }
+    let [a, b] = &mut escs;
+    assert_eq!(
+        a.memory()[0x0503] & 0x80,
+        0,
+        "busy ended at the frame's arrival"
+    );
+    assert_eq!(a.memory(), b.memory());
+    assert_eq!(a.pass_hits, 0, "the general path settled it");
+    // Settled: the shortcut is open again.
+    let mut f = frame(&[(phys(Command::Fprd, 0x7777, 0x0130, &[0; 2]), &[0; 2])]);
+    assert_eq!(
+        a.forward(1, &mut f, t0 + WRITE_CYCLE_NS + 1, true),
+        Forward::Port(0)
+    );
+    assert_eq!(a.pass_hits, 1);
+    assert_eq!(b.pass_hits, 0);
+}
+
+/// The pass-through shortcut (and the fused path, for port 0) closes while its skipped
+/// work is due and opens again as soon as it is done, whichever way: an EEPROM cycle
+/// settled by `advance`; latches armed by a write to 0x0900 and ended by the next frame at
+/// port 0, through `forward` (the general path then) and through `forward_dispatched`.
+#[test]
+fn pass_through_reopens_after_settle_and_latch_window() {
+    use crate::sii::WRITE_CYCLE_NS;
+    let mut e = bench_shape(true);
+    e.set_link(1, true);
+    let sa = e.station_address();
+    let pass = |e: &mut Esc, t: u64| {
+        let mut f = frame(&[(phys(Command::Fprd, 0x7777, 0x0130, &[0; 2]), &[0; 2])]);
+        assert_eq!(e.forward(1, &mut f, t, true), Forward::Port(0));
+        e.pass_hits
+    };
+    let lrw_at = |e: &mut Esc, t: u64, dispatched: bool| {
+        let h = DatagramHeader::logical(Command::Lrw, 0, 0x0001_0000, 64);
+        // Dispatched: with an FPRD for another station (an index needs one).
+        let other = phys(Command::Fprd, 0x7777, 0x0130, &[0; 2]);
+        let mut f = if dispatched {
+            frame(&[(h, &[1; 64]), (other, &[0; 2])])
+        } else {
+            frame(&[(h, &[1; 64])])
+        };
+        let hits = e.fused_hits;
+        if dispatched {
+            let mut d = crate::FrameDispatch::new();
+            assert!(d.build(&mut f));
+            e.forward_dispatched(0, &mut f, t, true, &mut d);
+        } else {
+            e.forward(0, &mut f, t, true);
+        }
+        assert_eq!(dg(&f, 0).1, 3);
+        e.fused_hits - hits
+    };
+    let t0 = 1_000_000;
+    assert_eq!(pass(&mut e, t0), 1);
+    run_at(&mut e, t0, Command::Fpwr, sa, 0x0504, &[0x20, 0, 0, 0]);
+    run_at(&mut e, t0, Command::Fpwr, sa, 0x0502, &[0x01, 0x02]);
+    e.advance(t0 + WRITE_CYCLE_NS);
+    assert_eq!(
+        pass(&mut e, t0 + WRITE_CYCLE_NS),
+        2,
+        "open after the settle"
+    );
+    for (k, dispatched) in [false, true].into_iter().enumerate() {
+        let t1 = t0 + WRITE_CYCLE_NS + 10_000 * (k as u64 + 1);
+        run_at(&mut e, t1, Command::Fpwr, sa, 0x0900, &[0; 4]);
+        assert_eq!(
+            lrw_at(&mut e, t1 + 100, dispatched),
+            0,
+            "armed: general path"
+        );
+        let hits = 3 + k as u64;
+        assert_eq!(
+            pass(&mut e, t1 + 1_000),
+            hits,
+            "open after the window ({k})"
+        );
+        assert_eq!(lrw_at(&mut e, t1 + 2_000, false), 1, "fused again ({k})");
     }
 }

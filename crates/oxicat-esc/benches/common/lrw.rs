@@ -104,20 +104,35 @@ impl Line {
 
     /// One frame from the master through the line and back; returns where it left the
     /// first ESC. The working counter is cleared first, as in a frame the master sends.
-    #[inline]
+    /// Inlined into the measuring loop (no call per frame); the ports each ESC sends the
+    /// frame out of are asserted by [`Line::check`], which walks the same hops.
+    #[inline(always)]
     pub fn cycle(&mut self, frame: &mut [u8], t: u64) -> Forward {
+        self.walk(frame, t, |_, _, _| {})
+    }
+
+    /// [`Line::cycle`] with `hop(position, ingress, egress)` told every hop.
+    #[inline(always)]
+    fn walk(
+        &mut self,
+        frame: &mut [u8],
+        t: u64,
+        mut hop: impl FnMut(usize, u8, Forward),
+    ) -> Forward {
         let n = frame.len();
         frame[n - 2] = 0;
         frame[n - 1] = 0;
         let last = self.escs.len() - 1;
-        for e in &mut self.escs[..last] {
+        for (i, e) in self.escs[..last].iter_mut().enumerate() {
             // Processed on the way out, leaves on port 1 to the next ESC.
-            let _ = std::hint::black_box(e.forward(0, frame, t, true));
+            hop(i, 0, e.forward(0, frame, t, true));
         }
         let mut out = self.escs[last].forward(0, frame, t, true);
-        for e in self.escs[..last].iter_mut().rev() {
+        hop(last, 0, out);
+        for (i, e) in self.escs[..last].iter_mut().enumerate().rev() {
             // The way back: in on port 1, out on port 0, not processed.
             out = e.forward(1, frame, t, true);
+            hop(i, 1, out);
         }
         out
     }
@@ -127,11 +142,17 @@ impl Line {
         let n = self.escs.len();
         let last = n - 1;
         let mut f = frame.to_vec();
-        assert_eq!(
-            self.cycle(&mut f, t),
-            Forward::Port(0),
-            "frame back at the master"
-        );
+        let mut hops = Vec::new();
+        let out = self.walk(&mut f, t, |i, port, out| hops.push((i, port, out)));
+        assert_eq!(out, Forward::Port(0), "frame back at the master");
+        // Out through port 1 to the next ESC, the last ESC turns it back through port 0,
+        // back from port 1 to port 0: 2n - 1 hops.
+        let line: Vec<_> = (0..last)
+            .map(|i| (i, 0, Forward::Port(1)))
+            .chain([(last, 0, Forward::Port(0))])
+            .chain((0..last).rev().map(|i| (i, 1, Forward::Port(0))))
+            .collect();
+        assert_eq!(hops, line, "hops (position, ingress, egress)");
         let wkc = u16::from_le_bytes([f[f.len() - 2], f[f.len() - 1]]);
         assert_eq!(wkc as usize, 3 * n, "LRW working counter of {n} ESCs");
         // Frame header (2) + datagram header (10): outputs, then inputs.

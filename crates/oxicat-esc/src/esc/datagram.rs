@@ -26,7 +26,7 @@ impl Esc {
         }
         // The fused path inlined too (a call's register saves cost as much as a third of
         // it); every other frame out of line.
-        if port == 0 && frame_ok && self.fused.ok {
+        if port == 0 && frame_ok && self.fused.on {
             return self.forward_fused(frame, t);
         }
         self.forward_generic(port, frame, t, frame_ok, None)
@@ -41,20 +41,41 @@ impl Esc {
         // path): a frame that only passes (arriving at port 1..3 and leaving without a
         // visit to the processing unit) changes the SII settle, a DC receive time and the
         // RX error counters, none of which the memo's answers read.
+        //
+        // The SII settle is left to the next access that can see it (every other entry
+        // settles first: a frame on any other path, the PDI, `advance`): the fused path
+        // reads and writes nothing of the EEPROM interface.
+        //
+        // The DC arrival: `fused.on` says it is the start-of-frame time alone, kept here.
         self.memo.clear();
         self.now = t;
-        self.dc_arrival(0, t);
+        self.sof0 = t;
         if let Some(out) = self.process_fused(frame, t) {
             return out;
         }
-        self.forward_after_arrival(0, frame, true, None)
+        self.fused_declined(frame, t, None)
+    }
+
+    /// A frame the fused path declined after its arrival: the general path from there
+    /// (the SII settle first, as in `forward_generic`).
+    #[cold]
+    #[inline(never)]
+    fn fused_declined(
+        &mut self,
+        frame: &mut [u8],
+        t: u64,
+        d: Option<&mut FrameDispatch>,
+    ) -> Forward {
+        self.sii_settle(t);
+        self.forward_after_arrival(0, frame, true, d)
     }
 
     /// The pass-through shortcut: a good frame entering port 1..3 that leaves again
     /// without reaching the processing unit (`route`). What `forward_generic` does for it,
-    /// without its port loop: time, the SII settle, the DC arrival (the receive time
-    /// latch when one is armed for this port); no RX error to count, nothing processed,
-    /// the memo untouched (as there).
+    /// without its port loop: the time; the SII settle and the DC arrival have nothing to
+    /// do (`route` sends the frame the general way while the EEPROM write cycle runs or a
+    /// receive-time latch is armed for the port: [`Esc::gate_routes`]); no RX error to
+    /// count, nothing processed, the memo untouched (as there).
     #[inline(always)]
     fn pass_through(&mut self, port: u8, t: u64, frame_ok: bool) -> Option<Forward> {
         let p = port & 3;
@@ -62,9 +83,11 @@ impl Esc {
         if p == 0 || out == NO_ROUTE || !frame_ok {
             return None;
         }
+        #[cfg(test)]
+        {
+            self.pass_hits += 1;
+        }
         self.now = t;
-        self.sii_settle(t);
-        self.dc_arrival(p, t);
         Some(Forward::Port(out))
     }
 
@@ -111,7 +134,7 @@ impl Esc {
             // logical datagram, and this one has a configured-address datagram).
             self.now = t;
             self.dc_arrival(0, t);
-            return self.forward_after_arrival(0, frame, true, Some(d));
+            return self.fused_declined(frame, t, Some(d));
         }
         self.forward_generic(port, frame, t, frame_ok, Some(d))
     }
@@ -120,7 +143,16 @@ impl Esc {
     /// file only when the unit needs it.
     #[inline(always)]
     fn dc_arrival(&mut self, port: u8, t: u64) {
-        if self.dc.arrival_needs_regs(port) {
+        if port == 0 {
+            self.sof0 = t;
+        }
+        // At port 0 an armed latch anywhere: the window ends, and the routes reopen.
+        let slow = if port == 0 {
+            self.dc.arrival0_needs_more()
+        } else {
+            self.dc.arrival_needs_regs(port)
+        };
+        if slow {
             self.dc_arrival_slow(port, t);
         } else {
             self.dc.frame_arrival_quiet(port, t);
@@ -131,6 +163,8 @@ impl Esc {
     #[inline(never)]
     fn dc_arrival_slow(&mut self, port: u8, t: u64) {
         self.dc.frame_arrival(&mut self.mem[..REG_END], port, t);
+        // The arrival may have latched a receive time or ended the latch window.
+        self.gate_routes();
     }
 
     /// The foreign-frame shortcut: a good frame entering port 0 whose datagrams are all
@@ -179,7 +213,8 @@ impl Esc {
             let head = *head;
             self.fused_accept(&head, frame.len())?;
         }
-        if self.events_dirty && self.ecat_mask != 0 {
+        // The mask first: with no ECAT event unmasked (a master that polls) one test.
+        if self.ecat_mask != 0 && self.events_dirty {
             self.refresh_events();
         }
         #[cfg(test)]
@@ -209,11 +244,12 @@ impl Esc {
         }
         if k.wd {
             self.pd_wd_last = Some(t);
-            self.pd_wd_forced = None;
+            self.pd_wd_forced = NO_DEADLINE;
             regs[regs::WD_STATUS_PD as usize] |= 1;
         }
         // The steps' bytes lie inside the datagram data (checked with the key).
-        for st in &self.fused.steps[k.s0 as usize..k.s1 as usize] {
+        // (`n <= PLAN_MAX`: the bound costs one compare per frame.)
+        for st in &self.fused.run[..usize::from(k.n).min(PLAN_MAX)] {
             let i = st.sm as usize & 15;
             let sm = &mut self.sms[i];
             let l = st.len as usize;
@@ -274,19 +310,32 @@ impl Esc {
         let nr = if c == 1 { 0 } else { nr };
         let nw = if c == 0 { 0 } else { nw };
         let inc = u16::from(nr > 0) + u16::from(nw > 0) * if c == 1 { 1 } else { 2 };
-        // Frame offsets of the steps' bytes: < 2^11 + the headers.
+        // The command's steps in plan order (reads, then writes), with the frame offsets
+        // of their bytes: < 2^11 + the headers.
         let base = dg_at + DG_HEADER_LEN + woff;
-        for (st, op) in self.fused.steps.iter_mut().zip(&self.plan) {
-            st.at = (base + op.off as usize) as u16;
+        let (s0, s1) = (if c == 1 { self.fused.nr } else { 0 }, self.fused.nr + nw);
+        let mut run = [fastpath::FusedStep::default(); PLAN_MAX];
+        for (r, (st, op)) in run.iter_mut().zip(
+            self.fused
+                .steps
+                .iter()
+                .zip(&self.plan)
+                .take(s1 as usize)
+                .skip(s0 as usize),
+        ) {
+            *r = fastpath::FusedStep {
+                at: (base + op.off as usize) as u16,
+                ..*st
+            };
         }
+        self.fused.run = run;
         let (lo, hi) = fastpath::FusedKey::words(head, frame_len);
         self.fused.key = fastpath::FusedKey {
             lo,
             hi,
             wkc_at: (dg_at + view::field::wkc(len).start) as u16,
             inc,
-            s0: if c == 1 { self.fused.nr } else { 0 },
-            s1: self.fused.nr + nw,
+            n: s1 - s0,
             wd: nw > 0 && self.fused.wd,
         };
         Some(())
@@ -305,7 +354,11 @@ impl Esc {
         self.now = t;
         self.sii_settle(t);
         // The DC unit's own entry (the reference for the shortcuts' `dc_arrival`).
+        if port == 0 {
+            self.sof0 = t;
+        }
         self.dc.frame_arrival(&mut self.mem[..REG_END], port, t);
+        self.gate_routes();
         self.forward_after_arrival(port, frame, frame_ok, d)
     }
 

@@ -181,7 +181,7 @@ impl Esc {
         match self.pd_wd_last {
             Some(l) if t != 0 => {
                 let d = l + t * self.wd_unit_ns();
-                Some(self.pd_wd_forced.map_or(d, |f| f.min(d)))
+                Some(self.pd_wd_forced.min(d))
             }
             _ => None,
         }
@@ -233,7 +233,7 @@ impl Esc {
         if let Some(d) = self.pd_wd_deadline() {
             if t >= d {
                 self.pd_wd_last = None;
-                self.pd_wd_forced = None;
+                self.pd_wd_forced = NO_DEADLINE;
                 self.mem[regs::WD_STATUS_PD as usize] &= !1;
                 let a = regs::WD_COUNTER_PD as usize;
                 self.mem[a] = self.mem[a].saturating_add(1);

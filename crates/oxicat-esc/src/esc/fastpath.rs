@@ -45,13 +45,20 @@ pub(super) struct Fused {
     pub(super) key: FusedKey,
     /// The fused path applies to this ESC's configuration.
     pub(super) ok: bool,
+    /// `ok`, and a frame's arrival at port 0 needs nothing of the DC unit but the
+    /// start-of-frame time (no receive-time latch armed; [`Esc::gate_routes`]): the
+    /// fused path then does not touch the DC unit.
+    pub(super) on: bool,
     /// Port the frame leaves through (first open port after port 0).
     pub(super) exit: u8,
+    /// The steps the key's command runs (`key.n` of them, in plan order: the reads for
+    /// LRD, the writes for LWR, all for LRW), with their frame offsets; set with the key.
+    /// In one cache line with the key.
+    pub(super) run: [FusedStep; PLAN_MAX],
     /// Some write step's SM triggers the process-data watchdog.
     pub(super) wd: bool,
     /// The plan's steps (`steps[k]` is `plan[k]`): `nr` read steps (run by LRD and LRW),
-    /// then `nw` write steps (run by LWR and LRW), each in FMMU order. In one array with
-    /// the key, so that a frame reads one cache line of them.
+    /// then `nw` write steps (run by LWR and LRW), each in FMMU order.
     pub(super) nr: u8,
     pub(super) nw: u8,
     pub(super) steps: [FusedStep; PLAN_MAX],
@@ -79,10 +86,8 @@ pub(super) struct FusedKey {
     pub(super) wkc_at: u16,
     /// Working-counter increment (LRD, LWR, LRW: from the read and write steps).
     pub(super) inc: u16,
-    /// The steps the command runs, `Fused::steps[s0..s1]`: the reads for LRD, the writes
-    /// for LWR, all for LRW.
-    pub(super) s0: u8,
-    pub(super) s1: u8,
+    /// How many steps the command runs ([`Fused::run`]).
+    pub(super) n: u8,
     /// The command runs a watchdog-triggering write step.
     pub(super) wd: bool,
 }
@@ -236,6 +241,7 @@ impl Esc {
             f = Fused::default();
         }
         self.fused = f;
+        self.gate_routes();
     }
 
     /// Rebuilds [`Esc::route`] from the open ports: the exit `forward_after_arrival`'s
@@ -243,7 +249,7 @@ impl Esc {
     /// frame would loop back through a closed port 0 into the processing unit.
     pub(super) fn rebuild_routes(&mut self) {
         let open = self.open_ports;
-        self.route = core::array::from_fn(|p| {
+        self.route_base = core::array::from_fn(|p| {
             let mut cur = p as u8;
             for _ in 0..8 {
                 let nxt = next_port(cur);
@@ -256,6 +262,28 @@ impl Esc {
                 cur = nxt;
             }
             NO_ROUTE
+        });
+        self.gate_routes();
+    }
+
+    /// [`Esc::route`] from [`Esc::route_base`]: ports 1..3 take the general path while the
+    /// EEPROM write cycle is under way (its end is settled there) or a receive-time latch
+    /// is armed for the port (latched there); and [`Fused::on`]: port 0 takes it while a
+    /// latch is armed anywhere (the window ends there). Called wherever either changes:
+    /// the write command that starts the cycle, the settle that ends it, DC writes (0x0900
+    /// arms the latches), the DC unit's frame arrivals (which latch or end the window)
+    /// and the fused path's rebuild.
+    pub(super) fn gate_routes(&mut self) {
+        self.fused.on = self.fused.ok && !self.dc.arrival0_needs_more();
+        let busy = self.sii_busy_until.is_some();
+        let base = self.route_base;
+        let dc = &self.dc;
+        self.route = core::array::from_fn(|p| {
+            if p != 0 && (busy || dc.arrival_needs_regs(p as u8)) {
+                NO_ROUTE
+            } else {
+                base[p]
+            }
         });
     }
 

@@ -111,6 +111,9 @@ const CMD_FPRW: u8 = Command::Fprw as u8;
 /// ESCs, e.g. an old and a new one in the same place, never share an epoch.
 static EPOCH_BASE: AtomicU32 = AtomicU32::new(0);
 
+/// [`Esc::pd_wd_forced`]: no injected expiry.
+const NO_DEADLINE: u64 = u64::MAX;
+
 /// [`Esc::route`]: no shortcut (the frame goes through the processing unit again).
 const NO_ROUTE: u8 = 0xFF;
 /// PDI control 0x0140 value of the digital I/O PDI.
@@ -191,13 +194,19 @@ pub struct Esc {
     pub(crate) sii_busy_until: Option<u64>,
     pd_wd_last: Option<u64>,
     /// An injected expiry ([`Esc::expire_pd_watchdog`]): the deadline, until it expires or
-    /// a write retriggers the watchdog.
-    pd_wd_forced: Option<u64>,
+    /// a write retriggers the watchdog ([`NO_DEADLINE`]: none).
+    pd_wd_forced: u64,
+    /// Arrival time of the last frame at port 0 (the DC unit's start-of-frame time, which
+    /// the fused path keeps here: handed to the DC unit before a write to its registers).
+    sof0: u64,
     /// Where a frame entering port `p` leaves when it does not reach the processing unit
     /// on its way (the port order 0 → 3 → 1 → 2 → 0 over the open ports, stopping at port
     /// 0 if it is open); [`NO_ROUTE`] when it would loop back through a closed port 0 into
     /// the processing unit, or when the fast paths are off. For port 0, where the frame
-    /// leaves after processing. Rebuilt with the open ports.
+    /// leaves after processing. Rebuilt with the open ports. For ports 1..3 also
+    /// [`NO_ROUTE`] while the EEPROM write cycle is under way or a receive-time latch is
+    /// armed for the port ([`Esc::gate_routes`]): then the SII settle and the DC arrival
+    /// have work, and the general path does it.
     route: [u8; 4],
     /// Reference switch ([`Esc::set_fast_paths`]): no fused path, no pass-through
     /// shortcut, no [`Esc::query_epoch`].
@@ -216,6 +225,9 @@ pub struct Esc {
     /// Frames the fused path processed (tests).
     #[cfg(test)]
     pub(crate) fused_hits: u64,
+    /// Frames the pass-through shortcut passed (tests).
+    #[cfg(test)]
+    pub(crate) pass_hits: u64,
     cfg: EscConfig,
     /// Per-byte permissions of this chip's register file (the generic table with the
     /// FMMUs, SMs and DC parts the chip lacks removed).
@@ -227,6 +239,8 @@ pub struct Esc {
     /// Words below this acknowledge writes ([`Esc::protect_eeprom_from`]).
     eeprom_writable_words: usize,
     link: [bool; 4],
+    /// [`Esc::route`] from the open ports alone (before [`Esc::gate_routes`]).
+    route_base: [u8; 4],
     active_sms: Vec<u8>,
     fmmus: Vec<Fmmu>,
     fmmu_rw_overlap: bool,
@@ -316,8 +330,11 @@ impl Esc {
             fused: Fused::default(),
             fast_off: false,
             route: [NO_ROUTE; 4],
+            route_base: [NO_ROUTE; 4],
             #[cfg(test)]
             fused_hits: 0,
+            #[cfg(test)]
+            pass_hits: 0,
             cfg,
             mem,
             perm,
@@ -359,7 +376,8 @@ impl Esc {
             al_ev: 0,
             dout: 0,
             pd_wd_last: None,
-            pd_wd_forced: None,
+            pd_wd_forced: NO_DEADLINE,
+            sof0: u64::MAX,
             pdi_wd_last: None,
             latch_inputs: [false; 2],
             loop_permanent: 0,
@@ -537,6 +555,7 @@ impl Esc {
             if t >= d {
                 self.sii_busy_until = None;
                 sii::end_write_cycle(&mut self.mem);
+                self.gate_routes();
             }
         }
     }
@@ -552,7 +571,7 @@ impl Esc {
         }
         // One nanosecond on: a caller that already brought this ESC to `now` (the segment)
         // takes an event at `now` as done.
-        self.pd_wd_forced = Some(self.now + 1);
+        self.pd_wd_forced = self.now + 1;
         self.memo.clear();
         true
     }

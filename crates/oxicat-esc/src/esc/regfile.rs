@@ -444,6 +444,7 @@ impl Esc {
                     sii::SiiOutcome::Written => {
                         sii::begin_write_cycle(&mut self.mem);
                         self.sii_busy_until = Some(self.now.saturating_add(sii::WRITE_CYCLE_NS));
+                        self.gate_routes();
                     }
                     _ => {}
                 }
@@ -473,6 +474,8 @@ impl Esc {
             let a = c.max(0x0900);
             let b = e.min(0x0A00);
             let ecat = side == Side::Ecat;
+            // The frame time of ECAT writes: the start of frame the ESC kept.
+            self.dc.set_sof0(self.sof0);
             self.dc.after_write(
                 &mut self.mem[..REG_END],
                 a as u16,
@@ -480,6 +483,8 @@ impl Esc {
                 self.now,
                 ecat,
             );
+            // A write to 0x0900 arms the receive-time latches.
+            self.gate_routes();
             self.events_dirty = true;
         }
         if over(0x0F00, 0x0F04) && side == Side::Ecat {
@@ -644,7 +649,7 @@ impl Esc {
         self.events_dirty = true;
         if side == Side::Ecat && wd {
             self.pd_wd_last = Some(self.now);
-            self.pd_wd_forced = None;
+            self.pd_wd_forced = NO_DEADLINE;
             self.mem[regs::WD_STATUS_PD as usize] |= 1;
         }
         if start < 0x0F04 && end > 0x0F00 {
