@@ -641,8 +641,31 @@ const _: () = {
     assert!(t[1].bits == r[1].bits && t[1].access.0 == r[1].access.0);
     assert!(t[1].dtype.code() == r[1].dtype.code() && t[0].dtype.code() == r[0].dtype.code());
 };
+/// An assignment object's entries, one per subindex, as the dictionary listing shows them
+/// (host tools only, as [`MAP_RW`]); the stack serves them from [`ASSIGN_TEMPLATE`].
 static ASSIGN_RW: [EntryDef; MAX_ASSIGN + 1] = assign_entries(Access::RW_PREOP);
 static ASSIGN_RO: [EntryDef; MAX_ASSIGN + 1] = assign_entries(Access::RO);
+/// What the stack serves 0x1C12/0x1C13 from: subindex 0 and one entry for subindexes
+/// 1..=n, named "PDO N".
+static ASSIGN_TEMPLATE: [EntryDef; 2] = [
+    e(0, "Number of assigned PDOs", U8, Access::RW_PREOP),
+    e(1, "PDO ", U16, Access::RW_PREOP),
+];
+/// Bytes an assignment object takes in the communication image (room for [`MAX_ASSIGN`]).
+const ASSIGN_STORAGE: usize = 1 + 2 * MAX_ASSIGN;
+const _: () = {
+    let (t, r) = (&ASSIGN_TEMPLATE, &assign_entries(Access::RW_PREOP));
+    assert!(t[0].sub == r[0].sub && t[0].bits == r[0].bits && t[0].access.0 == r[0].access.0);
+    assert!(t[1].bits == r[1].bits && t[1].access.0 == r[1].access.0);
+    assert!(t[1].dtype.code() == r[1].dtype.code() && t[0].dtype.code() == r[0].dtype.code());
+    let mut n = 0;
+    let mut i = 0;
+    while i < r.len() {
+        n += r[i].storage_len();
+        i += 1;
+    }
+    assert!(n == ASSIGN_STORAGE);
+};
 
 const fn sync_par_entries() -> [EntryDef; 12] {
     [
@@ -737,13 +760,13 @@ static COMM_HIGH: [ObjectDef; 5] = [
         index: 0x1C12,
         name: "RxPDO assign",
         code: ObjectCode::Array,
-        entries: &ASSIGN_RW,
+        entries: &ASSIGN_TEMPLATE,
     },
     ObjectDef {
         index: 0x1C13,
         name: "TxPDO assign",
         code: ObjectCode::Array,
-        entries: &ASSIGN_RW,
+        entries: &ASSIGN_TEMPLATE,
     },
     ObjectDef {
         index: 0x1C32,
@@ -759,15 +782,41 @@ static COMM_HIGH: [ObjectDef; 5] = [
     },
 ];
 
-const COMM_LOW_SIZE: usize = image_size(&COMM_LOW);
-const COMM_HIGH_SIZE: usize = image_size(&COMM_HIGH);
+/// Bytes a communication object takes in the communication image: an assignment object
+/// room for [`MAX_ASSIGN`] PDOs (its definition is the template), the others their entries.
+const fn comm_storage(o: &ObjectDef) -> usize {
+    if is_assign(o.index) {
+        ASSIGN_STORAGE
+    } else {
+        o.storage_len()
+    }
+}
+
+/// 0x1C12 or 0x1C13.
+const fn is_assign(index: u16) -> bool {
+    index == 0x1C12 || index == 0x1C13
+}
+
+/// Bytes `objs` take in the communication image.
+const fn comm_size(objs: &[ObjectDef]) -> usize {
+    let mut n = 0;
+    let mut i = 0;
+    while i < objs.len() {
+        n += comm_storage(&objs[i]);
+        i += 1;
+    }
+    n
+}
+
+const COMM_LOW_SIZE: usize = comm_size(&COMM_LOW);
+const COMM_HIGH_SIZE: usize = comm_size(&COMM_HIGH);
 
 /// Image offset of each object of `objs` (the sum of the sizes before it), at build time.
 const fn bases<const K: usize>(objs: &[ObjectDef; K]) -> [usize; K] {
     let mut b = [0; K];
     let mut i = 1;
     while i < K {
-        b[i] = b[i - 1] + objs[i - 1].storage_len();
+        b[i] = b[i - 1] + comm_storage(&objs[i - 1]);
         i += 1;
     }
     b
@@ -853,25 +902,34 @@ pub(crate) enum Kind {
 #[derive(Debug, Clone, Copy)]
 pub(crate) struct Entries {
     table: &'static [EntryDef],
-    /// Subindexes the template (`table[1]`) stands for; 0: `table` has one entry per
-    /// subindex.
+    /// `table` is subindex 0 and a template (`table[1]`) …
+    template: bool,
+    /// … that stands for subindexes 1..=n.
     n: u8,
 }
 
 impl Entries {
     /// One entry per subindex.
     pub const fn table(table: &'static [EntryDef]) -> Self {
-        Self { table, n: 0 }
+        Self {
+            table,
+            template: false,
+            n: 0,
+        }
     }
 
     /// Subindex 0 (`t[0]`) and subindexes 1..=`n` from the template `t[1]`.
     const fn template(t: &'static [EntryDef; 2], n: u8) -> Self {
-        Self { table: t, n }
+        Self {
+            table: t,
+            template: true,
+            n,
+        }
     }
 
     /// Number of entries.
     pub fn len(self) -> usize {
-        if self.n == 0 {
+        if !self.template {
             self.table.len()
         } else {
             1 + self.n as usize
@@ -881,7 +939,7 @@ impl Entries {
     /// The `i`-th entry: its subindex and definition (for a template entry the template's,
     /// whose own subindex is not the entry's).
     pub fn get(self, i: usize) -> Option<(u8, &'static EntryDef)> {
-        if self.n == 0 {
+        if !self.template {
             self.table.get(i).map(|e| (e.sub, e))
         } else if i == 0 {
             self.table.first().map(|e| (0, e))
@@ -900,7 +958,11 @@ impl Entries {
     /// The distinct definitions of the entries (each once: a template's once for all its
     /// subindexes), for a question about any entry of the object.
     pub fn defs(self) -> &'static [EntryDef] {
-        self.table
+        if self.template && self.n == 0 {
+            &self.table[..1]
+        } else {
+            self.table
+        }
     }
 
     /// The last entry.
@@ -915,7 +977,7 @@ impl Entries {
         let name = e.name.as_bytes();
         let mut n = name.len().min(out.len());
         out[..n].copy_from_slice(&name[..n]);
-        if self.n != 0 && sub != 0 {
+        if self.template && sub != 0 {
             let digits = [sub / 100, sub / 10 % 10, sub % 10];
             let first = if sub >= 100 {
                 0
@@ -1416,6 +1478,11 @@ impl<const N: usize> Od<N> {
         }
         let mut off = 0;
         for o in COMM_LOW.iter().chain(COMM_HIGH.iter()) {
+            if is_assign(o.index) {
+                // Set from the definition below (the rest of the room stays zero).
+                off += ASSIGN_STORAGE;
+                continue;
+            }
             for en in o.entries {
                 let len = en.storage_len();
                 write_default(&mut self.comm[off..off + len], en, o);
@@ -1505,11 +1572,12 @@ impl<const N: usize> Od<N> {
                 // A fixed assignment shows only its entries, read-only; a configurable
                 // one ASSIGN_SHOWN slots, or as many as its default assignment fills.
                 r.read_only = !d.assign_configurable;
-                r.entries = Entries::table(if d.assign_configurable {
-                    &ASSIGN_RW[..len.clamp(ASSIGN_SHOWN, MAX_ASSIGN) + 1]
+                let shown = if d.assign_configurable {
+                    len.clamp(ASSIGN_SHOWN, MAX_ASSIGN)
                 } else {
-                    &ASSIGN_RW[..len + 1]
-                });
+                    len
+                };
+                r.entries = Entries::template(&ASSIGN_TEMPLATE, shown as u8);
             }
             return Some(r);
         }
@@ -1661,6 +1729,7 @@ impl<const N: usize> Od<N> {
             Kind::RxMap | Kind::TxMap if o.read_only => &MAP_RO[..o.entries.len()],
             Kind::RxMap | Kind::TxMap => &MAP_RW[..o.entries.len()],
             Kind::RxAssign | Kind::TxAssign if o.read_only => &ASSIGN_RO[..o.entries.len()],
+            Kind::RxAssign | Kind::TxAssign => &ASSIGN_RW[..o.entries.len()],
             _ => o.entries.table,
         };
         Some(ObjectInfo {

@@ -54,6 +54,8 @@ fn map_steps_is_what_each_board_device_needs() {
     let od = Box::new(Od::<{ demo::IMAGE }>::new(&demo::DEF).expect("demo"));
     assert_eq!((steps(&od, Dir::Rx), steps(&od, Dir::Tx)), (Ok(13), Ok(5)));
     assert_eq!(map_steps(&demo::DEF), 13);
+    // The hub's stack type states its capacity as a number.
+    assert_eq!(axis_hub::app::MAP, map_steps(&axis_hub::device::DEF));
 }
 
 /// A stack that cannot hold the device's default mapping does not start: a typed error with
