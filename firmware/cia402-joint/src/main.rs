@@ -51,7 +51,8 @@ use stm32f4xx_hal::{
 /// Mailbox buffer size of the stack: the drive's mailboxes are 128 bytes.
 const MBX: usize = 128;
 /// Copy steps per direction of the stack's compiled PDO mappings, sized to the device
-/// (`pdo::map_steps`: 31, the entries of one configurable PDO; the default of 64 would be 2 × 33 × 8 = 528 B more RAM).
+/// (`pdo::map_steps`: 31, the entries of one configurable PDO; the default of 64 would be
+/// 528 B more RAM, 2 × 33 × 8).
 const MAP: usize = oxicat_slave::pdo::map_steps(&device::DEF);
 /// The main loop polls the stack every 20 current-loop ticks (1 ms). In free run that is
 /// also the application cycle, which matches the cycle the drive assumes when 0x1C32:02

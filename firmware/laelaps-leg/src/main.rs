@@ -65,7 +65,8 @@ pub static OXICAT_LEG_SIDE: u8 = match SIDE {
 /// Mailbox buffer size of the stack: the leg node's mailboxes are 128 bytes.
 const MBX: usize = 128;
 /// Copy steps per direction of the stack's compiled PDO mappings, sized to the device
-/// (`pdo::map_steps`: 14 output steps, 5 input steps; both legs have the same PDOs; the default of 64 would be 2 × 50 × 8 = 800 B more RAM).
+/// (`pdo::map_steps`: 14 output steps, 5 input steps; both legs have the same PDOs; the
+/// default of 64 would be 2 × 50 × 8 = 800 B more RAM).
 const MAP: usize = oxicat_slave::pdo::map_steps(&device::LEFT);
 /// Joint-loop rate (`laelaps::hw::CONTROL_PERIOD_S`).
 const JOINT_LOOP_HZ: u32 = 10_000;

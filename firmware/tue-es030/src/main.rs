@@ -53,7 +53,8 @@ use store::FlashStore;
 /// Mailbox buffer size of the stack: the board's mailboxes are 128 bytes.
 const MBX: usize = 128;
 /// Copy steps per direction of the stack's compiled PDO mappings, sized to the device
-/// (`pdo::map_steps`: 54, every entry of the PDOs its configurable assignment can take; the default of 64 would be 2 × 10 × 8 = 160 B more RAM).
+/// (`pdo::map_steps`: 54, every entry of the PDOs its configurable assignment can take; the
+/// default of 64 would be 2 × 10 × 8 = 160 B more RAM).
 const MAP: usize = oxicat_slave::pdo::map_steps(&device::DEF);
 /// Current-loop ticks per service-routine run (20 kHz / 1 kHz).
 const TICKS_PER_SERVICE: u32 = board::CURRENT_LOOP_HZ / 1000;
