@@ -513,7 +513,7 @@ const fn dir_steps(def: &DeviceDef, pdos: &[PdoDef], assign: &[u16]) -> usize {
                 let pe = p.entries[k];
                 let bits = pe.bits as usize;
                 if pe.index != 0 {
-                    let aligned = pos % 8 == 0 && bits % 8 == 0;
+                    let aligned = pos & 7 == 0 && bits & 7 == 0;
                     let off = app_offset(def.objects, pe.index, pe.sub);
                     let merged = match (last_end, off) {
                         (Some((pd_end, img_end)), Some(off)) => {
