@@ -65,22 +65,22 @@ fn set_bit(b: &mut [u8], i: usize, v: bool) {
     }
 }
 
-/// Walks the complete-access stream layout of `o` from subindex `start`: calls `f(entry,
+/// Walks the complete-access stream layout of `o` from subindex `start`: calls `f(subindex,
 /// object-relative image offset, stream bit position, value bits)`; returns the stream bits.
-fn ca_layout(o: &Obj, start: u8, mut f: impl FnMut(&EntryDef, usize, usize, usize)) -> usize {
+fn ca_layout(o: &Obj, start: u8, mut f: impl FnMut(u8, usize, usize, usize)) -> usize {
     let mut pos = 0usize;
     let mut off = 0usize;
-    for e in o.entries {
+    for (sub, e) in o.entries.iter() {
         let len = e.storage_len();
-        if e.sub >= start {
-            if e.sub == 0 {
-                f(e, off, pos, 8);
+        if sub >= start {
+            if sub == 0 {
+                f(sub, off, pos, 8);
                 pos += 16;
             } else {
                 if e.bits % 8 == 0 {
                     pos = pos.div_ceil(8) * 8;
                 }
-                f(e, off, pos, e.bits as usize);
+                f(sub, off, pos, e.bits as usize);
                 pos += e.bits as usize;
             }
         }
@@ -134,7 +134,7 @@ fn int_value(e: &EntryDef, b: &[u8]) -> i128 {
     }
 }
 
-impl<P: Pdi, const N: usize, const M: usize> Slave<P, N, M> {
+impl<P: Pdi, const N: usize, const M: usize, const K: usize> Slave<P, N, M, K> {
     // Not inlined: inlined into the firmware's main loop, its buffers joined `main`'s frame
     // and its code was copied per caller (minimal image: 1.4 KB flash, 232 B stack).
     #[inline(never)]
@@ -261,10 +261,10 @@ impl<P: Pdi, const N: usize, const M: usize> Slave<P, N, M> {
         if o.entry(sub).is_none() {
             return Err(Abort::SubindexDoesNotExist);
         }
-        if o.code == ObjectCode::Var || o.entries.iter().any(|e| e.dtype.is_string()) {
+        if o.code == ObjectCode::Var || o.entries.defs().iter().any(|e| e.dtype.is_string()) {
             return Err(Abort::CompleteAccessUnsupported);
         }
-        for e in o.entries.iter().filter(|e| e.sub >= sub) {
+        for (_, e) in o.entries.iter().filter(|&(s, _)| s >= sub) {
             check(e)?;
         }
         let bits = ca_layout(&o, sub, |_, _, _, _| {});
@@ -282,7 +282,7 @@ impl<P: Pdi, const N: usize, const M: usize> Slave<P, N, M> {
             }
             return;
         }
-        let obj_len: usize = o.entries.iter().map(|e| e.storage_len()).sum();
+        let obj_len: usize = o.entries.iter().map(|(_, e)| e.storage_len()).sum();
         let img = self.od.bytes_of(o, o.base, obj_len);
         let w0 = off * 8;
         let w1 = (off + out.len()) * 8;
@@ -348,12 +348,11 @@ impl<P: Pdi, const N: usize, const M: usize> Slave<P, N, M> {
             }
         }
         if data.len() >= size {
-            let mut tmp = [0u8; M];
             if size > M {
                 return Err(Abort::ObjectTooLong);
             }
-            tmp[..size].copy_from_slice(&data[..size]);
-            return self.commit(app, &o, sub, ca, &tmp[..size]);
+            // The request is the caller's copy, not the stack's buffer: no second copy.
+            return self.commit(app, &o, sub, ca, &data[..size]);
         }
         // Segmented download follows.
         let direct = size > M;
@@ -460,7 +459,7 @@ impl<P: Pdi, const N: usize, const M: usize> Slave<P, N, M> {
         ca: bool,
         data: &[u8],
     ) -> Result<(), Abort> {
-        let obj_len: usize = o.entries.iter().map(|e| e.storage_len()).sum();
+        let obj_len: usize = o.entries.iter().map(|(_, e)| e.storage_len()).sum();
         if obj_len > M {
             return Err(Abort::ObjectTooLong);
         }
@@ -470,8 +469,8 @@ impl<P: Pdi, const N: usize, const M: usize> Slave<P, N, M> {
         let mut written_sub0 = false;
         let mut written_high = false;
         if ca {
-            ca_layout(o, sub, |e, eoff, pos, bits| {
-                if e.sub == 0 {
+            ca_layout(o, sub, |s, eoff, pos, bits| {
+                if s == 0 {
                     written_sub0 = true;
                 } else {
                     written_high = true;
@@ -491,9 +490,9 @@ impl<P: Pdi, const N: usize, const M: usize> Slave<P, N, M> {
         }
         // Plain value checks on every written entry.
         let mut eoff = 0;
-        for e in o.entries {
+        for (s, e) in o.entries.iter() {
             let l = e.storage_len();
-            let in_scope = if ca { e.sub >= sub } else { e.sub == sub };
+            let in_scope = if ca { s >= sub } else { s == sub };
             if in_scope {
                 let v = &tmp[eoff..eoff + l];
                 if e.dtype == DataType::Bool && v[0] > 1 {
@@ -715,8 +714,8 @@ impl<P: Pdi, const N: usize, const M: usize> Slave<P, N, M> {
         };
         match list_type {
             od_list_type::ALL => true,
-            od_list_type::RX_PDO_MAPPABLE => o.entries.iter().any(|e| e.pdo.rx()),
-            od_list_type::TX_PDO_MAPPABLE => o.entries.iter().any(|e| e.pdo.tx()),
+            od_list_type::RX_PDO_MAPPABLE => o.entries.defs().iter().any(|e| e.pdo.rx()),
+            od_list_type::TX_PDO_MAPPABLE => o.entries.defs().iter().any(|e| e.pdo.tx()),
             _ => false,
         }
     }
@@ -769,8 +768,8 @@ impl<P: Pdi, const N: usize, const M: usize> Slave<P, N, M> {
                 let cap = self.reply_capacity() - 6 - 6;
                 let nl = name.len().min(cap);
                 let dt = match o.code {
-                    ObjectCode::Var => o.entries[0].dtype.code(),
-                    ObjectCode::Array => o.entries.last().map_or(0, |e| e.dtype.code()),
+                    ObjectCode::Var => o.entries.get(0).map_or(0, |(_, e)| e.dtype.code()),
+                    ObjectCode::Array => o.entries.last().map_or(0, |(_, e)| e.dtype.code()),
                     ObjectCode::Record => 0x002A,
                 };
                 d[0..2].copy_from_slice(&index.to_le_bytes());
@@ -798,9 +797,7 @@ impl<P: Pdi, const N: usize, const M: usize> Slave<P, N, M> {
                 };
                 let mut d = [0u8; M];
                 let cap = (self.reply_capacity() - 6).min(M);
-                let (vi, mut at) = self.value_info(&o, e, value_info, &mut d[..cap]);
-                let name = e.name.as_bytes();
-                let nl = name.len().min(cap - at);
+                let (vi, mut at) = self.value_info(&o, subindex, e, value_info, &mut d[..cap]);
                 let mut acc = o.access(e).0;
                 if e.pdo.rx() {
                     acc |= 0x40;
@@ -814,8 +811,7 @@ impl<P: Pdi, const N: usize, const M: usize> Slave<P, N, M> {
                 d[4..6].copy_from_slice(&e.dtype.code().to_le_bytes());
                 d[6..8].copy_from_slice(&e.bits.to_le_bytes());
                 d[8..10].copy_from_slice(&acc.to_le_bytes());
-                d[at..at + nl].copy_from_slice(&name[..nl]);
-                at += nl;
+                at += o.entries.name_into(subindex, e, &mut d[at..cap]);
                 self.info_reply(
                     SdoInfoOpcode::GetEntryDescriptionResponse,
                     false,
@@ -832,7 +828,7 @@ impl<P: Pdi, const N: usize, const M: usize> Slave<P, N, M> {
     /// 0x10 default, 0x20 minimum, 0x40 maximum value, each in the entry's storage length);
     /// returns the value info actually served (strings have no minimum/maximum; a field
     /// that does not fit the reply is left out) and the end offset.
-    fn value_info(&self, o: &Obj, e: &EntryDef, req: u8, d: &mut [u8]) -> (u8, usize) {
+    fn value_info(&self, o: &Obj, sub: u8, e: &EntryDef, req: u8, d: &mut [u8]) -> (u8, usize) {
         let len = e.storage_len();
         let mut vi = 0u8;
         let mut at = 10;
@@ -842,7 +838,7 @@ impl<P: Pdi, const N: usize, const M: usize> Slave<P, N, M> {
             vi |= 0x08;
         }
         if req & 0x10 != 0 && at + len <= d.len() {
-            self.od.default_of(o, e, &mut d[at..at + len]);
+            self.od.default_of(o, sub, e, &mut d[at..at + len]);
             at += len;
             vi |= 0x10;
         }

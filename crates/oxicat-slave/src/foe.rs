@@ -164,7 +164,7 @@ pub(crate) enum FoeState {
     Reading { packet: u32, offset: u32, len: u32 },
 }
 
-impl<P: Pdi, const N: usize, const M: usize> Slave<P, N, M> {
+impl<P: Pdi, const N: usize, const M: usize, const K: usize> Slave<P, N, M, K> {
     /// Ends a running FoE transfer (state change to INIT, mailbox restart).
     pub(crate) fn foe_reset<A: Application<N>>(&mut self, app: &mut A) {
         if self.foe != FoeState::Idle {

@@ -622,10 +622,50 @@ const fn assign_entries(a: Access) -> [EntryDef; MAX_ASSIGN + 1] {
     out
 }
 
+/// A mapping object's entries, one per subindex, as the dictionary listing
+/// ([`Od::object_info`], what the ESI is generated from) shows them: a table only host
+/// tools link. The stack serves the same entries from [`MAP_TEMPLATE`].
 static MAP_RW: [EntryDef; MAX_PDO_ENTRIES + 1] = map_entries(Access::RW_PREOP);
 static MAP_RO: [EntryDef; MAX_PDO_ENTRIES + 1] = map_entries(Access::RO);
+/// What the stack serves a mapping object from: subindex 0 and one entry that stands for
+/// subindexes 1..=n, named "Mapped object N" (its name followed by the subindex): two
+/// entries in a board image's flash instead of 32 (1.4 KB) and 31 names.
+static MAP_TEMPLATE: [EntryDef; 2] = [
+    e(0, "Number of entries", U8, Access::RW_PREOP),
+    e(1, "Mapped object ", U32, Access::RW_PREOP),
+];
+// The template is the table: the same entry but for the subindex and the name's number.
+const _: () = {
+    let (t, r) = (&MAP_TEMPLATE, &map_entries(Access::RW_PREOP));
+    assert!(t[0].sub == r[0].sub && t[0].bits == r[0].bits && t[0].access.0 == r[0].access.0);
+    assert!(t[1].bits == r[1].bits && t[1].access.0 == r[1].access.0);
+    assert!(t[1].dtype.code() == r[1].dtype.code() && t[0].dtype.code() == r[0].dtype.code());
+};
+/// An assignment object's entries, one per subindex, as the dictionary listing shows them
+/// (host tools only, as [`MAP_RW`]); the stack serves them from [`ASSIGN_TEMPLATE`].
 static ASSIGN_RW: [EntryDef; MAX_ASSIGN + 1] = assign_entries(Access::RW_PREOP);
 static ASSIGN_RO: [EntryDef; MAX_ASSIGN + 1] = assign_entries(Access::RO);
+/// What the stack serves 0x1C12/0x1C13 from: subindex 0 and one entry for subindexes
+/// 1..=n, named "PDO N".
+static ASSIGN_TEMPLATE: [EntryDef; 2] = [
+    e(0, "Number of assigned PDOs", U8, Access::RW_PREOP),
+    e(1, "PDO ", U16, Access::RW_PREOP),
+];
+/// Bytes an assignment object takes in the communication image (room for [`MAX_ASSIGN`]).
+const ASSIGN_STORAGE: usize = 1 + 2 * MAX_ASSIGN;
+const _: () = {
+    let (t, r) = (&ASSIGN_TEMPLATE, &assign_entries(Access::RW_PREOP));
+    assert!(t[0].sub == r[0].sub && t[0].bits == r[0].bits && t[0].access.0 == r[0].access.0);
+    assert!(t[1].bits == r[1].bits && t[1].access.0 == r[1].access.0);
+    assert!(t[1].dtype.code() == r[1].dtype.code() && t[0].dtype.code() == r[0].dtype.code());
+    let mut n = 0;
+    let mut i = 0;
+    while i < r.len() {
+        n += r[i].storage_len();
+        i += 1;
+    }
+    assert!(n == ASSIGN_STORAGE);
+};
 
 const fn sync_par_entries() -> [EntryDef; 12] {
     [
@@ -720,13 +760,13 @@ static COMM_HIGH: [ObjectDef; 5] = [
         index: 0x1C12,
         name: "RxPDO assign",
         code: ObjectCode::Array,
-        entries: &ASSIGN_RW,
+        entries: &ASSIGN_TEMPLATE,
     },
     ObjectDef {
         index: 0x1C13,
         name: "TxPDO assign",
         code: ObjectCode::Array,
-        entries: &ASSIGN_RW,
+        entries: &ASSIGN_TEMPLATE,
     },
     ObjectDef {
         index: 0x1C32,
@@ -742,15 +782,41 @@ static COMM_HIGH: [ObjectDef; 5] = [
     },
 ];
 
-const COMM_LOW_SIZE: usize = image_size(&COMM_LOW);
-const COMM_HIGH_SIZE: usize = image_size(&COMM_HIGH);
+/// Bytes a communication object takes in the communication image: an assignment object
+/// room for [`MAX_ASSIGN`] PDOs (its definition is the template), the others their entries.
+const fn comm_storage(o: &ObjectDef) -> usize {
+    if is_assign(o.index) {
+        ASSIGN_STORAGE
+    } else {
+        o.storage_len()
+    }
+}
+
+/// 0x1C12 or 0x1C13.
+const fn is_assign(index: u16) -> bool {
+    index == 0x1C12 || index == 0x1C13
+}
+
+/// Bytes `objs` take in the communication image.
+const fn comm_size(objs: &[ObjectDef]) -> usize {
+    let mut n = 0;
+    let mut i = 0;
+    while i < objs.len() {
+        n += comm_storage(&objs[i]);
+        i += 1;
+    }
+    n
+}
+
+const COMM_LOW_SIZE: usize = comm_size(&COMM_LOW);
+const COMM_HIGH_SIZE: usize = comm_size(&COMM_HIGH);
 
 /// Image offset of each object of `objs` (the sum of the sizes before it), at build time.
 const fn bases<const K: usize>(objs: &[ObjectDef; K]) -> [usize; K] {
     let mut b = [0; K];
     let mut i = 1;
     while i < K {
-        b[i] = b[i - 1] + objs[i - 1].storage_len();
+        b[i] = b[i - 1] + comm_storage(&objs[i - 1]);
         i += 1;
     }
     b
@@ -777,7 +843,7 @@ pub const MAP_POOL_MCU: usize = 512;
 pub const COMM_IMAGE_SIZE: usize = COMM_LOW_SIZE + COMM_HIGH_SIZE + MAP_POOL;
 
 /// Subindexes (after 0) the mapping object of `p` shows and stores.
-const fn map_shown(p: &PdoDef) -> usize {
+pub(crate) const fn map_shown(p: &PdoDef) -> usize {
     let n = p.entries.len();
     if !p.configurable {
         n
@@ -830,13 +896,114 @@ pub(crate) enum Kind {
     SyncPar,
 }
 
+/// The entries of a resolved object ([`Obj`]): a table of one [`EntryDef`] per subindex,
+/// or (a PDO mapping object) subindex 0 and one template entry that stands for subindexes
+/// 1..=n, each with its own subindex and named as the template followed by the subindex.
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct Entries {
+    table: &'static [EntryDef],
+    /// `table` is subindex 0 and a template (`table[1]`) …
+    template: bool,
+    /// … that stands for subindexes 1..=n.
+    n: u8,
+}
+
+impl Entries {
+    /// One entry per subindex.
+    pub const fn table(table: &'static [EntryDef]) -> Self {
+        Self {
+            table,
+            template: false,
+            n: 0,
+        }
+    }
+
+    /// Subindex 0 (`t[0]`) and subindexes 1..=`n` from the template `t[1]`.
+    const fn template(t: &'static [EntryDef; 2], n: u8) -> Self {
+        Self {
+            table: t,
+            template: true,
+            n,
+        }
+    }
+
+    /// Number of entries.
+    pub fn len(self) -> usize {
+        if !self.template {
+            self.table.len()
+        } else {
+            1 + self.n as usize
+        }
+    }
+
+    /// The `i`-th entry: its subindex and definition (for a template entry the template's,
+    /// whose own subindex is not the entry's).
+    pub fn get(self, i: usize) -> Option<(u8, &'static EntryDef)> {
+        if !self.template {
+            self.table.get(i).map(|e| (e.sub, e))
+        } else if i == 0 {
+            self.table.first().map(|e| (0, e))
+        } else if i <= self.n as usize {
+            self.table.get(1).map(|e| (i as u8, e))
+        } else {
+            None
+        }
+    }
+
+    /// The entries in subindex order, with their subindexes.
+    pub fn iter(self) -> impl Iterator<Item = (u8, &'static EntryDef)> {
+        (0..self.len()).filter_map(move |i| self.get(i))
+    }
+
+    /// The distinct definitions of the entries (each once: a template's once for all its
+    /// subindexes), for a question about any entry of the object.
+    pub fn defs(self) -> &'static [EntryDef] {
+        if self.template && self.n == 0 {
+            &self.table[..1]
+        } else {
+            self.table
+        }
+    }
+
+    /// The last entry.
+    pub fn last(self) -> Option<(u8, &'static EntryDef)> {
+        self.len().checked_sub(1).and_then(|i| self.get(i))
+    }
+
+    /// Writes the name of entry `sub` (`e`, as [`Entries::get`] gives it) into `out`, cut
+    /// to its length; returns the bytes written. A template entry's name is the template's
+    /// followed by the subindex in decimal ("Mapped object 7").
+    pub fn name_into(self, sub: u8, e: &EntryDef, out: &mut [u8]) -> usize {
+        let name = e.name.as_bytes();
+        let mut n = name.len().min(out.len());
+        out[..n].copy_from_slice(&name[..n]);
+        if self.template && sub != 0 {
+            let digits = [sub / 100, sub / 10 % 10, sub % 10];
+            let first = if sub >= 100 {
+                0
+            } else if sub >= 10 {
+                1
+            } else {
+                2
+            };
+            for d in &digits[first..] {
+                if n < out.len() {
+                    out[n] = b'0' + d;
+                    n += 1;
+                }
+            }
+        }
+        n
+    }
+}
+
 /// A resolved object: its definition and where its values are.
 #[derive(Debug, Clone, Copy)]
 pub(crate) struct Obj {
     pub index: u16,
     pub name: &'static str,
     pub code: ObjectCode,
-    pub entries: &'static [EntryDef],
+    pub entries: Entries,
     pub area: Area,
     pub base: usize,
     pub kind: Kind,
@@ -850,8 +1017,8 @@ impl Obj {
     /// Position and image offset of subindex `sub`.
     pub fn entry(&self, sub: u8) -> Option<(usize, &'static EntryDef, usize)> {
         let mut off = self.base;
-        for (i, e) in self.entries.iter().enumerate() {
-            if e.sub == sub {
+        for (i, (s, e)) in self.entries.iter().enumerate() {
+            if s == sub {
                 return Some((i, e, off));
             }
             off += e.storage_len();
@@ -861,7 +1028,7 @@ impl Obj {
 
     /// Highest defined subindex.
     pub fn max_sub(&self) -> u8 {
-        self.entries.last().map_or(0, |e| e.sub)
+        self.entries.last().map_or(0, |(s, _)| s)
     }
 
     /// Access rights of entry `e` of this object.
@@ -1311,6 +1478,11 @@ impl<const N: usize> Od<N> {
         }
         let mut off = 0;
         for o in COMM_LOW.iter().chain(COMM_HIGH.iter()) {
+            if is_assign(o.index) {
+                // Set from the definition below (the rest of the room stays zero).
+                off += ASSIGN_STORAGE;
+                continue;
+            }
             for en in o.entries {
                 let len = en.storage_len();
                 write_default(&mut self.comm[off..off + len], en, o);
@@ -1400,11 +1572,12 @@ impl<const N: usize> Od<N> {
                 // A fixed assignment shows only its entries, read-only; a configurable
                 // one ASSIGN_SHOWN slots, or as many as its default assignment fills.
                 r.read_only = !d.assign_configurable;
-                r.entries = if d.assign_configurable {
-                    &ASSIGN_RW[..len.clamp(ASSIGN_SHOWN, MAX_ASSIGN) + 1]
+                let shown = if d.assign_configurable {
+                    len.clamp(ASSIGN_SHOWN, MAX_ASSIGN)
                 } else {
-                    &ASSIGN_RW[..len + 1]
+                    len
                 };
+                r.entries = Entries::template(&ASSIGN_TEMPLATE, shown as u8);
             }
             return Some(r);
         }
@@ -1427,7 +1600,7 @@ impl<const N: usize> Od<N> {
             index: o.index,
             name: o.name,
             code: o.code,
-            entries: o.entries,
+            entries: Entries::table(o.entries),
             area: Area::App,
             base,
             kind: Kind::Plain,
@@ -1440,7 +1613,7 @@ impl<const N: usize> Od<N> {
             index: o.index,
             name: o.name,
             code: o.code,
-            entries: o.entries,
+            entries: Entries::table(o.entries),
             area: Area::Comm,
             base,
             kind,
@@ -1449,9 +1622,9 @@ impl<const N: usize> Od<N> {
     }
 
     fn map_obj(&self, p: &'static PdoDef, slot: usize, kind: Kind) -> Obj {
-        // One table for fixed and configurable mappings: a fixed one is read-only
+        // One template for fixed and configurable mappings: a fixed one is read-only
         // through `Obj::read_only`.
-        let entries: &'static [EntryDef] = &MAP_RW[..map_shown(p) + 1];
+        let entries = Entries::template(&MAP_TEMPLATE, map_shown(p) as u8);
         // The mapping objects lie in definition order (RxPDOs, then TxPDOs), each its size.
         let d = self.def();
         let before: usize = d
@@ -1473,10 +1646,10 @@ impl<const N: usize> Od<N> {
         }
     }
 
-    /// Writes the default value of entry `e` of `o` (as [`Od::reset_defaults`] sets it:
-    /// from the definition, including the values derived from the [`DeviceDef`]) into
+    /// Writes the default value of entry `sub` (`e`) of `o` (as [`Od::reset_defaults`] sets
+    /// it: from the definition, including the values derived from the [`DeviceDef`]) into
     /// `out` (its storage length, little endian).
-    pub(crate) fn default_of(&self, o: &Obj, e: &EntryDef, out: &mut [u8]) {
+    pub(crate) fn default_of(&self, o: &Obj, sub: u8, e: &EntryDef, out: &mut [u8]) {
         out.fill(0);
         let d = self.def();
         let put = |out: &mut [u8], v: u64| {
@@ -1488,7 +1661,7 @@ impl<const N: usize> Od<N> {
             let n = out.len().min(s.len());
             out[..n].copy_from_slice(&s.as_bytes()[..n]);
         };
-        match (o.kind, o.index, e.sub) {
+        match (o.kind, o.index, sub) {
             (Kind::Plain, 0x1000, 0) => put(out, d.device_type as u64),
             (Kind::Plain, 0x1008, 0) => put_str(out, d.name),
             (Kind::Plain, 0x1009, 0) => put_str(out, d.hw_version),
@@ -1530,7 +1703,7 @@ impl<const N: usize> Od<N> {
             (Kind::SyncPar, _, 6) => put(out, d.sync.calc_copy_ns as u64),
             _ => match e.default {
                 DefaultValue::Bits(v) => {
-                    let v = if e.sub == 0 && o.code != ObjectCode::Var && v == 0 {
+                    let v = if sub == 0 && o.code != ObjectCode::Var && v == 0 {
                         o.max_sub() as u64
                     } else {
                         v
@@ -1554,8 +1727,10 @@ impl<const N: usize> Od<N> {
         // server and SDO information take the access from `Obj::access`).
         let entries = match o.kind {
             Kind::RxMap | Kind::TxMap if o.read_only => &MAP_RO[..o.entries.len()],
+            Kind::RxMap | Kind::TxMap => &MAP_RW[..o.entries.len()],
             Kind::RxAssign | Kind::TxAssign if o.read_only => &ASSIGN_RO[..o.entries.len()],
-            _ => o.entries,
+            Kind::RxAssign | Kind::TxAssign => &ASSIGN_RW[..o.entries.len()],
+            _ => o.entries.table,
         };
         Some(ObjectInfo {
             index: o.index,

@@ -14,7 +14,7 @@ use crate::esm::{AlState, AlStatusCode};
 use crate::foe::{FoeFiles, FoeState};
 use crate::od::{DefError, EntryRef, Od};
 use crate::pdi::{reg, Pdi};
-use crate::pdo::{self, Dir, Mapping, MAX_PD_BYTES};
+use crate::pdo::{self, Dir, Mapping, MAX_ITEMS, MAX_PD_BYTES};
 
 /// Hooks through which the stack calls the application.
 pub trait Application<const N: usize> {
@@ -63,6 +63,17 @@ pub enum InitError<E> {
     Def(DefError),
     /// A mailbox of the definition is larger than the stack's buffer `M` or too small.
     MailboxSize,
+    /// The definition's default PDO mapping of one direction (`assign`: 0x1C12 outputs,
+    /// 0x1C13 inputs) compiles to more copy steps than the stack holds (its `K`; size it
+    /// with [`crate::pdo::map_steps`]).
+    MappingCapacity {
+        /// The assignment object of the direction (0x1C12 or 0x1C13).
+        assign: u16,
+        /// Copy steps the mapping needs.
+        needed: usize,
+        /// Copy steps the stack holds (`K`).
+        capacity: usize,
+    },
     /// The ESC could not be accessed.
     Pdi(E),
 }
@@ -131,10 +142,13 @@ impl SyncDiag {
     }
 }
 
+/// The mailbox side of the stack. One reply buffer: a reply is built in `last` and written
+/// to SM1 at once, and nothing new is served while the master has not read the previous
+/// reply (`posted`), so `last` is always the reply a repeat request asks for.
 pub(crate) struct MbxState<const M: usize> {
     pub running: bool,
     pub boot: bool,
-    pub out: [u8; M],
+    /// A reply built in `last` and not written to SM1 yet (its length).
     pub out_len: usize,
     pub last: [u8; M],
     pub last_len: usize,
@@ -152,7 +166,6 @@ impl<const M: usize> MbxState<M> {
         Self {
             running: false,
             boot: false,
-            out: [0; M],
             out_len: 0,
             last: [0; M],
             last_len: 0,
@@ -169,7 +182,6 @@ impl<const M: usize> MbxState<M> {
     /// Back to [`MbxState::new`] in place.
     fn clear(&mut self) {
         self.boot = false;
-        self.out.fill(0);
         self.last.fill(0);
         self.out_counter = 0;
         self.rx.fill(0);
@@ -201,13 +213,13 @@ impl<const M: usize> MbxState<M> {
 ///     loop { slave.poll(&mut pdi, &mut app).ok(); }
 /// }
 /// ```
-pub struct SlaveSlot<P: Pdi, const N: usize, const M: usize = 256> {
-    slave: Slave<P, N, M>,
+pub struct SlaveSlot<P: Pdi, const N: usize, const M: usize = 256, const K: usize = MAX_ITEMS> {
+    slave: Slave<P, N, M, K>,
     /// The last [`SlaveSlot::start`] succeeded and no [`SlaveSlot::stop`] followed.
     running: bool,
 }
 
-impl<P: Pdi, const N: usize, const M: usize> SlaveSlot<P, N, M> {
+impl<P: Pdi, const N: usize, const M: usize, const K: usize> SlaveSlot<P, N, M, K> {
     /// An empty slot (usable in a `static`).
     pub const fn new() -> Self {
         Self {
@@ -222,7 +234,7 @@ impl<P: Pdi, const N: usize, const M: usize> SlaveSlot<P, N, M> {
         &mut self,
         def: &'static DeviceDef,
         pdi: &mut P,
-    ) -> Result<&mut Slave<P, N, M>, InitError<P::Error>> {
+    ) -> Result<&mut Slave<P, N, M, K>, InitError<P::Error>> {
         self.running = false;
         self.slave.init(def, pdi)?;
         self.running = true;
@@ -236,17 +248,17 @@ impl<P: Pdi, const N: usize, const M: usize> SlaveSlot<P, N, M> {
     }
 
     /// The stack, when the last [`SlaveSlot::start`] succeeded and no stop followed.
-    pub fn slave(&self) -> Option<&Slave<P, N, M>> {
+    pub fn slave(&self) -> Option<&Slave<P, N, M, K>> {
         self.running.then_some(&self.slave)
     }
 
     /// The stack, mutably, when it runs (as [`SlaveSlot::slave`]).
-    pub fn slave_mut(&mut self) -> Option<&mut Slave<P, N, M>> {
+    pub fn slave_mut(&mut self) -> Option<&mut Slave<P, N, M, K>> {
         self.running.then_some(&mut self.slave)
     }
 }
 
-impl<P: Pdi, const N: usize, const M: usize> Default for SlaveSlot<P, N, M> {
+impl<P: Pdi, const N: usize, const M: usize, const K: usize> Default for SlaveSlot<P, N, M, K> {
     fn default() -> Self {
         Self::new()
     }
@@ -255,13 +267,16 @@ impl<P: Pdi, const N: usize, const M: usize> Default for SlaveSlot<P, N, M> {
 /// The EtherCAT slave stack.
 ///
 /// `N` is the application image size (at least [`crate::od::image_size`] of the
-/// definition's objects), `M` the mailbox buffer size (at least both mailbox lengths).
+/// definition's objects), `M` the mailbox buffer size (at least both mailbox lengths), `K`
+/// the copy steps a compiled PDO mapping of one direction holds (8 bytes each; a board
+/// image sizes it to its device with [`crate::pdo::map_steps`], the default
+/// [`MAX_ITEMS`] takes any mapping the stack accepts).
 ///
 /// The stack does not own its [`Pdi`]: every event takes it (`slave.poll(&mut pdi, &mut
 /// app)`), so the firmware's main (or the simulator, which owns the ESC) keeps the ESC
 /// access and lends it per call. `P` fixes which PDI type (and error type) the stack is
 /// used with.
-pub struct Slave<P: Pdi, const N: usize, const M: usize = 256> {
+pub struct Slave<P: Pdi, const N: usize, const M: usize = 256, const K: usize = MAX_ITEMS> {
     _pdi: PhantomData<fn() -> P>,
     pub(crate) od: Od<N>,
     pub(crate) state: AlState,
@@ -270,8 +285,8 @@ pub struct Slave<P: Pdi, const N: usize, const M: usize = 256> {
     pub(crate) mbx: MbxState<M>,
     pub(crate) sdo: SdoState,
     pub(crate) foe: FoeState,
-    rx_map: Mapping,
-    tx_map: Mapping,
+    rx_map: Mapping<K>,
+    tx_map: Mapping<K>,
     sync: SyncMode,
     pd: [u8; MAX_PD_BYTES],
     stats: Stats,
@@ -298,7 +313,7 @@ enum PdStep {
 
 type R<P> = Result<(), <P as Pdi>::Error>;
 
-impl<P: Pdi, const N: usize, const M: usize> Slave<P, N, M> {
+impl<P: Pdi, const N: usize, const M: usize, const K: usize> Slave<P, N, M, K> {
     /// Creates the stack: checks the definition, fills the dictionary with defaults,
     /// deactivates every SyncManager, sets the AL event mask and AL status INIT through
     /// `pdi`. The value is several KB: a microcontroller builds it in place in a static
@@ -342,7 +357,10 @@ impl<P: Pdi, const N: usize, const M: usize> Slave<P, N, M> {
     }
 
     /// [`Slave::new`] in place: every field set where it is (no temporary `Slave`, image or
-    /// mailbox buffer on the stack). On an error the value is not a usable stack.
+    /// mailbox buffer on the stack). On an error the value is not a usable stack. Not
+    /// inlined: start-up runs once, and its buffers (the mapping walk's) would join the
+    /// frame of the firmware's `main`, which the request handlers stand on.
+    #[inline(never)]
     fn init(&mut self, def: &'static DeviceDef, pdi: &mut P) -> Result<(), InitError<P::Error>> {
         self.od.init(def).map_err(InitError::Def)?;
         self.diag = SyncDiag::new(&self.od).map_err(InitError::Def)?;
@@ -351,6 +369,19 @@ impl<P: Pdi, const N: usize, const M: usize> Slave<P, N, M> {
         };
         if !fits(&def.mailbox) || def.boot_mailbox.is_some_and(|m| !fits(&m)) {
             return Err(InitError::MailboxSize);
+        }
+        // The default mappings must compile into `K` steps (a mapping that does not check
+        // at all is refused as before, when the master requests SAFEOP).
+        for (dir, assign) in [(Dir::Rx, 0x1C12), (Dir::Tx, 0x1C13)] {
+            if let Ok(needed) = pdo::steps(&self.od, dir) {
+                if needed > K {
+                    return Err(InitError::MappingCapacity {
+                        assign,
+                        needed,
+                        capacity: K,
+                    });
+                }
+            }
         }
         self.state = AlState::Init;
         self.error = false;
@@ -427,7 +458,7 @@ impl<P: Pdi, const N: usize, const M: usize> Slave<P, N, M> {
         self.rx_map.bytes()
     }
 
-    pub(crate) fn rx_mapping(&self) -> &Mapping {
+    pub(crate) fn rx_mapping(&self) -> &Mapping<K> {
         &self.rx_map
     }
 
@@ -450,7 +481,7 @@ impl<P: Pdi, const N: usize, const M: usize> Slave<P, N, M> {
             PdStep::Idle => {}
             PdStep::Rx => {
                 self.pd_step = PdStep::Tx;
-                // In place (a Mapping is 0.5 KB); below SAFEOP the mapping is unused, so a
+                // In place (no Mapping on the stack); below SAFEOP the mapping is unused, so a
                 // refused one may leave a part of it there.
                 match pdo::compile_into(&self.od, Dir::Tx, &mut self.tx_map) {
                     Ok(()) => {}
@@ -967,12 +998,12 @@ impl<P: Pdi, const N: usize, const M: usize> Slave<P, N, M> {
         // Checked first and compiled into the stack's own mappings only when the transition
         // is taken: a refused one leaves the active mappings as they were, and no mapping
         // is built on the stack.
-        let rx = match pdo::check(&self.od, Dir::Rx) {
-            Ok(n) => n,
+        let rx = match pdo::check(&self.od, Dir::Rx, K) {
+            Ok((bytes, _)) => bytes,
             Err(_) => return Ok(Err(AlStatusCode::INVALID_OUTPUT_MAPPING)),
         };
-        let tx = match pdo::check(&self.od, Dir::Tx) {
-            Ok(n) => n,
+        let tx = match pdo::check(&self.od, Dir::Tx, K) {
+            Ok((bytes, _)) => bytes,
             Err(_) => return Ok(Err(AlStatusCode::INVALID_INPUT_MAPPING)),
         };
         self.start_pd_with(pdi, app, rx, tx, true)
@@ -1128,33 +1159,31 @@ impl<P: Pdi, const N: usize, const M: usize> Slave<P, N, M> {
             pdi.write(reg::sm(1, 7), &[p1])?;
         }
         for _ in 0..2 {
-            if !self.mbx.posted && self.mbx.out_len > 0 {
-                let n = self.mbx.out_len;
-                self.mbx.last[..n].copy_from_slice(&self.mbx.out[..n]);
-                self.mbx.last_len = n;
-                self.mbx.out_len = 0;
-                self.write_sm1_last(pdi, mb)?;
-            }
-            if self.mbx.out_len > 0 {
+            // Nothing new while the master has not read the last reply (it stays in
+            // `last` for a repeat request).
+            if self.mbx.posted {
                 break;
             }
             // Continuations (segmented SDO info lists) and emergencies before new requests.
-            if self.sdo_continue() {
-                continue;
-            }
-            if let Some(e) = self.mbx.emcy.iter_mut().find_map(|e| e.take()) {
-                let mut p = [0u8; 10];
-                if e.write_coe(&mut p).is_ok() {
-                    self.queue_reply(MailboxType::Coe, &p);
+            if !self.sdo_continue() {
+                if let Some(e) = self.mbx.emcy.iter_mut().find_map(|e| e.take()) {
+                    let mut p = [0u8; 10];
+                    if e.write_coe(&mut p).is_ok() {
+                        self.queue_reply(MailboxType::Coe, &p);
+                    }
+                } else {
+                    let st = pdi.read_u8(reg::sm(0, 5))?;
+                    if st & 0x08 == 0 {
+                        break;
+                    }
+                    self.read_sm0(pdi, mb)?;
+                    self.handle_request(app, mb);
                 }
-                continue;
             }
-            let st = pdi.read_u8(reg::sm(0, 5))?;
-            if st & 0x08 == 0 {
-                break;
+            if self.mbx.out_len > 0 {
+                self.mbx.last_len = core::mem::take(&mut self.mbx.out_len);
+                self.write_sm1_last(pdi, mb)?;
             }
-            self.read_sm0(pdi, mb)?;
-            self.handle_request(app, mb);
         }
         Ok(())
     }
@@ -1186,8 +1215,8 @@ impl<P: Pdi, const N: usize, const M: usize> Slave<P, N, M> {
         Ok(())
     }
 
-    /// Queues a reply (header written here with the next counter); the service data is
-    /// `payload`.
+    /// Queues a reply (header written here with the next counter; built in the reply
+    /// buffer, written to SM1 when the handler returns); the service data is `payload`.
     pub(crate) fn queue_reply(&mut self, t: MailboxType, payload: &[u8]) {
         let max = self.mbx_def().tx_len as usize;
         let n = MAILBOX_HEADER_LEN + payload.len();
@@ -1196,8 +1225,8 @@ impl<P: Pdi, const N: usize, const M: usize> Slave<P, N, M> {
         }
         self.mbx.out_counter = MailboxHeader::next_counter(self.mbx.out_counter);
         let h = MailboxHeader::new(payload.len() as u16, 0, t, self.mbx.out_counter);
-        if h.write(&mut self.mbx.out[..]).is_ok() {
-            self.mbx.out[MAILBOX_HEADER_LEN..n].copy_from_slice(payload);
+        if h.write(&mut self.mbx.last[..]).is_ok() {
+            self.mbx.last[MAILBOX_HEADER_LEN..n].copy_from_slice(payload);
             self.mbx.out_len = n;
         }
     }

@@ -14,14 +14,15 @@ use oxicat_wire::mailbox::{write_mailbox, MailboxHeader, MailboxRef, MailboxType
 use oxicat_wire::{Command, DatagramHeader, EcatFrame};
 
 /// The bench: an ESC with station address [`STATION`], the firmware's PDI to it, the stack
-/// and the application. Every frame advances ESC time by 10 µs.
-pub struct Bench<P: Port, A = App, const N: usize = IMG> {
+/// and the application. Every frame advances ESC time by 10 µs. `K`: the stack's copy steps
+/// per compiled mapping (its default: any mapping the stack accepts).
+pub struct Bench<P: Port, A = App, const N: usize = IMG, const K: usize = { pdo::MAX_ITEMS }> {
     /// The firmware's PDI (the ESC itself, or a driver).
     pub drv: P::Pdi,
     /// The master's access to the ESC (and the SPI counters).
     pub port: P,
     /// The slave stack.
-    pub s: Slave<P::Pdi, N, MBX>,
+    pub s: Slave<P::Pdi, N, MBX, K>,
     /// The application.
     pub app: A,
     /// ESC time in ns.
@@ -32,7 +33,7 @@ pub struct Bench<P: Port, A = App, const N: usize = IMG> {
     pub sync0: u64,
 }
 
-impl<P: Port, A, const N: usize> Bench<P, A, N> {
+impl<P: Port, A, const N: usize, const K: usize> Bench<P, A, N, K> {
     /// SPI traffic since the last reset (`None` on the software ESC).
     pub fn bus_stats(&self) -> Option<BusStats> {
         self.port.bus_stats()
@@ -47,7 +48,7 @@ impl<P: Port, A, const N: usize> Bench<P, A, N> {
 }
 
 /// Every bench checks at the end that the simulated SPI chip saw no malformed frame.
-impl<P: Port, A, const N: usize> Drop for Bench<P, A, N> {
+impl<P: Port, A, const N: usize, const K: usize> Drop for Bench<P, A, N, K> {
     fn drop(&mut self) {
         if !std::thread::panicking() {
             self.assert_no_protocol_errors();
@@ -68,6 +69,14 @@ impl<P: Port> Default for Bench<P> {
     }
 }
 
+impl<P: Port, const K: usize> Bench<P, App, IMG, K> {
+    /// The test device with its default application, on a stack whose compiled mappings
+    /// hold `K` copy steps per direction.
+    pub fn with_steps() -> Self {
+        Bench::on(&DEF, App::default())
+    }
+}
+
 impl<P: Port, A: Application<IMG>> Bench<P, A> {
     /// The test device whose firmware runs `app`.
     pub fn with_app(app: A) -> Self {
@@ -75,7 +84,13 @@ impl<P: Port, A: Application<IMG>> Bench<P, A> {
     }
 }
 
-impl<P: Port, A: Application<N>, const N: usize> Bench<P, A, N> {
+impl<P: Port, A: Application<N>, const N: usize, const K: usize> Bench<P, A, N, K> {
+    /// Device `def` running `app` on the port's ESC and an SII image of `def` ([`Bench::with`]
+    /// with the port's configuration and a 20 MHz bus).
+    pub fn on(def: &'static DeviceDef, app: A) -> Self {
+        Bench::with(def, app, P::esc_config(), BusConfig::mhz(20))
+    }
+
     /// Device `def` running `app` on an ESC built from `cfg` and an SII image of `def`; SPI
     /// ports clock at `bus`. The station address is set.
     pub fn with(def: &'static DeviceDef, app: A, cfg: EscConfig, bus: BusConfig) -> Self {

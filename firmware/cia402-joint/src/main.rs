@@ -50,6 +50,10 @@ use stm32f4xx_hal::{
 
 /// Mailbox buffer size of the stack: the drive's mailboxes are 128 bytes.
 const MBX: usize = 128;
+/// Copy steps per direction of the stack's compiled PDO mappings, sized to the device
+/// (`pdo::map_steps`: 31, the entries of one configurable PDO; the default of 64 would be
+/// 528 B more RAM, 2 × 33 × 8).
+const MAP: usize = oxicat_slave::pdo::map_steps(&device::DEF);
 /// The main loop polls the stack every 20 current-loop ticks (1 ms). In free run that is
 /// also the application cycle, which matches the cycle the drive assumes when 0x1C32:02
 /// does not say (`DriveParams::cycle_s`, 1 ms).
@@ -63,10 +67,10 @@ const PRIO_CURRENT_LOOP: u8 = 0x10;
 const PRIO_ESC: u8 = 0x20;
 
 type Esc = Et1100Spi<EscSpi>;
-type JointSlave = Slave<Esc, { device::IMAGE }, MBX>;
+type JointSlave = Slave<Esc, { device::IMAGE }, MBX, MAP>;
 /// Where [`JointSlave`] is built in place: `main`'s `static mut`, all zero in `.bss` until
 /// [`start_stack`] starts it (no `Slave` value on the stack, no copy of one).
-type StackSlot = SlaveSlot<Esc, { device::IMAGE }, MBX>;
+type StackSlot = SlaveSlot<Esc, { device::IMAGE }, MBX, MAP>;
 type Drive = Cia402Drive<Sensors>;
 
 /// The stack, its ESC driver and the drive (the application the stack's hooks call).

@@ -64,6 +64,10 @@ pub static OXICAT_LEG_SIDE: u8 = match SIDE {
 
 /// Mailbox buffer size of the stack: the leg node's mailboxes are 128 bytes.
 const MBX: usize = 128;
+/// Copy steps per direction of the stack's compiled PDO mappings, sized to the device
+/// (`pdo::map_steps`: 14 output steps, 5 input steps; both legs have the same PDOs; the
+/// default of 64 would be 2 × 50 × 8 = 800 B more RAM).
+const MAP: usize = oxicat_slave::pdo::map_steps(&device::LEFT);
 /// Joint-loop rate (`laelaps::hw::CONTROL_PERIOD_S`).
 const JOINT_LOOP_HZ: u32 = 10_000;
 /// The main loop polls the stack every 4 joint-loop ticks (400 µs), as the rig does
@@ -77,10 +81,10 @@ const PRIO_JOINT_LOOP: u8 = 0x10;
 const PRIO_ESC: u8 = 0x20;
 
 type Esc = Lan9252<EscSpi>;
-type LegSlave = Slave<Esc, { device::IMAGE }, MBX>;
+type LegSlave = Slave<Esc, { device::IMAGE }, MBX, MAP>;
 /// Where [`LegSlave`] is built in place: `main`'s `static mut`, all zero in `.bss` until
 /// [`start_stack`] starts it (no `Slave` value on the stack, no copy of one).
-type StackSlot = SlaveSlot<Esc, { device::IMAGE }, MBX>;
+type StackSlot = SlaveSlot<Esc, { device::IMAGE }, MBX, MAP>;
 type Node = LegNode<BoardPwm, Encoders, BoardLeds>;
 
 /// The stack and its ESC driver.

@@ -36,8 +36,12 @@ static DEF: DeviceDef = demo::DEF.for_image();
 /// Mailbox buffer size of the stack: the demo's mailboxes are 128 bytes.
 const MBX: usize = 128;
 
+/// Copy steps per direction of the stack's compiled PDO mappings: what the demo device's
+/// fixed mapping compiles to (13 outputs, 5 inputs; the default of 64 would be 1 KB of RAM).
+const MAP: usize = oxicat_slave::pdo::map_steps(&demo::DEF);
+
 /// The stack type of this image.
-type Stack = Slave<StubPdi, { demo::IMAGE }, MBX>;
+type Stack = Slave<StubPdi, { demo::IMAGE }, MBX, MAP>;
 
 /// Bytes of the stack's state (the `Slave` value), readable from the ELF symbol table.
 #[no_mangle]
@@ -166,7 +170,7 @@ extern "C" {
 fn main() -> ! {
     // The stack's state, built in place in `.bss` (cortex-m-rt hands `main` a `&'static
     // mut`): no `Slave` value on the stack and no copy of one.
-    static mut SLOT: SlaveSlot<StubPdi, { demo::IMAGE }, MBX> = SlaveSlot::new();
+    static mut SLOT: SlaveSlot<StubPdi, { demo::IMAGE }, MBX, MAP> = SlaveSlot::new();
     let mut pdi = StubPdi;
     let mut app = WithFoe {
         app: Demo::new(BoardLeds, BoardButtons),

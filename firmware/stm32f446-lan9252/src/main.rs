@@ -31,6 +31,10 @@ use stm32f4xx_hal::{
 /// Mailbox buffer size of the stack: the demo's mailboxes are 128 bytes.
 const MBX: usize = 128;
 
+/// Copy steps per direction of the stack's compiled PDO mappings: what the demo device's
+/// fixed mapping compiles to (13 outputs, 5 inputs; the default of 64 would be 1 KB of RAM).
+const MAP: usize = oxicat_slave::pdo::map_steps(&demo::DEF);
+
 /// The ESC: the LAN9252 on SPI1, IRQ on PA10, SYNC0 on PB3, SYNC1 on PB5.
 type Esc = Lan9252<EscSpi, Pins<Pin<'A', 10, Input>, Pin<'B', 3, Input>, Pin<'B', 5, Input>>>;
 
@@ -81,7 +85,7 @@ fn fail(leds: &mut BoardLeds, delay: &mut impl embedded_hal::delay::DelayNs) -> 
 fn main() -> ! {
     // The stack's state, built in place in `.bss` (cortex-m-rt hands `main` a `&'static
     // mut`): no `Slave` value in `main`'s frame and no copy of one.
-    static mut SLOT: SlaveSlot<Esc, { demo::IMAGE }, MBX> = SlaveSlot::new();
+    static mut SLOT: SlaveSlot<Esc, { demo::IMAGE }, MBX, MAP> = SlaveSlot::new();
     let dp = pac::Peripherals::take().unwrap();
     let cp = cortex_m::Peripherals::take().unwrap();
     // Why the MCU (re)started: RCC_CSR's reset flags, cleared (RMVF) for the next reset.

@@ -52,6 +52,10 @@ use store::FlashStore;
 
 /// Mailbox buffer size of the stack: the board's mailboxes are 128 bytes.
 const MBX: usize = 128;
+/// Copy steps per direction of the stack's compiled PDO mappings, sized to the device
+/// (`pdo::map_steps`: 54, every entry of the PDOs its configurable assignment can take; the
+/// default of 64 would be 2 × 10 × 8 = 160 B more RAM).
+const MAP: usize = oxicat_slave::pdo::map_steps(&device::DEF);
 /// Current-loop ticks per service-routine run (20 kHz / 1 kHz).
 const TICKS_PER_SERVICE: u32 = board::CURRENT_LOOP_HZ / 1000;
 /// The main loop polls the stack every 20 current-loop ticks (1 ms).
@@ -63,10 +67,10 @@ const PRIO_CURRENT_LOOP: u8 = 0x10;
 const PRIO_ESC: u8 = 0x20;
 
 type Esc = Lan9252<EscSpi>;
-type TueSlave = Slave<Esc, { device::IMAGE }, MBX>;
+type TueSlave = Slave<Esc, { device::IMAGE }, MBX, MAP>;
 /// Where [`TueSlave`] is built in place: `main`'s `static mut`, all zero in `.bss` until
 /// [`start_stack`] starts it (no `Slave` value on the stack, no copy of one).
-type StackSlot = SlaveSlot<Esc, { device::IMAGE }, MBX>;
+type StackSlot = SlaveSlot<Esc, { device::IMAGE }, MBX, MAP>;
 type Firmware = TuEs030<TueBoard>;
 /// The stack's application: the device's hooks, and the FoE update flow on the flash
 /// store (the host rig's `WithFoe<_, FirmwareUpdate<_>>`, on flash instead of RAM).

@@ -356,13 +356,19 @@ impl Default for Supervisor {
     }
 }
 
+/// Copy steps per direction of the hub stack's compiled PDO mappings, sized to the device:
+/// `pdo::map_steps(&device::DEF)` (a test checks it; computed here, the constant formed a
+/// query cycle with the stack type in some rustc runs); the default of 64 would be 992 B
+/// more RAM in the board image.
+pub const MAP: usize = 2;
+
 /// The hub's stack type on PDI `P`.
-pub type HubSlave<P> = Slave<P, IMAGE, MBX>;
+pub type HubSlave<P> = Slave<P, IMAGE, MBX, MAP>;
 
 /// Where the hub's stack is built, in place ([`SlaveSlot`]): a board image's
 /// `static mut` (all zero, in `.bss`), a `Box` on a host. Built as a value and kept in an
 /// `Option`, the stack and its moves took an 18 KB frame in the board image.
-pub type HubSlot<P> = SlaveSlot<P, IMAGE, MBX>;
+pub type HubSlot<P> = SlaveSlot<P, IMAGE, MBX, MAP>;
 
 /// The firmware main: owns the slave stack (while the ESC answers) and the application,
 /// lends the PDI to the stack per event, and supervises the EtherCAT side. Nothing in it
