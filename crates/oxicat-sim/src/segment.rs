@@ -714,7 +714,21 @@ impl<E: SegmentEsc> Segment<E> {
     /// costs O(log n) instead of a read of every slot
     /// ([`set_reference_scheduler`](Self::set_reference_scheduler) keeps that way, to
     /// compare).
+    #[inline(always)]
     fn run_events_until(&mut self, t: u64) {
+        // Nothing due, the common case at a frame's hop: one look at the first entry.
+        if self.dirty.is_empty()
+            && !self.reference
+            && self.queue.peek().is_none_or(|(at, _, _)| at > t)
+        {
+            return;
+        }
+        self.run_events_due(t);
+    }
+
+    /// [`run_events_until`](Self::run_events_until) when something may be due.
+    #[inline(never)]
+    fn run_events_due(&mut self, t: u64) {
         if self.reference {
             return self.run_events_reference(t);
         }
