@@ -4,7 +4,8 @@
 //!
 //! ```text
 //! cargo run --release -p oxicat --example segment_scale -- [--kind demo,twin] \
-//!     [--n 16,64,256,1000] [--seconds 10] [--cycle-us 1000] [--rt] [--per-esc-walk] [--idle]
+//!     [--n 16,64,256,1000] [--seconds 10] [--cycle-us 1000] [--rt] [--spin] [--per-esc-walk]
+//!     [--idle]
 //! ```
 //!
 //! Columns: late cycles (an exchange that ended after the next cycle was due), the round
@@ -14,7 +15,9 @@
 //! and the resident memory the segment added per slave. `demo` is the firmware-hosting
 //! demo device; `twin` an EL2008 twin built from Beckhoff's ESI (an ESC with its SII and
 //! SM/FMMU set-up, no firmware), from `../shared/reference/esi-vendor` or
-//! `OXICAT_REFERENCE`. `--rt` serves from a SCHED_FIFO thread (root); `--per-esc-walk` turns
+//! `OXICAT_REFERENCE`. `--rt` serves from a SCHED_FIFO thread (root); `--spin` busy-polls
+//! for frames (`oxicat sim --spin`: no wakeup per frame, one core at 100 %, so the CPU
+//! column is the whole cycle); `--per-esc-walk` turns
 //! the segment's configured-address dispatch off (every ESC walks every datagram, as before
 //! it), for before/after figures from one binary. `--idle` runs no master: it advances the
 //! segment's virtual time 1 ms at a time and prints the CPU time per ms (the nodes' main
@@ -123,13 +126,25 @@ fn sim_args(kind: &str, n: usize, udp: Option<String>, rt: Option<u8>) -> SimArg
     }
 }
 
-fn run(kind: &str, n: usize, seconds: u64, cycle_us: u64, rt: bool, per_esc: bool) -> Row {
-    let args = sim_args(
-        kind,
-        n,
-        Some("127.0.0.1:0".into()),
-        rt.then_some(oxicat_sim::rt::DEFAULT_PRIORITY),
-    );
+/// How a row serves: `--rt`, `--spin`, `--per-esc-walk`.
+#[derive(Debug, Clone, Copy, Default)]
+struct Serving {
+    rt: bool,
+    spin: bool,
+    per_esc: bool,
+}
+
+fn run(kind: &str, n: usize, seconds: u64, cycle_us: u64, how: Serving) -> Row {
+    let Serving { rt, spin, per_esc } = how;
+    let args = SimArgs {
+        spin,
+        ..sim_args(
+            kind,
+            n,
+            Some("127.0.0.1:0".into()),
+            rt.then_some(oxicat_sim::rt::DEFAULT_PRIORITY),
+        )
+    };
     let rss0 = status_kb("/proc/self/status", "VmRSS:");
     let desc = sim_cmd::describe(&args).unwrap_or_else(|e| fail(&e.to_string()));
     sim_cmd::check_segment(&desc).unwrap_or_else(|e| fail(&e.to_string()));
@@ -324,8 +339,9 @@ fn virtual_row(kind: &str, n: usize, seconds: u64, cycle_us: u64) {
 fn main() {
     let mut kinds = vec!["demo".to_string(), "twin".to_string()];
     let mut ns = vec![16usize, 64, 256, 1000];
-    let (mut seconds, mut cycle_us, mut rt, mut one) = (10u64, 1000u64, false, false);
-    let (mut per_esc, mut idle_only, mut virt) = (false, false, false);
+    let (mut seconds, mut cycle_us, mut one) = (10u64, 1000u64, false);
+    let mut how = Serving::default();
+    let (mut idle_only, mut virt) = (false, false);
     let mut it = std::env::args().skip(1);
     while let Some(a) = it.next() {
         let mut val = || {
@@ -342,10 +358,12 @@ fn main() {
             }
             "--seconds" => seconds = val().parse().unwrap_or_else(|_| fail("--seconds")),
             "--cycle-us" => cycle_us = val().parse().unwrap_or_else(|_| fail("--cycle-us")),
-            "--rt" => rt = true,
+            "--rt" => how.rt = true,
+            // The serving thread busy-polls for frames (`oxicat sim --spin`).
+            "--spin" => how.spin = true,
             // The reference walk: every ESC walks every datagram (no configured-address
             // dispatch), for before/after figures from one binary.
-            "--per-esc-walk" => per_esc = true,
+            "--per-esc-walk" => how.per_esc = true,
             "--idle" => idle_only = true,
             "--virtual" => virt = true,
             // One row in this process (each row runs in a process of its own, so that the
@@ -375,7 +393,7 @@ fn main() {
     }
     if one {
         let (kind, n) = (&kinds[0], ns[0]);
-        let mut r = run(kind, n, seconds, cycle_us, rt, per_esc);
+        let mut r = run(kind, n, seconds, cycle_us, how);
         let (p50, p99, max) = (
             pct(&mut r.rtt, 0.5),
             pct(&mut r.rtt, 0.99),
@@ -416,11 +434,14 @@ fn main() {
                 "--cycle-us",
                 &cycle_us.to_string(),
             ]);
-            if rt {
-                cmd.arg("--rt");
-            }
-            if per_esc {
-                cmd.arg("--per-esc-walk");
+            for (on, flag) in [
+                (how.rt, "--rt"),
+                (how.spin, "--spin"),
+                (how.per_esc, "--per-esc-walk"),
+            ] {
+                if on {
+                    cmd.arg(flag);
+                }
             }
             let out = cmd
                 .stderr(std::process::Stdio::null())
