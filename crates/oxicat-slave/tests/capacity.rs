@@ -3,9 +3,11 @@
 //! more than the stack holds (at start-up for the default mapping, at PREOP → SAFEOP for one
 //! the master configured): a typed error or an AL status code, never a cut mapping.
 
+mod common;
+
 use oxicat_esc::{Esc, EscConfig};
 use oxicat_slave::pdo::{map_steps, steps, Dir};
-use oxicat_slave::{DeviceDef, InitError, Od, Slave};
+use oxicat_slave::{InitError, Od, Slave};
 use oxicat_testkit::device::{eeprom, App, IMG};
 use oxicat_testkit::ports::Soft;
 use oxicat_testkit::Bench;
@@ -15,22 +17,8 @@ use oxicat_testkit::Bench;
 /// input steps).
 #[test]
 fn map_steps_is_what_each_board_device_needs() {
-    use oxicat_devices::{axis_hub, cia402, demo, laelaps, tue_es030};
-    let defs: [(&str, &'static DeviceDef); 7] = [
-        ("demo", &demo::DEF),
-        ("demo additions", &demo::additions::DEF),
-        (
-            "laelaps left",
-            laelaps::device::device(laelaps::kinematics::Side::Left),
-        ),
-        (
-            "laelaps right",
-            laelaps::device::device(laelaps::kinematics::Side::Right),
-        ),
-        ("cia402", &cia402::device::DEF),
-        ("tue-es030", &tue_es030::device::DEF),
-        ("axis hub", &axis_hub::device::DEF),
-    ];
+    use oxicat_devices::{axis_hub, demo};
+    let defs = common::board_devices();
     for (name, def) in defs {
         let od = Box::new(Od::<4096>::new(def).expect(name));
         let (rx, tx) = (

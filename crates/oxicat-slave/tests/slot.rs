@@ -1,6 +1,8 @@
 //! `SlaveSlot`: the stack built in place (a board image's static) is the stack
 //! `Slave::new` builds, and starting a used slot again gives a fresh one.
 
+mod common;
+
 use oxicat_esc::{Esc, EscConfig};
 use oxicat_slave::{AlState, InitError, Slave, SlaveSlot};
 use oxicat_testkit::device::{eeprom, DEF, IMG, MBX};
@@ -144,23 +146,9 @@ fn the_image_definition_serves_the_same_dictionary() {
 /// a microcontroller build, so no board stops at start-up with `MappingsTooLarge`.
 #[test]
 fn every_board_device_fits_the_microcontroller_mapping_pool() {
-    use oxicat_devices::{axis_hub, cia402, demo, laelaps, tue_es030};
+    use oxicat_devices::demo;
     use oxicat_slave::od::{map_storage, MAP_POOL_MCU, MAP_SHOWN};
-    let defs: [(&str, &oxicat_slave::DeviceDef); 7] = [
-        ("demo", &demo::DEF),
-        ("demo additions", &demo::additions::DEF),
-        (
-            "laelaps left",
-            laelaps::device::device(laelaps::kinematics::Side::Left),
-        ),
-        (
-            "laelaps right",
-            laelaps::device::device(laelaps::kinematics::Side::Right),
-        ),
-        ("cia402", &cia402::device::DEF),
-        ("tue-es030", &tue_es030::device::DEF),
-        ("axis hub", &axis_hub::device::DEF),
-    ];
+    let defs = common::board_devices();
     for (name, def) in defs {
         let want: usize = def
             .rx_pdos
