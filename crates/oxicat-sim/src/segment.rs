@@ -381,12 +381,8 @@ impl<E: SegmentEsc> Segment<E> {
             delay_ns,
             up: true,
         });
-        self.settle(a);
-        self.settle(b);
-        self.slots[a].esc.set_link(pa, true);
-        self.slots[b].esc.set_link(pb, true);
-        self.requeue(a);
-        self.requeue(b);
+        self.set_link(a, pa, true);
+        self.set_link(b, pb, true);
         Ok(())
     }
 
@@ -397,12 +393,8 @@ impl<E: SegmentEsc> Segment<E> {
             .take()
             .ok_or(TopologyError::NotWired(a, pa))?;
         self.slots[l.peer].links[l.peer_port as usize] = None;
-        self.settle(a);
-        self.settle(l.peer);
-        self.slots[a].esc.set_link(pa, false);
-        self.slots[l.peer].esc.set_link(l.peer_port, false);
-        self.requeue(a);
-        self.requeue(l.peer);
+        self.set_link(a, pa, false);
+        self.set_link(l.peer, l.peer_port, false);
         Ok(())
     }
 
@@ -413,9 +405,7 @@ impl<E: SegmentEsc> Segment<E> {
         self.check(a, pa)?;
         if Self::is_master_port(a, pa) {
             self.master_link_up = plugged;
-            self.settle(0);
-            self.slots[0].esc.set_link(0, plugged);
-            self.requeue(0);
+            self.set_link(0, 0, plugged);
             return Ok(());
         }
         let l = self.slots[a].links[pa as usize].ok_or(TopologyError::NotWired(a, pa))?;
@@ -423,11 +413,17 @@ impl<E: SegmentEsc> Segment<E> {
             if let Some(x) = self.slots[s].links[p as usize].as_mut() {
                 x.up = plugged;
             }
-            self.settle(s);
-            self.slots[s].esc.set_link(p, plugged);
-            self.requeue(s);
+            self.set_link(s, p, plugged);
         }
         Ok(())
+    }
+
+    /// ESC `s` sees its port `p`'s link go up or down (brought to `now` first, its next
+    /// times read again after).
+    fn set_link(&mut self, s: SlaveId, p: u8, up: bool) {
+        self.settle(s);
+        self.slots[s].esc.set_link(p, up);
+        self.requeue(s);
     }
 
     /// Sets the cable delay of the link at `a`'s port `pa` (the master link for slave 0
@@ -642,10 +638,20 @@ impl<E: SegmentEsc> Segment<E> {
     /// Brings slot `i` to [`now`](Self::now), as time reaching it would have (see
     /// [`advance_to`](Self::advance_to)), before the segment lends or changes its ESC.
     fn settle(&mut self, i: usize) {
-        if self.slots[i].advanced < self.now {
-            self.advance_esc(i, self.now);
+        if self.catch_up(i) {
             self.requeue(i);
         }
+    }
+
+    /// Brings a slot time has lazily passed to `now` (see [`advance_to`](Self::advance_to));
+    /// whether it was behind.
+    #[inline]
+    fn catch_up(&mut self, i: usize) -> bool {
+        let behind = self.slots[i].advanced < self.now;
+        if behind {
+            self.advance_esc(i, self.now);
+        }
+        behind
     }
 
     /// The time up to which slot `i`'s events are done: the time its ESC was last brought
@@ -822,9 +828,7 @@ impl<E: SegmentEsc> Segment<E> {
     /// slot time has lazily passed is first brought to `now`, as the time reaching it
     /// would have (see [`advance_to`](Self::advance_to)).
     fn advance_slot(&mut self, i: usize, t: u64) {
-        if self.slots[i].advanced < self.now {
-            self.advance_esc(i, self.now);
-        }
+        self.catch_up(i);
         self.advance_esc(i, t);
     }
 
