@@ -622,6 +622,18 @@ const fn assign_entries(a: Access) -> [EntryDef; MAX_ASSIGN + 1] {
     out
 }
 
+/// A template (subindex 0 and the entry standing for 1..n) describes its table's entries:
+/// subindex 0 the same, and the entry the same type, size and access as subindex 1.
+const fn template_matches(t: &[EntryDef; 2], r: &[EntryDef]) -> bool {
+    t[0].sub == r[0].sub
+        && t[0].bits == r[0].bits
+        && t[0].access.0 == r[0].access.0
+        && t[0].dtype.code() == r[0].dtype.code()
+        && t[1].bits == r[1].bits
+        && t[1].access.0 == r[1].access.0
+        && t[1].dtype.code() == r[1].dtype.code()
+}
+
 /// A mapping object's entries, one per subindex, as the dictionary listing
 /// ([`Od::object_info`], what the ESI is generated from) shows them: a table only host
 /// tools link. The stack serves the same entries from [`MAP_TEMPLATE`].
@@ -635,12 +647,10 @@ static MAP_TEMPLATE: [EntryDef; 2] = [
     e(1, "Mapped object ", U32, Access::RW_PREOP),
 ];
 // The template is the table: the same entry but for the subindex and the name's number.
-const _: () = {
-    let (t, r) = (&MAP_TEMPLATE, &map_entries(Access::RW_PREOP));
-    assert!(t[0].sub == r[0].sub && t[0].bits == r[0].bits && t[0].access.0 == r[0].access.0);
-    assert!(t[1].bits == r[1].bits && t[1].access.0 == r[1].access.0);
-    assert!(t[1].dtype.code() == r[1].dtype.code() && t[0].dtype.code() == r[0].dtype.code());
-};
+const _: () = assert!(template_matches(
+    &MAP_TEMPLATE,
+    &map_entries(Access::RW_PREOP)
+));
 /// An assignment object's entries, one per subindex, as the dictionary listing shows them
 /// (host tools only, as [`MAP_RW`]); the stack serves them from [`ASSIGN_TEMPLATE`].
 static ASSIGN_RW: [EntryDef; MAX_ASSIGN + 1] = assign_entries(Access::RW_PREOP);
@@ -655,9 +665,7 @@ static ASSIGN_TEMPLATE: [EntryDef; 2] = [
 const ASSIGN_STORAGE: usize = 1 + 2 * MAX_ASSIGN;
 const _: () = {
     let (t, r) = (&ASSIGN_TEMPLATE, &assign_entries(Access::RW_PREOP));
-    assert!(t[0].sub == r[0].sub && t[0].bits == r[0].bits && t[0].access.0 == r[0].access.0);
-    assert!(t[1].bits == r[1].bits && t[1].access.0 == r[1].access.0);
-    assert!(t[1].dtype.code() == r[1].dtype.code() && t[0].dtype.code() == r[0].dtype.code());
+    assert!(template_matches(t, r));
     let mut n = 0;
     let mut i = 0;
     while i < r.len() {
