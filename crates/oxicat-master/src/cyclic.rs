@@ -169,6 +169,27 @@ impl Default for CycleOptions {
     }
 }
 
+/// How a free-running cycle exchanges the process image (DC cycles always use ethercrab's
+/// `tx_rx_dc`: its FRMW of the reference clock's time rides in the same frame).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum Exchange {
+    /// [`Exchange::Lean`] when ethercrab's exchange would need more than one frame and the
+    /// lean one needs no more frames than it, else [`Exchange::Ethercrab`] (a small
+    /// segment's image and status reads fit one frame, which the lean exchange would make
+    /// two).
+    #[default]
+    Auto,
+    /// The image in LRWs of up to 1,100 bytes sent together, and one BRD of AL status
+    /// that every slave answers (SOEM's pattern): a frame per 1,100 bytes of process data
+    /// plus one, whatever the number of slaves. The working counter of each LRW is planned
+    /// from the slaves' FMMUs; a segment whose FMMUs are not the group's image cycles as
+    /// [`Exchange::Ethercrab`].
+    Lean,
+    /// ethercrab's `tx_rx`: frames one after the other, each with as many per-slave FPRDs
+    /// of AL status as fit (at 1,000 slaves, 11 frames and 14 KB of status reads a cycle).
+    Ethercrab,
+}
+
 /// The process image of one cycle, per slave.
 pub struct CycleIo {
     /// Cycle number (0 = first cycle in OP).
@@ -224,6 +245,11 @@ pub struct CycleStats {
     pub cycles: u64,
     /// Cycles whose working counter was not the expected one.
     pub wkc_errors: u64,
+    /// How the cycles exchanged the process image ([`Exchange::Lean`] or
+    /// [`Exchange::Ethercrab`]; DC cycles: ethercrab's).
+    pub exchange: Exchange,
+    /// EtherCAT frames per cycle (free run; 0 for DC cycles, whose count ethercrab decides).
+    pub frames_per_cycle: usize,
 }
 
 impl Master {
@@ -308,6 +334,49 @@ impl Master {
             .iter()
             .map(|n| crate::pdo::resolve(n, layouts, &slave_names))
             .collect()
+    }
+
+    /// How free-running cycles exchange the process image (default [`Exchange::Auto`]).
+    pub fn set_exchange(&mut self, exchange: Exchange) {
+        self.exchange = exchange;
+    }
+
+    /// The plan of a [`Exchange::Lean`] cycle from every slave's active FMMUs (read from
+    /// its ESC) and the group's image sizes; `None` (with the reason logged) when they do
+    /// not match and the run should keep ethercrab's exchange.
+    async fn lean_plan(
+        &self,
+        out_len: &[usize],
+        in_len: &[usize],
+    ) -> Option<crate::exchange::Plan> {
+        let mut fmmus = Vec::with_capacity(self.len());
+        for p in 0..self.len() {
+            let read = async {
+                let count = self.fprd(p, regs::FMMU_COUNT, 1).await?[0].min(16);
+                let b = self
+                    .fprd(p, regs::FMMU_BASE, u16::from(count) * regs::FMMU_LEN)
+                    .await?;
+                Ok::<_, MasterError>(
+                    b.chunks(usize::from(regs::FMMU_LEN))
+                        .filter_map(crate::exchange::Fmmu::decode)
+                        .collect::<Vec<_>>(),
+                )
+            };
+            match read.await {
+                Ok(f) => fmmus.push(f),
+                Err(e) => {
+                    log::info!("slave {p}: FMMUs not read ({e}); cycling with ethercrab's tx_rx");
+                    return None;
+                }
+            }
+        }
+        let plan = crate::exchange::Plan::new(&fmmus, out_len, in_len);
+        if plan.is_none() {
+            log::info!(
+                "the slaves' FMMUs are not the group's process image; cycling with ethercrab's tx_rx"
+            );
+        }
+        plan
     }
 
     /// Cyclic runs end by just stopping, leaving the slaves in OP as a master that crashed
@@ -523,7 +592,10 @@ impl Master {
             inputs: vec![Vec::new(); n],
             working_counter: 0,
         };
-        let mut stats = CycleStats::default();
+        let mut stats = CycleStats {
+            exchange: Exchange::Ethercrab,
+            ..CycleStats::default()
+        };
         let mut left = false;
         // On the heap: ethercrab's cyclic futures are large (debug builds).
         crate::on_group_stack(|| {
@@ -602,34 +674,83 @@ impl Master {
                     for (p, sd) in group.iter(md).enumerate() {
                         io.outputs[p] = vec![0; sd.outputs_raw().len()];
                     }
+                    let (o, i): (Vec<usize>, Vec<usize>) = group
+                        .iter(md)
+                        .map(|sd| (sd.outputs_raw().len(), sd.inputs_raw().len()))
+                        .unzip();
+                    let ethercrab_frames =
+                        crate::exchange::ethercrab_frames(o.iter().chain(&i).sum(), n);
+                    let mut plan = match self.exchange {
+                        Exchange::Ethercrab => None,
+                        Exchange::Auto if ethercrab_frames <= 1 => None,
+                        Exchange::Auto | Exchange::Lean => self.lean_plan(&o, &i).await,
+                    };
+                    if self.exchange == Exchange::Auto
+                        && plan
+                            .as_ref()
+                            .is_some_and(|p| p.chunks.len() + 1 > ethercrab_frames)
+                    {
+                        plan = None;
+                    }
+                    stats.exchange = if plan.is_some() {
+                        Exchange::Lean
+                    } else {
+                        Exchange::Ethercrab
+                    };
+                    stats.frames_per_cycle = plan
+                        .as_ref()
+                        .map_or(ethercrab_frames, |p| p.chunks.len() + 1);
+                    let slaves = u16::try_from(n).unwrap_or(u16::MAX);
                     let t0 = time.now();
                     let mut expected = None;
                     loop {
-                        for (p, sd) in group.iter(md).enumerate() {
-                            let mut o = sd.outputs_raw_mut();
-                            let l = o.len().min(io.outputs[p].len());
-                            o[..l].copy_from_slice(&io.outputs[p][..l]);
-                        }
                         let due = t0 + io.cycle * period;
-                        time.wait_until(due);
-                        let r = match group.tx_rx(md).await {
-                            Ok(r) => r,
-                            Err(err) => return Err(self.frames_lost(stats.cycles, err).await),
+                        // (working counter, it is not the expected one, all slaves in OP)
+                        let (wkc, wkc_bad, all_op) = match &mut plan {
+                            Some(plan) => {
+                                plan.put_outputs(&io.outputs);
+                                time.wait_until(due);
+                                let r = match plan.exchange(md, slaves).await {
+                                    Ok(r) => r,
+                                    Err(err) => {
+                                        return Err(self.frames_lost(stats.cycles, err).await)
+                                    }
+                                };
+                                plan.take_inputs(&mut io.inputs);
+                                (r.working_counter, r.wkc_bad, r.all_op)
+                            }
+                            None => {
+                                for (p, sd) in group.iter(md).enumerate() {
+                                    let mut o = sd.outputs_raw_mut();
+                                    let l = o.len().min(io.outputs[p].len());
+                                    o[..l].copy_from_slice(&io.outputs[p][..l]);
+                                }
+                                time.wait_until(due);
+                                let r = match group.tx_rx(md).await {
+                                    Ok(r) => r,
+                                    Err(err) => {
+                                        return Err(self.frames_lost(stats.cycles, err).await)
+                                    }
+                                };
+                                for (p, sd) in group.iter(md).enumerate() {
+                                    io.inputs[p].clear();
+                                    io.inputs[p].extend_from_slice(&sd.inputs_raw());
+                                }
+                                // ethercrab's working counter is checked against the first
+                                // cycle's.
+                                let bad =
+                                    *expected.get_or_insert(r.working_counter) != r.working_counter;
+                                (r.working_counter, bad, r.all_op())
+                            }
                         };
-                        for (p, sd) in group.iter(md).enumerate() {
-                            io.inputs[p].clear();
-                            io.inputs[p].extend_from_slice(&sd.inputs_raw());
-                        }
-                        io.working_counter = r.working_counter;
-                        // ethercrab reads every slave's AL status with each exchange; the
-                        // working counter alone does not show a slave that left OP (its ESC
-                        // still counts the FMMU access).
-                        let wkc_bad =
-                            *expected.get_or_insert(r.working_counter) != r.working_counter;
+                        io.working_counter = wkc;
+                        // The AL status is read with each exchange: the working counter
+                        // alone does not show a slave that left OP (its ESC still counts
+                        // the FMMU access).
                         if wkc_bad {
                             stats.wkc_errors += 1;
                         }
-                        if wkc_bad || !r.all_op() {
+                        if wkc_bad || !all_op {
                             if let Some(d) = self.disturbed(stats.cycles, None).await {
                                 return Err(d);
                             }

@@ -16,6 +16,7 @@ pub mod coe;
 pub mod cyclic;
 mod error;
 pub mod esi;
+mod exchange;
 pub mod foe;
 pub mod inprocess;
 pub mod pdo;
@@ -258,6 +259,8 @@ pub struct Master {
     /// Cyclic runs take the slaves back to PRE-OP at their end (see
     /// [`Master::stop_cycling_as_if_gone`]).
     pub(crate) preop_after_cycling: bool,
+    /// How a free-running cycle exchanges the process image.
+    pub(crate) exchange: cyclic::Exchange,
 }
 
 fn map_open_error(iface: &str, e: std::io::Error) -> MasterError {
@@ -344,6 +347,7 @@ impl Master {
             mbx_counter: Default::default(),
             link_name,
             preop_after_cycling: true,
+            exchange: cyclic::Exchange::default(),
         };
         futures_lite::future::block_on(m.discover())?;
         Ok(m)

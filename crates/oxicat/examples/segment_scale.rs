@@ -5,7 +5,7 @@
 //! ```text
 //! cargo run --release -p oxicat --example segment_scale -- [--kind demo,twin] \
 //!     [--n 16,64,256,1000] [--seconds 10] [--cycle-us 1000] [--rt] [--spin] [--per-esc-walk]
-//!     [--idle]
+//!     [--idle] [--virtual] [--exchange auto,lean,ethercrab]
 //! ```
 //!
 //! Columns: late cycles (an exchange that ended after the next cycle was due), the round
@@ -32,7 +32,7 @@ use std::sync::{Arc, Mutex};
 use std::time::Duration;
 
 use oxicat::sim_cmd::{self, SimArgs};
-use oxicat_master::cyclic::{CycleOptions, Flow};
+use oxicat_master::cyclic::{CycleOptions, Exchange, Flow};
 use oxicat_master::{Link, Master};
 
 fn fail(msg: &str) -> ! {
@@ -91,6 +91,8 @@ struct Row {
     rtt: Vec<u64>,
     cpu_us_per_cycle: f64,
     kb_per_slave: f64,
+    /// The master's exchange and its frames per cycle.
+    exchange: String,
     note: String,
 }
 
@@ -132,10 +134,34 @@ struct Serving {
     rt: bool,
     spin: bool,
     per_esc: bool,
+    /// The master's free-run exchange (`--exchange auto|lean|ethercrab`).
+    exchange: Exchange,
+}
+
+fn parse_exchange(v: &str) -> Exchange {
+    match v {
+        "auto" => Exchange::Auto,
+        "lean" => Exchange::Lean,
+        "ethercrab" => Exchange::Ethercrab,
+        _ => fail(&format!("--exchange {v}: auto, lean or ethercrab")),
+    }
+}
+
+fn exchange_name(e: Exchange) -> &'static str {
+    match e {
+        Exchange::Auto => "auto",
+        Exchange::Lean => "lean",
+        Exchange::Ethercrab => "ethercrab",
+    }
 }
 
 fn run(kind: &str, n: usize, seconds: u64, cycle_us: u64, how: Serving) -> Row {
-    let Serving { rt, spin, per_esc } = how;
+    let Serving {
+        rt,
+        spin,
+        per_esc,
+        exchange,
+    } = how;
     let args = SimArgs {
         spin,
         ..sim_args(
@@ -179,6 +205,7 @@ fn run(kind: &str, n: usize, seconds: u64, cycle_us: u64, how: Serving) -> Row {
         .stack_size(64 << 20)
         .spawn(move || {
             let mut m = Master::open(Link::Udp(addr))?;
+            m.set_exchange(exchange);
             let _ = m.scan()?;
             let stats = m.run_cyclic(
                 CycleOptions {
@@ -222,6 +249,7 @@ fn run(kind: &str, n: usize, seconds: u64, cycle_us: u64, how: Serving) -> Row {
             rtt,
             cpu_us_per_cycle: ticks as f64 * 10_000.0 / s.cycles.max(1) as f64,
             kb_per_slave,
+            exchange: format!("{}, {}", exchange_name(s.exchange), s.frames_per_cycle),
             note: String::new(),
         },
         Err(e) => Row {
@@ -233,6 +261,7 @@ fn run(kind: &str, n: usize, seconds: u64, cycle_us: u64, how: Serving) -> Row {
             rtt: Vec::new(),
             cpu_us_per_cycle: f64::NAN,
             kb_per_slave,
+            exchange: "–".into(),
             // The first clause says what failed; a list of every slave does not fit a row.
             note: e.to_string().chars().take(140).collect(),
         },
@@ -268,7 +297,7 @@ fn process_ticks() -> u64 {
 
 /// `--virtual`: bring-up and `seconds` of 1 kHz cycles on the virtual clock, in this
 /// process; prints CPU per cycle and a digest of what the master saw.
-fn virtual_row(kind: &str, n: usize, seconds: u64, cycle_us: u64) {
+fn virtual_row(kind: &str, n: usize, seconds: u64, cycle_us: u64, exchange: Exchange) {
     let args = sim_args(kind, n, None, None);
     let desc = sim_cmd::describe(&args).unwrap_or_else(|e| fail(&e.to_string()));
     let t0 = process_ticks();
@@ -282,6 +311,7 @@ fn virtual_row(kind: &str, n: usize, seconds: u64, cycle_us: u64) {
         .stack_size(64 << 20)
         .spawn(move || {
             let mut m = Master::open(Link::Sim(seg))?;
+            m.set_exchange(exchange);
             let _ = m.scan()?;
             let (mut ticks_op, mut image, mut t_op) = (0, 0, 0);
             // FNV-1a over every cycle's inputs and working counter.
@@ -323,7 +353,9 @@ fn virtual_row(kind: &str, n: usize, seconds: u64, cycle_us: u64) {
         .unwrap_or_else(|_| fail("master thread panicked"));
     match r {
         Ok((s, t_op, t_end, digest, image, v_op)) => println!(
-            "| {kind} | {n} | virtual | {} | {} | build {:.2} s, bring-up {:.2} s CPU for {:.2} s of virtual time ({:.0} µs CPU per ms, the master's included) | {:.1} µs CPU per cycle | {image} B of process data | digest {digest:016x} |",
+            "| {kind} | {n} | virtual, {} exchange, {} frames per cycle | {} | {} | build {:.2} s, bring-up {:.2} s CPU for {:.2} s of virtual time ({:.0} µs CPU per ms, the master's included) | {:.1} µs CPU per cycle | {image} B of process data | digest {digest:016x} |",
+            exchange_name(s.exchange),
+            s.frames_per_cycle,
             s.cycles,
             s.wkc_errors,
             (t_built - t0) as f64 / 100.0,
@@ -364,6 +396,7 @@ fn main() {
             // The reference walk: every ESC walks every datagram (no configured-address
             // dispatch), for before/after figures from one binary.
             "--per-esc-walk" => how.per_esc = true,
+            "--exchange" => how.exchange = parse_exchange(&val()),
             "--idle" => idle_only = true,
             "--virtual" => virt = true,
             // One row in this process (each row runs in a process of its own, so that the
@@ -378,7 +411,7 @@ fn main() {
     if virt {
         for kind in &kinds {
             for &n in &ns {
-                virtual_row(kind, n, seconds, cycle_us);
+                virtual_row(kind, n, seconds, cycle_us, how.exchange);
             }
         }
         return;
@@ -400,7 +433,7 @@ fn main() {
             pct(&mut r.rtt, 1.0),
         );
         println!(
-            "| {} | {} | {} | {} | {} | {:.0} / {:.0} / {:.0} | {:.1} | {:.0} |{}",
+            "| {} | {} | {} | {} | {} | {:.0} / {:.0} / {:.0} | {:.1} | {:.0} | {} |{}",
             r.kind,
             r.n,
             r.cycles,
@@ -411,6 +444,7 @@ fn main() {
             max,
             r.cpu_us_per_cycle,
             r.kb_per_slave,
+            r.exchange,
             if r.note.is_empty() {
                 String::new()
             } else {
@@ -421,9 +455,9 @@ fn main() {
     }
     let exe = std::env::current_exe().unwrap_or_else(|e| fail(&e.to_string()));
     println!(
-        "| kind | N | cycles | WKC errors | late cycles | RTT p50 / p99 / max [µs] | sim CPU per cycle [µs] | memory per slave [KiB] |"
+        "| kind | N | cycles | WKC errors | late cycles | RTT p50 / p99 / max [µs] | sim CPU per cycle [µs] | memory per slave [KiB] | exchange, frames per cycle |"
     );
-    println!("|---|---|---|---|---|---|---|---|");
+    println!("|---|---|---|---|---|---|---|---|---|");
     for kind in &kinds {
         for &n in &ns {
             let mut cmd = std::process::Command::new(&exe);
@@ -434,6 +468,7 @@ fn main() {
                 "--cycle-us",
                 &cycle_us.to_string(),
             ]);
+            cmd.args(["--exchange", exchange_name(how.exchange)]);
             for (on, flag) in [
                 (how.rt, "--rt"),
                 (how.spin, "--spin"),
@@ -451,7 +486,7 @@ fn main() {
             match text.lines().find(|l| l.starts_with("| ")) {
                 Some(row) => println!("{row}"),
                 None => println!(
-                    "| {kind} | {n} | – | – | – | – | – | – | failed: {}",
+                    "| {kind} | {n} | – | – | – | – | – | – | – | failed: {}",
                     out.status
                 ),
             }

@@ -1,0 +1,419 @@
+//! The cyclic exchange of a free-running segment in O(1) datagrams: the process image in
+//! LRWs of up to [`CHUNK`] bytes, all in flight at once, and one BRD of the AL status
+//! (0x0130) that every slave ORs its state into — the pattern of SOEM's
+//! `ecx_send_processdata` + `ecx_readstate`.
+//!
+//! ethercrab's `SubDeviceGroup::tx_rx` sends its frames one after the other and fills them
+//! with an FPRD of AL status per slave: at 1,000 slaves that is 11 frames in sequence, 14 KB
+//! of status reads (1.1 ms of wire time at 100 Mbit/s, more than a 1 kHz cycle) and 11
+//! round trips per cycle. Here a cycle is one frame per [`CHUNK`] of process data plus one
+//! small frame, sent together.
+//!
+//! The plan is read from the wire, not from ethercrab's internals: every slave's active
+//! FMMUs (0x0600..) give its output (write) and input (read) ranges in the logical address
+//! space, and the expected working counter of each LRW follows the ESC's rule (+1 per slave
+//! whose read FMMU the datagram touches, +2 per slave whose write FMMU it touches). A
+//! segment whose FMMUs do not match the group's process image (an FMMU for something else,
+//! sizes that differ) gets no plan, and the run keeps ethercrab's exchange.
+
+use std::future::Future;
+use std::pin::Pin;
+use std::task::Poll;
+
+use ethercrab::error::Error;
+use ethercrab::{Command, MainDevice};
+use oxicat_wire::regs;
+
+/// Process-data bytes per LRW: one PDU filling a frame of the master's PDU storage.
+pub(crate) const CHUNK: usize = 1100;
+/// LRW frames in flight at once (the PDU storage has 16 frames; the BRD takes one).
+const IN_FLIGHT: usize = 8;
+
+/// One slave's bytes of one direction: (offset in the image, length), in logical order.
+type Pieces = Vec<(usize, usize)>;
+
+/// One LRW of the cycle.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(crate) struct Chunk {
+    /// Offset in the image.
+    pub(crate) offset: usize,
+    /// Bytes.
+    pub(crate) len: usize,
+    /// Working counter when every slave takes part.
+    pub(crate) wkc: u16,
+}
+
+/// An active FMMU as the wire shows it.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(crate) struct Fmmu {
+    /// Logical start address.
+    pub(crate) start: u32,
+    /// Length in bytes.
+    pub(crate) len: u16,
+    /// Type register bit 0: read (the slave's inputs).
+    pub(crate) read: bool,
+    /// Type register bit 1: write (the slave's outputs).
+    pub(crate) write: bool,
+}
+
+impl Fmmu {
+    /// Decodes one 16-byte FMMU register block; `None` when it is not active or maps
+    /// nothing.
+    pub(crate) fn decode(b: &[u8]) -> Option<Self> {
+        let b: &[u8; 16] = b.get(..16)?.try_into().ok()?;
+        let f = Self {
+            start: u32::from_le_bytes([b[0], b[1], b[2], b[3]]),
+            len: u16::from_le_bytes([b[4], b[5]]),
+            read: b[11] & 1 != 0,
+            write: b[11] & 2 != 0,
+        };
+        (b[12] & 1 != 0 && f.len != 0 && (f.read || f.write)).then_some(f)
+    }
+}
+
+/// Where every slave's process data lies in one image and how the image is exchanged.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub(crate) struct Plan {
+    /// Logical address of the image's first byte.
+    pub(crate) start: u32,
+    /// The image (outputs to send, inputs received).
+    pub(crate) image: Vec<u8>,
+    /// The LRWs of a cycle.
+    pub(crate) chunks: Vec<Chunk>,
+    outputs: Vec<Pieces>,
+    inputs: Vec<Pieces>,
+}
+
+/// What one exchange saw.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(crate) struct Exchanged {
+    /// Sum of the LRWs' working counters.
+    pub(crate) working_counter: u16,
+    /// Some LRW's working counter was not the planned one (its inputs were not taken).
+    pub(crate) wkc_bad: bool,
+    /// Every slave answered the BRD and all are in OP (AL status state bits 0x08).
+    pub(crate) all_op: bool,
+}
+
+impl Plan {
+    /// The plan for slaves with these active FMMUs, whose process image (as the group has
+    /// it) is `out_len[p]` output and `in_len[p]` input bytes; `None` when the FMMUs are not
+    /// exactly those images (each direction of a slave: FMMUs of that one type whose
+    /// lengths add up to the image, no FMMU of both types).
+    pub(crate) fn new(fmmus: &[Vec<Fmmu>], out_len: &[usize], in_len: &[usize]) -> Option<Self> {
+        let all = fmmus.iter().flatten();
+        let start = all.clone().map(|f| f.start).min()?;
+        let end = all
+            .clone()
+            .map(|f| u64::from(f.start) + u64::from(f.len))
+            .max()?;
+        let span = usize::try_from(end - u64::from(start)).ok()?;
+        // ethercrab's images are at most MAX_PDI (64 KB); anything far larger is not one.
+        if span > 1 << 20 {
+            return None;
+        }
+        let mut outputs = Vec::with_capacity(fmmus.len());
+        let mut inputs = Vec::with_capacity(fmmus.len());
+        for (p, fs) in fmmus.iter().enumerate() {
+            if fs.iter().any(|f| f.read && f.write) {
+                return None;
+            }
+            let pieces = |write: bool| -> Pieces {
+                let mut v: Pieces = fs
+                    .iter()
+                    .filter(|f| f.write == write)
+                    .map(|f| ((f.start - start) as usize, usize::from(f.len)))
+                    .collect();
+                v.sort_unstable();
+                v
+            };
+            let (o, i) = (pieces(true), pieces(false));
+            let total = |v: &Pieces| v.iter().map(|&(_, l)| l).sum::<usize>();
+            if total(&o) != *out_len.get(p)? || total(&i) != *in_len.get(p)? {
+                return None;
+            }
+            outputs.push(o);
+            inputs.push(i);
+        }
+        let chunks = (0..span)
+            .step_by(CHUNK)
+            .map(|offset| {
+                let len = CHUNK.min(span - offset);
+                let touches =
+                    |v: &Pieces| v.iter().any(|&(a, l)| a < offset + len && offset < a + l);
+                let wkc = inputs
+                    .iter()
+                    .zip(&outputs)
+                    .map(|(i, o)| u16::from(touches(i)) + 2 * u16::from(touches(o)))
+                    .sum();
+                Chunk { offset, len, wkc }
+            })
+            .collect();
+        Some(Self {
+            start,
+            image: vec![0; span],
+            chunks,
+            outputs,
+            inputs,
+        })
+    }
+
+    /// Puts every slave's outputs into the image.
+    pub(crate) fn put_outputs(&mut self, outputs: &[Vec<u8>]) {
+        for (pieces, data) in self.outputs.iter().zip(outputs) {
+            let mut at = 0;
+            for &(off, len) in pieces {
+                let n = len.min(data.len().saturating_sub(at));
+                self.image[off..off + n].copy_from_slice(&data[at..at + n]);
+                at += len;
+            }
+        }
+    }
+
+    /// Takes every slave's inputs from the image.
+    pub(crate) fn take_inputs(&self, inputs: &mut [Vec<u8>]) {
+        for (pieces, data) in self.inputs.iter().zip(inputs) {
+            data.clear();
+            for &(off, len) in pieces {
+                data.extend_from_slice(&self.image[off..off + len]);
+            }
+        }
+    }
+
+    /// One exchange: the LRWs (at most [`IN_FLIGHT`] at once) and, with the first of them,
+    /// the BRD of AL status, which `slaves` ESCs must answer. An LRW whose working counter
+    /// is not the planned one leaves its part of the image as it was. Errors other than a
+    /// working counter (a frame that did not come back) end the exchange.
+    pub(crate) async fn exchange(
+        &mut self,
+        md: &MainDevice<'_>,
+        slaves: u16,
+    ) -> Result<Exchanged, Error> {
+        let mut seen = Exchanged {
+            working_counter: 0,
+            wkc_bad: false,
+            all_op: true,
+        };
+        let mut status = Some(
+            Command::brd(regs::AL_STATUS)
+                .with_wkc(slaves)
+                .receive::<u16>(md),
+        );
+        for batch in self.chunks.chunks(IN_FLIGHT) {
+            let image = &self.image;
+            let lrws = batch.iter().map(|c| {
+                Command::lrw(self.start + c.offset as u32)
+                    .with_wkc(c.wkc)
+                    .send_receive_slice(md, &image[c.offset..c.offset + c.len])
+            });
+            let lrws = join_all(lrws);
+            let (replies, st) = match status.take() {
+                Some(s) => {
+                    let (r, st) = futures_lite::future::zip(lrws, s).await;
+                    (r, Some(st))
+                }
+                None => (lrws.await, None),
+            };
+            let mut taken = Vec::with_capacity(batch.len());
+            for (c, r) in batch.iter().zip(replies) {
+                match r {
+                    Ok(data) => {
+                        seen.working_counter = seen.working_counter.wrapping_add(c.wkc);
+                        taken.push((*c, data));
+                    }
+                    Err(Error::WorkingCounter { received, .. }) => {
+                        seen.working_counter = seen.working_counter.wrapping_add(received);
+                        seen.wkc_bad = true;
+                    }
+                    Err(e) => return Err(e),
+                }
+            }
+            for (c, data) in taken {
+                let n = data.len().min(c.len);
+                self.image[c.offset..c.offset + n].copy_from_slice(&data[..n]);
+            }
+            match st {
+                // AL status state bits only (0x0F): what ethercrab's per-slave check
+                // compared; the error flag is looked at when something else is wrong.
+                Some(Ok(or)) => seen.all_op = or & 0x0F == 0x08,
+                Some(Err(Error::WorkingCounter { .. })) => seen.all_op = false,
+                Some(Err(e)) => return Err(e),
+                None => {}
+            }
+        }
+        Ok(seen)
+    }
+}
+
+/// Frames per cycle of ethercrab's `tx_rx` for an image of `pdi_len` bytes and `slaves`
+/// slaves: its loop, frame by frame (an LRW of what fits, then FPRDs of AL status, 14
+/// bytes each and at most 129 a frame, while there is room).
+pub(crate) fn ethercrab_frames(pdi_len: usize, slaves: usize) -> usize {
+    // PDU bytes of a frame of the master's storage; each PDU has 12 bytes of header + WKC.
+    const BUF: usize = CHUNK + 12;
+    let (mut sent, mut checks, mut frames) = (0, 0, 0);
+    while sent < pdi_len || checks < slaves {
+        let mut used = 0;
+        if sent < pdi_len {
+            let take = (pdi_len - sent).min(BUF - 12);
+            sent += take;
+            used += take + 12;
+        }
+        let mut k = 0;
+        while used + 14 <= BUF && checks < slaves && k <= 128 {
+            checks += 1;
+            k += 1;
+            used += 14;
+        }
+        frames += 1;
+    }
+    frames
+}
+
+/// Polls every future of `futs` until all are ready; their outputs in order.
+async fn join_all<F: Future>(futs: impl Iterator<Item = F>) -> Vec<F::Output> {
+    let mut futs: Vec<Pin<Box<F>>> = futs.map(Box::pin).collect();
+    let mut out: Vec<Option<F::Output>> = futs.iter().map(|_| None).collect();
+    std::future::poll_fn(|cx| {
+        let mut pending = false;
+        for (f, o) in futs.iter_mut().zip(out.iter_mut()) {
+            if o.is_none() {
+                match f.as_mut().poll(cx) {
+                    Poll::Ready(v) => *o = Some(v),
+                    Poll::Pending => pending = true,
+                }
+            }
+        }
+        if pending {
+            Poll::Pending
+        } else {
+            Poll::Ready(())
+        }
+    })
+    .await;
+    out.into_iter().flatten().collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn fmmu(start: u32, len: u16, write: bool) -> Fmmu {
+        Fmmu {
+            start,
+            len,
+            read: !write,
+            write,
+        }
+    }
+
+    #[test]
+    fn an_fmmu_block_decodes_when_active() {
+        let mut b = [0u8; 16];
+        b[..4].copy_from_slice(&0x0001_0020u32.to_le_bytes());
+        b[4..6].copy_from_slice(&24u16.to_le_bytes());
+        b[11] = 2;
+        assert_eq!(Fmmu::decode(&b), None, "not active");
+        b[12] = 1;
+        assert_eq!(
+            Fmmu::decode(&b),
+            Some(Fmmu {
+                start: 0x0001_0020,
+                len: 24,
+                read: false,
+                write: true
+            })
+        );
+        b[11] = 0;
+        assert_eq!(Fmmu::decode(&b), None, "no type");
+        assert_eq!(Fmmu::decode(&b[..15]), None, "short");
+    }
+
+    #[test]
+    fn outputs_and_inputs_go_where_the_fmmus_say() {
+        // Slave 0: 2 output bytes at 0, 1 input byte at 4; slave 1: 1 output at 2, 2 inputs
+        // at 5, split over two FMMUs given out of order.
+        let fm = vec![
+            vec![fmmu(0x100, 2, true), fmmu(0x104, 1, false)],
+            vec![
+                fmmu(0x106, 1, false),
+                fmmu(0x102, 1, true),
+                fmmu(0x105, 1, false),
+            ],
+        ];
+        let mut plan = Plan::new(&fm, &[2, 1], &[1, 2]).unwrap();
+        assert_eq!(plan.start, 0x100);
+        assert_eq!(plan.image.len(), 7);
+        assert_eq!(
+            plan.chunks,
+            vec![Chunk {
+                offset: 0,
+                len: 7,
+                wkc: 6
+            }]
+        );
+        plan.put_outputs(&[vec![1, 2], vec![3]]);
+        assert_eq!(plan.image, [1, 2, 3, 0, 0, 0, 0]);
+        plan.image[4..].copy_from_slice(&[7, 8, 9]);
+        let mut inputs = vec![vec![0xEE; 5], Vec::new()];
+        plan.take_inputs(&mut inputs);
+        assert_eq!(inputs, vec![vec![7], vec![8, 9]]);
+    }
+
+    #[test]
+    fn the_working_counter_of_each_lrw_counts_the_slaves_it_touches() {
+        // 3 slaves, 1,000 output bytes each then 500 input bytes each: 4,500 bytes, five
+        // LRWs of up to 1,100.
+        let fm: Vec<Vec<Fmmu>> = (0..3u32)
+            .map(|p| vec![fmmu(p * 1000, 1000, true), fmmu(3000 + p * 500, 500, false)])
+            .collect();
+        let plan = Plan::new(&fm, &[1000; 3], &[500; 3]).unwrap();
+        let got: Vec<(usize, usize, u16)> = plan
+            .chunks
+            .iter()
+            .map(|c| (c.offset, c.len, c.wkc))
+            .collect();
+        // 0..1100 writes slaves 0 and 1; 1100..2200 slaves 1, 2; 2200..3300 slave 2's
+        // outputs and slave 0's inputs; 3300..4400 inputs of 0, 1, 2; 4400..4500 slave 2's.
+        assert_eq!(
+            got,
+            vec![
+                (0, 1100, 4),
+                (1100, 1100, 4),
+                (2200, 1100, 3),
+                (3300, 1100, 3),
+                (4400, 100, 1)
+            ]
+        );
+    }
+
+    #[test]
+    fn ethercrab_frames_follow_its_tx_rx_loop() {
+        // One frame: 24 bytes of image and 2 status reads.
+        assert_eq!(ethercrab_frames(24, 2), 1);
+        // 1,000 EL2008s: the LRW and 7 status reads, then 79 reads a frame.
+        assert_eq!(ethercrab_frames(1000, 1000), 1 + 993usize.div_ceil(79));
+        // An image of 2,200 bytes: two full LRW frames, the reads after them.
+        assert_eq!(ethercrab_frames(2200, 10), 3);
+        assert_eq!(ethercrab_frames(0, 0), 0);
+        // No more than 129 reads in one frame, even with room (none here: 79 fit).
+        assert_eq!(ethercrab_frames(0, 130), 2);
+    }
+
+    #[test]
+    fn fmmus_that_are_not_the_image_give_no_plan() {
+        let good = vec![vec![fmmu(0, 2, true), fmmu(2, 1, false)]];
+        assert!(Plan::new(&good, &[2], &[1]).is_some());
+        assert!(Plan::new(&good, &[3], &[1]).is_none(), "sizes differ");
+        let both = vec![vec![Fmmu {
+            start: 0,
+            len: 2,
+            read: true,
+            write: true,
+        }]];
+        assert!(Plan::new(&both, &[2], &[2]).is_none(), "one FMMU both ways");
+        assert!(Plan::new(&[vec![]], &[0], &[0]).is_none(), "nothing mapped");
+        let far = vec![vec![fmmu(0, 1, true), fmmu(0x1000_0000, 1, false)]];
+        assert!(Plan::new(&far, &[1], &[1]).is_none(), "not one image");
+    }
+}

@@ -1,0 +1,158 @@
+//! The master's lean free-run exchange (`oxicat_master::cyclic::Exchange`): the process
+//! image in LRWs sent together plus one BRD of AL status, against ethercrab's `tx_rx`, on
+//! a segment of 150 AX58100 DIO twins whose output pins are wired to their input pins.
+
+use std::sync::{Arc, Mutex};
+
+use oxicat_master::cyclic::{CycleOptions, CycleStats, Exchange, Flow};
+use oxicat_master::{Link, Master, MasterError};
+use oxicat_sim::segment::Segment;
+
+const N: usize = 150;
+
+fn segment() -> Arc<Mutex<Segment>> {
+    let esi = oxicat_testkit::served::reference()
+        .join("esi-vendor/AX58100_EVB_DIO_ESI_00010200_00000001_20220323.xml");
+    oxicat::master_cmd::build_sim(&format!("esi={}*{N}", esi.display())).unwrap()
+}
+
+/// What a run saw: its statistics, the frames the segment got per cycle, and per cycle
+/// every slave's inputs and the working counter.
+struct Run {
+    stats: CycleStats,
+    frames_per_cycle: f64,
+    seen: Vec<(Vec<Vec<u8>>, u16)>,
+}
+
+/// Cycles `cycles` times with `exchange`, each slave's outputs set to its own pattern
+/// from the first cycle on.
+fn run(exchange: Exchange, cycles: u64) -> Run {
+    let seg = segment();
+    let seg2 = seg.clone();
+    std::thread::Builder::new()
+        .stack_size(64 << 20)
+        .spawn(move || {
+            let mut m = Master::open(Link::Sim(seg2)).unwrap();
+            m.set_exchange(exchange);
+            let mut seen = Vec::new();
+            let (mut sent0, mut sent) = (0, 0);
+            let stats = m
+                .run_cyclic(CycleOptions::default(), |io| {
+                    // Frames between the first and the last cycle's end: cycles − 1 exchanges.
+                    if io.cycle == 0 {
+                        sent0 = seg.lock().unwrap().stats().sent;
+                    }
+                    if io.cycle + 1 == cycles {
+                        sent = seg.lock().unwrap().stats().sent - sent0;
+                    }
+                    for (p, o) in io.outputs.iter_mut().enumerate() {
+                        for (k, b) in o.iter_mut().enumerate() {
+                            *b = (p as u8).wrapping_mul(7) ^ (k as u8) << 5;
+                        }
+                    }
+                    seen.push((io.inputs.clone(), io.working_counter));
+                    Ok(if io.cycle + 1 >= cycles {
+                        Flow::Stop
+                    } else {
+                        Flow::Continue
+                    })
+                })
+                .unwrap();
+            Run {
+                stats,
+                frames_per_cycle: sent as f64 / (cycles - 1) as f64,
+                seen,
+            }
+        })
+        .unwrap()
+        .join()
+        .unwrap()
+}
+
+#[test]
+fn the_lean_exchange_sends_two_frames_and_sees_what_ethercrabs_sees() {
+    let cycles = 30;
+    let lean = run(Exchange::Auto, cycles);
+    let crab = run(Exchange::Ethercrab, cycles);
+    // ethercrab: the 600-byte image with 35 status reads, then two frames of reads.
+    assert_eq!(crab.stats.exchange, Exchange::Ethercrab);
+    assert_eq!(crab.stats.frames_per_cycle, 3);
+    assert_eq!(crab.frames_per_cycle, 3.0);
+    // Auto takes the lean exchange: one LRW and the BRD.
+    assert_eq!(lean.stats.exchange, Exchange::Lean);
+    assert_eq!(lean.stats.frames_per_cycle, 2);
+    assert_eq!(lean.frames_per_cycle, 2.0);
+    for r in [&lean, &crab] {
+        assert_eq!(r.stats.cycles, cycles);
+        assert_eq!(r.stats.wkc_errors, 0);
+        // Every slave's outputs came back on its inputs (pins wired), in both runs.
+        let (inputs, wkc) = r.seen.last().unwrap();
+        assert_eq!(*wkc, 3 * N as u16, "every slave read and written");
+        for (p, i) in inputs.iter().enumerate() {
+            assert!(!i.is_empty());
+            let want: Vec<u8> = (0..i.len())
+                .map(|k| (p as u8).wrapping_mul(7) ^ (k as u8) << 5)
+                .collect();
+            assert_eq!(*i, want, "slave {p}");
+        }
+    }
+    assert_eq!(
+        lean.seen.iter().map(|s| s.1).collect::<Vec<_>>(),
+        crab.seen.iter().map(|s| s.1).collect::<Vec<_>>(),
+        "the same working counter every cycle"
+    );
+}
+
+/// A demo node whose watchdog expires goes to SAFE-OP and keeps counting its FMMUs (the working
+/// counter does not change): the BRD of AL status shows it, and the run stops naming it;
+/// a pulled cable changes the working counter and names every slave behind it.
+#[test]
+fn the_lean_exchange_sees_a_slave_leave_op_and_a_pulled_cable() {
+    for pull in [false, true] {
+        let seg = if pull {
+            segment()
+        } else {
+            oxicat::master_cmd::build_sim("demo:3").unwrap()
+        };
+        let seg2 = seg.clone();
+        let err = std::thread::Builder::new()
+            .stack_size(64 << 20)
+            .spawn(move || {
+                let mut m = Master::open(Link::Sim(seg2.clone())).unwrap();
+                m.set_exchange(Exchange::Lean);
+                m.run_cyclic(CycleOptions::default(), |io| {
+                    if io.cycle == 10 {
+                        if pull {
+                            seg2.lock().unwrap().set_cable(139, 1, false).unwrap();
+                        } else {
+                            // The node's process-data watchdog expires: its firmware
+                            // goes to SAFE-OP with the error flag (0x001B).
+                            let mut seg = seg2.lock().unwrap();
+                            assert!(seg.esc_mut(1).unwrap().expire_pd_watchdog());
+                        }
+                    }
+                    Ok(if io.cycle > 200 {
+                        Flow::Stop
+                    } else {
+                        Flow::Continue
+                    })
+                })
+            })
+            .unwrap()
+            .join()
+            .unwrap();
+        let _ = seg;
+        match err {
+            Err(e @ MasterError::Disturbed { .. }) => {
+                let t = e.to_string();
+                if pull {
+                    assert!(t.contains("slave 140:") && t.contains("slave 149:"), "{t}");
+                    assert!(!t.contains("slave 139"), "{t}");
+                } else {
+                    assert!(t.contains("slave 1 is in SAFEOP + ERROR (0x001B"), "{t}");
+                }
+            }
+            other => panic!("pull {pull}: expected Disturbed, got {other:?}"),
+        }
+    }
+}
