@@ -80,6 +80,10 @@ pub(crate) struct Plan {
     pub(crate) image: Vec<u8>,
     /// The LRWs of a cycle.
     pub(crate) chunks: Vec<Chunk>,
+    /// LRWs sent together: [`IN_FLIGHT`], or 1 when a slave's piece is split over two
+    /// LRWs (they must then reach it in order, and ethercrab sends the frames in flight in
+    /// the order of its storage slots, not of their making).
+    pub(crate) in_flight: usize,
     outputs: Vec<Pieces>,
     inputs: Vec<Pieces>,
 }
@@ -135,10 +139,17 @@ impl Plan {
             outputs.push(o);
             inputs.push(i);
         }
-        let chunks = (0..span)
-            .step_by(CHUNK)
-            .map(|offset| {
-                let len = CHUNK.min(span - offset);
+        let mut all: Vec<(usize, usize)> =
+            outputs.iter().chain(&inputs).flatten().copied().collect();
+        all.sort_unstable();
+        // Two slaves (or directions) on the same logical bytes: not an image of ethercrab's.
+        if all.windows(2).any(|w| w[0].0 + w[0].1 > w[1].0) {
+            return None;
+        }
+        let (bounds, in_order) = chunk_bounds(&all);
+        let chunks = bounds
+            .into_iter()
+            .map(|(offset, len)| {
                 let touches =
                     |v: &Pieces| v.iter().any(|&(a, l)| a < offset + len && offset < a + l);
                 let wkc = inputs
@@ -153,6 +164,7 @@ impl Plan {
             start,
             image: vec![0; span],
             chunks,
+            in_flight: if in_order { 1 } else { IN_FLIGHT },
             outputs,
             inputs,
         })
@@ -180,7 +192,7 @@ impl Plan {
         }
     }
 
-    /// One exchange: the LRWs (at most [`IN_FLIGHT`] at once) and, with the first of them,
+    /// One exchange: the LRWs (at most [`Plan::in_flight`] at once) and, with the first of them,
     /// the BRD of AL status, which `slaves` ESCs must answer. An LRW whose working counter
     /// is not the planned one leaves its part of the image as it was. Errors other than a
     /// working counter (a frame that did not come back) end the exchange.
@@ -199,7 +211,7 @@ impl Plan {
                 .with_wkc(slaves)
                 .receive::<u16>(md),
         );
-        for batch in self.chunks.chunks(IN_FLIGHT) {
+        for batch in self.chunks.chunks(self.in_flight) {
             let image = &self.image;
             let lrws = batch.iter().map(|c| {
                 Command::lrw(self.start + c.offset as u32)
@@ -243,6 +255,41 @@ impl Plan {
         }
         Ok(seen)
     }
+}
+
+/// The LRWs (offset, length) that carry `pieces` (offset, length in the image; sorted, not
+/// overlapping): as few as fit [`CHUNK`] bytes each, a new one started before a piece that
+/// would cross the limit, so that no slave's piece (an FMMU onto one SyncManager) is split
+/// over two LRWs — a 3-buffer SyncManager is written or read as one access, first byte to
+/// last, and LRWs in flight together can reach the slaves in any order. The flag: some
+/// piece is longer than [`CHUNK`] and is split after all (its LRWs must then be sent one
+/// after the other).
+pub(crate) fn chunk_bounds(pieces: &[(usize, usize)]) -> (Vec<(usize, usize)>, bool) {
+    let mut out = Vec::new();
+    let mut split = false;
+    // The open chunk: [start, end).
+    let mut open: Option<(usize, usize)> = None;
+    for &(a, l) in pieces.iter().filter(|p| p.1 > 0) {
+        let e = a + l;
+        if let Some((s, end)) = open {
+            if e - s <= CHUNK {
+                open = Some((s, e.max(end)));
+                continue;
+            }
+            out.push((s, end - s));
+        }
+        let mut a = a;
+        while e - a > CHUNK {
+            split = true;
+            out.push((a, CHUNK));
+            a += CHUNK;
+        }
+        open = Some((a, e));
+    }
+    if let Some((s, end)) = open {
+        out.push((s, end - s));
+    }
+    (out, split)
 }
 
 /// Frames per cycle of ethercrab's `tx_rx` for an image of `pdi_len` bytes and `slaves`
@@ -362,29 +409,60 @@ mod tests {
 
     #[test]
     fn the_working_counter_of_each_lrw_counts_the_slaves_it_touches() {
-        // 3 slaves, 1,000 output bytes each then 500 input bytes each: 4,500 bytes, five
-        // LRWs of up to 1,100.
+        // 3 slaves, 400 output bytes each then 300 input bytes each.
         let fm: Vec<Vec<Fmmu>> = (0..3u32)
-            .map(|p| vec![fmmu(p * 1000, 1000, true), fmmu(3000 + p * 500, 500, false)])
+            .map(|p| vec![fmmu(p * 400, 400, true), fmmu(1200 + p * 300, 300, false)])
             .collect();
-        let plan = Plan::new(&fm, &[1000; 3], &[500; 3]).unwrap();
+        let plan = Plan::new(&fm, &[400; 3], &[300; 3]).unwrap();
         let got: Vec<(usize, usize, u16)> = plan
             .chunks
             .iter()
             .map(|c| (c.offset, c.len, c.wkc))
             .collect();
-        // 0..1100 writes slaves 0 and 1; 1100..2200 slaves 1, 2; 2200..3300 slave 2's
-        // outputs and slave 0's inputs; 3300..4400 inputs of 0, 1, 2; 4400..4500 slave 2's.
+        // Writes of slaves 0, 1; slave 2's write and the reads of 0, 1; the read of 2.
+        assert_eq!(got, vec![(0, 800, 4), (800, 1000, 4), (1800, 300, 1)]);
+        assert_eq!(plan.in_flight, IN_FLIGHT);
+        // A slave's image longer than an LRW: split, and sent in order.
+        let big = vec![vec![fmmu(0, 3000, true), fmmu(3000, 2, false)]];
+        let plan = Plan::new(&big, &[3000], &[2]).unwrap();
+        assert_eq!(plan.in_flight, 1);
         assert_eq!(
-            got,
-            vec![
-                (0, 1100, 4),
-                (1100, 1100, 4),
-                (2200, 1100, 3),
-                (3300, 1100, 3),
-                (4400, 100, 1)
-            ]
+            plan.chunks.iter().map(|c| c.wkc).collect::<Vec<_>>(),
+            vec![2, 2, 3]
         );
+    }
+
+    #[test]
+    fn no_piece_is_split_over_two_lrws_unless_it_is_longer_than_one() {
+        // 60 demo nodes: 24 output bytes each, then 22 input bytes each.
+        let pieces: Vec<(usize, usize)> = (0..60)
+            .map(|p| (p * 24, 24))
+            .chain((0..60).map(|p| (1440 + p * 22, 22)))
+            .collect();
+        let (chunks, split) = chunk_bounds(&pieces);
+        assert!(!split);
+        // 45 nodes' outputs (1,080 B) fit the first; then 15 outputs and 33 inputs; the rest.
+        assert_eq!(chunks, vec![(0, 1080), (1080, 1086), (2166, 594)]);
+        for &(a, l) in &pieces {
+            let n = chunks
+                .iter()
+                .filter(|&&(o, cl)| a < o + cl && o < a + l)
+                .count();
+            assert_eq!(n, 1, "piece at {a} in one LRW");
+            assert!(chunks.iter().any(|&(o, cl)| o <= a && a + l <= o + cl));
+        }
+        // A gap between pieces that do not fit together is not sent.
+        assert_eq!(
+            chunk_bounds(&[(0, 1000), (1500, 200)]),
+            (vec![(0, 1000), (1500, 200)], false)
+        );
+        assert_eq!(chunk_bounds(&[(0, 10), (20, 10)]), (vec![(0, 30)], false));
+        // A piece longer than a chunk is split, and said so.
+        assert_eq!(
+            chunk_bounds(&[(0, 10), (10, 2500)]),
+            (vec![(0, 10), (10, 1100), (1110, 1100), (2210, 300)], true)
+        );
+        assert_eq!(chunk_bounds(&[]), (vec![], false));
     }
 
     #[test]
@@ -413,6 +491,11 @@ mod tests {
         }]];
         assert!(Plan::new(&both, &[2], &[2]).is_none(), "one FMMU both ways");
         assert!(Plan::new(&[vec![]], &[0], &[0]).is_none(), "nothing mapped");
+        let overlap = vec![vec![fmmu(0, 2, true)], vec![fmmu(1, 1, false)]];
+        assert!(
+            Plan::new(&overlap, &[2, 0], &[0, 1]).is_none(),
+            "shared bytes"
+        );
         let far = vec![vec![fmmu(0, 1, true), fmmu(0x1000_0000, 1, false)]];
         assert!(Plan::new(&far, &[1], &[1]).is_none(), "not one image");
     }
