@@ -2,9 +2,9 @@
 //! information and the abort-code rules.
 
 use oxicat_wire::coe::{
-    od_list_type, write_sdo, write_sdo_abort, write_sdo_segment, CoeHeader, CoeService,
-    SdoAbortCode, SdoHeader, SdoInfoHeader, SdoInfoOpcode, SdoInfoRef, SdoInfoService, SdoRef,
-    SdoRequestCommand, COE_HEADER_LEN, SDO_INFO_HEADER_LEN,
+    od_list_type, write_sdo, write_sdo_segment, CoeHeader, CoeService, SdoAbortCode, SdoHeader,
+    SdoInfoHeader, SdoInfoOpcode, SdoInfoRef, SdoInfoService, SdoRef, SdoRequestCommand,
+    COE_HEADER_LEN, SDO_INFO_HEADER_LEN,
 };
 use oxicat_wire::mailbox::{MailboxErrorDetail, MailboxType};
 
@@ -117,6 +117,13 @@ fn value_limits(e: &EntryDef) -> Option<(u64, u64)> {
     })
 }
 
+/// The 32-bit value of an abort code: one copy of the code table in a board image for the
+/// SDO aborts and the SDO information errors (inlined, each caller had its own).
+#[cfg_attr(target_os = "none", inline(never))]
+fn abort_code(c: Abort) -> u32 {
+    c.code()
+}
+
 /// Value of an integer entry as i128 from its image bytes.
 fn int_value(e: &EntryDef, b: &[u8]) -> i128 {
     let mut a = [0u8; 8];
@@ -152,20 +159,31 @@ impl<P: Pdi, const N: usize, const M: usize, const K: usize> Slave<P, N, M, K> {
 
     fn abort(&mut self, index: u16, sub: u8, code: Abort) {
         self.sdo = SdoState::Idle;
-        let mut b = [0u8; 10];
-        if write_sdo_abort(&mut b, index, sub, code).is_ok() {
-            self.queue_reply(MailboxType::Coe, &b);
-        }
+        // An abort is an SDO request frame with command 0x80 and the code as its data.
+        let code = abort_code(code).to_le_bytes();
+        self.sdo_frame(CoeService::SdoRequest, 0x80, index, sub, code, &[]);
     }
 
     fn sdo_reply(&mut self, cmd: u8, index: u16, sub: u8, hdata: [u8; 4], data: &[u8]) {
+        self.sdo_frame(CoeService::SdoResponse, cmd, index, sub, hdata, data);
+    }
+
+    fn sdo_frame(
+        &mut self,
+        service: CoeService,
+        cmd: u8,
+        index: u16,
+        sub: u8,
+        hdata: [u8; 4],
+        data: &[u8],
+    ) {
         let mut b = [0u8; M];
         let h = SdoHeader {
             command: cmd,
             index,
             subindex: sub,
         };
-        if let Ok(n) = write_sdo(&mut b, CoeService::SdoResponse, &h, hdata, data) {
+        if let Ok(n) = write_sdo(&mut b, service, &h, hdata, data) {
             self.queue_reply(MailboxType::Coe, &b[..n]);
         }
     }
@@ -705,7 +723,12 @@ impl<P: Pdi, const N: usize, const M: usize, const K: usize> Slave<P, N, M, K> {
     }
 
     fn info_error(&mut self, code: Abort) {
-        self.info_reply(SdoInfoOpcode::Error, false, 0, &code.code().to_le_bytes());
+        self.info_reply(
+            SdoInfoOpcode::Error,
+            false,
+            0,
+            &abort_code(code).to_le_bytes(),
+        );
     }
 
     fn in_list(&self, n: usize, list_type: u16) -> bool {

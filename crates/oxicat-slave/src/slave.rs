@@ -120,12 +120,26 @@ impl SyncDiag {
     };
 
     fn new<const N: usize>(od: &Od<N>) -> Result<Self, DefError> {
-        let r = |i: u16, s: u8| od.entry(i, s).map_err(|_| DefError::BadEntries(i));
+        // One lookup loop over a table instead of seven lookups each with its own error
+        // path (flash).
+        const AT: [(u16, u8); 7] = [
+            (0x1C32, 0x0B),
+            (0x1C33, 0x0B),
+            (0x1C32, 0x0C),
+            (0x1C33, 0x0C),
+            (0x1C32, 0x20),
+            (0x1C33, 0x20),
+            (0x10F1, 2),
+        ];
+        let mut r = [EntryRef::BLANK; 7];
+        for (k, &(i, s)) in AT.iter().enumerate() {
+            r[k] = od.entry(i, s).map_err(|_| DefError::BadEntries(i))?;
+        }
         Ok(Self {
-            missed: [r(0x1C32, 0x0B)?, r(0x1C33, 0x0B)?],
-            exceeded: [r(0x1C32, 0x0C)?, r(0x1C33, 0x0C)?],
-            error: [r(0x1C32, 0x20)?, r(0x1C33, 0x20)?],
-            limit: r(0x10F1, 2)?,
+            missed: [r[0], r[1]],
+            exceeded: [r[2], r[3]],
+            error: [r[4], r[5]],
+            limit: r[6],
             missed_count: 0,
             exceeded_count: 0,
         })
