@@ -394,11 +394,11 @@ impl<T: Copy> Ring<T> {
         let o = kind.offsets(offsets);
         let len = o.desc as usize + entries as usize * size_of::<T>();
         for word in [o.producer, o.consumer, o.flags] {
-            if word as usize + 4 > o.desc as usize || word % 4 != 0 {
+            if word as usize + 4 > o.desc as usize || word & 3 != 0 {
                 return Err(io::Error::other("ring offsets out of place"));
             }
         }
-        if o.desc as usize % std::mem::align_of::<T>() != 0 {
+        if o.desc as usize & (std::mem::align_of::<T>() - 1) != 0 {
             return Err(io::Error::other("ring descriptors misaligned"));
         }
         // SAFETY: maps the socket's ring at the kernel's page offset for it; the length is

@@ -510,3 +510,86 @@ fn ignore_busy(r: io::Result<()>) -> io::Result<()> {
         r => r,
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::insn::{reg::*, Insn};
+    use std::os::fd::AsRawFd;
+
+    /// Root (CAP_BPF) or skipped with the reason; in CI (which runs as root) never skipped.
+    fn root() -> bool {
+        let euid = std::fs::read_to_string("/proc/self/status")
+            .ok()
+            .and_then(|s| {
+                s.lines()
+                    .find(|l| l.starts_with("Uid:"))
+                    .and_then(|l| l.split_whitespace().nth(2).map(|e| e == "0"))
+            })
+            .unwrap_or(false);
+        let ci = std::env::var_os("CI").is_some_and(|v| !v.is_empty() && v != "false" && v != "0");
+        if !euid {
+            assert!(!ci, "needs root in CI");
+            eprintln!("skipped: needs root for bpf() (CAP_BPF)");
+        }
+        euid
+    }
+
+    #[test]
+    fn the_kernel_verifier_accepts_the_program() {
+        if !root() {
+            return;
+        }
+        let map = sys::xskmap_create(1).expect("BPF_MAP_CREATE of an XSKMAP");
+        let p = insn::ethercat_redirect(map.as_raw_fd());
+        if let Err((e, log)) = sys::prog_load_xdp(&p, "Dual MIT/GPL") {
+            panic!("BPF_PROG_LOAD refused: {e}\n{log}");
+        }
+    }
+
+    #[test]
+    fn a_refused_program_comes_with_the_verifier_log() {
+        if !root() {
+            return;
+        }
+        // Reads the EtherType without checking data_end first.
+        let p = [
+            Insn::ldx_w(R2, R1, 0),
+            Insn::ldx_h(R0, R2, 12),
+            Insn::mov64_imm(R0, insn::XDP_PASS),
+            Insn::exit(),
+        ];
+        match sys::prog_load_xdp(&p, "Dual MIT/GPL") {
+            Ok(_) => panic!("the verifier took an unchecked packet read"),
+            Err((e, log)) => {
+                assert_eq!(e.raw_os_error(), Some(libc::EACCES), "{e}");
+                assert!(log.contains("invalid access to packet"), "{log}");
+            }
+        }
+    }
+
+    #[test]
+    fn open_names_what_is_wrong() {
+        let e = XdpSocket::open("oxicat-nope0", &Config::default()).unwrap_err();
+        assert_eq!(e.step, Step::Interface);
+        assert!(e.to_string().contains("oxicat-nope0"), "{e}");
+        let e = XdpSocket::open(
+            "lo",
+            &Config {
+                frames: 100,
+                ..Config::default()
+            },
+        )
+        .unwrap_err();
+        assert_eq!(e.step, Step::Umem, "{e}");
+        let e = XdpSocket::open(
+            "lo",
+            &Config {
+                queue: 4096,
+                ..Config::default()
+            },
+        )
+        .unwrap_err();
+        assert_eq!(e.step, Step::Queue, "{e}");
+    }
+}
