@@ -201,6 +201,8 @@ pub struct XdpSocket {
     /// The mode the program was attached in (never `Auto`).
     mode: Mode,
     queue: u32,
+    /// Bound zero-copy (else copy mode, where `sendto` is what sends: every send kicks).
+    zero_copy: bool,
     /// Frames the kernel handed back with an address outside the UMEM (never expected).
     bad_descs: u64,
 }
@@ -341,6 +343,7 @@ impl XdpSocket {
             rx_spare: Vec::new(),
             mode,
             queue: config.queue,
+            zero_copy,
             bad_descs: 0,
         })
     }
@@ -465,7 +468,9 @@ impl XdpSocket {
     }
 
     fn kick(&mut self) -> io::Result<()> {
-        if !self.tx.needs_wakeup() {
+        // Copy mode transmits inside `sendto` (or `poll`): kick whatever the flag says, or a
+        // spinning server that never polls would never send.
+        if self.zero_copy && !self.tx.needs_wakeup() {
             return Ok(());
         }
         for _ in 0..KICK_TRIES {
