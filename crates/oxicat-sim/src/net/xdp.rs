@@ -102,7 +102,12 @@ impl FramePort for XdpPort {
     }
 
     fn describe(&self) -> String {
-        format!("AF_XDP on {} queue 0 ({})", self.name, self.socket.mode())
+        format!(
+            "AF_XDP on {} queue {} ({})",
+            self.name,
+            self.socket.queue(),
+            self.socket.mode()
+        )
     }
 }
 
