@@ -16,6 +16,11 @@
 //! interface (`tcpdump` on the served end shows other traffic only); capture on the master's
 //! end instead. Multi-queue NICs: the socket binds queue 0, where NICs put frames without an
 //! IP header (RSS hashes IP); EtherCAT frames arriving on another queue pass to the stack.
+//!
+//! 802.1Q: where the driver strips VLAN tags into the packet's metadata (veth does, as most
+//! NICs with `rxvlan` on), the program sees a plain 0x88A4 frame and the reply leaves
+//! untagged, as with the raw socket; the program's tagged branch serves drivers that leave
+//! the tag in the frame.
 
 use std::time::{Duration, Instant};
 
