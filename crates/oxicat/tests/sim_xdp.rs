@@ -57,11 +57,13 @@ fn xdp_serving_to_op_with_ip_traffic_alongside() {
     };
     let sim_if = bench.sim_if().to_string();
     bench.spawn_in_ns(&["sim", "--iface", &sim_if, "--xdp", "demo:2"]);
-    assert!(
-        bench.sim_log().iter().any(|l| l.contains("AF_XDP on")),
-        "{:?}",
-        bench.sim_log()
-    );
+    // The bench returns on the "serving" line, which its reader stores a moment later.
+    let serving = |b: &NetnsSim| b.sim_log().iter().any(|l| l.contains("AF_XDP on"));
+    let deadline = Instant::now() + Duration::from_secs(5);
+    while !serving(&bench) && Instant::now() < deadline {
+        std::thread::sleep(Duration::from_millis(10));
+    }
+    assert!(serving(&bench), "{:?}", bench.sim_log());
     assert!(
         link_show(&bench).contains("oxicat_ecat"),
         "{}",
