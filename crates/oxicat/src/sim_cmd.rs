@@ -166,6 +166,38 @@ pub struct SimArgs {
     /// Pin the serving thread to CPU N (with --rt; isolate that core for the best figures).
     #[arg(long, value_name = "N", requires = "rt")]
     pub rt_cpu: Option<usize>,
+    /// Serve --iface through an AF_XDP socket (Linux; root): an XDP program steers the
+    /// interface's EtherCAT frames to the segment past the kernel's stack, other traffic
+    /// passes. MODE: auto (native XDP if the driver has it, else generic; the default),
+    /// generic, native, zero-copy. Written `--xdp` or `--xdp=MODE`.
+    #[arg(long, value_name = "MODE", num_args = 0..=1, require_equals = true,
+          default_missing_value = "auto", requires = "iface", value_enum)]
+    pub xdp: Option<XdpMode>,
+}
+
+/// How `--xdp` attaches its program and binds its socket.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum XdpMode {
+    /// Native XDP if the driver has it, else generic; copy mode.
+    Auto,
+    /// Generic (skb) XDP, any interface; copy mode.
+    Generic,
+    /// Native (driver) XDP; copy mode.
+    Native,
+    /// Native XDP with a zero-copy socket (drivers with AF_XDP zero-copy only).
+    ZeroCopy,
+}
+
+#[cfg(target_os = "linux")]
+impl From<XdpMode> for oxicat_sim::net::xdp::Mode {
+    fn from(m: XdpMode) -> Self {
+        match m {
+            XdpMode::Auto => Self::Auto,
+            XdpMode::Generic => Self::Generic,
+            XdpMode::Native => Self::Native,
+            XdpMode::ZeroCopy => Self::ZeroCopy,
+        }
+    }
 }
 
 /// Puts node `k` of a registered device on the segment (with its oscillator off by
@@ -209,6 +241,7 @@ impl SimArgs {
             slowdown: 1,
             rt: None,
             rt_cpu: None,
+            xdp: None,
         }
     }
 
@@ -280,6 +313,8 @@ pub enum SimError {
     },
     /// Ctrl-C while the segment was being built.
     Interrupted,
+    /// `--xdp` on a system without AF_XDP (not Linux).
+    XdpUnavailable,
 }
 
 impl std::fmt::Display for SimError {
@@ -318,6 +353,10 @@ impl std::fmt::Display for SimError {
             } => write!(f, "node {position} ({device}): {error}"),
             Self::Topology(e) => write!(f, "{e}"),
             Self::Net(e) => write!(f, "{e}"),
+            Self::XdpUnavailable => write!(
+                f,
+                "--xdp needs Linux (AF_XDP sockets); serve with the raw socket: --iface alone"
+            ),
             Self::Rt(e) => write!(f, "--rt: {e}"),
             Self::Range { key, value, range } => {
                 write!(f, "{key} = {value} is not in {range}")
@@ -962,6 +1001,16 @@ pub fn serve_until_with(
     };
     let summary = summarize(&names);
     if let Some(iface) = &args.iface {
+        #[cfg(target_os = "linux")]
+        if let Some(mode) = args.xdp {
+            let port =
+                oxicat_sim::net::xdp::XdpPort::open(iface, mode.into()).map_err(SimError::Net)?;
+            return run_port(port, segment, &config, args, stop, n, &summary);
+        }
+        #[cfg(not(target_os = "linux"))]
+        if args.xdp.is_some() {
+            return Err(SimError::XdpUnavailable);
+        }
         #[cfg(unix)]
         {
             let port = oxicat_sim::net::raw::RawPort::open(iface, wait).map_err(SimError::Net)?;

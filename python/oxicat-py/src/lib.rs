@@ -171,6 +171,7 @@ impl Segment {
             slowdown,
             rt: None,
             rt_cpu: None,
+            xdp: None,
         };
         let (seg, names) = py
             .allow_threads(|| {

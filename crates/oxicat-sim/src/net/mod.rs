@@ -1,7 +1,8 @@
 //! Transports that put a [`Segment`](crate::segment::Segment) on a real network: raw
-//! Ethernet on an interface ([`raw`], EtherType 0x88A4) and EtherCAT over UDP ([`udp`], port
-//! 34980). Both implement [`FramePort`](crate::realtime::FramePort) and are served in real
-//! time by [`realtime::serve`](crate::realtime::serve).
+//! Ethernet on an interface ([`raw`], EtherType 0x88A4), the same through an AF_XDP socket
+//! ([`xdp`], Linux) and EtherCAT over UDP ([`udp`], port 34980). All implement
+//! [`FramePort`](crate::realtime::FramePort) and are served in real time by
+//! [`realtime::serve`](crate::realtime::serve).
 
 use std::fmt;
 use std::io;
@@ -9,6 +10,8 @@ use std::io;
 #[cfg(unix)]
 pub mod raw;
 pub mod udp;
+#[cfg(target_os = "linux")]
+pub mod xdp;
 
 /// Why a network transport could not start or stopped.
 #[derive(Debug)]
@@ -35,6 +38,14 @@ pub enum NetError {
         addr: String,
         /// The cause.
         source: io::Error,
+    },
+    /// The kernel refused a step of setting up AF_XDP on the interface (`--xdp`).
+    #[cfg(target_os = "linux")]
+    Xdp {
+        /// The interface.
+        iface: String,
+        /// The step and what the kernel said.
+        error: oxicat_xdp::XdpError,
     },
     /// Receiving or sending failed.
     Io {
@@ -69,6 +80,12 @@ impl fmt::Display for NetError {
             ),
             Self::NotEthernet(n) => write!(f, "interface {n:?} does not carry Ethernet frames"),
             Self::Bind { addr, source } => write!(f, "cannot bind UDP address {addr}: {source}"),
+            #[cfg(target_os = "linux")]
+            Self::Xdp { iface, error } => write!(
+                f,
+                "AF_XDP on {iface:?}: {error}. Serve with the raw socket instead: `--iface \
+                 {iface}` without --xdp"
+            ),
             Self::Io { what, source } => write!(f, "{what} failed: {source}"),
         }
     }
@@ -78,6 +95,8 @@ impl std::error::Error for NetError {
     fn source(&self) -> Option<&(dyn std::error::Error + 'static)> {
         match self {
             Self::Bind { source, .. } | Self::Io { source, .. } => Some(source),
+            #[cfg(target_os = "linux")]
+            Self::Xdp { error, .. } => Some(error),
             _ => None,
         }
     }

@@ -49,7 +49,7 @@ impl core::fmt::Debug for RawPort {
     }
 }
 
-fn find(name: &str) -> Result<NetworkInterface, NetError> {
+pub(crate) fn find(name: &str) -> Result<NetworkInterface, NetError> {
     let all = pnet_datalink::interfaces();
     match all.iter().find(|i| i.name == name) {
         Some(i) => Ok(i.clone()),
@@ -67,7 +67,7 @@ fn hash(frame: &[u8]) -> u64 {
     })
 }
 
-fn is_ethercat(frame: &[u8]) -> bool {
+pub(crate) fn is_ethercat(frame: &[u8]) -> bool {
     match frame.get(12..14) {
         Some(t) if t == ETHERCAT => true,
         Some(t) if t == VLAN => frame.get(16..18) == Some(&ETHERCAT[..]),
