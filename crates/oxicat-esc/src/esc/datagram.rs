@@ -414,8 +414,8 @@ impl Esc {
             for k in 0..self.active_sms.len() {
                 let i = self.active_sms[k] as usize;
                 let sm = &mut self.sms[i];
-                if sm.write_open && sm.ecat_writes() {
-                    sm.write_open = false;
+                if sm.write_open() && sm.ecat_writes() {
+                    sm.close_write();
                     let st = sm.status_reg();
                     self.mem[regs::sm_reg(i, 5)] = st;
                 }
@@ -427,7 +427,7 @@ impl Esc {
         while pending != 0 {
             let i = pending.trailing_zeros() as usize;
             pending &= pending - 1;
-            if self.sms[i].pending_commit {
+            if self.sms[i].pending_commit() {
                 if frame_ok {
                     self.commit_sm(i, Side::Ecat);
                 } else {
