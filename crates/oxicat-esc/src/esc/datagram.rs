@@ -243,27 +243,31 @@ impl Esc {
             self.events_dirty = true;
         }
         if k.wd {
+            // 0x0440 bit 0 is set exactly while the watchdog runs (`pd_wd_last` is some:
+            // both set by a triggering write, both cleared by the expiry): its line is
+            // touched only when the watchdog starts.
+            if self.pd_wd_last.is_none() {
+                regs[regs::WD_STATUS_PD as usize] |= 1;
+            }
             self.pd_wd_last = Some(t);
             self.pd_wd_forced = NO_DEADLINE;
-            regs[regs::WD_STATUS_PD as usize] |= 1;
         }
-        // The steps' bytes lie inside the datagram data (checked with the key).
-        // (`n <= PLAN_MAX`: the bound costs one compare per frame.)
-        for st in &self.fused.run[..usize::from(k.n).min(PLAN_MAX)] {
-            let i = st.sm as usize & 15;
-            let sm = &mut self.sms[i];
-            let l = st.len as usize;
-            let at = st.at as usize;
-            if st.write {
-                let b = sm.buffered_write_commit();
-                regs[regs::sm_reg(i, 5)] = sm.buffered_status_reg();
-                let to = st.ram as usize + b as usize * l;
-                copy_small(&mut ram[to..to + l], &frame[at..at + l]);
-            } else {
-                let b = sm.buffered_read_whole();
-                regs[regs::sm_reg(i, 5)] = sm.buffered_status_reg();
-                let from = st.ram as usize + b as usize * l;
-                copy_small(&mut frame[at..at + l], &ram[from..from + l]);
+        // The steps' bytes lie inside the datagram data (checked with the key); unrolled
+        // (`n <= PLAN_MAX`), one test per step.
+        let n = usize::from(k.n);
+        let run = &self.fused.run;
+        let sms = &mut self.sms;
+        let [s0, s1, s2, s3] = run;
+        if n > 0 {
+            fused_step(sms, regs, ram, frame, s0);
+            if n > 1 {
+                fused_step(sms, regs, ram, frame, s1);
+                if n > 2 {
+                    fused_step(sms, regs, ram, frame, s2);
+                    if n > 3 {
+                        fused_step(sms, regs, ram, frame, s3);
+                    }
+                }
             }
         }
         Some(Forward::Port(self.fused.exit))
@@ -886,4 +890,32 @@ impl Esc {
     }
 
     // ------------------------------------------------------------------ memory layer
+}
+
+/// One step of the fused path ([`Esc::process_fused`]): a read step takes the newest
+/// buffer and copies it into the frame, a write step writes the free buffer from the frame
+/// and commits it; the SM status register follows.
+#[inline(always)]
+fn fused_step(
+    sms: &mut [Sm; 16],
+    regs: &mut [u8; REG_END],
+    ram: &mut [u8],
+    frame: &mut [u8],
+    st: &fastpath::FusedStep,
+) {
+    let i = st.sm as usize & 15;
+    let sm = &mut sms[i];
+    let l = st.len as usize;
+    let at = st.at as usize;
+    if st.write {
+        let b = sm.buffered_write_commit();
+        regs[regs::sm_reg(i, 5)] = sm.buffered_status_reg();
+        let to = st.ram as usize + b as usize * l;
+        copy_small(&mut ram[to..to + l], &frame[at..at + l]);
+    } else {
+        let b = sm.buffered_read_whole();
+        regs[regs::sm_reg(i, 5)] = sm.buffered_status_reg();
+        let from = st.ram as usize + b as usize * l;
+        copy_small(&mut frame[at..at + l], &ram[from..from + l]);
+    }
 }
