@@ -53,6 +53,17 @@ fn bench(c: &mut Criterion) {
         // The line still answers as it should after the measured cycles.
         line.check(&mut frame, t + 1000);
     }
+    // The harness alone (the same loop and frame, no ESC): subtract it from the chain of
+    // 1 for the ESC's own time.
+    let mut frame = lrw_frame();
+    let mut t = 1000u64;
+    g.throughput(Throughput::Elements(1));
+    g.bench_function("harness", |b| {
+        b.iter(|| {
+            t += 1000;
+            black_box(Line::harness_only(black_box(&mut frame), t))
+        })
+    });
     g.finish();
 }
 
