@@ -222,9 +222,13 @@ impl Esc {
             self.fused_hits += 1;
         }
         // Registers (SM status, watchdog status) and process RAM (the SM buffers, which
-        // the fused path requires to lie at or above `REG_END` with all three buffers).
-        let (regs, ram) = self.mem.split_at_mut(REG_END);
-        let regs: &mut [u8; REG_END] = regs.try_into().ok()?;
+        // the fused path requires to lie at or above `REG_END` with all three buffers):
+        // one slice whose length is known to cover the registers, so that register
+        // indices need no bounds check.
+        let mem = &mut self.mem[..];
+        if mem.len() < REG_END {
+            return None;
+        }
         // The IRQ field (as it came in, ORed with this ESC's bits as they stand before the
         // datagram's own access), the working counter where the checked length put it and
         // the watchdog trigger first: the steps touch none of them (the plan window lies
@@ -246,10 +250,13 @@ impl Esc {
             // 0x0440 bit 0 is set exactly while the watchdog runs (`pd_wd_last` is some:
             // both set by a triggering write, both cleared by the expiry): its line is
             // touched only when the watchdog starts.
-            if self.pd_wd_last.is_none() {
-                regs[regs::WD_STATUS_PD as usize] |= 1;
+            match &mut self.pd_wd_last {
+                Some(last) => *last = t,
+                None => {
+                    mem[regs::WD_STATUS_PD as usize] |= 1;
+                    self.pd_wd_last = Some(t);
+                }
             }
-            self.pd_wd_last = Some(t);
             self.pd_wd_forced = NO_DEADLINE;
         }
         // The steps' bytes lie inside the datagram data (checked with the key); unrolled
@@ -259,13 +266,13 @@ impl Esc {
         let sms = &mut self.sms;
         let [s0, s1, s2, s3] = run;
         if n > 0 {
-            fused_step(sms, regs, ram, frame, s0);
+            fused_step(sms, mem, frame, s0);
             if n > 1 {
-                fused_step(sms, regs, ram, frame, s1);
+                fused_step(sms, mem, frame, s1);
                 if n > 2 {
-                    fused_step(sms, regs, ram, frame, s2);
+                    fused_step(sms, mem, frame, s2);
                     if n > 3 {
-                        fused_step(sms, regs, ram, frame, s3);
+                        fused_step(sms, mem, frame, s3);
                     }
                 }
             }
@@ -896,26 +903,20 @@ impl Esc {
 /// buffer and copies it into the frame, a write step writes the free buffer from the frame
 /// and commits it; the SM status register follows.
 #[inline(always)]
-fn fused_step(
-    sms: &mut [Sm; 16],
-    regs: &mut [u8; REG_END],
-    ram: &mut [u8],
-    frame: &mut [u8],
-    st: &fastpath::FusedStep,
-) {
+fn fused_step(sms: &mut [Sm; 16], mem: &mut [u8], frame: &mut [u8], st: &fastpath::FusedStep) {
     let i = st.sm as usize & 15;
     let sm = &mut sms[i];
     let l = st.len as usize;
     let at = st.at as usize;
     if st.write {
         let b = sm.buffered_write_commit();
-        regs[regs::sm_reg(i, 5)] = sm.buffered_status_reg();
+        mem[regs::sm_reg(i, 5)] = sm.buffered_status_reg();
         let to = st.ram as usize + b as usize * l;
-        copy_small(&mut ram[to..to + l], &frame[at..at + l]);
+        copy_small(&mut mem[to..to + l], &frame[at..at + l]);
     } else {
         let b = sm.buffered_read_whole();
-        regs[regs::sm_reg(i, 5)] = sm.buffered_status_reg();
+        mem[regs::sm_reg(i, 5)] = sm.buffered_status_reg();
         let from = st.ram as usize + b as usize * l;
-        copy_small(&mut frame[at..at + l], &ram[from..from + l]);
+        copy_small(&mut frame[at..at + l], &mem[from..from + l]);
     }
 }

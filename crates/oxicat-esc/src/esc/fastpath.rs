@@ -24,7 +24,7 @@ pub(super) struct FusedStep {
     /// Offset of the step's bytes in the frame the key describes (set with the key, from
     /// the plan step's window offset).
     pub(super) at: u16,
-    /// The SM's start address relative to `REG_END` and length (one buffer).
+    /// The SM's start address (in process RAM) and length (one buffer).
     pub(super) ram: u16,
     pub(super) len: u16,
     /// SM index.
@@ -219,7 +219,7 @@ impl Esc {
             let st = FusedStep {
                 at: 0,
                 write: k >= self.plan_reads as usize,
-                ram: sm.start - REG_END as u16,
+                ram: sm.start,
                 len: sm.len,
                 sm: op.sm,
             };
