@@ -309,14 +309,14 @@ impl Esc {
             return None;
         }
         let ds = u64::from(d.address());
-        let (lo, hi) = (self.fused.lo, self.fused.hi);
+        let (lo, hi) = (self.fused_plan.lo, self.fused_plan.hi);
         if ds > lo || hi > ds + len as u64 {
             return None;
         }
         // The window offset fits: `hi - ds <= len` < 2^11.
         let woff = (lo - ds) as usize;
         let c = cmd - CMD_LRD;
-        let (nr, nw) = (self.fused.nr, self.fused.nw);
+        let (nr, nw) = (self.fused_plan.nr, self.fused_plan.nw);
         // LRD runs the reads, LWR the writes, LRW both; a write counts 1 in LWR, 2 in LRW.
         let nr = if c == 1 { 0 } else { nr };
         let nw = if c == 0 { 0 } else { nw };
@@ -324,10 +324,13 @@ impl Esc {
         // The command's steps in plan order (reads, then writes), with the frame offsets
         // of their bytes: < 2^11 + the headers.
         let base = dg_at + DG_HEADER_LEN + woff;
-        let (s0, s1) = (if c == 1 { self.fused.nr } else { 0 }, self.fused.nr + nw);
+        let (s0, s1) = (
+            if c == 1 { self.fused_plan.nr } else { 0 },
+            self.fused_plan.nr + nw,
+        );
         let mut run = [fastpath::FusedStep::default(); PLAN_MAX];
         for (r, (st, op)) in run.iter_mut().zip(
-            self.fused
+            self.fused_plan
                 .steps
                 .iter()
                 .zip(&self.plan)
@@ -347,7 +350,7 @@ impl Esc {
             wkc_at: (dg_at + view::field::wkc(len).start) as u16,
             inc,
             n: s1 - s0,
-            wd: nw > 0 && self.fused.wd,
+            wd: nw > 0 && self.fused_plan.wd,
         };
         Some(())
     }
