@@ -232,7 +232,7 @@ impl Esc {
         // The IRQ field (as it came in, ORed with this ESC's bits as they stand before the
         // datagram's own access), the working counter where the checked length put it and
         // the watchdog trigger first: the steps touch none of them (the plan window lies
-        // inside the datagram data), and with them done few values stay live in the loop.
+        // inside the datagram data), and with them done few values stay live in the steps.
         let irq = self.ecat_irq;
         if irq & !irq_in != 0 {
             frame[10..12].copy_from_slice(&(irq_in | irq).to_le_bytes());
