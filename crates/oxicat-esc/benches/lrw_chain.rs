@@ -7,7 +7,8 @@
 //!
 //! Instructions per ESC per datagram (load-independent, see `examples/lrw_profile.rs`):
 //! `valgrind --tool=callgrind <target>/release/examples/lrw_profile 256 N` for N = 100 and
-//! 300; (Ir(300) - Ir(100)) / (200 * 256).
+//! 300; (Ir(300) - Ir(100)) / (200 * 256). `lrw_chain/harness` (and `lrw_profile 0 N`) is
+//! the measuring loop without ESCs, to read the chain of 1 net of it.
 //!
 //! Figures (2-core shared box, load average 4-7 while measuring; wall-clock is noisy, see
 //! the crate README "Performance" for all runs). Up to the fused path the ESCs were the
@@ -23,6 +24,7 @@
 //! | pass-through, `FusedKey`       | 270 (287 / 272) | 31.2 / 26.6 / 36.4     | 36.6 / 29.0 / 36.9 |
 //! | key words, one step loop, inlined, hot fields first | 195 (234 / 198) | 21.4 / 14.4 / 15.8 | 23.3 / 15.8 / 17.2 (of 4) |
 //! | steps with the key, gated routes, fused path without the DC unit | 172 (198 / 174) | see the crate README | (second pass of item 6) |
+//! | packed SM state, unrolled steps, one memory slice | 144 (170 / 146) | 9.5 / 6.5 / 9.4 (load 2-3) | 10.1 / 7.4 / 10.1 (of 6; third pass) |
 //!
 //! (The "honest line" and `FusedKey` rows: A/B in one session, both bench binaries
 //! alternately, three runs each, load average 5.7-6.1 on the 2 cores, so about twice the
@@ -53,6 +55,17 @@ fn bench(c: &mut Criterion) {
         // The line still answers as it should after the measured cycles.
         line.check(&mut frame, t + 1000);
     }
+    // The harness alone (the same loop and frame, no ESC): subtract it from the chain of
+    // 1 for the ESC's own time.
+    let mut frame = lrw_frame();
+    let mut t = 1000u64;
+    g.throughput(Throughput::Elements(1));
+    g.bench_function("harness", |b| {
+        b.iter(|| {
+            t += 1000;
+            black_box(Line::harness_only(black_box(&mut frame), t))
+        })
+    });
     g.finish();
 }
 

@@ -137,6 +137,18 @@ impl Line {
         out
     }
 
+    /// What [`Line::cycle`] does around the ESCs (the working counter cleared, the frame
+    /// handed on), with no ESC: the harness's own cost per frame, measured beside the
+    /// chains (`lrw_chain/harness`, `lrw_profile 0 N`) so that the chain of 1, where it is
+    /// a large part, can be read net of it.
+    #[inline(always)]
+    pub fn harness_only(frame: &mut [u8], t: u64) -> Forward {
+        let n = frame.len();
+        frame[n - 2] = 0;
+        frame[n - 1] = 0;
+        Forward::Port((t & 1) as u8)
+    }
+
     /// Runs one cycle and asserts what the master sees (see the module docs).
     pub fn check(&mut self, frame: &mut [u8], t: u64) {
         let n = self.escs.len();

@@ -222,13 +222,17 @@ impl Esc {
             self.fused_hits += 1;
         }
         // Registers (SM status, watchdog status) and process RAM (the SM buffers, which
-        // the fused path requires to lie at or above `REG_END` with all three buffers).
-        let (regs, ram) = self.mem.split_at_mut(REG_END);
-        let regs: &mut [u8; REG_END] = regs.try_into().ok()?;
+        // the fused path requires to lie at or above `REG_END` with all three buffers):
+        // one slice whose length is known to cover the registers, so that register
+        // indices need no bounds check.
+        let mem = &mut self.mem[..];
+        if mem.len() < REG_END {
+            return None;
+        }
         // The IRQ field (as it came in, ORed with this ESC's bits as they stand before the
         // datagram's own access), the working counter where the checked length put it and
         // the watchdog trigger first: the steps touch none of them (the plan window lies
-        // inside the datagram data), and with them done few values stay live in the loop.
+        // inside the datagram data), and with them done few values stay live in the steps.
         let irq = self.ecat_irq;
         if irq & !irq_in != 0 {
             frame[10..12].copy_from_slice(&(irq_in | irq).to_le_bytes());
@@ -243,27 +247,34 @@ impl Esc {
             self.events_dirty = true;
         }
         if k.wd {
-            self.pd_wd_last = Some(t);
+            // 0x0440 bit 0 is set exactly while the watchdog runs (`pd_wd_last` is some:
+            // both set by a triggering write, both cleared by the expiry): its line is
+            // touched only when the watchdog starts.
+            match &mut self.pd_wd_last {
+                Some(last) => *last = t,
+                None => {
+                    mem[regs::WD_STATUS_PD as usize] |= 1;
+                    self.pd_wd_last = Some(t);
+                }
+            }
             self.pd_wd_forced = NO_DEADLINE;
-            regs[regs::WD_STATUS_PD as usize] |= 1;
         }
-        // The steps' bytes lie inside the datagram data (checked with the key).
-        // (`n <= PLAN_MAX`: the bound costs one compare per frame.)
-        for st in &self.fused.run[..usize::from(k.n).min(PLAN_MAX)] {
-            let i = st.sm as usize & 15;
-            let sm = &mut self.sms[i];
-            let l = st.len as usize;
-            let at = st.at as usize;
-            if st.write {
-                let b = sm.buffered_write_commit();
-                regs[regs::sm_reg(i, 5)] = sm.buffered_status_reg();
-                let to = st.ram as usize + b as usize * l;
-                copy_small(&mut ram[to..to + l], &frame[at..at + l]);
-            } else {
-                let b = sm.buffered_read_whole();
-                regs[regs::sm_reg(i, 5)] = sm.buffered_status_reg();
-                let from = st.ram as usize + b as usize * l;
-                copy_small(&mut frame[at..at + l], &ram[from..from + l]);
+        // The steps' bytes lie inside the datagram data (checked with the key); unrolled
+        // (`n <= PLAN_MAX`), one test per step.
+        let n = usize::from(k.n);
+        let run = &self.fused.run;
+        let sms = &mut self.sms;
+        let [s0, s1, s2, s3] = run;
+        if n > 0 {
+            fused_step(sms, mem, frame, s0);
+            if n > 1 {
+                fused_step(sms, mem, frame, s1);
+                if n > 2 {
+                    fused_step(sms, mem, frame, s2);
+                    if n > 3 {
+                        fused_step(sms, mem, frame, s3);
+                    }
+                }
             }
         }
         Some(Forward::Port(self.fused.exit))
@@ -298,14 +309,14 @@ impl Esc {
             return None;
         }
         let ds = u64::from(d.address());
-        let (lo, hi) = (self.fused.lo, self.fused.hi);
+        let (lo, hi) = (self.fused_plan.lo, self.fused_plan.hi);
         if ds > lo || hi > ds + len as u64 {
             return None;
         }
         // The window offset fits: `hi - ds <= len` < 2^11.
         let woff = (lo - ds) as usize;
         let c = cmd - CMD_LRD;
-        let (nr, nw) = (self.fused.nr, self.fused.nw);
+        let (nr, nw) = (self.fused_plan.nr, self.fused_plan.nw);
         // LRD runs the reads, LWR the writes, LRW both; a write counts 1 in LWR, 2 in LRW.
         let nr = if c == 1 { 0 } else { nr };
         let nw = if c == 0 { 0 } else { nw };
@@ -313,10 +324,13 @@ impl Esc {
         // The command's steps in plan order (reads, then writes), with the frame offsets
         // of their bytes: < 2^11 + the headers.
         let base = dg_at + DG_HEADER_LEN + woff;
-        let (s0, s1) = (if c == 1 { self.fused.nr } else { 0 }, self.fused.nr + nw);
+        let (s0, s1) = (
+            if c == 1 { self.fused_plan.nr } else { 0 },
+            self.fused_plan.nr + nw,
+        );
         let mut run = [fastpath::FusedStep::default(); PLAN_MAX];
         for (r, (st, op)) in run.iter_mut().zip(
-            self.fused
+            self.fused_plan
                 .steps
                 .iter()
                 .zip(&self.plan)
@@ -336,7 +350,7 @@ impl Esc {
             wkc_at: (dg_at + view::field::wkc(len).start) as u16,
             inc,
             n: s1 - s0,
-            wd: nw > 0 && self.fused.wd,
+            wd: nw > 0 && self.fused_plan.wd,
         };
         Some(())
     }
@@ -414,8 +428,8 @@ impl Esc {
             for k in 0..self.active_sms.len() {
                 let i = self.active_sms[k] as usize;
                 let sm = &mut self.sms[i];
-                if sm.write_open && sm.ecat_writes() {
-                    sm.write_open = false;
+                if sm.write_open() && sm.ecat_writes() {
+                    sm.close_write();
                     let st = sm.status_reg();
                     self.mem[regs::sm_reg(i, 5)] = st;
                 }
@@ -427,7 +441,7 @@ impl Esc {
         while pending != 0 {
             let i = pending.trailing_zeros() as usize;
             pending &= pending - 1;
-            if self.sms[i].pending_commit {
+            if self.sms[i].pending_commit() {
                 if frame_ok {
                     self.commit_sm(i, Side::Ecat);
                 } else {
@@ -886,4 +900,26 @@ impl Esc {
     }
 
     // ------------------------------------------------------------------ memory layer
+}
+
+/// One step of the fused path ([`Esc::process_fused`]): a read step takes the newest
+/// buffer and copies it into the frame, a write step writes the free buffer from the frame
+/// and commits it; the SM status register follows.
+#[inline(always)]
+fn fused_step(sms: &mut [Sm; 16], mem: &mut [u8], frame: &mut [u8], st: &fastpath::FusedStep) {
+    let i = st.sm as usize & 15;
+    let sm = &mut sms[i];
+    let l = st.len as usize;
+    let at = st.at as usize;
+    if st.write {
+        let b = sm.buffered_write_commit();
+        mem[regs::sm_reg(i, 5)] = sm.buffered_status_reg();
+        let to = st.ram as usize + b as usize * l;
+        copy_small(&mut mem[to..to + l], &frame[at..at + l]);
+    } else {
+        let b = sm.buffered_read_whole();
+        mem[regs::sm_reg(i, 5)] = sm.buffered_status_reg();
+        let from = st.ram as usize + b as usize * l;
+        copy_small(&mut frame[at..at + l], &mem[from..from + l]);
+    }
 }

@@ -24,7 +24,7 @@ pub(super) struct FusedStep {
     /// Offset of the step's bytes in the frame the key describes (set with the key, from
     /// the plan step's window offset).
     pub(super) at: u16,
-    /// The SM's start address relative to `REG_END` and length (one buffer).
+    /// The SM's start address (in process RAM) and length (one buffer).
     pub(super) ram: u16,
     pub(super) len: u16,
     /// SM index.
@@ -36,7 +36,9 @@ pub(super) struct FusedStep {
 /// The fused path (`Esc::forward_fused`): a frame entering port 0 with a good FCS that
 /// holds a single logical datagram covering the plan window, at an ESC whose plan steps
 /// are all distinct buffered-mode (3-buffer) SMs in process RAM and which has an open
-/// port (the frame does not loop back into the processing unit). Rebuilt with the plan and on port changes.
+/// port (the frame does not loop back into the processing unit). Rebuilt with the plan and
+/// on port changes. What a frame reads, in one cache line ([`FusedPlan`] holds what only
+/// the frame checks read).
 #[derive(Debug, Clone, Copy, Default)]
 #[repr(C)]
 pub(super) struct Fused {
@@ -53,8 +55,13 @@ pub(super) struct Fused {
     pub(super) exit: u8,
     /// The steps the key's command runs (`key.n` of them, in plan order: the reads for
     /// LRD, the writes for LWR, all for LRW), with their frame offsets; set with the key.
-    /// In one cache line with the key.
     pub(super) run: [FusedStep; PLAN_MAX],
+}
+
+/// The rest of the fused path's pre-resolved state (rebuilt with [`Fused`]), read only by
+/// the frame checks when the key changes.
+#[derive(Debug, Clone, Copy, Default)]
+pub(super) struct FusedPlan {
     /// Some write step's SM triggers the process-data watchdog.
     pub(super) wd: bool,
     /// The plan's steps (`steps[k]` is `plan[k]`): `nr` read steps (run by LRD and LRW),
@@ -66,6 +73,10 @@ pub(super) struct Fused {
     pub(super) lo: u64,
     pub(super) hi: u64,
 }
+
+/// [`Fused`] fills one cache line: with the `Esc` fields before it, the `SmBank` after it
+/// starts the next line.
+const _: () = assert!(core::mem::size_of::<Fused>() <= 64);
 
 /// What the fused path's frame checks depend on, and what they derived, for the last frame
 /// they accepted (with this configuration: `rebuild_fused` starts afresh). The checks read
@@ -192,6 +203,7 @@ impl Esc {
     /// Decides whether the fused path applies (see `Fused`) and pre-resolves it.
     pub(super) fn rebuild_fused(&mut self) {
         let mut f = Fused::default();
+        let mut p = FusedPlan::default();
         // Exit port of a frame entering port 0: the first open port in processing order
         // (port 0 itself last; all closed: the frame loops back, generic path).
         let exit = [3u8, 1, 2, 0].into_iter().find(|&p| self.port_open(p));
@@ -219,28 +231,30 @@ impl Esc {
             let st = FusedStep {
                 at: 0,
                 write: k >= self.plan_reads as usize,
-                ram: sm.start - REG_END as u16,
+                ram: sm.start,
                 len: sm.len,
                 sm: op.sm,
             };
             // Reads first, then writes (the plan's order).
-            f.steps[k] = st;
+            p.steps[k] = st;
             if k >= self.plan_reads as usize {
-                f.nw += 1;
-                f.wd |= sm.ctrl & CTRL_WD_TRIGGER != 0;
+                p.nw += 1;
+                p.wd |= sm.ctrl & CTRL_WD_TRIGGER != 0;
             } else {
-                f.nr += 1;
+                p.nr += 1;
             }
         }
         if ok {
             f.ok = true;
             f.exit = exit.unwrap_or(0);
-            f.lo = self.plan_lo;
-            f.hi = self.plan_hi;
+            p.lo = self.plan_lo;
+            p.hi = self.plan_hi;
         } else {
             f = Fused::default();
+            p = FusedPlan::default();
         }
         self.fused = f;
+        self.fused_plan = p;
         self.gate_routes();
     }
 

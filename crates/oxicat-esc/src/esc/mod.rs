@@ -34,7 +34,7 @@ mod fastpath;
 mod regfile;
 
 use events::QueryMemo;
-use fastpath::{Fused, PlanOp, PLAN_MAX};
+use fastpath::{Fused, FusedPlan, PlanOp, PLAN_MAX};
 use regfile::chip_permissions;
 
 /// Where a frame leaves the ESC.
@@ -152,16 +152,13 @@ fn copy_other(d: &mut [u8], s: &[u8]) {
     d.copy_from_slice(s);
 }
 
-/// Bytes before SM0 in [`SmBank`]: SM2 starts a cache line, so that SM2..SM4 share one
-/// (SM0/SM1 the line before): the usual assignment, SM0/SM1 mailbox, SM2/SM3 process data.
-const SM_BANK_PAD: usize = 64 - 2 * core::mem::size_of::<Sm>() % 64;
-
-/// The SyncManagers at a cache-line-aligned place (see [`SM_BANK_PAD`]); derefs to the
-/// array.
+/// The SyncManagers from a cache-line boundary: SM0..SM3 share one line (the usual
+/// assignment: SM0/SM1 mailbox, SM2/SM3 process data), the one right after the fused
+/// path's ([`Fused`]), so that a fused frame touches consecutive lines of the `Esc`.
+/// Derefs to the array.
 #[derive(Debug, Clone)]
 #[repr(C, align(64))]
 struct SmBank {
-    _pad: [u8; SM_BANK_PAD],
     sms: [Sm; 16],
 }
 
@@ -217,10 +214,12 @@ pub struct Esc {
     /// See [`QueryMemo`].
     memo: QueryMemo,
     mem: Vec<u8>,
-    /// Hot state of the fused LRW path.
+    /// Hot state of the fused LRW path (one line).
     fused: Fused,
     /// SyncManagers; the chip has the first `cfg.sm_count` (the others stay disabled).
     sms: SmBank,
+    /// The fused path's state that only its frame checks read.
+    fused_plan: FusedPlan,
     dc: Dc,
     /// Frames the fused path processed (tests).
     #[cfg(test)]
@@ -328,6 +327,7 @@ impl Esc {
         let mut esc = Self {
             memo,
             fused: Fused::default(),
+            fused_plan: FusedPlan::default(),
             fast_off: false,
             route: [NO_ROUTE; 4],
             route_base: [NO_ROUTE; 4],
@@ -344,10 +344,7 @@ impl Esc {
             sii_busy_until: None,
             dc,
             link: [true, false, false, false],
-            sms: SmBank {
-                _pad: [0; SM_BANK_PAD],
-                sms,
-            },
+            sms: SmBank { sms },
             active_sms: Vec::with_capacity(16),
             fmmus: Vec::with_capacity(16),
             fmmu_rw_overlap: false,

@@ -507,7 +507,7 @@ impl Esc {
             || if cur == sm.start as u32 {
                 !sm.open_read()
             } else {
-                !sm.read_open
+                !sm.read_open()
             };
         if refuse {
             if side == Side::Pdi {
@@ -516,7 +516,7 @@ impl Esc {
             }
             return false;
         }
-        let off = sm.buf_offset(sm.user_buf);
+        let off = sm.buf_offset(sm.user_buf());
         let done = cur + o.len() as u32 == sm.end();
         if done {
             sm.close_read();
@@ -578,12 +578,12 @@ impl Esc {
             || if cur == sm.start as u32 {
                 !sm.open_write()
             } else {
-                !sm.write_open
+                !sm.write_open()
             };
         if refuse {
             return false;
         }
-        let off = sm.buf_offset(sm.write_buf);
+        let off = sm.buf_offset(sm.write_buf());
         let done = cur + d.len() as u32 == sm.end();
         let to = cur + off;
         if (to as usize) < REG_END {
@@ -593,11 +593,11 @@ impl Esc {
         }
         let sm = &mut self.sms[i];
         if done {
-            sm.write_open = false;
             if side == Side::Ecat {
-                sm.pending_commit = true;
+                sm.close_write_pending();
                 self.pending_sms |= 1 << i;
             } else {
+                sm.close_write();
                 self.commit_sm(i, side);
                 return true;
             }
@@ -644,7 +644,7 @@ impl Esc {
         let wd = sm.ctrl & CTRL_WD_TRIGGER != 0;
         let start = sm.start as u32;
         let end = sm.end();
-        let off = sm.buf_offset(sm.last_written.min(2));
+        let off = sm.buf_offset(sm.last_written().min(2));
         self.mem[regs::sm_reg(i, 5)] = status;
         self.events_dirty = true;
         if side == Side::Ecat && wd {
