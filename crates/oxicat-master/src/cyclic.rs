@@ -683,23 +683,18 @@ impl Master {
                     let mut plan = match self.exchange {
                         Exchange::Ethercrab => None,
                         Exchange::Auto if ethercrab_frames <= 1 => None,
-                        Exchange::Auto | Exchange::Lean => self.lean_plan(&o, &i).await,
+                        Exchange::Auto => self
+                            .lean_plan(&o, &i)
+                            .await
+                            .filter(|p| p.frames() <= ethercrab_frames),
+                        Exchange::Lean => self.lean_plan(&o, &i).await,
                     };
-                    if self.exchange == Exchange::Auto
-                        && plan
-                            .as_ref()
-                            .is_some_and(|p| p.chunks.len() + 1 > ethercrab_frames)
-                    {
-                        plan = None;
-                    }
                     stats.exchange = if plan.is_some() {
                         Exchange::Lean
                     } else {
                         Exchange::Ethercrab
                     };
-                    stats.frames_per_cycle = plan
-                        .as_ref()
-                        .map_or(ethercrab_frames, |p| p.chunks.len() + 1);
+                    stats.frames_per_cycle = plan.as_ref().map_or(ethercrab_frames, |p| p.frames());
                     let slaves = u16::try_from(n).unwrap_or(u16::MAX);
                     let t0 = time.now();
                     let mut expected = None;

@@ -170,6 +170,11 @@ impl Plan {
         })
     }
 
+    /// Frames per cycle: the LRWs and the BRD.
+    pub(crate) fn frames(&self) -> usize {
+        self.chunks.len() + 1
+    }
+
     /// Puts every slave's outputs into the image.
     pub(crate) fn put_outputs(&mut self, outputs: &[Vec<u8>]) {
         for (pieces, data) in self.outputs.iter().zip(outputs) {
@@ -226,12 +231,12 @@ impl Plan {
                 }
                 None => (lrws.await, None),
             };
-            let mut taken = Vec::with_capacity(batch.len());
             for (c, r) in batch.iter().zip(replies) {
                 match r {
                     Ok(data) => {
                         seen.working_counter = seen.working_counter.wrapping_add(c.wkc);
-                        taken.push((*c, data));
+                        let n = data.len().min(c.len);
+                        self.image[c.offset..c.offset + n].copy_from_slice(&data[..n]);
                     }
                     Err(Error::WorkingCounter { received, .. }) => {
                         seen.working_counter = seen.working_counter.wrapping_add(received);
@@ -239,10 +244,6 @@ impl Plan {
                     }
                     Err(e) => return Err(e),
                 }
-            }
-            for (c, data) in taken {
-                let n = data.len().min(c.len);
-                self.image[c.offset..c.offset + n].copy_from_slice(&data[..n]);
             }
             match st {
                 // AL status state bits only (0x0F): what ethercrab's per-slave check

@@ -7,10 +7,9 @@
 
 mod netns_common;
 
-use std::io::{BufRead, BufReader};
 use std::net::{SocketAddr, TcpStream};
 use std::process::{Command, Stdio};
-use std::time::{Duration, Instant};
+use std::time::Duration;
 
 use ethercrab::std::{ethercat_now, tx_rx_task};
 use ethercrab::{MainDevice, PduStorage};
@@ -57,13 +56,11 @@ fn xdp_serving_to_op_with_ip_traffic_alongside() {
     };
     let sim_if = bench.sim_if().to_string();
     bench.spawn_in_ns(&["sim", "--iface", &sim_if, "--xdp", "demo:2"]);
-    // The bench returns on the "serving" line, which its reader stores a moment later.
-    let serving = |b: &NetnsSim| b.sim_log().iter().any(|l| l.contains("AF_XDP on"));
-    let deadline = Instant::now() + Duration::from_secs(5);
-    while !serving(&bench) && Instant::now() < deadline {
-        std::thread::sleep(Duration::from_millis(10));
-    }
-    assert!(serving(&bench), "{:?}", bench.sim_log());
+    assert!(
+        bench.sim_log().iter().any(|l| l.contains("AF_XDP on")),
+        "{:?}",
+        bench.sim_log()
+    );
     assert!(
         link_show(&bench).contains("oxicat_ecat"),
         "{}",
@@ -150,37 +147,19 @@ fn xdp_serving_to_op_with_ip_traffic_alongside() {
 /// link closed); runs the simulator itself to see the interface after it ended.
 #[test]
 fn xdp_program_detached_on_ctrl_c() {
-    let Some(bench) = NetnsSim::bare() else {
+    let Some(mut bench) = NetnsSim::bare() else {
         return;
     };
-    let mut child = Command::new("ip")
-        .args(["netns", "exec", bench.netns(), oxicat_bin()])
-        .args(["sim", "-q", "--iface", bench.sim_if(), "--xdp", "demo:1"])
-        .stdin(Stdio::null())
-        .stdout(Stdio::null())
-        .stderr(Stdio::piped())
-        .spawn()
-        .expect("spawn oxicat sim");
-    let stderr = child.stderr.take().expect("piped stderr");
-    let mut lines = BufReader::new(stderr).lines();
-    let deadline = Instant::now() + Duration::from_secs(60);
-    let mut log = Vec::new();
-    while Instant::now() < deadline {
-        let Some(Ok(l)) = lines.next() else { break };
-        let serving = l.contains("serving");
-        log.push(l);
-        if serving {
-            break;
-        }
-    }
+    let sim_if = bench.sim_if().to_string();
+    bench.spawn_in_ns(&["sim", "-q", "--iface", &sim_if, "--xdp", "demo:1"]);
     let attached = link_show(&bench);
-    let _ = Command::new("kill")
-        .args(["-INT", &child.id().to_string()])
-        .status();
-    let status = child.wait().expect("wait");
-    log.extend(lines.map_while(Result::ok));
+    let status = bench.interrupt();
+    let log = bench.sim_log();
     assert!(attached.contains("oxicat_ecat"), "{attached}\n{log:?}");
-    assert!(status.success(), "exit after Ctrl-C: {status:?}\n{log:?}");
+    assert!(
+        status.is_some_and(|s| s.success()),
+        "exit after Ctrl-C: {status:?}\n{log:?}"
+    );
     let after = link_show(&bench);
     assert!(!after.contains("xdp"), "still attached: {after}");
 }

@@ -226,10 +226,12 @@ impl NetnsSim {
         std::thread::spawn(move || {
             for line in BufReader::new(stderr).lines() {
                 let Ok(line) = line else { break };
-                if line.contains("serving") {
+                // Stored before the waiting test is told, so it finds the line in the log.
+                let serving = line.contains("serving");
+                log.lock().unwrap().push(line);
+                if serving {
                     let _ = tx.send(());
                 }
-                log.lock().unwrap().push(line);
             }
         });
         if rx.recv_timeout(Duration::from_secs(60)).is_err() {
@@ -272,21 +274,31 @@ impl NetnsSim {
     }
 }
 
+impl NetnsSim {
+    /// Ctrl-C to the simulator, then (after 2 s) a kill; its exit status (`None`: it was
+    /// not running, or had to be killed).
+    pub fn interrupt(&mut self) -> Option<std::process::ExitStatus> {
+        let mut c = self.child.take()?;
+        let _ = Command::new("kill")
+            .args(["-INT", &c.id().to_string()])
+            .status();
+        for _ in 0..40 {
+            if let Ok(Some(status)) = c.try_wait() {
+                return Some(status);
+            }
+            std::thread::sleep(Duration::from_millis(50));
+        }
+        let _ = c.kill();
+        let _ = c.wait();
+        None
+    }
+}
+
 impl Drop for NetnsSim {
     fn drop(&mut self) {
-        if let Some(mut c) = self.child.take() {
-            // Ctrl-C first, so the simulator prints its frame counters; then make sure.
-            let _ = Command::new("kill")
-                .args(["-INT", &c.id().to_string()])
-                .status();
-            for _ in 0..40 {
-                if !matches!(c.try_wait(), Ok(None)) {
-                    break;
-                }
-                std::thread::sleep(Duration::from_millis(50));
-            }
-            let _ = c.kill();
-            let _ = c.wait();
+        // Ctrl-C first, so the simulator prints its frame counters; then make sure.
+        if self.child.is_some() {
+            self.interrupt();
             if std::thread::panicking() {
                 // Give the reader thread a moment to collect the last lines.
                 std::thread::sleep(Duration::from_millis(100));
