@@ -30,10 +30,16 @@ use oxicat_wire::pipe::FramePipe;
 /// 10 ms for an EEPROM read — can expire although nothing is wrong. These are generous
 /// in every field, so only a real hang fails, and one definition serves every test and
 /// tool that drives a virtual segment.
+///
+/// `wait_loop_delay` is zero (ethercrab's own default): a wait loop's pause is real time,
+/// in which the virtual segment does not move (its clock advances with the frames), so a
+/// pause only made the run slower. Each turn of a wait loop sends a frame, so it still
+/// yields to the transport every time. With 200 µs the trot's bring-up spent 0.7 s of its
+/// 0.75 s asleep in about 2,900 such pauses, for the same frames and the same bytes.
 pub fn virtual_timeouts() -> Timeouts {
     use std::time::Duration;
     Timeouts {
-        wait_loop_delay: Duration::from_micros(200),
+        wait_loop_delay: Duration::ZERO,
         state_transition: Duration::from_secs(60),
         pdu: Duration::from_secs(10),
         eeprom: Duration::from_secs(10),
