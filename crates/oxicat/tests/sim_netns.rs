@@ -7,8 +7,8 @@ mod netns_common;
 
 use std::time::Duration;
 
-use ethercrab::std::{ethercat_now, tx_rx_task};
-use ethercrab::{MainDevice, PduStorage};
+use ethercrab::std::ethercat_now;
+use ethercrab::PduStorage;
 use netns_common::NetnsSim;
 
 const MAX_SUBDEVICES: usize = 8;
@@ -20,14 +20,7 @@ fn raw_ethernet_discovery_to_op_through_veth() {
     let Some(bench) = NetnsSim::start(&["demo:2"]) else {
         return;
     };
-    let (tx, rx, pdu_loop) = PDU_STORAGE.try_split().expect("split once");
-    let task = tx_rx_task(bench.master_if(), tx, rx).expect("raw socket on the veth end");
-    std::thread::spawn(move || futures_lite::future::block_on(task));
-    let md = MainDevice::new(
-        pdu_loop,
-        netns_common::relaxed_timeouts(),
-        netns_common::relaxed_config(),
-    );
+    let md = netns_common::master_on(&bench, &PDU_STORAGE);
     futures_lite::future::block_on(async {
         let group = md
             .init_single_group::<MAX_SUBDEVICES, PDI_LEN>(ethercat_now)

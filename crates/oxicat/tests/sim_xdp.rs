@@ -11,8 +11,8 @@ use std::net::{SocketAddr, TcpStream};
 use std::process::{Command, Stdio};
 use std::time::Duration;
 
-use ethercrab::std::{ethercat_now, tx_rx_task};
-use ethercrab::{MainDevice, PduStorage};
+use ethercrab::std::ethercat_now;
+use ethercrab::PduStorage;
 use netns_common::{oxicat_bin, NetnsSim};
 
 const MAX_SUBDEVICES: usize = 8;
@@ -98,14 +98,7 @@ fn xdp_serving_to_op_with_ip_traffic_alongside() {
         Ok(_) => panic!("nothing listens on port 9 in the namespace"),
     }
 
-    let (tx, rx, pdu_loop) = PDU_STORAGE.try_split().expect("split once");
-    let task = tx_rx_task(bench.master_if(), tx, rx).expect("raw socket on the veth end");
-    std::thread::spawn(move || futures_lite::future::block_on(task));
-    let md = MainDevice::new(
-        pdu_loop,
-        netns_common::relaxed_timeouts(),
-        netns_common::relaxed_config(),
-    );
+    let md = netns_common::master_on(&bench, &PDU_STORAGE);
     futures_lite::future::block_on(async {
         let group = md
             .init_single_group::<MAX_SUBDEVICES, PDI_LEN>(ethercat_now)

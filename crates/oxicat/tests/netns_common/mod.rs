@@ -74,6 +74,19 @@ pub fn relaxed_config() -> ethercrab::MainDeviceConfig {
     }
 }
 
+/// An ethercrab master on the bench's veth end: the test's own static PDU storage split,
+/// its tx/rx task on a thread of its own, [`relaxed_timeouts`] and [`relaxed_config`].
+pub fn master_on<const N: usize>(
+    bench: &NetnsSim,
+    storage: &'static ethercrab::PduStorage<16, N>,
+) -> ethercrab::MainDevice<'static> {
+    let (tx, rx, pdu_loop) = storage.try_split().expect("split once");
+    let task =
+        ethercrab::std::tx_rx_task(bench.master_if(), tx, rx).expect("raw socket on the veth end");
+    std::thread::spawn(move || futures_lite::future::block_on(task));
+    ethercrab::MainDevice::new(pdu_loop, relaxed_timeouts(), relaxed_config())
+}
+
 /// The `oxicat` binary under test (`None` in another crate's tests, which include this
 /// module by path and name their own binary: [`NetnsSim::spawn_bin_in_ns`]).
 pub fn oxicat_bin() -> &'static str {
