@@ -1248,7 +1248,9 @@ pub fn run_scenario(
     let md = MainDevice::new(
         pdu_loop,
         Timeouts {
-            wait_loop_delay: Duration::from_micros(200),
+            // A pause is real time, in which the virtual segment does not move
+            // (`oxicat_master::inprocess::virtual_timeouts`).
+            wait_loop_delay: Duration::ZERO,
             state_transition: Duration::from_secs(20),
             pdu: Duration::from_secs(2),
             mailbox_response: Duration::from_secs(5),
