@@ -336,7 +336,9 @@ impl Master {
 
     /// Reads object `index:sub` of the slave at `position` (SDO upload).
     pub fn sdo_upload(&self, position: usize, index: u16, sub: u8) -> Result<Vec<u8>, MasterError> {
-        futures_lite::future::block_on(self.sdo_upload_async(position, index, sub))
+        self.runner
+            .clone()
+            .block_on(self.sdo_upload_async(position, index, sub))
     }
 
     /// Writes `data` to object `index:sub` of the slave at `position` (SDO download).
@@ -347,7 +349,9 @@ impl Master {
         sub: u8,
         data: &[u8],
     ) -> Result<(), MasterError> {
-        futures_lite::future::block_on(self.sdo_download_async(position, index, sub, data))
+        self.runner
+            .clone()
+            .block_on(self.sdo_download_async(position, index, sub, data))
     }
 
     fn check_abort(
@@ -624,7 +628,7 @@ impl Master {
 
     /// The object list of the slave (SDO information, list type "all").
     pub fn sdo_list(&self, position: usize) -> Result<Vec<u16>, MasterError> {
-        futures_lite::future::block_on(async {
+        self.runner.clone().block_on(async {
             let (_, d) = self
                 .sdo_info(
                     position,
@@ -646,7 +650,9 @@ impl Master {
 
     /// The description of object `index` and of each of its entries.
     pub fn sdo_describe(&self, position: usize, index: u16) -> Result<ObjectDesc, MasterError> {
-        futures_lite::future::block_on(self.sdo_describe_async(position, index))
+        self.runner
+            .clone()
+            .block_on(self.sdo_describe_async(position, index))
     }
 
     pub(crate) async fn sdo_describe_async(

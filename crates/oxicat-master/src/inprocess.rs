@@ -167,3 +167,68 @@ pub fn spawn_inprocess_with<P: FramePipe + Send + ?Sized + 'static>(
         .name("oxicat-inprocess".into())
         .spawn(move || futures_lite::future::block_on(inprocess_task(segment, tx, rx, config)))
 }
+
+/// The in-process transport driven on the caller's thread: [`Runner::block_on`] polls it
+/// beside the future it runs, so a frame goes through the segment in the same poll that
+/// queued it, with no thread hand-over (two context switches and a handful of futex calls
+/// per frame on a transport thread, [`spawn_inprocess_with`]).
+pub type SharedTask = Arc<Mutex<Pin<Box<InProcessTask<dyn FramePipe + Send>>>>>;
+
+/// Runs futures to completion on the calling thread, with the in-process transport (if
+/// any) polled beside each.
+#[derive(Clone, Default)]
+pub struct Runner(Option<SharedTask>);
+
+impl Runner {
+    /// A runner that polls `task` beside every future it runs.
+    pub fn with_task(task: SharedTask) -> Self {
+        Self(Some(task))
+    }
+
+    /// `futures_lite::future::block_on(f)`, the transport polled after `f` in every turn
+    /// (a frame `f` queued is exchanged in the same turn; the reply wakes `f`, which is
+    /// polled again at once: the parker was notified while the thread ran).
+    pub fn block_on<F: Future>(&self, f: F) -> F::Output {
+        match &self.0 {
+            None => futures_lite::future::block_on(f),
+            Some(task) => futures_lite::future::block_on(futures_lite::future::or(
+                f,
+                Pump {
+                    task,
+                    done: false,
+                    _out: std::marker::PhantomData,
+                },
+            )),
+        }
+    }
+}
+
+/// Polls the transport; never ready (its output type is only there for `or`).
+struct Pump<'a, T> {
+    task: &'a SharedTask,
+    done: bool,
+    _out: std::marker::PhantomData<fn() -> T>,
+}
+
+impl<T> Future for Pump<'_, T> {
+    type Output = T;
+
+    fn poll(mut self: Pin<&mut Self>, cx: &mut Context<'_>) -> Poll<T> {
+        if !self.done {
+            let mut task = self.task.lock().unwrap_or_else(|e| e.into_inner());
+            match task.as_mut().poll(cx) {
+                Poll::Pending => {}
+                Poll::Ready(r) => {
+                    // ethercrab asked the loop to exit, or a hand-over failed: the master's
+                    // futures then end with ethercrab's own errors (timeouts).
+                    if let Err(e) = r {
+                        log::warn!("in-process transport stopped: {e}");
+                    }
+                    drop(task);
+                    self.done = true;
+                }
+            }
+        }
+        Poll::Pending
+    }
+}

@@ -30,7 +30,7 @@ use std::time::Duration;
 
 use ethercrab::subdevice_group::SubDeviceGroup;
 use ethercrab::{Command, MainDevice, MainDeviceConfig, PduStorage, Timeouts};
-use inprocess::{spawn_inprocess_with, InProcessConfig};
+use inprocess::{inprocess_task, InProcessConfig, Runner};
 pub use oxicat_wire::pipe::FramePipe;
 
 pub use al::{AlState, AlStatus};
@@ -261,6 +261,8 @@ pub struct Master {
     pub(crate) preop_after_cycling: bool,
     /// How a free-running cycle exchanges the process image.
     pub(crate) exchange: cyclic::Exchange,
+    /// Runs the master's futures (with the in-process transport on a virtual segment).
+    pub(crate) runner: Runner,
 }
 
 fn map_open_error(iface: &str, e: std::io::Error) -> MasterError {
@@ -298,6 +300,7 @@ impl Master {
             .try_split()
             .map_err(|_| MasterError::Usage("PDU storage already in use".into()))?;
         let link_name = link.describe();
+        let mut runner = Runner::default();
         let time = match &link {
             Link::Iface(iface) => {
                 check_interface(iface)?;
@@ -314,15 +317,17 @@ impl Master {
                 Time::Real
             }
             Link::Sim(seg) => {
-                spawn_inprocess_with(
+                // Polled on this thread inside every `Runner::block_on`: no transport
+                // thread, no hand-over per frame.
+                let task = inprocess_task(
                     seg.clone(),
                     tx,
                     rx,
                     InProcessConfig {
                         frame_gap_ns: SIM_FRAME_GAP_NS,
                     },
-                )
-                .map_err(|e| MasterError::Io("in-process".into(), e))?;
+                );
+                runner = Runner::with_task(Arc::new(Mutex::new(Box::pin(task))));
                 Time::Sim(seg.clone())
             }
         };
@@ -348,8 +353,9 @@ impl Master {
             link_name,
             preop_after_cycling: true,
             exchange: cyclic::Exchange::default(),
+            runner,
         };
-        futures_lite::future::block_on(m.discover())?;
+        m.runner.clone().block_on(m.discover())?;
         Ok(m)
     }
 
@@ -440,7 +446,7 @@ impl Master {
             ));
         }
         // On the heap: ethercrab's initialisation is a large future (debug builds).
-        let group = on_group_stack(|| futures_lite::future::block_on(Box::pin(self.init())))?;
+        let group = on_group_stack(|| self.runner.clone().block_on(Box::pin(self.init())))?;
         let addresses: Vec<u16> = group
             .iter(&self.md)
             .map(|s| s.configured_address())
@@ -556,12 +562,12 @@ impl Master {
 
     /// Reads `len` bytes at ESC address `reg` of the slave at `position` (FPRD).
     pub fn reg_read(&self, position: usize, reg: u16, len: u16) -> Result<Vec<u8>, MasterError> {
-        futures_lite::future::block_on(self.fprd(position, reg, len))
+        self.runner.clone().block_on(self.fprd(position, reg, len))
     }
 
     /// Writes `data` at ESC address `reg` of the slave at `position` (FPWR).
     pub fn reg_write(&self, position: usize, reg: u16, data: &[u8]) -> Result<(), MasterError> {
-        futures_lite::future::block_on(self.fpwr(position, reg, data))
+        self.runner.clone().block_on(self.fpwr(position, reg, data))
     }
 
     pub(crate) async fn fprd(
@@ -621,7 +627,7 @@ impl Master {
 
     /// AL status and code of the slave at `position`.
     pub fn al_status(&self, position: usize) -> Result<AlStatus, MasterError> {
-        futures_lite::future::block_on(self.al_status_async(position))
+        self.runner.clone().block_on(self.al_status_async(position))
     }
 
     pub(crate) async fn al_status_async(&self, position: usize) -> Result<AlStatus, MasterError> {
@@ -634,7 +640,7 @@ impl Master {
 
     /// Scans the slaves: addresses, alias, state, name, identity, ports (reads only).
     pub fn scan(&self) -> Result<Vec<SlaveInfo>, MasterError> {
-        futures_lite::future::block_on(async {
+        self.runner.clone().block_on(async {
             let mut out = Vec::new();
             for (position, sd) in self.found.iter().enumerate() {
                 let (vendor_id, product_code, revision, serial) = sd.identity;
@@ -678,7 +684,7 @@ impl Master {
         state: AlState,
     ) -> Result<Vec<(usize, AlStatus)>, MasterError> {
         // On the heap: the walk is a large future in debug builds.
-        futures_lite::future::block_on(Box::pin(async {
+        self.runner.clone().block_on(Box::pin(async {
             let mut out = Vec::new();
             for &p in positions {
                 self.address(p)?;
@@ -824,7 +830,7 @@ impl Master {
                 let md = &self.md;
                 // The group moves out of its box inside a future on the heap.
                 let g = on_group_stack(|| {
-                    futures_lite::future::block_on(Box::pin(async move {
+                    self.runner.clone().block_on(Box::pin(async move {
                         (*g).into_pre_op_pdi(md).await.map(Box::new)
                     }))
                 })
@@ -884,19 +890,19 @@ impl Master {
 
     /// Name (SII) of the slave at `position`.
     pub fn name(&self, position: usize) -> Result<String, MasterError> {
-        futures_lite::future::block_on(self.name_async(position))
+        self.runner.clone().block_on(self.name_async(position))
     }
 
     /// The sync mode of the slave at `position` (0x1C32:01: 0 free run, 1 SM2
     /// synchronous, 2 DC SYNC0, 3 DC SYNC1), `None` when it has no such object.
     pub fn sync_mode(&self, position: usize) -> Result<Option<u16>, MasterError> {
-        futures_lite::future::block_on(self.sync_mode_async(position))
+        self.runner.clone().block_on(self.sync_mode_async(position))
     }
 
     /// 0x1C32:04 (sync modes supported: bit 0 free run, 1 SM-synchronous, 2/3 DC) of the
     /// slave at `position`, `None` when it has no such object or no CoE now.
     pub fn sync_modes_supported(&self, position: usize) -> Result<Option<u16>, MasterError> {
-        futures_lite::future::block_on(async {
+        self.runner.clone().block_on(async {
             if !self.has_coe(position).await {
                 return Ok(None);
             }

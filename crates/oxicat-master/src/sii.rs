@@ -134,7 +134,9 @@ impl Master {
     /// Reads the SII of the slave at `position`: up to and including the end-of-categories
     /// marker, or the whole EEPROM with `full`.
     pub fn sii_read(&self, position: usize, full: bool) -> Result<Vec<u8>, MasterError> {
-        futures_lite::future::block_on(self.sii_read_async(position, full))
+        self.runner
+            .clone()
+            .block_on(self.sii_read_async(position, full))
     }
 
     /// `len` bytes of the SII from word `word` on.
@@ -198,9 +200,12 @@ impl Master {
     /// (16 Kbit) with one address byte, 512 KiB (4 Mbit) with two — so a blank EEPROM
     /// (0xFFFF) does not claim more than the chip can hold.
     pub fn eeprom_bytes(&self, position: usize) -> Result<usize, MasterError> {
-        let ctl = futures_lite::future::block_on(self.read_u16(position, CTL))?;
+        let ctl = self.runner.clone().block_on(self.read_u16(position, CTL))?;
         let chip = if ctl & 0x0080 != 0 { 512 * 1024 } else { 2048 };
-        let w = futures_lite::future::block_on(self.sii_read_at(position, 0x3E, 2))?;
+        let w = self
+            .runner
+            .clone()
+            .block_on(self.sii_read_at(position, 0x3E, 2))?;
         let sii = (usize::from(u16::from_le_bytes([w[0], w[1]])) + 1) * 128;
         Ok(sii.min(chip))
     }
@@ -239,7 +244,7 @@ impl Master {
         if let Some(c) = self.sii_cache.borrow_mut().get_mut(position) {
             *c = None;
         }
-        futures_lite::future::block_on(async {
+        self.runner.clone().block_on(async {
             let mut area = self.sii_read_at(position, 0, 16).await?;
             if sii_crc8(&area[..14]) != area[14] {
                 return Err(sii_err(
@@ -289,7 +294,7 @@ impl Master {
         if let Some(c) = self.sii_cache.borrow_mut().get_mut(position) {
             *c = None;
         }
-        futures_lite::future::block_on(async {
+        self.runner.clone().block_on(async {
             self.sii_take(position).await?;
             let words = img.len() / 2;
             for w in 0..words {
