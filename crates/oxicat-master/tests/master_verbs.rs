@@ -427,3 +427,56 @@ fn a_sync_mode_a_slave_does_not_offer_is_refused_naming_it() {
     let stats = m.run_cycles(opts.with_sync(SyncMode::FreeRun), 10).unwrap();
     assert_eq!((stats.cycles, stats.wkc_errors), (10, 0));
 }
+
+/// A segment that notes the thread every frame goes through it on.
+struct ThreadNoting {
+    seg: std::sync::Arc<std::sync::Mutex<oxicat_sim::segment::Segment>>,
+    threads: std::sync::Arc<std::sync::Mutex<Vec<std::thread::ThreadId>>>,
+}
+
+impl oxicat_wire::pipe::FramePipe for ThreadNoting {
+    fn exchange_in_place(&mut self, frame: &mut [u8]) -> bool {
+        self.threads
+            .lock()
+            .unwrap()
+            .push(std::thread::current().id());
+        oxicat_wire::pipe::FramePipe::exchange_in_place(&mut *self.seg.lock().unwrap(), frame)
+    }
+    fn now(&self) -> u64 {
+        oxicat_wire::pipe::FramePipe::now(&*self.seg.lock().unwrap())
+    }
+    fn advance_to(&mut self, t: u64) {
+        oxicat_wire::pipe::FramePipe::advance_to(&mut *self.seg.lock().unwrap(), t)
+    }
+    fn clock(&self) -> &'static dyn oxicat_wire::pipe::VirtualClock {
+        oxicat_wire::pipe::FramePipe::clock(&*self.seg.lock().unwrap())
+    }
+}
+
+/// On a virtual segment the master carries its frames itself, on the thread that calls
+/// it (no transport thread to hand each frame to and back: that hand-over was most of
+/// the CPU of a verb on `--sim`), through discovery, mailbox traffic and state changes.
+#[test]
+fn frames_go_through_the_virtual_segment_on_the_callers_thread() {
+    let (seg, _fws, _) = common::demo_segment(2);
+    let threads = std::sync::Arc::new(std::sync::Mutex::new(Vec::new()));
+    let pipe = ThreadNoting {
+        seg,
+        threads: threads.clone(),
+    };
+    let mut m = oxicat_master::Master::open(oxicat_master::Link::Sim(std::sync::Arc::new(
+        std::sync::Mutex::new(pipe),
+    )))
+    .expect("master opens");
+    m.sdo_upload(0, 0x1018, 1).expect("vendor id");
+    m.request_state(&[0, 1], AlState::Op).expect("to OP");
+    let me = std::thread::current().id();
+    let seen = threads.lock().unwrap().clone();
+    assert!(seen.len() > 50, "{} frames", seen.len());
+    assert!(
+        seen.iter().all(|&t| t == me),
+        "{} of {} frames on another thread",
+        seen.iter().filter(|&&t| t != me).count(),
+        seen.len()
+    );
+}
