@@ -5,17 +5,22 @@
 //! ```text
 //! cargo run --release -p oxicat --example segment_scale -- [--kind demo,twin] \
 //!     [--n 16,64,256,1000] [--seconds 10] [--cycle-us 1000] [--rt] [--spin] [--per-esc-walk]
-//!     [--idle] [--virtual] [--exchange auto,lean,ethercrab] [--beyond-limit]
+//!     [--idle] [--virtual] [--exchange auto,lean,ethercrab] [--beyond-limit] [--rt-master]
+//!     [--pin]
 //! ```
 //!
 //! Columns: late cycles (an exchange that ended after the next cycle was due), the round
 //! trip of each exchange as the master sees it (from its start — the due time, or the end
 //! of a late predecessor — to its end; includes ethercrab's own work), the serving thread's
 //! CPU time per cycle (`/proc/self/task/TID/stat`, 10 ms ticks, so read it over ≥ 10 s),
-//! and the resident memory the segment added per slave. `demo` is the firmware-hosting
+//! the virtual time the segment's clock moved per cycle (above the cycle when the frames'
+//! trips, each begun when the previous one is back, do not fit in it: the served clock
+//! then runs ahead of the host's), and the resident memory the segment added per slave. `demo` is the firmware-hosting
 //! demo device; `twin` an EL2008 twin built from Beckhoff's ESI (an ESC with its SII and
 //! SM/FMMU set-up, no firmware), from `../shared/reference/esi-vendor` or
-//! `OXICAT_REFERENCE`. `--rt` serves from a SCHED_FIFO thread (root); `--spin` busy-polls
+//! `OXICAT_REFERENCE`. `--rt` serves from a SCHED_FIFO thread (root), `--rt-master` runs the
+//! master's thread (and the UDP threads it starts) SCHED_FIFO too, `--pin` puts the serving
+//! thread on CPU 1 and the master's on CPU 0; `--spin` busy-polls
 //! for frames (`oxicat sim --spin`: no wakeup per frame, one core at 100 %, so the CPU
 //! column is the whole cycle); `--per-esc-walk` turns
 //! the segment's configured-address dispatch off (every ESC walks every datagram, as before
@@ -90,6 +95,10 @@ struct Row {
     late: u64,
     rtt: Vec<u64>,
     cpu_us_per_cycle: f64,
+    /// Virtual time the segment's clock moved per cycle [µs]: above the cycle when the
+    /// frames' trips (each starts when the previous one is back) do not fit in it, so
+    /// the served segment's clock runs ahead of the host's.
+    virtual_us_per_cycle: f64,
     kb_per_slave: f64,
     /// The master's exchange and its frames per cycle.
     exchange: String,
@@ -139,6 +148,11 @@ struct Serving {
     /// `--beyond-limit`: serve more firmware-hosting devices than `oxicat sim` takes
     /// (`MAX_SERVED_FIRMWARE_NODES`), to measure where the limit should be.
     beyond_limit: bool,
+    /// `--rt-master`: the master's thread (and the UDP threads it starts) SCHED_FIFO too.
+    rt_master: bool,
+    /// `--pin`: the serving thread on CPU 1, the master's on CPU 0 (with `--rt` /
+    /// `--rt-master`).
+    pin: bool,
 }
 
 fn parse_exchange(v: &str) -> Exchange {
@@ -165,9 +179,12 @@ fn run(kind: &str, n: usize, seconds: u64, cycle_us: u64, how: Serving) -> Row {
         per_esc,
         exchange,
         beyond_limit,
+        rt_master,
+        pin,
     } = how;
     let args = SimArgs {
         spin,
+        rt_cpu: (rt && pin).then_some(1),
         ..sim_args(
             kind,
             n,
@@ -183,6 +200,7 @@ fn run(kind: &str, n: usize, seconds: u64, cycle_us: u64, how: Serving) -> Row {
     }
     let (mut seg, names) = sim_cmd::build_segment(&desc).unwrap_or_else(|e| fail(&e.to_string()));
     seg.set_configured_dispatch(!per_esc);
+    let clock = seg.clock();
     let kb_per_slave =
         status_kb("/proc/self/status", "VmRSS:").saturating_sub(rss0) as f64 / n as f64;
     let port =
@@ -206,10 +224,19 @@ fn run(kind: &str, n: usize, seconds: u64, cycle_us: u64, how: Serving) -> Row {
     let cycles = seconds * 1_000_000 / cycle_us;
     let (mut late, mut prev_end) = (0u64, 0u64);
     let mut rtt = Vec::with_capacity(cycles as usize);
-    let mut ticks0 = 0;
+    let (mut ticks0, mut v0) = (0, 0);
     let run = std::thread::Builder::new()
         .stack_size(64 << 20)
         .spawn(move || {
+            if rt_master {
+                let o = oxicat_sim::rt::RtOptions {
+                    cpu: pin.then_some(0),
+                    ..oxicat_sim::rt::RtOptions::fifo(oxicat_sim::rt::DEFAULT_PRIORITY)
+                };
+                if let Err(e) = oxicat_sim::rt::enter(&o) {
+                    fail(&format!("--rt-master: {e}"));
+                }
+            }
             let mut m = Master::open(Link::Udp(addr))?;
             m.set_exchange(exchange);
             let _ = m.scan()?;
@@ -221,6 +248,7 @@ fn run(kind: &str, n: usize, seconds: u64, cycle_us: u64, how: Serving) -> Row {
                 |io| {
                     if io.cycle == 0 {
                         ticks0 = thread_ticks(&tid);
+                        v0 = clock.now();
                     }
                     let due = io.cycle * period;
                     let end = io.time_ns;
@@ -237,7 +265,8 @@ fn run(kind: &str, n: usize, seconds: u64, cycle_us: u64, how: Serving) -> Row {
                 },
             );
             let ticks = thread_ticks(&tid).saturating_sub(ticks0);
-            stats.map(|s| (s, late, rtt, ticks))
+            let virt = clock.now().saturating_sub(v0);
+            stats.map(|s| (s, late, rtt, ticks, virt))
         })
         .unwrap_or_else(|e| fail(&e.to_string()));
     let result = run
@@ -246,7 +275,7 @@ fn run(kind: &str, n: usize, seconds: u64, cycle_us: u64, how: Serving) -> Row {
     stop.store(true, Ordering::Relaxed);
     let _ = server.join();
     match result {
-        Ok((s, late, rtt, ticks)) => Row {
+        Ok((s, late, rtt, ticks, virt)) => Row {
             kind: kind.into(),
             n,
             cycles: s.cycles,
@@ -254,6 +283,7 @@ fn run(kind: &str, n: usize, seconds: u64, cycle_us: u64, how: Serving) -> Row {
             late,
             rtt,
             cpu_us_per_cycle: ticks as f64 * 10_000.0 / s.cycles.max(1) as f64,
+            virtual_us_per_cycle: virt as f64 / 1000.0 / s.cycles.max(1) as f64,
             kb_per_slave,
             exchange: format!("{}, {}", exchange_name(s.exchange), s.frames_per_cycle),
             note: String::new(),
@@ -266,6 +296,7 @@ fn run(kind: &str, n: usize, seconds: u64, cycle_us: u64, how: Serving) -> Row {
             late: 0,
             rtt: Vec::new(),
             cpu_us_per_cycle: f64::NAN,
+            virtual_us_per_cycle: f64::NAN,
             kb_per_slave,
             exchange: "–".into(),
             // The first clause says what failed; a list of every slave does not fit a row.
@@ -352,14 +383,17 @@ fn virtual_row(kind: &str, n: usize, seconds: u64, cycle_us: u64, exchange: Exch
                 },
             )?;
             let t_end = process_ticks();
-            Ok::<_, oxicat_master::MasterError>((stats, ticks_op, t_end, digest, image, t_op))
+            let v_cycles = clock.now().saturating_sub(t_op);
+            Ok::<_, oxicat_master::MasterError>((
+                stats, ticks_op, t_end, digest, image, t_op, v_cycles,
+            ))
         })
         .unwrap_or_else(|e| fail(&e.to_string()))
         .join()
         .unwrap_or_else(|_| fail("master thread panicked"));
     match r {
-        Ok((s, t_op, t_end, digest, image, v_op)) => println!(
-            "| {kind} | {n} | virtual, {} exchange, {} frames per cycle | {} | {} | build {:.2} s, bring-up {:.2} s CPU for {:.2} s of virtual time ({:.0} µs CPU per ms, the master's included) | {:.1} µs CPU per cycle | {image} B of process data | digest {digest:016x} |",
+        Ok((s, t_op, t_end, digest, image, v_op, v_cycles)) => println!(
+            "| {kind} | {n} | virtual, {} exchange, {} frames per cycle | {} | {} | build {:.2} s, bring-up {:.2} s CPU for {:.2} s of virtual time ({:.0} µs CPU per ms, the master's included) | {:.1} µs CPU per cycle, {:.0} µs of virtual time | {image} B of process data | digest {digest:016x} |",
             exchange_name(s.exchange),
             s.frames_per_cycle,
             s.cycles,
@@ -369,6 +403,7 @@ fn virtual_row(kind: &str, n: usize, seconds: u64, cycle_us: u64, exchange: Exch
             v_op as f64 * 1e-9,
             t_op.saturating_sub(t_built) as f64 * 1e4 / (v_op as f64 * 1e-6).max(1e-9),
             t_end.saturating_sub(t_op) as f64 * 10_000.0 / s.cycles.max(1) as f64,
+            v_cycles as f64 / 1000.0 / s.cycles.max(1) as f64,
         ),
         Err(e) => println!("| {kind} | {n} | virtual | failed: {e} |"),
     }
@@ -404,6 +439,8 @@ fn main() {
             "--per-esc-walk" => how.per_esc = true,
             "--exchange" => how.exchange = parse_exchange(&val()),
             "--beyond-limit" => how.beyond_limit = true,
+            "--rt-master" => how.rt_master = true,
+            "--pin" => how.pin = true,
             "--idle" => idle_only = true,
             "--virtual" => virt = true,
             // One row in this process (each row runs in a process of its own, so that the
@@ -440,7 +477,7 @@ fn main() {
             pct(&mut r.rtt, 1.0),
         );
         println!(
-            "| {} | {} | {} | {} | {} | {:.0} / {:.0} / {:.0} | {:.1} | {:.0} | {} |{}",
+            "| {} | {} | {} | {} | {} | {:.0} / {:.0} / {:.0} | {:.1} | {:.0} | {:.0} | {} |{}",
             r.kind,
             r.n,
             r.cycles,
@@ -450,6 +487,7 @@ fn main() {
             p99,
             max,
             r.cpu_us_per_cycle,
+            r.virtual_us_per_cycle,
             r.kb_per_slave,
             r.exchange,
             if r.note.is_empty() {
@@ -462,9 +500,9 @@ fn main() {
     }
     let exe = std::env::current_exe().unwrap_or_else(|e| fail(&e.to_string()));
     println!(
-        "| kind | N | cycles | WKC errors | late cycles | RTT p50 / p99 / max [µs] | sim CPU per cycle [µs] | memory per slave [KiB] | exchange, frames per cycle |"
+        "| kind | N | cycles | WKC errors | late cycles | RTT p50 / p99 / max [µs] | sim CPU per cycle [µs] | virtual time per cycle [µs] | memory per slave [KiB] | exchange, frames per cycle |"
     );
-    println!("|---|---|---|---|---|---|---|---|---|");
+    println!("|---|---|---|---|---|---|---|---|---|---|");
     for kind in &kinds {
         for &n in &ns {
             let mut cmd = std::process::Command::new(&exe);
@@ -481,6 +519,8 @@ fn main() {
                 (how.spin, "--spin"),
                 (how.per_esc, "--per-esc-walk"),
                 (how.beyond_limit, "--beyond-limit"),
+                (how.rt_master, "--rt-master"),
+                (how.pin, "--pin"),
             ] {
                 if on {
                     cmd.arg(flag);
@@ -494,7 +534,7 @@ fn main() {
             match text.lines().find(|l| l.starts_with("| ")) {
                 Some(row) => println!("{row}"),
                 None => println!(
-                    "| {kind} | {n} | – | – | – | – | – | – | – | failed: {}",
+                    "| {kind} | {n} | – | – | – | – | – | – | – | – | failed: {}",
                     out.status
                 ),
             }

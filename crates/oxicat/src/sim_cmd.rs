@@ -106,8 +106,10 @@ pub const MAX_SIM_SLAVES: usize = 1000;
 /// Most firmware-hosting devices (every device but an ESC twin: their firmware runs in the
 /// segment, its main loop every 50 µs of virtual time) that `oxicat sim` serves in real
 /// time; more are refused before anything is built (see [`check_served`]). Measured with
-/// `segment_scale` (README, "Scale"): 128 demo devices come up and cycle; at 256 the
-/// bring-up's PDUs time out.
+/// `segment_scale` (README, "Scale"): 128 demo devices come up and cycle at 1 kHz; 256 come
+/// up, but their 12 frames per cycle take 4 ms of the segment's virtual time (each frame's
+/// whole trip before the next; even a pipelined 100 Mbit/s line needs ≈ 1 ms for their
+/// 11,776 B of process data), so every cycle is late.
 pub const MAX_SERVED_FIRMWARE_NODES: usize = 128;
 
 /// Largest ESC or cable delay of a segment file, ns (1 ms: a whole 1 kHz cycle; a real ESC
@@ -769,9 +771,11 @@ pub fn check_served(desc: &SegmentFile) -> Result<(), SimError> {
 fn served_firmware_range() -> String {
     format!(
         "at most {MAX_SERVED_FIRMWARE_NODES} served in real time: each runs its firmware's main \
-         loop every 50 µs of virtual time, ≈ 1.6 µs of CPU per device per ms before any frame, \
-         and every frame passes every ESC twice; with 256 demo devices the serving thread falls \
-         behind and the master's PDUs time out in bring-up. ESC twins (esi=…) do not count; a \
+         loop every 50 µs of virtual time, ≈ 1–1.3 µs of CPU per device per ms before any \
+         frame, and every frame passes every ESC twice, each frame's whole trip before the \
+         next; 256 demo devices' process data (11,776 B, 12 frames) take 4 ms of virtual time \
+         per cycle and the serving thread's whole CPU, so no 1 kHz cycle is in time (and a \
+         100 Mbit/s line needs ≈ 1 ms for that image alone). ESC twins (esi=…) do not count; a \
          segment driven in the same process (--sim) runs on its virtual clock and has no such \
          limit"
     )
