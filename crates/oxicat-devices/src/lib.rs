@@ -71,7 +71,7 @@ pub mod tue_es030;
 /// assert_eq!(io::OBJECTS.len(), 2);
 /// assert_eq!(io::RX_PDOS[0].entries.len(), 2);
 /// assert_eq!((io::OUTPUT_BYTES, io::INPUT_BYTES), (3, 2));
-/// assert_eq!(io::OBJECTS[0].entries[1].scale.unwrap().unit, "deg");
+/// assert_eq!(io::OBJECTS[0].entries[1].scale().unwrap().unit, "deg");
 /// ```
 #[macro_export]
 macro_rules! pd_table {
@@ -104,7 +104,8 @@ macro_rules! pd_table {
                 entries: &[
                     __E::new(0, "SubIndex 000", __T::Unsigned8, __A::RO),
                     $( __E::new($tsub, $tname, __T::$tty, __A::RO).pdo(__M::Tx)
-                        $( .with_scale(&$crate::__slave::Scale { unit: $tunit, num: 1, den: $tden }) )? ),*
+                        $( .limits(&$crate::__slave::Limits::scale(
+                            &$crate::__slave::Scale { unit: $tunit, num: 1, den: $tden })) )? ),*
                 ],
             }, )* )*
             $( $( __O {
@@ -114,7 +115,8 @@ macro_rules! pd_table {
                 entries: &[
                     __E::new(0, "SubIndex 000", __T::Unsigned8, __A::RO),
                     $( __E::new($rsub, $rname, __T::$rty, __A::RW).pdo(__M::Rx)
-                        $( .with_scale(&$crate::__slave::Scale { unit: $runit, num: 1, den: $rden }) )? ),*
+                        $( .limits(&$crate::__slave::Limits::scale(
+                            &$crate::__slave::Scale { unit: $runit, num: 1, den: $rden })) )? ),*
                 ],
             }, )* )*
         ];

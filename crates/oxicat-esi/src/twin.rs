@@ -749,7 +749,7 @@ fn flags(f: Option<Node>) -> (Option<Access>, PdoMapping) {
 /// number, `DefaultString`).
 fn default_of(info: Option<Node>, base: Base) -> DefaultValue {
     let Some(info) = info else {
-        return DefaultValue::Bits(0);
+        return DefaultValue::bits(0);
     };
     if base.dtype.is_string() {
         if let Some(s) = info
@@ -762,18 +762,18 @@ fn default_of(info: Option<Node>, base: Base) -> DefaultValue {
         if let Some(b) = text(child(info, "DefaultData")).and_then(|s| parse_hex_bytes(&s)) {
             return DefaultValue::Bytes(Box::leak(b.into_boxed_slice()));
         }
-        return DefaultValue::Bits(0);
+        return DefaultValue::bits(0);
     }
     if let Some(b) = text(child(info, "DefaultData")).and_then(|s| parse_hex_bytes(&s)) {
         let mut a = [0u8; 8];
         let n = b.len().min(8);
         a[..n].copy_from_slice(&b[..n]);
-        return DefaultValue::Bits(u64::from_le_bytes(a));
+        return DefaultValue::bits(u64::from_le_bytes(a));
     }
     if let Some(v) = text(child(info, "DefaultValue")).and_then(|s| parse_num(&s)) {
-        return DefaultValue::Bits(v as u64);
+        return DefaultValue::bits(v as u64);
     }
-    DefaultValue::Bits(0)
+    DefaultValue::bits(0)
 }
 
 fn entry(sub: u8, name: &str, base: Base, access: Access, pdo: PdoMapping) -> EntryDef {
@@ -838,7 +838,7 @@ fn object(types: &Types, o: Node, index: u16) -> Result<(ObjectDef, Option<Strin
             };
             let mut v = vec![{
                 let mut e = entry(0, "SubIndex 000", u8b, Access::RO, PdoMapping::None);
-                e.default = DefaultValue::Bits(u64::from(elements));
+                e.default = DefaultValue::bits(u64::from(elements));
                 e
             }];
             let first = lbound.max(1);
@@ -878,7 +878,7 @@ fn object(types: &Types, o: Node, index: u16) -> Result<(ObjectDef, Option<Strin
                     Access::RO,
                     PdoMapping::None,
                 );
-                e.default = DefaultValue::Bits(v.last().map_or(0, |e| u64::from(e.sub)));
+                e.default = DefaultValue::bits(v.last().map_or(0, |e| u64::from(e.sub)));
                 v.insert(0, e);
             }
             if v[0].bits != 8 {
@@ -1082,13 +1082,15 @@ fn build_device(esi: &Esi, d: Node, cand: Candidate) -> Result<Twin, TwinError> 
             };
             match index {
                 0x1000 => {
-                    if let DefaultValue::Bits(v) = default_of(
+                    if let Some(v) = default_of(
                         info,
                         Base {
                             dtype: DataType::Unsigned32,
                             bits: 32,
                         },
-                    ) {
+                    )
+                    .as_bits()
+                    {
                         if v != 0 {
                             device_type = v as u32;
                         }
@@ -1234,7 +1236,7 @@ fn build_device(esi: &Esi, d: Node, cand: Candidate) -> Result<Twin, TwinError> 
         } else {
             if v[0].sub != 0 {
                 let mut e0 = EntryDef::new(0, "SubIndex 000", DataType::Unsigned8, Access::RO);
-                e0.default = DefaultValue::Bits(v.last().map_or(0, |e| u64::from(e.sub)));
+                e0.default = DefaultValue::bits(v.last().map_or(0, |e| u64::from(e.sub)));
                 v.insert(0, e0);
             } else if v[0].bits != 8 {
                 return Err(TwinError::Unsupported(format!(

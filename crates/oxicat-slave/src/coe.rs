@@ -108,7 +108,7 @@ fn value_limits(e: &EntryDef) -> Option<(u64, u64)> {
         DataType::Real32 => (f32::MIN.to_bits() as u64, f32::MAX.to_bits() as u64),
         DataType::Real64 => (f64::MIN.to_bits(), f64::MAX.to_bits()),
         DataType::VisibleString | DataType::OctetString => return None,
-        _ if e.range.0 <= e.range.1 => (e.range.0 as u64, e.range.1 as u64),
+        _ if e.limits.has_range() => (e.limits.range.0 as u64, e.limits.range.1 as u64),
         t if t.is_signed() => {
             let max = (u64::MAX >> (65 - bits)) as i64;
             ((-max - 1) as u64, max as u64)
@@ -516,12 +516,13 @@ impl<P: Pdi, const N: usize, const M: usize, const K: usize> Slave<P, N, M, K> {
                 if e.dtype == DataType::Bool && v[0] > 1 {
                     return Err(Abort::ValueRangeExceeded);
                 }
-                if e.dtype.is_integer() && e.range.0 <= e.range.1 {
+                let (min, max) = e.limits.range;
+                if e.dtype.is_integer() && min <= max {
                     let x = int_value(e, v);
-                    if x > e.range.1 as i128 {
+                    if x > max as i128 {
                         return Err(Abort::ValueTooHigh);
                     }
-                    if x < e.range.0 as i128 {
+                    if x < min as i128 {
                         return Err(Abort::ValueTooLow);
                     }
                 }
@@ -856,7 +857,7 @@ impl<P: Pdi, const N: usize, const M: usize, const K: usize> Slave<P, N, M, K> {
         let mut vi = 0u8;
         let mut at = 10;
         if req & 0x08 != 0 && at + 4 <= d.len() {
-            d[at..at + 4].copy_from_slice(&e.unit.to_le_bytes());
+            d[at..at + 4].copy_from_slice(&e.limits.unit.to_le_bytes());
             at += 4;
             vi |= 0x08;
         }

@@ -293,7 +293,7 @@ impl DeviceDef {
 
     /// The physical scaling of application entry `index:sub`, if it declares one.
     pub fn scale(&self, index: u16, sub: u8) -> Option<crate::od::Scale> {
-        self.entry_def(index, sub)?.scale.copied()
+        self.entry_def(index, sub)?.scale().copied()
     }
 
     /// The application object with index `index`.

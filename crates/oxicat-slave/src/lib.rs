@@ -22,8 +22,8 @@ pub mod slave;
 pub use device::{pdo_bytes, DeviceDef, Identity, MailboxDef, PdoDef, PdoEntry, SyncDef, SyncMode};
 pub use esm::{AlState, AlStatusCode};
 pub use od::{
-    find_entry, image_size, Access, DataType, DefError, DefaultValue, EntryDef, EntryRef,
-    ObjectCode, ObjectDef, Od, OdError, OdType, PdoMapping, Scale, Var,
+    find_entry, image_size, Access, CheckedDef, DataType, DefError, DefaultValue, EntryDef,
+    EntryRef, Limits, ObjectCode, ObjectDef, Od, OdError, OdType, PdoMapping, Scale, Var,
 };
 pub use pdi::{IrqLines, Pdi};
 pub use slave::{Application, InitError, Slave, SlaveSlot, Stats};

@@ -175,10 +175,28 @@ impl PdoMapping {
 /// Default value of an entry.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum DefaultValue {
-    /// Little-endian bits of a scalar (two's complement for signed, IEEE bits for reals).
-    Bits(u64),
+    /// Little-endian bits of a scalar (two's complement for signed, IEEE bits for reals),
+    /// low and high 32-bit halves: a `u64` would make every [`EntryDef`] 8-byte aligned
+    /// (48 instead of 44 bytes of flash per entry). Built with [`DefaultValue::bits`], read
+    /// with [`DefaultValue::as_bits`].
+    Bits([u32; 2]),
     /// Bytes of a string entry (shorter than its length: rest zero).
     Bytes(&'static [u8]),
+}
+
+impl DefaultValue {
+    /// A scalar default from its little-endian bits.
+    pub const fn bits(v: u64) -> Self {
+        Self::Bits([v as u32, (v >> 32) as u32])
+    }
+
+    /// A scalar default's bits (`None` for a string default).
+    pub const fn as_bits(&self) -> Option<u64> {
+        match *self {
+            Self::Bits([lo, hi]) => Some(lo as u64 | (hi as u64) << 32),
+            Self::Bytes(_) => None,
+        }
+    }
 }
 
 /// One subindex of an object.
@@ -198,6 +216,24 @@ pub struct EntryDef {
     pub pdo: PdoMapping,
     /// Default value.
     pub default: DefaultValue,
+    /// Unit, allowed range and physical scaling, the fields few entries set, behind one
+    /// reference ([`Limits::NONE`] when unset, [`EntryDef::limits`]): 4 bytes per entry in
+    /// flash instead of 16.
+    pub limits: &'static Limits,
+}
+
+// An entry's size in a microcontroller's flash (every object description of the image is
+// one): 32 bytes on a 32-bit target (was 56 with 64-bit range bounds, 48 with a `u64`
+// default, 44 with unit, range and scale in the entry).
+const _: () =
+    assert!(cfg!(not(target_pointer_width = "32")) || core::mem::size_of::<EntryDef>() <= 32);
+
+/// An entry's unit, allowed range and physical scaling ([`EntryDef::limits`]):
+/// `.limits(&Limits::range(0, 1000).with_unit(0xFD04_0000))` or
+/// `.limits(&Limits::scale(&CENTI_DEG))` in a `static` or `const` definition (in a `const
+/// fn` body: `const { &Limits::range(..) }`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Limits {
     /// Unit (ETG.1004 unit code; 0 = none).
     pub unit: u32,
     /// Allowed range for integer entries (`min > max`: no check). 32-bit bounds (every
@@ -208,13 +244,50 @@ pub struct EntryDef {
     pub scale: Option<&'static Scale>,
 }
 
-// An entry's size in a microcontroller's flash (every object description of the image is
-// one): 48 bytes on a 32-bit target (was 56 with 64-bit range bounds).
-const _: () =
-    assert!(cfg!(not(target_pointer_width = "32")) || core::mem::size_of::<EntryDef>() <= 48);
+impl Limits {
+    /// No unit, no range, no scaling.
+    pub const NONE: Limits = Limits {
+        unit: 0,
+        range: (1, 0),
+        scale: None,
+    };
+
+    /// An allowed value range `min..=max`, nothing else.
+    pub const fn range(min: i32, max: i32) -> Self {
+        let mut l = Self::NONE;
+        l.range = (min, max);
+        l
+    }
+
+    /// A unit (ETG.1004 unit code), nothing else.
+    pub const fn unit(u: u32) -> Self {
+        let mut l = Self::NONE;
+        l.unit = u;
+        l
+    }
+
+    /// A physical scaling (`Limits::scale(&CENTI_DEG)` with `const CENTI_DEG: Scale =
+    /// Scale::per("deg", 100)`: hundredths of a degree), nothing else.
+    pub const fn scale(s: &'static Scale) -> Self {
+        let mut l = Self::NONE;
+        l.scale = Some(s);
+        l
+    }
+
+    /// With a unit.
+    pub const fn with_unit(mut self, u: u32) -> Self {
+        self.unit = u;
+        self
+    }
+
+    /// Whether a range is declared (`min <= max`).
+    pub const fn has_range(&self) -> bool {
+        self.range.0 <= self.range.1
+    }
+}
 
 /// How a process-data integer maps to a physical value: `value = raw × num / den`, in
-/// `unit`. Declared once on the entry ([`EntryDef::with_scale`]); the master decodes with it
+/// `unit`. Declared once on the entry ([`Limits::scale`]); the master decodes with it
 /// (CSV headers in physical units), the firmware encodes with it.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct Scale {
@@ -276,10 +349,8 @@ impl EntryDef {
             bits: dtype.bits(),
             access,
             pdo: PdoMapping::None,
-            default: DefaultValue::Bits(0),
-            unit: 0,
-            range: (1, 0),
-            scale: None,
+            default: DefaultValue::bits(0),
+            limits: &Limits::NONE,
         }
     }
 
@@ -299,19 +370,19 @@ impl EntryDef {
 
     /// With a default value given as raw little-endian bits.
     pub const fn default_bits(mut self, v: u64) -> Self {
-        self.default = DefaultValue::Bits(v);
+        self.default = DefaultValue::bits(v);
         self
     }
 
     /// With a signed default value.
     pub const fn default_i64(mut self, v: i64) -> Self {
-        self.default = DefaultValue::Bits(v as u64);
+        self.default = DefaultValue::bits(v as u64);
         self
     }
 
     /// With a REAL32 default value.
     pub const fn default_f32(mut self, v: f32) -> Self {
-        self.default = DefaultValue::Bits(v.to_bits() as u64);
+        self.default = DefaultValue::bits(v.to_bits() as u64);
         self
     }
 
@@ -327,24 +398,15 @@ impl EntryDef {
         self
     }
 
-    /// With a unit.
-    pub const fn unit(mut self, u: u32) -> Self {
-        self.unit = u;
+    /// With a unit and/or an allowed value range (integer entries), see [`Limits`].
+    pub const fn limits(mut self, l: &'static Limits) -> Self {
+        self.limits = l;
         self
     }
 
-    /// With a physical scaling (`.with_scale(&CENTI_DEG)` with
-    /// `const CENTI_DEG: Scale = Scale::per("deg", 100)`: hundredths of a degree). A
-    /// reference, so an unscaled entry costs one word of flash, not a whole [`Scale`].
-    pub const fn with_scale(mut self, s: &'static Scale) -> Self {
-        self.scale = Some(s);
-        self
-    }
-
-    /// With an allowed value range (integer entries).
-    pub const fn range(mut self, min: i32, max: i32) -> Self {
-        self.range = (min, max);
-        self
+    /// Its physical scaling ([`Limits::scale`]), if any.
+    pub const fn scale(&self) -> Option<&'static Scale> {
+        self.limits.scale
     }
 
     /// Bytes this entry occupies in the image.
@@ -1440,9 +1502,14 @@ impl<const N: usize> Od<N> {
     /// [`Od::new`] in place (the images filled where they are, no copy on the stack).
     pub(crate) fn init(&mut self, def: &'static DeviceDef) -> Result<(), DefError> {
         check_def(def, N)?;
-        self.def = Some(def);
-        self.reset_defaults();
+        self.init_checked(CheckedDef(def));
         Ok(())
+    }
+
+    /// [`Od::init`] for a definition checked when the image was built.
+    pub(crate) fn init_checked(&mut self, def: CheckedDef<N>) {
+        self.def = Some(def.0);
+        self.reset_defaults();
     }
 
     /// The device definition. Not inlined in a board image: its blank-dictionary branch
@@ -1823,47 +1890,59 @@ impl<const N: usize> Od<N> {
 /// The checks [`Od::new`] makes of a definition, for an application image of `image` bytes:
 /// the image is large enough, the strings fit, application objects are sorted, unique and
 /// in free places, entries well formed, PDOs and assignments within the stack's limits.
-/// A definition built at run time (a twin from an ESI) is checked so before it is booted.
-pub fn check_def(def: &DeviceDef, image: usize) -> Result<(), DefError> {
+/// A definition built at run time (a twin from an ESI) is checked so before it is booted;
+/// a `static` one can be checked when the image is built ([`CheckedDef`]: a `const fn`).
+pub const fn check_def(def: &DeviceDef, image: usize) -> Result<(), DefError> {
     let needed = image_size(def.objects);
     if needed > image {
         return Err(DefError::ImageTooSmall { needed });
     }
-    for (index, text) in [
+    let texts = [
         (0x1008, def.name),
         (0x1009, def.hw_version),
         (0x100A, def.sw_version),
-    ] {
-        if text.len() > STR_MAX as usize {
-            return Err(DefError::StringTooLong(index));
+    ];
+    let mut i = 0;
+    while i < texts.len() {
+        if texts[i].1.len() > STR_MAX as usize {
+            return Err(DefError::StringTooLong(texts[i].0));
         }
+        i += 1;
     }
-    let mut prev: Option<u16> = None;
-    for o in def.objects {
-        if !app_index_free(def, o.index) || prev.is_some_and(|p| p >= o.index) {
+    let mut i = 0;
+    while i < def.objects.len() {
+        let o = &def.objects[i];
+        if !app_index_free(def, o.index) || (i > 0 && def.objects[i - 1].index >= o.index) {
             return Err(DefError::BadObjectOrder(o.index));
         }
-        prev = Some(o.index);
-        check_entries(o)?;
+        if let Err(e) = check_entries(o) {
+            return Err(e);
+        }
+        i += 1;
     }
-    for (list, lo, hi) in [
+    let lists = [
         (def.rx_pdos, 0x1600u16, 0x17FFu16),
         (def.tx_pdos, 0x1A00, 0x1BFF),
-    ] {
+    ];
+    let mut l = 0;
+    while l < lists.len() {
+        let (list, lo, hi) = lists[l];
         if list.len() > MAX_PDOS {
             return Err(DefError::BadPdo(lo));
         }
-        let mut prev: Option<u16> = None;
-        for p in list {
+        let mut i = 0;
+        while i < list.len() {
+            let p = &list[i];
             if p.index < lo
                 || p.index > hi
                 || p.entries.len() > MAX_PDO_ENTRIES
-                || prev.is_some_and(|q| q >= p.index)
+                || (i > 0 && list[i - 1].index >= p.index)
             {
                 return Err(DefError::BadPdo(p.index));
             }
-            prev = Some(p.index);
+            i += 1;
         }
+        l += 1;
     }
     if def.rx_assign.len() > MAX_ASSIGN || def.tx_assign.len() > MAX_ASSIGN {
         return Err(DefError::BadPdo(0x1C12));
@@ -1875,41 +1954,89 @@ pub fn check_def(def: &DeviceDef, image: usize) -> Result<(), DefError> {
     Ok(())
 }
 
+/// A `static` definition that passed [`check_def`] for an `N`-byte application image when
+/// the image was built: `const { CheckedDef::new(&DEF) }` (a definition the checks refuse
+/// fails the build) for [`crate::SlaveSlot::start_checked`], whose start-up then does not
+/// carry the checks (0.6 KB of the demo image's flash).
+#[derive(Debug, Clone, Copy)]
+pub struct CheckedDef<const N: usize>(pub(crate) &'static DeviceDef);
+
+impl<const N: usize> CheckedDef<N> {
+    /// `def` checked for an `N`-byte image; panics (in a `const`: the build fails) if
+    /// [`check_def`] refuses it.
+    pub const fn new(def: &'static DeviceDef) -> Self {
+        if check_def(def, N).is_err() {
+            panic!("check_def refuses the device definition");
+        }
+        Self(def)
+    }
+
+    /// The definition.
+    pub const fn def(self) -> &'static DeviceDef {
+        self.0
+    }
+}
+
 /// Whether an application object may have `index`: at 0x1000 or above and not where the
 /// stack keeps its own communication objects (those of [`COMM_LOW`], the PDO mapping and
 /// assignment ranges, the SM objects 0x1C00..0x1C3F). Devices of this repository keep
 /// theirs at 0x2000 and above; a twin of a vendor's ESI also serves objects such as the
 /// TxPDO parameters 0x1800 that Beckhoff terminals map into their PDOs. Such objects come
 /// after 0x1C33 in the SDO information object list.
-fn app_index_free(def: &DeviceDef, index: u16) -> bool {
-    index >= 0x1000
-        && !COMM_LOW.iter().any(|o| o.index == index)
-        && !(0x1600..=0x17FF).contains(&index)
-        && !(0x1A00..=0x1BFF).contains(&index)
-        && !(0x1C00..=0x1C3F).contains(&index)
-        && def.pdo(index).is_none()
+const fn app_index_free(def: &DeviceDef, index: u16) -> bool {
+    if index < 0x1000
+        || (index >= 0x1600 && index <= 0x17FF)
+        || (index >= 0x1A00 && index <= 0x1BFF)
+        || (index >= 0x1C00 && index <= 0x1C3F)
+    {
+        return false;
+    }
+    let mut i = 0;
+    while i < COMM_LOW.len() {
+        if COMM_LOW[i].index == index {
+            return false;
+        }
+        i += 1;
+    }
+    let mut i = 0;
+    while i < def.rx_pdos.len() {
+        if def.rx_pdos[i].index == index {
+            return false;
+        }
+        i += 1;
+    }
+    let mut i = 0;
+    while i < def.tx_pdos.len() {
+        if def.tx_pdos[i].index == index {
+            return false;
+        }
+        i += 1;
+    }
+    true
 }
 
-fn check_entries(o: &ObjectDef) -> Result<(), DefError> {
+const fn check_entries(o: &ObjectDef) -> Result<(), DefError> {
     let bad = DefError::BadEntries(o.index);
-    if o.entries.is_empty() {
+    let es = o.entries;
+    if es.is_empty() {
         return Err(bad);
     }
-    if o.code == ObjectCode::Var && (o.entries.len() != 1 || o.entries[0].sub != 0) {
+    if matches!(o.code, ObjectCode::Var) && (es.len() != 1 || es[0].sub != 0) {
         return Err(bad);
     }
-    if o.code != ObjectCode::Var && (o.entries[0].sub != 0 || o.entries[0].bits != 8) {
+    if !matches!(o.code, ObjectCode::Var) && (es[0].sub != 0 || es[0].bits != 8) {
         return Err(bad);
     }
-    for w in o.entries.windows(2) {
-        if w[0].sub >= w[1].sub {
+    let mut i = 0;
+    while i < es.len() {
+        let en = &es[i];
+        if i > 0 && es[i - 1].sub >= en.sub {
             return Err(bad);
         }
-    }
-    for en in o.entries {
         if en.bits == 0 || (en.bits > 64 && !en.dtype.is_string()) {
             return Err(bad);
         }
+        i += 1;
     }
     Ok(())
 }
@@ -1976,7 +2103,8 @@ fn default_into(d: &DeviceDef, o: &Obj, sub: u8, e: &EntryDef, out: &mut [u8]) {
         (Kind::SyncPar, _, 5) => put(out, d.sync.min_cycle_ns as u64),
         (Kind::SyncPar, _, 6) => put(out, d.sync.calc_copy_ns as u64),
         _ => match e.default {
-            DefaultValue::Bits(v) => {
+            DefaultValue::Bits([lo, hi]) => {
+                let v = lo as u64 | (hi as u64) << 32;
                 let v = if sub == 0 && o.code != ObjectCode::Var && v == 0 {
                     o.max_sub() as u64
                 } else {

@@ -12,7 +12,7 @@ use crate::coe::SdoState;
 use crate::device::{DeviceDef, MailboxDef, SyncMode};
 use crate::esm::{AlState, AlStatusCode};
 use crate::foe::{FoeFiles, FoeState};
-use crate::od::{DefError, EntryRef, Od};
+use crate::od::{check_def, CheckedDef, DefError, EntryRef, Od};
 use crate::pdi::{reg, Pdi};
 use crate::pdo::{self, Dir, Mapping, MAX_ITEMS, MAX_PD_BYTES};
 
@@ -255,6 +255,20 @@ impl<P: Pdi, const N: usize, const M: usize, const K: usize> SlaveSlot<P, N, M, 
         Ok(&mut self.slave)
     }
 
+    /// [`SlaveSlot::start`] of a definition checked when the image was built
+    /// (`SLOT.start_checked(const { CheckedDef::new(&DEF) }, pdi)`): the same start-up
+    /// without [`check_def`]'s code in the image.
+    pub fn start_checked(
+        &mut self,
+        def: CheckedDef<N>,
+        pdi: &mut P,
+    ) -> Result<&mut Slave<P, N, M, K>, InitError<P::Error>> {
+        self.running = false;
+        self.slave.init_checked(def, pdi)?;
+        self.running = true;
+        Ok(&mut self.slave)
+    }
+
     /// Marks the stack gone (a firmware that takes it down when its ESC stops answering and
     /// starts it again later): [`SlaveSlot::slave`] is `None` until the next start.
     pub fn stop(&mut self) {
@@ -376,7 +390,15 @@ impl<P: Pdi, const N: usize, const M: usize, const K: usize> Slave<P, N, M, K> {
     /// frame of the firmware's `main`, which the request handlers stand on.
     #[inline(never)]
     fn init(&mut self, def: &'static DeviceDef, pdi: &mut P) -> Result<(), InitError<P::Error>> {
-        self.od.init(def).map_err(InitError::Def)?;
+        check_def(def, N).map_err(InitError::Def)?;
+        self.init_checked(CheckedDef(def), pdi)
+    }
+
+    /// [`Slave::init`] of a definition checked when the image was built.
+    #[inline(never)]
+    fn init_checked(&mut self, def: CheckedDef<N>, pdi: &mut P) -> Result<(), InitError<P::Error>> {
+        let def = def.0;
+        self.od.init_checked(CheckedDef(def));
         self.diag = SyncDiag::new(&self.od).map_err(InitError::Def)?;
         let fits = |m: &MailboxDef| {
             (m.rx_len as usize) <= M && (m.tx_len as usize) <= M && m.rx_len >= 16 && m.tx_len >= 16

@@ -172,3 +172,49 @@ fn every_board_device_fits_the_microcontroller_mapping_pool() {
     // The demo's six fixed PDOs: 106 bytes (was 16 × 125 = 2,000 at the 31-entry capacity).
     assert_eq!(map_storage(&demo::DEF), 106);
 }
+
+/// A definition checked when the image is built (`const { CheckedDef::new(&DEF) }`, what
+/// the board images start with) starts the same stack as `start`, which checks it at run
+/// time.
+#[test]
+fn a_definition_checked_at_build_time_starts_the_same_stack() {
+    use oxicat_slave::CheckedDef;
+    let (mut e1, mut e2) = (esc(), esc());
+    let mut checked = Box::new(SlaveSlot::<Esc, IMG, MBX>::new());
+    let mut plain = Box::new(SlaveSlot::<Esc, IMG, MBX>::new());
+    let a = checked
+        .start_checked(const { CheckedDef::new(&DEF) }, &mut e1)
+        .expect("start_checked");
+    let b = plain.start(&DEF, &mut e2).expect("start");
+    assert_eq!(a.state(), AlState::Init);
+    assert_eq!(a.od().app_image(), b.od().app_image());
+    assert_eq!(snapshot(a, &mut e1), snapshot(b, &mut e2));
+    // The later start-up checks still run: buffers smaller than the mailboxes.
+    let mut small = Box::new(SlaveSlot::<Esc, IMG, 16>::new());
+    assert!(matches!(
+        small.start_checked(const { CheckedDef::new(&DEF) }, &mut esc()),
+        Err(InitError::MailboxSize)
+    ));
+}
+
+/// `check_def` gives the same answer in a `const` as at run time for every board device,
+/// and `CheckedDef::new` refuses what it refuses (here an image one byte too small).
+#[test]
+fn check_def_at_build_time_agrees_with_run_time() {
+    use oxicat_slave::od::{check_def, image_size, DefError};
+    use oxicat_slave::CheckedDef;
+    const AT_BUILD: Result<(), DefError> = check_def(&DEF, IMG);
+    assert_eq!(AT_BUILD, Ok(()));
+    assert_eq!(check_def(&DEF, IMG), Ok(()));
+    for (name, def) in common::board_devices() {
+        let n = image_size(def.objects);
+        assert_eq!(check_def(def, n), Ok(()), "{name}");
+        assert_eq!(
+            check_def(def, n - 1),
+            Err(DefError::ImageTooSmall { needed: n }),
+            "{name}"
+        );
+    }
+    let refused = std::panic::catch_unwind(|| CheckedDef::<1>::new(&DEF));
+    assert!(refused.is_err());
+}

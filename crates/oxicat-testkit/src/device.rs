@@ -20,8 +20,7 @@ pub static OBJECTS: &[ObjectDef] = &[
         code: ObjectCode::Var,
         entries: &[EntryDef::new(0, "Param", DataType::Unsigned32, Access::RW)
             .default_bits(7)
-            .range(0, 1000)
-            .unit(0xFD04_0000)],
+            .limits(&Limits::range(0, 1000).with_unit(0xFD04_0000))],
     },
     ObjectDef {
         index: 0x2001,

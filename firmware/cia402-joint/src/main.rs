@@ -42,7 +42,7 @@ use oxicat_devices::cia402::{
     device, Cia402Drive, CurrentCommand, CurrentFeedback, CurrentLoop, DriveParams, CURRENT_LOOP_HZ,
 };
 use oxicat_pdi::{Et1100Config, Et1100Spi};
-use oxicat_slave::{AlState, AlStatusCode, Application, Od, Slave, SlaveSlot};
+use oxicat_slave::{AlState, AlStatusCode, Application, CheckedDef, Od, Slave, SlaveSlot};
 use stm32f4xx_hal::{
     pac::{self, interrupt, Interrupt},
     prelude::*,
@@ -289,7 +289,9 @@ fn start_stack(
     sensors: Sensors,
     params: DriveParams,
 ) -> Result<(), ()> {
-    let slave = slot.start(&device::DEF, &mut esc).map_err(|_| ())?;
+    // The definition checked when the image is built (`check_def` is not in the image).
+    let def = const { CheckedDef::new(&device::DEF) };
+    let slave = slot.start_checked(def, &mut esc).map_err(|_| ())?;
     let drive = Cia402Drive::new(sensors, params);
     HANDOVER.put_command(drive.current_command());
     // SAFETY: once, before any ESC interrupt is unmasked (main enables them afterwards).

@@ -38,7 +38,7 @@ use oxicat_board_support::{
 use oxicat_devices::demo::Leds;
 use oxicat_devices::laelaps::{device, CaptureConfig, LegNode, Side};
 use oxicat_pdi::{Lan9252, Lan9252Config};
-use oxicat_slave::{AlState, AlStatusCode, Application, Od, Slave, SlaveSlot};
+use oxicat_slave::{AlState, AlStatusCode, Application, CheckedDef, Od, Slave, SlaveSlot};
 use qep::Encoders;
 use stm32f4xx_hal::{
     pac::{self, interrupt, Interrupt},
@@ -212,7 +212,9 @@ fn fail(leds: &mut BoardLeds, delay: &mut impl embedded_hal::delay::DelayNs) -> 
 fn start_stack(slot: &'static mut StackSlot, mut esc: Esc) -> Result<(), ()> {
     // SAFETY: a plain read of an immutable static; volatile so the link keeps the symbol.
     let _side = unsafe { core::ptr::read_volatile(&OXICAT_LEG_SIDE) };
-    let slave = slot.start(device::device(SIDE), &mut esc).map_err(|_| ())?;
+    // The definition checked when the image is built (`check_def` is not in the image).
+    let def = const { CheckedDef::new(device::device(SIDE)) };
+    let slave = slot.start_checked(def, &mut esc).map_err(|_| ())?;
     // The main loop polls with the ESC handlers masked: PREOP -> SAFEOP (compiling both
     // PDO mappings) in one poll held them off for 770 µs, and a SYNC0 edge was lost when
     // two fell into it (issue 15). In three polls each holds them off for a part.

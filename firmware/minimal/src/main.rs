@@ -26,7 +26,7 @@ use core::hint::black_box;
 use cortex_m_rt::entry;
 use oxicat_devices::demo::{self, Buttons, Demo, Leds};
 use oxicat_slave::foe::{FirmwareStore, FirmwareUpdate, StoreError, UpdateConfig, WithFoe};
-use oxicat_slave::{DeviceDef, IrqLines, Pdi, Slave, SlaveSlot};
+use oxicat_slave::{CheckedDef, DeviceDef, IrqLines, Pdi, Slave, SlaveSlot};
 use panic_halt as _;
 
 /// The demo device as the image links it: the stack's part of `demo::DEF`, without the
@@ -176,7 +176,8 @@ fn main() -> ! {
         app: Demo::new(BoardLeds, BoardButtons),
         files: FirmwareUpdate::new(StubFlash, UPDATE),
     };
-    let Ok(slave) = SLOT.start(&DEF, &mut pdi) else {
+    // The definition checked when the image is built (`check_def` is not in the image).
+    let Ok(slave) = SLOT.start_checked(const { CheckedDef::new(&DEF) }, &mut pdi) else {
         #[allow(clippy::empty_loop)]
         loop {}
     };

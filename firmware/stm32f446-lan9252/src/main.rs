@@ -19,7 +19,7 @@ use embedded_hal::digital::InputPin;
 use oxicat_board_support::{clocks_180mhz, esc_spi1, EscSpi};
 use oxicat_devices::demo::{self, Buttons, Demo, Leds};
 use oxicat_pdi::{Lan9252, Lan9252Config, Pins};
-use oxicat_slave::{AlState, DeviceDef, Pdi, SlaveSlot};
+use oxicat_slave::{AlState, CheckedDef, DeviceDef, Pdi, SlaveSlot};
 use panic_halt as _;
 use stm32f4xx_hal::{
     gpio::{Input, Output, Pin},
@@ -141,7 +141,8 @@ fn main() -> ! {
     }
 
     let mut app = Demo::new(leds, buttons);
-    let slave = match SLOT.start(&DEF, &mut esc) {
+    // The definition checked when the image is built (`check_def` is not in the image).
+    let slave = match SLOT.start_checked(const { CheckedDef::new(&DEF) }, &mut esc) {
         Ok(s) => s,
         Err(_) => fail(&mut app.leds, &mut delay),
     };

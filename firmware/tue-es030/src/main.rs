@@ -42,7 +42,7 @@ use oxicat_board_support::{
 use oxicat_devices::tue_es030::{device, FwLock, Hooks, TuEs030};
 use oxicat_pdi::{Lan9252, Lan9252Config};
 use oxicat_slave::foe::{FirmwareUpdate, WithFoe};
-use oxicat_slave::{Slave, SlaveSlot};
+use oxicat_slave::{CheckedDef, Slave, SlaveSlot};
 use stm32f4xx_hal::{
     gpio::{Output, Pin},
     pac::{self, interrupt, Interrupt},
@@ -185,7 +185,9 @@ fn fail(led: &mut Pin<'D', 14, Output>, delay: &mut impl embedded_hal::delay::De
 /// of its own, not inlined, for the FoE files' frame.
 #[inline(never)]
 fn start_stack(slot: &'static mut StackSlot, mut esc: Esc, flash: pac::FLASH) -> Result<(), ()> {
-    let slave = slot.start(&device::DEF, &mut esc).map_err(|_| ())?;
+    // The definition checked when the image is built (`check_def` is not in the image).
+    let def = const { CheckedDef::new(&device::DEF) };
+    let slave = slot.start_checked(def, &mut esc).map_err(|_| ())?;
     let app = WithFoe {
         app: Hooks(FwCs),
         files: FirmwareUpdate::new(FlashStore::new(flash), oxicat_devices::tue_es030::UPDATE),

@@ -12,8 +12,8 @@
 
 use oxicat_slave::device::{CoeInfo, DcOpMode, DeviceInfo, EscConfigArea, Group, Timeouts};
 use oxicat_slave::{
-    Access, DataType, DeviceDef, EntryDef, Identity, MailboxDef, ObjectCode, ObjectDef, PdoDef,
-    PdoEntry, PdoMapping, Scale, SyncDef, SyncMode,
+    Access, DataType, DeviceDef, EntryDef, Identity, Limits, MailboxDef, ObjectCode, ObjectDef,
+    PdoDef, PdoEntry, PdoMapping, Scale, SyncDef, SyncMode,
 };
 
 /// Number of temperature channels (the report's `NUM_OF_SENSORS 15u`).
@@ -67,21 +67,21 @@ pub static OBJECTS: &[ObjectDef] = &[
         code: ObjectCode::Record,
         entries: &[
             SUB0,
-            tx(1, "TEMPERATURE0", DataType::Int16).with_scale(&CENTI_DEG_C),
-            tx(2, "TEMPERATURE1", DataType::Int16).with_scale(&CENTI_DEG_C),
-            tx(3, "TEMPERATURE2", DataType::Int16).with_scale(&CENTI_DEG_C),
-            tx(4, "TEMPERATURE3", DataType::Int16).with_scale(&CENTI_DEG_C),
-            tx(5, "TEMPERATURE4", DataType::Int16).with_scale(&CENTI_DEG_C),
-            tx(6, "TEMPERATURE5", DataType::Int16).with_scale(&CENTI_DEG_C),
-            tx(7, "TEMPERATURE6", DataType::Int16).with_scale(&CENTI_DEG_C),
-            tx(8, "TEMPERATURE7", DataType::Int16).with_scale(&CENTI_DEG_C),
-            tx(9, "TEMPERATURE8", DataType::Int16).with_scale(&CENTI_DEG_C),
-            tx(10, "TEMPERATURE9", DataType::Int16).with_scale(&CENTI_DEG_C),
-            tx(11, "TEMPERATURE10", DataType::Int16).with_scale(&CENTI_DEG_C),
-            tx(12, "TEMPERATURE11", DataType::Int16).with_scale(&CENTI_DEG_C),
-            tx(13, "TEMPERATURE12", DataType::Int16).with_scale(&CENTI_DEG_C),
-            tx(14, "TEMPERATURE13", DataType::Int16).with_scale(&CENTI_DEG_C),
-            tx(15, "TEMPERATURE14", DataType::Int16).with_scale(&CENTI_DEG_C),
+            tx(1, "TEMPERATURE0", DataType::Int16).limits(&Limits::scale(&CENTI_DEG_C)),
+            tx(2, "TEMPERATURE1", DataType::Int16).limits(&Limits::scale(&CENTI_DEG_C)),
+            tx(3, "TEMPERATURE2", DataType::Int16).limits(&Limits::scale(&CENTI_DEG_C)),
+            tx(4, "TEMPERATURE3", DataType::Int16).limits(&Limits::scale(&CENTI_DEG_C)),
+            tx(5, "TEMPERATURE4", DataType::Int16).limits(&Limits::scale(&CENTI_DEG_C)),
+            tx(6, "TEMPERATURE5", DataType::Int16).limits(&Limits::scale(&CENTI_DEG_C)),
+            tx(7, "TEMPERATURE6", DataType::Int16).limits(&Limits::scale(&CENTI_DEG_C)),
+            tx(8, "TEMPERATURE7", DataType::Int16).limits(&Limits::scale(&CENTI_DEG_C)),
+            tx(9, "TEMPERATURE8", DataType::Int16).limits(&Limits::scale(&CENTI_DEG_C)),
+            tx(10, "TEMPERATURE9", DataType::Int16).limits(&Limits::scale(&CENTI_DEG_C)),
+            tx(11, "TEMPERATURE10", DataType::Int16).limits(&Limits::scale(&CENTI_DEG_C)),
+            tx(12, "TEMPERATURE11", DataType::Int16).limits(&Limits::scale(&CENTI_DEG_C)),
+            tx(13, "TEMPERATURE12", DataType::Int16).limits(&Limits::scale(&CENTI_DEG_C)),
+            tx(14, "TEMPERATURE13", DataType::Int16).limits(&Limits::scale(&CENTI_DEG_C)),
+            tx(15, "TEMPERATURE14", DataType::Int16).limits(&Limits::scale(&CENTI_DEG_C)),
         ],
     },
     ObjectDef {

@@ -13,7 +13,7 @@
 
 use oxicat_slave::device::{DcOpMode, DeviceInfo, Group};
 use oxicat_slave::{
-    Access as A, DataType as T, DeviceDef, EntryDef as E, Identity, MailboxDef, ObjectCode,
+    Access as A, DataType as T, DeviceDef, EntryDef as E, Identity, Limits, MailboxDef, ObjectCode,
     ObjectDef, PdoDef, PdoEntry as PE, PdoMapping as M, SyncDef, SyncMode,
 };
 
@@ -56,11 +56,11 @@ macro_rules! v {
     ($name:literal, $t:ident, $a:ident, $m:ident, [$u:literal / $den:literal]) => {
         &[E::new(0, $name, T::$t, A::$a)
             .pdo(M::$m)
-            .with_scale(&oxicat_slave::Scale {
+            .limits(&oxicat_slave::Limits::scale(&oxicat_slave::Scale {
                 unit: $u,
                 num: 1,
                 den: $den,
-            })]
+            }))]
     };
     ($name:literal, $t:ident, $a:ident, $m:ident, def $d:expr) => {
         &[E::new(0, $name, T::$t, A::$a).pdo(M::$m).default_i64($d)]
@@ -106,7 +106,7 @@ pub static OBJECTS: &[ObjectDef] = &[
         "Abort connection option code",
         &[E::new(0, "Abort connection option code", T::Int16, A::RW)
             .default_i64(ABORT_CONNECTION_DEFAULT as i64)
-            .range(0, 3)],
+            .limits(&Limits::range(0, 3))],
     ),
     var(0x603F, "Error code", v!("Error code", Unsigned16, RO, Tx)),
     var(0x6040, "Controlword", v!("Controlword", Unsigned16, RW, Rx)),
@@ -302,7 +302,7 @@ pub static OBJECTS: &[ObjectDef] = &[
         "Interpolation sub mode select",
         &[E::new(0, "Interpolation sub mode select", T::Int16, A::RW)
             .default_i64(0)
-            .range(0, 0)],
+            .limits(&Limits::range(0, 0))],
     ),
     ObjectDef {
         index: 0x60C1,
@@ -321,10 +321,10 @@ pub static OBJECTS: &[ObjectDef] = &[
             SUB0,
             E::new(1, "Interpolation time period value", T::Unsigned8, A::RW)
                 .default_i64(1)
-                .range(1, 255),
+                .limits(&Limits::range(1, 255)),
             E::new(2, "Interpolation time index", T::Int8, A::RW)
                 .default_i64(-3)
-                .range(-6, 0),
+                .limits(&Limits::range(-6, 0)),
         ],
     },
     var(

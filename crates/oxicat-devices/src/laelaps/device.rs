@@ -173,7 +173,7 @@ pub static LEFT: DeviceDef = def("EtherCAT Laelaps Motion Control v4 (SPI)");
 pub static RIGHT: DeviceDef = def("EtherCAT Laelaps Motion Control v4 (SPI)");
 
 /// The device definition of a side's build.
-pub fn device(side: Side) -> &'static DeviceDef {
+pub const fn device(side: Side) -> &'static DeviceDef {
     match side {
         Side::Left => &LEFT,
         Side::Right => &RIGHT,

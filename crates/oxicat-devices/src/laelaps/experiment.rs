@@ -194,7 +194,7 @@ impl InputVar {
         let Some(e) = oxicat_slave::find_entry(crate::laelaps::device::OBJECTS, index, sub) else {
             panic!("not a leg-node input");
         };
-        let Some(scale) = e.scale else {
+        let Some(scale) = e.scale() else {
             panic!("a recorded input declares its unit");
         };
         assert!(scale.num == 1 && scale.den <= i32::MAX as u32);

@@ -29,7 +29,7 @@
 
 use oxicat_slave::device::{DeviceInfo, Group};
 use oxicat_slave::{
-    Access as A, DataType as T, DeviceDef, EntryDef as E, Identity, MailboxDef, ObjectCode,
+    Access as A, DataType as T, DeviceDef, EntryDef as E, Identity, Limits, MailboxDef, ObjectCode,
     ObjectDef, PdoDef, PdoEntry as PE, PdoMapping as M, Scale, SyncDef, SyncMode,
 };
 
@@ -63,8 +63,8 @@ const fn motor_tx() -> [E; 6] {
         tx(1, "State", T::Unsigned8),
         tx(2, "Count", T::Unsigned32),
         tx(3, "Timestamp", T::Unsigned32),
-        tx(4, "Velocity", T::Int16).with_scale(&DECI_RAD_S),
-        tx(5, "Current", T::Int16).with_scale(&MILLI_A),
+        tx(4, "Velocity", T::Int16).limits(const { &Limits::scale(&DECI_RAD_S) }),
+        tx(5, "Current", T::Int16).limits(const { &Limits::scale(&MILLI_A) }),
     ]
 }
 static MOTOR_TX: [E; 6] = motor_tx();
@@ -82,7 +82,7 @@ static OTHERS_TX: [E; 14] = [
     tx(9, "Pos3", T::Unsigned16),
     tx(10, "Analog1", T::Unsigned16),
     tx(11, "Analog2", T::Unsigned16),
-    tx(12, "Linevoltage", T::Unsigned16).with_scale(&CENTI_V),
+    tx(12, "Linevoltage", T::Unsigned16).limits(&Limits::scale(&CENTI_V)),
     tx(13, "Ectime", T::Unsigned16),
 ];
 
@@ -108,8 +108,8 @@ static CURRENT_BUF: [E; FRF_PER_CYCLE + 1] = current_buffer();
 static MOTOR_RX: [E; 4] = [
     SUB0,
     rx(1, "Mcom", T::Unsigned8),
-    rx(2, "Setpoint", T::Int16).with_scale(&MILLI_A),
-    rx(3, "Ff", T::Int16).with_scale(&CENTI_V),
+    rx(2, "Setpoint", T::Int16).limits(&Limits::scale(&MILLI_A)),
+    rx(3, "Ff", T::Int16).limits(&Limits::scale(&CENTI_V)),
 ];
 
 static OTHERS_RX: [E; 4] = [
@@ -163,23 +163,23 @@ const fn params() -> [E; 9] {
         E::new(5, "CC i_limit [As]", T::Real32, A::RW).default_f32(ILIMIT),
         E::new(6, "Encoder direction", T::Int8, A::RW)
             .default_i64(ENCDIR as i64)
-            .range(-1, 1),
+            .limits(const { &Limits::range(-1, 1) }),
         E::new(7, "Encoder resolution", T::Unsigned16, A::RW)
             .default_bits(ENCRES as u64)
-            .range(1, 65535),
+            .limits(const { &Limits::range(1, 65535) }),
         E::new(8, "Current zero [mA]", T::Int16, A::RW)
             .default_i64(CZERO as i64)
-            .range(0, 4095),
+            .limits(const { &Limits::range(0, 4095) }),
     ]
 }
 static PARAMS: [E; 9] = params();
 
 static VOLTAGES: [E; 5] = [
     SUB0.default_bits(4),
-    E::new(1, "Line voltage", T::Unsigned16, A::RO).with_scale(&CENTI_V),
-    E::new(2, "5V reference", T::Unsigned16, A::RO).with_scale(&CENTI_V),
-    E::new(3, "Line peak", T::Unsigned16, A::RO).with_scale(&CENTI_V),
-    E::new(4, "Kill threshold", T::Unsigned16, A::RO).with_scale(&CENTI_V),
+    E::new(1, "Line voltage", T::Unsigned16, A::RO).limits(&Limits::scale(&CENTI_V)),
+    E::new(2, "5V reference", T::Unsigned16, A::RO).limits(&Limits::scale(&CENTI_V)),
+    E::new(3, "Line peak", T::Unsigned16, A::RO).limits(&Limits::scale(&CENTI_V)),
+    E::new(4, "Kill threshold", T::Unsigned16, A::RO).limits(&Limits::scale(&CENTI_V)),
 ];
 
 const fn rec(index: u16, name: &'static str, entries: &'static [E]) -> ObjectDef {

@@ -13,8 +13,8 @@
 use oxicat_slave::device::{CoeInfo, DeviceInfo, Identity, MailboxDef, SmControl, SyncDef};
 use oxicat_slave::od::{image_size, DefaultValue, MAX_ASSIGN, MAX_PDOS, MAX_PDO_ENTRIES};
 use oxicat_slave::{
-    Access, DataType, DeviceDef, EntryDef, ObjectCode, ObjectDef, PdoDef, PdoEntry, PdoMapping,
-    SyncMode,
+    Access, DataType, DeviceDef, EntryDef, Limits, ObjectCode, ObjectDef, PdoDef, PdoEntry,
+    PdoMapping, SyncMode,
 };
 use oxicat_wire::sii::SiiImage;
 
@@ -153,11 +153,13 @@ fn object(o: &SavedObject, left_out: &mut Vec<String>) -> Result<ObjectDef, Stri
             (false, true) => PdoMapping::Tx,
             _ => PdoMapping::None,
         };
-        d.unit = e.unit.unwrap_or(0);
+        if let Some(u) = e.unit.filter(|&u| u != 0) {
+            d.limits = Box::leak(Box::new(Limits::unit(u)));
+        }
         d.default = match (&e.value, dtype.is_string()) {
             (Some(v), true) => DefaultValue::Bytes(Box::leak(v.clone().into_boxed_slice())),
-            (Some(_), false) => DefaultValue::Bits(e.u64().unwrap_or(0)),
-            (None, _) => DefaultValue::Bits(0),
+            (Some(_), false) => DefaultValue::bits(e.u64().unwrap_or(0)),
+            (None, _) => DefaultValue::bits(0),
         };
         entries.push(d);
     }
@@ -174,7 +176,7 @@ fn object(o: &SavedObject, left_out: &mut Vec<String>) -> Result<ObjectDef, Stri
             if entries.first().is_none_or(|e| e.sub != 0) {
                 // Subindex 0 not described: the highest subindex, as the object says.
                 let mut e0 = EntryDef::new(0, "SubIndex 000", DataType::Unsigned8, Access::RO);
-                e0.default = DefaultValue::Bits(u64::from(o.max_sub));
+                e0.default = DefaultValue::bits(u64::from(o.max_sub));
                 entries.insert(0, e0);
                 left_out.push(format!(
                     "{}:0 was not described: served as UNSIGNED8 {}",
@@ -362,7 +364,7 @@ fn from_sii_pdos(m: &crate::DeviceModel, c: &mut Comm, objects: &mut Vec<ObjectD
         } else {
             if v[0].sub != 0 {
                 let mut e0 = EntryDef::new(0, "SubIndex 000", DataType::Unsigned8, Access::RO);
-                e0.default = DefaultValue::Bits(v.last().map_or(0, |e| u64::from(e.sub)));
+                e0.default = DefaultValue::bits(v.last().map_or(0, |e| u64::from(e.sub)));
                 v.insert(0, e0);
             }
             ObjectCode::Record

@@ -13,7 +13,7 @@ use std::process::Command;
 use oxicat::output::json_string as json_str;
 use oxicat_devices::registry::Kit;
 use oxicat_esi::model::DeviceModel;
-use oxicat_slave::od::{DataType, DefaultValue, ObjectCode};
+use oxicat_slave::od::{DataType, ObjectCode};
 use oxicat_slave::{AlState, DeviceDef, SyncMode};
 
 use crate::netns_common::NetnsSim;
@@ -90,11 +90,11 @@ pub fn writable_entry(def: &DeviceDef) -> Option<String> {
             if !e.access.write_in(AlState::PreOp) || !e.access.read_in(AlState::PreOp) {
                 continue;
             }
-            let DefaultValue::Bits(default) = e.default else {
+            let Some(default) = e.default.as_bits() else {
                 continue;
             };
-            let (lo, hi) = if e.range.0 <= e.range.1 {
-                (i64::from(e.range.0), i64::from(e.range.1))
+            let (lo, hi) = if e.limits.has_range() {
+                (i64::from(e.limits.range.0), i64::from(e.limits.range.1))
             } else {
                 (0, (1i64 << (8 * size)) - 1)
             };
