@@ -23,13 +23,13 @@ use crate::axis_hub::{
     self, codes, device, onewire, ws2812, HubFirmware, LedStrip, OneWireBus, TASKS,
 };
 use ethercrab::subdevice_group::DcConfiguration;
-use ethercrab::{DcSync, MainDevice, MainDeviceConfig, PduStorage, Timeouts};
+use ethercrab::{DcSync, MainDevice, MainDeviceConfig, PduStorage};
 use oxicat_esc::{Esc, EscConfig};
 use oxicat_plant::onewire::{ds18b20_rom, Ds18b20, OneWireNet};
 use oxicat_plant::thermal::{Mount, TempSensor, ThermalNet, ThermalNode};
 use oxicat_plant::ws2812::{decode, Decoded};
 
-use oxicat_master::inprocess::{spawn_inprocess_with, InProcessConfig};
+use oxicat_master::inprocess::{inprocess_task, virtual_timeouts, InProcessConfig, Runner};
 use oxicat_sim::firmware::{
     attach_host, AttachError, Bench, FirmwareConfig, Host, HostHandle, Image,
 };
@@ -1236,27 +1236,20 @@ pub fn run_scenario(
     let (tx, rx, pdu_loop) = storage
         .try_split()
         .map_err(|_| "PDU storage in use".to_string())?;
-    let _t = spawn_inprocess_with(
-        seg.clone(),
+    // The transport polled on this thread beside the scenario (no hand-over per frame).
+    let pipe: Arc<Mutex<dyn oxicat_wire::pipe::FramePipe + Send>> = seg.clone();
+    let task = inprocess_task(
+        pipe,
         tx,
         rx,
         InProcessConfig {
             frame_gap_ns: 10_000,
         },
-    )
-    .map_err(|e| e.to_string())?;
+    );
+    let runner = Runner::with_task(Arc::new(Mutex::new(Box::pin(task))));
     let md = MainDevice::new(
         pdu_loop,
-        Timeouts {
-            // A pause is real time, in which the virtual segment does not move
-            // (`oxicat_master::inprocess::virtual_timeouts`).
-            wait_loop_delay: Duration::ZERO,
-            state_transition: Duration::from_secs(20),
-            pdu: Duration::from_secs(2),
-            mailbox_response: Duration::from_secs(5),
-            eeprom: Duration::from_secs(2),
-            ..Timeouts::default()
-        },
+        virtual_timeouts(),
         MainDeviceConfig {
             dc_static_sync_iterations: 100,
             ..MainDeviceConfig::default()
@@ -1274,7 +1267,7 @@ pub fn run_scenario(
         log,
     };
     let e = |w: &'static str| move |e: ethercrab::error::Error| format!("{w}: {e}");
-    futures_lite::future::block_on(async {
+    runner.block_on(async {
         let mut group = md
             .init_single_group::<2, 128>(move || clock.now())
             .await
