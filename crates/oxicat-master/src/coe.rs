@@ -337,7 +337,6 @@ impl Master {
     /// Reads object `index:sub` of the slave at `position` (SDO upload).
     pub fn sdo_upload(&self, position: usize, index: u16, sub: u8) -> Result<Vec<u8>, MasterError> {
         self.runner
-            .clone()
             .block_on(self.sdo_upload_async(position, index, sub))
     }
 
@@ -350,7 +349,6 @@ impl Master {
         data: &[u8],
     ) -> Result<(), MasterError> {
         self.runner
-            .clone()
             .block_on(self.sdo_download_async(position, index, sub, data))
     }
 
@@ -628,7 +626,7 @@ impl Master {
 
     /// The object list of the slave (SDO information, list type "all").
     pub fn sdo_list(&self, position: usize) -> Result<Vec<u16>, MasterError> {
-        self.runner.clone().block_on(async {
+        self.runner.block_on(async {
             let (_, d) = self
                 .sdo_info(
                     position,
@@ -651,7 +649,6 @@ impl Master {
     /// The description of object `index` and of each of its entries.
     pub fn sdo_describe(&self, position: usize, index: u16) -> Result<ObjectDesc, MasterError> {
         self.runner
-            .clone()
             .block_on(self.sdo_describe_async(position, index))
     }
 

@@ -484,7 +484,7 @@ impl Master {
             return Ok(());
         }
         for p in 0..self.len() {
-            let supported = self.runner.clone().block_on(self.sync_supported(p))?;
+            let supported = self.runner.block_on(self.sync_supported(p))?;
             let esc_dc = dc_support.get(p).copied().unwrap_or(false);
             if !sync.offered_by(supported) || (sync == SyncMode::Dc && !esc_dc) {
                 return Err(MasterError::SyncModeUnsupported {
@@ -534,7 +534,7 @@ impl Master {
             // TUeES030), as `states` does. A DC recording left 0x1C32:01 = 2 (DC SYNC0), with
             // which the slave would wait for SYNC0 pulses that never come and not reach OP.
             for p in 0..n {
-                let r = self.runner.clone().block_on(async {
+                let r = self.runner.block_on(async {
                     let mode = match sync.code() {
                         Some(code) => self.sync_mode_async(p).await?.map(|_| code),
                         None => self.plain_sync_mode(p).await?,
@@ -599,7 +599,7 @@ impl Master {
         let mut left = false;
         // On the heap: ethercrab's cyclic futures are large (debug builds).
         crate::on_group_stack(|| {
-            self.runner.clone().block_on(Box::pin(async {
+            self.runner.block_on(Box::pin(async {
                 if dc {
                     let group = group
                         .configure_dc_sync(

@@ -320,14 +320,18 @@ pub(crate) fn ethercrab_frames(pdi_len: usize, slaves: usize) -> usize {
 
 /// Polls every future of `futs` until all are ready; their outputs in order.
 async fn join_all<F: Future>(futs: impl Iterator<Item = F>) -> Vec<F::Output> {
-    let mut futs: Vec<Pin<Box<F>>> = futs.map(Box::pin).collect();
-    let mut out: Vec<Option<F::Output>> = futs.iter().map(|_| None).collect();
+    /// A future still running, or its output.
+    enum Slot<F: Future> {
+        Running(Pin<Box<F>>),
+        Done(F::Output),
+    }
+    let mut slots: Vec<Slot<F>> = futs.map(|f| Slot::Running(Box::pin(f))).collect();
     std::future::poll_fn(|cx| {
         let mut pending = false;
-        for (f, o) in futs.iter_mut().zip(out.iter_mut()) {
-            if o.is_none() {
+        for s in slots.iter_mut() {
+            if let Slot::Running(f) = s {
                 match f.as_mut().poll(cx) {
-                    Poll::Ready(v) => *o = Some(v),
+                    Poll::Ready(v) => *s = Slot::Done(v),
                     Poll::Pending => pending = true,
                 }
             }
@@ -339,7 +343,13 @@ async fn join_all<F: Future>(futs: impl Iterator<Item = F>) -> Vec<F::Output> {
         }
     })
     .await;
-    out.into_iter().flatten().collect()
+    slots
+        .into_iter()
+        .filter_map(|s| match s {
+            Slot::Done(v) => Some(v),
+            Slot::Running(_) => None,
+        })
+        .collect()
 }
 
 #[cfg(test)]

@@ -86,7 +86,7 @@ impl Master {
         data: &[u8],
         progress: Progress<'_>,
     ) -> Result<(), MasterError> {
-        self.runner.clone().block_on(async {
+        self.runner.block_on(async {
             let m = self.foe_open(position).await?;
             let seg = m.out_len as usize - MAILBOX_HEADER_LEN - FOE_HEADER_LEN;
             let total = data.len();
@@ -149,7 +149,7 @@ impl Master {
         password: u32,
         progress: Progress<'_>,
     ) -> Result<Vec<u8>, MasterError> {
-        self.runner.clone().block_on(async {
+        self.runner.block_on(async {
             let m = self.foe_open(position).await?;
             let seg = m.in_len as usize - MAILBOX_HEADER_LEN - FOE_HEADER_LEN;
             let mut out = Vec::new();

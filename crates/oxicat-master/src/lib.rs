@@ -446,7 +446,7 @@ impl Master {
             ));
         }
         // On the heap: ethercrab's initialisation is a large future (debug builds).
-        let group = on_group_stack(|| self.runner.clone().block_on(Box::pin(self.init())))?;
+        let group = on_group_stack(|| self.runner.block_on(Box::pin(self.init())))?;
         let addresses: Vec<u16> = group
             .iter(&self.md)
             .map(|s| s.configured_address())
@@ -562,12 +562,12 @@ impl Master {
 
     /// Reads `len` bytes at ESC address `reg` of the slave at `position` (FPRD).
     pub fn reg_read(&self, position: usize, reg: u16, len: u16) -> Result<Vec<u8>, MasterError> {
-        self.runner.clone().block_on(self.fprd(position, reg, len))
+        self.runner.block_on(self.fprd(position, reg, len))
     }
 
     /// Writes `data` at ESC address `reg` of the slave at `position` (FPWR).
     pub fn reg_write(&self, position: usize, reg: u16, data: &[u8]) -> Result<(), MasterError> {
-        self.runner.clone().block_on(self.fpwr(position, reg, data))
+        self.runner.block_on(self.fpwr(position, reg, data))
     }
 
     pub(crate) async fn fprd(
@@ -627,7 +627,7 @@ impl Master {
 
     /// AL status and code of the slave at `position`.
     pub fn al_status(&self, position: usize) -> Result<AlStatus, MasterError> {
-        self.runner.clone().block_on(self.al_status_async(position))
+        self.runner.block_on(self.al_status_async(position))
     }
 
     pub(crate) async fn al_status_async(&self, position: usize) -> Result<AlStatus, MasterError> {
@@ -640,7 +640,7 @@ impl Master {
 
     /// Scans the slaves: addresses, alias, state, name, identity, ports (reads only).
     pub fn scan(&self) -> Result<Vec<SlaveInfo>, MasterError> {
-        self.runner.clone().block_on(async {
+        self.runner.block_on(async {
             let mut out = Vec::new();
             for (position, sd) in self.found.iter().enumerate() {
                 let (vendor_id, product_code, revision, serial) = sd.identity;
@@ -684,7 +684,7 @@ impl Master {
         state: AlState,
     ) -> Result<Vec<(usize, AlStatus)>, MasterError> {
         // On the heap: the walk is a large future in debug builds.
-        self.runner.clone().block_on(Box::pin(async {
+        self.runner.block_on(Box::pin(async {
             let mut out = Vec::new();
             for &p in positions {
                 self.address(p)?;
@@ -830,7 +830,7 @@ impl Master {
                 let md = &self.md;
                 // The group moves out of its box inside a future on the heap.
                 let g = on_group_stack(|| {
-                    self.runner.clone().block_on(Box::pin(async move {
+                    self.runner.block_on(Box::pin(async move {
                         (*g).into_pre_op_pdi(md).await.map(Box::new)
                     }))
                 })
@@ -890,19 +890,19 @@ impl Master {
 
     /// Name (SII) of the slave at `position`.
     pub fn name(&self, position: usize) -> Result<String, MasterError> {
-        self.runner.clone().block_on(self.name_async(position))
+        self.runner.block_on(self.name_async(position))
     }
 
     /// The sync mode of the slave at `position` (0x1C32:01: 0 free run, 1 SM2
     /// synchronous, 2 DC SYNC0, 3 DC SYNC1), `None` when it has no such object.
     pub fn sync_mode(&self, position: usize) -> Result<Option<u16>, MasterError> {
-        self.runner.clone().block_on(self.sync_mode_async(position))
+        self.runner.block_on(self.sync_mode_async(position))
     }
 
     /// 0x1C32:04 (sync modes supported: bit 0 free run, 1 SM-synchronous, 2/3 DC) of the
     /// slave at `position`, `None` when it has no such object or no CoE now.
     pub fn sync_modes_supported(&self, position: usize) -> Result<Option<u16>, MasterError> {
-        self.runner.clone().block_on(async {
+        self.runner.block_on(async {
             if !self.has_coe(position).await {
                 return Ok(None);
             }

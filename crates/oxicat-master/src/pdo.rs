@@ -197,7 +197,7 @@ fn entry(index: u16, sub: u8, bits: u16, name: Option<String>, code: Option<u16>
 impl Master {
     /// The SII of the slave decoded into the comparable model (names, PDOs, CoE details).
     pub fn sii_model(&self, position: usize) -> Result<DeviceModel, MasterError> {
-        let img = self.runner.clone().block_on(self.sii_image(position))?;
+        let img = self.runner.block_on(self.sii_image(position))?;
         oxicat_esi::sii::parse(&img).map_err(|e| MasterError::SiiImage(e.to_string()))
     }
 
@@ -212,7 +212,6 @@ impl Master {
             .is_some();
         if has_coe {
             self.runner
-                .clone()
                 .block_on(self.pdos_coe(position, model.as_ref()))
         } else {
             let m = model.ok_or(MasterError::NoCoe(position))?;

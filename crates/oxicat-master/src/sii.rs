@@ -134,9 +134,7 @@ impl Master {
     /// Reads the SII of the slave at `position`: up to and including the end-of-categories
     /// marker, or the whole EEPROM with `full`.
     pub fn sii_read(&self, position: usize, full: bool) -> Result<Vec<u8>, MasterError> {
-        self.runner
-            .clone()
-            .block_on(self.sii_read_async(position, full))
+        self.runner.block_on(self.sii_read_async(position, full))
     }
 
     /// `len` bytes of the SII from word `word` on.
@@ -200,7 +198,7 @@ impl Master {
     /// (16 Kbit) with one address byte, 512 KiB (4 Mbit) with two — so a blank EEPROM
     /// (0xFFFF) does not claim more than the chip can hold.
     pub fn eeprom_bytes(&self, position: usize) -> Result<usize, MasterError> {
-        let ctl = self.runner.clone().block_on(self.read_u16(position, CTL))?;
+        let ctl = self.runner.block_on(self.read_u16(position, CTL))?;
         let chip = if ctl & 0x0080 != 0 { 512 * 1024 } else { 2048 };
         let w = self
             .runner
@@ -244,7 +242,7 @@ impl Master {
         if let Some(c) = self.sii_cache.borrow_mut().get_mut(position) {
             *c = None;
         }
-        self.runner.clone().block_on(async {
+        self.runner.block_on(async {
             let mut area = self.sii_read_at(position, 0, 16).await?;
             if sii_crc8(&area[..14]) != area[14] {
                 return Err(sii_err(
@@ -294,7 +292,7 @@ impl Master {
         if let Some(c) = self.sii_cache.borrow_mut().get_mut(position) {
             *c = None;
         }
-        self.runner.clone().block_on(async {
+        self.runner.block_on(async {
             self.sii_take(position).await?;
             let words = img.len() / 2;
             for w in 0..words {
