@@ -7,7 +7,6 @@ mod netns_common;
 
 use std::time::Duration;
 
-use ethercrab::std::ethercat_now;
 use ethercrab::PduStorage;
 use netns_common::NetnsSim;
 
@@ -22,14 +21,15 @@ fn raw_ethernet_discovery_to_op_through_veth() {
     };
     let md = netns_common::master_on(&bench, &PDU_STORAGE);
     futures_lite::future::block_on(async {
-        let group = md
-            .init_single_group::<MAX_SUBDEVICES, PDI_LEN>(ethercat_now)
-            .await
-            .unwrap_or_else(|e| panic!("discovery failed: {e}; sim log: {:?}", bench.sim_log()));
-        assert_eq!(group.len(), 2, "two demo nodes on the segment");
+        let group = netns_common::discover::<MAX_SUBDEVICES, PDI_LEN>(
+            &md,
+            &bench,
+            2,
+            oxicat_devices::demo::VENDOR_ID,
+        )
+        .await;
         for sd in group.iter(&md) {
             let id = sd.identity();
-            assert_eq!(id.vendor_id, oxicat_devices::demo::VENDOR_ID);
             assert_eq!(
                 id.product_id,
                 oxicat_devices::demo::DEF.identity.product_code

@@ -11,7 +11,6 @@ use std::net::{SocketAddr, TcpStream};
 use std::process::{Command, Stdio};
 use std::time::Duration;
 
-use ethercrab::std::ethercat_now;
 use ethercrab::PduStorage;
 use netns_common::{oxicat_bin, NetnsSim};
 
@@ -100,14 +99,13 @@ fn xdp_serving_to_op_with_ip_traffic_alongside() {
 
     let md = netns_common::master_on(&bench, &PDU_STORAGE);
     futures_lite::future::block_on(async {
-        let group = md
-            .init_single_group::<MAX_SUBDEVICES, PDI_LEN>(ethercat_now)
-            .await
-            .unwrap_or_else(|e| panic!("discovery failed: {e}; sim log: {:?}", bench.sim_log()));
-        assert_eq!(group.len(), 2, "two demo nodes on the segment");
-        for sd in group.iter(&md) {
-            assert_eq!(sd.identity().vendor_id, oxicat_devices::demo::VENDOR_ID);
-        }
+        let group = netns_common::discover::<MAX_SUBDEVICES, PDI_LEN>(
+            &md,
+            &bench,
+            2,
+            oxicat_devices::demo::VENDOR_ID,
+        )
+        .await;
         let group = group.into_op(&md).await.expect("PRE-OP -> OP");
         let mut bad = Vec::new();
         for k in 0..CYCLES {

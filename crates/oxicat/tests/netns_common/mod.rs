@@ -87,6 +87,24 @@ pub fn master_on<const N: usize>(
     ethercrab::MainDevice::new(pdu_loop, relaxed_timeouts(), relaxed_config())
 }
 
+/// ethercrab's discovery of the bench's segment, which must hold `n` slaves of `vendor`.
+pub async fn discover<const S: usize, const P: usize>(
+    md: &ethercrab::MainDevice<'static>,
+    bench: &NetnsSim,
+    n: usize,
+    vendor: u32,
+) -> ethercrab::subdevice_group::SubDeviceGroup<S, P> {
+    let group = md
+        .init_single_group::<S, P>(ethercrab::std::ethercat_now)
+        .await
+        .unwrap_or_else(|e| panic!("discovery failed: {e}; sim log: {:?}", bench.sim_log()));
+    assert_eq!(group.len(), n, "{n} nodes on the segment");
+    for sd in group.iter(md) {
+        assert_eq!(sd.identity().vendor_id, vendor);
+    }
+    group
+}
+
 /// The `oxicat` binary under test (`None` in another crate's tests, which include this
 /// module by path and name their own binary: [`NetnsSim::spawn_bin_in_ns`]).
 pub fn oxicat_bin() -> &'static str {
