@@ -184,8 +184,9 @@ pub fn ifindex(name: &str) -> Option<u32> {
     (i != 0).then_some(i)
 }
 
-fn check(r: libc::c_int) -> io::Result<()> {
-    if r < 0 {
+/// A system call's result: negative is the failure `errno` describes.
+fn check<R: Default + PartialOrd>(r: R) -> io::Result<()> {
+    if r < R::default() {
         Err(io::Error::last_os_error())
     } else {
         Ok(())
@@ -510,7 +511,7 @@ pub fn wait_readable(fd: &OwnedFd, timeout: Duration) -> io::Result<bool> {
 /// Kicks the kernel to send what the TX ring holds (`sendto` with no data).
 pub fn kick_tx(fd: &OwnedFd) -> io::Result<()> {
     // SAFETY: no buffer and no address are passed.
-    let r = unsafe {
+    check(unsafe {
         libc::sendto(
             fd.as_raw_fd(),
             std::ptr::null(),
@@ -519,18 +520,13 @@ pub fn kick_tx(fd: &OwnedFd) -> io::Result<()> {
             std::ptr::null(),
             0,
         )
-    };
-    if r < 0 {
-        Err(io::Error::last_os_error())
-    } else {
-        Ok(())
-    }
+    })
 }
 
 /// Wakes the driver to refill from the fill ring (`recvfrom` with no data).
 pub fn kick_rx(fd: &OwnedFd) -> io::Result<()> {
     // SAFETY: no buffer and no address are passed.
-    let r = unsafe {
+    check(unsafe {
         libc::recvfrom(
             fd.as_raw_fd(),
             std::ptr::null_mut(),
@@ -539,12 +535,7 @@ pub fn kick_rx(fd: &OwnedFd) -> io::Result<()> {
             std::ptr::null_mut(),
             std::ptr::null_mut(),
         )
-    };
-    if r < 0 {
-        Err(io::Error::last_os_error())
-    } else {
-        Ok(())
-    }
+    })
 }
 
 /// Binds the socket to `queue` of interface `ifindex` with `flags` (`XDP_COPY`,
