@@ -172,7 +172,7 @@ pub fn spawn_inprocess_with<P: FramePipe + Send + ?Sized + 'static>(
 /// beside the future it runs, so a frame goes through the segment in the same poll that
 /// queued it, with no thread hand-over (two context switches and a handful of futex calls
 /// per frame on a transport thread, [`spawn_inprocess_with`]).
-pub type SharedTask = Arc<Mutex<Pin<Box<InProcessTask<dyn FramePipe + Send>>>>>;
+type SharedTask = Arc<Mutex<Pin<Box<InProcessTask<dyn FramePipe + Send>>>>>;
 
 /// Runs futures to completion on the calling thread, with the in-process transport (if
 /// any) polled beside each.
@@ -181,8 +181,8 @@ pub struct Runner(Option<SharedTask>);
 
 impl Runner {
     /// A runner that polls `task` beside every future it runs.
-    pub fn with_task(task: SharedTask) -> Self {
-        Self(Some(task))
+    pub fn with_task(task: InProcessTask<dyn FramePipe + Send>) -> Self {
+        Self(Some(Arc::new(Mutex::new(Box::pin(task)))))
     }
 
     /// `futures_lite::future::block_on(f)`, the transport polled after `f` in every turn

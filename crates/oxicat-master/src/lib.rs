@@ -327,7 +327,7 @@ impl Master {
                         frame_gap_ns: SIM_FRAME_GAP_NS,
                     },
                 );
-                runner = Runner::with_task(Arc::new(Mutex::new(Box::pin(task))));
+                runner = Runner::with_task(task);
                 Time::Sim(seg.clone())
             }
         };

@@ -1246,7 +1246,7 @@ pub fn run_scenario(
             frame_gap_ns: 10_000,
         },
     );
-    let runner = Runner::with_task(Arc::new(Mutex::new(Box::pin(task))));
+    let runner = Runner::with_task(task);
     let md = MainDevice::new(
         pdu_loop,
         virtual_timeouts(),
