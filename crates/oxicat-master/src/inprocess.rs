@@ -83,8 +83,10 @@ pub struct InProcessTask<P: FramePipe + Send + ?Sized + 'static> {
     tx: Option<PduTx<'static>>,
     rx: Option<PduRx<'static>>,
     config: InProcessConfig,
-    /// The frame on its way through the segment (reused: no allocation per frame).
-    buf: Vec<u8>,
+    /// The frames on their way through the segment (reused: no allocation per frame).
+    bufs: Vec<Vec<u8>>,
+    /// Which of them came back.
+    back: Vec<bool>,
 }
 
 impl<P: FramePipe + Send + ?Sized + 'static> Future for InProcessTask<P> {
@@ -102,25 +104,45 @@ impl<P: FramePipe + Send + ?Sized + 'static> Future for InProcessTask<P> {
             };
             return Poll::Ready(Ok((tx.release(), rx.release())));
         }
+        // Every frame ethercrab has ready goes out as one train, as a NIC sends its queue
+        // (the segment has them on the line together), the master's own time before each.
+        let mut n = 0;
         while let Some(frame) = tx.next_sendable_frame() {
-            let mut back = false;
-            let segment = &this.segment;
-            let gap = this.config.frame_gap_ns;
-            let buf = &mut this.buf;
+            if n == this.bufs.len() {
+                this.bufs.push(Vec::with_capacity(1600));
+            }
+            let buf = &mut this.bufs[n];
             frame
                 .send_blocking(|bytes| {
-                    let mut seg = segment.lock().unwrap_or_else(|e| e.into_inner());
-                    if gap > 0 {
-                        seg.advance_by(gap);
-                    }
                     buf.clear();
                     buf.extend_from_slice(bytes);
-                    back = seg.exchange_in_place(buf);
                     Ok(bytes.len())
                 })
                 .map_err(TransportError::Send)?;
+            n += 1;
+        }
+        if n == 0 {
+            return Poll::Pending;
+        }
+        let gap = this.config.frame_gap_ns;
+        this.back.clear();
+        this.back.resize(n, false);
+        {
+            let mut seg = this.segment.lock().unwrap_or_else(|e| e.into_inner());
+            if gap > 0 {
+                seg.advance_by(gap);
+            }
+            if n == 1 {
+                this.back[0] = seg.exchange_in_place(&mut this.bufs[0]);
+            } else {
+                let mut frames: Vec<&mut [u8]> =
+                    this.bufs[..n].iter_mut().map(Vec::as_mut_slice).collect();
+                seg.exchange_train(&mut frames, &mut this.back, gap);
+            }
+        }
+        for (buf, &back) in this.bufs[..n].iter().zip(&this.back) {
             if back {
-                if let Err(e) = rx.receive_frame(&this.buf) {
+                if let Err(e) = rx.receive_frame(buf) {
                     log::warn!("ethercrab did not accept a returned frame: {e}");
                 }
             }
@@ -142,7 +164,8 @@ pub fn inprocess_task<P: FramePipe + Send + ?Sized + 'static>(
         tx: Some(tx),
         rx: Some(rx),
         config,
-        buf: Vec::with_capacity(1600),
+        bufs: vec![Vec::with_capacity(1600)],
+        back: Vec::with_capacity(1),
     }
 }
 

@@ -5,7 +5,8 @@
 //! [`serve`] loops: bring the segment to "now" (SYNC0/SYNC1, firmware timers and main loop
 //! run at their times on the way), wait for a frame at most [`RealtimeConfig::idle`] (or
 //! not at all when spinning), bring the segment to the arrival time, walk the frame through
-//! the ESCs and send the reply back where the frame came from. The event latency is the
+//! the ESCs — with the frames already waiting behind it, as one train on the line
+//! ([`Segment::exchange_train`]) — and send the replies back where the frames came from. The event latency is the
 //! wait granularity; what the master sees does not depend on it, because each frame meets
 //! ESCs that were advanced to its arrival time first.
 
@@ -15,7 +16,11 @@ use std::time::{Duration, Instant};
 
 use crate::model::SegmentEsc;
 use crate::net::NetError;
-use crate::segment::Segment;
+use crate::segment::{FrameFate, Segment};
+
+/// Most frames [`serve`] takes from its port at once as one train (a cycle of 1,000
+/// twins' process data is a few dozen frames).
+pub const MAX_TRAIN: usize = 64;
 
 /// A source and sink of EtherCAT frames for [`serve`].
 pub trait FramePort {
@@ -104,7 +109,10 @@ pub fn serve<P: FramePort, E: SegmentEsc>(
     } else {
         config.idle
     };
-    let mut buf = Vec::with_capacity(2048);
+    // The frames of one train (see below), their senders and fates; reused.
+    let mut bufs: Vec<Vec<u8>> = vec![Vec::with_capacity(2048)];
+    let mut peers: Vec<P::Peer> = Vec::new();
+    let mut fates: Vec<FrameFate> = Vec::new();
     // The segment is advanced on its own only after a wait that brought no frame (and at
     // the start); a frame is served with an advance to its arrival. Each advance visits
     // every slot: one more per frame is 11,000 slot visits per cycle at 1,000 twins.
@@ -113,31 +121,51 @@ pub fn serve<P: FramePort, E: SegmentEsc>(
         if idle {
             lock().advance_to(now(&start));
         }
-        let Some(peer) = port.recv(&mut buf, wait)? else {
+        let Some(peer) = port.recv(&mut bufs[0], wait)? else {
             idle = true;
             continue;
         };
         idle = false;
         let arrived = Instant::now();
-        stats.frames.fetch_add(1, Ordering::Relaxed);
-        let back = {
+        peers.clear();
+        peers.push(peer);
+        // The frames already waiting behind it go with it as one train: a master sends its
+        // cycle's frames back to back, and on the line they follow each other one wire
+        // time apart, not one trip (`Segment::exchange_train`).
+        while peers.len() < MAX_TRAIN {
+            if bufs.len() == peers.len() {
+                bufs.push(Vec::with_capacity(2048));
+            }
+            match port.recv(&mut bufs[peers.len()], Duration::ZERO)? {
+                Some(p) => peers.push(p),
+                None => break,
+            }
+        }
+        let n = peers.len();
+        stats.frames.fetch_add(n as u64, Ordering::Relaxed);
+        fates.clear();
+        fates.resize(n, FrameFate::Lost);
+        {
             let mut seg = lock();
             seg.advance_to(now(&start));
-            seg.exchange_in_place(&mut buf)
-        };
-        if !back {
-            stats.lost.fetch_add(1, Ordering::Relaxed);
-            continue;
+            let mut frames: Vec<&mut [u8]> = bufs[..n].iter_mut().map(Vec::as_mut_slice).collect();
+            seg.exchange_train(&mut frames, &mut fates, 0);
         }
-        match port.send(&buf, &peer) {
-            Ok(()) => {
-                stats.replies.fetch_add(1, Ordering::Relaxed);
-                let dt = arrived.elapsed().as_nanos() as u64;
-                stats.max_turnaround_ns.fetch_max(dt, Ordering::Relaxed);
+        for ((buf, peer), fate) in bufs.iter().zip(&peers).zip(&fates) {
+            if *fate != FrameFate::Returned {
+                stats.lost.fetch_add(1, Ordering::Relaxed);
+                continue;
             }
-            Err(e) => {
-                stats.send_errors.fetch_add(1, Ordering::Relaxed);
-                log::warn!("{e}");
+            match port.send(buf, peer) {
+                Ok(()) => {
+                    stats.replies.fetch_add(1, Ordering::Relaxed);
+                    let dt = arrived.elapsed().as_nanos() as u64;
+                    stats.max_turnaround_ns.fetch_max(dt, Ordering::Relaxed);
+                }
+                Err(e) => {
+                    stats.send_errors.fetch_add(1, Ordering::Relaxed);
+                    log::warn!("{e}");
+                }
             }
         }
     }
@@ -278,6 +306,52 @@ mod tests {
         assert!(
             v <= real / 1000 + 20 * 20_000,
             "virtual {v} ns for {real} real ns at 1/1000"
+        );
+    }
+
+    #[test]
+    fn frames_waiting_together_go_as_one_train() {
+        let line = |n| {
+            let mut seg = Segment::new();
+            for _ in 0..n {
+                seg.add(oxicat_esc::Esc::new(
+                    oxicat_esc::EscConfig::et1100(),
+                    vec![0; 256],
+                ));
+            }
+            seg
+        };
+        // One BRD's trip through 30 ESCs, from a segment of its own.
+        let mut alone = line(30);
+        alone.exchange(&brd_frame()).unwrap();
+        let trip = alone.now();
+        let seg = Arc::new(Mutex::new(line(30)));
+        let stop = Arc::new(AtomicBool::new(false));
+        let sent = Arc::new(Mutex::new(Vec::new()));
+        let mut port = Queue {
+            inbox: VecDeque::from(vec![brd_frame(); 3]),
+            sent: sent.clone(),
+            stop: stop.clone(),
+        };
+        // Virtual time all but stands still (a second of real time is a nanosecond).
+        let config = RealtimeConfig {
+            slowdown: 1_000_000_000,
+            ..RealtimeConfig::default()
+        };
+        let stats = RealtimeStats::default();
+        serve(&seg, &mut port, &config, &stats, &stop).unwrap();
+        assert_eq!(sent.lock().unwrap().len(), 3);
+        for f in sent.lock().unwrap().iter() {
+            let wkc = u16::from_le_bytes([f[14 + 2 + 12], f[14 + 2 + 13]]);
+            assert_eq!(wkc, 30);
+        }
+        // On the line together: two wire times and one trip, not three trips.
+        let wire = Segment::<oxicat_esc::Esc>::wire_time_ns(60);
+        let v = seg.lock().unwrap().now();
+        assert!(v >= 2 * wire + trip, "{v} ns");
+        assert!(
+            v < 2 * wire + trip + 10,
+            "{v} ns: the frames went one after the other"
         );
     }
 }

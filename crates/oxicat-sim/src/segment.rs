@@ -6,7 +6,12 @@
 //! delay (both directions alike, so DC delay measurement is exact when all ESCs have the
 //! same forwarding delay). The frame is back at the master when its first bit leaves slave 0
 //! port 0 plus the master link delay; the master has it when its last bit arrived, i.e. one
-//! wire time later. `now()` then stands at that moment.
+//! wire time later. `now()` then stands at that moment. Frames the master sends together
+//! (a train, [`Segment::exchange_train`], as a NIC sends its queue) are on the line
+//! together: each leaves the master one wire time after the one before, and every ESC
+//! meets them in that order, each at its own time, with the nodes' events between them at
+//! theirs; a cycle of several frames takes their wire times and one trip, as on a real
+//! segment, not a trip per frame.
 
 use std::sync::atomic::{AtomicU64, Ordering};
 
@@ -221,14 +226,76 @@ pub struct Segment<E: SegmentEsc = oxicat_esc::Esc> {
     reference: bool,
     /// Configured-address dispatch on (the default; see [`Segment::set_configured_dispatch`]).
     dispatch_on: bool,
-    /// The index of the frame being walked (kept for its buffers).
-    dispatch: oxicat_esc::FrameDispatch,
+    /// The indexes of frames on their way, kept for their buffers.
+    dispatch_pool: Vec<oxicat_esc::FrameDispatch>,
+    /// The frames of the train on its way (kept for its buffer).
+    flights: Vec<Flight>,
+    /// The fates of a train sent through [`oxicat_wire::pipe::FramePipe`] (kept for its
+    /// buffer).
+    train_fates: Vec<FrameFate>,
+}
+
+/// Where a frame on its way is: the ESC port it reaches next and when.
+#[derive(Debug, Clone, Copy)]
+struct Hop {
+    at: (SlaveId, u8),
+    t: u64,
+    /// Not corrupted so far.
+    ok: bool,
+    hops: usize,
+}
+
+/// A frame of a train ([`Segment::exchange_train`]).
+#[derive(Debug)]
+struct Flight {
+    /// Offset of the EtherCAT header in the Ethernet frame.
+    off: usize,
+    /// When its first bit left the master.
+    sent: u64,
+    /// Its wire time (0: ignored, never sent).
+    wire: u64,
+    hop: Hop,
+    /// The frame's index for configured-address dispatch, if it has one.
+    dispatch: Option<oxicat_esc::FrameDispatch>,
+    /// Its fate and the time its first bit was back at the master (or was lost).
+    done: Option<(FrameFate, u64)>,
+}
+
+impl Flight {
+    /// A frame that is not EtherCAT: never on the line.
+    fn ignored(t: u64) -> Self {
+        Self {
+            off: 0,
+            sent: t,
+            wire: 0,
+            hop: Hop {
+                at: (0, 0),
+                t,
+                ok: false,
+                hops: 0,
+            },
+            dispatch: None,
+            done: Some((FrameFate::Ignored, t)),
+        }
+    }
 }
 
 /// The master's side of an in-process segment ([`oxicat_wire::pipe`]).
 impl<E: SegmentEsc> oxicat_wire::pipe::FramePipe for Segment<E> {
     fn exchange_in_place(&mut self, frame: &mut [u8]) -> bool {
         Segment::exchange_in_place(self, frame)
+    }
+
+    fn exchange_train(&mut self, frames: &mut [&mut [u8]], back: &mut [bool], spacing_ns: u64) {
+        let n = frames.len().min(back.len());
+        let mut fates = core::mem::take(&mut self.train_fates);
+        fates.clear();
+        fates.resize(n, FrameFate::Lost);
+        Segment::exchange_train(self, &mut frames[..n], &mut fates, spacing_ns);
+        for (b, f) in back.iter_mut().zip(&fates) {
+            *b = *f == FrameFate::Returned;
+        }
+        self.train_fates = fates;
     }
 
     fn now(&self) -> u64 {
@@ -280,7 +347,9 @@ impl<E: SegmentEsc> Segment<E> {
             event_log: None,
             reference: false,
             dispatch_on: true,
-            dispatch: oxicat_esc::FrameDispatch::new(),
+            dispatch_pool: Vec::new(),
+            flights: Vec::new(),
+            train_fates: Vec::new(),
         }
     }
 
@@ -910,40 +979,141 @@ impl<E: SegmentEsc> Segment<E> {
     }
 
     /// Like [`exchange`](Self::exchange) but processes `frame` in place; returns whether the
-    /// frame came back (then `frame` holds the returned frame).
+    /// frame came back (then `frame` holds the returned frame). A train of one
+    /// ([`exchange_train`](Self::exchange_train)).
     pub fn exchange_in_place(&mut self, frame: &mut [u8]) -> bool {
-        let Ok(eth) = EthernetHeader::parse(frame) else {
-            self.stats.ignored += 1;
-            self.last_fate = Some(FrameFate::Ignored);
-            return false;
-        };
+        let mut fate = [FrameFate::Lost];
+        self.exchange_train(&mut [frame], &mut fate, 0);
+        fate[0] == FrameFate::Returned
+    }
+
+    /// Sends `frames` from the master back to back, as a NIC sends its queue: the first at
+    /// `now()`, each next one when the last bit (and gap) of the one before has left, one
+    /// wire time later, or `spacing_ns` after the one before left (the master's own time
+    /// per frame) when that is later. They are on the line together, as on a real segment: every ESC
+    /// meets them in that order, each at its own time, with the nodes' events between
+    /// them at theirs (a train of frames takes its wire times plus one trip, not one trip
+    /// per frame). `fates[k]` tells what became of frame k (the first `min(frames.len(),
+    /// fates.len())` frames are sent); a returned frame is in place, as
+    /// [`exchange_in_place`](Self::exchange_in_place) leaves it. Virtual time advances to
+    /// the moment the last bit of the last frame to come back is at the master (of the last
+    /// one sent, when that is later); [`last_fate`](Self::last_fate) is the last frame's.
+    pub fn exchange_train(
+        &mut self,
+        frames: &mut [&mut [u8]],
+        fates: &mut [FrameFate],
+        spacing_ns: u64,
+    ) {
+        let n = frames.len().min(fates.len());
+        let mut flights = core::mem::take(&mut self.flights);
+        flights.clear();
         let t0 = self.now;
-        self.stats.sent += 1;
+        // Records of a train of several frames wait until their times are all known, so
+        // that the capture stays in time order (a reply can come before a later request).
+        let mut records: Vec<(u64, Direction, Vec<u8>)> = Vec::new();
+        let defer = n > 1 && self.capture.is_some();
+        let mut line = t0;
+        for frame in frames.iter_mut().take(n) {
+            let frame = &mut **frame;
+            let Ok(eth) = EthernetHeader::parse(frame) else {
+                self.stats.ignored += 1;
+                flights.push(Flight::ignored(t0));
+                continue;
+            };
+            let sent = line;
+            let wire = Self::wire_time_ns(frame.len());
+            line = sent + wire.max(spacing_ns);
+            self.stats.sent += 1;
+            if defer {
+                records.push((sent, Direction::ToSegment, frame.to_vec()));
+            } else if let Some(c) = self.capture.as_mut() {
+                c.record(sent, Direction::ToSegment, frame);
+            }
+            let mut f = Flight {
+                off: eth.payload_offset,
+                sent,
+                wire,
+                hop: Hop {
+                    at: (0, 0),
+                    t: sent + self.master_link_delay_ns,
+                    ok: true,
+                    hops: 0,
+                },
+                dispatch: None,
+                done: None,
+            };
+            if self.drop_next > 0 {
+                self.drop_next -= 1;
+                f.done = Some((FrameFate::DroppedByFault, sent));
+            } else if self.slots.is_empty() || !self.master_link_up {
+                f.done = Some((FrameFate::LostAtOpenPort(0, 0), sent));
+            } else if self.dispatch_on && self.corruptions.is_empty() {
+                // A corruption on the way changes the bytes (headers included) under the
+                // index: such a frame takes the per-ESC walk.
+                let mut d = self.dispatch_pool.pop().unwrap_or_default();
+                if d.build(&mut frame[f.off..]) {
+                    f.dispatch = Some(d);
+                } else {
+                    self.dispatch_pool.push(d);
+                }
+            }
+            flights.push(f);
+        }
+        // Hop by hop, the frame that is earliest first (the one sent first on a tie: frames
+        // on a line do not overtake each other).
+        loop {
+            let mut next: Option<usize> = None;
+            for (k, f) in flights.iter().enumerate() {
+                if f.done.is_none() && next.is_none_or(|j| f.hop.t < flights[j].hop.t) {
+                    next = Some(k);
+                }
+            }
+            let Some(k) = next else { break };
+            let f = &mut flights[k];
+            let ecat = &mut frames[k][f.off..];
+            if let Some(done) = self.hop(ecat, &mut f.hop, f.dispatch.as_mut()) {
+                f.done = Some(done);
+                if let Some(mut d) = f.dispatch.take() {
+                    d.apply_irq(ecat);
+                    self.dispatch_pool.push(d);
+                }
+            }
+        }
+        let end = flights
+            .iter()
+            .filter_map(|f| f.done.map(|(_, t)| t.max(f.sent) + f.wire))
+            .fold(t0, u64::max);
+        self.advance_to(end);
+        for (k, f) in flights.iter().enumerate() {
+            let (fate, t_back) = f.done.unwrap_or((FrameFate::Lost, f.sent));
+            fates[k] = fate;
+            self.last_fate = Some(fate);
+            match fate {
+                FrameFate::Ignored => continue,
+                FrameFate::Returned => {}
+                _ => {
+                    self.stats.lost += 1;
+                    continue;
+                }
+            }
+            self.stats.returned += 1;
+            let frame = &mut *frames[k];
+            frame[6] |= 0x02;
+            let t = t_back.max(f.sent) + f.wire;
+            if defer {
+                records.push((t, Direction::ToMaster, frame.to_vec()));
+            } else if let Some(c) = self.capture.as_mut() {
+                c.record(t, Direction::ToMaster, frame);
+            }
+        }
         if let Some(c) = self.capture.as_mut() {
-            c.record(t0, Direction::ToSegment, frame);
+            // Stable: a request before a reply of the same instant, each in its order.
+            records.sort_by_key(|r| r.0);
+            for (t, dir, bytes) in &records {
+                c.record(*t, *dir, bytes);
+            }
         }
-        let wire = Self::wire_time_ns(frame.len());
-        let fate = if self.drop_next > 0 {
-            self.drop_next -= 1;
-            self.advance_to(t0 + wire);
-            FrameFate::DroppedByFault
-        } else {
-            let (fate, t_back) = self.walk(&mut frame[eth.payload_offset..], t0);
-            self.advance_to(t_back.max(t0) + wire);
-            fate
-        };
-        self.last_fate = Some(fate);
-        if fate != FrameFate::Returned {
-            self.stats.lost += 1;
-            return false;
-        }
-        self.stats.returned += 1;
-        frame[6] |= 0x02;
-        let t = self.now;
-        if let Some(c) = self.capture.as_mut() {
-            c.record(t, Direction::ToMaster, frame);
-        }
-        true
+        self.flights = flights;
     }
 
     /// Configured-address dispatch (on by default): each frame's datagram headers are
@@ -956,100 +1126,81 @@ impl<E: SegmentEsc> Segment<E> {
         self.dispatch_on = on;
     }
 
-    /// Walks an EtherCAT frame (from its header) through the topology; returns its fate and
-    /// the time its first bit is back at the master (or was lost).
-    fn walk(&mut self, ecat: &mut [u8], t0: u64) -> (FrameFate, u64) {
-        // A corruption on the way changes the bytes (headers included) under the index.
-        if !self.dispatch_on || !self.corruptions.is_empty() {
-            return self.walk_through(ecat, t0, None);
-        }
-        let mut d = core::mem::take(&mut self.dispatch);
-        let r = if d.build(ecat) {
-            let r = self.walk_through(ecat, t0, Some(&mut d));
-            d.apply_irq(ecat);
-            r
-        } else {
-            self.walk_through(ecat, t0, None)
-        };
-        self.dispatch = d;
-        r
-    }
-
-    /// [`walk`](Self::walk) with the frame's index `d`, if any.
-    fn walk_through(
+    /// Moves a frame (its EtherCAT part, from the header) one hop on: through the ESC port
+    /// it is at, at its time, and the cable to the next. Returns its fate and the time its
+    /// first bit is back at the master (or was lost) when its trip ended there; `d` is the
+    /// frame's index, if any.
+    fn hop(
         &mut self,
         ecat: &mut [u8],
-        t0: u64,
-        mut d: Option<&mut oxicat_esc::FrameDispatch>,
-    ) -> (FrameFate, u64) {
-        if self.slots.is_empty() || !self.master_link_up {
-            return (FrameFate::LostAtOpenPort(0, 0), t0);
+        h: &mut Hop,
+        d: Option<&mut oxicat_esc::FrameDispatch>,
+    ) -> Option<(FrameFate, u64)> {
+        if h.hops == MAX_HOPS {
+            return Some((FrameFate::Lost, h.t));
         }
-        let mut at: (SlaveId, u8) = (0, 0);
-        let mut t = t0 + self.master_link_delay_ns;
-        let mut ok = true;
-        for _ in 0..MAX_HOPS {
-            if !self.corruptions.is_empty() {
-                if let Some(k) = self
-                    .corruptions
-                    .iter()
-                    .position(|c| c.slave == at.0 && c.port == at.1)
-                {
-                    let c = self.corruptions.remove(k);
-                    if !ecat.is_empty() {
-                        let o = c.offset % ecat.len();
-                        ecat[o] ^= 0xFF;
-                    }
-                    ok = false;
+        h.hops += 1;
+        if !self.corruptions.is_empty() {
+            if let Some(k) = self
+                .corruptions
+                .iter()
+                .position(|c| c.slave == h.at.0 && c.port == h.at.1)
+            {
+                let c = self.corruptions.remove(k);
+                if !ecat.is_empty() {
+                    let o = c.offset % ecat.len();
+                    ecat[o] ^= 0xFF;
                 }
+                h.ok = false;
             }
-            self.run_events_until(t);
-            let (s, p) = at;
+        }
+        let t = h.t;
+        self.run_events_until(t);
+        let (s, p) = h.at;
+        let slot = &mut self.slots[s];
+        // Keep the ESC's own timeline in step so its events come before the frame.
+        let out = match d {
+            Some(d) => slot.esc.forward_dispatched(p, ecat, t, h.ok, d),
+            None => slot.esc.forward(p, ecat, t, h.ok),
+        };
+        // The ESC's IRQ line and the slot's queue entries, unless the ESC's query epoch
+        // is the one the last hop here left: then neither its next event nor its IRQ
+        // line can have changed since that hop re-queued the slot (every other change
+        // to the slot's times re-queues it where it happens) and set `irq` to the
+        // line's level (which every later `check_irq` sets to the same level), so both
+        // would be no-ops. A frame that only passes an ESC leaves its epoch alone.
+        let epoch = slot.esc.query_epoch();
+        if epoch.is_none() || epoch != slot.hop_epoch {
+            self.check_irq(s, t);
+            // The frame (and the node, if it handled an interrupt) may have moved the
+            // slot's next times.
+            self.requeue(s);
             let slot = &mut self.slots[s];
-            // Keep the ESC's own timeline in step so its events come before the frame.
-            let out = match d.as_deref_mut() {
-                Some(d) => slot.esc.forward_dispatched(p, ecat, t, ok, d),
-                None => slot.esc.forward(p, ecat, t, ok),
-            };
-            // The ESC's IRQ line and the slot's queue entries, unless the ESC's query epoch
-            // is the one the last hop here left: then neither its next event nor its IRQ
-            // line can have changed since that hop re-queued the slot (every other change
-            // to the slot's times re-queues it where it happens) and set `irq` to the
-            // line's level (which every later `check_irq` sets to the same level), so both
-            // would be no-ops. A frame that only passes an ESC leaves its epoch alone.
-            let epoch = slot.esc.query_epoch();
-            if epoch.is_none() || epoch != slot.hop_epoch {
-                self.check_irq(s, t);
-                // The frame (and the node, if it handled an interrupt) may have moved the
-                // slot's next times.
-                self.requeue(s);
-                let slot = &mut self.slots[s];
-                slot.hop_epoch = slot.esc.query_epoch();
-            }
-            let Some(out) = out else {
-                return (FrameFate::DroppedByEsc(s), t);
-            };
-            t += self.slots[s].delay_ns;
-            if s == 0 && out == 0 {
-                let t_back = t + self.master_link_delay_ns;
-                return (
-                    if ok {
-                        FrameFate::Returned
-                    } else {
-                        FrameFate::Corrupted
-                    },
-                    t_back,
-                );
-            }
-            match self.slots[s].links.get(out as usize).copied().flatten() {
-                Some(l) if l.up => {
-                    t += l.delay_ns;
-                    at = (l.peer, l.peer_port);
-                }
-                _ => return (FrameFate::LostAtOpenPort(s, out), t),
-            }
+            slot.hop_epoch = slot.esc.query_epoch();
         }
-        (FrameFate::Lost, t)
+        let Some(out) = out else {
+            return Some((FrameFate::DroppedByEsc(s), t));
+        };
+        let t = t + self.slots[s].delay_ns;
+        if s == 0 && out == 0 {
+            let t_back = t + self.master_link_delay_ns;
+            return Some((
+                if h.ok {
+                    FrameFate::Returned
+                } else {
+                    FrameFate::Corrupted
+                },
+                t_back,
+            ));
+        }
+        match self.slots[s].links.get(out as usize).copied().flatten() {
+            Some(l) if l.up => {
+                h.t = t + l.delay_ns;
+                h.at = (l.peer, l.peer_port);
+                None
+            }
+            _ => Some((FrameFate::LostAtOpenPort(s, out), t)),
+        }
     }
 }
 
@@ -1511,5 +1662,142 @@ mod tests {
         assert_eq!(c[1].dir, Direction::ToMaster);
         assert_eq!(c[1].t_ns, seg.now());
         assert_eq!(c[1].data[6], 0x12);
+    }
+
+    /// Frames of `lens` bytes, each a fake EtherCAT frame.
+    fn frames_of(lens: &[usize]) -> Vec<Vec<u8>> {
+        lens.iter()
+            .map(|&n| {
+                let mut f = eth_frame();
+                f.resize(n, 0);
+                f
+            })
+            .collect()
+    }
+
+    /// What one ESC saw: (port, time, frame intact) per frame.
+    type Visits = Vec<(u8, u64, bool)>;
+
+    /// What each ESC saw of one frame on its own, from a fresh line of `n`, and the time
+    /// its first bit was back.
+    fn single_trip(n: usize) -> (Vec<Visits>, u64) {
+        let (v, seen) = fakes(n);
+        let mut seg = Segment::line(v);
+        seg.exchange(&eth_frame()).unwrap();
+        let w = Segment::<Fake>::wire_time_ns(60);
+        let lists = seen.iter().map(|s| s.lock().unwrap().clone()).collect();
+        (lists, seg.now() - w)
+    }
+
+    #[test]
+    fn a_train_is_on_the_line_together() {
+        let (alone, t_back) = single_trip(3);
+        let (v, seen) = fakes(3);
+        let mut seg = Segment::line(v);
+        let mut frames = frames_of(&[60, 300, 60]);
+        let wire: Vec<u64> = frames
+            .iter()
+            .map(|f| Segment::<Fake>::wire_time_ns(f.len()))
+            .collect();
+        let sent = [0, wire[0], wire[0] + wire[1]];
+        let mut fates = [FrameFate::Lost; 3];
+        let mut refs: Vec<&mut [u8]> = frames.iter_mut().map(|f| f.as_mut_slice()).collect();
+        seg.exchange_train(&mut refs, &mut fates, 0);
+        assert_eq!(fates, [FrameFate::Returned; 3]);
+        for f in &frames {
+            assert_eq!(f[6], 0x12);
+            assert_eq!(f[16], 3, "each ESC processed each frame once");
+        }
+        // Every ESC met each frame where it meets a frame alone, shifted by the frame's
+        // start, in time order: the frames overlap on the line.
+        for (esc, got) in seen.iter().enumerate() {
+            let mut want: Visits = sent
+                .iter()
+                .flat_map(|&s| alone[esc].iter().map(move |&(p, t, ok)| (p, t + s, ok)))
+                .collect();
+            want.sort_by_key(|e| e.1);
+            assert_eq!(*got.lock().unwrap(), want, "ESC {esc}");
+        }
+        // Its last bit back at the master: the last frame's start, one trip, its wire time.
+        assert_eq!(seg.now(), sent[2] + t_back + wire[2]);
+        let serial: u64 = wire.iter().map(|w| t_back + w).sum();
+        assert!(seg.now() < serial);
+        assert_eq!(seg.stats().sent, 3);
+        assert_eq!(seg.stats().returned, 3);
+    }
+
+    #[test]
+    fn a_train_of_one_is_the_single_exchange() {
+        let (alone, t_back) = single_trip(4);
+        let (v, seen) = fakes(4);
+        let mut seg = Segment::line(v);
+        let mut f = eth_frame();
+        let mut fates = [FrameFate::Lost];
+        seg.exchange_train(&mut [f.as_mut_slice()], &mut fates, 0);
+        assert_eq!(fates, [FrameFate::Returned]);
+        assert_eq!(seg.now(), t_back + Segment::<Fake>::wire_time_ns(60));
+        for (esc, got) in seen.iter().enumerate() {
+            assert_eq!(*got.lock().unwrap(), alone[esc]);
+        }
+        assert_eq!(f[16], 4);
+    }
+
+    #[test]
+    fn a_train_skips_what_is_not_ethercat_and_loses_what_is_dropped() {
+        let (v, _) = fakes(2);
+        let mut seg = Segment::line(v);
+        let mut frames = frames_of(&[60, 60, 60]);
+        frames[1][12] = 0x08; // IPv4: not EtherCAT
+        frames[1][13] = 0x00;
+        seg.drop_next_frames(1);
+        let mut fates = [FrameFate::Lost; 3];
+        let mut refs: Vec<&mut [u8]> = frames.iter_mut().map(|f| f.as_mut_slice()).collect();
+        seg.exchange_train(&mut refs, &mut fates, 0);
+        assert_eq!(
+            fates,
+            [
+                FrameFate::DroppedByFault,
+                FrameFate::Ignored,
+                FrameFate::Returned
+            ]
+        );
+        let s = seg.stats();
+        assert_eq!((s.sent, s.returned, s.lost, s.ignored), (2, 1, 1, 1));
+        assert_eq!(seg.last_fate(), Some(FrameFate::Returned));
+        // The dropped frame had the line for its wire time, the ignored one never did.
+        let w = Segment::<Fake>::wire_time_ns(60);
+        let (_, t_back) = single_trip(2);
+        assert_eq!(seg.now(), w + t_back + w);
+    }
+
+    #[test]
+    fn a_train_is_captured_in_time_order() {
+        let (v, _) = fakes(8);
+        let mut seg = Segment::line(v);
+        let cap = crate::capture::MemoryCapture::new();
+        seg.set_capture(Some(Box::new(cap.clone())));
+        let mut frames = frames_of(&[60, 60, 60]);
+        let sent_bytes = frames.clone();
+        let mut fates = [FrameFate::Lost; 3];
+        let mut refs: Vec<&mut [u8]> = frames.iter_mut().map(|f| f.as_mut_slice()).collect();
+        seg.exchange_train(&mut refs, &mut fates, 0);
+        let c = cap.frames();
+        assert_eq!(c.len(), 6);
+        assert!(
+            c.windows(2).all(|w| w[0].t_ns <= w[1].t_ns),
+            "in time order"
+        );
+        let to_seg: Vec<_> = c.iter().filter(|r| r.dir == Direction::ToSegment).collect();
+        let back: Vec<_> = c.iter().filter(|r| r.dir == Direction::ToMaster).collect();
+        assert_eq!(to_seg.len(), 3);
+        for (r, f) in to_seg.iter().zip(&sent_bytes) {
+            assert_eq!(&r.data, f, "as sent, before the ESCs changed it");
+        }
+        for (r, f) in back.iter().zip(&frames) {
+            assert_eq!(&r.data, f);
+        }
+        assert_eq!(back[2].t_ns, seg.now());
+        // Eight ESCs: the first reply is back after the second and third frames left.
+        assert!(back[0].t_ns > to_seg[2].t_ns);
     }
 }

@@ -12,6 +12,22 @@ pub trait FramePipe {
     /// in place; true when the frame came back (then `frame` holds it as returned).
     fn exchange_in_place(&mut self, frame: &mut [u8]) -> bool;
 
+    /// Passes `frames` through the segment as the master's NIC sends a queue: from the
+    /// current virtual time, each frame after the first `spacing_ns` (the master's own time
+    /// per frame) or one wire time (the line's) after the one before, whichever is longer;
+    /// a segment that models the line has them on it together, each behind the one before.
+    /// This default sends each when the one before is back and `spacing_ns` passed.
+    /// `back[k]` is set to whether frame k came back (only the first `min(frames.len(),
+    /// back.len())` frames are sent).
+    fn exchange_train(&mut self, frames: &mut [&mut [u8]], back: &mut [bool], spacing_ns: u64) {
+        for (k, (f, b)) in frames.iter_mut().zip(back.iter_mut()).enumerate() {
+            if k > 0 {
+                self.advance_by(spacing_ns);
+            }
+            *b = self.exchange_in_place(f);
+        }
+    }
+
     /// The segment's virtual time, ns.
     fn now(&self) -> u64;
 
