@@ -157,6 +157,9 @@ struct Slot<E> {
     /// The ESC's [`SegmentEsc::query_epoch`] after the last hop of a frame here, when that
     /// hop had read its next event and IRQ line (see `Segment::walk_through`).
     hop_epoch: Option<u64>,
+    /// The ESC's [`SegmentEsc::query_epoch`] when `irq` was last read from its line (see
+    /// `Segment::check_irq`).
+    irq_epoch: Option<u64>,
 }
 
 /// A slot's next times as the scheduler last read them.
@@ -393,6 +396,7 @@ impl<E: SegmentEsc> Segment<E> {
             last_wake: None,
             due: Due::default(),
             hop_epoch: None,
+            irq_epoch: None,
         });
         self.queue.grow_to(self.slots.len());
         self.requeue(id);
@@ -950,15 +954,32 @@ impl<E: SegmentEsc> Segment<E> {
         }
     }
 
-    /// Delivers an IRQ if the line rose; returns whether it did.
+    /// Delivers an IRQ if the line rose; returns whether it did. Skipped while the ESC's
+    /// query epoch is the one `irq` was read at: the line cannot have moved since.
+    #[inline]
     fn check_irq(&mut self, i: usize, t: u64) -> bool {
-        let level = self.slots[i].esc.irq_line();
-        let rising = level && !self.slots[i].irq;
-        self.slots[i].irq = level;
+        let slot = &self.slots[i];
+        let epoch = slot.esc.query_epoch();
+        if epoch.is_some() && epoch == slot.irq_epoch {
+            return false;
+        }
+        self.read_irq(i, t)
+    }
+
+    /// [`check_irq`](Self::check_irq) when the line may have moved.
+    #[inline(never)]
+    fn read_irq(&mut self, i: usize, t: u64) -> bool {
+        let slot = &mut self.slots[i];
+        let level = slot.esc.irq_line();
+        let rising = level && !slot.irq;
+        slot.irq = level;
         if rising {
             self.deliver(i, EscEvent::Irq, t);
-            self.slots[i].irq = self.slots[i].esc.irq_line();
+            let slot = &mut self.slots[i];
+            slot.irq = slot.esc.irq_line();
         }
+        let slot = &mut self.slots[i];
+        slot.irq_epoch = slot.esc.query_epoch();
         rising
     }
 
@@ -1130,6 +1151,7 @@ impl<E: SegmentEsc> Segment<E> {
     /// it is at, at its time, and the cable to the next. Returns its fate and the time its
     /// first bit is back at the master (or was lost) when its trip ended there; `d` is the
     /// frame's index, if any.
+    #[inline(always)]
     fn hop(
         &mut self,
         ecat: &mut [u8],
