@@ -13,8 +13,8 @@
 //! trip of each exchange as the master sees it (from its start — the due time, or the end
 //! of a late predecessor — to its end; includes ethercrab's own work), the serving thread's
 //! CPU time per cycle (`/proc/self/task/TID/stat`, 10 ms ticks, so read it over ≥ 10 s),
-//! the virtual time the segment's clock moved per cycle (above the cycle when the frames'
-//! trips, each begun when the previous one is back, do not fit in it: the served clock
+//! the virtual time the segment's clock moved per cycle (above the cycle when the cycle's
+//! frames, on the line together one wire time apart, do not fit in it: the served clock
 //! then runs ahead of the host's), and the resident memory the segment added per slave. `demo` is the firmware-hosting
 //! demo device; `twin` an EL2008 twin built from Beckhoff's ESI (an ESC with its SII and
 //! SM/FMMU set-up, no firmware), from `../shared/reference/esi-vendor` or

@@ -107,9 +107,10 @@ pub const MAX_SIM_SLAVES: usize = 1000;
 /// segment, its main loop every 50 µs of virtual time) that `oxicat sim` serves in real
 /// time; more are refused before anything is built (see [`check_served`]). Measured with
 /// `segment_scale` (README, "Scale"): 128 demo devices come up and cycle at 1 kHz; 256 come
-/// up, but their 12 frames per cycle take 4 ms of the segment's virtual time (each frame's
-/// whole trip before the next; even a pipelined 100 Mbit/s line needs ≈ 1 ms for their
-/// 11,776 B of process data), so every cycle is late.
+/// up, but their 12 frames per cycle take 1.87 ms of the segment's virtual time even on the
+/// line together (their 11,776 B of process data alone are 0.94 ms at 100 Mbit/s, plus
+/// one trip through 256 ESCs) and 2.1 ms of the serving thread's CPU, so every cycle is
+/// late.
 pub const MAX_SERVED_FIRMWARE_NODES: usize = 128;
 
 /// Largest ESC or cable delay of a segment file, ns (1 ms: a whole 1 kHz cycle; a real ESC
@@ -772,12 +773,11 @@ fn served_firmware_range() -> String {
     format!(
         "at most {MAX_SERVED_FIRMWARE_NODES} served in real time: each runs its firmware's main \
          loop every 50 µs of virtual time, ≈ 1–1.3 µs of CPU per device per ms before any \
-         frame, and every frame passes every ESC twice, each frame's whole trip before the \
-         next; 256 demo devices' process data (11,776 B, 12 frames) take 4 ms of virtual time \
-         per cycle and the serving thread's whole CPU, so no 1 kHz cycle is in time (and a \
-         100 Mbit/s line needs ≈ 1 ms for that image alone). ESC twins (esi=…) do not count; a \
-         segment driven in the same process (--sim) runs on its virtual clock and has no such \
-         limit"
+         frame; 256 demo devices' process data (11,776 B, 12 frames) take 1.87 ms of virtual \
+         time per cycle on the line (0.94 ms of it the image's wire time at 100 Mbit/s) and \
+         2.1 ms of the serving thread's CPU, so no 1 kHz cycle is in time. ESC twins (esi=…) \
+         do not count; a segment driven in the same process (--sim) runs on its virtual \
+         clock and has no such limit"
     )
 }
 
