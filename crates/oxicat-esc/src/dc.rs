@@ -109,10 +109,6 @@ fn owned(a: usize) -> bool {
     OWNED.iter().any(|&(lo, hi)| (lo..=hi).contains(&a))
 }
 
-/// What the global → system time mapping depends on: anchor time, oscillator and
-/// accumulator at the anchor, correction rate, offset.
-type ClockKey = (u64, i128, i128, i64, u64);
-
 /// `floor(t · drift_ppt / 10^12)`, exactly, without a 128-bit division (this runs for every
 /// evaluation of the local clock). With `t = a·10^12 + b` and `drift = h·10^6 + l`
 /// (`0 ≤ b < 10^12`, `0 ≤ l < 10^6`, |h| ≤ 10^4 since |drift| ≤ 10^10):
@@ -361,11 +357,13 @@ pub struct Dc {
     /// Cached `next_event`.
     next_cache: Option<u64>,
     /// Memo of the last [`Dc::global_at_sys`] answer that was the earliest global time of
-    /// its target: `(clock mapping, target, global time)`.
-    edge_memo: Option<(ClockKey, u64, u64)>,
+    /// its target: `(target, global time)`, for the current global → system time mapping
+    /// (forgotten by every change of it: [`Dc::set_rate`], an offset write).
+    edge_memo: Option<(u64, u64)>,
     /// Width of the start-time comparison (32 for ET1100, 64 for 64-bit compare).
     compare_bits: u32,
-    /// Tests: take the general (slow) path everywhere a fast path exists, to compare both.
+    /// Tests: take the general (slow) path everywhere a fast path exists, and compute
+    /// every edge time afresh (no memo), to compare both.
     #[cfg(test)]
     slow: bool,
 }
@@ -508,19 +506,25 @@ impl Dc {
     /// `local(t) = base_local + Δ + floor((acc_frac + rate·Δ) / 2^40)`.
     #[inline(always)]
     fn local_rel(&self, t: u64) -> Option<i64> {
-        #[cfg(test)]
-        if self.slow {
+        let (dosc, _, p) = self.local_parts(t)?;
+        Some(dosc + (p >> Q))
+    }
+
+    /// The parts of [`Dc::local_rel`]: `(Δ, drift_rem + k·drift, acc_frac + rate·Δ)`.
+    #[inline(always)]
+    fn local_parts(&self, t: u64) -> Option<(i64, i64, i64)> {
+        if !self.fast_paths() {
             return None;
         }
         let k = rel_time(t, self.anchor_t)?;
-        let dosc = if self.drift_ppt == 0 {
-            k
+        let (dosc, m) = if self.drift_ppt == 0 {
+            (k, 0)
         } else {
             let m = k.checked_mul(self.drift_ppt)?.checked_add(self.drift_rem)?;
-            k + m.div_euclid(E12_I)
+            (k + m.div_euclid(E12_I), m)
         };
         let p = self.rate_q.checked_mul(dosc)?.checked_add(self.acc_frac)?;
-        Some(dosc + (p >> Q))
+        Some((dosc, m, p))
     }
 
     /// The local copy of the system time (local time + offset) at global time `t`.
@@ -534,22 +538,27 @@ impl Dc {
     }
 
     fn set_rate(&mut self, t: u64, rate_q: i64) {
+        self.edge_memo = None;
+        let rate_q = rate_q.clamp(-MAX_RATE_Q, MAX_RATE_Q);
+        if let Some((dosc, m, p)) = self.local_parts(t) {
+            // Moving the anchor by the 64-bit parts (what `rebase` gives for the new
+            // anchor): the oscillator and accumulator advance by Δ and rate·Δ, the new
+            // fraction and base follow from `p = acc_frac + rate·Δ`, and the drift
+            // remainder of `t` is that of `drift_rem + k·drift`.
+            self.anchor_osc += dosc as i128;
+            self.anchor_acc += self.rate_q as i128 * dosc as i128;
+            self.base_local = self.base_local.wrapping_add((dosc + (p >> Q)) as u64);
+            self.acc_frac = p & ((1i64 << Q) - 1);
+            self.drift_rem = m.rem_euclid(E12_I);
+            self.anchor_t = t;
+            self.rate_q = rate_q;
+            return;
+        }
         self.anchor_acc = self.acc_at(t);
         self.anchor_osc = self.osc(t);
         self.anchor_t = t;
-        self.rate_q = rate_q.clamp(-MAX_RATE_Q, MAX_RATE_Q);
+        self.rate_q = rate_q;
         self.rebase();
-    }
-
-    /// Everything the global → system time mapping depends on.
-    fn clock_key(&self) -> ClockKey {
-        (
-            self.anchor_t,
-            self.anchor_osc,
-            self.anchor_acc,
-            self.rate_q,
-            self.offset,
-        )
     }
 
     /// [`global_at_sys`](Self::global_at_sys), memoised: the system time is a
@@ -558,16 +567,17 @@ impl Dc {
     /// any `from` is `max(g, from)`. The SYNC unit asks for the same edge several times
     /// (finding it, then the next one, then `next_event`), each a bisection.
     fn global_at(&mut self, target: u64, from: u64) -> Option<u64> {
-        let key = self.clock_key();
-        if let Some((k, x, g)) = self.edge_memo {
-            if k == key && x == target {
+        if let Some((x, g)) = self.edge_memo {
+            // (The general paths of the tests compute every answer, so that the
+            // comparison checks the memo's invalidation too.)
+            if x == target && self.fast_paths() {
                 return Some(g.max(from));
             }
         }
         let g = self.global_at_sys(target, from)?;
         // `g > from`: the target was not reached at `from`, so `g` is its earliest time.
         if g > from {
-            self.edge_memo = Some((key, target, g));
+            self.edge_memo = Some((target, g));
         }
         Some(g)
     }
@@ -628,6 +638,8 @@ impl Dc {
     }
 
     /// [`global_at_sys`](Self::global_at_sys) by search, for any `from` and clock.
+    #[cold]
+    #[inline(never)]
     fn global_at_sys_search(&self, target: u64, from: u64) -> Option<u64> {
         let d0 = sdiff(target, self.system_time(from));
         if d0 <= 0 {
@@ -923,6 +935,7 @@ impl Dc {
         }
         if wrote[0x20..0x28].iter().any(|&w| w) {
             self.offset = self.get64(0x0920);
+            self.edge_memo = None;
         }
         if wrote[0x28..0x2C].iter().any(|&w| w) {
             self.delay = self.get32(0x0928);
@@ -997,6 +1010,12 @@ impl Dc {
         } else {
             t
         }
+    }
+
+    /// Tests: the general paths everywhere (`true`) or the fast paths (see [`Dc::slow`]).
+    #[cfg(test)]
+    pub(crate) fn set_slow(&mut self, slow: bool) {
+        self.slow = slow;
     }
 
     /// Whether the fast paths may be taken (always, except in tests that compare them
@@ -1235,7 +1254,16 @@ impl Dc {
         if !self.sync.active {
             return None;
         }
-        let reference = self.system_time(self.t_done);
+        self.next_edge_from(self.system_time(self.t_done))
+    }
+
+    /// [`next_edge`](Self::next_edge) with the system time at `t_done` known
+    /// (`reference`).
+    #[inline]
+    fn next_edge_from(&self, reference: u64) -> Option<(u64, u8)> {
+        if !self.sync.active {
+            return None;
+        }
         let cands = [
             (self.sync.fall0, 0u8),
             (self.sync.fall1, 1),
@@ -1265,7 +1293,8 @@ impl Dc {
             return;
         }
         let mut guard = 0u32;
-        while let Some((x, kind)) = self.next_edge() {
+        let mut next = self.next_edge();
+        while let Some((x, kind)) = next {
             let Some(g) = self.global_at(x, self.t_done) else {
                 break;
             };
@@ -1273,7 +1302,10 @@ impl Dc {
                 break;
             }
             self.t_done = g;
-            self.edge(x, kind, g);
+            // The edge leaves the clock alone: its system time at `g` is the next
+            // search's reference.
+            let now = self.edge(x, kind, g);
+            next = self.next_edge_from(now);
             guard += 1;
             if guard > 1_000_000 {
                 break;
@@ -1282,7 +1314,9 @@ impl Dc {
         self.t_done = t;
     }
 
-    fn edge(&mut self, x: u64, kind: u8, g: u64) {
+    /// Processes the edge `kind` at system time `x`, global time `g`; returns the system
+    /// time at `g`.
+    fn edge(&mut self, x: u64, kind: u8, g: u64) -> u64 {
         let act = self.shadow[0x81];
         let now = self.system_time(g);
         match kind {
@@ -1322,6 +1356,7 @@ impl Dc {
                 }
             }
         }
+        now
     }
 
     fn update_status(&mut self) {
