@@ -227,7 +227,7 @@ fn speed_diff(rate_q: i64, start: u16) -> i16 {
         0
     } else {
         // |rate| ≤ MAX_RATE_Q < 2^30: 10·r fits, and so does the quotient.
-        let period = ((1u64 << Q) / (10 * r)).min(i64::MAX as u64) as i64;
+        let period = ((1u64 << Q) / r.saturating_mul(10)).min(i64::MAX as u64) as i64;
         if period >= start {
             0
         } else {
@@ -624,14 +624,14 @@ impl Dc {
         }
         let n = f_from.checked_add(d0)?;
         let m = n.checked_mul(self.rate_q)?.checked_add(self.acc_frac)?;
-        let dosc = n - m.div_euclid((1i64 << Q) + self.rate_q);
+        let dosc = n.checked_sub(m.div_euclid((1i64 << Q) + self.rate_q))?;
         let k = if self.drift_ppt == 0 {
             dosc
         } else {
             let m = dosc
                 .checked_mul(self.drift_ppt)?
                 .checked_add(self.drift_rem)?;
-            dosc - m.div_euclid(E12_I + self.drift_ppt)
+            dosc.checked_sub(m.div_euclid(E12_I + self.drift_ppt))?
         };
         let g = self.anchor_t.checked_add_signed(k)?;
         Some(Some(g.max(from)))
@@ -2001,6 +2001,27 @@ mod tests {
             }
         }
         assert!(exact > 20_000, "{exact} closed-form answers");
+        // The ends of the closed form's range: targets up to 2^62 ahead of a `from` up to
+        // 2^62 past the anchor, at the extreme rates and drifts.
+        for rate in [-MAX_RATE_Q, -1, 0, 1, MAX_RATE_Q] {
+            for drift_ppm in [-10_000.0, -0.001, 0.0, 0.001, 10_000.0] {
+                for from in [1 << 62, (1 << 62) - 1, 1 << 61, 0] {
+                    for span in [1 << 62, (1 << 62) - 5, 1 << 61, 1] {
+                        let mut dc = Dc::new(ClockConfig {
+                            drift_ppm,
+                            start_offset_ns: 0,
+                        });
+                        dc.set_rate(0, rate);
+                        let target = dc.system_time(from).wrapping_add(span);
+                        let search = dc.global_at_sys_search(target, from);
+                        if let Some(g) = dc.global_at_sys_exact(target, from) {
+                            assert_eq!(g, search, "rate {rate} drift {drift_ppm} from {from}");
+                        }
+                        assert_eq!(dc.global_at_sys(target, from), search);
+                    }
+                }
+            }
+        }
     }
 
     /// The 64-bit rate law is the 128-bit one, over the whole input range the loop can
