@@ -97,6 +97,8 @@ const MAX_RATE_Q: i64 = (1i64 << Q) / 1270;
 const TAU_PER_UNIT_NS: u64 = 24_414;
 /// Largest accepted oscillator error, in parts per 10^12 (±1 %).
 const MAX_DRIFT_PPT: i64 = 10_000_000_000;
+/// 10^12 (the drift's unit), signed.
+const E12_I: i64 = 1_000_000_000_000;
 
 /// The registers this unit maintains in its shadow (inclusive absolute address ranges).
 const OWNED: [(usize, usize); 3] = [(0x0900, 0x0935), (0x0980, 0x0981), (0x0984, 0x09CF)];
@@ -106,10 +108,6 @@ const OWNED: [(usize, usize); 3] = [(0x0900, 0x0935), (0x0980, 0x0981), (0x0984,
 fn owned(a: usize) -> bool {
     OWNED.iter().any(|&(lo, hi)| (lo..=hi).contains(&a))
 }
-
-/// What the global → system time mapping depends on: anchor time, oscillator and
-/// accumulator at the anchor, correction rate, offset.
-type ClockKey = (u64, i128, i128, i64, u64);
 
 /// `floor(t · drift_ppt / 10^12)`, exactly, without a 128-bit division (this runs for every
 /// evaluation of the local clock). With `t = a·10^12 + b` and `drift = h·10^6 + l`
@@ -128,6 +126,115 @@ fn drift_ns(t: u64, drift_ppt: i64) -> i64 {
     let l = drift_ppt.rem_euclid(E6);
     let y = ((b as u64 * l as u64) / E6 as u64) as i64;
     a * drift_ppt + (b * h + y).div_euclid(E6)
+}
+
+/// `t · drift_ppt` split as `q · 10^12 + r` with `0 ≤ r < 10^12`: `q` is
+/// [`drift_ns`]`(t, drift_ppt)`, `r` what the clock's 64-bit evaluation relative to an
+/// anchor needs ([`Dc::local_rel`]). The same nested flooring as `drift_ns`, keeping the
+/// remainders: with `z = b·h + floor(b·l / 10^6) = w·10^6 + w_r` and `b·l mod 10^6 = y_r`,
+/// `t·drift = (a·drift + w)·10^12 + w_r·10^6 + y_r`.
+fn drift_split(t: u64, drift_ppt: i64) -> (i64, i64) {
+    const E6: i64 = 1_000_000;
+    const E12: u64 = 1_000_000_000_000;
+    debug_assert!(drift_ppt.abs() <= MAX_DRIFT_PPT);
+    let a = (t / E12) as i64;
+    let b = (t % E12) as i64;
+    let h = drift_ppt.div_euclid(E6);
+    let l = drift_ppt.rem_euclid(E6);
+    let bl = b as u64 * l as u64;
+    let (y, yr) = ((bl / E6 as u64) as i64, (bl % E6 as u64) as i64);
+    let z = b * h + y;
+    let (w, wr) = (z.div_euclid(E6), z.rem_euclid(E6));
+    (a * drift_ppt + w, wr * E6 + yr)
+}
+
+/// `t - anchor` as a signed distance when it is within ±2^62 (the range in which the
+/// 64-bit clock evaluation is exact), else `None`.
+#[inline(always)]
+fn rel_time(t: u64, anchor: u64) -> Option<i64> {
+    let k = t.wrapping_sub(anchor) as i64;
+    // The wrapped difference is the true one iff the signs agree (|true difference| < 2^63).
+    if (t >= anchor) != (k >= 0) || k.unsigned_abs() > 1 << 62 {
+        return None;
+    }
+    Some(k)
+}
+
+/// The proportional-integral law of the time-control loop (see the module's MODEL):
+/// the new integral of Δt·h and the rate (2^-40 ns per ns, within ±[`MAX_RATE_Q`]) after a
+/// sample `dt` (ns) `h_raw` ns after the previous one (0: first sample), with time constant
+/// `tau` ns (`tau ≥ 0x80 · 24 414`, from [`Dc::tau_ns`]):
+/// `h = min(h_raw, τ/4)`, `integ += dt·h` (limited to ±MAX_RATE·τ²), `kp = min(2/τ, 1/(2h))`,
+/// `rate = −(dt·kp + integ/τ²)`, all in 2^-40 fixed point with truncating divisions, as
+/// `rate_law_wide` (tests) computes it in 128 bits. Here the divisions are 64-bit ones:
+/// `2^41/τ` and `2^40/(2h) = 2^39/h` fit, and `trunc(integ·2^40/τ²)` is
+/// `floor(floor(|integ|·2^40/τ)/τ)` with the sign, the inner quotient by long division
+/// in two 20-bit steps (it is below 2^64 because |integ| ≤ MAX_RATE·τ²/2^40 < τ·2^24).
+fn rate_law(integ: i128, dt: i64, h_raw: u64, tau: u64) -> (i128, i64) {
+    let tau_i = tau as i128;
+    let h = h_raw.min(tau / 4);
+    let integ_max = ((MAX_RATE_Q as i128) * tau_i * tau_i) >> Q;
+    let integ = (integ + dt as i128 * h as i128).clamp(-integ_max, integ_max);
+    let mut kp = (2u64 << Q) / tau;
+    if let Some(k) = (1u64 << (Q - 1)).checked_div(h_raw) {
+        kp = kp.min(k);
+    }
+    let n = integ.unsigned_abs();
+    let i = if n < (tau as u128) << 24 {
+        let n = n as u64;
+        let (a, b) = (n / tau, n % tau);
+        let (c, d) = ((b << 20) / tau, (b << 20) % tau);
+        let m = (a << Q) + (c << 20) + (d << 20) / tau;
+        let i = (m / tau) as i128;
+        if integ < 0 {
+            -i
+        } else {
+            i
+        }
+    } else {
+        // Not reached (the limit above keeps |integ| below τ·2^24); the 128-bit form.
+        (integ << Q) / (tau_i * tau_i)
+    };
+    let p = dt as i128 * kp as i128;
+    let rate = (-(p + i)).clamp(-(MAX_RATE_Q as i128), MAX_RATE_Q as i128) as i64;
+    (integ, rate)
+}
+
+/// The former 128-bit form of [`rate_law`], kept as its reference.
+#[cfg(test)]
+fn rate_law_wide(integ: i128, dt: i64, h_raw: u64, tau: u64) -> (i128, i64) {
+    let tau = tau as i128;
+    let h = (h_raw as i128).min(tau / 4);
+    let integ_max = ((MAX_RATE_Q as i128) * tau * tau) >> Q;
+    let integ = (integ + dt as i128 * h).clamp(-integ_max, integ_max);
+    let mut kp = 2 * ONE_Q / tau;
+    if h_raw > 0 {
+        kp = kp.min(ONE_Q / (2 * h_raw as i128));
+    }
+    let p = dt as i128 * kp;
+    let i = (integ << Q) / (tau * tau);
+    let rate = (-(p + i)).clamp(-(MAX_RATE_Q as i128), MAX_RATE_Q as i128) as i64;
+    (integ, rate)
+}
+
+/// 0x0932 for a rate `rate_q` and speed counter start `start` (0x80..=0x7FFF): the signed
+/// speed-counter value `±(start − P)`, P = 10 ns ticks per 1 ns correction
+/// (`2^40 / (10·|rate|)`), 0 when `P ≥ start`, at most `start − 0x7F`.
+fn speed_diff(rate_q: i64, start: u16) -> i16 {
+    let start = start as i64;
+    let r = rate_q.unsigned_abs();
+    let diff = if r == 0 {
+        0
+    } else {
+        // |rate| ≤ MAX_RATE_Q < 2^30: 10·r fits, and so does the quotient.
+        let period = ((1u64 << Q) / r.saturating_mul(10)).min(i64::MAX as u64) as i64;
+        if period >= start {
+            0
+        } else {
+            (start - period).min(start - 0x7F)
+        }
+    };
+    (if rate_q < 0 { -diff } else { diff }) as i16
 }
 
 /// Write mask of a DC register byte for a side, or `None` if that side may not write it.
@@ -216,6 +323,13 @@ pub struct Dc {
     anchor_acc: i128,
     /// Current correction rate (2^-40 ns per oscillator ns).
     rate_q: i64,
+    /// Local time at `anchor_t` without the fraction of the accumulator, wrapped to 64 bits
+    /// (`(anchor_osc + anchor_acc >> 40) as u64`): the base of [`Dc::local_rel`].
+    base_local: u64,
+    /// Fraction of the accumulator at `anchor_t`: `anchor_acc mod 2^40`.
+    acc_frac: i64,
+    /// `anchor_t · drift_ppt mod 10^12` ([`drift_split`]).
+    drift_rem: i64,
     /// System time offset (0x0920).
     offset: u64,
     /// System time delay (0x0928).
@@ -243,10 +357,15 @@ pub struct Dc {
     /// Cached `next_event`.
     next_cache: Option<u64>,
     /// Memo of the last [`Dc::global_at_sys`] answer that was the earliest global time of
-    /// its target: `(clock mapping, target, global time)`.
-    edge_memo: Option<(ClockKey, u64, u64)>,
+    /// its target: `(target, global time)`, for the current global → system time mapping
+    /// (forgotten by every change of it: [`Dc::set_rate`], an offset write).
+    edge_memo: Option<(u64, u64)>,
     /// Width of the start-time comparison (32 for ET1100, 64 for 64-bit compare).
     compare_bits: u32,
+    /// Tests: take the general (slow) path everywhere a fast path exists, and compute
+    /// every edge time afresh (no memo), to compare both.
+    #[cfg(test)]
+    slow: bool,
 }
 
 impl Dc {
@@ -261,6 +380,9 @@ impl Dc {
             anchor_osc: 0,
             anchor_acc: 0,
             rate_q: 0,
+            base_local: 0,
+            acc_frac: 0,
+            drift_rem: 0,
             offset: 0,
             delay: 0,
             mean_q: 0,
@@ -280,8 +402,11 @@ impl Dc {
             edge_memo: None,
             compare_bits: 32,
             inited: false,
+            #[cfg(test)]
+            slow: false,
         };
         dc.anchor_osc = dc.osc(0);
+        dc.rebase();
         dc.shadow_reset();
         dc
     }
@@ -302,8 +427,14 @@ impl Dc {
     pub fn reset(&mut self, regs: &mut [u8]) {
         let cfg = self.cfg;
         let bits = self.compare_bits;
+        #[cfg(test)]
+        let slow = self.slow;
         *self = Self::new(cfg);
         self.compare_bits = bits;
+        #[cfg(test)]
+        {
+            self.slow = slow;
+        }
         self.inited = true;
         self.sync_slow();
         self.pulse_len = rd16(regs, 0x0982);
@@ -343,8 +474,57 @@ impl Dc {
     }
 
     /// The ESC's local time (oscillator plus control-loop correction) at global time `t`.
+    #[inline]
     pub fn local_time(&self, t: u64) -> u64 {
+        match self.local_rel(t) {
+            Some(f) => self.base_local.wrapping_add(f as u64),
+            None => self.local_time_wide(t),
+        }
+    }
+
+    /// [`local_time`](Self::local_time) in 128-bit arithmetic, for any `t` (the model's
+    /// definition; [`Dc::local_rel`] is the same in 64 bits near the anchor).
+    fn local_time_wide(&self, t: u64) -> u64 {
         (self.osc(t) + (self.acc_at(t) >> Q)) as u64
+    }
+
+    /// The derived anchor values of the 64-bit evaluation, after every change of the
+    /// anchor ([`Dc::set_rate`], [`Dc::new`]).
+    fn rebase(&mut self) {
+        self.base_local = (self.anchor_osc + (self.anchor_acc >> Q)) as u64;
+        self.acc_frac = (self.anchor_acc & (ONE_Q - 1)) as i64;
+        self.drift_rem = drift_split(self.anchor_t, self.drift_ppt).1;
+    }
+
+    /// The local time at `t` relative to [`Dc::base_local`], exactly, in 64-bit
+    /// arithmetic, or `None` where that does not fit (`t` more than 2^62 ns from the
+    /// anchor or a product overflowing; then [`Dc::local_time_wide`] is used).
+    ///
+    /// With `k = t − anchor_t`: the oscillator advanced by
+    /// `Δ = k + floor((drift_rem + k·drift) / 10^12)` (as `drift_ns(t) − drift_ns(anchor_t)`,
+    /// by the split of [`drift_split`]), and the accumulator by `rate·Δ`, so
+    /// `local(t) = base_local + Δ + floor((acc_frac + rate·Δ) / 2^40)`.
+    #[inline(always)]
+    fn local_rel(&self, t: u64) -> Option<i64> {
+        let (dosc, _, p) = self.local_parts(t)?;
+        Some(dosc + (p >> Q))
+    }
+
+    /// The parts of [`Dc::local_rel`]: `(Δ, drift_rem + k·drift, acc_frac + rate·Δ)`.
+    #[inline(always)]
+    fn local_parts(&self, t: u64) -> Option<(i64, i64, i64)> {
+        if !self.fast_paths() {
+            return None;
+        }
+        let k = rel_time(t, self.anchor_t)?;
+        let (dosc, m) = if self.drift_ppt == 0 {
+            (k, 0)
+        } else {
+            let m = k.checked_mul(self.drift_ppt)?.checked_add(self.drift_rem)?;
+            (k + m.div_euclid(E12_I), m)
+        };
+        let p = self.rate_q.checked_mul(dosc)?.checked_add(self.acc_frac)?;
+        Some((dosc, m, p))
     }
 
     /// The local copy of the system time (local time + offset) at global time `t`.
@@ -358,21 +538,27 @@ impl Dc {
     }
 
     fn set_rate(&mut self, t: u64, rate_q: i64) {
+        self.edge_memo = None;
+        let rate_q = rate_q.clamp(-MAX_RATE_Q, MAX_RATE_Q);
+        if let Some((dosc, m, p)) = self.local_parts(t) {
+            // Moving the anchor by the 64-bit parts (what `rebase` gives for the new
+            // anchor): the oscillator and accumulator advance by Δ and rate·Δ, the new
+            // fraction and base follow from `p = acc_frac + rate·Δ`, and the drift
+            // remainder of `t` is that of `drift_rem + k·drift`.
+            self.anchor_osc += dosc as i128;
+            self.anchor_acc += self.rate_q as i128 * dosc as i128;
+            self.base_local = self.base_local.wrapping_add((dosc + (p >> Q)) as u64);
+            self.acc_frac = p & ((1i64 << Q) - 1);
+            self.drift_rem = m.rem_euclid(E12_I);
+            self.anchor_t = t;
+            self.rate_q = rate_q;
+            return;
+        }
         self.anchor_acc = self.acc_at(t);
         self.anchor_osc = self.osc(t);
         self.anchor_t = t;
-        self.rate_q = rate_q.clamp(-MAX_RATE_Q, MAX_RATE_Q);
-    }
-
-    /// Everything the global → system time mapping depends on.
-    fn clock_key(&self) -> ClockKey {
-        (
-            self.anchor_t,
-            self.anchor_osc,
-            self.anchor_acc,
-            self.rate_q,
-            self.offset,
-        )
+        self.rate_q = rate_q;
+        self.rebase();
     }
 
     /// [`global_at_sys`](Self::global_at_sys), memoised: the system time is a
@@ -381,22 +567,80 @@ impl Dc {
     /// any `from` is `max(g, from)`. The SYNC unit asks for the same edge several times
     /// (finding it, then the next one, then `next_event`), each a bisection.
     fn global_at(&mut self, target: u64, from: u64) -> Option<u64> {
-        let key = self.clock_key();
-        if let Some((k, x, g)) = self.edge_memo {
-            if k == key && x == target {
+        if let Some((x, g)) = self.edge_memo {
+            // (The general paths of the tests compute every answer, so that the
+            // comparison checks the memo's invalidation too.)
+            if x == target && self.fast_paths() {
                 return Some(g.max(from));
             }
         }
         let g = self.global_at_sys(target, from)?;
         // `g > from`: the target was not reached at `from`, so `g` is its earliest time.
         if g > from {
-            self.edge_memo = Some((key, target, g));
+            self.edge_memo = Some((target, g));
         }
         Some(g)
     }
 
     /// Earliest global time ≥ `from` at which the system time reaches `target`.
     fn global_at_sys(&self, target: u64, from: u64) -> Option<u64> {
+        match self.global_at_sys_exact(target, from) {
+            Some(g) => g,
+            None => self.global_at_sys_search(target, from),
+        }
+    }
+
+    /// [`global_at_sys`](Self::global_at_sys) solved in closed form, in 64-bit integers
+    /// (`None`: out of that range, search instead).
+    ///
+    /// The local time relative to the anchor is `F(Δ) = Δ + floor((f + R·Δ) / 2^40)` of the
+    /// oscillator's advance `Δ` (see [`Dc::local_rel`]; `f` = [`Dc::acc_frac`], `R` the
+    /// rate), and `Δ(k) = k + floor((r + k·D) / 10^12)` of `k = g − anchor_t` (`r` =
+    /// [`Dc::drift_rem`], `D` the drift). Both are floors of lines with positive slope
+    /// (`2^40 + R > 0`, `10^12 + D > 0`), so the least `Δ` with `F(Δ) ≥ N` is
+    /// `N − floor((N·R + f) / (2^40 + R))` and the least `k` with `Δ(k) ≥ Δ*` is
+    /// `Δ* − floor((Δ*·D + r) / (10^12 + D))`. `N` is the target relative to the base:
+    /// `F` at `from` plus the distance `d0` the search starts from.
+    ///
+    /// It is the search's answer: the search fails (`None`) only when a probe overflows
+    /// `u64`, which cannot happen for `from ≤ 2^62` and `d0 ≤ 2^62` (slope ≥ 0.989, so every
+    /// probe stays below `from + 1.012·d0 + 4`); above that the search runs.
+    #[inline]
+    fn global_at_sys_exact(&self, target: u64, from: u64) -> Option<Option<u64>> {
+        if from > 1 << 62 {
+            return None;
+        }
+        let f_from = self.local_rel(from)?;
+        let s_from = self
+            .base_local
+            .wrapping_add(f_from as u64)
+            .wrapping_add(self.offset);
+        let d0 = sdiff(target, s_from);
+        if d0 <= 0 {
+            return Some(Some(from));
+        }
+        if d0 > (1i64 << 62) {
+            return Some(None);
+        }
+        let n = f_from.checked_add(d0)?;
+        let m = n.checked_mul(self.rate_q)?.checked_add(self.acc_frac)?;
+        let dosc = n.checked_sub(m.div_euclid((1i64 << Q) + self.rate_q))?;
+        let k = if self.drift_ppt == 0 {
+            dosc
+        } else {
+            let m = dosc
+                .checked_mul(self.drift_ppt)?
+                .checked_add(self.drift_rem)?;
+            dosc.checked_sub(m.div_euclid(E12_I + self.drift_ppt))?
+        };
+        let g = self.anchor_t.checked_add_signed(k)?;
+        Some(Some(g.max(from)))
+    }
+
+    /// [`global_at_sys`](Self::global_at_sys) by search, for any `from` and clock.
+    #[cold]
+    #[inline(never)]
+    fn global_at_sys_search(&self, target: u64, from: u64) -> Option<u64> {
         let d0 = sdiff(target, self.system_time(from));
         if d0 <= 0 {
             return Some(from);
@@ -460,41 +704,29 @@ impl Dc {
         let sm = if mean < 0 { mag | 0x8000_0000 } else { mag };
         self.put32(0x092C, sm);
 
-        let tau = self.tau_ns() as i128;
+        let tau = self.tau_ns();
         let h_raw = match self.last_sample {
             Some(p) if t > p => t - p,
             _ => 0,
         };
         self.last_sample = Some(t);
-        let h = (h_raw as i128).min(tau / 4);
-        let integ_max = ((MAX_RATE_Q as i128) * tau * tau) >> Q;
-        self.integ = (self.integ + dt as i128 * h).clamp(-integ_max, integ_max);
-        let mut kp = 2 * ONE_Q / tau;
-        if h_raw > 0 {
-            kp = kp.min(ONE_Q / (2 * h_raw as i128));
-        }
-        let p = dt as i128 * kp;
-        let i = (self.integ << Q) / (tau * tau);
-        let rate = (-(p + i)).clamp(-(MAX_RATE_Q as i128), MAX_RATE_Q as i128) as i64;
+        #[cfg(test)]
+        let (integ, rate) = if self.slow {
+            rate_law_wide(self.integ, dt, h_raw, tau)
+        } else {
+            rate_law(self.integ, dt, h_raw, tau)
+        };
+        #[cfg(not(test))]
+        let (integ, rate) = rate_law(self.integ, dt, h_raw, tau);
+        self.integ = integ;
         self.set_rate(t, rate);
         self.publish_speed_diff();
     }
 
     fn publish_speed_diff(&mut self) {
-        let start = (self.get16(0x0930) & 0x7FFF).max(0x80) as i128;
-        let r = (self.rate_q as i128).abs();
-        let diff = if r == 0 {
-            0
-        } else {
-            let period = ONE_Q / (10 * r);
-            if period >= start {
-                0
-            } else {
-                (start - period).min(start - 0x7F)
-            }
-        };
-        let v = if self.rate_q < 0 { -diff } else { diff };
-        self.put16(0x0932, v as i16 as u16);
+        let start = (self.get16(0x0930) & 0x7FFF).max(0x80);
+        let v = speed_diff(self.rate_q, start);
+        self.put16(0x0932, v as u16);
     }
 
     fn reset_filters(&mut self, t: u64) {
@@ -601,11 +833,21 @@ impl Dc {
         }
         self.ensure_init(regs);
         self.catch_up(t);
-        if overlaps(addr, len, 0x0910, 0x0917) {
+        let time = overlaps(addr, len, 0x0910, 0x0917);
+        if time {
             let s = self.system_time(t);
             self.put64(0x0910, s);
         }
-        self.publish(regs);
+        if self.fast_paths() {
+            // Shadow and register file are in step (every change is published when it is
+            // made, the first contact publishes everything) and catching up changes only
+            // the SYNC unit's state, not the shadow: the system time is all that changed.
+            if time {
+                self.publish_range(regs, 0x0910, 0x0918);
+            }
+        } else {
+            self.publish(regs);
+        }
     }
 
     /// Bytes `addr..addr+len` were read at `t` by ECAT (`ecat`) or the PDI.
@@ -654,6 +896,11 @@ impl Dc {
         if !overlaps(addr, len, 0x0900, 0x09FF) {
             return;
         }
+        if self.inited && addr >= 0x0910 && addr as u32 + len as u32 <= 0x0918 && self.fast_paths()
+        {
+            self.system_time_written(regs, addr, len, t, ecat);
+            return;
+        }
         self.ensure_init_keep(regs, (addr as usize, addr as usize + len as usize));
         self.catch_up(t);
         let old_act = self.shadow[0x81];
@@ -674,13 +921,7 @@ impl Dc {
             }
         }
         // Frame time for ECAT writes: the frame's arrival at port 0.
-        // (`NO_SOF` is never <= t unless t is that value too: then both give t.)
-        let s = self.sof0;
-        let tf = if ecat && s <= t && s >= self.anchor_t {
-            s
-        } else {
-            t
-        };
+        let tf = if ecat { self.ecat_frame_time(t) } else { t };
         if ecat && overlaps(addr, len, 0x0900, 0x0903) {
             let lt = self.local_time(tf);
             self.put32(0x0900, lt as u32);
@@ -694,6 +935,7 @@ impl Dc {
         }
         if wrote[0x20..0x28].iter().any(|&w| w) {
             self.offset = self.get64(0x0920);
+            self.edge_memo = None;
         }
         if wrote[0x28..0x2C].iter().any(|&w| w) {
             self.delay = self.get32(0x0928);
@@ -731,6 +973,63 @@ impl Dc {
         self.update_status();
         self.publish(regs);
         self.refresh_next();
+    }
+
+    /// [`after_write`](Self::after_write) of bytes within the system time 0x0910..0x0917
+    /// after the first contact (the FRMW that distributes the reference time, every
+    /// cycle): what the general path does for it. No side may write those bytes (they
+    /// show the local copy of the system time), so nothing is stored in the shadow; an
+    /// ECAT write of 0x0910..0x0913 feeds the time-control loop. Republished are the
+    /// registers that changed: the system time, the loop's 0x092C..0x0933 and the SYNC
+    /// status 0x0984..0x099F (the rest is in step, as every change is published when it
+    /// is made).
+    fn system_time_written(&mut self, regs: &mut [u8], addr: u16, len: u16, t: u64, ecat: bool) {
+        self.pulse_len = rd16(regs, 0x0982);
+        self.catch_up(t);
+        if ecat && covers(addr, len, 0x0910, 0x0913) {
+            let tf = self.ecat_frame_time(t);
+            let rx = rd32(regs, 0x0910);
+            self.time_control(tf, rx);
+        }
+        let s = self.system_time(t);
+        self.put64(0x0910, s);
+        self.update_status();
+        self.publish_range(regs, 0x0910, 0x0934);
+        self.publish_range(regs, 0x0984, 0x09A0);
+        self.refresh_next();
+    }
+
+    /// The time of an ECAT write at `t`: the frame's arrival at port 0, unless that is
+    /// unknown or before the last rate change.
+    /// (`NO_SOF` is never <= t unless t is that value too: then both give t.)
+    #[inline]
+    fn ecat_frame_time(&self, t: u64) -> u64 {
+        let s = self.sof0;
+        if s <= t && s >= self.anchor_t {
+            s
+        } else {
+            t
+        }
+    }
+
+    /// Tests: the general paths everywhere (`true`) or the fast paths (see [`Dc::slow`]).
+    #[cfg(test)]
+    pub(crate) fn set_slow(&mut self, slow: bool) {
+        self.slow = slow;
+    }
+
+    /// Whether the fast paths may be taken (always, except in tests that compare them
+    /// with the general paths).
+    #[inline(always)]
+    fn fast_paths(&self) -> bool {
+        #[cfg(test)]
+        {
+            !self.slow
+        }
+        #[cfg(not(test))]
+        {
+            true
+        }
     }
 
     /// Advance to global time `t`.
@@ -955,7 +1254,16 @@ impl Dc {
         if !self.sync.active {
             return None;
         }
-        let reference = self.system_time(self.t_done);
+        self.next_edge_from(self.system_time(self.t_done))
+    }
+
+    /// [`next_edge`](Self::next_edge) with the system time at `t_done` known
+    /// (`reference`).
+    #[inline]
+    fn next_edge_from(&self, reference: u64) -> Option<(u64, u8)> {
+        if !self.sync.active {
+            return None;
+        }
         let cands = [
             (self.sync.fall0, 0u8),
             (self.sync.fall1, 1),
@@ -985,7 +1293,8 @@ impl Dc {
             return;
         }
         let mut guard = 0u32;
-        while let Some((x, kind)) = self.next_edge() {
+        let mut next = self.next_edge();
+        while let Some((x, kind)) = next {
             let Some(g) = self.global_at(x, self.t_done) else {
                 break;
             };
@@ -993,7 +1302,10 @@ impl Dc {
                 break;
             }
             self.t_done = g;
-            self.edge(x, kind, g);
+            // The edge leaves the clock alone: its system time at `g` is the next
+            // search's reference.
+            let now = self.edge(x, kind, g);
+            next = self.next_edge_from(now);
             guard += 1;
             if guard > 1_000_000 {
                 break;
@@ -1002,7 +1314,9 @@ impl Dc {
         self.t_done = t;
     }
 
-    fn edge(&mut self, x: u64, kind: u8, g: u64) {
+    /// Processes the edge `kind` at system time `x`, global time `g`; returns the system
+    /// time at `g`.
+    fn edge(&mut self, x: u64, kind: u8, g: u64) -> u64 {
         let act = self.shadow[0x81];
         let now = self.system_time(g);
         match kind {
@@ -1042,6 +1356,7 @@ impl Dc {
                 }
             }
         }
+        now
     }
 
     fn update_status(&mut self) {
@@ -1153,6 +1468,8 @@ fn rd32(regs: &[u8], a: usize) -> u32 {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use std::vec;
+    use std::vec::Vec;
 
     /// `arrival_needs_regs` (the ESC's shortcut test) says what `frame_arrival` needs:
     /// every port before the first contact, none after it, the armed latch ports after a
@@ -1304,5 +1621,474 @@ mod tests {
         assert!(owned(0x0900) && owned(0x0935) && !owned(0x0936));
         assert!(!owned(0x097F) && owned(0x0980) && owned(0x0981) && !owned(0x0982));
         assert!(!owned(0x0983) && owned(0x0984) && owned(0x09CF) && !owned(0x09D0));
+    }
+
+    /// xorshift64: the random source of the tests below.
+    struct Rnd(u64);
+
+    impl Rnd {
+        fn next(&mut self) -> u64 {
+            let mut x = self.0;
+            x ^= x << 13;
+            x ^= x >> 7;
+            x ^= x << 17;
+            self.0 = x;
+            x
+        }
+
+        /// Uniform in `0..n` (n > 0).
+        fn below(&mut self, n: u64) -> u64 {
+            self.next() % n
+        }
+    }
+
+    /// One step of a random master/firmware session against a DC unit.
+    #[derive(Debug, Clone)]
+    enum Op {
+        Arrival(u8),
+        EcatWrite(u16, Vec<u8>),
+        PdiWrite(u16, Vec<u8>),
+        /// An FRMW-like ECAT write of 0x0910: the unit's own system time plus `Δ`.
+        SysWrite(i64, u16),
+        /// The master starts the cyclic unit: start time = system time + `Δ`, activation.
+        StartSync(u64, u8),
+        Read(u16, u16, bool),
+        Pulse(u16),
+        Latch(u8, bool),
+        Advance,
+    }
+
+    /// A random session: the ethercrab-like DC set-up, cyclic SYNC0/SYNC1 with random
+    /// cycle times, FRMW distribution, and writes of random bytes anywhere in 0x0900..0x09FF.
+    fn random_ops(r: &mut Rnd, n: usize) -> Vec<(u64, Op)> {
+        let mut ops = Vec::new();
+        let mut t = r.below(1 << 30);
+        // Cycle times first, then the start.
+        let c0 = [100_000, 400_000, 1_000_000, 1 + r.below(2_000_000)][r.below(4) as usize];
+        ops.push((t, Op::EcatWrite(0x09A0, (c0 as u32).to_le_bytes().to_vec())));
+        let c1 = [0, 0, 50_000, r.below(3 * c0)][r.below(4) as usize];
+        ops.push((t, Op::EcatWrite(0x09A4, (c1 as u32).to_le_bytes().to_vec())));
+        ops.push((t, Op::Pulse([0, 100, 1000][r.below(3) as usize])));
+        ops.push((t, Op::StartSync(100_000 + r.below(1_000_000), 0x07)));
+        let dc_addr = |r: &mut Rnd| -> u16 {
+            let hot = [
+                0x0900, 0x0910, 0x0918, 0x0920, 0x0928, 0x092C, 0x0930, 0x0934, 0x0980, 0x0981,
+                0x0984, 0x098E, 0x098F, 0x0990, 0x0998, 0x09A0, 0x09A4, 0x09A8, 0x09AE, 0x09B0,
+                0x09B8, 0x09C0,
+            ];
+            if r.below(3) == 0 {
+                0x08F8 + r.below(0x110) as u16
+            } else {
+                hot[r.below(hot.len() as u64) as usize] + r.below(4) as u16
+            }
+        };
+        let bytes =
+            |r: &mut Rnd, len: usize| -> Vec<u8> { (0..len).map(|_| r.next() as u8).collect() };
+        for _ in 0..n {
+            t += match r.below(6) {
+                0 => 0,
+                1 => r.below(100),
+                2 => r.below(10_000),
+                3 => r.below(500_000),
+                4 => r.below(5_000_000),
+                _ => r.below(200_000_000),
+            };
+            let op = match r.below(26) {
+                0..=2 => Op::Arrival(r.below(4) as u8),
+                3..=4 => {
+                    let a = dc_addr(r);
+                    let len = 1 + r.below(12) as usize;
+                    Op::EcatWrite(a, bytes(r, len))
+                }
+                5 => {
+                    let a = dc_addr(r);
+                    let len = 1 + r.below(12) as usize;
+                    Op::PdiWrite(a, bytes(r, len))
+                }
+                6 => {
+                    // Set-up writes with sensible values.
+                    let (a, v): (u16, Vec<u8>) = match r.below(9) {
+                        0 => (
+                            0x0981,
+                            vec![[0x03, 0x07, 0x01, 0x0F, 0x00, 0x27, 0x87][r.below(7) as usize]],
+                        ),
+                        1 => (
+                            0x09A0,
+                            (100_000 + r.below(1_000_000) as u32).to_le_bytes().to_vec(),
+                        ),
+                        2 => (
+                            0x09A4,
+                            [0, 0, 50_000, 130_000 + r.below(900_000) as u32][r.below(4) as usize]
+                                .to_le_bytes()
+                                .to_vec(),
+                        ),
+                        3 => (0x0990, r.next().to_le_bytes().to_vec()),
+                        4 => (
+                            0x0930,
+                            (0x80 + r.below(0x8000) as u16).to_le_bytes().to_vec(),
+                        ),
+                        5 => (0x0934, vec![r.below(16) as u8, r.below(16) as u8]),
+                        6 => (
+                            0x0980,
+                            vec![[0x00, 0x01, 0x10, 0x20, 0x30][r.below(5) as usize]],
+                        ),
+                        7 => (0x09A8, vec![r.below(4) as u8, r.below(4) as u8]),
+                        _ => (0x0920, r.next().to_le_bytes().to_vec()),
+                    };
+                    if r.below(2) == 0 {
+                        Op::EcatWrite(a, v)
+                    } else {
+                        Op::PdiWrite(a, v)
+                    }
+                }
+                7..=10 => {
+                    let d = match r.below(4) {
+                        0 => r.below(200) as i64 - 100,
+                        1 => r.below(20_000) as i64 - 10_000,
+                        2 => r.below(2_000_000) as i64 - 1_000_000,
+                        _ => r.next() as i64,
+                    };
+                    Op::SysWrite(d, [8, 8, 8, 4, 2, 6][r.below(6) as usize])
+                }
+                11..=12 => {
+                    let a = dc_addr(r);
+                    Op::Read(a, 1 + r.below(16) as u16, r.below(2) == 0)
+                }
+                13 => match r.below(4) {
+                    0 => Op::StartSync(
+                        r.below(1 << 33),
+                        [0x03, 0x07, 0x27, 0x67][r.below(4) as usize],
+                    ),
+                    _ => Op::Pulse([0, 1, 10, 100, 1000, 40_000][r.below(6) as usize]),
+                },
+                14 => Op::Latch(r.below(2) as u8, r.below(2) == 0),
+                _ => Op::Advance,
+            };
+            ops.push((t, op));
+        }
+        ops
+    }
+
+    /// Everything outside the unit can see of it after one step.
+    type Seen = (
+        Vec<u8>,
+        Option<DcEvents>,
+        Option<u64>,
+        (bool, bool),
+        (u16, u32),
+        u64,
+    );
+
+    /// Runs `ops` on a unit, returning what is seen after each step. `t` of an `Advance`
+    /// goes to the next edge when there is one before it (so edges are hit exactly too).
+    macro_rules! run_ops {
+        ($dc:expr, $ops:expr) => {{
+            let dc = &mut $dc;
+            let mut regs = [0u8; 0x1000];
+            let mut seen: Vec<Seen> = Vec::new();
+            let mut now = 0u64;
+            for (t, op) in $ops.iter() {
+                let t = (*t).max(now);
+                let mut ev = None;
+                match op.clone() {
+                    Op::Arrival(p) => dc.frame_arrival(&mut regs, p, t),
+                    Op::EcatWrite(a, v) | Op::PdiWrite(a, v) => {
+                        let ecat = matches!(op, Op::EcatWrite(..));
+                        // As the core stores them (the unit decides what it keeps).
+                        let a0 = a as usize;
+                        regs[a0..a0 + v.len()].copy_from_slice(&v);
+                        dc.after_write(&mut regs, a, v.len() as u16, t, ecat);
+                    }
+                    Op::SysWrite(d, len) => {
+                        let v = dc.system_time(t).wrapping_add(d as u64).to_le_bytes();
+                        dc.frame_arrival(&mut regs, 0, t);
+                        regs[0x0910..0x0910 + len as usize].copy_from_slice(&v[..len as usize]);
+                        now = t + 300;
+                        dc.after_write(&mut regs, 0x0910, len, now, true);
+                    }
+                    Op::Read(a, len, ecat) => {
+                        dc.before_read(&mut regs, a, len, t);
+                        dc.after_read(&mut regs, a, len, t, ecat);
+                    }
+                    Op::Pulse(p) => regs[0x0982..0x0984].copy_from_slice(&p.to_le_bytes()),
+                    Op::StartSync(d, act) => {
+                        let s = dc.system_time(t).wrapping_add(d).to_le_bytes();
+                        regs[0x0990..0x0998].copy_from_slice(&s);
+                        dc.after_write(&mut regs, 0x0990, 8, t, true);
+                        regs[0x0981] = act;
+                        dc.after_write(&mut regs, 0x0981, 1, t, true);
+                    }
+                    Op::Latch(n, level) => dc.latch_input(&mut regs, n, level, t),
+                    Op::Advance => {
+                        let to = match dc.next_event() {
+                            Some(n) if n >= now && n < t => n,
+                            _ => t,
+                        };
+                        ev = Some(dc.advance(&mut regs, to));
+                        now = to;
+                    }
+                }
+                now = now.max(t);
+                seen.push((
+                    regs[0x0900..0x0A00].to_vec(),
+                    ev,
+                    dc.next_event(),
+                    dc.sync_levels(),
+                    dc.event_bits(),
+                    dc.local_time(now),
+                ));
+            }
+            seen
+        }};
+    }
+
+    /// A random oscillator: ideal, a crystal's ±100 ppm, or anything within the ±1 % the
+    /// model accepts; power-on offsets small, large or near the 64-bit wrap.
+    fn random_clock(r: &mut Rnd) -> ClockConfig {
+        let drift_ppm = match r.below(4) {
+            0 => 0.0,
+            1 => r.below(201) as f64 - 100.0,
+            2 => (r.below(2_000_001) as f64 - 1_000_000.0) / 1000.0,
+            _ => (r.below(20_001) as f64 - 10_000.0) / 1.0,
+        };
+        let start_offset_ns = match r.below(3) {
+            0 => r.below(1 << 40),
+            1 => r.next(),
+            _ => u64::MAX - r.below(1 << 34),
+        };
+        ClockConfig {
+            drift_ppm,
+            start_offset_ns,
+        }
+    }
+
+    /// The fast paths (64-bit clock, closed-form edge times, the system-time write, the
+    /// publication of what changed) against the general paths, over random sessions:
+    /// everything the ESC core can see must be the same after every step.
+    #[test]
+    fn fast_paths_match_the_general_paths() {
+        let mut r = Rnd(0x2545_F491_4F6C_DD1D);
+        let mut edges = 0usize;
+        for case in 0..400 {
+            let cfg = random_clock(&mut r);
+            let bits = if r.below(3) == 0 { 64 } else { 32 };
+            let ops = random_ops(&mut r, 300);
+            let mut fast = Dc::new(cfg);
+            let mut slow = Dc::new(cfg);
+            slow.slow = true;
+            fast.set_start_time_compare_bits(bits);
+            slow.set_start_time_compare_bits(bits);
+            let a = run_ops!(fast, ops);
+            let b = run_ops!(slow, ops);
+            for (i, (x, y)) in a.iter().zip(&b).enumerate() {
+                assert_eq!(x, y, "case {case} ({cfg:?}) step {i}: {:?}", ops[i]);
+            }
+            edges += a
+                .iter()
+                .filter(|s| s.1.is_some_and(|e| e.sync0.is_some()))
+                .count();
+        }
+        // The sessions did run the SYNC unit.
+        assert!(edges > 10_000, "{edges} SYNC0 edges");
+    }
+
+    /// A unit with a random clock mapping: anchor, rate and offset anywhere.
+    fn random_mapping(r: &mut Rnd) -> Dc {
+        let mut dc = Dc::new(random_clock(r));
+        let t0 = match r.below(3) {
+            0 => r.below(1 << 36),
+            1 => r.below(1 << 50),
+            _ => r.next(),
+        };
+        let rate = (r.below(2 * MAX_RATE_Q as u64 + 1)) as i64 - MAX_RATE_Q;
+        dc.set_rate(t0, rate);
+        dc.offset = r.next();
+        dc
+    }
+
+    /// The 64-bit evaluation of the clock is the 128-bit one wherever it answers, and it
+    /// answers near the anchor.
+    #[test]
+    fn local_time_matches_the_wide_form() {
+        let mut r = Rnd(0x9E37_79B9_7F4A_7C15);
+        let mut near = 0;
+        for _ in 0..200_000 {
+            let dc = random_mapping(&mut r);
+            let span = match r.below(4) {
+                0 => r.below(1000),
+                1 => r.below(1 << 30),
+                2 => r.below(1 << 40),
+                _ => r.next(),
+            };
+            let (t, wrapped) = if r.below(2) == 0 {
+                dc.anchor_t.overflowing_add(span)
+            } else {
+                dc.anchor_t.overflowing_sub(span)
+            };
+            assert_eq!(
+                dc.local_time(t),
+                dc.local_time_wide(t),
+                "t {t} anchor {}",
+                dc.anchor_t
+            );
+            if span < 1 << 26 && !wrapped {
+                assert!(dc.local_rel(t).is_some(), "t {t} anchor {}", dc.anchor_t);
+                near += 1;
+            }
+        }
+        assert!(near > 50_000);
+    }
+
+    #[test]
+    fn drift_split_matches_128_bit_formula() {
+        let mut r = Rnd(0xD1B5_4A32_D192_ED03);
+        for k in 0..200_000 {
+            let d = match k % 3 {
+                0 => r.below(2 * MAX_DRIFT_PPT as u64 + 1) as i64 - MAX_DRIFT_PPT,
+                1 => [0, 1, -1, 999_999, -1_000_000, MAX_DRIFT_PPT, -MAX_DRIFT_PPT][k % 7],
+                _ => r.below(200_000_001) as i64 - 100_000_000,
+            };
+            let t = match k % 4 {
+                0 => r.next(),
+                1 => r.below(1_000_000_000_000_000),
+                2 => r.below(100_000_000_000),
+                _ => r.below(1000) * 1_000_000_000_000 + r.below(3),
+            };
+            let p = t as i128 * d as i128;
+            let want = (
+                p.div_euclid(1_000_000_000_000) as i64,
+                p.rem_euclid(1_000_000_000_000) as i64,
+            );
+            assert_eq!(drift_split(t, d), want, "t {t} drift {d}");
+        }
+    }
+
+    /// The closed form of the edge time is the search's answer, and it is the one taken
+    /// near the anchor; the search is the bisection's answer everywhere.
+    #[test]
+    fn edge_time_closed_form_matches_search() {
+        let mut r = Rnd(0xA076_1D64_78BD_642F);
+        let mut exact = 0;
+        for _ in 0..100_000 {
+            let dc = random_mapping(&mut r);
+            let from = match r.below(3) {
+                0 => dc.anchor_t.saturating_add(r.below(1_000_000)),
+                1 => dc.anchor_t.wrapping_add(r.below(1 << 40)),
+                _ => r.next(),
+            };
+            let span = match r.below(4) {
+                0 => r.below(100),
+                1 => r.below(1_000_000),
+                2 => r.below(1 << 34),
+                _ => r.next(),
+            };
+            let target = dc
+                .system_time(from)
+                .wrapping_add(span)
+                .wrapping_sub(r.below(8));
+            let search = dc.global_at_sys_search(target, from);
+            if let Some(g) = dc.global_at_sys_exact(target, from) {
+                assert_eq!(
+                    g, search,
+                    "target {target} from {from} anchor {}",
+                    dc.anchor_t
+                );
+                exact += 1;
+            }
+            assert_eq!(dc.global_at_sys(target, from), search);
+            if span < 1 << 34 {
+                assert_eq!(search, global_at_sys_bisect(&dc, target, from));
+            }
+        }
+        assert!(exact > 20_000, "{exact} closed-form answers");
+        // The ends of the closed form's range: targets up to 2^62 ahead of a `from` up to
+        // 2^62 past the anchor, at the extreme rates and drifts.
+        for rate in [-MAX_RATE_Q, -1, 0, 1, MAX_RATE_Q] {
+            for drift_ppm in [-10_000.0, -0.001, 0.0, 0.001, 10_000.0] {
+                for from in [1 << 62, (1 << 62) - 1, 1 << 61, 0] {
+                    for span in [1 << 62, (1 << 62) - 5, 1 << 61, 1] {
+                        let mut dc = Dc::new(ClockConfig {
+                            drift_ppm,
+                            start_offset_ns: 0,
+                        });
+                        dc.set_rate(0, rate);
+                        let target = dc.system_time(from).wrapping_add(span);
+                        let search = dc.global_at_sys_search(target, from);
+                        if let Some(g) = dc.global_at_sys_exact(target, from) {
+                            assert_eq!(g, search, "rate {rate} drift {drift_ppm} from {from}");
+                        }
+                        assert_eq!(dc.global_at_sys(target, from), search);
+                    }
+                }
+            }
+        }
+    }
+
+    /// The 64-bit rate law is the 128-bit one, over the whole input range the loop can
+    /// produce (integral within its limit, any sample distance and time constant).
+    #[test]
+    fn rate_law_matches_the_wide_form() {
+        let mut r = Rnd(0xE703_7ED1_A0B4_28DB);
+        for k in 0..300_000 {
+            let start = match k % 3 {
+                0 => 0x80,
+                1 => 0x7FFF,
+                _ => 0x80 + r.below(0x7F80),
+            };
+            let tau = start * TAU_PER_UNIT_NS;
+            let integ_max = ((MAX_RATE_Q as i128) * (tau as i128) * (tau as i128)) >> Q;
+            let integ = match r.below(4) {
+                0 => 0,
+                1 => integ_max,
+                2 => -integ_max,
+                _ => (r.next() as i128 % (integ_max + 1)) * if r.below(2) == 0 { 1 } else { -1 },
+            };
+            let dt = r.next() as i32 as i64 >> r.below(31);
+            let h_raw = match r.below(4) {
+                0 => 0,
+                1 => r.below(1_000_000),
+                2 => r.below(1 << 40),
+                _ => r.next(),
+            };
+            assert_eq!(
+                rate_law(integ, dt, h_raw, tau),
+                rate_law_wide(integ, dt, h_raw, tau),
+                "integ {integ} dt {dt} h {h_raw} tau {tau}"
+            );
+        }
+    }
+
+    #[test]
+    fn speed_diff_matches_the_wide_form() {
+        let wide = |rate_q: i64, start: u16| -> u16 {
+            let start = start as i128;
+            let r = (rate_q as i128).abs();
+            let diff = if r == 0 {
+                0
+            } else {
+                let period = ONE_Q / (10 * r);
+                if period >= start {
+                    0
+                } else {
+                    (start - period).min(start - 0x7F)
+                }
+            };
+            let v = if rate_q < 0 { -diff } else { diff };
+            v as i16 as u16
+        };
+        let mut r = Rnd(0x8CB9_2BA7_2F3D_8DD7);
+        for k in 0..200_000 {
+            let rate = match k % 3 {
+                0 => r.below(2 * MAX_RATE_Q as u64 + 1) as i64 - MAX_RATE_Q,
+                1 => r.below(2001) as i64 - 1000,
+                _ => [0, 1, -1, MAX_RATE_Q, -MAX_RATE_Q][k % 5],
+            };
+            let start = 0x80 + r.below(0x7F80) as u16;
+            assert_eq!(
+                speed_diff(rate, start) as u16,
+                wide(rate, start),
+                "rate {rate} start {start}"
+            );
+        }
     }
 }

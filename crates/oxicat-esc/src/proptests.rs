@@ -201,6 +201,10 @@ enum Op {
     DlControl(u8, bool),
     /// ECAT write of port 0 receive time: arms the receive-time latch of every port.
     ArmLatch,
+    /// An access around the DC system time (0x0900 + offset): 0 FPWR, 1 FRMW of another
+    /// station (a write), 2 BWR, 4 FRMW of this one (a read), with a good FCS or not;
+    /// 3 a PDI write.
+    DcWrite(u16, Vec<u8>, u8, bool),
 }
 
 /// Station addresses of the `Foreign` frames: the ESC's station address (set up), its
@@ -226,6 +230,9 @@ fn arb_op() -> impl Strategy<Value = Op> {
             .prop_map(|(a, every, ok)| Op::Foreign(a, every, ok)),
         1 => (any::<u8>(), any::<bool>()).prop_map(|(l, a)| Op::DlControl(l, a)),
         1 => Just(Op::ArmLatch),
+        2 => (0x08u16..0x20, proptest::collection::vec(any::<u8>(), 1..12), 0u8..5,
+              proptest::bool::weighted(0.9))
+            .prop_map(|(a, d, c, ok)| Op::DcWrite(a, d, c, ok)),
     ]
 }
 
@@ -237,7 +244,9 @@ proptest! {
     /// and the general path leave identical frames, exit ports, memory, registers and
     /// events for random SM/FMMU configurations, two- and four-port ESCs, random logical
     /// frames, frames entering every port, dispatched frames of configured-address
-    /// datagrams, link and loop-control changes, armed receive-time latches and time. And
+    /// datagrams, link and loop-control changes, armed receive-time latches, writes and
+    /// FRMW reads around the DC system time (the system-time write path; in the DC unit
+    /// its fast paths against its general ones) and time. And
     /// while [`Esc::query_epoch`] stays the same, `next_event` and `irq_line` answer the
     /// same (the segment skips reading them then).
     #[test]
@@ -384,6 +393,23 @@ proptest! {
                 Op::Advance(dt) => {
                     t += dt;
                     prop_assert_eq!(a.advance(t), b.advance(t));
+                }
+                Op::DcWrite(off, d, c, ok) => {
+                    let ado = 0x0900 + off;
+                    if c == 3 {
+                        prop_assert_eq!(a.pdi_write(ado, &d), b.pdi_write(ado, &d));
+                    } else {
+                        let h = match c {
+                            0 => DatagramHeader::physical(Command::Fpwr, 0, STATIONS[0], ado, d.len() as u16),
+                            1 => DatagramHeader::physical(Command::Frmw, 0, STATIONS[2], ado, d.len() as u16),
+                            4 => DatagramHeader::physical(Command::Frmw, 0, STATIONS[0], ado, d.len() as u16),
+                            _ => DatagramHeader::physical(Command::Bwr, 0, 0, ado, d.len() as u16),
+                        };
+                        let mut f = frame(&[(h, &d)]);
+                        let mut g = f.clone();
+                        prop_assert_eq!(a.forward(0, &mut f, t, ok), b.forward(0, &mut g, t, ok));
+                        prop_assert_eq!(f, g);
+                    }
                 }
             }
             prop_assert_eq!(a.memory(), b.memory());

@@ -304,11 +304,15 @@ impl Esc {
     /// Reference switch for differential tests and benchmarks: with `false` every frame
     /// takes the general path (`forward_generic`: no fused LRW path, no pass-through
     /// shortcut for frames that only pass the ESC) and [`Esc::query_epoch`] answers
-    /// `None`, so a segment re-reads the ESC's next event and IRQ line after every hop.
+    /// `None`, so a segment re-reads the ESC's next event and IRQ line after every hop;
+    /// the system-time write (0x0910..0x0917) takes the general register path (and in
+    /// the crate's tests the DC unit its general paths too).
     /// The observable behaviour is the same either way; on by default.
     pub fn set_fast_paths(&mut self, on: bool) {
         self.memo.clear();
         self.fast_off = !on;
+        #[cfg(test)]
+        self.dc.set_slow(!on);
         self.rebuild_routes();
         self.rebuild_fused();
     }

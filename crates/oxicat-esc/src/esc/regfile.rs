@@ -276,6 +276,9 @@ impl Esc {
             self.store(cur, d, m);
             return c < self.mem.len();
         }
+        if c >= 0x0910 && full_end <= 0x0918 && !self.fast_off {
+            return self.system_time_write(side, c, d, m);
+        }
         let mut counted = false;
         if full_end > REG_END {
             let k = REG_END - c;
@@ -367,6 +370,46 @@ impl Esc {
             self.al_ctl_unread = true;
         }
         self.write_side_effects(side, c, e, old_al_ctl, &old_activate);
+        true
+    }
+
+    /// [`plain_write`](Self::plain_write) of bytes within the DC system time
+    /// 0x0910..0x0917 (the FRMW that distributes the reference time, every cycle): what
+    /// the general path does there, without its checks for the registers elsewhere (AL
+    /// control, SII, SyncManagers, the SYNC unit's owner, read-only bits: none of them
+    /// applies to these bytes) — the permissions, the good-FCS rule, the store and the
+    /// only side effect, the DC unit's.
+    fn system_time_write(&mut self, side: Side, c: usize, d: &[u8], m: Option<&[u8]>) -> bool {
+        let e = c + d.len();
+        let bit = if side == Side::Ecat { P_ECAT } else { P_PDI };
+        if !self.perm[c..e].iter().any(|&p| p & bit != 0) {
+            return false;
+        }
+        if side == Side::Ecat && !self.frame_ok {
+            return true;
+        }
+        for (k, a) in (c..e).enumerate() {
+            let p = self.perm[a];
+            if p & bit == 0 {
+                continue;
+            }
+            if p & P_CLEAR != 0 {
+                self.mem[a] = 0;
+                continue;
+            }
+            let bm = m.map_or(0xFF, |m| m[k]);
+            self.mem[a] = (self.mem[a] & !bm) | (d[k] & bm);
+        }
+        self.dc.set_sof0(self.sof0);
+        self.dc.after_write(
+            &mut self.mem[..REG_END],
+            c as u16,
+            (e - c) as u16,
+            self.now,
+            side == Side::Ecat,
+        );
+        self.gate_routes();
+        self.events_dirty = true;
         true
     }
 
