@@ -373,14 +373,15 @@ fn pdo_range(dir: Dir, index: u16) -> Result<(), SdoAbortCode> {
 }
 
 /// Walks the PDOs assigned in 0x1C12 (`Rx`) or 0x1C13 (`Tx`), checks every mapped entry
-/// and hands it to `sink` as a copy step with its bits; the capacity checks ([`MAX_ITEMS`]
-/// entries, [`MAX_PD_BYTES`], `cap` copy steps) included. Returns the process data bytes
-/// and the copy steps.
-fn walk<const N: usize>(
+/// and pushes it onto `m` (if given) as a copy step with its bits; the capacity checks
+/// ([`MAX_ITEMS`] entries, [`MAX_PD_BYTES`], `cap` copy steps) included. Returns the
+/// process data bytes and the copy steps. One function for checking and compiling (a
+/// closure per use made two copies of it in a board image, 490 B each).
+fn walk<const N: usize, const K: usize>(
     od: &Od<N>,
     dir: Dir,
     cap: usize,
-    mut sink: impl FnMut(Step, usize),
+    mut m: Option<&mut Mapping<K>>,
 ) -> Result<(usize, usize), SdoAbortCode> {
     let assign = match dir {
         Dir::Rx => 0x1C12,
@@ -423,7 +424,9 @@ fn walk<const N: usize>(
             }
             n += 1;
             bits += pe.bits as usize;
-            sink(s, pe.bits as usize);
+            if let Some(m) = m.as_deref_mut() {
+                m.push(s, pe.bits as usize);
+            }
         }
     }
     if bits.div_ceil(8) > MAX_PD_BYTES {
@@ -434,19 +437,21 @@ fn walk<const N: usize>(
 
 /// Checks the mapping of `dir` as [`compile_into`] does for a mapping of `cap` copy steps
 /// and returns its process data bytes and copy steps, without building it (nothing stored).
-pub(crate) fn check<const N: usize>(
+/// `K`: the capacity of the stack's mappings, so that checking and compiling are one
+/// function ([`walk`]) in the image.
+pub(crate) fn check<const N: usize, const K: usize>(
     od: &Od<N>,
     dir: Dir,
     cap: usize,
 ) -> Result<(usize, usize), SdoAbortCode> {
-    walk(od, dir, cap, |_, _| {})
+    walk::<N, K>(od, dir, cap, None)
 }
 
 /// The copy steps the current mapping of `dir` (0x1C12/0x1C13 and the mapping objects of
 /// `od`) compiles to, checked as PREOP → SAFEOP checks it but without a capacity of steps:
 /// what a stack's `K` must hold for it.
 pub fn steps<const N: usize>(od: &Od<N>, dir: Dir) -> Result<usize, SdoAbortCode> {
-    check(od, dir, usize::MAX).map(|(_, steps)| steps)
+    check::<N, 0>(od, dir, usize::MAX).map(|(_, steps)| steps)
 }
 
 /// Compiles the mapping of `dir` into `m` (in place: no [`Mapping`] on the stack). On an
@@ -457,7 +462,7 @@ pub(crate) fn compile_into<const N: usize, const K: usize>(
     m: &mut Mapping<K>,
 ) -> Result<(), SdoAbortCode> {
     m.clear();
-    walk(od, dir, K, |s, bits| m.push(s, bits)).map(|_| ())
+    walk(od, dir, K, Some(m)).map(|_| ())
 }
 
 /// Copy steps per direction enough for every mapping `def` can run: the `K` a board image
