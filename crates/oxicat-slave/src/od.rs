@@ -1136,7 +1136,9 @@ pub(crate) struct Finder<'a, const N: usize> {
 }
 
 impl<const N: usize> Finder<'_, N> {
-    /// Object `index`, as [`Od::find`] gives it.
+    /// Object `index`, as [`Od::find`] gives it. Not inlined in a board image: it is
+    /// [`Od::find`] too.
+    #[cfg_attr(target_os = "none", inline(never))]
     pub(crate) fn find(&mut self, index: u16) -> Option<Obj> {
         match self.od.locate(index)? {
             Located::Comm(o) => Some(o),
@@ -1730,10 +1732,9 @@ impl<const N: usize> Od<N> {
 
     /// Finds an object by index.
     pub(crate) fn find(&self, index: u16) -> Option<Obj> {
-        match self.locate(index)? {
-            Located::Comm(o) => Some(o),
-            Located::App(i) => Some(self.app_obj(i, self.app_base(i))),
-        }
+        // A fresh finder walks the application objects from the first: the image offset
+        // `app_base` gives, with one copy of the lookup in a board image.
+        self.finder().find(index)
     }
 
     /// Where object `index` is: a communication object whole, an application object by its
