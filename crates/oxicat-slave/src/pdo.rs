@@ -72,6 +72,25 @@ impl Op {
     fn img(&self) -> usize {
         (self.img & OP_POS) as usize
     }
+    /// Copies the step's bytes or bits from `src` to `dst`: `to_buf`, from the image
+    /// `src` into the process data buffer `dst` ([`Mapping::pack`]); else from the buffer
+    /// `src` into the image `dst` ([`Mapping::unpack`]). Out-of-range positions copy
+    /// nothing. One copy loop for both directions in a board image.
+    #[cfg_attr(target_os = "none", inline(never))]
+    fn copy(&self, src: &[u8], dst: &mut [u8], to_buf: bool) {
+        let (pd, img, len) = (self.pd as usize, self.img(), self.len as usize);
+        let (from, to) = if to_buf { (img, pd) } else { (pd, img) };
+        if self.aligned() {
+            if let (Some(d), Some(s)) = (dst.get_mut(to..to + len), src.get(from..from + len)) {
+                d.copy_from_slice(s);
+            }
+        } else {
+            for k in 0..len {
+                set_bit(dst, to + k, get_bit(src, from + k));
+            }
+        }
+    }
+
     /// Image bytes `[start, end)` the step touches.
     fn img_bytes(&self) -> (usize, usize) {
         if self.aligned() {
@@ -144,16 +163,7 @@ impl<const K: usize> Mapping<K> {
     pub(crate) fn pack<const N: usize>(&self, od: &Od<N>, buf: &mut [u8]) {
         for op in self.ops() {
             let src = if op.app() { &od.app[..] } else { &od.comm[..] };
-            let (pd, img, len) = (op.pd as usize, op.img(), op.len as usize);
-            if op.aligned() {
-                if let (Some(d), Some(s)) = (buf.get_mut(pd..pd + len), src.get(img..img + len)) {
-                    d.copy_from_slice(s);
-                }
-            } else {
-                for k in 0..len {
-                    set_bit(buf, pd + k, get_bit(src, img + k));
-                }
-            }
+            op.copy(src, buf, true);
         }
     }
 
@@ -165,16 +175,7 @@ impl<const K: usize> Mapping<K> {
             } else {
                 &mut od.comm[..]
             };
-            let (pd, img, len) = (op.pd as usize, op.img(), op.len as usize);
-            if op.aligned() {
-                if let (Some(d), Some(s)) = (dst.get_mut(img..img + len), buf.get(pd..pd + len)) {
-                    d.copy_from_slice(s);
-                }
-            } else {
-                for k in 0..len {
-                    set_bit(dst, img + k, get_bit(buf, pd + k));
-                }
-            }
+            op.copy(buf, dst, false);
         }
     }
 
