@@ -1,6 +1,6 @@
 //! The memory functions of oxicat's Cortex-M board images, small: `memcpy`, `memmove`,
 //! `memset`, `memcmp` / `bcmp` and their ARM EABI forms (`__aeabi_memcpy{,4,8}`,
-//! `__aeabi_memmove{,4,8}`, `__aeabi_memset{,4,8}`, `__aeabi_memclr{,4,8}`), 146 B of Thumb-2
+//! `__aeabi_memmove{,4,8}`, `__aeabi_memset{,4,8}`, `__aeabi_memclr{,4,8}`), 178 B of Thumb-2
 //! in all.
 //!
 //! The compiler calls these for slice copies, `fill` and array moves. `compiler_builtins`
@@ -10,12 +10,13 @@
 //! 156-208 B copy: 1.2-1.6 KB of an image's flash. The strong definitions here replace
 //! them at link time (issue 18 item 7; root README, Firmware footprint).
 //!
-//! What they do: a copy or fill moves whole words while both addresses are word-aligned
-//! (what the stack's buffers and images are) and bytes otherwise; `memmove` copies
-//! backwards, a byte at a time, only when the destination overlaps the source from above;
-//! `memcmp` compares bytes and returns the difference of the first pair that differs. The
-//! stack's copies are a mailbox frame at most (128-256 B): the byte loop of a misaligned
-//! copy takes 4 cycles a byte on a Cortex-M4.
+//! What they do: a copy or fill moves whole words from the destination's first word
+//! boundary on when source and destination are equally aligned (a fill always is), bytes
+//! otherwise; `memmove` copies backwards, a byte at a time, only when the destination
+//! overlaps the source from above; `memcmp` compares bytes and returns the difference of
+//! the first pair that differs. The stack's copies are a mailbox frame at most (128-256
+//! B): the byte loop of a copy between differently aligned buffers takes 4 cycles a byte
+//! on a Cortex-M4.
 //!
 //! An image links them by naming the crate (`use oxicat_fw_mem as _;`); the board images
 //! get them through `oxicat-board-support`.
@@ -63,10 +64,18 @@ mod asm {
 memcpy:
     .thumb_func
 __aeabi_memcpy:
-    orr     r3, r0, r1
-    lsls    r3, r3, #30             @ both word-aligned: Z
+    eor     r3, r0, r1
+    lsls    r3, r3, #30             @ dst and src equally aligned: Z
     mov     r12, r0
     bne     .Lcpy_bytes
+.Lcpy_head:                         @ bytes up to dst's next word boundary
+    lsls.w  r3, r12, #30
+    beq     .Lcpy_words
+    subs    r2, #1
+    blo     .Lret
+    ldrb    r3, [r1], #1
+    strb    r3, [r12], #1
+    b       .Lcpy_head
     @ __aeabi_memcpy4/8: dst and src word-aligned.
     .thumb_func
 __aeabi_memcpy4:
@@ -136,8 +145,13 @@ memset:
     uxtb    r1, r1
     orr     r1, r1, r1, lsl #8
     orr     r1, r1, r1, lsl #16
-    lsls    r3, r0, #30             @ dst word-aligned: Z
-    bne     .Lset_bytes
+.Lset_head:                         @ bytes up to dst's next word boundary
+    lsls.w  r3, r12, #30
+    beq     .Lset_words
+    subs    r2, #1
+    blo     .Lret
+    strb    r1, [r12], #1
+    b       .Lset_head
 .Lset_words:
     subs    r2, #4
     blo     .Lset_words_end
