@@ -410,9 +410,18 @@ impl EntryDef {
     }
 
     /// Bytes this entry occupies in the image. Not inlined in a board image: every
-    /// dictionary walk needs it (188 B of the demo image's flash as inlined copies).
+    /// dictionary walk needs it (184 B of the demo image's flash as inlined copies); the
+    /// two walks every lookup by index makes ([`ObjectDef::storage_len`] over the objects
+    /// before it, [`Obj::entry`] over its entries) inline it ([`EntryDef::len_inline`]).
     #[cfg_attr(target_os = "none", inline(never))]
     pub const fn storage_len(&self) -> usize {
+        self.len_inline()
+    }
+
+    /// [`EntryDef::storage_len`], inlined: for the walks on the path of a lookup by index
+    /// (an application reads and writes its entries so, some on every cycle).
+    #[inline(always)]
+    pub(crate) const fn len_inline(&self) -> usize {
         if self.bits < 8 {
             1
         } else {
@@ -487,7 +496,7 @@ impl ObjectDef {
         let mut n = 0;
         let mut i = 0;
         while i < self.entries.len() {
-            n += self.entries[i].storage_len();
+            n += self.entries[i].len_inline();
             i += 1;
         }
         n
@@ -1093,7 +1102,7 @@ impl Obj {
             if s == sub {
                 return Some((i, e, off));
             }
-            off += e.storage_len();
+            off += e.len_inline();
         }
         None
     }
