@@ -872,9 +872,8 @@ impl<P: Pdi, const N: usize, const M: usize, const K: usize> Slave<P, N, M, K> {
             at += len;
             vi |= 0x10;
         }
-        let limits = value_limits(e);
-        for (bit, v) in [(0x20u8, limits.map(|l| l.0)), (0x40, limits.map(|l| l.1))] {
-            if let Some(v) = v {
+        if let Some((min, max)) = value_limits(e) {
+            for (bit, v) in [(0x20u8, min), (0x40, max)] {
                 if req & bit != 0 && at + len <= d.len() {
                     let b = v.to_le_bytes();
                     let n = len.min(8);
