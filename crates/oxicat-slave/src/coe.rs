@@ -65,28 +65,52 @@ fn set_bit(b: &mut [u8], i: usize, v: bool) {
     }
 }
 
-/// Walks the complete-access stream layout of `o` from subindex `start`: calls `f(subindex,
-/// object-relative image offset, stream bit position, value bits)`; returns the stream bits.
-fn ca_layout(o: &Obj, start: u8, mut f: impl FnMut(u8, usize, usize, usize)) -> usize {
-    let mut pos = 0usize;
-    let mut off = 0usize;
+/// Walks the complete-access stream layout of `o` from subindex `start` (subindex 0 as 8
+/// bits in a 16-bit slot, a whole-byte entry from the next byte boundary) and copies each
+/// entry's bits: `to_stream`, from the object's image bytes `src` into `dst`, the window of
+/// the stream that starts at stream byte `w0`; else from the stream `src` into the object's
+/// image bytes `dst`. An empty `dst` copies nothing. Returns the stream bits and whether
+/// subindex 0 and any other subindex are in the stream. One function for the layout and both
+/// copies (a closure per use made a copy of the walk for each of its three callers).
+fn ca_copy(
+    o: &Obj,
+    start: u8,
+    src: &[u8],
+    dst: &mut [u8],
+    to_stream: bool,
+    w0: usize,
+) -> (usize, bool, bool) {
+    let (mut pos, mut off) = (0usize, 0usize);
+    let (mut sub0, mut high) = (false, false);
     for (sub, e) in o.entries.iter() {
-        let len = e.storage_len();
         if sub >= start {
-            if sub == 0 {
-                f(sub, off, pos, 8);
-                pos += 16;
+            let bits = if sub == 0 {
+                sub0 = true;
+                8
             } else {
+                high = true;
                 if e.bits % 8 == 0 {
                     pos = pos.div_ceil(8) * 8;
                 }
-                f(sub, off, pos, e.bits as usize);
-                pos += e.bits as usize;
+                e.bits as usize
+            };
+            if !dst.is_empty() {
+                for k in 0..bits {
+                    // Stream bit `pos + k`, image bit `off * 8 + k`; a stream bit before
+                    // the window wraps to an index `set_bit` ignores.
+                    let (from, to) = if to_stream {
+                        (off * 8 + k, (pos + k).wrapping_sub(w0 * 8))
+                    } else {
+                        (pos + k, off * 8 + k)
+                    };
+                    set_bit(dst, to, get_bit(src, from));
+                }
             }
+            pos += if sub == 0 { 16 } else { bits };
         }
-        off += len;
+        off += e.storage_len();
     }
-    pos
+    (pos, sub0, high)
 }
 
 fn size_abort(size: usize, needed: usize) -> Option<Abort> {
@@ -285,7 +309,7 @@ impl<P: Pdi, const N: usize, const M: usize, const K: usize> Slave<P, N, M, K> {
         for (_, e) in o.entries.iter().filter(|&(s, _)| s >= sub) {
             check(e)?;
         }
-        let bits = ca_layout(&o, sub, |_, _, _, _| {});
+        let (bits, _, _) = ca_copy(&o, sub, &[], &mut [], false, 0);
         Ok((o, bits.div_ceil(8)))
     }
 
@@ -302,16 +326,7 @@ impl<P: Pdi, const N: usize, const M: usize, const K: usize> Slave<P, N, M, K> {
         }
         let obj_len: usize = o.entries.iter().map(|(_, e)| e.storage_len()).sum();
         let img = self.od.bytes_of(o, o.base, obj_len);
-        let w0 = off * 8;
-        let w1 = (off + out.len()) * 8;
-        ca_layout(o, sub, |_, eoff, pos, bits| {
-            for k in 0..bits {
-                let p = pos + k;
-                if p >= w0 && p < w1 {
-                    set_bit(out, p - w0, get_bit(img, eoff * 8 + k));
-                }
-            }
-        });
+        ca_copy(o, sub, img, out, true, off);
     }
 
     #[allow(clippy::too_many_arguments)]
@@ -484,19 +499,10 @@ impl<P: Pdi, const N: usize, const M: usize, const K: usize> Slave<P, N, M, K> {
         // Work on a copy of the object's values, validate, then store.
         let mut tmp = [0u8; M];
         tmp[..obj_len].copy_from_slice(self.od.bytes_of(o, o.base, obj_len));
-        let mut written_sub0 = false;
-        let mut written_high = false;
+        let written_sub0;
+        let written_high;
         if ca {
-            ca_layout(o, sub, |s, eoff, pos, bits| {
-                if s == 0 {
-                    written_sub0 = true;
-                } else {
-                    written_high = true;
-                }
-                for k in 0..bits {
-                    set_bit(&mut tmp, eoff * 8 + k, get_bit(data, pos + k));
-                }
-            });
+            (_, written_sub0, written_high) = ca_copy(o, sub, data, &mut tmp[..obj_len], false, 0);
         } else {
             let (_, e, off) = o.entry(sub).ok_or(Abort::SubindexDoesNotExist)?;
             let r = off - o.base;
@@ -866,9 +872,8 @@ impl<P: Pdi, const N: usize, const M: usize, const K: usize> Slave<P, N, M, K> {
             at += len;
             vi |= 0x10;
         }
-        let limits = value_limits(e);
-        for (bit, v) in [(0x20u8, limits.map(|l| l.0)), (0x40, limits.map(|l| l.1))] {
-            if let Some(v) = v {
+        if let Some((min, max)) = value_limits(e) {
+            for (bit, v) in [(0x20u8, min), (0x40, max)] {
                 if req & bit != 0 && at + len <= d.len() {
                     let b = v.to_le_bytes();
                     let n = len.min(8);

@@ -409,8 +409,19 @@ impl EntryDef {
         self.limits.scale
     }
 
-    /// Bytes this entry occupies in the image.
+    /// Bytes this entry occupies in the image. Not inlined in a board image: every
+    /// dictionary walk needs it (184 B of the demo image's flash as inlined copies); the
+    /// two walks every lookup by index makes ([`ObjectDef::storage_len`] over the objects
+    /// before it, [`Obj::entry`] over its entries) inline it ([`EntryDef::len_inline`]).
+    #[cfg_attr(target_os = "none", inline(never))]
     pub const fn storage_len(&self) -> usize {
+        self.len_inline()
+    }
+
+    /// [`EntryDef::storage_len`], inlined: for the walks on the path of a lookup by index
+    /// (an application reads and writes its entries so, some on every cycle).
+    #[inline(always)]
+    pub(crate) const fn len_inline(&self) -> usize {
         if self.bits < 8 {
             1
         } else {
@@ -485,7 +496,7 @@ impl ObjectDef {
         let mut n = 0;
         let mut i = 0;
         while i < self.entries.len() {
-            n += self.entries[i].storage_len();
+            n += self.entries[i].len_inline();
             i += 1;
         }
         n
@@ -1091,7 +1102,7 @@ impl Obj {
             if s == sub {
                 return Some((i, e, off));
             }
-            off += e.storage_len();
+            off += e.len_inline();
         }
         None
     }
@@ -1134,7 +1145,9 @@ pub(crate) struct Finder<'a, const N: usize> {
 }
 
 impl<const N: usize> Finder<'_, N> {
-    /// Object `index`, as [`Od::find`] gives it.
+    /// Object `index`, as [`Od::find`] gives it. Not inlined in a board image: it is
+    /// [`Od::find`] too.
+    #[cfg_attr(target_os = "none", inline(never))]
     pub(crate) fn find(&mut self, index: u16) -> Option<Obj> {
         match self.od.locate(index)? {
             Located::Comm(o) => Some(o),
@@ -1728,10 +1741,9 @@ impl<const N: usize> Od<N> {
 
     /// Finds an object by index.
     pub(crate) fn find(&self, index: u16) -> Option<Obj> {
-        match self.locate(index)? {
-            Located::Comm(o) => Some(o),
-            Located::App(i) => Some(self.app_obj(i, self.app_base(i))),
-        }
+        // A fresh finder walks the application objects from the first: the image offset
+        // `app_base` gives, with one copy of the lookup in a board image.
+        self.finder().find(index)
     }
 
     /// Where object `index` is: a communication object whole, an application object by its

@@ -72,6 +72,25 @@ impl Op {
     fn img(&self) -> usize {
         (self.img & OP_POS) as usize
     }
+    /// Copies the step's bytes or bits from `src` to `dst`: `to_buf`, from the image
+    /// `src` into the process data buffer `dst` ([`Mapping::pack`]); else from the buffer
+    /// `src` into the image `dst` ([`Mapping::unpack`]). Out-of-range positions copy
+    /// nothing. One copy loop for both directions in a board image.
+    #[cfg_attr(target_os = "none", inline(never))]
+    fn copy(&self, src: &[u8], dst: &mut [u8], to_buf: bool) {
+        let (pd, img, len) = (self.pd as usize, self.img(), self.len as usize);
+        let (from, to) = if to_buf { (img, pd) } else { (pd, img) };
+        if self.aligned() {
+            if let (Some(d), Some(s)) = (dst.get_mut(to..to + len), src.get(from..from + len)) {
+                d.copy_from_slice(s);
+            }
+        } else {
+            for k in 0..len {
+                set_bit(dst, to + k, get_bit(src, from + k));
+            }
+        }
+    }
+
     /// Image bytes `[start, end)` the step touches.
     fn img_bytes(&self) -> (usize, usize) {
         if self.aligned() {
@@ -144,16 +163,7 @@ impl<const K: usize> Mapping<K> {
     pub(crate) fn pack<const N: usize>(&self, od: &Od<N>, buf: &mut [u8]) {
         for op in self.ops() {
             let src = if op.app() { &od.app[..] } else { &od.comm[..] };
-            let (pd, img, len) = (op.pd as usize, op.img(), op.len as usize);
-            if op.aligned() {
-                if let (Some(d), Some(s)) = (buf.get_mut(pd..pd + len), src.get(img..img + len)) {
-                    d.copy_from_slice(s);
-                }
-            } else {
-                for k in 0..len {
-                    set_bit(buf, pd + k, get_bit(src, img + k));
-                }
-            }
+            op.copy(src, buf, true);
         }
     }
 
@@ -165,16 +175,7 @@ impl<const K: usize> Mapping<K> {
             } else {
                 &mut od.comm[..]
             };
-            let (pd, img, len) = (op.pd as usize, op.img(), op.len as usize);
-            if op.aligned() {
-                if let (Some(d), Some(s)) = (dst.get_mut(img..img + len), buf.get(pd..pd + len)) {
-                    d.copy_from_slice(s);
-                }
-            } else {
-                for k in 0..len {
-                    set_bit(dst, img + k, get_bit(buf, pd + k));
-                }
-            }
+            op.copy(buf, dst, false);
         }
     }
 
@@ -373,14 +374,15 @@ fn pdo_range(dir: Dir, index: u16) -> Result<(), SdoAbortCode> {
 }
 
 /// Walks the PDOs assigned in 0x1C12 (`Rx`) or 0x1C13 (`Tx`), checks every mapped entry
-/// and hands it to `sink` as a copy step with its bits; the capacity checks ([`MAX_ITEMS`]
-/// entries, [`MAX_PD_BYTES`], `cap` copy steps) included. Returns the process data bytes
-/// and the copy steps.
-fn walk<const N: usize>(
+/// and pushes it onto `m` (if given) as a copy step with its bits; the capacity checks
+/// ([`MAX_ITEMS`] entries, [`MAX_PD_BYTES`], `cap` copy steps) included. Returns the
+/// process data bytes and the copy steps. One function for checking and compiling (a
+/// closure per use made two copies of it in a board image, 490 B each).
+fn walk<const N: usize, const K: usize>(
     od: &Od<N>,
     dir: Dir,
     cap: usize,
-    mut sink: impl FnMut(Step, usize),
+    mut m: Option<&mut Mapping<K>>,
 ) -> Result<(usize, usize), SdoAbortCode> {
     let assign = match dir {
         Dir::Rx => 0x1C12,
@@ -423,7 +425,9 @@ fn walk<const N: usize>(
             }
             n += 1;
             bits += pe.bits as usize;
-            sink(s, pe.bits as usize);
+            if let Some(m) = m.as_deref_mut() {
+                m.push(s, pe.bits as usize);
+            }
         }
     }
     if bits.div_ceil(8) > MAX_PD_BYTES {
@@ -434,19 +438,21 @@ fn walk<const N: usize>(
 
 /// Checks the mapping of `dir` as [`compile_into`] does for a mapping of `cap` copy steps
 /// and returns its process data bytes and copy steps, without building it (nothing stored).
-pub(crate) fn check<const N: usize>(
+/// `K`: the capacity of the stack's mappings, so that checking and compiling are one
+/// function ([`walk`]) in the image.
+pub(crate) fn check<const N: usize, const K: usize>(
     od: &Od<N>,
     dir: Dir,
     cap: usize,
 ) -> Result<(usize, usize), SdoAbortCode> {
-    walk(od, dir, cap, |_, _| {})
+    walk::<N, K>(od, dir, cap, None)
 }
 
 /// The copy steps the current mapping of `dir` (0x1C12/0x1C13 and the mapping objects of
 /// `od`) compiles to, checked as PREOP → SAFEOP checks it but without a capacity of steps:
 /// what a stack's `K` must hold for it.
 pub fn steps<const N: usize>(od: &Od<N>, dir: Dir) -> Result<usize, SdoAbortCode> {
-    check(od, dir, usize::MAX).map(|(_, steps)| steps)
+    check::<N, 0>(od, dir, usize::MAX).map(|(_, steps)| steps)
 }
 
 /// Compiles the mapping of `dir` into `m` (in place: no [`Mapping`] on the stack). On an
@@ -457,7 +463,7 @@ pub(crate) fn compile_into<const N: usize, const K: usize>(
     m: &mut Mapping<K>,
 ) -> Result<(), SdoAbortCode> {
     m.clear();
-    walk(od, dir, K, |s, bits| m.push(s, bits)).map(|_| ())
+    walk(od, dir, K, Some(m)).map(|_| ())
 }
 
 /// Copy steps per direction enough for every mapping `def` can run: the `K` a board image

@@ -409,7 +409,8 @@ impl<P: Pdi, const N: usize, const M: usize, const K: usize> Slave<P, N, M, K> {
         // The default mappings must compile into `K` steps (a mapping that does not check
         // at all is refused as before, when the master requests SAFEOP).
         for (dir, assign) in [(Dir::Rx, 0x1C12), (Dir::Tx, 0x1C13)] {
-            if let Ok(needed) = pdo::steps(&self.od, dir) {
+            // `pdo::steps`, as the one mapping walk of the image.
+            if let Ok((_, needed)) = pdo::check::<N, K>(&self.od, dir, usize::MAX) {
                 if needed > K {
                     return Err(InitError::MappingCapacity {
                         assign,
@@ -1034,11 +1035,11 @@ impl<P: Pdi, const N: usize, const M: usize, const K: usize> Slave<P, N, M, K> {
         // Checked first and compiled into the stack's own mappings only when the transition
         // is taken: a refused one leaves the active mappings as they were, and no mapping
         // is built on the stack.
-        let rx = match pdo::check(&self.od, Dir::Rx, K) {
+        let rx = match pdo::check::<N, K>(&self.od, Dir::Rx, K) {
             Ok((bytes, _)) => bytes,
             Err(_) => return Ok(Err(AlStatusCode::INVALID_OUTPUT_MAPPING)),
         };
-        let tx = match pdo::check(&self.od, Dir::Tx, K) {
+        let tx = match pdo::check::<N, K>(&self.od, Dir::Tx, K) {
             Ok((bytes, _)) => bytes,
             Err(_) => return Ok(Err(AlStatusCode::INVALID_INPUT_MAPPING)),
         };

@@ -231,24 +231,26 @@ impl FoeErrorCode {
         }
     }
 
-    /// The error code.
+    /// The error code: a standard one is 0x8000 + its position (computed, not a jump table
+    /// with a constant per code).
     pub const fn code(self) -> u32 {
-        match self {
-            Self::NotDefined => 0x8000,
-            Self::NotFound => 0x8001,
-            Self::AccessDenied => 0x8002,
-            Self::DiskFull => 0x8003,
-            Self::Illegal => 0x8004,
-            Self::PacketNumberWrong => 0x8005,
-            Self::AlreadyExists => 0x8006,
-            Self::NoUser => 0x8007,
-            Self::BootstrapOnly => 0x8008,
-            Self::NotBootstrap => 0x8009,
-            Self::NoRights => 0x800A,
-            Self::ProgramError => 0x800B,
-            Self::ChecksumError => 0x800C,
-            Self::Other(o) => o,
-        }
+        0x8000
+            + match self {
+                Self::NotDefined => 0x0,
+                Self::NotFound => 0x1,
+                Self::AccessDenied => 0x2,
+                Self::DiskFull => 0x3,
+                Self::Illegal => 0x4,
+                Self::PacketNumberWrong => 0x5,
+                Self::AlreadyExists => 0x6,
+                Self::NoUser => 0x7,
+                Self::BootstrapOnly => 0x8,
+                Self::NotBootstrap => 0x9,
+                Self::NoRights => 0xA,
+                Self::ProgramError => 0xB,
+                Self::ChecksumError => 0xC,
+                Self::Other(o) => return o,
+            }
     }
 
     /// The standard description.

@@ -237,18 +237,19 @@ impl MailboxErrorDetail {
         }
     }
 
-    /// The detail code.
+    /// The detail code: a named detail's is its position + 1 (computed: a match with a
+    /// constant per detail is a jump table on a Cortex-M).
     pub const fn code(self) -> u16 {
-        match self {
-            Self::Syntax => 1,
-            Self::UnsupportedProtocol => 2,
-            Self::InvalidChannel => 3,
-            Self::ServiceNotSupported => 4,
-            Self::InvalidHeader => 5,
-            Self::SizeTooShort => 6,
-            Self::NoMoreMemory => 7,
-            Self::InvalidSize => 8,
-            Self::Other(o) => o,
+        1 + match self {
+            Self::Syntax => 0,
+            Self::UnsupportedProtocol => 1,
+            Self::InvalidChannel => 2,
+            Self::ServiceNotSupported => 3,
+            Self::InvalidHeader => 4,
+            Self::SizeTooShort => 5,
+            Self::NoMoreMemory => 6,
+            Self::InvalidSize => 7,
+            Self::Other(o) => return o,
         }
     }
 

@@ -15,6 +15,9 @@
 
 #![no_std]
 
+// The images' memcpy / memset / memcmp (the crate's README): linked by naming it.
+use oxicat_fw_mem as _;
+
 use core::cell::UnsafeCell;
 use core::mem::MaybeUninit;
 use core::sync::atomic::{compiler_fence, Ordering};

@@ -25,6 +25,7 @@ use core::hint::black_box;
 
 use cortex_m_rt::entry;
 use oxicat_devices::demo::{self, Buttons, Demo, Leds};
+use oxicat_fw_mem as _;
 use oxicat_slave::foe::{FirmwareStore, FirmwareUpdate, StoreError, UpdateConfig, WithFoe};
 use oxicat_slave::{CheckedDef, DeviceDef, IrqLines, Pdi, Slave, SlaveSlot};
 use panic_halt as _;
