@@ -226,3 +226,65 @@ fn a_virtual_segment_runs_the_same_every_time() {
     assert_eq!(ta, tb, "the same virtual time at the end");
     assert!(a == b, "the same inputs and working counter every cycle");
 }
+
+#[test]
+fn the_frames_of_a_cycle_are_on_the_line_together() {
+    // demo:40's process image (1,840 B) takes two LRWs; the lean exchange sends them and
+    // its BRD together, and the in-process transport hands them to the segment as one
+    // train: the second frame leaves the master before the first is back.
+    let seg = oxicat::master_cmd::build_sim("demo:40").unwrap();
+    let cap = oxicat_sim::capture::MemoryCapture::new();
+    let seg2 = seg.clone();
+    let frames = std::thread::Builder::new()
+        .stack_size(64 << 20)
+        .spawn(move || {
+            let mut m = Master::open(Link::Sim(seg2.clone())).unwrap();
+            m.set_exchange(Exchange::Lean);
+            let mut armed = false;
+            m.run_cyclic(CycleOptions::default(), |io| {
+                if !armed && io.cycle >= 10 {
+                    seg2.lock()
+                        .unwrap()
+                        .set_capture(Some(Box::new(cap.clone())));
+                    armed = true;
+                }
+                Ok(if io.cycle + 1 >= 20 {
+                    Flow::Stop
+                } else {
+                    Flow::Continue
+                })
+            })
+            .unwrap();
+            cap.frames()
+        })
+        .unwrap()
+        .join()
+        .unwrap();
+    assert!(frames.len() > 10, "{} frames captured", frames.len());
+    use oxicat_sim::capture::Direction;
+    // A request right after a request: on the line together.
+    let together = frames
+        .windows(2)
+        .filter(|w| w[0].dir == Direction::ToSegment && w[1].dir == Direction::ToSegment)
+        .count();
+    assert!(
+        together >= 9,
+        "{together} requests sent behind another in 10 cycles"
+    );
+    // Each next one a wire time or more after the one before, before that one came back.
+    let mut last_sent: Option<(u64, usize)> = None;
+    for f in &frames {
+        if f.dir == Direction::ToSegment {
+            if let Some((t, len)) = last_sent {
+                assert!(
+                    f.t_ns
+                        >= t + oxicat_sim::segment::Segment::<oxicat_esc::Esc>::wire_time_ns(len)
+                );
+            }
+            last_sent = Some((f.t_ns, f.data.len()));
+        } else {
+            last_sent = None;
+        }
+    }
+    drop(seg);
+}
