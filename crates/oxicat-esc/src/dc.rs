@@ -109,30 +109,21 @@ fn owned(a: usize) -> bool {
     OWNED.iter().any(|&(lo, hi)| (lo..=hi).contains(&a))
 }
 
-/// `floor(t · drift_ppt / 10^12)`, exactly, without a 128-bit division (this runs for every
-/// evaluation of the local clock). With `t = a·10^12 + b` and `drift = h·10^6 + l`
-/// (`0 ≤ b < 10^12`, `0 ≤ l < 10^6`, |h| ≤ 10^4 since |drift| ≤ 10^10):
-/// `t·drift / 10^12 = a·drift + (b·h·10^6 + b·l) / 10^12`, and by nested flooring
-/// `floor((x·10^6 + y) / 10^12) = floor((x + floor(y / 10^6)) / 10^6)` for integer `x`.
-/// Every product fits in 64 bits.
+/// `floor(t · drift_ppt / 10^12)`, exactly, without a 128-bit division: the quotient of
+/// [`drift_split`].
 #[inline]
 fn drift_ns(t: u64, drift_ppt: i64) -> i64 {
-    const E6: i64 = 1_000_000;
-    const E12: u64 = 1_000_000_000_000;
-    debug_assert!(drift_ppt.abs() <= MAX_DRIFT_PPT);
-    let a = (t / E12) as i64;
-    let b = (t % E12) as i64;
-    let h = drift_ppt.div_euclid(E6);
-    let l = drift_ppt.rem_euclid(E6);
-    let y = ((b as u64 * l as u64) / E6 as u64) as i64;
-    a * drift_ppt + (b * h + y).div_euclid(E6)
+    drift_split(t, drift_ppt).0
 }
 
 /// `t · drift_ppt` split as `q · 10^12 + r` with `0 ≤ r < 10^12`: `q` is
 /// [`drift_ns`]`(t, drift_ppt)`, `r` what the clock's 64-bit evaluation relative to an
-/// anchor needs ([`Dc::local_rel`]). The same nested flooring as `drift_ns`, keeping the
+/// anchor needs ([`Dc::local_rel`]). With `t = a·10^12 + b` and `drift = h·10^6 + l`
+/// (`0 ≤ b < 10^12`, `0 ≤ l < 10^6`, |h| ≤ 10^4 since |drift| ≤ 10^10):
+/// `t·drift = a·drift·10^12 + b·h·10^6 + b·l`, and by nested flooring, keeping the
 /// remainders: with `z = b·h + floor(b·l / 10^6) = w·10^6 + w_r` and `b·l mod 10^6 = y_r`,
-/// `t·drift = (a·drift + w)·10^12 + w_r·10^6 + y_r`.
+/// `t·drift = (a·drift + w)·10^12 + w_r·10^6 + y_r`. Every product fits in 64 bits.
+#[inline]
 fn drift_split(t: u64, drift_ppt: i64) -> (i64, i64) {
     const E6: i64 = 1_000_000;
     const E12: u64 = 1_000_000_000_000;
