@@ -35,6 +35,14 @@ pub trait FramePort {
         timeout: Duration,
     ) -> Result<Option<Self::Peer>, NetError>;
 
+    /// The next EtherCAT frame if one is already waiting, without waiting for one;
+    /// `Ok(None)` when none is, or when the port cannot look without waiting (then
+    /// [`serve`] answers each frame before it reads the next). The default is
+    /// [`recv`](Self::recv) with a zero timeout, for ports that honour it.
+    fn recv_waiting(&mut self, buf: &mut Vec<u8>) -> Result<Option<Self::Peer>, NetError> {
+        self.recv(buf, Duration::ZERO)
+    }
+
     /// Sends the returned Ethernet `frame` back to `peer`.
     fn send(&mut self, frame: &[u8], peer: &Self::Peer) -> Result<(), NetError>;
 
@@ -136,7 +144,7 @@ pub fn serve<P: FramePort, E: SegmentEsc>(
             if bufs.len() == peers.len() {
                 bufs.push(Vec::with_capacity(2048));
             }
-            match port.recv(&mut bufs[peers.len()], Duration::ZERO)? {
+            match port.recv_waiting(&mut bufs[peers.len()])? {
                 Some(p) => peers.push(p),
                 None => break,
             }
@@ -352,6 +360,69 @@ mod tests {
         assert!(
             v < 2 * wire + trip + 10,
             "{v} ns: the frames went one after the other"
+        );
+    }
+
+    #[test]
+    fn a_port_that_cannot_look_without_waiting_gets_each_reply_first() {
+        // Like the raw socket's port: every `recv` may wait its read timeout, whatever it
+        // is asked, so a frame must be answered before the next `recv`.
+        struct Waits {
+            q: Queue,
+            owed: usize,
+            waited_owing: Arc<AtomicBool>,
+        }
+        impl FramePort for Waits {
+            type Peer = ();
+            fn recv(&mut self, buf: &mut Vec<u8>, t: Duration) -> Result<Option<()>, NetError> {
+                if self.owed > 0 {
+                    self.waited_owing.store(true, Ordering::Relaxed);
+                }
+                let got = self.q.recv(buf, t)?;
+                self.owed += usize::from(got.is_some());
+                Ok(got)
+            }
+            fn recv_waiting(&mut self, _buf: &mut Vec<u8>) -> Result<Option<()>, NetError> {
+                Ok(None)
+            }
+            fn send(&mut self, frame: &[u8], p: &()) -> Result<(), NetError> {
+                self.owed -= 1;
+                self.q.send(frame, p)
+            }
+            fn describe(&self) -> String {
+                "waiting queue".into()
+            }
+        }
+        let mut seg = Segment::new();
+        seg.add(oxicat_esc::Esc::new(
+            oxicat_esc::EscConfig::et1100(),
+            vec![0; 256],
+        ));
+        let seg = Arc::new(Mutex::new(seg));
+        let stop = Arc::new(AtomicBool::new(false));
+        let sent = Arc::new(Mutex::new(Vec::new()));
+        let waited_owing = Arc::new(AtomicBool::new(false));
+        let mut port = Waits {
+            q: Queue {
+                inbox: VecDeque::from(vec![brd_frame(); 3]),
+                sent: sent.clone(),
+                stop: stop.clone(),
+            },
+            owed: 0,
+            waited_owing: waited_owing.clone(),
+        };
+        serve(
+            &seg,
+            &mut port,
+            &RealtimeConfig::default(),
+            &RealtimeStats::default(),
+            &stop,
+        )
+        .unwrap();
+        assert_eq!(sent.lock().unwrap().len(), 3);
+        assert!(
+            !waited_owing.load(Ordering::Relaxed),
+            "serve waited for a frame with a reply not yet sent"
         );
     }
 }

@@ -171,6 +171,17 @@ impl FramePort for RawPort {
         }
     }
 
+    /// pnet's receiver waits its read timeout (the channel's, `wait`) whatever `recv` is
+    /// asked, so only a port that polls (`wait` below 1 ms, `--spin`) can look for a
+    /// waiting frame without waiting.
+    fn recv_waiting(&mut self, buf: &mut Vec<u8>) -> Result<Option<()>, NetError> {
+        if self.wait < Duration::from_millis(1) {
+            self.recv(buf, Duration::ZERO)
+        } else {
+            Ok(None)
+        }
+    }
+
     fn send(&mut self, frame: &[u8], _peer: &()) -> Result<(), NetError> {
         let r = self
             .tx
