@@ -35,14 +35,6 @@ pub trait FramePort {
         timeout: Duration,
     ) -> Result<Option<Self::Peer>, NetError>;
 
-    /// The next EtherCAT frame if one is already waiting, without waiting for one;
-    /// `Ok(None)` when none is, or when the port cannot look without waiting (then
-    /// [`serve`] answers each frame before it reads the next). The default is
-    /// [`recv`](Self::recv) with a zero timeout, for ports that honour it.
-    fn recv_waiting(&mut self, buf: &mut Vec<u8>) -> Result<Option<Self::Peer>, NetError> {
-        self.recv(buf, Duration::ZERO)
-    }
-
     /// Sends the returned Ethernet `frame` back to `peer`.
     fn send(&mut self, frame: &[u8], peer: &Self::Peer) -> Result<(), NetError>;
 
@@ -144,7 +136,7 @@ pub fn serve<P: FramePort, E: SegmentEsc>(
             if bufs.len() == peers.len() {
                 bufs.push(Vec::with_capacity(2048));
             }
-            match port.recv_waiting(&mut bufs[peers.len()])? {
+            match port.recv(&mut bufs[peers.len()], Duration::ZERO)? {
                 Some(p) => peers.push(p),
                 None => break,
             }
@@ -156,8 +148,7 @@ pub fn serve<P: FramePort, E: SegmentEsc>(
         {
             let mut seg = lock();
             seg.advance_to(now(&start));
-            let mut frames: Vec<&mut [u8]> = bufs[..n].iter_mut().map(Vec::as_mut_slice).collect();
-            seg.exchange_train(&mut frames, &mut fates, 0);
+            seg.exchange_train(&mut bufs[..n], &mut fates, 0);
         }
         for ((buf, peer), fate) in bufs.iter().zip(&peers).zip(&fates) {
             if *fate != FrameFate::Returned {
@@ -216,6 +207,18 @@ mod tests {
         }
     }
 
+    /// A line of `n` ET1100s with 256 bytes of SII each.
+    fn line(n: usize) -> Segment {
+        let mut seg = Segment::new();
+        for _ in 0..n {
+            seg.add(oxicat_esc::Esc::new(
+                oxicat_esc::EscConfig::et1100(),
+                vec![0; 256],
+            ));
+        }
+        seg
+    }
+
     fn brd_frame() -> Vec<u8> {
         let mut f = vec![0xFF; 6];
         f.extend_from_slice(&[0x10; 6]);
@@ -230,13 +233,7 @@ mod tests {
 
     #[test]
     fn serves_frames_and_follows_real_time() {
-        let mut seg = Segment::new();
-        for _ in 0..3 {
-            seg.add(oxicat_esc::Esc::new(
-                oxicat_esc::EscConfig::et1100(),
-                vec![0; 256],
-            ));
-        }
+        let seg = line(3);
         let seg = Arc::new(Mutex::new(seg));
         let stop = Arc::new(AtomicBool::new(false));
         let sent = Arc::new(Mutex::new(Vec::new()));
@@ -271,11 +268,7 @@ mod tests {
 
     #[test]
     fn a_slowdown_stretches_virtual_time() {
-        let mut seg = Segment::new();
-        seg.add(oxicat_esc::Esc::new(
-            oxicat_esc::EscConfig::et1100(),
-            vec![0; 256],
-        ));
+        let seg = line(1);
         let seg = Arc::new(Mutex::new(seg));
         let stop = Arc::new(AtomicBool::new(false));
         // Frames that each take a real millisecond to come: the segment is advanced to
@@ -319,16 +312,6 @@ mod tests {
 
     #[test]
     fn frames_waiting_together_go_as_one_train() {
-        let line = |n| {
-            let mut seg = Segment::new();
-            for _ in 0..n {
-                seg.add(oxicat_esc::Esc::new(
-                    oxicat_esc::EscConfig::et1100(),
-                    vec![0; 256],
-                ));
-            }
-            seg
-        };
         // One BRD's trip through 30 ESCs, from a segment of its own.
         let mut alone = line(30);
         alone.exchange(&brd_frame()).unwrap();
@@ -365,8 +348,8 @@ mod tests {
 
     #[test]
     fn a_port_that_cannot_look_without_waiting_gets_each_reply_first() {
-        // Like the raw socket's port: every `recv` may wait its read timeout, whatever it
-        // is asked, so a frame must be answered before the next `recv`.
+        // Like the raw socket's port: a `recv` that may wait waits its read timeout,
+        // whatever it is asked, so a frame must be answered before the next such `recv`.
         struct Waits {
             q: Queue,
             owed: usize,
@@ -375,15 +358,16 @@ mod tests {
         impl FramePort for Waits {
             type Peer = ();
             fn recv(&mut self, buf: &mut Vec<u8>, t: Duration) -> Result<Option<()>, NetError> {
+                if t.is_zero() {
+                    // It cannot look without waiting.
+                    return Ok(None);
+                }
                 if self.owed > 0 {
                     self.waited_owing.store(true, Ordering::Relaxed);
                 }
                 let got = self.q.recv(buf, t)?;
                 self.owed += usize::from(got.is_some());
                 Ok(got)
-            }
-            fn recv_waiting(&mut self, _buf: &mut Vec<u8>) -> Result<Option<()>, NetError> {
-                Ok(None)
             }
             fn send(&mut self, frame: &[u8], p: &()) -> Result<(), NetError> {
                 self.owed -= 1;
@@ -393,11 +377,7 @@ mod tests {
                 "waiting queue".into()
             }
         }
-        let mut seg = Segment::new();
-        seg.add(oxicat_esc::Esc::new(
-            oxicat_esc::EscConfig::et1100(),
-            vec![0; 256],
-        ));
+        let seg = line(1);
         let seg = Arc::new(Mutex::new(seg));
         let stop = Arc::new(AtomicBool::new(false));
         let sent = Arc::new(Mutex::new(Vec::new()));

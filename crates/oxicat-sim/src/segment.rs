@@ -1019,9 +1019,9 @@ impl<E: SegmentEsc> Segment<E> {
     /// [`exchange_in_place`](Self::exchange_in_place) leaves it. Virtual time advances to
     /// the moment the last bit of the last frame to come back is at the master (of the last
     /// one sent, when that is later); [`last_fate`](Self::last_fate) is the last frame's.
-    pub fn exchange_train(
+    pub fn exchange_train<F: AsMut<[u8]>>(
         &mut self,
-        frames: &mut [&mut [u8]],
+        frames: &mut [F],
         fates: &mut [FrameFate],
         spacing_ns: u64,
     ) {
@@ -1035,7 +1035,7 @@ impl<E: SegmentEsc> Segment<E> {
         let defer = n > 1 && self.capture.is_some();
         let mut line = t0;
         for frame in frames.iter_mut().take(n) {
-            let frame = &mut **frame;
+            let frame = frame.as_mut();
             let Ok(eth) = EthernetHeader::parse(frame) else {
                 self.stats.ignored += 1;
                 flights.push(Flight::ignored(t0));
@@ -1091,7 +1091,7 @@ impl<E: SegmentEsc> Segment<E> {
             }
             let Some(k) = next else { break };
             let f = &mut flights[k];
-            let ecat = &mut frames[k][f.off..];
+            let ecat = &mut frames[k].as_mut()[f.off..];
             if let Some(done) = self.hop(ecat, &mut f.hop, f.dispatch.as_mut()) {
                 f.done = Some(done);
                 if let Some(mut d) = f.dispatch.take() {
@@ -1118,7 +1118,7 @@ impl<E: SegmentEsc> Segment<E> {
                 }
             }
             self.stats.returned += 1;
-            let frame = &mut *frames[k];
+            let frame = frames[k].as_mut();
             frame[6] |= 0x02;
             let t = t_back.max(f.sent) + f.wire;
             if defer {

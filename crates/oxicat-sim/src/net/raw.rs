@@ -143,7 +143,13 @@ impl RawPort {
 impl FramePort for RawPort {
     type Peer = ();
 
-    fn recv(&mut self, buf: &mut Vec<u8>, _timeout: Duration) -> Result<Option<()>, NetError> {
+    /// pnet's receiver waits its read timeout (the channel's, `wait`) whatever it is asked,
+    /// so a zero `timeout` ("do not wait") on a port that waits brings nothing; a port that
+    /// polls (`wait` below 1 ms, `--spin`) looks. Any other `timeout` waits `wait`.
+    fn recv(&mut self, buf: &mut Vec<u8>, timeout: Duration) -> Result<Option<()>, NetError> {
+        if timeout.is_zero() && self.wait >= Duration::from_millis(1) {
+            return Ok(None);
+        }
         let deadline = Instant::now() + self.wait;
         loop {
             match self.rx.next() {
@@ -168,17 +174,6 @@ impl FramePort for RawPort {
                     })
                 }
             }
-        }
-    }
-
-    /// pnet's receiver waits its read timeout (the channel's, `wait`) whatever `recv` is
-    /// asked, so only a port that polls (`wait` below 1 ms, `--spin`) can look for a
-    /// waiting frame without waiting.
-    fn recv_waiting(&mut self, buf: &mut Vec<u8>) -> Result<Option<()>, NetError> {
-        if self.wait < Duration::from_millis(1) {
-            self.recv(buf, Duration::ZERO)
-        } else {
-            Ok(None)
         }
     }
 
