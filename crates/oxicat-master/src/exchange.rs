@@ -54,21 +54,79 @@ pub(crate) struct Fmmu {
     pub(crate) read: bool,
     /// Type register bit 1: write (the slave's outputs).
     pub(crate) write: bool,
+    /// Logical start bit 0 and end bit 7: whole bytes (what [`overlapped`] can move).
+    pub(crate) whole_bytes: bool,
+    /// Which of the slave's FMMUs (register block 0x0600 + 16 × index).
+    pub(crate) index: u8,
 }
 
 impl Fmmu {
-    /// Decodes one 16-byte FMMU register block; `None` when it is not active or maps
-    /// nothing.
-    pub(crate) fn decode(b: &[u8]) -> Option<Self> {
+    /// Decodes FMMU register block `index` (16 bytes); `None` when it is not active or
+    /// maps nothing.
+    pub(crate) fn decode(index: u8, b: &[u8]) -> Option<Self> {
         let b: &[u8; 16] = b.get(..16)?.try_into().ok()?;
         let f = Self {
             start: u32::from_le_bytes([b[0], b[1], b[2], b[3]]),
             len: u16::from_le_bytes([b[4], b[5]]),
             read: b[11] & 1 != 0,
             write: b[11] & 2 != 0,
+            whole_bytes: b[6] & 7 == 0 && b[7] & 7 == 7,
+            index,
         };
         (b[12] & 1 != 0 && f.len != 0 && (f.read || f.write)).then_some(f)
     }
+}
+
+/// An FMMU to move for [`overlapped`]: the slave, its FMMU index, the logical start it
+/// had and the one it gets.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(crate) struct Move {
+    pub(crate) slave: usize,
+    pub(crate) index: u8,
+    pub(crate) from: u32,
+    pub(crate) to: u32,
+}
+
+/// The overlapped layout of SOEM's `ecx_config_overlap_map`: every slave's inputs on the
+/// logical bytes of its outputs, so an LRW carries max(outputs, inputs) bytes per slave
+/// instead of their sum (each ESC writes its outputs from the bytes as they arrive and puts
+/// its inputs in their place). Slave by slave from the image's first address, each gets
+/// max(outputs, inputs) bytes; a direction's FMMUs keep their logical order. Returns the
+/// FMMUs as they will be and the moves that make them so; `None` when some FMMU is not
+/// whole bytes or maps both ways, or when nothing is mapped.
+pub(crate) fn overlapped(fmmus: &[Vec<Fmmu>]) -> Option<(Vec<Vec<Fmmu>>, Vec<Move>)> {
+    let mut at = fmmus.iter().flatten().map(|f| f.start).min()?;
+    let mut layout = Vec::with_capacity(fmmus.len());
+    let mut moves = Vec::new();
+    for (slave, fs) in fmmus.iter().enumerate() {
+        if fs.iter().any(|f| !f.whole_bytes || (f.read && f.write)) {
+            return None;
+        }
+        let mut placed = fs.clone();
+        let mut span = 0u32;
+        for write in [true, false] {
+            let mut order: Vec<usize> = (0..fs.len()).filter(|&k| fs[k].write == write).collect();
+            order.sort_by_key(|&k| fs[k].start);
+            let mut off = 0u32;
+            for k in order {
+                let to = at.checked_add(off)?;
+                if to != fs[k].start {
+                    moves.push(Move {
+                        slave,
+                        index: fs[k].index,
+                        from: fs[k].start,
+                        to,
+                    });
+                }
+                placed[k].start = to;
+                off += u32::from(fs[k].len);
+            }
+            span = span.max(off);
+        }
+        at = at.checked_add(span)?;
+        layout.push(placed);
+    }
+    Some((layout, moves))
 }
 
 /// Where every slave's process data lies in one image and how the image is exchanged.
@@ -76,8 +134,15 @@ impl Fmmu {
 pub(crate) struct Plan {
     /// Logical address of the image's first byte.
     pub(crate) start: u32,
-    /// The image (outputs to send, inputs received).
+    /// The image as sent: the outputs (input bytes that no output shares stay zero).
     pub(crate) image: Vec<u8>,
+    /// The image as it came back: the inputs, from the last LRW of each part whose
+    /// working counter was the planned one.
+    pub(crate) received: Vec<u8>,
+    /// Some slave's inputs share its outputs' logical bytes ([`overlapped`]).
+    pub(crate) overlapped: bool,
+    /// The FMMUs moved for this plan, to be moved back after the run.
+    pub(crate) moved: Vec<Move>,
     /// The LRWs of a cycle.
     pub(crate) chunks: Vec<Chunk>,
     /// LRWs sent together: [`IN_FLIGHT`], or 1 when a slave's piece is split over two
@@ -103,7 +168,9 @@ impl Plan {
     /// The plan for slaves with these active FMMUs, whose process image (as the group has
     /// it) is `out_len[p]` output and `in_len[p]` input bytes; `None` when the FMMUs are not
     /// exactly those images (each direction of a slave: FMMUs of that one type whose
-    /// lengths add up to the image, no FMMU of both types).
+    /// lengths add up to the image, no FMMU of both types, no logical byte shared by two
+    /// slaves or two FMMUs of one direction; a slave's inputs may share its own outputs'
+    /// bytes, the [`overlapped`] layout).
     pub(crate) fn new(fmmus: &[Vec<Fmmu>], out_len: &[usize], in_len: &[usize]) -> Option<Self> {
         let all = fmmus.iter().flatten();
         let start = all.clone().map(|f| f.start).min()?;
@@ -139,14 +206,50 @@ impl Plan {
             outputs.push(o);
             inputs.push(i);
         }
-        let mut all: Vec<(usize, usize)> =
-            outputs.iter().chain(&inputs).flatten().copied().collect();
-        all.sort_unstable();
-        // Two slaves (or directions) on the same logical bytes: not an image of ethercrab's.
-        if all.windows(2).any(|w| w[0].0 + w[0].1 > w[1].0) {
-            return None;
+        // Two FMMUs of one direction on the same logical bytes, or two slaves: not an image.
+        for dir in [&outputs, &inputs] {
+            let mut v: Vec<(usize, usize)> = dir.iter().flatten().copied().collect();
+            v.sort_unstable();
+            if v.windows(2).any(|w| w[0].0 + w[0].1 > w[1].0) {
+                return None;
+            }
         }
-        let (bounds, in_order) = chunk_bounds(&all);
+        // (offset, length, slave) of every piece, sorted; a piece may overlap only the
+        // other direction's pieces of its own slave.
+        let mut all: Vec<(usize, usize, usize)> = outputs
+            .iter()
+            .chain(&inputs)
+            .enumerate()
+            .flat_map(|(k, v)| v.iter().map(move |&(a, l)| (a, l, k % fmmus.len())))
+            .filter(|p| p.1 > 0)
+            .collect();
+        all.sort_unstable();
+        let mut overlapped = false;
+        // The slaves' merged pieces (offset, length), sorted and disjoint.
+        let mut spans: Vec<(usize, usize)> = Vec::with_capacity(all.len());
+        // The open span: start, end, its slave.
+        let mut open: Option<(usize, usize, usize)> = None;
+        for &(a, l, k) in &all {
+            match &mut open {
+                Some((_, e, owner)) if a < *e => {
+                    if *owner != k {
+                        return None;
+                    }
+                    overlapped = true;
+                    *e = (*e).max(a + l);
+                }
+                _ => {
+                    if let Some((s, e, _)) = open.take() {
+                        spans.push((s, e - s));
+                    }
+                    open = Some((a, a + l, k));
+                }
+            }
+        }
+        if let Some((s, e, _)) = open {
+            spans.push((s, e - s));
+        }
+        let (bounds, in_order) = chunk_bounds(&spans);
         let chunks = bounds
             .into_iter()
             .map(|(offset, len)| {
@@ -163,6 +266,9 @@ impl Plan {
         Some(Self {
             start,
             image: vec![0; span],
+            received: vec![0; span],
+            overlapped,
+            moved: Vec::new(),
             chunks,
             in_flight: if in_order { 1 } else { IN_FLIGHT },
             outputs,
@@ -192,7 +298,7 @@ impl Plan {
         for (pieces, data) in self.inputs.iter().zip(inputs) {
             data.clear();
             for &(off, len) in pieces {
-                data.extend_from_slice(&self.image[off..off + len]);
+                data.extend_from_slice(&self.received[off..off + len]);
             }
         }
     }
@@ -236,7 +342,7 @@ impl Plan {
                     Ok(data) => {
                         seen.working_counter = seen.working_counter.wrapping_add(c.wkc);
                         let n = data.len().min(c.len);
-                        self.image[c.offset..c.offset + n].copy_from_slice(&data[..n]);
+                        self.received[c.offset..c.offset + n].copy_from_slice(&data[..n]);
                     }
                     Err(Error::WorkingCounter { received, .. }) => {
                         seen.working_counter = seen.working_counter.wrapping_add(received);
@@ -362,6 +468,8 @@ mod tests {
             len,
             read: !write,
             write,
+            whole_bytes: true,
+            index: u8::from(!write),
         }
     }
 
@@ -371,20 +479,32 @@ mod tests {
         b[..4].copy_from_slice(&0x0001_0020u32.to_le_bytes());
         b[4..6].copy_from_slice(&24u16.to_le_bytes());
         b[11] = 2;
-        assert_eq!(Fmmu::decode(&b), None, "not active");
+        assert_eq!(Fmmu::decode(3, &b), None, "not active");
         b[12] = 1;
+        let want = Fmmu {
+            start: 0x0001_0020,
+            len: 24,
+            read: false,
+            write: true,
+            whole_bytes: false,
+            index: 3,
+        };
         assert_eq!(
-            Fmmu::decode(&b),
+            Fmmu::decode(3, &b),
+            Some(want),
+            "end bit 0: not whole bytes"
+        );
+        b[7] = 7;
+        assert_eq!(
+            Fmmu::decode(3, &b),
             Some(Fmmu {
-                start: 0x0001_0020,
-                len: 24,
-                read: false,
-                write: true
+                whole_bytes: true,
+                ..want
             })
         );
         b[11] = 0;
-        assert_eq!(Fmmu::decode(&b), None, "no type");
-        assert_eq!(Fmmu::decode(&b[..15]), None, "short");
+        assert_eq!(Fmmu::decode(3, &b), None, "no type");
+        assert_eq!(Fmmu::decode(3, &b[..15]), None, "short");
     }
 
     #[test]
@@ -410,9 +530,10 @@ mod tests {
                 wkc: 6
             }]
         );
+        assert!(!plan.overlapped);
         plan.put_outputs(&[vec![1, 2], vec![3]]);
         assert_eq!(plan.image, [1, 2, 3, 0, 0, 0, 0]);
-        plan.image[4..].copy_from_slice(&[7, 8, 9]);
+        plan.received[4..].copy_from_slice(&[7, 8, 9]);
         let mut inputs = vec![vec![0xEE; 5], Vec::new()];
         plan.take_inputs(&mut inputs);
         assert_eq!(inputs, vec![vec![7], vec![8, 9]]);
@@ -495,10 +616,8 @@ mod tests {
         assert!(Plan::new(&good, &[2], &[1]).is_some());
         assert!(Plan::new(&good, &[3], &[1]).is_none(), "sizes differ");
         let both = vec![vec![Fmmu {
-            start: 0,
-            len: 2,
             read: true,
-            write: true,
+            ..fmmu(0, 2, true)
         }]];
         assert!(Plan::new(&both, &[2], &[2]).is_none(), "one FMMU both ways");
         assert!(Plan::new(&[vec![]], &[0], &[0]).is_none(), "nothing mapped");
@@ -507,7 +626,126 @@ mod tests {
             Plan::new(&overlap, &[2, 0], &[0, 1]).is_none(),
             "shared bytes"
         );
+        // A slave's long output piece reaching over a short input piece of its own into
+        // the next slave's bytes.
+        let reach = vec![
+            vec![fmmu(0, 4, true), fmmu(0, 1, false)],
+            vec![fmmu(2, 1, false)],
+        ];
+        assert!(
+            Plan::new(&reach, &[4, 0], &[1, 1]).is_none(),
+            "reaches over"
+        );
+        let same_dir = vec![vec![fmmu(0, 2, true), fmmu(1, 2, true)]];
+        assert!(Plan::new(&same_dir, &[4], &[0]).is_none(), "two outputs");
         let far = vec![vec![fmmu(0, 1, true), fmmu(0x1000_0000, 1, false)]];
         assert!(Plan::new(&far, &[1], &[1]).is_none(), "not one image");
+    }
+    #[test]
+    fn the_overlapped_layout_puts_each_slaves_inputs_on_its_outputs() {
+        // ethercrab's layout of three demo-like slaves: each 3 output bytes then 2 input
+        // bytes (slave 1 with no inputs, slave 2's outputs in two FMMUs).
+        let fm = vec![
+            vec![fmmu(0x100, 3, true), fmmu(0x103, 2, false)],
+            vec![fmmu(0x105, 3, true)],
+            vec![
+                Fmmu {
+                    index: 2,
+                    ..fmmu(0x10A, 2, true)
+                },
+                fmmu(0x10C, 4, false),
+                fmmu(0x108, 2, true),
+            ],
+        ];
+        let (layout, moves) = overlapped(&fm).unwrap();
+        // Slave 0 at 0x100 (3 bytes), slave 1 at 0x103 (3), slave 2 at 0x106 (4).
+        let starts: Vec<Vec<u32>> = layout
+            .iter()
+            .map(|v| v.iter().map(|f| f.start).collect())
+            .collect();
+        assert_eq!(
+            starts,
+            vec![vec![0x100, 0x100], vec![0x103], vec![0x108, 0x106, 0x106]]
+        );
+        assert_eq!(
+            moves,
+            vec![
+                Move {
+                    slave: 0,
+                    index: 1,
+                    from: 0x103,
+                    to: 0x100
+                },
+                Move {
+                    slave: 1,
+                    index: 0,
+                    from: 0x105,
+                    to: 0x103
+                },
+                Move {
+                    slave: 2,
+                    index: 0,
+                    from: 0x108,
+                    to: 0x106
+                },
+                Move {
+                    slave: 2,
+                    index: 2,
+                    from: 0x10A,
+                    to: 0x108
+                },
+                Move {
+                    slave: 2,
+                    index: 1,
+                    from: 0x10C,
+                    to: 0x106
+                },
+            ]
+        );
+        let mut plan = Plan::new(&layout, &[3, 3, 4], &[2, 0, 4]).unwrap();
+        assert!(plan.overlapped);
+        assert_eq!(plan.image.len(), 10, "3 + 3 + 4, not 18");
+        // Both directions of slaves 0 and 2, the outputs of slave 1: 3 + 2 + 3.
+        assert_eq!(
+            plan.chunks,
+            vec![Chunk {
+                offset: 0,
+                len: 10,
+                wkc: 8
+            }]
+        );
+        plan.put_outputs(&[vec![1, 2, 3], vec![4, 5, 6], vec![7, 8, 9, 10]]);
+        assert_eq!(plan.image, [1, 2, 3, 4, 5, 6, 7, 8, 9, 10]);
+        // What the ESCs send back: slave 0's inputs on its first two bytes, slave 1's
+        // outputs as they were, slave 2's inputs over its outputs.
+        plan.received
+            .copy_from_slice(&[21, 22, 3, 4, 5, 6, 41, 42, 43, 44]);
+        let mut inputs = vec![Vec::new(); 3];
+        plan.take_inputs(&mut inputs);
+        assert_eq!(inputs, vec![vec![21, 22], vec![], vec![41, 42, 43, 44]]);
+        // The outputs sent are not what came back.
+        assert_eq!(plan.image, [1, 2, 3, 4, 5, 6, 7, 8, 9, 10]);
+        // Already overlapped: nothing to move.
+        let (again, none) = overlapped(&layout).unwrap();
+        assert_eq!(again, layout);
+        assert!(none.is_empty());
+    }
+
+    #[test]
+    fn fmmus_of_bits_or_both_ways_are_not_overlapped() {
+        let bits = vec![vec![
+            fmmu(0, 1, true),
+            Fmmu {
+                whole_bytes: false,
+                ..fmmu(1, 1, false)
+            },
+        ]];
+        assert!(overlapped(&bits).is_none());
+        let both = vec![vec![Fmmu {
+            read: true,
+            ..fmmu(0, 2, true)
+        }]];
+        assert!(overlapped(&both).is_none());
+        assert!(overlapped(&[vec![], vec![]]).is_none(), "nothing mapped");
     }
 }

@@ -5,7 +5,7 @@
 //! ```text
 //! cargo run --release -p oxicat --example segment_scale -- [--kind demo,twin] \
 //!     [--n 16,64,256,1000] [--seconds 10] [--cycle-us 1000] [--rt] [--spin] [--per-esc-walk]
-//!     [--idle] [--virtual] [--exchange auto,lean,ethercrab] [--beyond-limit] [--rt-master]
+//!     [--idle] [--virtual] [--exchange auto,lean,overlap,ethercrab] [--beyond-limit] [--rt-master]
 //!     [--pin]
 //! ```
 //!
@@ -160,7 +160,8 @@ fn parse_exchange(v: &str) -> Exchange {
         "auto" => Exchange::Auto,
         "lean" => Exchange::Lean,
         "ethercrab" => Exchange::Ethercrab,
-        _ => fail(&format!("--exchange {v}: auto, lean or ethercrab")),
+        "overlap" => Exchange::Overlapped,
+        _ => fail(&format!("--exchange {v}: auto, lean, overlap or ethercrab")),
     }
 }
 
@@ -169,6 +170,7 @@ fn exchange_name(e: Exchange) -> &'static str {
         Exchange::Auto => "auto",
         Exchange::Lean => "lean",
         Exchange::Ethercrab => "ethercrab",
+        Exchange::Overlapped => "overlapped",
     }
 }
 

@@ -288,3 +288,105 @@ fn the_frames_of_a_cycle_are_on_the_line_together() {
     }
     drop(seg);
 }
+
+/// The logical start addresses of every active FMMU of every node (read off the ESCs).
+fn fmmu_starts(seg: &Mutex<Segment>, n: usize) -> Vec<Vec<(u32, u8)>> {
+    let seg = seg.lock().unwrap();
+    (0..n)
+        .map(|p| {
+            let mem = seg.esc(p).unwrap().memory();
+            (0..16)
+                .map(|k| &mem[0x600 + 16 * k..0x610 + 16 * k])
+                .filter(|b| b[12] & 1 != 0)
+                .map(|b| (u32::from_le_bytes([b[0], b[1], b[2], b[3]]), b[11]))
+                .collect()
+        })
+        .collect()
+}
+
+/// The overlapped exchange (SOEM's overlapped IO map): 40 demo nodes' 24 output and 22 input
+/// bytes take 960 bytes of LRW instead of 1,840, one LRW instead of two; every node echoes
+/// its outputs into its inputs (Input1 = Output1, InputUINT16 = OutputUINT16, Input2 =
+/// Output2) as under the lean exchange, with the planned working counter every cycle; the
+/// FMMUs are moved for the run and moved back after it.
+#[test]
+fn the_overlapped_exchange_carries_each_node_once_and_moves_the_fmmus_back() {
+    const N: usize = 40;
+    let mut runs = Vec::new();
+    for exchange in [Exchange::Lean, Exchange::Overlapped] {
+        let seg = oxicat::master_cmd::build_sim(&format!("demo:{N}")).unwrap();
+        let seg2 = seg.clone();
+        let r = std::thread::Builder::new()
+            .stack_size(64 << 20)
+            .spawn(move || {
+                let mut m = Master::open(Link::Sim(seg2.clone())).unwrap();
+                m.set_exchange(exchange);
+                m.prepare_cyclic().unwrap();
+                let before = fmmu_starts(&seg2, N);
+
+                let mut during = Vec::new();
+                let mut last = (Vec::new(), Vec::new(), 0u16);
+                let stats = m
+                    .run_cyclic(CycleOptions::default(), |io| {
+                        if io.cycle == 5 {
+                            during = fmmu_starts(&seg2, N);
+                        }
+                        for (p, o) in io.outputs.iter_mut().enumerate() {
+                            for (k, b) in o.iter_mut().enumerate() {
+                                *b = (p as u8).wrapping_mul(11) ^ (k as u8).wrapping_mul(5);
+                            }
+                        }
+                        last = (io.outputs.clone(), io.inputs.clone(), io.working_counter);
+                        Ok(if io.cycle + 1 >= 40 {
+                            Flow::Stop
+                        } else {
+                            Flow::Continue
+                        })
+                    })
+                    .unwrap();
+                let after = fmmu_starts(&seg2, N);
+                (stats, before, during, after, last)
+            })
+            .unwrap()
+            .join()
+            .unwrap();
+        runs.push(r);
+    }
+    let [(lean, lb, ld, la, lean_io), (over, ob, od, oa, over_io)] = &runs[..] else {
+        unreachable!()
+    };
+    assert_eq!(lean.exchange, Exchange::Lean);
+    assert_eq!(lean.frames_per_cycle, 3, "two LRWs and the BRD");
+    assert_eq!(over.exchange, Exchange::Overlapped);
+    assert_eq!(over.frames_per_cycle, 2, "one LRW and the BRD");
+    for s in [lean, over] {
+        assert_eq!(s.cycles, 40);
+        assert_eq!(s.wkc_errors, 0);
+    }
+    // ethercrab activates the FMMUs on the way to SAFE-OP, not in PRE-OP.
+    assert!(lb.iter().chain(ob).all(|f| f.is_empty()));
+    // ethercrab's layout (every node's inputs, then every node's outputs) in the lean run
+    // and after it; the overlapped run's segment has the same after it.
+    assert_eq!(ld[0].len(), 2);
+    assert_eq!(ld, la);
+    assert_eq!(la, oa, "moved back");
+    assert_ne!(od, oa);
+    // During the overlapped run each node's read FMMU (type 1) starts where its write
+    // FMMU (type 2) does, 24 bytes after the node before.
+    let base = od[0][0].0;
+    for (p, f) in od.iter().enumerate() {
+        let w: Vec<u32> = f.iter().filter(|x| x.1 == 2).map(|x| x.0).collect();
+        let r: Vec<u32> = f.iter().filter(|x| x.1 == 1).map(|x| x.0).collect();
+        assert_eq!(w, vec![base + 24 * p as u32], "node {p}");
+        assert_eq!(r, w, "node {p}");
+    }
+    for (outputs, inputs, wkc) in [lean_io, over_io] {
+        assert_eq!(*wkc, 3 * N as u16);
+        for p in 0..N {
+            assert_eq!(outputs[p].len(), 24);
+            assert_eq!(inputs[p].len(), 22);
+            // Buttons (2 bytes), then Output1, OutputUINT16, Output2: echoed first.
+            assert_eq!(inputs[p][..10], outputs[p][2..12], "node {p}");
+        }
+    }
+}
