@@ -37,7 +37,7 @@ use std::sync::{Arc, Mutex};
 use std::time::Duration;
 
 use oxicat::sim_cmd::{self, SimArgs};
-use oxicat_master::cyclic::{CycleOptions, Exchange, Flow};
+use oxicat_master::cyclic::{CycleOptions, Exchange, Flow, SyncMode};
 use oxicat_master::{Link, Master};
 
 fn fail(msg: &str) -> ! {
@@ -153,6 +153,22 @@ struct Serving {
     /// `--pin`: the serving thread on CPU 1, the master's on CPU 0 (with `--rt` /
     /// `--rt-master`).
     pin: bool,
+    /// `--sm-sync`: every slave SM-synchronous (0x1C32:01 = 1: its cycle on the SM2 event,
+    /// once per frame) instead of free run (every main-loop pass).
+    sm_sync: bool,
+}
+
+/// The master's cycle: `cycle_us`, free run or SM-synchronous.
+fn cycling(cycle_us: u64, sm_sync: bool) -> oxicat_master::cyclic::Cycling {
+    CycleOptions {
+        cycle: Duration::from_micros(cycle_us),
+        dc: false,
+    }
+    .with_sync(if sm_sync {
+        SyncMode::SmSync
+    } else {
+        SyncMode::FreeRun
+    })
 }
 
 fn parse_exchange(v: &str) -> Exchange {
@@ -160,7 +176,7 @@ fn parse_exchange(v: &str) -> Exchange {
         "auto" => Exchange::Auto,
         "lean" => Exchange::Lean,
         "ethercrab" => Exchange::Ethercrab,
-        "overlap" => Exchange::Overlapped,
+        "overlap" | "overlapped" => Exchange::Overlapped,
         _ => fail(&format!("--exchange {v}: auto, lean, overlap or ethercrab")),
     }
 }
@@ -183,6 +199,7 @@ fn run(kind: &str, n: usize, seconds: u64, cycle_us: u64, how: Serving) -> Row {
         beyond_limit,
         rt_master,
         pin,
+        sm_sync,
     } = how;
     let args = SimArgs {
         spin,
@@ -242,30 +259,24 @@ fn run(kind: &str, n: usize, seconds: u64, cycle_us: u64, how: Serving) -> Row {
             let mut m = Master::open(Link::Udp(addr))?;
             m.set_exchange(exchange);
             let _ = m.scan()?;
-            let stats = m.run_cyclic(
-                CycleOptions {
-                    cycle: Duration::from_nanos(period),
-                    dc: false,
-                },
-                |io| {
-                    if io.cycle == 0 {
-                        ticks0 = thread_ticks(&tid);
-                        v0 = clock.now();
-                    }
-                    let due = io.cycle * period;
-                    let end = io.time_ns;
-                    rtt.push(end.saturating_sub(due.max(prev_end)));
-                    if end > due + period {
-                        late += 1;
-                    }
-                    prev_end = end;
-                    Ok(if io.cycle + 1 >= cycles {
-                        Flow::Stop
-                    } else {
-                        Flow::Continue
-                    })
-                },
-            );
+            let stats = m.run_cyclic(cycling(period / 1000, sm_sync), |io| {
+                if io.cycle == 0 {
+                    ticks0 = thread_ticks(&tid);
+                    v0 = clock.now();
+                }
+                let due = io.cycle * period;
+                let end = io.time_ns;
+                rtt.push(end.saturating_sub(due.max(prev_end)));
+                if end > due + period {
+                    late += 1;
+                }
+                prev_end = end;
+                Ok(if io.cycle + 1 >= cycles {
+                    Flow::Stop
+                } else {
+                    Flow::Continue
+                })
+            });
             let ticks = thread_ticks(&tid).saturating_sub(ticks0);
             let virt = clock.now().saturating_sub(v0);
             stats.map(|s| (s, late, rtt, ticks, virt))
@@ -336,7 +347,8 @@ fn process_ticks() -> u64 {
 
 /// `--virtual`: bring-up and `seconds` of 1 kHz cycles on the virtual clock, in this
 /// process; prints CPU per cycle and a digest of what the master saw.
-fn virtual_row(kind: &str, n: usize, seconds: u64, cycle_us: u64, exchange: Exchange) {
+fn virtual_row(kind: &str, n: usize, seconds: u64, cycle_us: u64, how: Serving) {
+    let (exchange, sm_sync) = (how.exchange, how.sm_sync);
     let args = sim_args(kind, n, None, None);
     let desc = sim_cmd::describe(&args).unwrap_or_else(|e| fail(&e.to_string()));
     let t0 = process_ticks();
@@ -353,49 +365,54 @@ fn virtual_row(kind: &str, n: usize, seconds: u64, cycle_us: u64, exchange: Exch
             m.set_exchange(exchange);
             let _ = m.scan()?;
             let (mut ticks_op, mut image, mut t_op) = (0, 0, 0);
+            // Virtual time from each cycle's due time to the end of its exchange.
+            let mut took: Vec<u64> = Vec::new();
             // FNV-1a over every cycle's inputs and working counter.
             let mut digest: u64 = 0xcbf2_9ce4_8422_2325;
             let mut eat = |b: u8| {
                 digest ^= u64::from(b);
                 digest = digest.wrapping_mul(0x0100_0000_01b3);
             };
-            let stats = m.run_cyclic(
-                CycleOptions {
-                    cycle: Duration::from_nanos(period),
-                    dc: false,
-                },
-                |io| {
-                    if io.cycle == 0 {
-                        ticks_op = process_ticks();
-                        t_op = clock.now();
-                        image = io.inputs.iter().chain(&io.outputs).map(Vec::len).sum();
-                    }
-                    for i in &io.inputs {
-                        i.iter().for_each(|&b| eat(b));
-                    }
-                    io.working_counter
-                        .to_le_bytes()
-                        .iter()
-                        .for_each(|&b| eat(b));
-                    Ok(if io.cycle + 1 >= cycles {
-                        Flow::Stop
-                    } else {
-                        Flow::Continue
-                    })
-                },
-            )?;
+            let stats = m.run_cyclic(cycling(period / 1000, sm_sync), |io| {
+                if io.cycle == 0 {
+                    ticks_op = process_ticks();
+                    t_op = clock.now();
+                    image = io.inputs.iter().chain(&io.outputs).map(Vec::len).sum();
+                }
+                took.push(io.time_ns.saturating_sub(io.cycle * period));
+                for i in &io.inputs {
+                    i.iter().for_each(|&b| eat(b));
+                }
+                io.working_counter
+                    .to_le_bytes()
+                    .iter()
+                    .for_each(|&b| eat(b));
+                Ok(if io.cycle + 1 >= cycles {
+                    Flow::Stop
+                } else {
+                    Flow::Continue
+                })
+            })?;
             let t_end = process_ticks();
             let v_cycles = clock.now().saturating_sub(t_op);
+            // The first cycle's is its start; the others' their exchange.
+            let mut took = took.split_off(1.min(took.len()));
+            took.sort_unstable();
+            let pick = |q: f64| {
+                took.get(((took.len() as f64 - 1.0) * q) as usize)
+                    .map_or(0.0, |&t| t as f64 / 1000.0)
+            };
+            let exchange = (pick(0.5), pick(1.0));
             Ok::<_, oxicat_master::MasterError>((
-                stats, ticks_op, t_end, digest, image, t_op, v_cycles,
+                stats, ticks_op, t_end, digest, image, t_op, v_cycles, exchange,
             ))
         })
         .unwrap_or_else(|e| fail(&e.to_string()))
         .join()
         .unwrap_or_else(|_| fail("master thread panicked"));
     match r {
-        Ok((s, t_op, t_end, digest, image, v_op, v_cycles)) => println!(
-            "| {kind} | {n} | virtual, {} exchange, {} frames per cycle | {} | {} | build {:.2} s, bring-up {:.2} s CPU for {:.2} s of virtual time ({:.0} µs CPU per ms, the master's included) | {:.1} µs CPU per cycle, {:.0} µs of virtual time | {image} B of process data | digest {digest:016x} |",
+        Ok((s, t_op, t_end, digest, image, v_op, v_cycles, (x50, xmax))) => println!(
+            "| {kind} | {n} | virtual, {} exchange, {} frames per cycle | {} | {} | build {:.2} s, bring-up {:.2} s CPU for {:.2} s of virtual time ({:.0} µs CPU per ms, the master's included) | {:.1} µs CPU per cycle, {:.0} µs of virtual time, exchange p50 / max {x50:.0} / {xmax:.0} µs | {image} B of process data | digest {digest:016x} |",
             exchange_name(s.exchange),
             s.frames_per_cycle,
             s.cycles,
@@ -443,6 +460,7 @@ fn main() {
             "--beyond-limit" => how.beyond_limit = true,
             "--rt-master" => how.rt_master = true,
             "--pin" => how.pin = true,
+            "--sm-sync" => how.sm_sync = true,
             "--idle" => idle_only = true,
             "--virtual" => virt = true,
             // One row in this process (each row runs in a process of its own, so that the
@@ -457,7 +475,7 @@ fn main() {
     if virt {
         for kind in &kinds {
             for &n in &ns {
-                virtual_row(kind, n, seconds, cycle_us, how.exchange);
+                virtual_row(kind, n, seconds, cycle_us, how);
             }
         }
         return;
@@ -523,6 +541,7 @@ fn main() {
                 (how.beyond_limit, "--beyond-limit"),
                 (how.rt_master, "--rt-master"),
                 (how.pin, "--pin"),
+                (how.sm_sync, "--sm-sync"),
             ] {
                 if on {
                     cmd.arg(flag);

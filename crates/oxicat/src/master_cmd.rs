@@ -12,7 +12,7 @@ use std::sync::{Arc, Mutex};
 use std::time::Duration;
 
 use clap::{Args, Subcommand};
-use oxicat_master::cyclic::{CycleOptions, Cycling, SyncMode};
+use oxicat_master::cyclic::{CycleOptions, Cycling, Exchange, SyncMode};
 use oxicat_master::pdo::Variable;
 use oxicat_master::value::{parse_int, parse_u16, ValueType};
 use oxicat_master::{AlState, Link, Master, MasterError, MasterOptions};
@@ -400,6 +400,37 @@ pub struct RecordArgs {
     /// refused, naming the slave, when its 0x1C32:04 does not offer it.
     #[arg(long, value_enum)]
     pub sync: Option<SyncArg>,
+    /// How a free-running or SM-synchronous cycle exchanges the process image (default:
+    /// auto, the lean exchange where ethercrab's would need more than one frame). `overlap`
+    /// puts every slave's inputs on its outputs' logical bytes (SOEM's overlapped IO map):
+    /// an LRW then carries max(outputs, inputs) bytes per slave instead of their sum. A DC
+    /// cycle is ethercrab's tx_rx_dc and takes no --exchange.
+    #[arg(long, value_enum)]
+    pub exchange: Option<ExchangeArg>,
+}
+
+/// `--exchange` of `record`: [`Exchange`] by name.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum ExchangeArg {
+    /// The lean exchange where ethercrab's would need more than one frame.
+    Auto,
+    /// The image in LRWs of up to 1,100 bytes sent together, and one BRD of AL status.
+    Lean,
+    /// Lean, with every slave's inputs on its outputs' bytes.
+    Overlap,
+    /// ethercrab's tx_rx: frames one after the other, an FPRD of AL status per slave.
+    Ethercrab,
+}
+
+impl From<ExchangeArg> for Exchange {
+    fn from(a: ExchangeArg) -> Self {
+        match a {
+            ExchangeArg::Auto => Exchange::Auto,
+            ExchangeArg::Lean => Exchange::Lean,
+            ExchangeArg::Overlap => Exchange::Overlapped,
+            ExchangeArg::Ethercrab => Exchange::Ethercrab,
+        }
+    }
 }
 
 /// `--sync` of the cyclic verbs: the sync mode every slave gets (ETG.1020 0x1C32:01).
@@ -1228,11 +1259,25 @@ fn record(a: RecordArgs, out: &mut dyn Write) -> Result<(), CliError> {
         output,
         free_run,
         sync,
+        exchange,
     } = a;
     // Every argument is checked before the output is touched; the CSV goes to a
     // temporary file renamed over `output` at the end, so a failure leaves it as it was.
     let (opts, cycles) = record_plan(&cycle, &duration, free_run, sync)?;
+    if let (Some(x), true) = (exchange, opts.dc()) {
+        return Err(UsageError::OutOfRange {
+            option: "--exchange",
+            value: format!("{x:?}").to_lowercase(),
+            allowed: "only with --free-run or --sync free-run|sm-sync (a DC cycle is \
+                      ethercrab's tx_rx_dc, whose frame carries the reference clock's time)"
+                .into(),
+        }
+        .into());
+    }
     let mut m = open(&link)?;
+    if let Some(x) = exchange {
+        m.set_exchange(x.into());
+    }
     m.prepare_cyclic()?;
     let layouts = m.layouts()?;
     let vars = with_device_units(&m, m.resolve(&vars, &layouts)?.concat());
@@ -1253,8 +1298,20 @@ fn record(a: RecordArgs, out: &mut dyn Write) -> Result<(), CliError> {
         }
         None => "standard output".to_string(),
     };
+    let how = match (exchange, stats.exchange) {
+        (None, _) => String::new(),
+        (Some(_), x) => format!(
+            "; {} exchange, {} frames per cycle",
+            match x {
+                Exchange::Overlapped => "overlapped",
+                Exchange::Lean | Exchange::Auto => "lean",
+                Exchange::Ethercrab => "ethercrab's",
+            },
+            stats.frames_per_cycle
+        ),
+    };
     let line = format!(
-        "{} cycles of {} variables to {place} ({} working-counter errors){}\n",
+        "{} cycles of {} variables to {place} ({} working-counter errors){how}{}\n",
         stats.cycles,
         vars.len(),
         stats.wkc_errors,

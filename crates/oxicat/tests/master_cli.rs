@@ -354,3 +354,56 @@ fn the_cyclic_verbs_take_an_explicit_sync_mode() {
     ]);
     assert!(err.contains("cannot be used with"), "{err}");
 }
+
+/// `record --exchange overlap`: 40 demo nodes' image (24 output and 22 input bytes each)
+/// in one LRW with every node's inputs on its outputs' bytes, against two LRWs for the
+/// lean exchange; a DC cycle takes no `--exchange`, refused before anything is opened.
+#[test]
+fn record_cycles_with_the_exchange_asked_for() {
+    let dir = std::env::temp_dir().join(format!("oxicat-master-xchg-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let csv = dir.join("x.csv");
+    for (x, want) in [
+        ("overlap", "; overlapped exchange, 2 frames per cycle"),
+        ("lean", "; lean exchange, 3 frames per cycle"),
+    ] {
+        let out = ok(&[
+            "record",
+            "--free-run",
+            "--exchange",
+            x,
+            "--duration",
+            "30ms",
+            "39.InINT32Var1",
+            "-o",
+            csv.to_str().unwrap(),
+            "--sim",
+            "demo:40",
+        ]);
+        assert!(
+            out.starts_with("30 cycles of 1 variables")
+                && out.contains("(0 working-counter errors)")
+                && out.trim_end().ends_with(want),
+            "{x}: {out}"
+        );
+        let text = std::fs::read_to_string(&csv).unwrap();
+        assert_eq!(text.lines().count(), 31, "{text}");
+    }
+    std::fs::write(&csv, "kept\n").unwrap();
+    let err = fails(&[
+        "record",
+        "--exchange",
+        "overlap",
+        "0.InINT32Var1",
+        "-o",
+        csv.to_str().unwrap(),
+        "--sim",
+        "demo:1",
+    ]);
+    assert!(
+        err.contains("--exchange overlap") && err.contains("only with --free-run"),
+        "{err}"
+    );
+    assert_eq!(std::fs::read_to_string(&csv).unwrap(), "kept\n");
+    let _ = std::fs::remove_dir_all(&dir);
+}
