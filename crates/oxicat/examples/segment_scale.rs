@@ -244,6 +244,7 @@ fn run(kind: &str, n: usize, seconds: u64, cycle_us: u64, how: Serving) -> Row {
     let (mut late, mut prev_end) = (0u64, 0u64);
     let mut rtt = Vec::with_capacity(cycles as usize);
     let (mut ticks0, mut v0) = (0, 0);
+    let mut last = (0, 0);
     let run = std::thread::Builder::new()
         .stack_size(64 << 20)
         .spawn(move || {
@@ -271,14 +272,18 @@ fn run(kind: &str, n: usize, seconds: u64, cycle_us: u64, how: Serving) -> Row {
                     late += 1;
                 }
                 prev_end = end;
+                // The cycles' end: not the way back to PRE-OP after them.
+                if io.cycle + 1 >= cycles {
+                    last = (thread_ticks(&tid), clock.now());
+                }
                 Ok(if io.cycle + 1 >= cycles {
                     Flow::Stop
                 } else {
                     Flow::Continue
                 })
             });
-            let ticks = thread_ticks(&tid).saturating_sub(ticks0);
-            let virt = clock.now().saturating_sub(v0);
+            let ticks = last.0.saturating_sub(ticks0);
+            let virt = last.1.saturating_sub(v0);
             stats.map(|s| (s, late, rtt, ticks, virt))
         })
         .unwrap_or_else(|e| fail(&e.to_string()));
@@ -295,8 +300,8 @@ fn run(kind: &str, n: usize, seconds: u64, cycle_us: u64, how: Serving) -> Row {
             wkc_errors: s.wkc_errors,
             late,
             rtt,
-            cpu_us_per_cycle: ticks as f64 * 10_000.0 / s.cycles.max(1) as f64,
-            virtual_us_per_cycle: virt as f64 / 1000.0 / s.cycles.max(1) as f64,
+            cpu_us_per_cycle: ticks as f64 * 10_000.0 / s.cycles.saturating_sub(1).max(1) as f64,
+            virtual_us_per_cycle: virt as f64 / 1000.0 / s.cycles.saturating_sub(1).max(1) as f64,
             kb_per_slave,
             exchange: format!("{}, {}", exchange_name(s.exchange), s.frames_per_cycle),
             note: String::new(),
@@ -367,6 +372,7 @@ fn virtual_row(kind: &str, n: usize, seconds: u64, cycle_us: u64, how: Serving) 
             let (mut ticks_op, mut image, mut t_op) = (0, 0, 0);
             // Virtual time from each cycle's due time to the end of its exchange.
             let mut took: Vec<u64> = Vec::new();
+            let mut last = (0, 0);
             // FNV-1a over every cycle's inputs and working counter.
             let mut digest: u64 = 0xcbf2_9ce4_8422_2325;
             let mut eat = |b: u8| {
@@ -380,6 +386,10 @@ fn virtual_row(kind: &str, n: usize, seconds: u64, cycle_us: u64, how: Serving) 
                     image = io.inputs.iter().chain(&io.outputs).map(Vec::len).sum();
                 }
                 took.push(io.time_ns.saturating_sub(io.cycle * period));
+                // The cycles' end: not the way back to PRE-OP after them.
+                if io.cycle + 1 >= cycles {
+                    last = (process_ticks(), clock.now());
+                }
                 for i in &io.inputs {
                     i.iter().for_each(|&b| eat(b));
                 }
@@ -393,8 +403,9 @@ fn virtual_row(kind: &str, n: usize, seconds: u64, cycle_us: u64, how: Serving) 
                     Flow::Continue
                 })
             })?;
-            let t_end = process_ticks();
-            let v_cycles = clock.now().saturating_sub(t_op);
+            // From the first cycle's end to the last's: cycles − 1 cycles.
+            let (t_end, v_end) = last;
+            let v_cycles = v_end.saturating_sub(t_op);
             // The first cycle's is its start; the others' their exchange.
             let mut took = took.split_off(1.min(took.len()));
             took.sort_unstable();
@@ -421,8 +432,8 @@ fn virtual_row(kind: &str, n: usize, seconds: u64, cycle_us: u64, how: Serving) 
             t_op.saturating_sub(t_built) as f64 / 100.0,
             v_op as f64 * 1e-9,
             t_op.saturating_sub(t_built) as f64 * 1e4 / (v_op as f64 * 1e-6).max(1e-9),
-            t_end.saturating_sub(t_op) as f64 * 10_000.0 / s.cycles.max(1) as f64,
-            v_cycles as f64 / 1000.0 / s.cycles.max(1) as f64,
+            t_end.saturating_sub(t_op) as f64 * 10_000.0 / s.cycles.saturating_sub(1).max(1) as f64,
+            v_cycles as f64 / 1000.0 / s.cycles.saturating_sub(1).max(1) as f64,
         ),
         Err(e) => println!("| {kind} | {n} | virtual | failed: {e} |"),
     }
