@@ -6,7 +6,7 @@
 //! cargo run --release -p oxicat --example segment_scale -- [--kind demo,twin] \
 //!     [--n 16,64,256,1000] [--seconds 10] [--cycle-us 1000] [--rt] [--spin] [--per-esc-walk]
 //!     [--idle] [--virtual] [--exchange auto,lean,overlap,ethercrab] [--beyond-limit] [--rt-master]
-//!     [--pin]
+//!     [--pin] [--sm-sync] [--idle-preop]
 //! ```
 //!
 //! Columns: late cycles (an exchange that ended after the next cycle was due), the round
@@ -326,10 +326,28 @@ fn run(kind: &str, n: usize, seconds: u64, cycle_us: u64, how: Serving) -> Row {
 /// `--idle`: the segment's own cost with no master: virtual time advanced 1 ms at a time
 /// for `seconds`, the thread's CPU time per ms (what the nodes' firmware main loops, timers
 /// and the scheduler cost before a frame arrives).
-fn idle(kind: &str, n: usize, seconds: u64) {
+/// With `preop` (`--idle-preop`) the master (in this process, on the virtual clock) first
+/// brings every slave to PRE-OP as for cycling (ethercrab's initialisation: the SIIs read,
+/// the mailboxes set up), and the idle time is measured there.
+fn idle(kind: &str, n: usize, seconds: u64, preop: bool) {
     let args = sim_args(kind, n, None, None);
     let desc = sim_cmd::describe(&args).unwrap_or_else(|e| fail(&e.to_string()));
-    let (mut seg, _) = sim_cmd::build_segment(&desc).unwrap_or_else(|e| fail(&e.to_string()));
+    let (seg, _) = sim_cmd::build_segment(&desc).unwrap_or_else(|e| fail(&e.to_string()));
+    let seg = Arc::new(Mutex::new(seg));
+    if preop {
+        let link = Link::Sim(seg.clone());
+        std::thread::Builder::new()
+            .stack_size(64 << 20)
+            .spawn(move || {
+                let mut m = Master::open(link)?;
+                m.prepare_cyclic()
+            })
+            .unwrap_or_else(|e| fail(&e.to_string()))
+            .join()
+            .unwrap_or_else(|_| fail("master thread panicked"))
+            .unwrap_or_else(|e| fail(&e.to_string()));
+    }
+    let mut seg = seg.lock().unwrap_or_else(|e| e.into_inner());
     let ms = seconds * 1000;
     let t0 = thread_ticks("self");
     let w0 = std::time::Instant::now();
@@ -338,8 +356,9 @@ fn idle(kind: &str, n: usize, seconds: u64) {
     }
     let wall = w0.elapsed().as_secs_f64();
     let cpu_us_per_ms = thread_ticks("self").saturating_sub(t0) as f64 * 10_000.0 / ms as f64;
+    let state = if preop { "PRE-OP" } else { "as booted" };
     println!(
-        "| {kind} | {n} | idle, {ms} ms of virtual time | {cpu_us_per_ms:.0} µs CPU per ms ({:.2} µs per node; {:.2} s wall) |",
+        "| {kind} | {n} | idle ({state}), {ms} ms of virtual time | {cpu_us_per_ms:.0} µs CPU per ms ({:.2} µs per node; {:.2} s wall) |",
         cpu_us_per_ms / n as f64,
         wall
     );
@@ -444,7 +463,7 @@ fn main() {
     let mut ns = vec![16usize, 64, 256, 1000];
     let (mut seconds, mut cycle_us, mut one) = (10u64, 1000u64, false);
     let mut how = Serving::default();
-    let (mut idle_only, mut virt) = (false, false);
+    let (mut idle_only, mut virt, mut idle_preop) = (false, false, false);
     let mut it = std::env::args().skip(1);
     while let Some(a) = it.next() {
         let mut val = || {
@@ -473,6 +492,7 @@ fn main() {
             "--pin" => how.pin = true,
             "--sm-sync" => how.sm_sync = true,
             "--idle" => idle_only = true,
+            "--idle-preop" => (idle_only, idle_preop) = (true, true),
             "--virtual" => virt = true,
             // One row in this process (each row runs in a process of its own, so that the
             // memory a segment adds is not hidden by what the previous one freed).
@@ -494,7 +514,7 @@ fn main() {
     if idle_only {
         for kind in &kinds {
             for &n in &ns {
-                idle(kind, n, seconds);
+                idle(kind, n, seconds, idle_preop);
             }
         }
         return;
