@@ -95,34 +95,37 @@ pub fn sample(raw: &[i32; 9], leg: LegId) -> LegSample {
 }
 
 /// One CSV row being written: its bytes on the stack, appended to the output once per row
-/// (one copy of ~400 bytes instead of one per field).
+/// (one copy of ~400 bytes instead of one per field). The writers take the position to
+/// write at and return the one after it (a local of the caller's loop, not a field the
+/// byte stores would make the compiler reload).
 struct Row {
     buf: [u8; ROW_MAX],
-    len: usize,
 }
 
-/// Longest row: 64 fields of at most 22 bytes ([`Row::fixed`]) and their separators, with
-/// room to spare (the writer's indexing is checked: a longer row would panic, not corrupt).
+/// Longest row, a power of two: 64 fields of at most 22 bytes ([`Row::fixed`]) and their
+/// separators are 1,472 bytes.
 const ROW_MAX: usize = 2048;
+
+/// Row positions are taken modulo [`ROW_MAX`] (`& ROW_MASK`): a row never gets near it, and
+/// so the byte stores need no bounds check (they could only wrap within the row, never
+/// leave it).
+const ROW_MASK: usize = ROW_MAX - 1;
 
 impl Row {
     fn new() -> Self {
-        Row {
-            buf: [0; ROW_MAX],
-            len: 0,
-        }
+        Row { buf: [0; ROW_MAX] }
     }
 
     #[inline(always)]
-    fn push(&mut self, b: u8) {
-        self.buf[self.len] = b;
-        self.len += 1;
+    fn push(&mut self, at: usize, b: u8) -> usize {
+        self.buf[at & ROW_MASK] = b;
+        at + 1
     }
 
-    /// Appends the row to `out` and starts the next one.
-    fn flush(&mut self, out: &mut Vec<u8>) {
-        out.extend_from_slice(&self.buf[..self.len]);
-        self.len = 0;
+    /// Appends the row's first `len` bytes to `out`.
+    fn flush(&self, len: usize, out: &mut Vec<u8>) {
+        debug_assert!(len <= ROW_MAX);
+        out.extend_from_slice(&self.buf[..len.min(ROW_MAX)]);
     }
 
     /// Writes `raw / 10^decimals` exactly (no float rounding): the text of
@@ -133,7 +136,7 @@ impl Row {
     /// go straight into the row from the field's end backwards, two at a time, with the
     /// power of ten from a table. Inlined into its callers.
     #[inline(always)]
-    fn fixed(&mut self, raw: i64, decimals: u32) {
+    fn fixed(&mut self, at: usize, raw: i64, decimals: u32) -> usize {
         /// "00" "01" … "99".
         const PAIRS: [[u8; 2]; 100] = {
             let mut t = [[0u8; 2]; 100];
@@ -165,49 +168,55 @@ impl Row {
         // sign, integer digits (at least one), point and decimals: at most 1 + 20 + 1 + 18.
         let int_digits = int.checked_ilog10().map_or(1, |l| l as usize + 1);
         let n = usize::from(raw < 0) + int_digits + if dec > 0 { 1 + dec as usize } else { 0 };
-        let start = self.len;
-        let mut i = start + n;
-        self.len = i;
+        let end = at + n;
+        let mut i = end;
         let buf = &mut self.buf;
         if dec > 0 {
             let mut k = dec;
             while k >= 2 {
                 i -= 2;
-                buf[i..i + 2].copy_from_slice(&PAIRS[(frac % 100) as usize]);
+                let [x, y] = PAIRS[(frac % 100) as usize];
+                buf[i & ROW_MASK] = x;
+                buf[(i + 1) & ROW_MASK] = y;
                 frac /= 100;
                 k -= 2;
             }
             if k == 1 {
                 i -= 1;
-                buf[i] = b'0' + (frac % 10) as u8;
+                buf[i & ROW_MASK] = b'0' + (frac % 10) as u8;
             }
             i -= 1;
-            buf[i] = b'.';
+            buf[i & ROW_MASK] = b'.';
         }
         while int >= 100 {
             i -= 2;
-            buf[i..i + 2].copy_from_slice(&PAIRS[(int % 100) as usize]);
+            let [x, y] = PAIRS[(int % 100) as usize];
+            buf[i & ROW_MASK] = x;
+            buf[(i + 1) & ROW_MASK] = y;
             int /= 100;
         }
         if int >= 10 {
             i -= 2;
-            buf[i..i + 2].copy_from_slice(&PAIRS[int as usize]);
+            let [x, y] = PAIRS[int as usize];
+            buf[i & ROW_MASK] = x;
+            buf[(i + 1) & ROW_MASK] = y;
         } else {
             i -= 1;
-            buf[i] = b'0' + int as u8;
+            buf[i & ROW_MASK] = b'0' + int as u8;
         }
         if raw < 0 {
             i -= 1;
-            buf[i] = b'-';
+            buf[i & ROW_MASK] = b'-';
         }
-        debug_assert_eq!(i, start);
+        debug_assert_eq!(i, at);
+        end
     }
 
     /// Millimetres with two decimals, `-0.00` written as `0.00`.
     #[inline(always)]
-    fn mm(&mut self, m: f64) {
+    fn mm(&mut self, at: usize, m: f64) -> usize {
         let v = (m * 100_000.0).round() as i64;
-        self.fixed(v, 2);
+        self.fixed(at, v, 2)
     }
 }
 
@@ -234,31 +243,31 @@ pub fn csv(run: &TrotRun) -> String {
     out.extend_from_slice(h.as_bytes());
     let mut row = Row::new();
     for (k, r) in run.rows.iter().enumerate() {
-        row.fixed(k as i64, 0);
-        row.push(b',');
+        let mut at = row.fixed(0, k as i64, 0);
+        at = row.push(at, b',');
         // t in µs resolution, exact.
-        row.fixed((k as u64 * cyc_ns / 1000) as i64, 6);
-        row.push(b',');
-        row.push(if r.state_machine { b'1' } else { b'0' });
-        row.push(b',');
-        row.fixed(i64::from(r.wkc), 0);
+        at = row.fixed(at, (k as u64 * cyc_ns / 1000) as i64, 6);
+        at = row.push(at, b',');
+        at = row.push(at, if r.state_machine { b'1' } else { b'0' });
+        at = row.push(at, b',');
+        at = row.fixed(at, i64::from(r.wkc), 0);
         for (li, leg) in LegId::TABLE.into_iter().enumerate() {
-            row.push(b',');
-            row.fixed(i64::from(r.a_cmd[li]), 0);
-            row.push(b',');
-            row.fixed(i64::from(r.b_cmd[li]), 0);
+            at = row.push(at, b',');
+            at = row.fixed(at, i64::from(r.a_cmd[li]), 0);
+            at = row.push(at, b',');
+            at = row.fixed(at, i64::from(r.b_cmd[li]), 0);
             for (v, dec) in decimals.iter().enumerate() {
-                row.push(b',');
-                row.fixed(i64::from(r.inputs[li][v]), *dec);
+                at = row.push(at, b',');
+                at = row.fixed(at, i64::from(r.inputs[li][v]), *dec);
             }
             let s = sample(&r.inputs[li], leg);
             for m in [s.toe_des.0, s.toe_des.1, s.toe.0, s.toe.1] {
-                row.push(b',');
-                row.mm(m);
+                at = row.push(at, b',');
+                at = row.mm(at, m);
             }
         }
-        row.push(b'\n');
-        row.flush(&mut out);
+        at = row.push(at, b'\n');
+        row.flush(at, &mut out);
     }
     String::from_utf8(out).unwrap_or_else(|e| String::from_utf8_lossy(e.as_bytes()).into_owned())
 }
@@ -818,14 +827,13 @@ mod observation_tests {
         for decimals in 0..=18 {
             for &v in &values {
                 // After a field already in the row, as the CSV writes them.
-                row.push(b'x');
-                row.fixed(v, decimals);
+                let at = row.push(0, b'x');
+                let end = row.fixed(at, v, decimals);
                 assert_eq!(
-                    row.buf[1..row.len],
+                    row.buf[1..end],
                     *reference(v, decimals).as_bytes(),
                     "{v} with {decimals} decimals"
                 );
-                row.len = 0;
             }
         }
         // Millimetres: rounded to 1/100 mm, no negative zero.
@@ -836,17 +844,16 @@ mod observation_tests {
             (0.123_456, "123.46"),
             (-0.012_344, "-12.34"),
         ] {
-            row.mm(m);
-            assert_eq!(row.buf[..row.len], *text.as_bytes(), "{m}");
-            row.len = 0;
+            let end = row.mm(0, m);
+            assert_eq!(row.buf[..end], *text.as_bytes(), "{m}");
         }
-        // A row goes out whole and the next starts empty.
+        // A row goes out whole.
         let mut out = b"h".to_vec();
-        row.fixed(-5, 1);
-        row.push(b'\n');
-        row.flush(&mut out);
-        row.fixed(7, 0);
-        row.flush(&mut out);
+        let at = row.fixed(0, -5, 1);
+        let at = row.push(at, b'\n');
+        row.flush(at, &mut out);
+        let at = row.fixed(0, 7, 0);
+        row.flush(at, &mut out);
         assert_eq!(out, b"h-0.5\n7");
     }
 }
