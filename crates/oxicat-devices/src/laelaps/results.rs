@@ -94,130 +94,83 @@ pub fn sample(raw: &[i32; 9], leg: LegId) -> LegSample {
     }
 }
 
-/// One CSV row being written: its bytes on the stack, appended to the output once per row
-/// (one copy of ~400 bytes instead of one per field). The writers take the position to
-/// write at and return the one after it (a local of the caller's loop, not a field the
-/// byte stores would make the compiler reload).
-struct Row {
-    buf: [u8; ROW_MAX],
+/// Writes `raw / 10^decimals` exactly (no float rounding): the text of
+/// `format!("{sign}{}.{:0decimals$}", |raw| / 10^decimals, |raw| % 10^decimals)` (no point
+/// for 0 decimals; at most 18 decimals), built from its digits on the stack — the CSV
+/// writes 61,250 rows of 64 such fields, where `core::fmt` took a fifth of a whole trot's
+/// CPU time. Inlined into its three callers, with the power of ten from a table: a call
+/// and `u64::pow`'s loop cost as much as the digits of a short field.
+#[inline(always)]
+fn fixed(out: &mut Vec<u8>, raw: i64, decimals: u32) {
+    /// "00" "01" … "99".
+    const PAIRS: [[u8; 2]; 100] = {
+        let mut t = [[0u8; 2]; 100];
+        let mut k = 0;
+        while k < 100 {
+            t[k] = [b'0' + (k / 10) as u8, b'0' + (k % 10) as u8];
+            k += 1;
+        }
+        t
+    };
+    /// 10^0 … 10^18.
+    const POW10: [u64; 19] = {
+        let mut t = [1u64; 19];
+        let mut k = 1;
+        while k < 19 {
+            t[k] = t[k - 1] * 10;
+            k += 1;
+        }
+        t
+    };
+    // |i64::MIN| has 19 digits; with 18 decimals, a leading zero, the point and the sign
+    // at most 22 bytes, written from the end of the buffer backwards two digits at a time.
+    const W: usize = 24;
+    let mut buf = [0u8; W];
+    let mut i = W;
+    let dec = decimals.min(18);
+    let a = raw.unsigned_abs();
+    let mut int = a;
+    if dec > 0 {
+        let p = POW10[dec as usize];
+        int = a / p;
+        let mut frac = a % p;
+        let mut k = dec;
+        while k >= 2 {
+            i -= 2;
+            buf[i..i + 2].copy_from_slice(&PAIRS[(frac % 100) as usize]);
+            frac /= 100;
+            k -= 2;
+        }
+        if k == 1 {
+            i -= 1;
+            buf[i] = b'0' + (frac % 10) as u8;
+        }
+        i -= 1;
+        buf[i] = b'.';
+    }
+    while int >= 100 {
+        i -= 2;
+        buf[i..i + 2].copy_from_slice(&PAIRS[(int % 100) as usize]);
+        int /= 100;
+    }
+    if int >= 10 {
+        i -= 2;
+        buf[i..i + 2].copy_from_slice(&PAIRS[int as usize]);
+    } else {
+        i -= 1;
+        buf[i] = b'0' + int as u8;
+    }
+    if raw < 0 {
+        i -= 1;
+        buf[i] = b'-';
+    }
+    out.extend_from_slice(&buf[i..]);
 }
 
-/// Longest row, a power of two: 64 fields of at most 22 bytes ([`Row::fixed`]) and their
-/// separators are 1,472 bytes.
-const ROW_MAX: usize = 2048;
-
-/// Row positions are taken modulo [`ROW_MAX`] (`& ROW_MASK`): a row never gets near it, and
-/// so the byte stores need no bounds check (they could only wrap within the row, never
-/// leave it).
-const ROW_MASK: usize = ROW_MAX - 1;
-
-impl Row {
-    fn new() -> Self {
-        Row { buf: [0; ROW_MAX] }
-    }
-
-    #[inline(always)]
-    fn push(&mut self, at: usize, b: u8) -> usize {
-        self.buf[at & ROW_MASK] = b;
-        at + 1
-    }
-
-    /// Appends the row's first `len` bytes to `out`.
-    fn flush(&self, len: usize, out: &mut Vec<u8>) {
-        debug_assert!(len <= ROW_MAX);
-        out.extend_from_slice(&self.buf[..len.min(ROW_MAX)]);
-    }
-
-    /// Writes `raw / 10^decimals` exactly (no float rounding): the text of
-    /// `format!("{sign}{}.{:0decimals$}", |raw| / 10^decimals, |raw| % 10^decimals)` (no
-    /// point for 0 decimals; at most 18 decimals), digit by digit — the CSV writes 61,250
-    /// rows of 64 such fields, where `core::fmt` took a fifth of a whole trot's CPU time.
-    /// Its length is known first (the integer part's digits from `ilog10`), so the digits
-    /// go straight into the row from the field's end backwards, two at a time, with the
-    /// power of ten from a table. Inlined into its callers.
-    #[inline(always)]
-    fn fixed(&mut self, at: usize, raw: i64, decimals: u32) -> usize {
-        /// "00" "01" … "99".
-        const PAIRS: [[u8; 2]; 100] = {
-            let mut t = [[0u8; 2]; 100];
-            let mut k = 0;
-            while k < 100 {
-                t[k] = [b'0' + (k / 10) as u8, b'0' + (k % 10) as u8];
-                k += 1;
-            }
-            t
-        };
-        /// 10^0 … 10^18.
-        const POW10: [u64; 19] = {
-            let mut t = [1u64; 19];
-            let mut k = 1;
-            while k < 19 {
-                t[k] = t[k - 1] * 10;
-                k += 1;
-            }
-            t
-        };
-        let dec = decimals.min(18);
-        let a = raw.unsigned_abs();
-        let (mut int, mut frac) = if dec > 0 {
-            let p = POW10[dec as usize];
-            (a / p, a % p)
-        } else {
-            (a, 0)
-        };
-        // sign, integer digits (at least one), point and decimals: at most 1 + 20 + 1 + 18.
-        let int_digits = int.checked_ilog10().map_or(1, |l| l as usize + 1);
-        let n = usize::from(raw < 0) + int_digits + if dec > 0 { 1 + dec as usize } else { 0 };
-        let end = at + n;
-        let mut i = end;
-        let buf = &mut self.buf;
-        if dec > 0 {
-            let mut k = dec;
-            while k >= 2 {
-                i -= 2;
-                let [x, y] = PAIRS[(frac % 100) as usize];
-                buf[i & ROW_MASK] = x;
-                buf[(i + 1) & ROW_MASK] = y;
-                frac /= 100;
-                k -= 2;
-            }
-            if k == 1 {
-                i -= 1;
-                buf[i & ROW_MASK] = b'0' + (frac % 10) as u8;
-            }
-            i -= 1;
-            buf[i & ROW_MASK] = b'.';
-        }
-        while int >= 100 {
-            i -= 2;
-            let [x, y] = PAIRS[(int % 100) as usize];
-            buf[i & ROW_MASK] = x;
-            buf[(i + 1) & ROW_MASK] = y;
-            int /= 100;
-        }
-        if int >= 10 {
-            i -= 2;
-            let [x, y] = PAIRS[int as usize];
-            buf[i & ROW_MASK] = x;
-            buf[(i + 1) & ROW_MASK] = y;
-        } else {
-            i -= 1;
-            buf[i & ROW_MASK] = b'0' + int as u8;
-        }
-        if raw < 0 {
-            i -= 1;
-            buf[i & ROW_MASK] = b'-';
-        }
-        debug_assert_eq!(i, at);
-        end
-    }
-
-    /// Millimetres with two decimals, `-0.00` written as `0.00`.
-    #[inline(always)]
-    fn mm(&mut self, at: usize, m: f64) -> usize {
-        let v = (m * 100_000.0).round() as i64;
-        self.fixed(at, v, 2)
-    }
+/// Millimetres with two decimals, `-0.00` written as `0.00`.
+fn mm(out: &mut Vec<u8>, m: f64) {
+    let v = (m * 100_000.0).round() as i64;
+    fixed(out, v, 2);
 }
 
 /// The CSV of a run: one header line, one row per recorded cycle.
@@ -241,33 +194,31 @@ pub fn csv(run: &TrotRun) -> String {
     // at the end instead of per field).
     let mut out = Vec::with_capacity(h.len() + run.rows.len() * 420);
     out.extend_from_slice(h.as_bytes());
-    let mut row = Row::new();
     for (k, r) in run.rows.iter().enumerate() {
-        let mut at = row.fixed(0, k as i64, 0);
-        at = row.push(at, b',');
+        fixed(&mut out, k as i64, 0);
+        out.push(b',');
         // t in µs resolution, exact.
-        at = row.fixed(at, (k as u64 * cyc_ns / 1000) as i64, 6);
-        at = row.push(at, b',');
-        at = row.push(at, if r.state_machine { b'1' } else { b'0' });
-        at = row.push(at, b',');
-        at = row.fixed(at, i64::from(r.wkc), 0);
+        fixed(&mut out, (k as u64 * cyc_ns / 1000) as i64, 6);
+        out.push(b',');
+        out.push(if r.state_machine { b'1' } else { b'0' });
+        out.push(b',');
+        fixed(&mut out, i64::from(r.wkc), 0);
         for (li, leg) in LegId::TABLE.into_iter().enumerate() {
-            at = row.push(at, b',');
-            at = row.fixed(at, i64::from(r.a_cmd[li]), 0);
-            at = row.push(at, b',');
-            at = row.fixed(at, i64::from(r.b_cmd[li]), 0);
+            out.push(b',');
+            fixed(&mut out, i64::from(r.a_cmd[li]), 0);
+            out.push(b',');
+            fixed(&mut out, i64::from(r.b_cmd[li]), 0);
             for (v, dec) in decimals.iter().enumerate() {
-                at = row.push(at, b',');
-                at = row.fixed(at, i64::from(r.inputs[li][v]), *dec);
+                out.push(b',');
+                fixed(&mut out, i64::from(r.inputs[li][v]), *dec);
             }
             let s = sample(&r.inputs[li], leg);
             for m in [s.toe_des.0, s.toe_des.1, s.toe.0, s.toe.1] {
-                at = row.push(at, b',');
-                at = row.mm(at, m);
+                out.push(b',');
+                mm(&mut out, m);
             }
         }
-        at = row.push(at, b'\n');
-        row.flush(at, &mut out);
+        out.push(b'\n');
     }
     String::from_utf8(out).unwrap_or_else(|e| String::from_utf8_lossy(e.as_bytes()).into_owned())
 }
@@ -815,45 +766,16 @@ mod observation_tests {
             p *= 10;
             values.extend([p - 1, p, p + 1, -(p - 1), -p, -(p + 1), p / 3, -p / 7]);
         }
-        let mut s = 0xD1B5_4A32_D192_ED03u64;
-        for _ in 0..2000 {
-            s ^= s << 13;
-            s ^= s >> 7;
-            s ^= s << 17;
-            // Any i64, and values of every width.
-            values.extend([s as i64, (s >> (s % 64)) as i64, -((s >> (s % 64)) as i64)]);
-        }
-        let mut row = super::Row::new();
         for decimals in 0..=18 {
             for &v in &values {
-                // After a field already in the row, as the CSV writes them.
-                let at = row.push(0, b'x');
-                let end = row.fixed(at, v, decimals);
+                let mut out = b"x".to_vec();
+                super::fixed(&mut out, v, decimals);
                 assert_eq!(
-                    row.buf[1..end],
+                    out[1..],
                     *reference(v, decimals).as_bytes(),
                     "{v} with {decimals} decimals"
                 );
             }
         }
-        // Millimetres: rounded to 1/100 mm, no negative zero.
-        for (m, text) in [
-            (0.0, "0.00"),
-            (-0.0, "0.00"),
-            (-0.000_000_04, "0.00"),
-            (0.123_456, "123.46"),
-            (-0.012_344, "-12.34"),
-        ] {
-            let end = row.mm(0, m);
-            assert_eq!(row.buf[..end], *text.as_bytes(), "{m}");
-        }
-        // A row goes out whole.
-        let mut out = b"h".to_vec();
-        let at = row.fixed(0, -5, 1);
-        let at = row.push(at, b'\n');
-        row.flush(at, &mut out);
-        let at = row.fixed(0, 7, 0);
-        row.flush(at, &mut out);
-        assert_eq!(out, b"h-0.5\n7");
     }
 }
