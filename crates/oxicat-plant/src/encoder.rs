@@ -116,8 +116,73 @@ impl Encoder {
     }
 
     /// Move the shaft from `a0` at `t0` to `a1` at `t0 + h`; records every edge crossed.
+    ///
+    /// Of the edges crossed only the last one's time and the unit events' times are seen
+    /// (the last edge time, the latest capture and its period), so only those edges' times
+    /// are computed, each with the expression [`update_every_edge`](Self::update_every_edge)
+    /// evaluates for every edge (the same operations on the same values: the same bits;
+    /// tested side by side). The others only count.
     #[inline]
     pub(crate) fn update(&mut self, a0: f64, a1: f64, t0: f64, h: f64) {
+        let c1 = self.count_at(a1);
+        let c0 = self.count;
+        if c1 == c0 {
+            return;
+        }
+        let k = COUNTS_PER_REV / (2.0 * PI);
+        let up = c1 > c0;
+        let n = (c1 - c0).unsigned_abs();
+        let da = a1 - a0;
+        let zero = self.zero_angle;
+        // The time of edge `e` (1..=n), as the edge loop computes it.
+        let edge_time = |e: u64| {
+            let c = if up { c0 + e as i64 } else { c0 - e as i64 };
+            let edge_angle = zero + (c as f64 - if up { 0.5 } else { -0.5 }) / k;
+            let frac = if da != 0.0 {
+                ((edge_angle - a0) / da).clamp(0.0, 1.0)
+            } else {
+                1.0
+            };
+            t0 + h * frac
+        };
+        // The direction is the same for every edge of one move: only the first can flip it.
+        if up != self.forward {
+            self.dir_changed = true;
+            self.forward = up;
+        }
+        self.edges_total = self.edges_total.wrapping_add(n);
+        // Unit events fall on the edges where the count since the last one reaches
+        // `upps` (`edges_since_unit < upps` between moves): edges `j·upps − before`.
+        let upps = u64::from(self.upps);
+        let before = u64::from(self.edges_since_unit);
+        let units = (before + n) / upps;
+        if units > 0 {
+            let last = units * upps - before;
+            let t = edge_time(last);
+            // The capture before it: this move's previous unit edge, else the last one's.
+            let (prev, dir_changed) = if units > 1 {
+                // The first unit event of this move cleared the flag; no later edge sets it.
+                (edge_time(last - upps), false)
+            } else {
+                (self.last_unit_time, self.dir_changed)
+            };
+            self.capture = Some(UnitCapture {
+                period: t - prev,
+                time: t,
+                direction_changed: dir_changed,
+            });
+            self.dir_changed = false;
+            self.last_unit_time = t;
+        }
+        self.edges_since_unit = ((before + n) % upps) as u32;
+        self.last_edge_time = edge_time(n);
+        self.count = c1;
+    }
+
+    /// [`update`](Self::update) as it was, walking every edge crossed (the reference its
+    /// tests compare it with).
+    #[cfg(test)]
+    fn update_every_edge(&mut self, a0: f64, a1: f64, t0: f64, h: f64) {
         let c1 = self.count_at(a1);
         let c0 = self.count;
         if c1 == c0 {
@@ -161,7 +226,65 @@ impl Encoder {
 
 #[cfg(test)]
 mod tests {
-    use super::floor_i64;
+    use super::{floor_i64, Encoder};
+
+    /// `update` computes only the edge times that are seen; over random moves (small and
+    /// large, either way, reversals, standstill, a zero-length move, every prescaler from 1
+    /// to 40, captures taken or left, resets) the encoder is the one the every-edge loop
+    /// leaves, field for field (floats by their bits, through `PartialEq` on equal values
+    /// and the debug form).
+    #[test]
+    fn update_is_the_every_edge_loop() {
+        let mut s = 0x9E37_79B9_7F4A_7C15u64;
+        let mut next = move || {
+            s ^= s << 13;
+            s ^= s >> 7;
+            s ^= s << 17;
+            s
+        };
+        for upps in 1..=40u32 {
+            let zero = (next() % 1000) as f64 * 1e-3 - 0.5;
+            let mut fast = Encoder::new(zero, upps);
+            let mut slow = fast.clone();
+            let (mut a, mut t) = (zero, 0.0f64);
+            for step in 0..4000 {
+                let r = next();
+                // Mostly a few edges (k ≈ 318 counts/rad), sometimes many, sometimes none.
+                let scale = match r % 8 {
+                    0 => 0.0,
+                    1 => 0.5,
+                    2 | 3 => 0.02,
+                    _ => 0.005,
+                };
+                let da = ((r >> 8) % 20001) as f64 * 1e-4 - 1.0;
+                let a1 = if r % 97 == 0 { a } else { a + da * scale };
+                let h = 5e-5 * (1.0 + ((r >> 40) % 7) as f64 * 1e-9);
+                fast.update(a, a1, t, h);
+                slow.update_every_edge(a, a1, t, h);
+                assert_eq!(
+                    format!("{fast:?}"),
+                    format!("{slow:?}"),
+                    "upps {upps} step {step}"
+                );
+                assert_eq!(fast, slow);
+                assert_eq!(fast.last_edge_time.to_bits(), slow.last_edge_time.to_bits());
+                assert_eq!(fast.last_unit_time.to_bits(), slow.last_unit_time.to_bits());
+                if r % 5 == 0 {
+                    assert_eq!(fast.take_capture(), slow.take_capture());
+                }
+                if r % 1009 == 0 {
+                    fast.reset(a1);
+                    slow.reset(a1);
+                }
+                a = a1;
+                t += h;
+            }
+            assert!(
+                fast.edges_total() > 1000,
+                "upps {upps}: the moves cross edges"
+            );
+        }
+    }
 
     #[test]
     fn floor_i64_matches_floor_cast() {

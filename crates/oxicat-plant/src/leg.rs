@@ -252,6 +252,9 @@ impl Default for LegParams {
 #[derive(Clone, Debug)]
 struct Drive {
     p: DriveParams,
+    /// `p.ratio()`, computed once (a drive's parameters do not change after it is built:
+    /// the same product, the same bits).
+    n: f64,
     /// Motor angle in the joint-aligned frame (= sign · motor shaft angle) [rad].
     psi: f64,
     /// Motor speed in the joint-aligned frame [rad/s].
@@ -312,6 +315,7 @@ impl Leg {
             let psi = dp.ratio() * q;
             Drive {
                 p: dp,
+                n: dp.ratio(),
                 psi,
                 w: 0.0,
                 i_cmd: 0.0,
@@ -398,6 +402,13 @@ impl Leg {
         }
         let n = ceil(dt / self.p.substep - 1e-9).max(1.0);
         (n as u64, dt / n)
+    }
+
+    /// `(dt / params.substep − 1e-9).ceil().max(1.0) as u64` for any `dt` (a zero or
+    /// negative span gives one), without the libm `ceil` call: how many substeps a caller
+    /// stepping the leg itself (the body coupling) cuts `dt` into.
+    pub fn substep_count(&self, dt: f64) -> u64 {
+        ceil(dt / self.p.substep - 1e-9).max(1.0) as u64
     }
 
     /// Runs a split from [`split`](Self::split): `advance(dt)` is `run_split(split(dt))`.
@@ -676,7 +687,7 @@ impl Leg {
             let mut b = base_b;
             for k in 0..2 {
                 let d = &self.d[k];
-                let n = d.p.ratio();
+                let n = d.n;
                 if d.stuck {
                     a[k][k] += n * n * (d.p.motor.inertia + h * fr[k].1);
                     b[k] += n * (tau_em[k] - fr[k].0);
@@ -696,7 +707,7 @@ impl Leg {
                 if !d.stuck {
                     continue;
                 }
-                let n = d.p.ratio();
+                let n = d.n;
                 let dw = n * dv[k];
                 // Coupler torque at the gearhead output from the motor-side balance.
                 let tc = d.p.gearhead_ratio
@@ -720,7 +731,7 @@ impl Leg {
         let mut wn = [0.0; 2];
         for k in 0..2 {
             let d = &mut self.d[k];
-            let n = d.p.ratio();
+            let n = d.n;
             if d.stuck {
                 wn[k] = n * vn[k];
                 continue;
@@ -836,5 +847,35 @@ mod tests {
             assert!(a == b || a.is_nan() && b.is_nan(), "{x}: {a} against {b}");
         }
         assert!(super::ceil(f64::NAN).is_nan());
+    }
+
+    /// `substep_count` is the libm form it replaced in the body coupling, over spans from
+    /// nothing to seconds (and the degenerate ones).
+    #[test]
+    fn substep_count_is_the_library_form() {
+        let leg = Leg::new(LegParams::default());
+        let sub = leg.params().substep;
+        let mut dts = vec![
+            0.0,
+            -1.0,
+            f64::NAN,
+            f64::INFINITY,
+            sub,
+            2.0 * sub,
+            sub * (1.0 + 1e-12),
+        ];
+        let mut s = 0x1234_5678_9ABC_DEF1u64;
+        for _ in 0..100_000 {
+            s ^= s << 13;
+            s ^= s >> 7;
+            s ^= s << 17;
+            // Spans in whole nanoseconds as the rig has them, up to 10 ms, and any bits.
+            dts.push((s % 10_000_000) as f64 * 1e-9);
+            dts.push(f64::from_bits(s));
+        }
+        for dt in dts {
+            let old = (dt / sub - 1e-9).ceil().max(1.0) as u64;
+            assert_eq!(leg.substep_count(dt), old, "{dt}");
+        }
     }
 }

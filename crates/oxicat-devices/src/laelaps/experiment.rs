@@ -268,6 +268,20 @@ impl OutputMap {
             p.put(image, i64::from(v));
         }
     }
+
+    /// [`write`](Self::write) unless `o` is `last`, what was last written into `image`
+    /// (then updated). Skipping leaves the same bytes: a place's `put` sets exactly its
+    /// bits whatever they held, so writing `o` again changes nothing but the
+    /// `State_Machine` place, which [`LinkedVariable::apply`] sets after it every cycle
+    /// (`o.state_machine` is false, the linked value goes over it). The trot's outputs
+    /// change at a few phase boundaries; the 16 places of each of the 4 images were
+    /// written every cycle.
+    fn write_changed(&self, o: &LegOutputs, last: &mut Option<LegOutputs>, image: &mut [u8]) {
+        if *last != Some(*o) {
+            self.write(o, image);
+            *last = Some(*o);
+        }
+    }
 }
 
 /// A variable of the master linked to the same PDO entry of several slaves (TwinCAT's
@@ -861,6 +875,8 @@ async fn run_master(
         .max()
         .unwrap_or(0);
     let mut images = vec![vec![0u8; out_len]; 4];
+    // What each image was last written with (`OutputMap::write_changed`).
+    let mut written = [None::<LegOutputs>; 4];
 
     // Bring the cycle in line with SYNC0 until everyone is in OP.
     let mut warm = 0;
@@ -923,7 +939,7 @@ async fn run_master(
             let mut o = *o;
             o.traj[2] = if a_on { ab_full[pos].0 } else { 0 };
             o.traj[3] = if b_on { ab_full[pos].1 } else { 0 };
-            map.write(&o, &mut images[pos]);
+            map.write_changed(&o, &mut written[pos], &mut images[pos]);
             let ti = table_index(legs[pos]);
             a_cmd[ti] = o.traj[2];
             b_cmd[ti] = o.traj[3];
@@ -984,4 +1000,75 @@ async fn run_master(
     }
     bus.cycles = rows.len() as u64;
     Ok((rows, bus, rec_start.elapsed()))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The images the master sends are the same bytes with `write_changed` as with
+    /// `write` every cycle, over random runs of outputs (changing now and then, as the
+    /// procedure's phases change them, or every cycle) and of the linked `State_Machine`,
+    /// from images holding any bytes.
+    #[test]
+    fn writing_only_changed_outputs_leaves_the_same_images() {
+        let def = device::device(crate::laelaps::Side::Left);
+        let map = OutputMap::new(def).expect("the leg node's outputs");
+        let len = map
+            .traj
+            .iter()
+            .chain(&map.gains)
+            .chain([&map.state_machine, &map.transition_time, &map.filter])
+            .map(|p| (p.bit + usize::from(p.bits)).div_ceil(8))
+            .max()
+            .unwrap_or(0);
+        let mut s = 0xA076_1D64_78BD_642Fu64;
+        let mut next = move || {
+            s ^= s << 13;
+            s ^= s >> 7;
+            s ^= s << 17;
+            s
+        };
+        let mut sm = LinkedVariable {
+            name: "State_Machine",
+            targets: (0..4).map(|p| (p, map.state_machine)).collect(),
+            value: 0,
+        };
+        let start: Vec<u8> = (0..len).map(|_| next() as u8).collect();
+        let mut always = vec![start.clone(); 4];
+        let mut changed = vec![start; 4];
+        let mut written = [None::<LegOutputs>; 4];
+        let mut outs = [LegOutputs::default(); 4];
+        let mut skipped = 0;
+        for cycle in 0..20_000 {
+            let r = next();
+            if r % 5 == 0 {
+                sm.value = i64::from(r % 3 == 0);
+            }
+            for (pos, o) in outs.iter_mut().enumerate() {
+                let r = next();
+                // Mostly unchanged; a field now and then; everything at once sometimes.
+                match r % 16 {
+                    0 => o.traj[(r >> 8) as usize % 7] = (r >> 16) as i16,
+                    1 => o.gains[(r >> 8) as usize % 6] = (r >> 16) as i16,
+                    2 => o.transition_time = (r >> 16) as i8,
+                    3 => o.filter_hz = (r >> 16) as u16,
+                    4 => {
+                        o.traj = core::array::from_fn(|k| (r >> (k * 8)) as i16);
+                        o.gains = core::array::from_fn(|k| (r >> (k * 9)) as i16);
+                    }
+                    _ => {}
+                }
+                if written[pos] == Some(*o) {
+                    skipped += 1;
+                }
+                map.write(o, &mut always[pos]);
+                map.write_changed(o, &mut written[pos], &mut changed[pos]);
+            }
+            sm.apply(&mut always);
+            sm.apply(&mut changed);
+            assert_eq!(always, changed, "cycle {cycle}");
+        }
+        assert!(skipped > 40_000, "most writes were skipped: {skipped}");
+    }
 }

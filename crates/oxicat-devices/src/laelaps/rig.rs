@@ -469,7 +469,7 @@ impl LegPlant {
 pub fn advance_on_body(leg: &mut Leg, body: &mut Body, index: usize, from_ns: u64, to_ns: u64) {
     let span_ns = to_ns - from_ns;
     let dt = span_ns as f64 * 1e-9;
-    let n = (dt / leg.params().substep - 1e-9).ceil().max(1.0) as u64;
+    let n = leg.substep_count(dt);
     let h = dt / n as f64;
     // The momentum after a substep is the next one's before: the hip's motion, set in
     // between, does not enter it.
@@ -477,7 +477,9 @@ pub fn advance_on_body(leg: &mut Leg, body: &mut Body, index: usize, from_ns: u6
     // What `leg.advance(h)` would split `h` into, the same at every substep.
     let inner = leg.split(h);
     for k in 0..n {
-        let j = body.step_of(from_ns + span_ns * k / n);
+        // The first substep starts at `from_ns` (`span_ns * 0 / n`, without the division).
+        let at = if k == 0 { 0 } else { span_ns * k / n };
+        let j = body.step_of(from_ns + at);
         leg.set_hip_motion(body.hip_motion(index, j));
         leg.run_split(inner);
         let p1 = leg.vertical_momentum();
