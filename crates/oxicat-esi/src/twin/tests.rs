@@ -82,9 +82,9 @@ fn a_coe_device_becomes_a_stack_twin_with_its_dictionary() {
         (v.dtype, v.bits, v.pdo),
         (DataType::Int16, 16, PdoMapping::Tx)
     );
-    assert_eq!(v.default, DefaultValue::bits(0x1234));
+    assert_eq!(v.default(), DefaultValue::bits(0x1234));
     let g = d.entry_def(0x8000, 0).unwrap();
-    assert_eq!(g.default, DefaultValue::bits(0x1000));
+    assert_eq!(g.default(), DefaultValue::bits(0x1000));
     assert_eq!(g.access, Access(0x07 | 0x08), "rw, written in PREOP only");
     // The SII says what the ESI says.
     let m = crate::sii::parse(&t.sii).unwrap();
