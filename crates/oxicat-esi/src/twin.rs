@@ -292,6 +292,18 @@ fn leak(s: &str) -> &'static str {
     Box::leak(s.to_string().into_boxed_str())
 }
 
+/// Gives `e` default `d`: in the entry's own word when it fits there, else in (leaked)
+/// limits that keep the entry's unit, range and scaling.
+pub(crate) fn set_default(e: &mut EntryDef, d: DefaultValue) {
+    let inline = match d.as_bits() {
+        Some(v) => e.limits.default.is_none() && e.set_default_word(v),
+        None => false,
+    };
+    if !inline {
+        e.limits = Box::leak(Box::new(e.limits.with_default(d)));
+    }
+}
+
 struct Esi<'a, 'i> {
     root: Node<'a, 'i>,
     vendor_id: u32,
@@ -823,7 +835,7 @@ fn object(types: &Types, o: Node, index: u16) -> Result<(ObjectDef, Option<Strin
             ObjectCode::Var,
             vec![{
                 let mut e = entry(0, &name, b, oacc_or_ro, opdo);
-                e.default = default_of(info, b);
+                set_default(&mut e, default_of(info, b));
                 e
             }],
         ),
@@ -838,7 +850,7 @@ fn object(types: &Types, o: Node, index: u16) -> Result<(ObjectDef, Option<Strin
             };
             let mut v = vec![{
                 let mut e = entry(0, "SubIndex 000", u8b, Access::RO, PdoMapping::None);
-                e.default = DefaultValue::bits(u64::from(elements));
+                set_default(&mut e, DefaultValue::bits(u64::from(elements)));
                 e
             }];
             let first = lbound.max(1);
@@ -847,7 +859,7 @@ fn object(types: &Types, o: Node, index: u16) -> Result<(ObjectDef, Option<Strin
                 let sname = format!("SubIndex {sub:03}");
                 let (inf, a, p) = sub_info(k as usize + 1, &sname);
                 let mut e = entry(sub, &sname, elem, a.unwrap_or(oacc_or_ro), pdo_or(p, opdo));
-                e.default = default_of(inf, elem);
+                set_default(&mut e, default_of(inf, elem));
                 v.push(e);
             }
             (ObjectCode::Array, v)
@@ -864,7 +876,7 @@ fn object(types: &Types, o: Node, index: u16) -> Result<(ObjectDef, Option<Strin
                     access,
                     pdo_or(pdo_or(p, s.pdo), opdo),
                 );
-                e.default = default_of(inf, s.base);
+                set_default(&mut e, default_of(inf, s.base));
                 v.push(e);
             }
             if v.first().is_none_or(|e| e.sub != 0) {
@@ -878,7 +890,10 @@ fn object(types: &Types, o: Node, index: u16) -> Result<(ObjectDef, Option<Strin
                     Access::RO,
                     PdoMapping::None,
                 );
-                e.default = DefaultValue::bits(v.last().map_or(0, |e| u64::from(e.sub)));
+                set_default(
+                    &mut e,
+                    DefaultValue::bits(v.last().map_or(0, |e| u64::from(e.sub))),
+                );
                 v.insert(0, e);
             }
             if v[0].bits != 8 {
@@ -1236,7 +1251,10 @@ fn build_device(esi: &Esi, d: Node, cand: Candidate) -> Result<Twin, TwinError> 
         } else {
             if v[0].sub != 0 {
                 let mut e0 = EntryDef::new(0, "SubIndex 000", DataType::Unsigned8, Access::RO);
-                e0.default = DefaultValue::bits(v.last().map_or(0, |e| u64::from(e.sub)));
+                set_default(
+                    &mut e0,
+                    DefaultValue::bits(v.last().map_or(0, |e| u64::from(e.sub))),
+                );
                 v.insert(0, e0);
             } else if v[0].bits != 8 {
                 return Err(TwinError::Unsupported(format!(

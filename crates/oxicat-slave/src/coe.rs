@@ -546,9 +546,15 @@ impl<P: Pdi, const N: usize, const M: usize, const K: usize> Slave<P, N, M, K> {
     /// The subindex-0 protocol and consistency rules of mapping, assignment and sync objects.
     fn check_kind(&self, o: &Obj, v: &[u8], sub0: bool, high: bool, ca: bool) -> Result<(), Abort> {
         let cur0 = self.od.bytes_of(o, o.base, 1)[0];
-        let u32at =
-            |k: usize| u32::from_le_bytes([v[1 + 4 * k], v[2 + 4 * k], v[3 + 4 * k], v[4 + 4 * k]]);
-        let u16at = |k: usize| u16::from_le_bytes([v[1 + 2 * k], v[2 + 2 * k]]);
+        // One bounds check per value (not per byte).
+        let u32at = |k: usize| {
+            let b = &v[1 + 4 * k..5 + 4 * k];
+            u32::from_le_bytes([b[0], b[1], b[2], b[3]])
+        };
+        let u16at = |k: usize| {
+            let b = &v[1 + 2 * k..3 + 2 * k];
+            u16::from_le_bytes([b[0], b[1]])
+        };
         match o.kind {
             Kind::Plain => Ok(()),
             Kind::RxMap | Kind::TxMap => {

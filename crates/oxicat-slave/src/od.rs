@@ -214,19 +214,22 @@ pub struct EntryDef {
     pub access: Access,
     /// PDO mappability.
     pub pdo: PdoMapping,
-    /// Default value.
-    pub default: DefaultValue,
+    /// The default's low 32 bits, extended as the type says (sign for a signed type, zero
+    /// else) when [`Limits::default`] is `None`: every default the board devices declare
+    /// fits; a string default or a wider one is in the limits ([`EntryDef::default`] reads
+    /// either). 4 bytes per entry instead of a 12-byte [`DefaultValue`].
+    default_word: u32,
     /// Unit, allowed range and physical scaling, the fields few entries set, behind one
     /// reference ([`Limits::NONE`] when unset, [`EntryDef::limits`]): 4 bytes per entry in
-    /// flash instead of 16.
+    /// flash instead of 16. Also a default that does not fit the entry's own word.
     pub limits: &'static Limits,
 }
 
 // An entry's size in a microcontroller's flash (every object description of the image is
-// one): 32 bytes on a 32-bit target (was 56 with 64-bit range bounds, 48 with a `u64`
-// default, 44 with unit, range and scale in the entry).
+// one): 24 bytes on a 32-bit target (was 56 with 64-bit range bounds, 48 with a `u64`
+// default, 44 with unit, range and scale in the entry, 32 with a `DefaultValue` in it).
 const _: () =
-    assert!(cfg!(not(target_pointer_width = "32")) || core::mem::size_of::<EntryDef>() <= 32);
+    assert!(cfg!(not(target_pointer_width = "32")) || core::mem::size_of::<EntryDef>() <= 24);
 
 /// An entry's unit, allowed range and physical scaling ([`EntryDef::limits`]):
 /// `.limits(&Limits::range(0, 1000).with_unit(0xFD04_0000))` or
@@ -242,6 +245,10 @@ pub struct Limits {
     /// How the integer maps to a physical value (process data: what a master's
     /// recordings show); `None`: a plain number.
     pub scale: Option<&'static Scale>,
+    /// A default the entry's own 32-bit word cannot hold (a string's bytes, a 64-bit value
+    /// beyond the sign or zero extension of its low half): [`Limits::with_default`]; `None`:
+    /// the entry's word is its default.
+    pub default: Option<DefaultValue>,
 }
 
 impl Limits {
@@ -250,7 +257,15 @@ impl Limits {
         unit: 0,
         range: (1, 0),
         scale: None,
+        default: None,
     };
+
+    /// With a default value held here instead of in the entry (a string default:
+    /// `.limits(&Limits::NONE.with_default(DefaultValue::Bytes(b"hello")))`).
+    pub const fn with_default(mut self, d: DefaultValue) -> Self {
+        self.default = Some(d);
+        self
+    }
 
     /// An allowed value range `min..=max`, nothing else.
     pub const fn range(min: i32, max: i32) -> Self {
@@ -349,7 +364,7 @@ impl EntryDef {
             bits: dtype.bits(),
             access,
             pdo: PdoMapping::None,
-            default: DefaultValue::bits(0),
+            default_word: 0,
             limits: &Limits::NONE,
         }
     }
@@ -368,28 +383,61 @@ impl EntryDef {
         e
     }
 
-    /// With a default value given as raw little-endian bits.
+    /// With a default value given as raw little-endian bits. `v` must be what the entry's
+    /// word extends to ([`EntryDef::fits_word`]: the low 32 bits sign-extended for a signed
+    /// type, zero-extended else), else this panics (a build error in a `static`
+    /// definition): a wider default goes in the limits ([`Limits::with_default`]).
     pub const fn default_bits(mut self, v: u64) -> Self {
-        self.default = DefaultValue::bits(v);
+        assert!(
+            self.set_default_word(v),
+            "a default beyond the entry's 32-bit word: use Limits::with_default"
+        );
         self
     }
 
-    /// With a signed default value.
-    pub const fn default_i64(mut self, v: i64) -> Self {
-        self.default = DefaultValue::bits(v as u64);
-        self
+    /// With a signed default value ([`EntryDef::default_bits`] of its two's complement).
+    pub const fn default_i64(self, v: i64) -> Self {
+        self.default_bits(v as u64)
     }
 
     /// With a REAL32 default value.
-    pub const fn default_f32(mut self, v: f32) -> Self {
-        self.default = DefaultValue::bits(v.to_bits() as u64);
-        self
+    pub const fn default_f32(self, v: f32) -> Self {
+        self.default_bits(v.to_bits() as u64)
     }
 
-    /// With a default value for a string entry.
-    pub const fn default_bytes(mut self, v: &'static [u8]) -> Self {
-        self.default = DefaultValue::Bytes(v);
-        self
+    /// Whether the entry's own word holds default `v`: `v` is its low 32 bits extended as
+    /// the type says (sign for a signed type, zero else).
+    pub const fn fits_word(&self, v: u64) -> bool {
+        self.extend(v as u32) == v
+    }
+
+    /// Sets the default to `v` in the entry's word if it fits there ([`EntryDef::fits_word`];
+    /// `true`), else leaves the entry unchanged (`false`: hand it in the limits,
+    /// [`Limits::with_default`]). The entry's limits must not hold a default of their own.
+    pub const fn set_default_word(&mut self, v: u64) -> bool {
+        if !self.fits_word(v) {
+            return false;
+        }
+        self.default_word = v as u32;
+        true
+    }
+
+    /// A word extended as this entry's type says.
+    const fn extend(&self, w: u32) -> u64 {
+        if self.dtype.is_signed() {
+            w as i32 as i64 as u64
+        } else {
+            w as u64
+        }
+    }
+
+    /// The default value: the limits' ([`Limits::default`]) if they hold one, else the
+    /// entry's word extended as its type says.
+    pub const fn default(&self) -> DefaultValue {
+        match self.limits.default {
+            Some(d) => d,
+            None => DefaultValue::bits(self.extend(self.default_word)),
+        }
     }
 
     /// With PDO mappability.
@@ -1527,13 +1575,16 @@ impl<const N: usize> Od<N> {
 
     /// The device definition. Not inlined in a board image: its blank-dictionary branch
     /// was copied into every caller (140 B of the demo image's flash). Inlined on a host.
+    ///
+    /// A blank dictionary is never handed out (a [`crate::Slave`] is made by
+    /// [`crate::Slave::new`], a [`crate::SlaveSlot`] hands its stack out after `init`, which
+    /// sets the definition first): it has no definition to give, and this panics. It stood
+    /// on a blank `DeviceDef` (256 B of flash in every image) before.
     #[cfg_attr(target_os = "none", inline(never))]
     pub fn def(&self) -> &'static DeviceDef {
-        /// What a blank dictionary (never handed out) stands on.
-        static BLANK: DeviceDef = DeviceDef::BASE;
         match self.def {
             Some(d) => d,
-            None => &BLANK,
+            None => unreachable!("a blank object dictionary has no definition"),
         }
     }
 
@@ -2114,7 +2165,7 @@ fn default_into(d: &DeviceDef, o: &Obj, sub: u8, e: &EntryDef, out: &mut [u8]) {
         (Kind::SyncPar, _, 4) => put(out, d.sync.supported as u64),
         (Kind::SyncPar, _, 5) => put(out, d.sync.min_cycle_ns as u64),
         (Kind::SyncPar, _, 6) => put(out, d.sync.calc_copy_ns as u64),
-        _ => match e.default {
+        _ => match e.default() {
             DefaultValue::Bits([lo, hi]) => {
                 let v = lo as u64 | (hi as u64) << 32;
                 let v = if sub == 0 && o.code != ObjectCode::Var && v == 0 {
@@ -2157,6 +2208,57 @@ mod tests {
             let d = oxicat_wire::datatype::by_code(t.code()).expect("in the table");
             assert_eq!(d.bits, t.bits(), "{t:?}");
         }
+    }
+}
+
+#[cfg(test)]
+mod default_tests {
+    use super::*;
+
+    #[test]
+    fn a_default_reads_back_as_it_was_given_in_the_word_or_in_the_limits() {
+        let i16e = EntryDef::new(1, "s", DataType::Int16, Access::RW);
+        assert_eq!(
+            i16e.default_i64(-5).default(),
+            DefaultValue::bits(-5i64 as u64)
+        );
+        // Raw bits of -1 as an INTEGER16, as an ESI's `DefaultData` gives them.
+        assert_eq!(
+            i16e.default_bits(0xFFFF).default(),
+            DefaultValue::bits(0xFFFF)
+        );
+        let u32e = EntryDef::new(1, "u", DataType::Unsigned32, Access::RW);
+        assert_eq!(
+            u32e.default_bits(0xFFFF_FFFF).default(),
+            DefaultValue::bits(0xFFFF_FFFF)
+        );
+        assert_eq!(
+            EntryDef::new(1, "r", DataType::Real32, Access::RW)
+                .default_f32(-1.5)
+                .default(),
+            DefaultValue::bits(u64::from((-1.5f32).to_bits()))
+        );
+        // Beyond the word: refused in it, held by the limits.
+        let mut u64e = EntryDef::new(1, "w", DataType::Unsigned64, Access::RW);
+        assert!(!u64e.fits_word(1 << 40));
+        assert!(!u64e.set_default_word(1 << 40));
+        assert!(
+            !u32e.fits_word(u64::MAX),
+            "zero extension for an unsigned type"
+        );
+        assert!(i16e.fits_word(u64::MAX), "sign extension for a signed type");
+        static WIDE: Limits = Limits::NONE.with_default(DefaultValue::bits(1 << 40));
+        u64e = u64e.limits(&WIDE);
+        assert_eq!(u64e.default(), DefaultValue::bits(1 << 40));
+        static TEXT: Limits = Limits::NONE.with_default(DefaultValue::Bytes(b"hi"));
+        let s = EntryDef::string(0, "t", 8, Access::RW).limits(&TEXT);
+        assert_eq!(s.default(), DefaultValue::Bytes(b"hi"));
+    }
+
+    #[test]
+    #[should_panic(expected = "beyond the entry's 32-bit word")]
+    fn a_default_beyond_the_word_is_refused_by_the_builder() {
+        let _ = EntryDef::new(1, "w", DataType::Unsigned64, Access::RW).default_bits(1 << 40);
     }
 }
 

@@ -69,7 +69,8 @@ pub static OBJECTS: &[ObjectDef] = &[
         index: 0x2006,
         name: "Label",
         code: ObjectCode::Var,
-        entries: &[EntryDef::string(0, "Label", 16, Access::RW).default_bytes(b"hello")],
+        entries: &[EntryDef::string(0, "Label", 16, Access::RW)
+            .limits(&Limits::NONE.with_default(DefaultValue::Bytes(b"hello")))],
     },
     ObjectDef {
         index: 0x6000,

@@ -429,7 +429,10 @@ impl<P: Pdi, B: OneWireBus, L: LedStrip, S: BorrowMut<HubSlot<P>>> HubFirmware<P
                 return;
             }
         }
-        match self.slot.borrow_mut().start(&device::DEF, pdi) {
+        // The definition checked when the image is built (`check_def` is not in a board
+        // image); the same stack as `start` (the slave crate's tests/slot.rs).
+        let def = const { oxicat_slave::CheckedDef::<IMAGE>::new(&device::DEF) };
+        match self.slot.borrow_mut().start_checked(def, pdi) {
             Ok(_) => {
                 self.sup.phase = EcatPhase::Connected;
                 self.sup.consecutive = 0;

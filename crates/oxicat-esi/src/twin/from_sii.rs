@@ -19,8 +19,8 @@ use oxicat_slave::{
 use oxicat_wire::sii::SiiImage;
 
 use super::{
-    check_stack_sms, hx, leak, loopback_of, stack_owned, Candidate, EscSpec, Served, Twin,
-    TwinError,
+    check_stack_sms, hx, leak, loopback_of, set_default, stack_owned, Candidate, EscSpec, Served,
+    Twin, TwinError,
 };
 use super::{MAX_IMAGE, MAX_MAILBOX};
 use crate::model::SmKind;
@@ -156,11 +156,12 @@ fn object(o: &SavedObject, left_out: &mut Vec<String>) -> Result<ObjectDef, Stri
         if let Some(u) = e.unit.filter(|&u| u != 0) {
             d.limits = Box::leak(Box::new(Limits::unit(u)));
         }
-        d.default = match (&e.value, dtype.is_string()) {
+        let default = match (&e.value, dtype.is_string()) {
             (Some(v), true) => DefaultValue::Bytes(Box::leak(v.clone().into_boxed_slice())),
             (Some(_), false) => DefaultValue::bits(e.u64().unwrap_or(0)),
             (None, _) => DefaultValue::bits(0),
         };
+        set_default(&mut d, default);
         entries.push(d);
     }
     entries.sort_by_key(|e| e.sub);
@@ -176,7 +177,7 @@ fn object(o: &SavedObject, left_out: &mut Vec<String>) -> Result<ObjectDef, Stri
             if entries.first().is_none_or(|e| e.sub != 0) {
                 // Subindex 0 not described: the highest subindex, as the object says.
                 let mut e0 = EntryDef::new(0, "SubIndex 000", DataType::Unsigned8, Access::RO);
-                e0.default = DefaultValue::bits(u64::from(o.max_sub));
+                set_default(&mut e0, DefaultValue::bits(u64::from(o.max_sub)));
                 entries.insert(0, e0);
                 left_out.push(format!(
                     "{}:0 was not described: served as UNSIGNED8 {}",
@@ -364,7 +365,10 @@ fn from_sii_pdos(m: &crate::DeviceModel, c: &mut Comm, objects: &mut Vec<ObjectD
         } else {
             if v[0].sub != 0 {
                 let mut e0 = EntryDef::new(0, "SubIndex 000", DataType::Unsigned8, Access::RO);
-                e0.default = DefaultValue::bits(v.last().map_or(0, |e| u64::from(e.sub)));
+                set_default(
+                    &mut e0,
+                    DefaultValue::bits(v.last().map_or(0, |e| u64::from(e.sub))),
+                );
                 v.insert(0, e0);
             }
             ObjectCode::Record

@@ -82,9 +82,9 @@ fn a_coe_device_becomes_a_stack_twin_with_its_dictionary() {
         (v.dtype, v.bits, v.pdo),
         (DataType::Int16, 16, PdoMapping::Tx)
     );
-    assert_eq!(v.default, DefaultValue::bits(0x1234));
+    assert_eq!(v.default(), DefaultValue::bits(0x1234));
     let g = d.entry_def(0x8000, 0).unwrap();
-    assert_eq!(g.default, DefaultValue::bits(0x1000));
+    assert_eq!(g.default(), DefaultValue::bits(0x1000));
     assert_eq!(g.access, Access(0x07 | 0x08), "rw, written in PREOP only");
     // The SII says what the ESI says.
     let m = crate::sii::parse(&t.sii).unwrap();
@@ -248,4 +248,26 @@ fn latin1_and_bom_files_decode() {
     assert_eq!(decode(b"\xEF\xBB\xBFab"), "ab");
     assert_eq!(decode(b"\xB5s"), "\u{b5}s");
     assert_eq!(decode(&[0xFF, 0xFE, b'a', 0]), "a");
+}
+
+#[test]
+fn a_default_the_entry_word_cannot_hold_goes_in_leaked_limits_that_keep_the_unit() {
+    use oxicat_slave::od::Limits;
+    let mut e = EntryDef::new(1, "w", DataType::Unsigned64, Access::RW);
+    e.limits = Box::leak(Box::new(Limits::unit(0x00D2_0000)));
+    set_default(&mut e, DefaultValue::bits(1 << 40));
+    assert_eq!(e.default(), DefaultValue::bits(1 << 40));
+    assert_eq!(e.limits.unit, 0x00D2_0000);
+    // A later default that fits the word replaces the one in the limits.
+    set_default(&mut e, DefaultValue::bits(7));
+    assert_eq!(e.default(), DefaultValue::bits(7));
+    assert_eq!(e.limits.unit, 0x00D2_0000);
+    let mut s = EntryDef::string(0, "s", 8, Access::RW);
+    set_default(&mut s, DefaultValue::Bytes(b"ab"));
+    assert_eq!(s.default(), DefaultValue::Bytes(b"ab"));
+    // One that fits stays in the entry: no limits leaked for it.
+    let mut u = EntryDef::new(1, "u", DataType::Int16, Access::RW);
+    set_default(&mut u, DefaultValue::bits(-2i64 as u64));
+    assert_eq!(u.default(), DefaultValue::bits(-2i64 as u64));
+    assert!(u.limits.default.is_none());
 }

@@ -90,7 +90,7 @@ pub fn writable_entry(def: &DeviceDef) -> Option<String> {
             if !e.access.write_in(AlState::PreOp) || !e.access.read_in(AlState::PreOp) {
                 continue;
             }
-            let Some(default) = e.default.as_bits() else {
+            let Some(default) = e.default().as_bits() else {
                 continue;
             };
             let (lo, hi) = if e.limits.has_range() {
