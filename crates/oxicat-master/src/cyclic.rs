@@ -380,21 +380,17 @@ impl Master {
                 }
             }
         }
-        let mut moved = Vec::new();
         if overlap {
             match crate::exchange::overlapped(&fmmus) {
                 Some((layout, moves)) => {
-                    let plan = crate::exchange::Plan::new(&layout, out_len, in_len);
-                    if plan.is_some() {
-                        for (k, m) in moves.iter().enumerate() {
-                            if let Err(e) = self.move_fmmu(m.slave, m.index, m.to).await {
-                                log::info!("FMMUs not moved ({e}); cycling without overlap");
-                                self.move_fmmus_back(&moves[..k]).await;
-                                return self.plan_or_log(&fmmus, out_len, in_len, Vec::new());
+                    if let Some(mut plan) = crate::exchange::Plan::new(&layout, out_len, in_len) {
+                        match self.move_fmmus(&moves).await {
+                            Ok(()) => {
+                                plan.moved = moves;
+                                return Some(plan);
                             }
+                            Err(e) => log::info!("FMMUs not moved ({e}); cycling without overlap"),
                         }
-                        fmmus = layout;
-                        moved = moves;
                     }
                 }
                 None => {
@@ -402,26 +398,24 @@ impl Master {
                 }
             }
         }
-        self.plan_or_log(&fmmus, out_len, in_len, moved)
-    }
-
-    fn plan_or_log(
-        &self,
-        fmmus: &[Vec<crate::exchange::Fmmu>],
-        out_len: &[usize],
-        in_len: &[usize],
-        moved: Vec<crate::exchange::Move>,
-    ) -> Option<crate::exchange::Plan> {
-        let plan = crate::exchange::Plan::new(fmmus, out_len, in_len).map(|mut p| {
-            p.moved = moved;
-            p
-        });
+        let plan = crate::exchange::Plan::new(&fmmus, out_len, in_len);
         if plan.is_none() {
             log::info!(
                 "the slaves' FMMUs are not the group's process image; cycling with ethercrab's tx_rx"
             );
         }
         plan
+    }
+
+    /// Makes `moves`; when a slave does not answer, moves back the ones made before it.
+    async fn move_fmmus(&self, moves: &[crate::exchange::Move]) -> Result<(), MasterError> {
+        for (k, m) in moves.iter().enumerate() {
+            if let Err(e) = self.move_fmmu(m.slave, m.index, m.to).await {
+                self.move_fmmus_back(&moves[..k]).await;
+                return Err(e);
+            }
+        }
+        Ok(())
     }
 
     /// Writes the logical start address of FMMU `index` of the slave at `position`.
