@@ -231,6 +231,27 @@ impl MasterOptions {
             },
         }
     }
+
+    /// These options for a segment that runs `k` times slower than real time (`oxicat sim
+    /// --slowdown K`, `oxicat-emu sim --slowdown K`): every timeout, ethercrab's (PDU,
+    /// EEPROM, mailbox echo and response, state transition) and the mailbox reply's, is
+    /// `k` times longer, so each allows the segment the same time it would at real time.
+    /// The wait between polls is kept. `k` of 0 or 1 changes nothing.
+    pub fn stretched(mut self, k: u32) -> Self {
+        let k = k.max(1);
+        let t = &mut self.timeouts;
+        for d in [
+            &mut t.state_transition,
+            &mut t.pdu,
+            &mut t.eeprom,
+            &mut t.mailbox_echo,
+            &mut t.mailbox_response,
+            &mut self.mailbox_timeout,
+        ] {
+            *d = d.saturating_mul(k);
+        }
+        self
+    }
 }
 
 /// A master on one link.
@@ -918,5 +939,33 @@ impl Master {
     pub fn identity(&self, position: usize) -> Result<(u32, u32, u32, u32), MasterError> {
         self.address(position)?;
         Ok(self.found[position].identity)
+    }
+}
+
+#[cfg(test)]
+mod options_tests {
+    use super::*;
+
+    #[test]
+    fn stretched_options_allow_a_slowed_segment_the_same_time() {
+        let link = Link::Udp("127.0.0.1:1".into());
+        let o = MasterOptions::for_link(&link);
+        let s = o.clone().stretched(20);
+        let (a, b) = (o.timeouts, s.timeouts);
+        assert_eq!(b.pdu, a.pdu * 20);
+        assert_eq!(b.eeprom, a.eeprom * 20);
+        assert_eq!(b.mailbox_echo, a.mailbox_echo * 20);
+        assert_eq!(b.mailbox_response, a.mailbox_response * 20);
+        assert_eq!(b.state_transition, a.state_transition * 20);
+        assert_eq!(s.mailbox_timeout, o.mailbox_timeout * 20);
+        assert_eq!(
+            b.wait_loop_delay, a.wait_loop_delay,
+            "the poll interval is kept"
+        );
+        let same = o.clone().stretched(0);
+        assert_eq!(
+            (same.timeouts.pdu, same.mailbox_timeout),
+            (a.pdu, o.mailbox_timeout)
+        );
     }
 }

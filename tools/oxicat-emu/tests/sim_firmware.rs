@@ -41,30 +41,7 @@ fn ethercrab_runs_two_served_demo_board_images_in_op_over_udp() {
     let fw = format!("demo={}", path.display());
     // 20 times slower than real time: two boards emulated in full on a loaded 2-core box.
     let (_served, addr) = serve(&["--firmware", &fw, "--slowdown", "20", "demo:2"]);
-    // The boards boot first: until their clocks catch up with the segment's, frames can
-    // time out, so the master tries again, as one waits for a machine to power up.
-    let options = || {
-        let mut o = MasterOptions::for_link(&Link::Udp(addr.clone()));
-        // 2 s (100 ms of the segment's time) was missed once in CI with the machine busy
-        // beside the slowed-down boards; a lost frame is not what this test is about.
-        o.timeouts.pdu = Duration::from_secs(10);
-        o.timeouts.state_transition = Duration::from_secs(120);
-        o.timeouts.mailbox_response = Duration::from_secs(30);
-        o.mailbox_timeout = Duration::from_secs(30);
-        o
-    };
-    let mut tries = 0;
-    let mut m = loop {
-        match Master::open_with(Link::Udp(addr.clone()), options()) {
-            Ok(m) => break m,
-            Err(e) if tries < 30 => {
-                tries += 1;
-                eprintln!("not yet ({e}); again");
-                std::thread::sleep(Duration::from_secs(1));
-            }
-            Err(e) => panic!("ethercrab does not scan the served images: {e}"),
-        }
-    };
+    let mut m = open_served(&addr, 20);
     let cycles = 300;
     let stats = m
         .run_cycles(
@@ -79,16 +56,17 @@ fn ethercrab_runs_two_served_demo_board_images_in_op_over_udp() {
     assert_eq!((stats.cycles, stats.wkc_errors), (cycles, 0), "{stats:?}");
 }
 
-/// A master on a slowed-down served segment, trying again while the boards boot.
-fn open_served(addr: &str) -> Master {
-    let options = || {
-        let mut o = MasterOptions::for_link(&Link::Udp(addr.to_string()));
-        o.timeouts.pdu = Duration::from_secs(10);
-        o.timeouts.state_transition = Duration::from_secs(120);
-        o.timeouts.mailbox_response = Duration::from_secs(30);
-        o.mailbox_timeout = Duration::from_secs(30);
-        o
-    };
+/// A master on a segment served `slowdown` times slower than real time, trying again while
+/// the boards boot (until their clocks catch up with the segment's, frames can time out, as
+/// one waits for a machine to power up).
+///
+/// Every timeout is the master's usual one stretched by the slowdown (the segment gets the
+/// time it would have at real time), then twice more: the emulated boards are the
+/// machine's heaviest load and fall further behind when other tests run beside them. The
+/// mailbox echo timeout once was not stretched (100 ms of wall time, 5 ms of the boards'):
+/// a board that missed it under load failed the bring-up with "timeout: mailbox echo".
+fn open_served(addr: &str, slowdown: u32) -> Master {
+    let options = || MasterOptions::for_link(&Link::Udp(addr.to_string())).stretched(2 * slowdown);
     let mut tries = 0;
     loop {
         match Master::open_with(Link::Udp(addr.to_string()), options()) {
@@ -114,7 +92,7 @@ fn a_served_cia402_joint_image_runs_on_its_et1100_in_dc_op_over_udp() {
     let fw = format!("cia402-joint={}", path.display());
     // The image sleeps between its interrupts: 20 times slower than real time is ample.
     let (_served, addr) = serve(&["--firmware", &fw, "--slowdown", "20", "cia402-joint:1"]);
-    let mut m = open_served(&addr);
+    let mut m = open_served(&addr, 20);
     let _ = std::fs::remove_file(&path);
     let id = oxicat_devices::cia402::DEF.identity;
     let product = m.sdo_upload(0, 0x1018, 2).unwrap_or_else(|e| panic!("{e}"));
@@ -148,7 +126,7 @@ fn a_served_tue_es030_image_runs_sm_synchronous_over_udp() {
     // Its 20 kHz current loop and the motors' 6.25 µs plant step run about 5 times slower
     // than real time here (debug): 20 times slower is ample.
     let (_served, addr) = serve(&["--firmware", &fw, "--slowdown", "20", "tue-es030:1"]);
-    let mut m = open_served(&addr);
+    let mut m = open_served(&addr, 20);
     let _ = std::fs::remove_file(&path);
     let id = oxicat_devices::tue_es030::device::DEF.identity;
     let product = m.sdo_upload(0, 0x1018, 2).unwrap_or_else(|e| panic!("{e}"));

@@ -156,7 +156,7 @@ const fn def(name: &'static str) -> DeviceDef {
             // supports it: the SYNC0 handler (38 output + 22 input bytes) takes 70.4 µs of
             // bus time through a LAN9252 and 30.5 µs through an ET1100 at 20 MHz
             // (oxicat-pdi `bus_time`), and oxicat-sim's execution-time model runs it at
-            // 100 µs with no SYNC0 lost (`tests/exec_time.rs`). Slower boards (a LAN9252
+            // 100 µs with no SYNC0 lost (`tests/integration/exec_time.rs`). Slower boards (a LAN9252
             // at 10 MHz: 139 µs) must be run at a longer cycle.
             min_cycle_ns: 100_000,
             calc_copy_ns: 85_000,

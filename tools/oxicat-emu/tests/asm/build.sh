@@ -1,5 +1,5 @@
 #!/bin/sh
-# Assembles the test programs into the ELF images tests/exceptions.rs loads (committed, so
+# Assembles the test programs into the ELF images tests/integration/exceptions.rs loads (committed, so
 # the tests need no assembler). Needs llvm-mc and an ELF linker (ld.lld or rust-lld).
 set -e
 cd "$(dirname "$0")"

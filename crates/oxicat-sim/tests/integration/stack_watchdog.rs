@@ -3,7 +3,7 @@
 //! 0x001B, inputs keep updating; the master acknowledges, returns the nodes to OP and process
 //! data flows again.
 
-mod stack_common;
+use crate::stack_common;
 
 use ethercrab::PduStorage;
 use oxicat_sim::segment::Segment;

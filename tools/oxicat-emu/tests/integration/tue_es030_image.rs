@@ -38,7 +38,7 @@ use oxicat_sim::segment::Segment;
 use oxicat_wire::frame::FrameBuilder;
 use oxicat_wire::{Command, DatagramHeader, EcatFrame};
 
-mod common;
+use crate::common;
 
 use common::Direct;
 
@@ -156,7 +156,7 @@ fn ethercrab_runs_the_emulated_board_sm_synchronous_for_1000_cycles() {
 }
 
 /// The long run: 10,000 SM-synchronous cycles of 1 ms,
-/// `cargo test -p oxicat-emu --test tue_es030_image -- --ignored`.
+/// `cargo test -p oxicat-emu --test integration tue_es030_image:: -- --ignored`.
 #[test]
 #[ignore = "long: 10,000 cycles of the emulated board"]
 fn ethercrab_runs_the_emulated_board_for_10000_cycles() {

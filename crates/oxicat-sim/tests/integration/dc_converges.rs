@@ -4,7 +4,7 @@
 //! the in-process transport in virtual time. Afterwards every ESC's system-time difference
 //! (0x092C) is under 100 ns and the SYNC0 edges of all ESCs fall within 100 ns.
 
-mod segment_common;
+use crate::segment_common;
 use segment_common as common;
 
 use std::sync::{Arc, Mutex};

@@ -1,7 +1,7 @@
 //! `SlaveSlot`: the stack built in place (a board image's static) is the stack
 //! `Slave::new` builds, and starting a used slot again gives a fresh one.
 
-mod common;
+use crate::common;
 
 use oxicat_esc::{Esc, EscConfig};
 use oxicat_slave::{AlState, InitError, Slave, SlaveSlot};

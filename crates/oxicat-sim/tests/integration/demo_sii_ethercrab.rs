@@ -11,7 +11,7 @@
 //!   sizes SM2/SM3 from the SII's RxPDO/TxPDO categories (entries, bit lengths, SM index),
 //!   so the PDO categories themselves are what gives 24 output and 22 input bytes.
 
-mod stack_common;
+use crate::stack_common;
 
 use std::sync::{Arc, Mutex};
 

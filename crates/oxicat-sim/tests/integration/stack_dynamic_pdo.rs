@@ -2,7 +2,7 @@
 //! (fewer PDOs, other order); ethercrab sizes the process image from the new assignment,
 //! the stack accepts the SM2/SM3 sizes, and the node runs with the new layout.
 
-mod stack_common;
+use crate::stack_common;
 
 use ethercrab::PduStorage;
 use oxicat_sim::segment::Segment;

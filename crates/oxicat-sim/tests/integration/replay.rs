@@ -29,7 +29,7 @@
 //! Bare-ESC captures use only the time/cable/EEPROM-timing masks (plus one named chip
 //! quirk in soem-sdinfo); µC captures add the named firmware masks of [`firmware_masks`].
 
-mod replay_bench;
+use crate::replay_bench;
 
 use oxicat_esc::{DcSupport, EscConfig};
 use replay_bench::*;

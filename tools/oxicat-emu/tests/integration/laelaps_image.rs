@@ -38,7 +38,7 @@ const PRIO_ESC: u8 = 0x20;
 /// The image's build (the default, `RIGHT_LEG`).
 const SIDE: Side = Side::Right;
 
-mod common;
+use crate::common;
 
 use common::Direct;
 
@@ -114,7 +114,7 @@ fn ethercrab_runs_two_emulated_leg_nodes_in_dc_op_without_losing_a_sync0() {
 }
 
 /// The long run: 10,000 DC cycles (about 4 s of segment time, a couple of minutes
-/// of wall time here), `cargo test -p oxicat-emu --test laelaps_image -- --ignored`.
+/// of wall time here), `cargo test -p oxicat-emu --test integration laelaps_image:: -- --ignored`.
 #[test]
 #[ignore = "long: 10,000 cycles of two emulated boards"]
 fn ethercrab_runs_two_emulated_leg_nodes_for_10000_dc_cycles() {

@@ -18,7 +18,7 @@
 //! through the ET1100 driver over the simulated SPI (`oxicat_sim::pdi_path`): the same
 //! checks, no PDI error, no SPI protocol error, SPI traffic counted.
 
-mod stack_common;
+use crate::stack_common;
 
 use std::sync::{Arc, Mutex};
 use std::time::Duration;

@@ -1,7 +1,7 @@
 //! Fault hooks on a segment of real devices: lost frames, a frame corrupted on a cable, a
 //! cable pulled between two slaves and plugged back.
 
-mod segment_common;
+use crate::segment_common;
 use segment_common as common;
 
 use oxicat_sim::segment::{FrameFate, Segment};

@@ -27,7 +27,7 @@ fn run_done(b: &mut Board) {
 
 #[test]
 fn svc_enters_svcall_and_pendsv_tail_chains_with_the_thread_state_intact() {
-    let mut b = board(include_bytes!("asm/svc_pendsv.elf"));
+    let mut b = board(include_bytes!("../asm/svc_pendsv.elf"));
     run_done(&mut b);
     assert_eq!((word(&b, 0x04), word(&b, 0x08)), (1, 1), "one of each");
     assert_eq!(word(&b, 0x0C), 11, "VECTACTIVE in SVCall");
@@ -68,7 +68,7 @@ fn svc_enters_svcall_and_pendsv_tail_chains_with_the_thread_state_intact() {
 
 #[test]
 fn a_higher_priority_irq_preempts_and_basepri_and_primask_hold_irqs_back() {
-    let mut b = board(include_bytes!("asm/preempt.elf"));
+    let mut b = board(include_bytes!("../asm/preempt.elf"));
     run_done(&mut b);
     let n = word(&b, 0x04);
     let log: Vec<u32> = (0..n).map(|k| word(&b, 0x08 + 4 * k)).collect();
@@ -93,7 +93,7 @@ fn a_higher_priority_irq_preempts_and_basepri_and_primask_hold_irqs_back() {
 
 #[test]
 fn systick_interrupts_wake_wfi_and_sleep_skips_the_time_between() {
-    let mut b = board(include_bytes!("asm/systick_wfi.elf"));
+    let mut b = board(include_bytes!("../asm/systick_wfi.elf"));
     run_done(&mut b);
     assert_eq!(word(&b, 0x04), 10);
     assert_eq!(b.exceptions_taken(15), 10);
@@ -117,7 +117,7 @@ fn systick_interrupts_wake_wfi_and_sleep_skips_the_time_between() {
 
 #[test]
 fn exti_lines_interrupt_on_their_selected_edge_of_an_injected_pin() {
-    let mut b = board(include_bytes!("asm/exti.elf"));
+    let mut b = board(include_bytes!("../asm/exti.elf"));
     b.set_input('C', 0, true);
     b.set_input('B', 12, false);
     b.run(2_000).unwrap();
@@ -142,7 +142,7 @@ fn exti_lines_interrupt_on_their_selected_edge_of_an_injected_pin() {
 
 #[test]
 fn tim6_interrupts_at_each_update_of_its_90_mhz_clock_divided_by_psc_and_arr() {
-    let mut b = board(include_bytes!("asm/tim6.elf"));
+    let mut b = board(include_bytes!("../asm/tim6.elf"));
     b.run(1_000).unwrap();
     let before = word(&b, 0x04);
     // 10 kHz: 18,000 cycles per update at 180 MHz.
@@ -161,7 +161,7 @@ fn tim6_interrupts_at_each_update_of_its_90_mhz_clock_divided_by_psc_and_arr() {
 
 #[test]
 fn tim1_oc4ref_as_trgo_starts_adc1s_injected_sequence_once_per_pwm_period() {
-    let mut b = board(include_bytes!("asm/adc.elf"));
+    let mut b = board(include_bytes!("../asm/adc.elf"));
     b.set_analog(10, 1.65);
     b.set_analog(11, 0.33);
     b.run(2_000).unwrap();
@@ -190,7 +190,7 @@ fn tim1_oc4ref_as_trgo_starts_adc1s_injected_sequence_once_per_pwm_period() {
 
 #[test]
 fn converting_a_channel_nothing_drives_is_a_fault_naming_it() {
-    let mut b = board(include_bytes!("asm/adc.elf"));
+    let mut b = board(include_bytes!("../asm/adc.elf"));
     b.set_analog(11, 0.0);
     let e = b.run(9_000 * 2).unwrap_err();
     let EmuError::Fault { reason, .. } = e else {
@@ -201,7 +201,7 @@ fn converting_a_channel_nothing_drives_is_a_fault_naming_it() {
 
 #[test]
 fn dwt_cyccnt_counts_cycles_only_with_trcena_and_cyccntena() {
-    let mut b = board(include_bytes!("asm/dwt.elf"));
+    let mut b = board(include_bytes!("../asm/dwt.elf"));
     run_done(&mut b);
     assert_eq!(
         (word(&b, 0x04), word(&b, 0x08)),
@@ -217,7 +217,7 @@ fn dwt_cyccnt_counts_cycles_only_with_trcena_and_cyccntena() {
 
 #[test]
 fn timers_give_pwm_duty_encoder_counts_and_input_captures() {
-    let mut b = board(include_bytes!("asm/timers.elf"));
+    let mut b = board(include_bytes!("../asm/timers.elf"));
     run_done(&mut b);
     assert_eq!(b.pwm_duty(1, 1), Some(0.25));
     assert_eq!(b.pwm_duty(1, 2), None, "CH2 not enabled");
@@ -241,7 +241,7 @@ fn timers_give_pwm_duty_encoder_counts_and_input_captures() {
 
 #[test]
 fn an_isr_using_s0_leaves_the_threads_live_fp_registers_intact() {
-    let mut b = board(include_bytes!("asm/fp.elf"));
+    let mut b = board(include_bytes!("../asm/fp.elf"));
     run_done(&mut b);
     assert_eq!(word(&b, 0x04), 2);
     assert_eq!(word(&b, 0x08), 0xFFFF_FFF9, "no FP context: basic frame");
@@ -259,7 +259,7 @@ fn an_isr_using_s0_leaves_the_threads_live_fp_registers_intact() {
 
 #[test]
 fn an_fp_instruction_with_cpacr_off_is_a_nocp_fault() {
-    let mut b = board(include_bytes!("asm/nocp.elf"));
+    let mut b = board(include_bytes!("../asm/nocp.elf"));
     match b.run(1_000) {
         Err(EmuError::Fault { pc, reason }) => {
             assert!(reason.contains("NOCP"), "{reason}");
@@ -274,7 +274,7 @@ fn an_fp_instruction_with_cpacr_off_is_a_nocp_fault() {
 /// "WRITE_UNMAPPED".
 #[test]
 fn unbounded_recursion_is_a_stack_overflow_fault_with_its_pc() {
-    let mut b = board(include_bytes!("asm/overflow.elf"));
+    let mut b = board(include_bytes!("../asm/overflow.elf"));
     assert_eq!(
         b.stack_limit(),
         0x2000_0000,
@@ -337,7 +337,7 @@ fn the_test_programs_match_their_sources() {
 
 #[test]
 fn dma_feeds_a_timer_compare_register_one_item_per_update_and_raises_transfer_complete() {
-    let mut b = board(include_bytes!("asm/dma.elf"));
+    let mut b = board(include_bytes!("../asm/dma.elf"));
     // 8 updates of 1 µs (180 cycles each), then well past.
     b.run(180 * 30).unwrap();
     assert_eq!(word(&b, 0x04), 1, "one transfer-complete interrupt");
@@ -369,7 +369,7 @@ fn dma_feeds_a_timer_compare_register_one_item_per_update_and_raises_transfer_co
 /// reload, restarts from its vector table with SRAM intact, and RCC_CSR tells it why.
 #[test]
 fn a_starved_iwdg_resets_the_mcu_after_its_timeout_with_iwdgrstf_set() {
-    let mut b = board(include_bytes!("asm/iwdg_starve.elf"));
+    let mut b = board(include_bytes!("../asm/iwdg_starve.elf"));
     assert_eq!(b.lsi_hz(), 32_000, "the nominal LSI");
     let fed = b
         .run_until(20, 1_000_000, |b| word(b, 0x20) == 1)
@@ -413,7 +413,7 @@ fn a_starved_iwdg_resets_the_mcu_after_its_timeout_with_iwdgrstf_set() {
 /// (17 kHz, the datasheet's minimum) only stretches a starved one's timeout.
 #[test]
 fn a_fed_iwdg_never_resets_and_the_lsi_frequency_sets_the_timeout() {
-    let mut b = board(include_bytes!("asm/iwdg_feed.elf"));
+    let mut b = board(include_bytes!("../asm/iwdg_feed.elf"));
     b.run_to_ns(100_000_000).unwrap();
     assert_eq!(b.watchdog_resets(), 0);
     assert_eq!(word(&b, 0x04), 1, "one boot");
@@ -423,7 +423,7 @@ fn a_fed_iwdg_never_resets_and_the_lsi_frequency_sets_the_timeout() {
         word(&b, 0x08)
     );
 
-    let mut b = board(include_bytes!("asm/iwdg_starve.elf"));
+    let mut b = board(include_bytes!("../asm/iwdg_starve.elf"));
     b.set_lsi_hz(17_000);
     b.run_until(20, 1_000_000, |b| word(b, 0x20) == 1).unwrap();
     let fed_ns = b.time_ns();
@@ -442,7 +442,7 @@ fn a_fed_iwdg_never_resets_and_the_lsi_frequency_sets_the_timeout() {
 #[test]
 fn the_window_watchdog_is_a_fault_naming_its_register() {
     // The starve program with its first IWDG key write moved to WWDG_CR (0x4000_2C00).
-    let mut elf = include_bytes!("asm/iwdg_starve.elf").to_vec();
+    let mut elf = include_bytes!("../asm/iwdg_starve.elf").to_vec();
     let key = 0x4000_3000u32.to_le_bytes();
     let at = elf
         .windows(4)

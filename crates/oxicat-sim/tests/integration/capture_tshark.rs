@@ -1,7 +1,7 @@
 //! A pcapng written during an ethercrab run is dissected by tshark with no malformed packet
 //! and no expert error, and tshark sees EtherCAT in it.
 
-mod segment_common;
+use crate::segment_common;
 use segment_common as common;
 
 use std::process::Command;

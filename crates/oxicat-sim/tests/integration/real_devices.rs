@@ -1,7 +1,7 @@
 //! Real Beckhoff devices emulated from their SII EEPROMs, driven by ethercrab through the
 //! in-process transport: discovery (names, identities), OP, outputs and inputs.
 
-mod segment_common;
+use crate::segment_common;
 use segment_common as common;
 
 use std::sync::{Arc, Mutex};

@@ -5,7 +5,7 @@
 //! device. The stack serves its mapping and assignment objects from a template entry per
 //! object kind; the listing keeps one table entry per subindex.
 //!
-//! `cargo test -p oxicat-slave --test sdo_info -- --nocapture` prints a digest of each
+//! `cargo test -p oxicat-slave --test integration sdo_info:: -- --nocapture` prints a digest of each
 //! device's whole transcript (the reply bytes of every request above), for comparing two
 //! trees byte for byte.
 

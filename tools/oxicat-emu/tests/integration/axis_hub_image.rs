@@ -30,7 +30,7 @@ use oxicat_master::{Link, Master};
 use oxicat_pdi::sim::{BusConfig, Lan9252Model};
 use oxicat_sim::segment::Segment;
 
-mod common;
+use crate::common;
 
 use common::Direct;
 
@@ -127,7 +127,7 @@ fn ethercrab_runs_the_emulated_hub_in_free_run_op() {
 }
 
 /// The long run: 10,000 cycles of 10 ms (100 s of board time),
-/// `cargo test -p oxicat-emu --test axis_hub_image -- --ignored`.
+/// `cargo test -p oxicat-emu --test integration axis_hub_image:: -- --ignored`.
 #[test]
 #[ignore = "long: 10,000 cycles of an emulated board"]
 fn ethercrab_runs_the_emulated_hub_for_10000_free_run_cycles() {
@@ -187,7 +187,7 @@ fn in_free_run_the_per_frame_command_echo_fails() {
     synchronous_op(SyncMode::FreeRun, 200);
 }
 
-/// `cargo test -p oxicat-emu --test axis_hub_image -- --ignored`: 10,000 SM-synchronous
+/// `cargo test -p oxicat-emu --test integration axis_hub_image:: -- --ignored`: 10,000 SM-synchronous
 /// cycles of 4 ms (40 s of board time).
 #[test]
 #[ignore = "long: 10,000 cycles of an emulated board"]

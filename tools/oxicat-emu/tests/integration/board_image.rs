@@ -9,7 +9,7 @@ use oxicat_emu::{Board, EmuError};
 use oxicat_esc::{Esc, EscConfig};
 use oxicat_pdi::sim::{BusConfig, Lan9252Model};
 
-mod common;
+use crate::common;
 
 /// The board image (`firmware/stm32f446-lan9252`, or `OXICAT_BOARD_IMAGE`).
 fn image() -> Option<Vec<u8>> {
@@ -203,7 +203,7 @@ fn a_stuck_firmware_shows_as_an_expired_pdi_watchdog() {
     let Some(healthy) = image() else { return };
     let def = &oxicat_devices::demo::DEF;
     let mut seg = Segment::new();
-    let stuck = include_bytes!("asm/stuck.elf").to_vec();
+    let stuck = include_bytes!("../asm/stuck.elf").to_vec();
     for img in [stuck, healthy] {
         let sii = oxicat_esi::sii::generate(def).unwrap();
         let id = seg.add(Esc::new(EscConfig::lan9252(), sii));

@@ -31,7 +31,7 @@ use oxicat_pdi::sim::{BusConfig, Et1100Model};
 use oxicat_plant::bldc_joint::BldcJointParams;
 use oxicat_sim::segment::Segment;
 
-mod common;
+use crate::common;
 
 use common::Direct;
 
@@ -158,7 +158,7 @@ fn ethercrab_runs_two_emulated_joints_in_dc_op_without_losing_a_sync0() {
 }
 
 /// The long run: 10,000 DC cycles of 1 ms,
-/// `cargo test -p oxicat-emu --test cia402_image -- --ignored`.
+/// `cargo test -p oxicat-emu --test integration cia402_image:: -- --ignored`.
 #[test]
 #[ignore = "long: 10,000 cycles of two emulated boards"]
 fn ethercrab_runs_two_emulated_joints_for_10000_dc_cycles() {

@@ -2,7 +2,7 @@
 //! flashed, on the emulated STM32F446: the stack's update flow (`FirmwareUpdate`, the host
 //! rig's) on the image's flash store (sectors 6 and 7 through the FLASH interface, the
 //! emulator's register-level FLASH model), driven by the master's FoE client in BOOT as
-//! `crates/oxicat-devices/tests/tue_es030_board.rs` drives the host-compiled board:
+//! `crates/oxicat-devices/tests/integration/tue_es030_board.rs` drives the host-compiled board:
 //!
 //! - `version.txt` before any update is the host rig's (the same factory image);
 //! - outside BOOT 0x8008, another file 0x8009, another device's image 0x800B, a flipped
@@ -24,7 +24,7 @@ use oxicat_esc::{Esc, EscConfig};
 use oxicat_master::{Link, Master, MasterError, MasterOptions};
 use oxicat_sim::segment::Segment;
 
-mod common;
+use crate::common;
 
 /// Slot 0 (sector 6) and slot 1 (sector 7) of the image's store; each a 16-byte mark,
 /// then the image.

@@ -15,7 +15,7 @@ use oxicat_devices::laelaps::scenario::{Scenario, DEFAULT_TOML};
 use oxicat_emu::trot::{markdown, run, LegImages, EXC_JOINT_LOOP, EXC_SYNC0};
 use oxicat_emu::EmuError;
 
-mod common;
+use crate::common;
 
 /// The right build (`.ci/run`'s plain build) and the left build (`--features left-leg`,
 /// target dir `firmware/target/left`).
@@ -59,7 +59,7 @@ fn short(trot_s: f64) -> Scenario {
 }
 
 /// About 14,000 cycles of four emulated boards: a minute or two of wall time in a test
-/// build. `cargo test -p oxicat-emu --test laelaps_trot -- --ignored`.
+/// build. `cargo test -p oxicat-emu --test integration laelaps_trot:: -- --ignored`.
 #[test]
 #[ignore = "long: four emulated boards for 5.7 s of segment time"]
 fn four_leg_images_trot_within_the_host_bounds_without_losing_a_sync0() {

@@ -3,7 +3,7 @@
 //! more than the stack holds (at start-up for the default mapping, at PREOP → SAFEOP for one
 //! the master configured): a typed error or an AL status code, never a cut mapping.
 
-mod common;
+use crate::common;
 
 use oxicat_esc::{Esc, EscConfig};
 use oxicat_slave::pdo::{map_steps, steps, Dir};
