@@ -22,12 +22,14 @@ use oxicat_master::{Link, Master, MasterOptions};
 /// each other on a loaded 2-core machine (frames past the master's timeouts).
 static ONE_AT_A_TIME: std::sync::Mutex<()> = std::sync::Mutex::new(());
 
-/// Starts `oxicat-emu sim … --udp 127.0.0.1:0`; returns it and the address it serves on.
-fn serve(args: &[&str]) -> (Served, String) {
+/// Starts `oxicat-emu sim --firmware FW --slowdown SLOWDOWN SEGMENT --udp 127.0.0.1:0`
+/// and a master on it ([`open_served`], its timeouts stretched by the same slowdown).
+fn serve(fw: &str, slowdown: u32, segment: &str) -> (Served, Master) {
     let mut cmd = Command::new(env!("CARGO_BIN_EXE_oxicat-emu"));
-    cmd.args(["sim", "--quiet", "--udp", "127.0.0.1:0"])
-        .args(args);
-    spawn_udp(cmd)
+    cmd.args(["sim", "--quiet", "--udp", "127.0.0.1:0", "--firmware", fw])
+        .args(["--slowdown", &slowdown.to_string(), segment]);
+    let (served, addr) = spawn_udp(cmd);
+    (served, open_served(&addr, slowdown))
 }
 
 #[test]
@@ -40,8 +42,7 @@ fn ethercrab_runs_two_served_demo_board_images_in_op_over_udp() {
     std::fs::write(&path, img).unwrap();
     let fw = format!("demo={}", path.display());
     // 20 times slower than real time: two boards emulated in full on a loaded 2-core box.
-    let (_served, addr) = serve(&["--firmware", &fw, "--slowdown", "20", "demo:2"]);
-    let mut m = open_served(&addr, 20);
+    let (_served, mut m) = serve(&fw, 20, "demo:2");
     let cycles = 300;
     let stats = m
         .run_cycles(
@@ -91,8 +92,7 @@ fn a_served_cia402_joint_image_runs_on_its_et1100_in_dc_op_over_udp() {
     std::fs::write(&path, img).unwrap();
     let fw = format!("cia402-joint={}", path.display());
     // The image sleeps between its interrupts: 20 times slower than real time is ample.
-    let (_served, addr) = serve(&["--firmware", &fw, "--slowdown", "20", "cia402-joint:1"]);
-    let mut m = open_served(&addr, 20);
+    let (_served, mut m) = serve(&fw, 20, "cia402-joint:1");
     let _ = std::fs::remove_file(&path);
     let id = oxicat_devices::cia402::DEF.identity;
     let product = m.sdo_upload(0, 0x1018, 2).unwrap_or_else(|e| panic!("{e}"));
@@ -125,8 +125,7 @@ fn a_served_tue_es030_image_runs_sm_synchronous_over_udp() {
     let fw = format!("tue-es030={}", path.display());
     // Its 20 kHz current loop and the motors' 6.25 µs plant step run about 5 times slower
     // than real time here (debug): 20 times slower is ample.
-    let (_served, addr) = serve(&["--firmware", &fw, "--slowdown", "20", "tue-es030:1"]);
-    let mut m = open_served(&addr, 20);
+    let (_served, mut m) = serve(&fw, 20, "tue-es030:1");
     let _ = std::fs::remove_file(&path);
     let id = oxicat_devices::tue_es030::device::DEF.identity;
     let product = m.sdo_upload(0, 0x1018, 2).unwrap_or_else(|e| panic!("{e}"));
