@@ -205,7 +205,21 @@ enum Op {
     /// station (a write), 2 BWR, 4 FRMW of this one (a read), with a good FCS or not;
     /// 3 a PDI write.
     DcWrite(u16, Vec<u8>, u8, bool),
+    /// A read of `len` bytes of the register file at `addr`: 0 from the PDI, 1 an FPRD of
+    /// this station, 2 a BRD (ORed into the frame's data `pat`).
+    RegRead(u16, u16, u8, u8),
+    /// SM 7 over registers: start, length, control byte, activate (ECAT writes).
+    SmOverRegs(u16, u16, u8, bool),
 }
+
+/// Register addresses the reads start near: the ones with read side effects (DL status,
+/// AL control, AL status, the watchdog status, SM status and activation), those whose
+/// ranges the plain-register path leaves to the general one (the event registers, the DC
+/// unit), missing registers and the end of the register file.
+const REG_SPOTS: [u16; 22] = [
+    0x0000, 0x0008, 0x0100, 0x0110, 0x0120, 0x0130, 0x0134, 0x0200, 0x020C, 0x0220, 0x0300, 0x0310,
+    0x0440, 0x0442, 0x0502, 0x0600, 0x0800, 0x080D, 0x0838, 0x08FC, 0x0E00, 0x0FFC,
+];
 
 /// Station addresses of the `Foreign` frames: the ESC's station address (set up), its
 /// alias (from the EEPROM), two others.
@@ -233,6 +247,13 @@ fn arb_op() -> impl Strategy<Value = Op> {
         2 => (0x08u16..0x20, proptest::collection::vec(any::<u8>(), 1..12), 0u8..5,
               proptest::bool::weighted(0.9))
             .prop_map(|(a, d, c, ok)| Op::DcWrite(a, d, c, ok)),
+        3 => (prop_oneof![3 => (0usize..REG_SPOTS.len(), 0u16..8)
+                  .prop_map(|(k, o)| REG_SPOTS[k] + o), 1 => 0u16..0x1000],
+              1u16..16, 0u8..3, any::<u8>())
+            .prop_map(|(a, l, h, p)| Op::RegRead(a, l, h, p)),
+        1 => (prop_oneof![0x0E00u16..0x0E20, 0x0800u16..0x0820, 0x0120u16..0x0140],
+              0u16..8, any::<u8>(), any::<bool>())
+            .prop_map(|(a, l, c, on)| Op::SmOverRegs(a, l, c, on)),
     ]
 }
 
@@ -410,6 +431,26 @@ proptest! {
                         prop_assert_eq!(a.forward(0, &mut f, t, ok), b.forward(0, &mut g, t, ok));
                         prop_assert_eq!(f, g);
                     }
+                }
+                Op::RegRead(addr, len, how, pat) => {
+                    if how == 0 {
+                        let mut x = vec![pat; len as usize];
+                        let mut y = x.clone();
+                        prop_assert_eq!(a.pdi_read(addr, &mut x), b.pdi_read(addr, &mut y));
+                        prop_assert_eq!(x, y);
+                    } else {
+                        let (cmd, adp) = if how == 1 { (Command::Fprd, STATIONS[0]) } else { (Command::Brd, 0) };
+                        let d = vec![pat; len as usize];
+                        prop_assert_eq!(run_at(&mut a, t, cmd, adp, addr, &d), run_at(&mut b, t, cmd, adp, addr, &d));
+                    }
+                }
+                Op::SmOverRegs(start, len, ctrl, on) => {
+                    let mut r = [0u8; 8];
+                    r[0..2].copy_from_slice(&start.to_le_bytes());
+                    r[2..4].copy_from_slice(&len.to_le_bytes());
+                    r[4] = ctrl;
+                    r[6] = u8::from(on);
+                    prop_assert_eq!(fpwr(&mut a, 0x0838, &r), fpwr(&mut b, 0x0838, &r));
                 }
             }
             prop_assert_eq!(a.memory(), b.memory());

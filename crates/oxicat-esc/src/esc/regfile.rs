@@ -72,6 +72,23 @@ impl Esc {
     /// when the access counts: at least one byte exists in this chip and no SyncManager
     /// refused (part of) the access.
     pub(super) fn phys_read(&mut self, side: Side, addr: u32, out: &mut [u8], or: bool) -> bool {
+        if self.plain_registers(addr, out.len()) {
+            // What `plain_read` does for registers that all exist, with no DC or event
+            // refresh due and no SyncManager over them: the firmware's polls (SM status,
+            // watchdog status, AL control) and the master's AL-status reads.
+            let c = addr as usize;
+            let e = c + out.len();
+            let src = &self.mem[c..e];
+            if or {
+                for (x, y) in out.iter_mut().zip(src) {
+                    *x |= *y;
+                }
+            } else {
+                out.copy_from_slice(src);
+            }
+            self.read_side_effects(side, c, e);
+            return true;
+        }
         let end = addr + out.len() as u32;
         let mut cur = addr;
         let mut ok = true;
@@ -90,6 +107,35 @@ impl Esc {
             cur = pe;
         }
         ok && any
+    }
+
+    /// Whether `[addr, addr + len)` is a non-empty run of registers that all exist in this
+    /// chip, outside the DC unit (0x0900..0x09FF: its reads latch and acknowledge) and the
+    /// event registers (0x0210..0x0223: read after a refresh), with no active SyncManager
+    /// over any of its bytes: [`Esc::phys_read`] then reads it as plain memory. Never with
+    /// the fast paths off (the general path is the reference).
+    #[inline(always)]
+    fn plain_registers(&self, addr: u32, len: usize) -> bool {
+        let c = addr as usize;
+        let e = c + len;
+        if self.fast_off
+            || len == 0
+            || e > REG_END
+            || (c < 0x0A00 && e > 0x0900)
+            || (c < 0x0224 && e > 0x0210)
+        {
+            return false;
+        }
+        let Some(perm) = self.perm.get(c..e) else {
+            return false;
+        };
+        if perm.iter().any(|&p| p & P_IMPL == 0) {
+            return false;
+        }
+        self.active_sms.iter().all(|&i| {
+            let sm = &self.sms[i as usize];
+            sm.start as u32 >= e as u32 || sm.end() <= addr
+        })
     }
 
     /// Writes physical memory as `side` (SyncManager rules and register permissions
