@@ -646,22 +646,8 @@ impl<P: Pdi, const N: usize, const M: usize, const K: usize> Slave<P, N, M, K> {
             self.sdo_reply(cmd, index, sub, d, &[]);
             return Ok(());
         }
-        let cap = self.reply_capacity() - 10;
-        let first = size.min(cap);
-        let mut d = [0u8; M];
-        self.stream_read(&o, sub, ca, 0, &mut d[..first]);
-        let cmd = 0x41 | if ca { 0x10 } else { 0 };
-        self.sdo_reply(cmd, index, sub, (size as u32).to_le_bytes(), &d[..first]);
-        if first < size {
-            self.sdo = SdoState::Upload {
-                index,
-                sub,
-                ca,
-                size,
-                sent: first,
-                toggle: false,
-            };
-        }
+        // The next segment's toggle bit is clear: `upload_part` flips this one.
+        self.upload_part(&o, index, sub, ca, size, 0, true, true);
         Ok(())
     }
 
@@ -683,15 +669,47 @@ impl<P: Pdi, const N: usize, const M: usize, const K: usize> Slave<P, N, M, K> {
         let Some(o) = self.od.find(index) else {
             return self.abort(index, sub, Abort::ObjectDoesNotExist);
         };
-        let cap = self.reply_capacity() - 3;
-        let n = (size - sent).min(cap);
-        let mut d = [0u8; M];
-        self.stream_read(&o, sub, ca, sent, &mut d[..n]);
-        let last = sent + n == size;
-        let unused = if n < 7 { (7 - n) as u8 } else { 0 };
-        let cmd = (if toggle { 0x10 } else { 0 }) | (unused << 1) | u8::from(last);
+        self.upload_part(&o, index, sub, ca, size, sent, toggle, false);
+    }
+
+    /// Queues the next part of a normal upload from stream byte `sent`: the initiate
+    /// response (`initiate`: command, index, subindex and the size before the data) or an
+    /// upload segment (command `toggle`, unused bytes, last; data padded to 7 bytes), the
+    /// data read straight into the reply; then the transfer's state, the next segment's
+    /// toggle the inverse of `toggle`. One path for both (they were two copies of the read,
+    /// the reply and the state).
+    #[allow(clippy::too_many_arguments)]
+    fn upload_part(
+        &mut self,
+        o: &Obj,
+        index: u16,
+        sub: u8,
+        ca: bool,
+        size: usize,
+        sent: usize,
+        toggle: bool,
+        initiate: bool,
+    ) {
+        let at = if initiate { 10 } else { 3 };
+        let n = (size - sent).min(self.reply_capacity() - at);
         let mut b = [0u8; M];
-        if let Ok(len) = write_sdo_segment(&mut b, CoeService::SdoResponse, cmd, &d[..n]) {
+        self.stream_read(o, sub, ca, sent, &mut b[at..at + n]);
+        let last = sent + n == size;
+        let (cmd, len) = if initiate {
+            b[3..5].copy_from_slice(&index.to_le_bytes());
+            b[5] = sub;
+            b[6..10].copy_from_slice(&(size as u32).to_le_bytes());
+            (0x41 | if ca { 0x10 } else { 0 }, 10 + n)
+        } else {
+            let unused = if n < 7 { (7 - n) as u8 } else { 0 };
+            let cmd = (if toggle { 0x10 } else { 0 }) | (unused << 1) | u8::from(last);
+            (cmd, 3 + n.max(7))
+        };
+        if CoeHeader::new(CoeService::SdoResponse)
+            .write(&mut b)
+            .is_ok()
+        {
+            b[2] = cmd;
             self.queue_reply(MailboxType::Coe, &b[..len]);
         }
         self.sdo = if last {
@@ -703,7 +721,7 @@ impl<P: Pdi, const N: usize, const M: usize, const K: usize> Slave<P, N, M, K> {
                 ca,
                 size,
                 sent: sent + n,
-                toggle: !t,
+                toggle: !toggle,
             }
         };
     }

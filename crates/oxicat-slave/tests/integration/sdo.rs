@@ -1,6 +1,8 @@
 use oxicat_testkit::device::*;
 use oxicat_testkit::{Bench, Port};
-use oxicat_wire::coe::{write_sdo, CoeService, SdoHeader, SdoInfoRef, SdoInfoService};
+use oxicat_wire::coe::{
+    write_sdo, write_sdo_segment, CoeService, SdoHeader, SdoInfoRef, SdoInfoService,
+};
 use oxicat_wire::mailbox::{MailboxErrorReply, MailboxType};
 
 fn abort_of(r: Result<impl Sized, u32>) -> u32 {
@@ -366,6 +368,60 @@ fn protocol_aborts<P: Port>() {
     assert_eq!(abort_in(&r), 0x0503_0000);
 }
 
+/// The upload replies byte for byte, as `write_sdo` and `write_sdo_segment` make them: a
+/// normal upload in one initiate response (a string, a complete access) and a segmented one
+/// (initiate response with the size, then segments with the toggle bit, the unused count of
+/// a short one padded to 7 bytes, and the last bit).
+fn upload_frames_byte_for_byte<P: Port>() {
+    let mut b = Bench::<P>::new();
+    b.enter_preop();
+    let initiate = |cmd: u8, index: u16, sub: u8, size: usize, data: &[u8]| {
+        let mut f = vec![0u8; 10 + data.len()];
+        let h = SdoHeader {
+            command: cmd,
+            index,
+            subindex: sub,
+        };
+        let size = (size as u32).to_le_bytes();
+        let n = write_sdo(&mut f, CoeService::SdoResponse, &h, size, data).unwrap();
+        f.truncate(n);
+        f
+    };
+    let name = b"oxicat test device";
+    let r = raw_sdo(&mut b, 0x40, 0x1008, 0, [0; 4]);
+    assert_eq!(r, initiate(0x41, 0x1008, 0, name.len(), name));
+    b.s.od_mut().set(0x6000, 1, true).unwrap();
+    b.s.od_mut().set(0x6000, 3, -2i16).unwrap();
+    let ca = [4, 0, 0x01, 0xFE, 0xFF, 0, 0, 0, 0];
+    let r = raw_sdo(&mut b, 0x50, 0x6000, 0, [0; 4]);
+    assert_eq!(r, initiate(0x51, 0x6000, 0, ca.len(), &ca));
+    // Segmented: 1100 bytes of 0x2001.
+    let data: Vec<u8> = (0..1100u32).map(|i| (i * 5 + 1) as u8).collect();
+    b.download(0x2001, 0, false, &data).unwrap();
+    let r = raw_sdo(&mut b, 0x40, 0x2001, 0, [0; 4]);
+    let first = r.len() - 10;
+    assert!(first < data.len());
+    assert_eq!(r, initiate(0x41, 0x2001, 0, data.len(), &data[..first]));
+    let (mut sent, mut toggle, mut segments) = (first, false, 0);
+    while sent < data.len() {
+        let r = raw_sdo(&mut b, 0x60 | if toggle { 0x10 } else { 0 }, 0, 0, [0; 4]);
+        let n = (data.len() - sent).min(first + 7);
+        let last = sent + n == data.len();
+        let unused = if n < 7 { (7 - n) as u8 } else { 0 };
+        let cmd = (if toggle { 0x10 } else { 0 }) | (unused << 1) | u8::from(last);
+        let mut f = vec![0u8; 10 + n];
+        let len =
+            write_sdo_segment(&mut f, CoeService::SdoResponse, cmd, &data[sent..sent + n]).unwrap();
+        assert_eq!(r, f[..len], "segment {segments}");
+        sent += n;
+        toggle = !toggle;
+        segments += 1;
+    }
+    assert!(segments > 1);
+    // The transfer is over: another segment request is refused.
+    assert_eq!(abort_in(&raw_sdo(&mut b, 0x60, 0, 0, [0; 4])), 0x0504_0001);
+}
+
 fn mailbox_errors_and_counters<P: Port>() {
     let mut b = Bench::<P>::new();
     b.enter_preop();
@@ -666,6 +722,7 @@ oxicat_testkit::every_pdi!(
     refused_safeop_keeps_the_active_mapping,
     abort_codes_table,
     protocol_aborts,
+    upload_frames_byte_for_byte,
     mailbox_errors_and_counters,
     repeat_request_resends_last_reply,
     sdo_information,
