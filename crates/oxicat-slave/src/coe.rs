@@ -639,13 +639,6 @@ impl<P: Pdi, const N: usize, const M: usize, const K: usize> Slave<P, N, M, K> {
 
     fn initiate_upload(&mut self, index: u16, sub: u8, ca: bool) -> Result<(), Abort> {
         let (o, size) = self.target(index, sub, ca, false)?;
-        if !ca && size <= 4 && size > 0 {
-            let mut d = [0u8; 4];
-            self.stream_read(&o, sub, ca, 0, &mut d[..size]);
-            let cmd = 0x43 | (((4 - size) as u8) << 2);
-            self.sdo_reply(cmd, index, sub, d, &[]);
-            return Ok(());
-        }
         // The next segment's toggle bit is clear: `upload_part` flips this one.
         self.upload_part(&o, index, sub, ca, size, 0, true, true);
         Ok(())
@@ -672,8 +665,9 @@ impl<P: Pdi, const N: usize, const M: usize, const K: usize> Slave<P, N, M, K> {
         self.upload_part(&o, index, sub, ca, size, sent, toggle, false);
     }
 
-    /// Queues the next part of a normal upload from stream byte `sent`: the initiate
-    /// response (`initiate`: command, index, subindex and the size before the data) or an
+    /// Queues the next part of an upload from stream byte `sent`: the initiate response
+    /// (`initiate`: command, index, subindex, then 1 to 4 bytes of one entry expedited in the
+    /// header's data field, else the size before the data) or an
     /// upload segment (command `toggle`, unused bytes, last; data padded to 7 bytes), the
     /// data read straight into the reply; then the transfer's state, the next segment's
     /// toggle the inverse of `toggle`. One path for both (they were two copies of the read,
@@ -690,7 +684,15 @@ impl<P: Pdi, const N: usize, const M: usize, const K: usize> Slave<P, N, M, K> {
         toggle: bool,
         initiate: bool,
     ) {
-        let at = if initiate { 10 } else { 3 };
+        // Expedited: 1 to 4 bytes of one entry in the header's data field.
+        let expedited = initiate && !ca && size <= 4 && size > 0;
+        let at = if expedited {
+            6
+        } else if initiate {
+            10
+        } else {
+            3
+        };
         let n = (size - sent).min(self.reply_capacity() - at);
         let mut b = [0u8; M];
         self.stream_read(o, sub, ca, sent, &mut b[at..at + n]);
@@ -698,8 +700,12 @@ impl<P: Pdi, const N: usize, const M: usize, const K: usize> Slave<P, N, M, K> {
         let (cmd, len) = if initiate {
             b[3..5].copy_from_slice(&index.to_le_bytes());
             b[5] = sub;
-            b[6..10].copy_from_slice(&(size as u32).to_le_bytes());
-            (0x41 | if ca { 0x10 } else { 0 }, 10 + n)
+            if expedited {
+                (0x43 | (((4 - size) as u8) << 2), 10)
+            } else {
+                b[6..10].copy_from_slice(&(size as u32).to_le_bytes());
+                (0x41 | if ca { 0x10 } else { 0 }, 10 + n)
+            }
         } else {
             let unused = if n < 7 { (7 - n) as u8 } else { 0 };
             let cmd = (if toggle { 0x10 } else { 0 }) | (unused << 1) | u8::from(last);

@@ -368,8 +368,8 @@ fn protocol_aborts<P: Port>() {
     assert_eq!(abort_in(&r), 0x0503_0000);
 }
 
-/// The upload replies byte for byte, as `write_sdo` and `write_sdo_segment` make them: a
-/// normal upload in one initiate response (a string, a complete access) and a segmented one
+/// The upload replies byte for byte, as `write_sdo` and `write_sdo_segment` make them: an
+/// expedited upload, a normal upload in one initiate response (a string, a complete access) and a segmented one
 /// (initiate response with the size, then segments with the toggle bit, the unused count of
 /// a short one padded to 7 bytes, and the last bit).
 fn upload_frames_byte_for_byte<P: Port>() {
@@ -387,6 +387,20 @@ fn upload_frames_byte_for_byte<P: Port>() {
         f.truncate(n);
         f
     };
+    // Expedited: 4 and 2 bytes in the header's data field, the unused count in the command.
+    for (index, sub, cmd, d) in [
+        (0x1018, 1, 0x43, 0x0A5Cu32.to_le_bytes()),
+        (0x10F1, 2, 0x4B, [4, 0, 0, 0]),
+    ] {
+        let mut f = vec![0u8; 10];
+        let h = SdoHeader {
+            command: cmd,
+            index,
+            subindex: sub,
+        };
+        write_sdo(&mut f, CoeService::SdoResponse, &h, d, &[]).unwrap();
+        assert_eq!(raw_sdo(&mut b, 0x40, index, sub, [0; 4]), f);
+    }
     let name = b"oxicat test device";
     let r = raw_sdo(&mut b, 0x40, 0x1008, 0, [0; 4]);
     assert_eq!(r, initiate(0x41, 0x1008, 0, name.len(), name));
