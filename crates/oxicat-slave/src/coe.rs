@@ -2,9 +2,8 @@
 //! information and the abort-code rules.
 
 use oxicat_wire::coe::{
-    od_list_type, write_sdo, write_sdo_segment, CoeHeader, CoeService, SdoAbortCode, SdoHeader,
-    SdoInfoHeader, SdoInfoOpcode, SdoInfoRef, SdoInfoService, SdoRef, SdoRequestCommand,
-    COE_HEADER_LEN, SDO_INFO_HEADER_LEN,
+    od_list_type, CoeHeader, CoeService, SdoAbortCode, SdoInfoOpcode, SdoInfoRef, SdoInfoService,
+    SdoRef, SdoRequestCommand, COE_HEADER_LEN, SDO_INFO_HEADER_LEN,
 };
 use oxicat_wire::mailbox::{MailboxErrorDetail, MailboxType};
 
@@ -113,6 +112,15 @@ fn ca_copy(
     (pos, sub0, high)
 }
 
+/// Writes the CoE header of a reply of `service` (number 0) and the byte after it (the SDO
+/// command or the SDO information opcode): `CoeHeader::write` without its checks of
+/// fields the stack never sets out of range, in each reply path.
+fn coe_head(b: &mut [u8], service: CoeService, cmd: u8) {
+    b[0] = 0;
+    b[1] = service.code() << 4;
+    b[2] = cmd;
+}
+
 fn size_abort(size: usize, needed: usize) -> Option<Abort> {
     if size > needed {
         Some(Abort::LengthTooHigh)
@@ -185,31 +193,18 @@ impl<P: Pdi, const N: usize, const M: usize, const K: usize> Slave<P, N, M, K> {
         self.sdo = SdoState::Idle;
         // An abort is an SDO request frame with command 0x80 and the code as its data.
         let code = abort_code(code).to_le_bytes();
-        self.sdo_frame(CoeService::SdoRequest, 0x80, index, sub, code, &[]);
+        self.sdo_frame(CoeService::SdoRequest, 0x80, index, sub, code);
     }
 
-    fn sdo_reply(&mut self, cmd: u8, index: u16, sub: u8, hdata: [u8; 4], data: &[u8]) {
-        self.sdo_frame(CoeService::SdoResponse, cmd, index, sub, hdata, data);
-    }
-
-    fn sdo_frame(
-        &mut self,
-        service: CoeService,
-        cmd: u8,
-        index: u16,
-        sub: u8,
-        hdata: [u8; 4],
-        data: &[u8],
-    ) {
-        let mut b = [0u8; M];
-        let h = SdoHeader {
-            command: cmd,
-            index,
-            subindex: sub,
-        };
-        if let Ok(n) = write_sdo(&mut b, service, &h, hdata, data) {
-            self.queue_reply(MailboxType::Coe, &b[..n]);
-        }
+    /// Queues a 10-byte SDO frame of `service`: command, index, subindex and the 4 data
+    /// bytes of the header (an abort, the download responses).
+    fn sdo_frame(&mut self, service: CoeService, cmd: u8, index: u16, sub: u8, hdata: [u8; 4]) {
+        let mut b = [0u8; 10];
+        coe_head(&mut b, service, cmd);
+        b[3..5].copy_from_slice(&index.to_le_bytes());
+        b[5] = sub;
+        b[6..10].copy_from_slice(&hdata);
+        self.queue_reply(MailboxType::Coe, &b);
     }
 
     fn sdo_request<A: Application<N>>(&mut self, app: &mut A, p: &[u8]) {
@@ -246,7 +241,7 @@ impl<P: Pdi, const N: usize, const M: usize, const K: usize> Slave<P, N, M, K> {
                     unused,
                 );
                 match r {
-                    Ok(()) => self.sdo_reply(0x60, index, sub, [0; 4], &[]),
+                    Ok(()) => self.sdo_frame(CoeService::SdoResponse, 0x60, index, sub, [0; 4]),
                     Err(c) => self.abort(index, sub, c),
                 }
             }
@@ -478,9 +473,8 @@ impl<P: Pdi, const N: usize, const M: usize, const K: usize> Slave<P, N, M, K> {
         }
         let cmd = 0x20 | if toggle { 0x10 } else { 0 };
         let mut b = [0u8; 10];
-        if write_sdo_segment(&mut b, CoeService::SdoResponse, cmd, &[]).is_ok() {
-            self.queue_reply(MailboxType::Coe, &b);
-        }
+        coe_head(&mut b, CoeService::SdoResponse, cmd);
+        self.queue_reply(MailboxType::Coe, &b);
     }
 
     /// Validates and stores a complete download.
@@ -711,13 +705,8 @@ impl<P: Pdi, const N: usize, const M: usize, const K: usize> Slave<P, N, M, K> {
             let cmd = (if toggle { 0x10 } else { 0 }) | (unused << 1) | u8::from(last);
             (cmd, 3 + n.max(7))
         };
-        if CoeHeader::new(CoeService::SdoResponse)
-            .write(&mut b)
-            .is_ok()
-        {
-            b[2] = cmd;
-            self.queue_reply(MailboxType::Coe, &b[..len]);
-        }
+        coe_head(&mut b, CoeService::SdoResponse, cmd);
+        self.queue_reply(MailboxType::Coe, &b[..len]);
         self.sdo = if last {
             SdoState::Idle
         } else {
@@ -740,21 +729,12 @@ impl<P: Pdi, const N: usize, const M: usize, const K: usize> Slave<P, N, M, K> {
         if n > M {
             return;
         }
-        if CoeHeader::new(CoeService::SdoInformation)
-            .write(&mut b)
-            .is_err()
-        {
-            return;
-        }
-        let h = SdoInfoHeader {
-            opcode,
-            incomplete,
-            reserved: 0,
-            fragments_left: left,
-        };
-        if h.write(&mut b[COE_HEADER_LEN..]).is_err() {
-            return;
-        }
+        coe_head(
+            &mut b,
+            CoeService::SdoInformation,
+            opcode.code() | if incomplete { 0x80 } else { 0 },
+        );
+        b[4..6].copy_from_slice(&left.to_le_bytes());
         b[COE_HEADER_LEN + SDO_INFO_HEADER_LEN..n].copy_from_slice(data);
         self.queue_reply(MailboxType::Coe, &b[..n]);
     }

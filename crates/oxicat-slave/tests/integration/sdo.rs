@@ -1,7 +1,8 @@
 use oxicat_testkit::device::*;
 use oxicat_testkit::{Bench, Port};
 use oxicat_wire::coe::{
-    write_sdo, write_sdo_segment, CoeService, SdoHeader, SdoInfoRef, SdoInfoService,
+    write_sdo, write_sdo_abort, write_sdo_segment, CoeService, SdoAbortCode, SdoHeader, SdoInfoRef,
+    SdoInfoService,
 };
 use oxicat_wire::mailbox::{MailboxErrorReply, MailboxType};
 
@@ -436,6 +437,50 @@ fn upload_frames_byte_for_byte<P: Port>() {
     assert_eq!(abort_in(&raw_sdo(&mut b, 0x60, 0, 0, [0; 4])), 0x0504_0001);
 }
 
+/// The abort and download replies byte for byte, as `write_sdo_abort`, `write_sdo` and
+/// `write_sdo_segment` make them: an abort, the expedited and the segmented download's
+/// initiate response, the segment responses with their toggle bit.
+fn download_and_abort_frames_byte_for_byte<P: Port>() {
+    let mut b = Bench::<P>::new();
+    b.enter_preop();
+    let mut f = [0u8; 10];
+    write_sdo_abort(&mut f, 0x2000, 3, SdoAbortCode::InvalidCommand).unwrap();
+    assert_eq!(raw_sdo(&mut b, 0xC0, 0x2000, 3, [0; 4]), f);
+    let initiated = |index: u16, sub: u8| {
+        let mut f = [0u8; 10];
+        let h = SdoHeader {
+            command: 0x60,
+            index,
+            subindex: sub,
+        };
+        write_sdo(&mut f, CoeService::SdoResponse, &h, [0; 4], &[]).unwrap();
+        f
+    };
+    assert_eq!(
+        raw_sdo(&mut b, 0x2F, 0x2005, 6, [200, 0, 0, 0]),
+        initiated(0x2005, 6)
+    );
+    assert_eq!(b.s.od().get::<u8>(0x2005, 6), Ok(200));
+    // The 16-byte label in three segments (7, 7, then 2 bytes and the last bit).
+    let r = raw_sdo(&mut b, 0x21, 0x2006, 0, 16u32.to_le_bytes());
+    assert_eq!(r, initiated(0x2006, 0));
+    let label = b"sixteen byte lbl";
+    for (k, cmd) in [(0usize, 0x00u8), (1, 0x10), (2, 0x0B)] {
+        let mut p = [0u8; 10];
+        let n = write_sdo_segment(
+            &mut p,
+            CoeService::SdoRequest,
+            cmd,
+            &label[7 * k..(7 * k + 7).min(16)],
+        )
+        .unwrap();
+        let mut f = [0u8; 10];
+        write_sdo_segment(&mut f, CoeService::SdoResponse, 0x20 | (cmd & 0x10), &[]).unwrap();
+        assert_eq!(b.coe(&p[..n]), f, "segment {k}");
+    }
+    assert_eq!(b.s.od().bytes(0x2006, 0).unwrap(), label);
+}
+
 fn mailbox_errors_and_counters<P: Port>() {
     let mut b = Bench::<P>::new();
     b.enter_preop();
@@ -737,6 +782,7 @@ oxicat_testkit::every_pdi!(
     abort_codes_table,
     protocol_aborts,
     upload_frames_byte_for_byte,
+    download_and_abort_frames_byte_for_byte,
     mailbox_errors_and_counters,
     repeat_request_resends_last_reply,
     sdo_information,
