@@ -4,7 +4,7 @@ use oxicat_wire::coe::{
     write_sdo, write_sdo_abort, write_sdo_segment, CoeService, SdoAbortCode, SdoHeader, SdoInfoRef,
     SdoInfoService,
 };
-use oxicat_wire::mailbox::{MailboxErrorReply, MailboxType};
+use oxicat_wire::mailbox::{MailboxErrorReply, MailboxHeader, MailboxType};
 
 fn abort_of(r: Result<impl Sized, u32>) -> u32 {
     match r {
@@ -481,6 +481,31 @@ fn download_and_abort_frames_byte_for_byte<P: Port>() {
     assert_eq!(b.s.od().bytes(0x2006, 0).unwrap(), label);
 }
 
+/// The reply's mailbox header in every field (length, address 0, channel 0, priority 0, the
+/// type, the counter 1..=7 wrapping to 1, the reserved bit clear), over more replies than
+/// the counter has values and with a mailbox error among them.
+fn reply_mailbox_headers<P: Port>() {
+    let mut b = Bench::<P>::new();
+    b.enter_preop();
+    let mut counter = 0;
+    for k in 0..10 {
+        counter = MailboxHeader::next_counter(counter);
+        let (t, len) = if k == 4 {
+            // A CoE service the stack does not serve: a mailbox error reply.
+            b.mbx_write(MailboxType::Coe, &[0x00, 0x50, 0, 0, 0, 0, 0, 0, 0, 0]);
+            (MailboxType::Error, 4)
+        } else {
+            b.mbx_write(
+                MailboxType::Coe,
+                &[0x00, 0x20, 0x40, 0x18, 0x10, 1, 0, 0, 0, 0],
+            );
+            (MailboxType::Coe, 10)
+        };
+        let (h, _) = b.mbx_read().expect("reply");
+        assert_eq!(h, MailboxHeader::new(len, 0, t, counter), "reply {k}");
+    }
+}
+
 fn mailbox_errors_and_counters<P: Port>() {
     let mut b = Bench::<P>::new();
     b.enter_preop();
@@ -783,6 +808,7 @@ oxicat_testkit::every_pdi!(
     protocol_aborts,
     upload_frames_byte_for_byte,
     download_and_abort_frames_byte_for_byte,
+    reply_mailbox_headers,
     mailbox_errors_and_counters,
     repeat_request_resends_last_reply,
     sdo_information,
