@@ -2,8 +2,8 @@
 //! information and the abort-code rules.
 
 use oxicat_wire::coe::{
-    od_list_type, CoeHeader, CoeService, SdoAbortCode, SdoInfoOpcode, SdoInfoRef, SdoInfoService,
-    SdoRef, SdoRequestCommand, COE_HEADER_LEN, SDO_INFO_HEADER_LEN,
+    od_list_type, CoeHeader, CoeService, SdoAbortCode, SdoInfoOpcode, SdoInfoRef, SdoRef,
+    SdoRequestCommand, COE_HEADER_LEN, SDO_INFO_HEADER_LEN,
 };
 use oxicat_wire::mailbox::{MailboxErrorDetail, MailboxType};
 
@@ -766,8 +766,14 @@ impl<P: Pdi, const N: usize, const M: usize, const K: usize> Slave<P, N, M, K> {
             return;
         };
         self.sdo = SdoState::Idle;
-        match r.service() {
-            Ok(SdoInfoService::GetOdListRequest { list_type }) => {
+        // The three requests decoded here, as `SdoInfoService::parse` decodes them: a board
+        // image has no use for its decoding of the responses. Any other opcode, and a
+        // request too short for its fields, is a service the stack does not serve.
+        let d = r.data;
+        let u16at = |i: usize| u16::from_le_bytes([d[i], d[i + 1]]);
+        match r.header.opcode {
+            SdoInfoOpcode::GetOdListRequest if d.len() >= 2 => {
+                let list_type = u16at(0);
                 if list_type == od_list_type::LENGTHS {
                     let total = self.od.object_count();
                     let mut w = [0u8; 12];
@@ -799,7 +805,8 @@ impl<P: Pdi, const N: usize, const M: usize, const K: usize> Slave<P, N, M, K> {
                     self.info_error(Abort::UnsupportedAccess);
                 }
             }
-            Ok(SdoInfoService::GetObjectDescriptionRequest { index }) => {
+            SdoInfoOpcode::GetObjectDescriptionRequest if d.len() >= 2 => {
+                let index = u16at(0);
                 let Some(o) = self.od.find(index) else {
                     return self.info_error(Abort::ObjectDoesNotExist);
                 };
@@ -824,11 +831,8 @@ impl<P: Pdi, const N: usize, const M: usize, const K: usize> Slave<P, N, M, K> {
                     &d[..6 + nl],
                 );
             }
-            Ok(SdoInfoService::GetEntryDescriptionRequest {
-                index,
-                subindex,
-                value_info,
-            }) => {
+            SdoInfoOpcode::GetEntryDescriptionRequest if d.len() >= 4 => {
+                let (index, subindex, value_info) = (u16at(0), d[2], d[3]);
                 let Some(o) = self.od.find(index) else {
                     return self.info_error(Abort::ObjectDoesNotExist);
                 };

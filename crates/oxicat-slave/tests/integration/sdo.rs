@@ -506,6 +506,62 @@ fn reply_mailbox_headers<P: Port>() {
     }
 }
 
+/// SDO information messages the stack does not serve: the responses' opcodes, the error
+/// opcode, a reserved one and each request too short for its fields are a service not
+/// supported (mailbox error 4); one shorter than the headers is too short (6); the
+/// shortest well-formed requests are answered.
+fn sdo_information_not_served<P: Port>() {
+    let mut b = Bench::<P>::new();
+    b.enter_preop();
+    let mut reply = |op: u8, data: &[u8]| {
+        let mut p = vec![0x00, 0x80, op, 0, 0, 0];
+        p.extend_from_slice(data);
+        b.mbx_write(MailboxType::Coe, &p);
+        let (h, p) = b.mbx_read().expect("reply");
+        match h.mailbox_type {
+            MailboxType::Error => Some(MailboxErrorReply::parse(&p).unwrap().detail.code()),
+            _ => None,
+        }
+    };
+    for (op, data) in [
+        (0x01u8, &[0u8][..]),
+        (0x03, &[0x18][..]),
+        (0x05, &[0x18, 0x10, 1][..]),
+        (0x02, &[1, 0, 0, 0][..]),
+        (0x04, &[0x18, 0x10, 0, 0, 0, 0][..]),
+        (0x06, &[0x18, 0x10, 1, 0, 0, 0, 0, 0, 0, 0][..]),
+        (0x07, &[0, 0, 0, 0][..]),
+        (0x09, &[0, 0, 0, 0][..]),
+    ] {
+        assert_eq!(
+            reply(op, data),
+            Some(4),
+            "opcode {op:#x} with {} bytes",
+            data.len()
+        );
+    }
+    let mut p = vec![0x00, 0x80, 0x03];
+    b.mbx_write(MailboxType::Coe, &p);
+    let (h, r) = b.mbx_read().expect("reply");
+    assert_eq!(h.mailbox_type, MailboxType::Error);
+    assert_eq!(MailboxErrorReply::parse(&r).unwrap().detail.code(), 6);
+    p.extend_from_slice(&[0, 0, 0, 0x18, 0x10]);
+    b.mbx_write(MailboxType::Coe, &p);
+    assert_eq!(
+        b.mbx_read().expect("reply").0.mailbox_type,
+        MailboxType::Coe
+    );
+    for (op, data) in [(0x01u8, &[1u8, 0][..]), (0x05, &[0x18, 0x10, 1, 0][..])] {
+        let mut p = vec![0x00, 0x80, op, 0, 0, 0];
+        p.extend_from_slice(data);
+        b.mbx_write(MailboxType::Coe, &p);
+        assert_eq!(
+            b.mbx_read().expect("reply").0.mailbox_type,
+            MailboxType::Coe
+        );
+    }
+}
+
 fn mailbox_errors_and_counters<P: Port>() {
     let mut b = Bench::<P>::new();
     b.enter_preop();
@@ -809,6 +865,7 @@ oxicat_testkit::every_pdi!(
     upload_frames_byte_for_byte,
     download_and_abort_frames_byte_for_byte,
     reply_mailbox_headers,
+    sdo_information_not_served,
     mailbox_errors_and_counters,
     repeat_request_resends_last_reply,
     sdo_information,
