@@ -433,7 +433,7 @@ pub fn profile_no(def: &DeviceDef) -> Option<u32> {
 pub fn generate(def: &'static DeviceDef) -> Result<String, Error> {
     let od = OdSnapshot::new(def)?;
     let objs = objects(&od);
-    let i = &def.info;
+    let i = def.info();
     let mut x = Xml::new();
     head(
         &mut x,

@@ -754,7 +754,7 @@ fn pdo_model(def: &DeviceDef, p: &PdoDef, sm: u8, assign: &[u16]) -> PdoModel {
 
 /// The model of a definition (what its ESI and SII must say).
 pub fn from_def(def: &DeviceDef) -> DeviceModel {
-    let i = &def.info;
+    let i = def.info();
     let sm = |kind, start, size: u16, control, enable| SmModel {
         kind,
         start,
@@ -861,7 +861,7 @@ pub fn from_def(def: &DeviceDef) -> DeviceModel {
 
 /// The 14 CRC-covered bytes of the SII configuration area of a definition.
 pub fn config_bytes(def: &DeviceDef) -> [u8; 14] {
-    let e = def.info.esc;
+    let e = def.info().esc;
     oxicat_wire::sii::SiiConfig {
         pdi_control: e.pdi_control,
         pdi_config: e.pdi_config,

@@ -76,7 +76,7 @@ pub fn generate(def: &DeviceDef) -> Result<Vec<u8>, Error> {
 
 /// [`generate`] with the sync managers of `layout` instead of the stack's standard four.
 pub fn generate_with(def: &DeviceDef, layout: Option<&SmLayout>) -> Result<Vec<u8>, Error> {
-    let info = &def.info;
+    let info = def.info();
     let size = info.eeprom_bytes as usize;
     if size < 256 || !size.is_power_of_two() {
         return Err(Error::DoesNotFit(

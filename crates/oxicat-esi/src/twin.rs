@@ -1707,7 +1707,7 @@ fn build_device(esi: &Esi, d: Node, cand: Candidate) -> Result<Twin, TwinError> 
             min_cycle_ns: 100_000,
             calc_copy_ns: 0,
         },
-        info: DeviceInfo {
+        info: Some(Box::leak(Box::new(DeviceInfo {
             vendor_name: leak(esi.vendor_name.as_deref().unwrap_or("")),
             group: Group {
                 type_name: leak(&group_type),
@@ -1729,7 +1729,7 @@ fn build_device(esi: &Esi, d: Node, cand: Candidate) -> Result<Twin, TwinError> 
             dc_modes: Box::leak(dc_modes.into_boxed_slice()),
             ebus_current_ma: ebus,
             timeouts: m.timeouts,
-        },
+        }))),
     };
     let layout = SmLayout {
         sms,
@@ -1740,16 +1740,20 @@ fn build_device(esi: &Esi, d: Node, cand: Candidate) -> Result<Twin, TwinError> 
     let sii = loop {
         match crate::sii::generate_with(&def, Some(&layout)) {
             Ok(s) => break s,
-            Err(crate::Error::DoesNotFit(_)) if def.info.eeprom_bytes < 65536 => {
-                def.info.eeprom_bytes *= 2;
+            Err(crate::Error::DoesNotFit(_)) if def.info().eeprom_bytes < 65536 => {
+                let info = DeviceInfo {
+                    eeprom_bytes: def.info().eeprom_bytes * 2,
+                    ..*def.info()
+                };
+                def.info = Some(Box::leak(Box::new(info)));
             }
             Err(e) => return Err(TwinError::Esi(e)),
         }
     };
-    if def.info.eeprom_bytes != eeprom_bytes {
+    if def.info().eeprom_bytes != eeprom_bytes {
         left_out.push(format!(
             "EEPROM size {eeprom_bytes} bytes: the generated SII needs {}",
-            def.info.eeprom_bytes
+            def.info().eeprom_bytes
         ));
     }
     let def: &'static DeviceDef = Box::leak(Box::new(def));

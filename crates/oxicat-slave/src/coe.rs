@@ -2,9 +2,8 @@
 //! information and the abort-code rules.
 
 use oxicat_wire::coe::{
-    od_list_type, write_sdo, write_sdo_segment, CoeHeader, CoeService, SdoAbortCode, SdoHeader,
-    SdoInfoHeader, SdoInfoOpcode, SdoInfoRef, SdoInfoService, SdoRef, SdoRequestCommand,
-    COE_HEADER_LEN, SDO_INFO_HEADER_LEN,
+    od_list_type, CoeHeader, CoeService, SdoAbortCode, SdoInfoOpcode, SdoInfoRef, SdoRef,
+    SdoRequestCommand, COE_HEADER_LEN, SDO_INFO_HEADER_LEN,
 };
 use oxicat_wire::mailbox::{MailboxErrorDetail, MailboxType};
 
@@ -113,6 +112,15 @@ fn ca_copy(
     (pos, sub0, high)
 }
 
+/// Writes the CoE header of a reply of `service` (number 0) and the byte after it (the SDO
+/// command or the SDO information opcode): `CoeHeader::write` without its checks of
+/// fields the stack never sets out of range, in each reply path.
+fn coe_head(b: &mut [u8], service: CoeService, cmd: u8) {
+    b[0] = 0;
+    b[1] = service.code() << 4;
+    b[2] = cmd;
+}
+
 fn size_abort(size: usize, needed: usize) -> Option<Abort> {
     if size > needed {
         Some(Abort::LengthTooHigh)
@@ -185,31 +193,18 @@ impl<P: Pdi, const N: usize, const M: usize, const K: usize> Slave<P, N, M, K> {
         self.sdo = SdoState::Idle;
         // An abort is an SDO request frame with command 0x80 and the code as its data.
         let code = abort_code(code).to_le_bytes();
-        self.sdo_frame(CoeService::SdoRequest, 0x80, index, sub, code, &[]);
+        self.sdo_frame(CoeService::SdoRequest, 0x80, index, sub, code);
     }
 
-    fn sdo_reply(&mut self, cmd: u8, index: u16, sub: u8, hdata: [u8; 4], data: &[u8]) {
-        self.sdo_frame(CoeService::SdoResponse, cmd, index, sub, hdata, data);
-    }
-
-    fn sdo_frame(
-        &mut self,
-        service: CoeService,
-        cmd: u8,
-        index: u16,
-        sub: u8,
-        hdata: [u8; 4],
-        data: &[u8],
-    ) {
-        let mut b = [0u8; M];
-        let h = SdoHeader {
-            command: cmd,
-            index,
-            subindex: sub,
-        };
-        if let Ok(n) = write_sdo(&mut b, service, &h, hdata, data) {
-            self.queue_reply(MailboxType::Coe, &b[..n]);
-        }
+    /// Queues a 10-byte SDO frame of `service`: command, index, subindex and the 4 data
+    /// bytes of the header (an abort, the download responses).
+    fn sdo_frame(&mut self, service: CoeService, cmd: u8, index: u16, sub: u8, hdata: [u8; 4]) {
+        let mut b = [0u8; 10];
+        coe_head(&mut b, service, cmd);
+        b[3..5].copy_from_slice(&index.to_le_bytes());
+        b[5] = sub;
+        b[6..10].copy_from_slice(&hdata);
+        self.queue_reply(MailboxType::Coe, &b);
     }
 
     fn sdo_request<A: Application<N>>(&mut self, app: &mut A, p: &[u8]) {
@@ -246,7 +241,7 @@ impl<P: Pdi, const N: usize, const M: usize, const K: usize> Slave<P, N, M, K> {
                     unused,
                 );
                 match r {
-                    Ok(()) => self.sdo_reply(0x60, index, sub, [0; 4], &[]),
+                    Ok(()) => self.sdo_frame(CoeService::SdoResponse, 0x60, index, sub, [0; 4]),
                     Err(c) => self.abort(index, sub, c),
                 }
             }
@@ -478,9 +473,8 @@ impl<P: Pdi, const N: usize, const M: usize, const K: usize> Slave<P, N, M, K> {
         }
         let cmd = 0x20 | if toggle { 0x10 } else { 0 };
         let mut b = [0u8; 10];
-        if write_sdo_segment(&mut b, CoeService::SdoResponse, cmd, &[]).is_ok() {
-            self.queue_reply(MailboxType::Coe, &b);
-        }
+        coe_head(&mut b, CoeService::SdoResponse, cmd);
+        self.queue_reply(MailboxType::Coe, &b);
     }
 
     /// Validates and stores a complete download.
@@ -639,29 +633,8 @@ impl<P: Pdi, const N: usize, const M: usize, const K: usize> Slave<P, N, M, K> {
 
     fn initiate_upload(&mut self, index: u16, sub: u8, ca: bool) -> Result<(), Abort> {
         let (o, size) = self.target(index, sub, ca, false)?;
-        if !ca && size <= 4 && size > 0 {
-            let mut d = [0u8; 4];
-            self.stream_read(&o, sub, ca, 0, &mut d[..size]);
-            let cmd = 0x43 | (((4 - size) as u8) << 2);
-            self.sdo_reply(cmd, index, sub, d, &[]);
-            return Ok(());
-        }
-        let cap = self.reply_capacity() - 10;
-        let first = size.min(cap);
-        let mut d = [0u8; M];
-        self.stream_read(&o, sub, ca, 0, &mut d[..first]);
-        let cmd = 0x41 | if ca { 0x10 } else { 0 };
-        self.sdo_reply(cmd, index, sub, (size as u32).to_le_bytes(), &d[..first]);
-        if first < size {
-            self.sdo = SdoState::Upload {
-                index,
-                sub,
-                ca,
-                size,
-                sent: first,
-                toggle: false,
-            };
-        }
+        // The next segment's toggle bit is clear: `upload_part` flips this one.
+        self.upload_part(&o, index, sub, ca, size, 0, true, true);
         Ok(())
     }
 
@@ -683,17 +656,57 @@ impl<P: Pdi, const N: usize, const M: usize, const K: usize> Slave<P, N, M, K> {
         let Some(o) = self.od.find(index) else {
             return self.abort(index, sub, Abort::ObjectDoesNotExist);
         };
-        let cap = self.reply_capacity() - 3;
-        let n = (size - sent).min(cap);
-        let mut d = [0u8; M];
-        self.stream_read(&o, sub, ca, sent, &mut d[..n]);
-        let last = sent + n == size;
-        let unused = if n < 7 { (7 - n) as u8 } else { 0 };
-        let cmd = (if toggle { 0x10 } else { 0 }) | (unused << 1) | u8::from(last);
+        self.upload_part(&o, index, sub, ca, size, sent, toggle, false);
+    }
+
+    /// Queues the next part of an upload from stream byte `sent`: the initiate response
+    /// (`initiate`: command, index, subindex, then 1 to 4 bytes of one entry expedited in the
+    /// header's data field, else the size before the data) or an
+    /// upload segment (command `toggle`, unused bytes, last; data padded to 7 bytes), the
+    /// data read straight into the reply; then the transfer's state, the next segment's
+    /// toggle the inverse of `toggle`. One path for both (they were two copies of the read,
+    /// the reply and the state).
+    #[allow(clippy::too_many_arguments)]
+    fn upload_part(
+        &mut self,
+        o: &Obj,
+        index: u16,
+        sub: u8,
+        ca: bool,
+        size: usize,
+        sent: usize,
+        toggle: bool,
+        initiate: bool,
+    ) {
+        // Expedited: 1 to 4 bytes of one entry in the header's data field.
+        let expedited = initiate && !ca && size <= 4 && size > 0;
+        let at = if expedited {
+            6
+        } else if initiate {
+            10
+        } else {
+            3
+        };
+        let n = (size - sent).min(self.reply_capacity() - at);
         let mut b = [0u8; M];
-        if let Ok(len) = write_sdo_segment(&mut b, CoeService::SdoResponse, cmd, &d[..n]) {
-            self.queue_reply(MailboxType::Coe, &b[..len]);
-        }
+        self.stream_read(o, sub, ca, sent, &mut b[at..at + n]);
+        let last = sent + n == size;
+        let (cmd, len) = if initiate {
+            b[3..5].copy_from_slice(&index.to_le_bytes());
+            b[5] = sub;
+            if expedited {
+                (0x43 | (((4 - size) as u8) << 2), 10)
+            } else {
+                b[6..10].copy_from_slice(&(size as u32).to_le_bytes());
+                (0x41 | if ca { 0x10 } else { 0 }, 10 + n)
+            }
+        } else {
+            let unused = if n < 7 { (7 - n) as u8 } else { 0 };
+            let cmd = (if toggle { 0x10 } else { 0 }) | (unused << 1) | u8::from(last);
+            (cmd, 3 + n.max(7))
+        };
+        coe_head(&mut b, CoeService::SdoResponse, cmd);
+        self.queue_reply(MailboxType::Coe, &b[..len]);
         self.sdo = if last {
             SdoState::Idle
         } else {
@@ -703,7 +716,7 @@ impl<P: Pdi, const N: usize, const M: usize, const K: usize> Slave<P, N, M, K> {
                 ca,
                 size,
                 sent: sent + n,
-                toggle: !t,
+                toggle: !toggle,
             }
         };
     }
@@ -716,21 +729,12 @@ impl<P: Pdi, const N: usize, const M: usize, const K: usize> Slave<P, N, M, K> {
         if n > M {
             return;
         }
-        if CoeHeader::new(CoeService::SdoInformation)
-            .write(&mut b)
-            .is_err()
-        {
-            return;
-        }
-        let h = SdoInfoHeader {
-            opcode,
-            incomplete,
-            reserved: 0,
-            fragments_left: left,
-        };
-        if h.write(&mut b[COE_HEADER_LEN..]).is_err() {
-            return;
-        }
+        coe_head(
+            &mut b,
+            CoeService::SdoInformation,
+            opcode.code() | if incomplete { 0x80 } else { 0 },
+        );
+        b[4..6].copy_from_slice(&left.to_le_bytes());
         b[COE_HEADER_LEN + SDO_INFO_HEADER_LEN..n].copy_from_slice(data);
         self.queue_reply(MailboxType::Coe, &b[..n]);
     }
@@ -762,8 +766,14 @@ impl<P: Pdi, const N: usize, const M: usize, const K: usize> Slave<P, N, M, K> {
             return;
         };
         self.sdo = SdoState::Idle;
-        match r.service() {
-            Ok(SdoInfoService::GetOdListRequest { list_type }) => {
+        // The three requests decoded here, as `SdoInfoService::parse` decodes them: a board
+        // image has no use for its decoding of the responses. Any other opcode, and a
+        // request too short for its fields, is a service the stack does not serve.
+        let d = r.data;
+        let u16at = |i: usize| u16::from_le_bytes([d[i], d[i + 1]]);
+        match r.header.opcode {
+            SdoInfoOpcode::GetOdListRequest if d.len() >= 2 => {
+                let list_type = u16at(0);
                 if list_type == od_list_type::LENGTHS {
                     let total = self.od.object_count();
                     let mut w = [0u8; 12];
@@ -795,7 +805,8 @@ impl<P: Pdi, const N: usize, const M: usize, const K: usize> Slave<P, N, M, K> {
                     self.info_error(Abort::UnsupportedAccess);
                 }
             }
-            Ok(SdoInfoService::GetObjectDescriptionRequest { index }) => {
+            SdoInfoOpcode::GetObjectDescriptionRequest if d.len() >= 2 => {
+                let index = u16at(0);
                 let Some(o) = self.od.find(index) else {
                     return self.info_error(Abort::ObjectDoesNotExist);
                 };
@@ -820,11 +831,8 @@ impl<P: Pdi, const N: usize, const M: usize, const K: usize> Slave<P, N, M, K> {
                     &d[..6 + nl],
                 );
             }
-            Ok(SdoInfoService::GetEntryDescriptionRequest {
-                index,
-                subindex,
-                value_info,
-            }) => {
+            SdoInfoOpcode::GetEntryDescriptionRequest if d.len() >= 4 => {
+                let (index, subindex, value_info) = (u16at(0), d[2], d[3]);
                 let Some(o) = self.od.find(index) else {
                     return self.info_error(Abort::ObjectDoesNotExist);
                 };

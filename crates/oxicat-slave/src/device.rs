@@ -229,21 +229,29 @@ pub struct DeviceDef {
     /// Synchronisation support.
     pub sync: SyncDef,
     /// What the ESI and the SII need beyond the stack (names, groups, ESC configuration,
-    /// DC op modes, FMMU usage, mailbox protocol details).
-    pub info: DeviceInfo,
+    /// DC op modes, FMMU usage, mailbox protocol details); the stack reads none of it.
+    /// `None` in a board image's definition ([`DeviceDef::for_image`]): read it with
+    /// [`DeviceDef::info`].
+    pub info: Option<&'static DeviceInfo>,
 }
 
 impl DeviceDef {
     /// This definition as a board image links it: the same device for the stack (every
-    /// object, PDO, mailbox, sync and identity field), with [`DeviceInfo::for_image`], so the
-    /// strings only the ESI and SII need are not in the image's flash
+    /// object, PDO, mailbox, sync and identity field) without its [`DeviceInfo`], which only
+    /// the ESI and the SII need, so none of it is in the image's flash
     /// (`static DEF: DeviceDef = demo::DEF.for_image();`). The ESI and the EEPROM are made
     /// from the full definition on the host.
     pub const fn for_image(&self) -> DeviceDef {
         DeviceDef {
-            info: self.info.for_image(),
+            info: None,
             ..*self
         }
+    }
+
+    /// The device's [`DeviceInfo`]; [`DeviceInfo::DEFAULT`] for a definition without one
+    /// (an image's, [`DeviceDef::for_image`]).
+    pub fn info(&self) -> &'static DeviceInfo {
+        self.info.unwrap_or(&DeviceInfo::DEFAULT)
     }
 
     /// A base definition with empty lists and [`DeviceInfo::DEFAULT`]: start a device with
@@ -275,7 +283,7 @@ impl DeviceDef {
             min_cycle_ns: 1_000_000,
             calc_copy_ns: 0,
         },
-        info: DeviceInfo::DEFAULT,
+        info: Some(&DeviceInfo::DEFAULT),
     };
 
     /// The PDO with mapping index `index` (RxPDOs and TxPDOs).
@@ -313,7 +321,7 @@ impl DeviceDef {
 
     /// CoE details as the SII general category encodes them (ETG.2010 bit layout).
     pub fn coe_details(&self) -> u8 {
-        let c = self.info.coe;
+        let c = self.info().coe;
         let mut v = 0;
         if c.enabled {
             v |= 0x01;
@@ -343,7 +351,7 @@ impl DeviceDef {
 
     /// Mailbox protocols word (SII word 0x1C): AoE 1, EoE 2, CoE 4, FoE 8, SoE 16, VoE 32.
     pub fn mailbox_protocols(&self) -> u16 {
-        let i = &self.info;
+        let i = self.info();
         let mut v = 0;
         if i.eoe {
             v |= 0x02;
@@ -568,29 +576,6 @@ pub struct DeviceInfo {
 }
 
 impl DeviceInfo {
-    /// Only what a running device needs of it: the mailbox protocol flags and the sizes
-    /// (ESC configuration, EEPROM, SII version, SM control, mailbox range, E-bus current);
-    /// the texts and tables only ESI and SII carry (vendor, group, order code, description,
-    /// image, physics, FMMU usage, DC mode names, timeouts) emptied. See
-    /// [`DeviceDef::for_image`].
-    pub const fn for_image(self) -> Self {
-        Self {
-            vendor_name: "",
-            group: Group {
-                type_name: "",
-                name: "",
-            },
-            order_code: "",
-            description: None,
-            image: None,
-            physics: "",
-            fmmus: &[],
-            dc_modes: &[],
-            timeouts: None,
-            ..self
-        }
-    }
-
     /// Defaults: SPI PDI, 2 KiB EEPROM, FMMUs Outputs/Inputs/MBoxState, standard SM control
     /// bytes, CoE as the stack implements it, no DC modes.
     pub const DEFAULT: DeviceInfo = DeviceInfo {

@@ -1261,11 +1261,15 @@ impl<P: Pdi, const N: usize, const M: usize, const K: usize> Slave<P, N, M, K> {
             return;
         }
         self.mbx.out_counter = MailboxHeader::next_counter(self.mbx.out_counter);
-        let h = MailboxHeader::new(payload.len() as u16, 0, t, self.mbx.out_counter);
-        if h.write(&mut self.mbx.last[..]).is_ok() {
-            self.mbx.last[MAILBOX_HEADER_LEN..n].copy_from_slice(payload);
-            self.mbx.out_len = n;
-        }
+        // The header as `MailboxHeader::write` makes it (address 0, channel 0, priority 0),
+        // without its checks of fields the stack never sets out of range (a named type, a
+        // counter of 1..=7) and their error strings.
+        let b = &mut self.mbx.last;
+        b[0..2].copy_from_slice(&(payload.len() as u16).to_le_bytes());
+        b[2..5].fill(0);
+        b[5] = t.code() | (self.mbx.out_counter << 4);
+        b[MAILBOX_HEADER_LEN..n].copy_from_slice(payload);
+        self.mbx.out_len = n;
     }
 
     /// Room for service data in one reply.

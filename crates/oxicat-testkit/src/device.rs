@@ -165,7 +165,7 @@ pub static DEF: DeviceDef = DeviceDef {
         min_cycle_ns: 100_000,
         calc_copy_ns: 10_000,
     },
-    info: device::DeviceInfo::DEFAULT,
+    info: Some(&device::DeviceInfo::DEFAULT),
 };
 
 /// SII image for a definition (config area, identity, mailbox layout).

@@ -54,6 +54,10 @@ const MBX: usize = 128;
 /// (`pdo::map_steps`: 31, the entries of one configurable PDO; the default of 64 would be
 /// 528 B more RAM, 2 × 33 × 8).
 const MAP: usize = oxicat_slave::pdo::map_steps(&device::DEF);
+
+/// The device's definition as the image links it: without the ESI/SII description
+/// (`DeviceDef::for_image`), which the stack does not read.
+static IMAGE_DEF: oxicat_slave::DeviceDef = device::DEF.for_image();
 /// The main loop polls the stack every 20 current-loop ticks (1 ms). In free run that is
 /// also the application cycle, which matches the cycle the drive assumes when 0x1C32:02
 /// does not say (`DriveParams::cycle_s`, 1 ms).
@@ -290,7 +294,7 @@ fn start_stack(
     params: DriveParams,
 ) -> Result<(), ()> {
     // The definition checked when the image is built (`check_def` is not in the image).
-    let def = const { CheckedDef::new(&device::DEF) };
+    let def = const { CheckedDef::new(&IMAGE_DEF) };
     let slave = slot.start_checked(def, &mut esc).map_err(|_| ())?;
     let drive = Cia402Drive::new(sensors, params);
     HANDOVER.put_command(drive.current_command());

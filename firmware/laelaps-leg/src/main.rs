@@ -68,6 +68,11 @@ const MBX: usize = 128;
 /// (`pdo::map_steps`: 14 output steps, 5 input steps; both legs have the same PDOs; the
 /// default of 64 would be 2 × 50 × 8 = 800 B more RAM).
 const MAP: usize = oxicat_slave::pdo::map_steps(&device::LEFT);
+
+/// The device's definition as the image links it: without the ESI/SII description
+/// (`DeviceDef::for_image`), which the stack does not read.
+static IMAGE_DEF: oxicat_slave::DeviceDef = device::device(SIDE).for_image();
+
 /// Joint-loop rate (`laelaps::hw::CONTROL_PERIOD_S`).
 const JOINT_LOOP_HZ: u32 = 10_000;
 /// The main loop polls the stack every 4 joint-loop ticks (400 µs), as the rig does
@@ -213,7 +218,7 @@ fn start_stack(slot: &'static mut StackSlot, mut esc: Esc) -> Result<(), ()> {
     // SAFETY: a plain read of an immutable static; volatile so the link keeps the symbol.
     let _side = unsafe { core::ptr::read_volatile(&OXICAT_LEG_SIDE) };
     // The definition checked when the image is built (`check_def` is not in the image).
-    let def = const { CheckedDef::new(device::device(SIDE)) };
+    let def = const { CheckedDef::new(&IMAGE_DEF) };
     let slave = slot.start_checked(def, &mut esc).map_err(|_| ())?;
     // The main loop polls with the ESC handlers masked: PREOP -> SAFEOP (compiling both
     // PDO mappings) in one poll held them off for 770 µs, and a SYNC0 edge was lost when

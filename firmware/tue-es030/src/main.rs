@@ -56,6 +56,10 @@ const MBX: usize = 128;
 /// (`pdo::map_steps`: 54, every entry of the PDOs its configurable assignment can take; the
 /// default of 64 would be 2 × 10 × 8 = 160 B more RAM).
 const MAP: usize = oxicat_slave::pdo::map_steps(&device::DEF);
+
+/// The device's definition as the image links it: without the ESI/SII description
+/// (`DeviceDef::for_image`), which the stack does not read.
+static IMAGE_DEF: oxicat_slave::DeviceDef = device::DEF.for_image();
 /// Current-loop ticks per service-routine run (20 kHz / 1 kHz).
 const TICKS_PER_SERVICE: u32 = board::CURRENT_LOOP_HZ / 1000;
 /// The main loop polls the stack every 20 current-loop ticks (1 ms).
@@ -186,7 +190,7 @@ fn fail(led: &mut Pin<'D', 14, Output>, delay: &mut impl embedded_hal::delay::De
 #[inline(never)]
 fn start_stack(slot: &'static mut StackSlot, mut esc: Esc, flash: pac::FLASH) -> Result<(), ()> {
     // The definition checked when the image is built (`check_def` is not in the image).
-    let def = const { CheckedDef::new(&device::DEF) };
+    let def = const { CheckedDef::new(&IMAGE_DEF) };
     let slave = slot.start_checked(def, &mut esc).map_err(|_| ())?;
     let app = WithFoe {
         app: Hooks(FwCs),

@@ -11,6 +11,11 @@ use super::device::{self, IMAGE, MBX, SENSORS, TEMP_INVALID};
 use super::onewire::{OneWireBus, TempFrame, TempTask, TEMP_PERIOD_MS};
 use super::ws2812::{self, LedStrip, LedTask, Rgb, LED_PERIOD_MS};
 
+/// The hub's definition as its stack runs it (board image and host twin alike): without
+/// the ESI/SII description (`DeviceDef::for_image`), which the stack does not read, so a
+/// board image does not carry it.
+static IMAGE_DEF: oxicat_slave::DeviceDef = device::DEF.for_image();
+
 /// CMSIS-RTOS priority of a task (higher runs first when several are due at once).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord)]
 pub enum Priority {
@@ -431,7 +436,7 @@ impl<P: Pdi, B: OneWireBus, L: LedStrip, S: BorrowMut<HubSlot<P>>> HubFirmware<P
         }
         // The definition checked when the image is built (`check_def` is not in a board
         // image); the same stack as `start` (the slave crate's tests/slot.rs).
-        let def = const { oxicat_slave::CheckedDef::<IMAGE>::new(&device::DEF) };
+        let def = const { oxicat_slave::CheckedDef::<IMAGE>::new(&IMAGE_DEF) };
         match self.slot.borrow_mut().start_checked(def, pdi) {
             Ok(_) => {
                 self.sup.phase = EcatPhase::Connected;

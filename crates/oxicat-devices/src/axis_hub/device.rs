@@ -260,5 +260,5 @@ pub static DEF: DeviceDef = DeviceDef {
         min_cycle_ns: 1_000_000,
         calc_copy_ns: 100_000,
     },
-    info: INFO,
+    info: Some(&INFO),
 };

@@ -437,5 +437,5 @@ pub static DEF: DeviceDef = DeviceDef {
         min_cycle_ns: 250_000,
         calc_copy_ns: 20_000,
     },
-    info: INFO,
+    info: Some(&INFO),
 };

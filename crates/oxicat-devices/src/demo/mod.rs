@@ -109,7 +109,7 @@ macro_rules! demo_device {
                 min_cycle_ns: 200_000,
                 calc_copy_ns: 85_000,
             },
-            info: $crate::demo::INFO,
+            info: Some(&$crate::demo::INFO),
         };
     };
 }

@@ -161,7 +161,7 @@ const fn def(name: &'static str) -> DeviceDef {
             min_cycle_ns: 100_000,
             calc_copy_ns: 85_000,
         },
-        info: INFO,
+        info: Some(&INFO),
     }
 }
 

@@ -37,7 +37,7 @@ pub static DEF: oxicat_slave::DeviceDef = oxicat_slave::DeviceDef {
         min_cycle_ns: 100_000,
         calc_copy_ns: 10_000,
     },
-    info: oxicat_slave::device::DeviceInfo {
+    info: Some(&oxicat_slave::device::DeviceInfo {
         vendor_name: "oxicat",
         group: oxicat_slave::device::Group {
             type_name: "OxicatToy",
@@ -46,7 +46,7 @@ pub static DEF: oxicat_slave::DeviceDef = oxicat_slave::DeviceDef {
         order_code: "OXICAT-TOY",
         description: Some("oxicat toy device (the Add-a-device recipe)"),
         ..oxicat_slave::device::DeviceInfo::DEFAULT
-    },
+    }),
 };
 
 /// The application: `Echo = Value + 1` (wrapping), `Cycles` counts cycles.

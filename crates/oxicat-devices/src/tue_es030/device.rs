@@ -382,7 +382,7 @@ pub static DEF: DeviceDef = DeviceDef {
         min_cycle_ns: 1_000_000,
         calc_copy_ns: 0,
     },
-    info: INFO,
+    info: Some(&INFO),
 };
 
 /// The board's definition under another revision and product code: what a firmware image

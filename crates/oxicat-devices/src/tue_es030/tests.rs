@@ -57,7 +57,7 @@ fn internal_voltages_are_four_read_only_10mv_words_and_foe_is_declared() {
     }
     let od = Od::<{ device::IMAGE }>::new(&DEF).expect("definition is consistent");
     assert_eq!(od.get::<u8>(0x8040, 0), Ok(4));
-    assert!(DEF.info.foe, "the firmware runs ESC_foeprocess");
+    assert!(DEF.info().foe, "the firmware runs ESC_foeprocess");
     assert!(
         DEF.boot_mailbox.is_some(),
         "firmware.bin is written in BOOT"

@@ -56,7 +56,7 @@ fn run_batch(twins: &[&'static Twin]) -> Result<(), String> {
                 t.spec, s.vendor_id, s.product_code, s.revision, s.name
             ));
         }
-        if t.esi.served == Served::Stack && t.esi.def.info.coe.enabled {
+        if t.esi.served == Served::Stack && t.esi.def.info().coe.enabled {
             for (sub, want) in [(1, id.vendor_id), (2, id.product_code), (3, id.revision)] {
                 let v = m
                     .sdo_upload(p, 0x1018, sub)

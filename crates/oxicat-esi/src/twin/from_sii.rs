@@ -537,7 +537,7 @@ pub fn from_sii(sii: &[u8], dictionary: Option<&[SavedObject]>) -> Result<Twin, 
             min_cycle_ns: 100_000,
             calc_copy_ns: 0,
         }),
-        info: DeviceInfo {
+        info: Some(Box::leak(Box::new(DeviceInfo {
             order_code: leak(m.order_code.as_deref().unwrap_or("")),
             eeprom_bytes: sii.len() as u32,
             sm_control: SmControl {
@@ -554,7 +554,7 @@ pub fn from_sii(sii: &[u8], dictionary: Option<&[SavedObject]>) -> Result<Twin, 
                 segmented_sdo: coe.is_some(),
             },
             ..DeviceInfo::DEFAULT
-        },
+        }))),
     };
     let def: &'static DeviceDef = Box::leak(Box::new(def));
     oxicat_slave::od::check_def(def, MAX_IMAGE)

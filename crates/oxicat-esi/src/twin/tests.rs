@@ -74,7 +74,7 @@ fn a_coe_device_becomes_a_stack_twin_with_its_dictionary() {
     let d = t.def;
     assert_eq!(d.identity.vendor_id, 0x0B95);
     assert_eq!(d.name, "AI1 analog input", "the English name");
-    assert_eq!(d.info.order_code, "AI1");
+    assert_eq!(d.info().order_code, "AI1");
     assert_eq!(d.device_type, 5001);
     assert_eq!(d.tx_assign, &[0x1A00]);
     let v = d.entry_def(0x6000, 1).unwrap();
@@ -101,7 +101,7 @@ fn a_coe_device_becomes_a_stack_twin_with_its_dictionary() {
 fn a_device_without_mailbox_is_the_esc_alone_with_the_esis_sync_managers() {
     let t = build(&esi(DIG_OUT), &sel("EL2008")).unwrap();
     assert_eq!(t.served, Served::EscOnly);
-    assert_ne!(t.def.info.esc.pdi_control & 0x0100, 0, "device emulation");
+    assert_ne!(t.def.info().esc.pdi_control & 0x0100, 0, "device emulation");
     let m = crate::sii::parse(&t.sii).unwrap();
     assert_eq!(m.sms.len(), 1);
     assert_eq!((m.sms[0].kind, m.sms[0].start), (SmKind::Outputs, 0x0F00));

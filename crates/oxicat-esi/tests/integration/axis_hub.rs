@@ -28,7 +28,10 @@ fn axis_hub_sii_and_esi_carry_the_reports_lan9252_settings() {
     assert_eq!(w(0x3E), 7);
     // ... and 512 bytes are refused, not cut.
     let mut small = DEF;
-    small.info.eeprom_bytes = 512;
+    small.info = Some(Box::leak(Box::new(oxicat_slave::device::DeviceInfo {
+        eeprom_bytes: 512,
+        ..*DEF.info()
+    })));
     assert!(matches!(
         oxicat_esi::sii::generate(&small),
         Err(oxicat_esi::Error::DoesNotFit(_))

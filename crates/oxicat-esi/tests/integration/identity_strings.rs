@@ -101,12 +101,12 @@ fn sii_general_points_at_order_code_and_name_like_beckhoff() {
         let s = |i: u8| strings.get_str(i).map(str::to_string);
         let g = im.general().unwrap().expect("general category");
         // SOEM names a slave by string 1, Beckhoff's images hold the type there.
-        assert_eq!(s(1).as_deref(), Some(def.info.order_code), "{}", def.name);
+        assert_eq!(s(1).as_deref(), Some(def.info().order_code), "{}", def.name);
         assert_eq!(g.order_idx, 1, "{}", def.name);
         assert_eq!(s(g.name_idx).as_deref(), Some(def.name), "{}", def.name);
         assert_eq!(
             s(g.group_idx).as_deref(),
-            Some(def.info.group.type_name),
+            Some(def.info().group.type_name),
             "{}",
             def.name
         );

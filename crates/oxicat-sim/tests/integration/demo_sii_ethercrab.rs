@@ -137,7 +137,7 @@ fn run(sii: Vec<u8>, pdu: &'static Pdu) -> Seen {
 fn check(s: &Seen) {
     let d = &demo::DEF;
     // Name (ethercrab: the order string), device name string, identity.
-    assert_eq!(s.name, d.info.order_code);
+    assert_eq!(s.name, d.info().order_code);
     assert_eq!(s.name, "EtherCAT_Application_SPI");
     assert_eq!(s.description.as_deref(), Some(d.name));
     assert_eq!(
@@ -150,7 +150,7 @@ fn check(s: &Seen) {
         )
     );
     // SyncManagers as the SII's SM category defines them, SM2/SM3 sized for the mapping.
-    let c = d.info.sm_control;
+    let c = d.info().sm_control;
     assert_eq!(
         s.sms,
         vec![

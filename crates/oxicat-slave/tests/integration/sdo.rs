@@ -1,7 +1,10 @@
 use oxicat_testkit::device::*;
 use oxicat_testkit::{Bench, Port};
-use oxicat_wire::coe::{write_sdo, CoeService, SdoHeader, SdoInfoRef, SdoInfoService};
-use oxicat_wire::mailbox::{MailboxErrorReply, MailboxType};
+use oxicat_wire::coe::{
+    write_sdo, write_sdo_abort, write_sdo_segment, CoeService, SdoAbortCode, SdoHeader, SdoInfoRef,
+    SdoInfoService,
+};
+use oxicat_wire::mailbox::{MailboxErrorReply, MailboxHeader, MailboxType};
 
 fn abort_of(r: Result<impl Sized, u32>) -> u32 {
     match r {
@@ -366,6 +369,199 @@ fn protocol_aborts<P: Port>() {
     assert_eq!(abort_in(&r), 0x0503_0000);
 }
 
+/// The upload replies byte for byte, as `write_sdo` and `write_sdo_segment` make them: an
+/// expedited upload, a normal upload in one initiate response (a string, a complete access) and a segmented one
+/// (initiate response with the size, then segments with the toggle bit, the unused count of
+/// a short one padded to 7 bytes, and the last bit).
+fn upload_frames_byte_for_byte<P: Port>() {
+    let mut b = Bench::<P>::new();
+    b.enter_preop();
+    let initiate = |cmd: u8, index: u16, sub: u8, size: usize, data: &[u8]| {
+        let mut f = vec![0u8; 10 + data.len()];
+        let h = SdoHeader {
+            command: cmd,
+            index,
+            subindex: sub,
+        };
+        let size = (size as u32).to_le_bytes();
+        let n = write_sdo(&mut f, CoeService::SdoResponse, &h, size, data).unwrap();
+        f.truncate(n);
+        f
+    };
+    // Expedited: 4 and 2 bytes in the header's data field, the unused count in the command.
+    for (index, sub, cmd, d) in [
+        (0x1018, 1, 0x43, 0x0A5Cu32.to_le_bytes()),
+        (0x10F1, 2, 0x4B, [4, 0, 0, 0]),
+    ] {
+        let mut f = vec![0u8; 10];
+        let h = SdoHeader {
+            command: cmd,
+            index,
+            subindex: sub,
+        };
+        write_sdo(&mut f, CoeService::SdoResponse, &h, d, &[]).unwrap();
+        assert_eq!(raw_sdo(&mut b, 0x40, index, sub, [0; 4]), f);
+    }
+    let name = b"oxicat test device";
+    let r = raw_sdo(&mut b, 0x40, 0x1008, 0, [0; 4]);
+    assert_eq!(r, initiate(0x41, 0x1008, 0, name.len(), name));
+    b.s.od_mut().set(0x6000, 1, true).unwrap();
+    b.s.od_mut().set(0x6000, 3, -2i16).unwrap();
+    let ca = [4, 0, 0x01, 0xFE, 0xFF, 0, 0, 0, 0];
+    let r = raw_sdo(&mut b, 0x50, 0x6000, 0, [0; 4]);
+    assert_eq!(r, initiate(0x51, 0x6000, 0, ca.len(), &ca));
+    // Segmented: 1100 bytes of 0x2001.
+    let data: Vec<u8> = (0..1100u32).map(|i| (i * 5 + 1) as u8).collect();
+    b.download(0x2001, 0, false, &data).unwrap();
+    let r = raw_sdo(&mut b, 0x40, 0x2001, 0, [0; 4]);
+    let first = r.len() - 10;
+    assert!(first < data.len());
+    assert_eq!(r, initiate(0x41, 0x2001, 0, data.len(), &data[..first]));
+    let (mut sent, mut toggle, mut segments) = (first, false, 0);
+    while sent < data.len() {
+        let r = raw_sdo(&mut b, 0x60 | if toggle { 0x10 } else { 0 }, 0, 0, [0; 4]);
+        let n = (data.len() - sent).min(first + 7);
+        let last = sent + n == data.len();
+        let unused = if n < 7 { (7 - n) as u8 } else { 0 };
+        let cmd = (if toggle { 0x10 } else { 0 }) | (unused << 1) | u8::from(last);
+        let mut f = vec![0u8; 10 + n];
+        let len =
+            write_sdo_segment(&mut f, CoeService::SdoResponse, cmd, &data[sent..sent + n]).unwrap();
+        assert_eq!(r, f[..len], "segment {segments}");
+        sent += n;
+        toggle = !toggle;
+        segments += 1;
+    }
+    assert!(segments > 1);
+    // The transfer is over: another segment request is refused.
+    assert_eq!(abort_in(&raw_sdo(&mut b, 0x60, 0, 0, [0; 4])), 0x0504_0001);
+}
+
+/// The abort and download replies byte for byte, as `write_sdo_abort`, `write_sdo` and
+/// `write_sdo_segment` make them: an abort, the expedited and the segmented download's
+/// initiate response, the segment responses with their toggle bit.
+fn download_and_abort_frames_byte_for_byte<P: Port>() {
+    let mut b = Bench::<P>::new();
+    b.enter_preop();
+    let mut f = [0u8; 10];
+    write_sdo_abort(&mut f, 0x2000, 3, SdoAbortCode::InvalidCommand).unwrap();
+    assert_eq!(raw_sdo(&mut b, 0xC0, 0x2000, 3, [0; 4]), f);
+    let initiated = |index: u16, sub: u8| {
+        let mut f = [0u8; 10];
+        let h = SdoHeader {
+            command: 0x60,
+            index,
+            subindex: sub,
+        };
+        write_sdo(&mut f, CoeService::SdoResponse, &h, [0; 4], &[]).unwrap();
+        f
+    };
+    assert_eq!(
+        raw_sdo(&mut b, 0x2F, 0x2005, 6, [200, 0, 0, 0]),
+        initiated(0x2005, 6)
+    );
+    assert_eq!(b.s.od().get::<u8>(0x2005, 6), Ok(200));
+    // The 16-byte label in three segments (7, 7, then 2 bytes and the last bit).
+    let r = raw_sdo(&mut b, 0x21, 0x2006, 0, 16u32.to_le_bytes());
+    assert_eq!(r, initiated(0x2006, 0));
+    let label = b"sixteen byte lbl";
+    for (k, cmd) in [(0usize, 0x00u8), (1, 0x10), (2, 0x0B)] {
+        let mut p = [0u8; 10];
+        let n = write_sdo_segment(
+            &mut p,
+            CoeService::SdoRequest,
+            cmd,
+            &label[7 * k..(7 * k + 7).min(16)],
+        )
+        .unwrap();
+        let mut f = [0u8; 10];
+        write_sdo_segment(&mut f, CoeService::SdoResponse, 0x20 | (cmd & 0x10), &[]).unwrap();
+        assert_eq!(b.coe(&p[..n]), f, "segment {k}");
+    }
+    assert_eq!(b.s.od().bytes(0x2006, 0).unwrap(), label);
+}
+
+/// The reply's mailbox header in every field (length, address 0, channel 0, priority 0, the
+/// type, the counter 1..=7 wrapping to 1, the reserved bit clear), over more replies than
+/// the counter has values and with a mailbox error among them.
+fn reply_mailbox_headers<P: Port>() {
+    let mut b = Bench::<P>::new();
+    b.enter_preop();
+    let mut counter = 0;
+    for k in 0..10 {
+        counter = MailboxHeader::next_counter(counter);
+        let (t, len) = if k == 4 {
+            // A CoE service the stack does not serve: a mailbox error reply.
+            b.mbx_write(MailboxType::Coe, &[0x00, 0x50, 0, 0, 0, 0, 0, 0, 0, 0]);
+            (MailboxType::Error, 4)
+        } else {
+            b.mbx_write(
+                MailboxType::Coe,
+                &[0x00, 0x20, 0x40, 0x18, 0x10, 1, 0, 0, 0, 0],
+            );
+            (MailboxType::Coe, 10)
+        };
+        let (h, _) = b.mbx_read().expect("reply");
+        assert_eq!(h, MailboxHeader::new(len, 0, t, counter), "reply {k}");
+    }
+}
+
+/// SDO information messages the stack does not serve: the responses' opcodes, the error
+/// opcode, a reserved one and each request too short for its fields are a service not
+/// supported (mailbox error 4); one shorter than the headers is too short (6); the
+/// shortest well-formed requests are answered.
+fn sdo_information_not_served<P: Port>() {
+    let mut b = Bench::<P>::new();
+    b.enter_preop();
+    let mut reply = |op: u8, data: &[u8]| {
+        let mut p = vec![0x00, 0x80, op, 0, 0, 0];
+        p.extend_from_slice(data);
+        b.mbx_write(MailboxType::Coe, &p);
+        let (h, p) = b.mbx_read().expect("reply");
+        match h.mailbox_type {
+            MailboxType::Error => Some(MailboxErrorReply::parse(&p).unwrap().detail.code()),
+            _ => None,
+        }
+    };
+    for (op, data) in [
+        (0x01u8, &[0u8][..]),
+        (0x03, &[0x18][..]),
+        (0x05, &[0x18, 0x10, 1][..]),
+        (0x02, &[1, 0, 0, 0][..]),
+        (0x04, &[0x18, 0x10, 0, 0, 0, 0][..]),
+        (0x06, &[0x18, 0x10, 1, 0, 0, 0, 0, 0, 0, 0][..]),
+        (0x07, &[0, 0, 0, 0][..]),
+        (0x09, &[0, 0, 0, 0][..]),
+    ] {
+        assert_eq!(
+            reply(op, data),
+            Some(4),
+            "opcode {op:#x} with {} bytes",
+            data.len()
+        );
+    }
+    let mut p = vec![0x00, 0x80, 0x03];
+    b.mbx_write(MailboxType::Coe, &p);
+    let (h, r) = b.mbx_read().expect("reply");
+    assert_eq!(h.mailbox_type, MailboxType::Error);
+    assert_eq!(MailboxErrorReply::parse(&r).unwrap().detail.code(), 6);
+    p.extend_from_slice(&[0, 0, 0, 0x18, 0x10]);
+    b.mbx_write(MailboxType::Coe, &p);
+    assert_eq!(
+        b.mbx_read().expect("reply").0.mailbox_type,
+        MailboxType::Coe
+    );
+    for (op, data) in [(0x01u8, &[1u8, 0][..]), (0x05, &[0x18, 0x10, 1, 0][..])] {
+        let mut p = vec![0x00, 0x80, op, 0, 0, 0];
+        p.extend_from_slice(data);
+        b.mbx_write(MailboxType::Coe, &p);
+        assert_eq!(
+            b.mbx_read().expect("reply").0.mailbox_type,
+            MailboxType::Coe
+        );
+    }
+}
+
 fn mailbox_errors_and_counters<P: Port>() {
     let mut b = Bench::<P>::new();
     b.enter_preop();
@@ -666,6 +862,10 @@ oxicat_testkit::every_pdi!(
     refused_safeop_keeps_the_active_mapping,
     abort_codes_table,
     protocol_aborts,
+    upload_frames_byte_for_byte,
+    download_and_abort_frames_byte_for_byte,
+    reply_mailbox_headers,
+    sdo_information_not_served,
     mailbox_errors_and_counters,
     repeat_request_resends_last_reply,
     sdo_information,

@@ -107,22 +107,21 @@ fn a_slot_hands_out_its_stack_only_while_it_runs() {
     assert!(small.slave().is_none());
 }
 
-/// `DeviceDef::for_image` (what a board image links) drops the ESI/SII texts and keeps
-/// everything the stack serves: the same dictionary, byte for byte.
+/// `DeviceDef::for_image` (what a board image links) drops the ESI/SII description
+/// (`DeviceInfo`, which the stack does not read) and keeps everything the stack serves: the
+/// same dictionary, byte for byte.
 #[test]
 fn the_image_definition_serves_the_same_dictionary() {
     use oxicat_devices::demo;
     static IMAGE_DEF: oxicat_slave::DeviceDef = demo::DEF.for_image();
     type Demo = Slave<Esc, { demo::IMAGE }, 128>;
-    let info = &IMAGE_DEF.info;
-    assert_eq!((info.vendor_name, info.order_code), ("", ""));
-    assert!(info.description.is_none() && info.dc_modes.is_empty());
-    assert!(!demo::DEF.info.vendor_name.is_empty() && !demo::DEF.info.dc_modes.is_empty());
+    assert!(IMAGE_DEF.info.is_none());
+    assert_eq!(IMAGE_DEF.info(), &oxicat_slave::device::DeviceInfo::DEFAULT);
+    assert!(!demo::DEF.info().vendor_name.is_empty() && !demo::DEF.info().dc_modes.is_empty());
     assert_eq!(
-        (IMAGE_DEF.info.coe, IMAGE_DEF.info.foe),
-        (demo::DEF.info.coe, demo::DEF.info.foe)
+        (IMAGE_DEF.identity, IMAGE_DEF.mailbox, IMAGE_DEF.sync),
+        (demo::DEF.identity, demo::DEF.mailbox, demo::DEF.sync)
     );
-    assert_eq!(IMAGE_DEF.mailbox_protocols(), demo::DEF.mailbox_protocols());
     // Every object's description (SDO information) and every entry's value.
     let dump = |def: &'static oxicat_slave::DeviceDef| {
         let mut e = Esc::new(EscConfig::default(), eeprom(&demo::DEF));

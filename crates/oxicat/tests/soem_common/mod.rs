@@ -133,7 +133,7 @@ pub fn esi_model(def: &'static DeviceDef) -> DeviceModel {
 /// The device has DC SYNC0: an ESI DC op mode that activates SYNC0, and the definition
 /// supports the mode.
 pub fn has_dc(def: &'static DeviceDef) -> bool {
-    def.info
+    def.info()
         .dc_modes
         .iter()
         .any(|d| d.assign_activate & 0x0300 == 0x0300)
@@ -193,7 +193,7 @@ fn slave_json(e: &Expect, sync: Option<SyncMode>) -> String {
     let (out_bytes, in_bytes) = (out_bits.div_ceil(8), in_bits.div_ceil(8));
     // The SM watchdog guards the outputs' sync manager where its control byte enables it
     // (bit 6), and it is the slave's firmware that leaves OP when it expires.
-    let watchdog = e.stack && out_bytes > 0 && def.info.sm_control.outputs & 0x40 != 0;
+    let watchdog = e.stack && out_bytes > 0 && def.info().sm_control.outputs & 0x40 != 0;
     format!(
         "{{\"vendor_id\": {}, \"product_code\": {}, \"revision\": {}, \
          \"order_code\": {}, \"name\": {}, \"device_name\": {}, \"hw_version\": {}, \
