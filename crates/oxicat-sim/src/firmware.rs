@@ -317,6 +317,9 @@ impl<I: Image<P::Pdi>, P: PdiPath, B: Bench<I>> Host<I, P, B> {
     }
 
     fn next_wakeup(&self) -> u64 {
+        if self.timers.is_empty() && self.cpu.is_none() {
+            return self.next_poll;
+        }
         let first_timer = self.timers.iter().map(|t| t.2).min();
         match &self.cpu {
             None => first_timer.map_or(self.next_poll, |t| t.min(self.next_poll)),
@@ -483,6 +486,10 @@ impl<I: Image<P::Pdi>, P: PdiPath, B: Bench<I>> Host<I, P, B> {
     fn wakeup(&mut self, esc: &mut Esc, t: u64) {
         if self.cpu.is_some() {
             return self.dispatch(esc, t);
+        }
+        if self.timers.is_empty() {
+            // The main loop alone (most devices): no timer instant to order it against.
+            return self.poll_if_due(esc, t);
         }
         if self.poll_before_timers {
             self.poll_if_due(esc, t);
