@@ -184,6 +184,13 @@ enum Op {
     PdiRead(u16, u16),
     /// PDI write at an offset from 0x1000.
     PdiWrite(u16, Vec<u8>),
+    /// PDI read of `len` bytes of the register file (0x0000..0x0A00): AL control, the
+    /// watchdog status, SM activate and the DC unit clear events when read, the others
+    /// leave the event memo valid ([`Esc::pdi_read`]).
+    PdiReadReg(u16, u16),
+    /// ECAT FPWR of a register that raises an AL event: AL control (0x0120), an SM's
+    /// activate byte (0x0806 + 8·n, the SM-change event) with `data`.
+    EcatEvent(u16, u8),
     /// ECAT FPWR of the event mask (IRQ field contents).
     Mask(u16),
     /// Link change on a port.
@@ -235,6 +242,17 @@ fn arb_op() -> impl Strategy<Value = Op> {
         3 => (0u16..0x280, proptest::collection::vec(any::<u8>(), 1..48))
             .prop_map(|(a, d)| Op::PdiWrite(a, d)),
         1 => any::<u16>().prop_map(Op::Mask),
+        3 => (prop_oneof![
+                  2 => (0x0110u16..0x0130, 1u16..4),
+                  2 => (0x0200u16..0x0230, 1u16..8),
+                  1 => (0x0440u16..0x0444, 1u16..3),
+                  3 => (0x0800u16..0x0900, 1u16..8),
+                  1 => (0x0900u16..0x09F0, 1u16..16),
+                  1 => (0u16..0x0A00, 1u16..64),
+              ])
+            .prop_map(|(a, l)| Op::PdiReadReg(a, l)),
+        2 => (prop_oneof![Just(0x0120u16), (0u16..4).prop_map(|n| 0x0806 + 8 * n)], any::<u8>())
+            .prop_map(|(a, d)| Op::EcatEvent(a, d)),
         1 => (1u8..4, any::<bool>()).prop_map(|(p, up)| Op::Link(p, up)),
         1 => (0u64..2_000_000).prop_map(Op::Advance),
         4 => (0u8..6, prop_oneof![3 => Just(0u16), 1 => any::<u16>()], proptest::bool::weighted(0.9))
@@ -362,6 +380,20 @@ proptest! {
                 }
                 Op::PdiWrite(off, d) => {
                     prop_assert_eq!(a.pdi_write(0x1000 + off, &d), b.pdi_write(0x1000 + off, &d));
+                }
+                Op::PdiReadReg(addr, len) => {
+                    let mut x = vec![0u8; len as usize];
+                    let mut y = vec![0u8; len as usize];
+                    prop_assert_eq!(a.pdi_read(addr, &mut x), b.pdi_read(addr, &mut y));
+                    prop_assert_eq!(x, y);
+                }
+                Op::EcatEvent(addr, d) => {
+                    // AL control as the master writes it (state 1..8), an SM activate byte
+                    // with its enable bit mostly set.
+                    let d = if addr == 0x0120 { 1 + d % 8 } else { d | u8::from(d % 4 != 0) };
+                    for e in [&mut a, &mut b] {
+                        run_at(e, t, Command::Fpwr, STATIONS[0], addr, &[d]);
+                    }
                 }
                 Op::Mask(m) => {
                     prop_assert_eq!(fpwr(&mut a, 0x0200, &m.to_le_bytes()), fpwr(&mut b, 0x0200, &m.to_le_bytes()));

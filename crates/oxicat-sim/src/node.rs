@@ -57,6 +57,19 @@ impl<T> Shared<T> {
     pub fn lock(&self) -> std::sync::MutexGuard<'_, T> {
         self.0.lock().unwrap_or_else(|e| e.into_inner())
     }
+
+    /// Whether this is the board's last handle (no other can be made from nothing, so
+    /// it stays the last).
+    pub(crate) fn is_last(&self) -> bool {
+        std::sync::Arc::strong_count(&self.0) == 1
+    }
+
+    /// The board itself if this is its last handle, else the handle back.
+    pub(crate) fn into_last(self) -> Result<T, Self> {
+        std::sync::Arc::try_unwrap(self.0)
+            .map(|m| m.into_inner().unwrap_or_else(|e| e.into_inner()))
+            .map_err(Self)
+    }
 }
 
 impl<T> Clone for Shared<T> {

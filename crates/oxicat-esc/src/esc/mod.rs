@@ -478,12 +478,54 @@ impl Esc {
 
     /// PDI read of `buf.len()` bytes at `addr` (SyncManager rules apply; reading AL
     /// control clears its event; reading a buffer's last byte frees it).
+    ///
+    /// The memo of the event requests ([`QueryMemo`]) outlives a read that cannot have
+    /// changed them: one of registers outside the DC unit (0x0900..0x09FF) and every
+    /// SyncManager's area, whose side effects (AL control, watchdog status, SM activate
+    /// reads, the PDI watchdog's DL status bit) left the ECAT and AL event bits as they
+    /// were. The firmware's main loop polls SM0 status and SM1 activate that way at every
+    /// pass; the interrupt line after it is then read from the memo instead of computed,
+    /// and such a read of the SyncManager registers (0x0800..0x08FF, no SM-change event
+    /// to clear) copies the bytes without the general path's piece-by-piece walk. The
+    /// next-event memo always goes (the access retriggers the PDI watchdog). With the
+    /// fast paths off ([`Esc::set_fast_paths`]) neither shortcut is taken.
     pub fn pdi_read(&mut self, addr: u16, buf: &mut [u8]) -> Result<(), PdiError> {
+        let events = if self.fast_off {
+            None
+        } else {
+            self.memo.events()
+        };
         self.memo.clear();
         self.pdi_range(addr, buf.len())?;
+        let bits = (self.ecat_ev, self.al_ev);
         self.sii_settle(self.now);
         self.pdi_access();
-        self.phys_read(Side::Pdi, addr as u32, buf, false);
+        let start = addr as u32;
+        let end = start + buf.len() as u32;
+        let plain = (end <= 0x0900 || start >= 0x0A00) && self.piece(start, end) == (end, None);
+        if plain
+            && !self.fast_off
+            && start >= 0x0800
+            && end <= 0x0900
+            && self.al_ev & AL_EV_SM_CHANGE == 0
+        {
+            // What `plain_read` does there: the bytes the chip has, 0 for the others, and
+            // no side effect (SM activate clears only a pending SM-change event).
+            for (o, a) in buf.iter_mut().zip(start as usize..) {
+                *o = if self.perm[a] & P_IMPL != 0 {
+                    self.mem[a]
+                } else {
+                    0
+                };
+            }
+        } else {
+            self.phys_read(Side::Pdi, start, buf, false);
+        }
+        if let Some((e, a)) = events {
+            if plain && (self.ecat_ev, self.al_ev) == bits {
+                self.memo.set_events(e, a);
+            }
+        }
         Ok(())
     }
 
